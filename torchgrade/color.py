@@ -1,0 +1,238 @@
+"""Colour science on ``(..., 3, H, W)`` tensors: luminance, sRGB, LogC, ACES, LMS and HSV.
+
+All functions are differentiable and safe: no NaN or Inf in outputs or gradients at 0, at grey
+pixels (undefined hue), or at very large values. Branches are computed with ``torch.where`` on
+guarded arguments, so the branch not taken never produces an infinite gradient.
+
+Constants are Unity's (``com.unity.render-pipelines.core/ShaderLibrary/Color.hlsl`` and
+``ACES.hlsl``), so grades typed in from Unity's inspector reproduce Unity's numbers.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from .core import apply_matrix
+
+CHANNEL = -3
+"""The colour-channel dimension of every image tensor."""
+
+REC709_LUMINANCE = (0.2126729, 0.7151522, 0.0721750)
+"""Y of linear Rec.709/sRGB primaries, D65 (Unity ``Luminance``)."""
+
+AP1_LUMINANCE = (0.272229, 0.674082, 0.0536895)
+"""Y of linear ACEScg (AP1) primaries (Unity ``AP1_RGB2Y``)."""
+
+# ACES primaries conversions (Unity ACES.hlsl; from aces-dev README-MATRIX). The sRGB<->AP1
+# matrices are derived from these in float64 so that every round trip is exact to rounding.
+_SRGB_TO_AP0 = (
+    (0.4397010, 0.3829780, 0.1773350),
+    (0.0897923, 0.8134230, 0.0967616),
+    (0.0175440, 0.1115440, 0.8707040),
+)
+_AP0_TO_AP1 = (
+    (1.4514393161, -0.2365107469, -0.2149285693),
+    (-0.0765537734, 1.1762296998, -0.0996759264),
+    (0.0083161484, -0.0060324498, 0.9977163014),
+)
+_AP1_TO_XYZ = (
+    (0.6624541811, 0.1340042065, 0.1561876870),
+    (0.2722287168, 0.6740817658, 0.0536895174),
+    (-0.0055746495, 0.0040607335, 1.0103391003),
+)
+_XYZ_TO_REC709 = (
+    (3.2409699419, -1.5373831776, -0.4986107603),
+    (-0.9692436363, 1.8759675015, 0.0415550574),
+    (0.0556300797, -0.2039769589, 1.0569715142),
+)
+_D60_TO_D65_CAT = (
+    (0.98722400, -0.00611327, 0.0159533),
+    (-0.00759836, 1.00186000, 0.0053302),
+    (0.00307257, -0.00509595, 1.0816800),
+)
+# Linear Rec.709 <-> LMS (Unity LinearToLMS / LMSToLinear, CAT02-based).
+_LINEAR_TO_LMS = (
+    (3.90405e-1, 5.49941e-1, 8.92632e-3),
+    (7.08416e-2, 9.63172e-1, 1.35775e-3),
+    (2.31082e-2, 1.28021e-1, 9.36245e-1),
+)
+_LMS_TO_LINEAR = (
+    (2.85847e0, -1.62879e0, -2.48910e-2),
+    (-2.10182e-1, 1.15820e0, 3.24281e-4),
+    (-4.18120e-2, -1.18169e-1, 1.06867e0),
+)
+
+
+def _m(rows) -> torch.Tensor:
+    return torch.tensor(rows, dtype=torch.float64)
+
+
+MATRICES = {
+    "srgb_to_ap0": _m(_SRGB_TO_AP0),
+    "ap0_to_ap1": _m(_AP0_TO_AP1),
+    "ap1_to_xyz": _m(_AP1_TO_XYZ),
+    "xyz_to_rec709": _m(_XYZ_TO_REC709),
+    "d60_to_d65": _m(_D60_TO_D65_CAT),
+    "linear_to_lms": _m(_LINEAR_TO_LMS),
+    "lms_to_linear": _m(_LMS_TO_LINEAR),
+}
+MATRICES["ap0_to_srgb"] = torch.linalg.inv(MATRICES["srgb_to_ap0"])
+MATRICES["ap1_to_ap0"] = torch.linalg.inv(MATRICES["ap0_to_ap1"])
+MATRICES["srgb_to_ap1"] = MATRICES["ap0_to_ap1"] @ MATRICES["srgb_to_ap0"]
+MATRICES["ap1_to_srgb"] = torch.linalg.inv(MATRICES["srgb_to_ap1"])
+MATRICES["xyz_to_ap1"] = torch.linalg.inv(MATRICES["ap1_to_xyz"])
+
+
+def matrix(name: str, like: torch.Tensor) -> torch.Tensor:
+    """One of :data:`MATRICES` in ``like``'s dtype and device."""
+    return MATRICES[name].to(device=like.device, dtype=like.dtype)
+
+
+def convert(image: torch.Tensor, name: str) -> torch.Tensor:
+    """Apply the named 3x3 matrix of :data:`MATRICES` to every pixel."""
+    return apply_matrix(matrix(name, image), image)
+
+
+def luminance(image: torch.Tensor, weights: str = "rec709") -> torch.Tensor:
+    """Relative luminance ``Y = w · rgb`` as ``(..., 1, H, W)``; ``weights`` is ``"rec709"`` or ``"ap1"``."""
+    w = {"rec709": REC709_LUMINANCE, "ap1": AP1_LUMINANCE}[weights]
+    w = torch.tensor(w, dtype=image.dtype, device=image.device).reshape(3, 1, 1)
+    return (image * w).sum(dim=CHANNEL, keepdim=True)
+
+
+def safe_pow(x: torch.Tensor, exponent) -> torch.Tensor:
+    """``max(x, 0) ** exponent`` with a finite gradient at 0 (HLSL ``PositivePow`` on clamped input)."""
+    positive = x > 0
+    return torch.where(positive, torch.where(positive, x, torch.ones_like(x)) ** exponent, torch.zeros_like(x))
+
+
+def safe_sqrt(x: torch.Tensor) -> torch.Tensor:
+    """``sqrt(max(x, 0))`` with gradient 0 (not Inf) at 0."""
+    return safe_pow(x, 0.5)
+
+
+def linear_to_srgb(image: torch.Tensor) -> torch.Tensor:
+    """IEC 61966-2-1 sRGB encoding: ``12.92 x`` below 0.0031308, else ``1.055 x^(1/2.4) - 0.055``."""
+    high = 1.055 * image.clamp_min(0.0031308) ** (1.0 / 2.4) - 0.055
+    return torch.where(image <= 0.0031308, 12.92 * image, high)
+
+
+def srgb_to_linear(image: torch.Tensor) -> torch.Tensor:
+    """IEC 61966-2-1 sRGB decoding: ``c / 12.92`` up to 0.04045, else ``((c + 0.055) / 1.055)^2.4``."""
+    high = ((image.clamp_min(0.04045) + 0.055) / 1.055) ** 2.4
+    return torch.where(image <= 0.04045, image / 12.92, high)
+
+
+# ARRI LogC (v3) curve with the constants Unity uses (ARRI's EI 1000 table), and Unity's fast form:
+# the logarithmic segment everywhere, ``c log10(a x + b) + d``. Its range tops out at ~58.86.
+LOGC_CUT, LOGC_A, LOGC_B, LOGC_C, LOGC_D = 0.011361, 5.555556, 0.047996, 0.244161, 0.386036
+LOGC_E, LOGC_F = 5.301883, 0.092819
+
+
+def linear_to_logc(image: torch.Tensor) -> torch.Tensor:
+    """Unity ``LinearToLogC``: ``c log10(max(a x + b, tiny)) + d``.
+
+    Inputs below ``-b/a`` (≈ -0.0086, far out of gamut) all encode to the floor, as in Unity,
+    where the ``max(…, 0)`` gives ``log10(0) = -inf``; the floor keeps it finite.
+    """
+    tiny = torch.finfo(image.dtype).tiny
+    return LOGC_C * torch.log10((LOGC_A * image + LOGC_B).clamp_min(tiny)) + LOGC_D
+
+
+def logc_to_linear(image: torch.Tensor) -> torch.Tensor:
+    """Unity ``LogCToLinear``: ``(10^((x - d) / c) - b) / a``."""
+    return (torch.pow(10.0, (image - LOGC_D) / LOGC_C) - LOGC_B) / LOGC_A
+
+
+ACESCC_MIDGRAY = 0.4135884
+"""ACEScc code value of 18% grey; Unity uses it as the contrast pivot in LogC too."""
+ACESCC_MAX = 1.4679964
+_HALF_MAX = 65504.0
+_ACESCC_LOW_KNEE = (9.72 - 15.0) / 17.52
+
+
+def aces_to_acescc(image: torch.Tensor) -> torch.Tensor:
+    """ACES2065-1 -> ACEScc (S-2014-003 §4.4), input clamped to [0, 65504] as Unity does."""
+    x = image.clamp(0.0, _HALF_MAX)
+    low = (torch.log2(2.0**-16 + x * 0.5) + 9.72) / 17.52
+    high = (torch.log2(x.clamp_min(2.0**-15)) + 9.72) / 17.52
+    return torch.where(x < 2.0**-15, low, high)
+
+
+def acescc_to_aces(image: torch.Tensor) -> torch.Tensor:
+    """ACEScc -> ACES2065-1 (S-2014-003 §4.4); saturates at 65504 like Unity."""
+    top = (torch.log2(torch.tensor(_HALF_MAX, dtype=torch.float64)).item() + 9.72) / 17.52
+    x = image.clamp(max=top)
+    value = torch.exp2(x * 17.52 - 9.72)
+    return torch.where(x < _ACESCC_LOW_KNEE, (value - 2.0**-16) * 2.0, value)
+
+
+def unity_to_aces(image: torch.Tensor) -> torch.Tensor:
+    """Linear Rec.709 -> ACES2065-1 (AP0), Unity ``unity_to_ACES``."""
+    return convert(image, "srgb_to_ap0")
+
+
+def aces_to_unity(image: torch.Tensor) -> torch.Tensor:
+    """ACES2065-1 (AP0) -> linear Rec.709, Unity ``ACES_to_unity``."""
+    return convert(image, "ap0_to_srgb")
+
+
+def unity_to_acescg(image: torch.Tensor) -> torch.Tensor:
+    """Linear Rec.709 -> ACEScg (AP1), Unity ``unity_to_ACEScg``."""
+    return convert(image, "srgb_to_ap1")
+
+
+def acescg_to_unity(image: torch.Tensor) -> torch.Tensor:
+    """ACEScg (AP1) -> linear Rec.709, Unity ``ACEScg_to_unity``."""
+    return convert(image, "ap1_to_srgb")
+
+
+def aces_to_acescg(image: torch.Tensor) -> torch.Tensor:
+    """ACES2065-1 (AP0) -> ACEScg (AP1)."""
+    return convert(image, "ap0_to_ap1")
+
+
+def acescg_to_aces(image: torch.Tensor) -> torch.Tensor:
+    """ACEScg (AP1) -> ACES2065-1 (AP0)."""
+    return convert(image, "ap1_to_ap0")
+
+
+def linear_to_lms(image: torch.Tensor) -> torch.Tensor:
+    """Linear Rec.709 -> LMS cone space (Unity ``LinearToLMS``)."""
+    return convert(image, "linear_to_lms")
+
+
+def lms_to_linear(image: torch.Tensor) -> torch.Tensor:
+    """LMS cone space -> linear Rec.709 (Unity ``LMSToLinear``)."""
+    return convert(image, "lms_to_linear")
+
+
+def rgb_to_hsv(image: torch.Tensor) -> torch.Tensor:
+    """RGB -> HSV with hue in turns [0, 1), for non-negative RGB.
+
+    The exact hexcone model (Smith 1978): ``V = max``, ``S = (max - min) / max``, hue from the
+    dominant channel. Unlike Unity's ``RgbToHsv`` there is no ``1e-4`` bias, so HSV round trips are
+    exact; at grey (undefined hue) and black (undefined saturation) hue and saturation are 0 and
+    their gradients are finite.
+    """
+    r, g, b = image.unbind(CHANNEL)
+    value, argmax = image.max(dim=CHANNEL)
+    delta = value - image.min(dim=CHANNEL).values
+    chromatic = delta > 0
+    safe_delta = torch.where(chromatic, delta, torch.ones_like(delta))
+    hue_r = torch.remainder((g - b) / safe_delta, 6.0)
+    hue_g = (b - r) / safe_delta + 2.0
+    hue_b = (r - g) / safe_delta + 4.0
+    hue = torch.where(argmax == 0, hue_r, torch.where(argmax == 1, hue_g, hue_b)) / 6.0
+    hue = torch.where(chromatic, hue, torch.zeros_like(hue))
+    lit = value > 0
+    saturation = torch.where(lit, delta / torch.where(lit, value, torch.ones_like(value)), torch.zeros_like(value))
+    return torch.stack((hue, saturation, value), dim=CHANNEL)
+
+
+def hsv_to_rgb(image: torch.Tensor) -> torch.Tensor:
+    """HSV (hue in turns) -> RGB: ``V * lerp(1, clamp(|frac(H + k) * 6 - 3| - 1, 0, 1), S)`` (Unity ``HsvToRgb``)."""
+    hue, saturation, value = (c.unsqueeze(CHANNEL) for c in image.unbind(CHANNEL))
+    offsets = torch.tensor((0.0, 2.0 / 3.0, 1.0 / 3.0), dtype=image.dtype, device=image.device).reshape(3, 1, 1)
+    ramp = (torch.abs(torch.frac(hue + offsets + 1.0) * 6.0 - 3.0) - 1.0).clamp(0.0, 1.0)
+    return value * (1.0 + saturation * (ramp - 1.0))

@@ -1,0 +1,156 @@
+"""Shared conventions: image validation, parameter broadcasting and the non-finite input policy.
+
+Every public module of torchgrade goes through these helpers, so the rules are stated once:
+
+* Images are float tensors ``(..., 3, H, W)``; anything else is a ``TypeError`` (dtype) or a
+  ``ValueError`` (shape), with a message naming the problem.
+* Parameters may be a Python number, a 0-d tensor, a per-sample tensor ``(B,)`` (colours ``(B, 3)``,
+  matrices ``(B, 3, 3)``) or an ``nn.Parameter``; they are cast to the image's dtype and device and
+  shaped to broadcast against ``(B, 3, H, W)``.
+* **Non-finite policy** (:func:`sanitize`): NaN becomes 0 and every value is bounded to
+  ``[-HALF_MAX, HALF_MAX]`` (±65504, the range of the half-float HDR buffers that engines render
+  to), so ±Inf becomes ±65504. Stages that mix pixels (bloom, metering) or raise values to powers
+  apply it first, so one bad pixel never spreads and intermediate sums never overflow in float32.
+  Scene-referred values inside that range are never clamped.
+"""
+
+from __future__ import annotations
+
+import numbers
+from typing import Union
+
+import torch
+
+Param = Union[float, int, torch.Tensor]
+
+HALF_MAX = 65504.0
+"""Largest finite half-float value: the bound of the non-finite policy."""
+
+
+def check_image(image: torch.Tensor, name: str = "image") -> None:
+    """Raise a clear error unless ``image`` is a non-empty floating tensor shaped ``(..., 3, H, W)``."""
+    if not isinstance(image, torch.Tensor):
+        raise TypeError(f"{name} must be a torch.Tensor, got {type(image).__name__}")
+    if not image.is_floating_point():
+        raise TypeError(
+            f"{name} must be a floating-point tensor (float16, bfloat16, float32 or float64), "
+            f"got {image.dtype}; convert integer images with image.float() / 255"
+        )
+    if image.dim() < 3 or image.shape[-3] != 3:
+        raise ValueError(f"{name} must have shape (..., 3, H, W) with 3 colour channels, got {tuple(image.shape)}")
+    if image.numel() == 0:
+        raise ValueError(f"{name} is empty: shape {tuple(image.shape)}")
+
+
+def sanitize(image: torch.Tensor) -> torch.Tensor:
+    """Apply the non-finite policy: NaN -> 0, values bounded to [-65504, 65504] (so ±Inf -> ±65504)."""
+    return torch.nan_to_num(image, nan=0.0).clamp(-HALF_MAX, HALF_MAX)
+
+
+def _as_tensor(value: Param, image: torch.Tensor, name: str) -> torch.Tensor:
+    if isinstance(value, torch.Tensor):
+        if value.is_complex() or not (value.is_floating_point() or value.dtype in _INT_DTYPES):
+            raise TypeError(f"parameter {name!r} must be a real number tensor, got {value.dtype}")
+        return value.to(device=image.device, dtype=image.dtype)
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"parameter {name!r} must be a number or a tensor, got {type(value).__name__}")
+    return torch.tensor(float(value), device=image.device, dtype=image.dtype)
+
+
+_INT_DTYPES = (torch.int8, torch.int16, torch.int32, torch.int64, torch.uint8)
+
+
+def _per_sample(t: torch.Tensor, image: torch.Tensor, name: str, trailing: int) -> torch.Tensor:
+    """Shape a per-sample tensor ``(B, *k)`` to ``(B, *k, 1, 1)`` after checking B against the image."""
+    batch = t.shape[0]
+    if image.dim() != 4 or image.shape[0] != batch:
+        raise ValueError(
+            f"parameter {name!r} has {batch} per-sample values but the image has shape {tuple(image.shape)}; "
+            f"per-sample parameters need a (B, 3, H, W) image with B = {batch}"
+        )
+    return t.reshape(t.shape + (1,) * (image.dim() - 1 - trailing))
+
+
+def scalar_param(value: Param, image: torch.Tensor, name: str) -> torch.Tensor:
+    """A scalar control as a tensor that broadcasts against ``image``: 0-d, or ``(B, 1, 1, 1)``."""
+    t = _as_tensor(value, image, name)
+    if t.dim() == 0:
+        return t
+    if t.dim() == 1:
+        return _per_sample(t, image, name, trailing=0)
+    raise ValueError(f"parameter {name!r} must be a number, a 0-d tensor or a (B,) tensor, got shape {tuple(t.shape)}")
+
+
+def color_param(value, image: torch.Tensor, name: str) -> torch.Tensor:
+    """An RGB control as ``(3, 1, 1)`` or per sample ``(B, 3, 1, 1)``; accepts a 3-sequence or tensor."""
+    t = _as_tensor(value, image, name) if isinstance(value, torch.Tensor) else _sequence(value, image, name)
+    if t.shape == (3,):
+        return t.reshape(3, 1, 1)
+    if t.dim() == 2 and t.shape[1] == 3:
+        return _per_sample(t, image, name, trailing=1)
+    raise ValueError(f"parameter {name!r} must be an RGB triple (3,) or per-sample (B, 3), got shape {tuple(t.shape)}")
+
+
+def matrix_param(value, image: torch.Tensor, name: str) -> torch.Tensor:
+    """A 3x3 colour matrix as ``(3, 3)`` or per sample ``(B, 3, 3)``."""
+    t = _as_tensor(value, image, name) if isinstance(value, torch.Tensor) else _sequence(value, image, name)
+    if t.shape == (3, 3) or (t.dim() == 3 and t.shape[1:] == (3, 3)):
+        if t.dim() == 3:
+            _per_sample(t, image, name, trailing=2)
+        return t
+    raise ValueError(f"parameter {name!r} must be a 3x3 matrix or per-sample (B, 3, 3), got shape {tuple(t.shape)}")
+
+
+def _sequence(value, image: torch.Tensor, name: str) -> torch.Tensor:
+    try:
+        return torch.as_tensor(value, dtype=image.dtype, device=image.device)
+    except (TypeError, ValueError, RuntimeError) as error:
+        raise TypeError(f"parameter {name!r} must be numbers or a tensor: {error}") from None
+
+
+def apply_matrix(matrix: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
+    """``out[..., i, h, w] = sum_j matrix[..., i, j] * image[..., j, h, w]`` for (3,3) or (B,3,3) matrices."""
+    if matrix.dim() == 2:
+        return torch.einsum("ij,...jhw->...ihw", matrix, image)
+    return torch.einsum("bij,bjhw->bihw", matrix, image)
+
+
+def check_range(value: Param, name: str, low: float, high: float) -> None:
+    """Raise ``ValueError`` naming ``name`` and its range when a concrete value lies outside [low, high].
+
+    Tensors that require grad are checked too (on detached values); NaN parameters are rejected.
+    """
+    t = value.detach() if isinstance(value, torch.Tensor) else torch.as_tensor(value, dtype=torch.float64)
+    if t.numel() == 0:
+        return
+    if torch.isnan(t).any() or (t < low).any() or (t > high).any():
+        raise ValueError(f"{name} must lie in [{low}, {high}], got {t.tolist()}")
+
+
+def is_constant(value, constant) -> bool:
+    """True when ``value`` is a plain (non-learnable) value equal to ``constant`` everywhere.
+
+    Learnable parameters (``requires_grad``) are never constant: they may move during training.
+    """
+    if isinstance(value, torch.Tensor) and value.requires_grad:
+        return False
+    try:
+        value = torch.as_tensor(value, dtype=torch.float64, device="cpu")
+        return bool((value == torch.as_tensor(constant, dtype=torch.float64)).all())
+    except (TypeError, ValueError, RuntimeError):
+        return False
+
+
+_LOW_PRECISION = (torch.float16, torch.bfloat16)
+
+
+def working_dtype(image: torch.Tensor) -> torch.Tensor:
+    """float16/bfloat16 images are computed in float32 (no silent overflow); others as they are."""
+    return image.float() if image.dtype in _LOW_PRECISION else image
+
+
+def to_input_dtype(result: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
+    """Cast a float32 result back to the input's low-precision dtype, bounded to its finite range."""
+    if result.dtype == image.dtype:
+        return result
+    return result.clamp(-HALF_MAX, HALF_MAX).to(image.dtype)

@@ -1,0 +1,35 @@
+"""The pure, differentiable functions behind torchgrade's modules, in one namespace."""
+
+from .color import (
+    aces_to_acescc,
+    aces_to_acescg,
+    aces_to_unity,
+    acescc_to_aces,
+    acescg_to_aces,
+    acescg_to_unity,
+    hsv_to_rgb,
+    linear_to_lms,
+    linear_to_logc,
+    linear_to_srgb,
+    lms_to_linear,
+    logc_to_linear,
+    luminance,
+    rgb_to_hsv,
+    srgb_to_linear,
+    unity_to_aces,
+    unity_to_acescg,
+)
+from .tonemap import tonemap, reinhard, reinhard_extended, reinhard_luminance, neutral, aces, hable
+from .grade import (
+    color_grade,
+    post_exposure,
+    white_balance,
+    white_balance_coefficients,
+    contrast,
+    color_filter,
+    split_toning,
+    channel_mixer,
+    shadows_midtones_highlights,
+    hue_shift,
+    saturation,
+)

@@ -1,0 +1,3 @@
+"""File interchange: OpenEXR images and .cube LUTs."""
+
+from .exr import read_exr, write_exr
