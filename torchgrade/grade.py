@@ -79,7 +79,7 @@ def white_balance_coefficients(temperature: torch.Tensor, tint: torch.Tensor) ->
     D65's LMS ``(0.949237, 1.03542, 1.08728)`` divided by it. Returns ``(..., 3, 1, 1)``.
     """
     t1, t2 = _channels(temperature) / 65.0, _channels(tint) / 65.0
-    x = 0.31271 - t1 * torch.where(t1 < 0, 0.1, 0.05)
+    x = 0.31271 - torch.where(t1 < 0, t1 * 0.1, t1 * 0.05)
     y = 2.87 * x - 3.0 * x * x - 0.27509508 + t2 * 0.05
     big_x, big_z = x / y, (1.0 - x - y) / y
     lms = torch.cat(
