@@ -36,7 +36,11 @@ def _checked_size(path: Path, header: dict) -> tuple[int, int]:
 
 
 def _planes(path: Path, channels: dict, shape: tuple[int, int]) -> list[np.ndarray]:
-    """The image as RGB or RGBA planes; a luminance-only (Y) file becomes grey RGB."""
+    """The image as RGB or RGBA planes.
+
+    As OpenEXR's own RGBA interface does, a file with some of R, G, B gets zeros for the missing
+    ones, and a luminance-only (Y) file becomes grey RGB.
+    """
     planes = {}
     for name, channel in channels.items():
         pixels = np.asarray(channel.pixels)
@@ -44,8 +48,9 @@ def _planes(path: Path, channels: dict, shape: tuple[int, int]) -> list[np.ndarr
             planes.update({letter: pixels[..., i] for i, letter in enumerate(name)})
         else:
             planes[name.split(".")[-1]] = pixels
-    if all(c in planes for c in "RGB"):
-        colour = [planes["R"], planes["G"], planes["B"]]
+    if any(c in planes for c in "RGB"):
+        zeros = np.zeros(shape, dtype=np.float32)
+        colour = [planes.get(c, zeros) for c in "RGB"]
     elif "Y" in planes:
         colour = [planes["Y"]] * 3
     else:

@@ -1,0 +1,49 @@
+"""The torchgrade command: demo and grade, as a user runs them."""
+
+import subprocess
+import sys
+
+import numpy as np
+from PIL import Image
+
+import torchgrade as tg
+from torchgrade.cli import main
+
+
+def test_demo_writes_a_graded_png_and_prints_one_line(tmp_path, capsys):
+    out = tmp_path / "demo.png"
+    assert main(["demo", "--output", str(out), "--width", "160", "--height", "90", "--exr", str(tmp_path / "scene.exr")]) == 0
+    line = capsys.readouterr().out.strip()
+    assert "\n" not in line and "160x90" in line and "ToneMap" in line and " ms" in line
+    pixels = np.asarray(Image.open(out))
+    assert pixels.shape == (90, 160, 3)
+    assert 10 < pixels.mean() < 200 and pixels.std() > 20  # a lit scene, neither black nor blown out
+    scene = tg.io.read_exr(tmp_path / "scene.exr")
+    assert scene.shape == (3, 90, 160) and scene.max() >= 200  # the lamp and glints stay HDR in the EXR
+
+
+def test_demo_scene_has_the_promised_content():
+    scene = tg.scene.demo_scene(180, 320)
+    assert scene.shape == (1, 3, 180, 320)
+    assert (scene == 1000).all(dim=1).sum() >= 3  # single-pixel glints
+    assert (scene.amax(dim=1) == 200).any()  # the lamp of 200
+    assert ((scene.amax(dim=1) > 5) & (scene.amax(dim=1) <= 8.5)).sum() > 50  # emissive objects around 8
+    assert scene.min() >= 0 and scene.median() < 0.5  # a dim room
+
+
+def test_grade_command_grades_an_exr(exr_dir, tmp_path):
+    out = tmp_path / "desk.png"
+    result = subprocess.run(
+        [sys.executable, "-m", "torchgrade.cli", "grade", str(exr_dir / "Desk.exr"), "-o", str(out), "--tonemap", "neutral", "--contrast", "20"],
+        capture_output=True, text=True, timeout=120,
+    )
+    assert result.returncode == 0, result.stderr
+    assert np.asarray(Image.open(out)).shape == (874, 644, 3)
+
+
+def test_grade_command_reports_bad_arguments_without_a_traceback(exr_dir, tmp_path, capsys):
+    assert main(["grade", str(exr_dir / "Desk.exr"), "-o", str(tmp_path / "x.jpg")]) == 2
+    assert main(["grade", str(exr_dir / "Desk.exr"), "-o", str(tmp_path / "x.png"), "--contrast", "500"]) == 2
+    err = capsys.readouterr().err
+    assert "must end in .png or .exr" in err and "contrast must lie in" in err
+    assert not list(tmp_path.iterdir())

@@ -1,0 +1,84 @@
+"""OpenEXR reading and writing on the sample images and on written files."""
+
+import os
+
+import numpy as np
+import OpenEXR
+import pytest
+import torch
+
+import torchgrade as tg
+
+SAMPLES = ["AllHalfValues", "BrightRings", "BrightRingsNanInf", "CandleGlass", "Carrots", "Desk", "Garden",
+           "GoldenGate", "GrayRampsHorizontal", "WideColorGamut", "WideFloatRange"]
+
+
+@pytest.mark.parametrize("name", SAMPLES)
+def test_every_sample_reads_and_grades_to_finite_display_values(exr_dir, name):
+    image = tg.io.read_exr(exr_dir / f"{name}.exr")
+    assert image.dtype == torch.float32 and image.shape[0] in (3, 4) and image.shape[1] > 0
+    small = image[:3, ::8, ::8].unsqueeze(0)
+    out = tg.ToneMap("aces")(tg.ColorGrade(aces=True, contrast=20, saturation=10, temperature=10)(small))
+    assert torch.isfinite(out).all() and out.min() >= 0 and out.max() <= 1
+
+
+def test_rgba_keeps_alpha_and_matches_the_raw_channels(exr_dir):
+    image = tg.io.read_exr(exr_dir / "Desk.exr")
+    raw = OpenEXR.File(str(exr_dir / "Desk.exr")).channels()["RGBA"].pixels
+    assert image.shape == (4, 874, 644)
+    np.testing.assert_array_equal(image.numpy(), raw.astype(np.float32).transpose(2, 0, 1))
+
+
+def test_luminance_only_tiled_file_becomes_grey_rgb(exr_dir):
+    image = tg.io.read_exr(exr_dir / "Garden.exr")
+    raw = OpenEXR.File(str(exr_dir / "Garden.exr")).channels()["Y"].pixels.astype(np.float32)
+    assert image.shape == (3,) + raw.shape
+    for channel in image:
+        np.testing.assert_array_equal(channel.numpy(), raw)
+
+
+def test_single_green_channel_file_gets_zero_red_and_blue(exr_dir):
+    image = tg.io.read_exr(exr_dir / "WideFloatRange.exr")
+    raw = OpenEXR.File(str(exr_dir / "WideFloatRange.exr")).channels()["G"].pixels
+    np.testing.assert_array_equal(image[1].numpy(), raw)
+    assert (image[0] == 0).all() and (image[2] == 0).all()
+
+
+@pytest.mark.parametrize("half", [True, False])
+@pytest.mark.parametrize("channels", [3, 4])
+def test_write_then_read_round_trips(tmp_path, half, channels):
+    image = torch.rand(channels, 5, 7) * 100
+    path = tmp_path / "out.exr"
+    tg.io.write_exr(path, image, half=half)
+    back = tg.io.read_exr(path)
+    expected = image.half().float() if half else image
+    torch.testing.assert_close(back, expected, atol=0, rtol=0)
+
+
+def test_half_write_bounds_values_instead_of_overflowing(tmp_path):
+    image = torch.tensor([1e30, -1e30, float("nan")]).reshape(3, 1, 1)
+    tg.io.write_exr(tmp_path / "big.exr", image)
+    assert tg.io.read_exr(tmp_path / "big.exr").flatten().tolist() == [65504.0, -65504.0, 0.0]
+
+
+def test_failed_write_leaves_no_file_and_keeps_the_old_one(tmp_path):
+    path = tmp_path / "keep.exr"
+    tg.io.write_exr(path, torch.ones(3, 2, 2))
+    before = path.read_bytes()
+    with pytest.raises(ValueError):
+        tg.io.write_exr(path, torch.ones(2, 2, 2))
+    assert path.read_bytes() == before and os.listdir(tmp_path) == ["keep.exr"]
+
+
+def test_writing_into_a_missing_folder_is_a_clear_error(tmp_path):
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        tg.io.write_exr(tmp_path / "nope" / "x.exr", torch.ones(3, 2, 2))
+
+
+def test_non_exr_and_missing_files_are_clear_errors(tmp_path):
+    junk = tmp_path / "junk.exr"
+    junk.write_bytes(b"not an exr file at all")
+    with pytest.raises(ValueError, match="not a readable OpenEXR file"):
+        tg.io.read_exr(junk)
+    with pytest.raises(FileNotFoundError):
+        tg.io.read_exr(tmp_path / "missing.exr")
