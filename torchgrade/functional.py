@@ -33,3 +33,4 @@ from .grade import (
     hue_shift,
     saturation,
 )
+from .exposure import auto_exposure, meter_luminance, adapt_luminance, exposure_operator, area_resize, halving_average
