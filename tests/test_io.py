@@ -1,6 +1,8 @@
 """OpenEXR reading and writing on the sample images and on written files."""
 
 import os
+import subprocess
+import sys
 
 import numpy as np
 import OpenEXR
@@ -82,3 +84,26 @@ def test_non_exr_and_missing_files_are_clear_errors(tmp_path):
         tg.io.read_exr(junk)
     with pytest.raises(FileNotFoundError):
         tg.io.read_exr(tmp_path / "missing.exr")
+
+
+REJECT_ALL = """
+import sys, pathlib, torchgrade as tg
+for path in sorted(pathlib.Path(sys.argv[1]).iterdir()):
+    if path.suffix == ".rst":
+        continue
+    try:
+        tg.io.read_exr(path)
+        print("VERDICT accepted", path.name)
+    except (ValueError, OSError):
+        print("VERDICT rejected", path.name)
+"""
+
+
+def test_every_damaged_file_is_rejected_cleanly_without_crash_or_hang(exr_dir):
+    # A child process, so a crash in the decoder shows as a failure here instead of killing the suite.
+    result = subprocess.run([sys.executable, "-c", REJECT_ALL, str(exr_dir / "damaged")], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr[-2000:]
+    verdicts = [line for line in result.stdout.splitlines() if line.startswith("VERDICT ")]  # the decoder prints too
+    assert len(verdicts) == len([p for p in (exr_dir / "damaged").iterdir() if p.suffix != ".rst"]) >= 29
+    accepted = [line for line in verdicts if not line.startswith("VERDICT rejected")]
+    assert not accepted, accepted
