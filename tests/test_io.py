@@ -107,3 +107,22 @@ def test_every_damaged_file_is_rejected_cleanly_without_crash_or_hang(exr_dir):
     assert len(verdicts) == len([p for p in (exr_dir / "damaged").iterdir() if p.suffix != ".rst"]) >= 29
     accepted = [line for line in verdicts if not line.startswith("VERDICT rejected")]
     assert not accepted, accepted
+
+
+def test_ap0_file_converts_to_rec709_like_colour_science(exr_dir):
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        import colour
+    raw = tg.io.read_exr(exr_dir / "Carrots.exr")
+    converted = tg.io.read_exr(exr_dir / "Carrots.exr", to_rec709=True)
+    pixels = raw[:3, ::20, ::20].reshape(3, -1).T.double().numpy()
+    expected = colour.RGB_to_RGB(pixels, "ACES2065-1", "sRGB", chromatic_adaptation_transform="Bradford")
+    np.testing.assert_allclose(converted[:3, ::20, ::20].reshape(3, -1).T.numpy(), expected, atol=2e-3, rtol=2e-4)
+    torch.testing.assert_close(converted[3], raw[3])
+
+
+def test_rec709_file_is_unchanged_by_conversion(exr_dir):
+    original = tg.io.read_exr(exr_dir / "WideColorGamut.exr")
+    torch.testing.assert_close(tg.io.read_exr(exr_dir / "WideColorGamut.exr", to_rec709=True), original, atol=2e-5, rtol=2e-5)

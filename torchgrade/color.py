@@ -236,3 +236,33 @@ def hsv_to_rgb(image: torch.Tensor) -> torch.Tensor:
     offsets = torch.tensor((0.0, 2.0 / 3.0, 1.0 / 3.0), dtype=image.dtype, device=image.device).reshape(3, 1, 1)
     ramp = (torch.abs(torch.frac(hue + offsets + 1.0) * 6.0 - 3.0) - 1.0).clamp(0.0, 1.0)
     return value * (1.0 + saturation * (ramp - 1.0))
+
+
+REC709_CHROMATICITIES = ((0.64, 0.33), (0.30, 0.60), (0.15, 0.06), (0.3127, 0.3290))
+"""Rec.709 / sRGB red, green, blue and D65 white as CIE xy."""
+
+_BRADFORD = _m(((0.8951, 0.2664, -0.1614), (-0.7502, 1.7135, 0.0367), (0.0389, -0.0685, 1.0296)))
+
+
+def _xy_to_xyz(x: float, y: float) -> torch.Tensor:
+    return torch.tensor((x / y, 1.0, (1.0 - x - y) / y), dtype=torch.float64)
+
+
+def rgb_to_xyz_matrix(chromaticities) -> torch.Tensor:
+    """RGB -> XYZ for primaries and white given as ``((xr, yr), (xg, yg), (xb, yb), (xw, yw))`` (SMPTE RP 177)."""
+    primaries = torch.stack([_xy_to_xyz(x, y) for x, y in chromaticities[:3]], dim=1)
+    scale = torch.linalg.solve(primaries, _xy_to_xyz(*chromaticities[3]))
+    return primaries * scale
+
+
+def bradford_adaptation(source_white, target_white) -> torch.Tensor:
+    """XYZ -> XYZ von Kries adaptation in Bradford cone space from one white (xy) to another."""
+    source, target = _BRADFORD @ _xy_to_xyz(*source_white), _BRADFORD @ _xy_to_xyz(*target_white)
+    return torch.linalg.inv(_BRADFORD) @ torch.diag(target / source) @ _BRADFORD
+
+
+def primaries_to_rec709_matrix(chromaticities) -> torch.Tensor:
+    """float64 matrix taking linear RGB with the given primaries and white to linear Rec.709 (D65), Bradford-adapted."""
+    to_xyz = rgb_to_xyz_matrix(chromaticities)
+    adapt = bradford_adaptation(chromaticities[3], REC709_CHROMATICITIES[3])
+    return torch.linalg.inv(rgb_to_xyz_matrix(REC709_CHROMATICITIES)) @ adapt @ to_xyz

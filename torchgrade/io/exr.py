@@ -13,7 +13,8 @@ import numpy as np
 import OpenEXR
 import torch
 
-from ..core import check_image
+from ..color import primaries_to_rec709_matrix
+from ..core import apply_matrix, check_image
 from .atomic import atomic_write
 
 MAX_PIXELS = 1 << 28
@@ -61,22 +62,34 @@ def _planes(path: Path, channels: dict, shape: tuple[int, int]) -> list[np.ndarr
     return result
 
 
-def read_exr(path) -> torch.Tensor:
+def read_exr(path, to_rec709: bool = False) -> torch.Tensor:
     """Read an OpenEXR image as a float32 tensor ``(3, H, W)`` (RGB) or ``(4, H, W)`` (RGBA).
 
     Half and float files are accepted; luminance-only files become grey RGB. Alpha is returned as
-    stored (OpenEXR alpha is premultiplied). Raises ``ValueError`` for damaged or unsupported files.
+    stored (OpenEXR alpha is premultiplied). With ``to_rec709=True`` a file whose ``chromaticities``
+    attribute names other primaries (ACES AP0, say) is converted to linear Rec.709 with a Bradford
+    adaptation to D65; files without the attribute are Rec.709 by the OpenEXR convention.
+    Raises ``ValueError`` for damaged or unsupported files.
     """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no such EXR file: {path}")
-    shape = _checked_size(path, _header(path))
+    header = _header(path)
+    shape = _checked_size(path, header)
     try:
         channels = OpenEXR.File(str(path)).channels()
     except Exception as error:
         raise ValueError(f"{path}: cannot decode OpenEXR pixels ({error})") from None
-    planes = _planes(path, channels, shape)
-    return torch.from_numpy(np.stack([p.astype(np.float32) for p in planes]))
+    image = torch.from_numpy(np.stack([p.astype(np.float32) for p in _planes(path, channels, shape)]))
+    if to_rec709 and header.get("chromaticities") is not None:
+        image[:3] = _to_rec709(image[:3], header["chromaticities"])
+    return image
+
+
+def _to_rec709(rgb: torch.Tensor, chromaticities) -> torch.Tensor:
+    """Convert RGB with the header's chromaticities ``(xr, yr, xg, yg, xb, yb, xw, yw)`` to Rec.709."""
+    pairs = tuple(zip(chromaticities[0::2], chromaticities[1::2]))
+    return apply_matrix(primaries_to_rec709_matrix(pairs).float(), rgb)
 
 
 def write_exr(path, image: torch.Tensor, half: bool = True) -> None:
