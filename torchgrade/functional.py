@@ -19,7 +19,23 @@ from .color import (
     unity_to_aces,
     unity_to_acescg,
 )
-from .tonemap import tonemap, reinhard, reinhard_extended, reinhard_luminance, neutral, aces, hable
+from .tonemap import (
+    tonemap,
+    reinhard,
+    reinhard_extended,
+    reinhard_luminance,
+    neutral,
+    aces,
+    hable,
+    filmic,
+    unreal_filmic,
+    aces_reference,
+    aces_hill,
+    aces_narkowicz,
+    agx,
+    agx_godot,
+    khronos_pbr_neutral,
+)
 from .grade import (
     color_grade,
     post_exposure,
@@ -34,3 +50,5 @@ from .grade import (
     saturation,
 )
 from .exposure import auto_exposure, meter_luminance, adapt_luminance, exposure_operator, area_resize, halving_average
+from .bloom import bloom, bloom_threshold
+from .lut import apply_lut

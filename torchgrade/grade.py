@@ -25,6 +25,10 @@ import torch
 
 from .color import (
     ACESCC_MIDGRAY,
+    LOGC_A,
+    LOGC_B,
+    LOGC_C,
+    LOGC_D,
     aces_to_acescc,
     aces_to_acescg,
     aces_to_unity,
@@ -32,9 +36,7 @@ from .color import (
     acescg_to_aces,
     hsv_to_rgb,
     linear_to_lms,
-    linear_to_logc,
     lms_to_linear,
-    logc_to_linear,
     luminance,
     rgb_to_hsv,
     safe_pow,
@@ -104,13 +106,16 @@ def contrast(image: torch.Tensor, amount: Param, aces: bool = False) -> torch.Te
     """Contrast about mid grey in log space: ``(log(x) - 0.4135884) · (1 + amount/100) + 0.4135884``.
 
     Linear mode uses LogC and returns linear Rec.709; ``aces=True`` uses ACEScc and returns ACEScg
-    (Unity ``ColorGradingContrast``).
+    (Unity ``ColorGradingContrast``). In LogC, ``c log10(a x + b) + d``, the encode, the scaling and
+    the decode fold into one power: ``((a x + b)^k · 10^((d - 0.4135884)(k - 1) / c) - b) / a``.
     """
     k = 1.0 + scalar_param(amount, image, "contrast") * 0.01
     if aces:
         log = aces_to_acescc(unity_to_aces(image))
         return aces_to_acescg(acescc_to_aces((log - ACESCC_MIDGRAY) * k + ACESCC_MIDGRAY))
-    return logc_to_linear((linear_to_logc(image) - ACESCC_MIDGRAY) * k + ACESCC_MIDGRAY)
+    base = (LOGC_A * image + LOGC_B).clamp_min(torch.finfo(image.dtype).tiny)
+    gain = torch.pow(10.0, (LOGC_D - ACESCC_MIDGRAY) * (k - 1.0) / LOGC_C)
+    return (base**k * gain - LOGC_B) / LOGC_A
 
 
 def color_filter(image: torch.Tensor, color) -> torch.Tensor:

@@ -1,0 +1,132 @@
+"""Speed of bloom on CPU, as a ratio to a plain copy of the same frame (the memory floor).
+
+Measures float32 bloom at 1920x1080 in each mode, how the time grows with resolution (512^2 to 4K)
+and with ``max_iterations``; each timing is the median (and minimum) of several runs, with the copy
+timed alongside it so that both see the same machine load. Results go to
+``benchmarks/results/bloom.json`` and ``bloom.md``.
+
+Run from the repository root::
+
+    .venv/bin/python benchmarks/bench_bloom.py
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+import torchgrade as tg
+
+RESULTS = Path(__file__).resolve().parent / "results"
+COMMAND = ".venv/bin/python benchmarks/bench_bloom.py"
+FULL_HD = (1080, 1920)
+RESOLUTIONS = [(512, 512), (1024, 1024), FULL_HD, (1440, 2560), (2160, 3840)]
+ITERATIONS = [1, 2, 4, 8, 16]
+VARIANTS = {
+    "additive": {},
+    "additive, no firefly fading": {"fade_fireflies": False},
+    "scattering": {"mode": "scattering", "intensity": 0.5},
+    "scattering, bicubic": {"mode": "scattering", "intensity": 0.5, "bicubic_upsampling": True},
+}
+
+
+def hdr_frame(height: int, width: int) -> torch.Tensor:
+    """A frame with light above the threshold everywhere, so the pyramid is always built."""
+    generator = torch.Generator().manual_seed(0)
+    return torch.rand(1, 3, height, width, generator=generator) * 4.0
+
+
+def seconds(function, repeats: int) -> list[float]:
+    function()  # warm-up
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        function()
+        times.append(time.perf_counter() - start)
+    return times
+
+
+def measure(frame: torch.Tensor, repeats: int, **settings) -> dict:
+    """Median and minimum milliseconds of bloom and of a copy of ``frame``, interleaved run by run."""
+    bloom_times, copy_times = [], []
+    with torch.no_grad():
+        tg.functional.bloom(frame, **settings)
+        for _ in range(repeats):
+            copy_times += seconds(frame.clone, 3)
+            bloom_times += seconds(lambda: tg.functional.bloom(frame, **settings), 1)
+    bloom_ms, copy_ms = statistics.median(bloom_times) * 1e3, statistics.median(copy_times) * 1e3
+    return {
+        "height": frame.shape[-2],
+        "width": frame.shape[-1],
+        "settings": settings,
+        "bloom_ms": round(bloom_ms, 2),
+        "bloom_min_ms": round(min(bloom_times) * 1e3, 2),
+        "copy_ms": round(copy_ms, 3),
+        "copy_min_ms": round(min(copy_times) * 1e3, 3),
+        "ratio_to_copy": round(bloom_ms / copy_ms, 1),
+        "ratio_of_minima": round(min(bloom_times) / min(copy_times), 1),
+        "ms_per_megapixel": round(bloom_ms / (frame.shape[-2] * frame.shape[-1] / 1e6), 2),
+    }
+
+
+def table(rows: list[dict], label: str, key) -> str:
+    lines = [
+        f"| {label} | bloom ms (median / min) | copy ms (median / min) | bloom / copy (medians / minima) | ms per MP |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    for row in rows:
+        lines.append(
+            f"| {key(row)} | {row['bloom_ms']} / {row['bloom_min_ms']} | {row['copy_ms']} / {row['copy_min_ms']} "
+            f"| {row['ratio_to_copy']} / {row['ratio_of_minima']} | {row['ms_per_megapixel']} |"
+        )
+    return "\n".join(lines)
+
+
+def main() -> None:
+    started = time.perf_counter()
+    frame = hdr_frame(*FULL_HD)
+    variants = [dict(measure(frame, 7, **settings), variant=name) for name, settings in VARIANTS.items()]
+    iterations = [measure(frame, 3, max_iterations=n) for n in ITERATIONS]
+    resolutions = [measure(hdr_frame(h, w), 7 if h * w < 2e6 else 3) for h, w in RESOLUTIONS]
+
+    machine = f"{platform.processor() or platform.machine()}, {torch.get_num_threads()} threads, torch {torch.__version__}"
+    results = {
+        "command": COMMAND,
+        "machine": machine,
+        "python": sys.version.split()[0],
+        "frame": "float32 (1, 3, H, W), uniform random in [0, 4)",
+        "variants_1080p": variants,
+        "max_iterations_1080p": iterations,
+        "resolutions_additive": resolutions,
+        "seconds": round(time.perf_counter() - started, 1),
+    }
+    headline = variants[0]
+    markdown = "\n\n".join(
+        [
+            "# Bloom on CPU",
+            f"`{COMMAND}` on {machine}. Times are the median (and minimum) of several runs; the copy "
+            "(`frame.clone()`, the memory floor) is timed alongside each bloom run. Defaults unless stated "
+            "(additive, threshold 1, max_iterations 16, fireflies faded, bilinear).",
+            f"**1920x1080 float32: bloom {headline['bloom_ms']} ms = {headline['ratio_to_copy']} copies of the frame "
+            f"(medians; {headline['ratio_of_minima']} comparing the fastest runs; goal: at most 15).**",
+            "## Variants at 1920x1080\n\n" + table(variants, "variant", lambda r: r["variant"]),
+            "## max_iterations at 1920x1080\n\n" + table(iterations, "max_iterations", lambda r: r["settings"]["max_iterations"]),
+            "## Resolution (additive)\n\n" + table(resolutions, "frame", lambda r: f"{r['width']}x{r['height']}"),
+        ]
+    )
+    RESULTS.mkdir(exist_ok=True)
+    (RESULTS / "bloom.json").write_text(json.dumps(results, indent=2) + "\n")
+    (RESULTS / "bloom.md").write_text(markdown + "\n")
+    print(markdown)
+    print(f"\nwrote {RESULTS / 'bloom.json'} and {RESULTS / 'bloom.md'} in {results['seconds']} s")
+    print(f"reproduce: {COMMAND}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,179 @@
+""".cube interchange: exact round trips, both directions against OpenColorIO, strict parsing."""
+
+import itertools
+
+import numpy as np
+import pytest
+import torch
+
+PyOpenColorIO = pytest.importorskip("PyOpenColorIO")
+OCIO = PyOpenColorIO
+
+from torchgrade.io.cube import read_cube, write_cube  # noqa: E402
+from torchgrade.lut import LUT3D, bake_lut, identity_table  # noqa: E402
+
+_names = itertools.count()
+OCIO_INTERPOLATION = {"tetrahedral": OCIO.INTERP_TETRAHEDRAL, "trilinear": OCIO.INTERP_LINEAR}
+
+
+def look(image: torch.Tensor) -> torch.Tensor:
+    """Cross-talk and a compressive curve: enough structure that a wrong lattice order shows."""
+    r, g, b = image.unbind(-3)
+    y = torch.stack((0.9 * r + 0.1 * g, g + 0.05 * b, 1.1 * b + 0.05 * r), dim=-3).clamp_min(0.0)
+    return y / (1.0 + y)
+
+
+def unique_cube(folder) -> str:
+    """A fresh file name per LUT: OpenColorIO caches file transforms by path."""
+    return str(folder / f"lut{next(_names)}.cube")
+
+
+def ocio_apply(path: str, image: torch.Tensor, interpolation: str) -> torch.Tensor:
+    config = OCIO.Config.CreateRaw()
+    transform = OCIO.FileTransform(src=path, interpolation=OCIO_INTERPOLATION[interpolation])
+    processor = config.getProcessor(transform).getDefaultCPUProcessor()
+    pixels = np.ascontiguousarray(image[0].permute(1, 2, 0).numpy().astype(np.float32))
+    processor.applyRGB(pixels)
+    return torch.from_numpy(pixels).permute(2, 0, 1).unsqueeze(0)
+
+
+def hdr_image() -> torch.Tensor:
+    return torch.exp(torch.randn(1, 3, 32, 32) * 2.0 - 1.0)
+
+
+@pytest.mark.parametrize("shaper", ["linear", "logc"])
+def test_round_trip_keeps_the_table_bit_exact(tmp_path, shaper):
+    lut = bake_lut(look, size=9, shaper=shaper)
+    path = unique_cube(tmp_path)
+    write_cube(path, lut)
+    back = read_cube(path)
+    assert torch.equal(back.table, lut.table.float())
+    image = hdr_image()
+    tolerance = 0 if shaper == "linear" else 1e-4  # the LogC shaper travels as a 65536-point 1D table
+    torch.testing.assert_close(back(image), lut(image), atol=tolerance, rtol=0)
+
+
+def test_identity_lut_round_trips_exactly_on_lattice_points(tmp_path):
+    path = unique_cube(tmp_path)
+    write_cube(path, LUT3D(identity_table(17)))
+    axis = torch.linspace(0, 1, 17)
+    points = torch.stack(torch.meshgrid(axis, axis, axis, indexing="ij")).reshape(1, 3, -1, 1)
+    assert torch.equal(read_cube(path)(points), points)
+
+
+def test_written_file_follows_the_conventions(tmp_path):
+    path = unique_cube(tmp_path)
+    table = torch.zeros(2, 2, 2, 3)
+    table[0, 0, 1] = torch.tensor([1.0, 0.0, 0.0])  # red = 1 is the second row: red varies fastest
+    write_cube(path, LUT3D(table, domain=(0.0, 2.0)), title="look")
+    lines = open(path).read().splitlines()
+    assert lines[:4] == ['TITLE "look"', "DOMAIN_MIN 0.0 0.0 0.0", "DOMAIN_MAX 2.0 2.0 2.0", "LUT_3D_SIZE 2"]
+    assert lines[4:6] == ["0 0 0", "1 0 0"]
+
+
+@pytest.mark.parametrize("interpolation", ["tetrahedral", "trilinear"])
+@pytest.mark.parametrize("shaper", ["linear", "logc"])
+def test_opencolorio_applies_our_cube_like_lut3d(tmp_path, shaper, interpolation):
+    lut = bake_lut(look, size=17, shaper=shaper)
+    path = unique_cube(tmp_path)
+    write_cube(path, lut)
+    image = hdr_image()
+    torch.testing.assert_close(lut(image, interpolation), ocio_apply(path, image, interpolation), atol=1e-4, rtol=0)
+
+
+def _baked_by_opencolorio(folder, file_format: str, shaper: bool) -> str:
+    """Bake a saturation + exponent look with OpenColorIO's Baker (optionally with a log shaper)."""
+    config = OCIO.Config.CreateRaw()
+    config.addColorSpace(OCIO.ColorSpace(name="linear"))  # "raw" is a data space: nothing converts from it
+    graded = OCIO.ColorSpace(name="graded")
+    group = OCIO.GroupTransform()
+    group.appendTransform(OCIO.CDLTransform(slope=[1.1, 1.0, 0.9], offset=[0.01, 0.0, -0.01], power=[1.2, 1.0, 0.8], sat=1.3))
+    graded.setTransform(group, OCIO.COLORSPACE_DIR_FROM_REFERENCE)
+    config.addColorSpace(graded)
+    log = OCIO.ColorSpace(name="log")
+    log.setTransform(OCIO.LogAffineTransform(logSideSlope=[0.1] * 3, logSideOffset=[0.5] * 3, linSideOffset=[0.05] * 3), OCIO.COLORSPACE_DIR_FROM_REFERENCE)
+    config.addColorSpace(log)
+    baker = OCIO.Baker()
+    baker.setConfig(config)
+    baker.setFormat(file_format)
+    baker.setInputSpace("linear")
+    baker.setTargetSpace("graded")
+    baker.setCubeSize(17)
+    if shaper:
+        baker.setShaperSpace("log")
+        baker.setShaperSize(1024)
+    path = unique_cube(folder)
+    with open(path, "w") as handle:
+        handle.write(baker.bake())
+    return path
+
+
+@pytest.mark.parametrize("interpolation", ["tetrahedral", "trilinear"])
+@pytest.mark.parametrize("file_format, shaper", [("iridas_cube", False), ("resolve_cube", True)])
+def test_we_apply_opencolorio_baked_cubes_like_opencolorio(tmp_path, file_format, shaper, interpolation):
+    path = _baked_by_opencolorio(tmp_path, file_format, shaper)
+    lut = read_cube(path)
+    assert lut.shaper == ("curve" if shaper else "linear")
+    assert (lut.table - identity_table(17)).abs().max() > 0.05  # a real look, not an identity
+    image = torch.rand(1, 3, 32, 32) * (4.0 if shaper else 1.2) - 0.1
+    torch.testing.assert_close(lut(image, interpolation), ocio_apply(path, image, interpolation), atol=1e-4, rtol=0)
+
+
+def _table_rows(size: int) -> str:
+    return "\n".join("0.5 0.25 0.125" for _ in range(size**3)) + "\n"
+
+
+MALFORMED = {
+    "no size": "TITLE \"x\"\n" + _table_rows(2),
+    "size too small": "LUT_3D_SIZE 1\n0 0 0\n",
+    "size too large": "LUT_3D_SIZE 100000\n0 0 0\n",
+    "size not an integer": "LUT_3D_SIZE 2.5\n" + _table_rows(2),
+    "truncated": "LUT_3D_SIZE 3\n" + "\n".join(_table_rows(3).splitlines()[:20]) + "\n",
+    "too many rows": "LUT_3D_SIZE 2\n" + _table_rows(2) + "0 0 0\n",
+    "two numbers on a row": "LUT_3D_SIZE 2\n" + _table_rows(2).replace("0.5 0.25 0.125", "0.5 0.25", 1),
+    "nan": "LUT_3D_SIZE 2\n" + _table_rows(2).replace("0.5 0.25 0.125", "nan 0 0", 1),
+    "inf": "LUT_3D_SIZE 2\n" + _table_rows(2).replace("0.5 0.25 0.125", "0 inf 0", 1),
+    "text in data": "LUT_3D_SIZE 2\n" + _table_rows(2).replace("0.5 0.25 0.125", "0 zero 0", 1),
+    "unknown keyword": "LUT_3D_SIZE 2\nGAMMA 2.2\n" + _table_rows(2),
+    "duplicate keyword": "LUT_3D_SIZE 2\nLUT_3D_SIZE 2\n" + _table_rows(2),
+    "empty domain": "DOMAIN_MIN 1 0 0\nDOMAIN_MAX 1 1 1\nLUT_3D_SIZE 2\n" + _table_rows(2),
+    "non-finite domain": "DOMAIN_MIN 0 0 0\nDOMAIN_MAX inf 1 1\nLUT_3D_SIZE 2\n" + _table_rows(2),
+    "shaper too large": "LUT_1D_SIZE 10000000\nLUT_3D_SIZE 2\n" + _table_rows(2),
+    "1D only": "LUT_1D_SIZE 2\n0 0 0\n1 1 1\n",
+    "empty": "",
+}
+
+
+@pytest.mark.parametrize("name", sorted(MALFORMED))
+def test_malformed_files_raise_value_error(tmp_path, name):
+    path = tmp_path / "bad.cube"
+    path.write_text(MALFORMED[name])
+    with pytest.raises(ValueError):
+        read_cube(path)
+
+
+def test_binary_garbage_raises_value_error(tmp_path):
+    path = tmp_path / "bad.cube"
+    path.write_bytes(b"LUT_3D_SIZE 2\n\xff\xfe\x00garbage\n")
+    with pytest.raises(ValueError, match="non-ASCII"):
+        read_cube(path)
+
+
+def test_absurdly_large_file_is_refused_before_reading(tmp_path):
+    path = tmp_path / "huge.cube"
+    with open(path, "wb") as handle:
+        handle.write(b"LUT_3D_SIZE 2\n0 0 0\n")
+        handle.truncate(8 << 30)  # a sparse 8 GiB file: reading it would exhaust memory
+    with pytest.raises(ValueError, match="far more"):
+        read_cube(path)
+
+
+def test_failed_write_leaves_the_existing_file_untouched(tmp_path):
+    path = tmp_path / "keep.cube"
+    path.write_text("original")
+    with pytest.raises(ValueError):
+        write_cube(path, LUT3D(identity_table(2)), title='bad "title"')
+    with pytest.raises(ValueError):
+        write_cube(path, LUT3D(identity_table(2), shaper="logc"), shaper_size=1)
+    assert path.read_text() == "original"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.cube"]

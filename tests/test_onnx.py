@@ -1,0 +1,186 @@
+"""ONNX export: onnxruntime against PyTorch at two batch sizes and two resolutions (one odd) from one file,
+identity stages adding no nodes, grading controls as graph inputs, opsets of the LUT backends."""
+
+import collections
+
+import numpy as np
+import onnx
+import pytest
+import torch
+
+import torchgrade as tg
+from torchgrade.onnx import export, grade_feeds, node_count, session, verify
+
+SHAPES = [(1, 3, 37, 53), (3, 3, 64, 96)]
+"""Two batch sizes, two resolutions (the first odd in both sides); exports trace at (2, 3, 64, 64)."""
+TOLERANCE = 1e-4
+STEP_TOLERANCE = 1e-3
+"""A grade_inputs graph evaluates every grading step; PyTorch skips steps at identity, and some identity
+evaluations are not exact (white balance at temperature = tint = 0 is Unity's formula, gains 1 +- 1e-6,
+and split toning's gamma round trip). Looks with such steps left at identity agree to this (display)."""
+
+FULL_GRADE = dict(
+    post_exposure=0.5, temperature=20, tint=5, contrast=30, color_filter=(1.0, 0.9, 0.8), hue_shift=10, saturation=20,
+    split_shadows=(0.4, 0.5, 0.6), split_highlights=(0.6, 0.5, 0.4), split_balance=10,
+    channel_mixer=((1.1, 0.0, 0.0), (0.0, 0.9, 0.1), (0.0, 0.0, 1.0)),
+    shadows=(1.0, 0.9, 1.0), midtones=(1.0, 1.0, 1.1), highlights=(0.9, 1.0, 1.0),
+)
+
+
+def hdr(shape, seed=1) -> torch.Tensor:
+    """Scene-referred noise: mostly below 2, a tail up to ~60, some exact zeros."""
+    generator = torch.Generator().manual_seed(seed)
+    image = torch.rand(shape, generator=generator) ** 4 * 60.0
+    image[..., ::7, ::5] = 0.0
+    return image
+
+
+def display_error(module, path, inputs) -> float:
+    """verify()'s max abs error, relative to the output's peak where that exceeds 1 (scene-referred stages)."""
+    with torch.no_grad():
+        peak = float(module(inputs).abs().max())
+    return verify(module, path, inputs) / max(1.0, peak)
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    """Export a module once per (name, options) and reuse the file for every shape."""
+    folder = tmp_path_factory.mktemp("onnx")
+    cache = {}
+
+    def get(name, module, **options):
+        if name not in cache:
+            cache[name] = export(module, folder / f"{name}.onnx", **options)
+        return cache[name]
+
+    return get
+
+
+@pytest.mark.parametrize("mode", tg.TONEMAP_MODES)
+def test_every_tonemapper_matches(exported, mode):
+    module = tg.ToneMap(mode)
+    path = exported(f"tonemap_{mode}", module)
+    for shape in SHAPES:
+        assert verify(module, path, hdr(shape)) <= TOLERANCE
+
+
+@pytest.mark.parametrize("aces", [False, True])
+def test_full_grade_matches(exported, aces):
+    module = tg.ColorGrade(aces=aces, **FULL_GRADE)
+    path = exported(f"grade_{aces}", module)
+    for shape in SHAPES:
+        assert display_error(module, path, hdr(shape)) <= TOLERANCE
+
+
+@pytest.mark.parametrize("mode", tg.bloom.BLOOM_MODES)
+@pytest.mark.parametrize("bicubic", [False, True])
+def test_bloom_matches(exported, mode, bicubic):
+    # Three levels: every test size has at least that many, so PyTorch and the fixed-depth graph agree.
+    module = tg.Bloom(mode=mode, intensity=0.8, max_iterations=3, bicubic_upsampling=bicubic)
+    path = exported(f"bloom_{mode}_{bicubic}", module)
+    for shape in SHAPES:
+        assert display_error(module, path, hdr(shape)) <= TOLERANCE
+
+
+def test_bloom_depth_follows_frame_size(exported, tmp_path):
+    """A graph keeps the depth of its frame_size; a frame of another depth then differs from PyTorch."""
+    module = tg.Bloom(intensity=1.0)
+    image = hdr((1, 3, 64, 96))
+    matching = export(module, tmp_path / "matching.onnx", frame_size=(64, 96))
+    deeper = export(module, tmp_path / "deeper.onnx", frame_size=(1080, 1920))
+    assert display_error(module, matching, image) <= TOLERANCE
+    assert display_error(module, deeper, image) > 1e-3
+
+
+LUT = tg.bake_lut(torch.nn.Sequential(tg.ColorGrade(contrast=20, saturation=15), tg.ToneMap("neutral")), size=17)
+
+
+@pytest.mark.parametrize("interpolation", ["trilinear", "tetrahedral"])
+@pytest.mark.parametrize("backend, opset", [("strip", 17), ("gather", 17), ("volume", 20)])
+def test_lut_matches_in_both_interpolations(exported, interpolation, backend, opset):
+    module = tg.PostFX(lut=LUT, interpolation=interpolation)
+    path = exported(f"lut_{interpolation}_{backend}", module, lut_backend=backend)
+    model = onnx.load(str(path))
+    assert model.opset_import[0].version == opset
+    ops = collections.Counter(node.op_type for node in model.graph.node)
+    uses_grid = interpolation == "trilinear" and backend != "gather"
+    assert (ops["GridSample"] > 0) == uses_grid and (ops["Gather"] > 0 or uses_grid)
+    for shape in SHAPES:
+        assert verify(module, path, hdr(shape)) <= TOLERANCE
+
+
+def test_strip_lookup_matches_the_gather_kernel_on_lattice_points():
+    """Lattice points come back exactly from the strip layout (no half-texel offset)."""
+    from torchgrade.onnx import strip_table, trilinear_strip
+
+    table = torch.rand(5, 5, 5, 3)
+    unit = tg.lut.lattice(5).permute(3, 0, 1, 2).reshape(1, 3, 25, 5).float()
+    looked_up = trilinear_strip(unit, strip_table(table))
+    torch.testing.assert_close(looked_up, table.reshape(1, 25, 5, 3).permute(0, 3, 1, 2), atol=1e-6, rtol=0)
+
+
+FULL_LOOK = dict(
+    exposure={"speed": 1.5},
+    bloom={"intensity": 0.5, "max_iterations": 3},
+    grade={"aces": True, "contrast": 20, "saturation": 10, "temperature": 10},
+    tonemap="aces",
+)
+
+
+def test_full_look_matches_including_the_adaptation_state(exported):
+    look = tg.PostFX(**FULL_LOOK)
+    path = exported("full_look", look)
+    names = [i.name for i in session(path).get_inputs()]
+    assert names == ["image", "adapted", "dt"]
+    for shape in SHAPES:
+        adapted = torch.linspace(0.0, 2.0, shape[0])  # the first sample starts a sequence
+        assert verify(look, path, (hdr(shape), adapted, torch.tensor(0.2))) <= TOLERANCE
+
+
+def test_identity_grade_and_zero_bloom_add_no_nodes(exported):
+    plain = node_count(exported("tonemap_only", tg.PostFX(tonemap="neutral")))
+    with_identity = tg.PostFX(grade=tg.ColorGrade(), bloom=tg.Bloom(intensity=0.0), tonemap="neutral")
+    sequential = torch.nn.Sequential(tg.ColorGrade(), tg.Bloom(intensity=0.0), tg.ToneMap("neutral"))
+    assert node_count(exported("identity_look", with_identity)) == plain
+    assert node_count(exported("identity_sequential", sequential)) == node_count(exported("tonemap_neutral", tg.ToneMap("neutral")))
+    graded = tg.PostFX(grade={"contrast": 10}, tonemap="neutral")
+    assert node_count(exported("graded_look", graded)) > plain
+
+
+def test_grading_controls_as_inputs_serve_many_looks(exported):
+    baked_look = tg.PostFX(grade=FULL_GRADE, tonemap="neutral")
+    inputs_path = exported("grade_inputs", baked_look, grade_inputs=True)
+    baked_path = exported("grade_baked", baked_look)
+    runner, baked_runner = session(inputs_path), session(baked_path)
+    assert [i.name for i in runner.get_inputs()] == ["image"] + list(tg.grade.CONTROLS)
+    other_look = tg.PostFX(grade={"contrast": -30, "hue_shift": -40, "split_balance": -20}, tonemap="neutral")
+    for shape in SHAPES:
+        image = hdr(shape)
+        feeds = {"image": image.numpy(), **{k: v.numpy() for k, v in grade_feeds(baked_look.grade, shape[0]).items()}}
+        from_inputs = runner.run(None, feeds)[0]
+        np.testing.assert_allclose(from_inputs, baked_runner.run(None, {"image": image.numpy()})[0], atol=TOLERANCE, rtol=0)
+        feeds.update({k: v.numpy() for k, v in grade_feeds(other_look.grade, shape[0]).items()})
+        with torch.no_grad():
+            np.testing.assert_allclose(runner.run(None, feeds)[0], other_look(image).numpy(), atol=STEP_TOLERANCE, rtol=0)
+
+
+def test_grading_controls_as_inputs_per_sample(exported):
+    """One batch, a different look per sample."""
+    look = tg.PostFX(grade={"contrast": 10}, tonemap="neutral")
+    runner = session(exported("grade_inputs_small", look, grade_inputs=True))
+    image = hdr((2, 3, 9, 11))
+    contrasts = torch.tensor([-40.0, 60.0])
+    feeds = {k: v.numpy() for k, v in grade_feeds(tg.ColorGrade(contrast=contrasts), 2).items()}
+    output = runner.run(None, {"image": image.numpy(), **feeds})[0]
+    for sample, contrast in enumerate(contrasts.tolist()):
+        expected = tg.PostFX(grade={"contrast": contrast}, tonemap="neutral")(image[sample : sample + 1])
+        np.testing.assert_allclose(output[sample : sample + 1], expected.detach().numpy(), atol=STEP_TOLERANCE, rtol=0)
+
+
+def test_bad_options_raise(tmp_path):
+    with pytest.raises(ValueError, match="lut_backend"):
+        export(tg.ToneMap(), tmp_path / "x.onnx", lut_backend="texture")
+    with pytest.raises(ValueError, match="opset >= 20"):
+        export(tg.PostFX(lut=LUT), tmp_path / "x.onnx", lut_backend="volume", opset=17)
+    with pytest.raises(ValueError, match="needs a ColorGrade"):
+        export(tg.ToneMap(), tmp_path / "x.onnx", grade_inputs=True)

@@ -1,0 +1,193 @@
+"""``PostFX``: the whole look, ``AutoExposure -> Bloom -> ColorGrade -> ToneMap``, built from arguments or a config.
+
+Each stage is given as a module, a dict of its constructor arguments, or ``None``. Only the stages a
+scene needs are built ("model only what a scene requires"): a grade whose controls are all identity
+and a bloom of intensity 0 (or ``max_iterations`` 0) are dropped, so they cost nothing in PyTorch and
+add no ONNX nodes. Tone mapping is never dropped when given (even ``"none"`` clips to [0, 1]).
+
+A config is a dict (or a JSON file) with the keys ``exposure``, ``bloom``, ``grade`` and ``tonemap``;
+each holds the arguments of its stage (``tonemap`` may also be just a mode name)::
+
+    {"bloom": {"intensity": 0.8, "threshold": 1.2},
+     "grade": {"aces": true, "contrast": 20, "saturation": 10},
+     "tonemap": {"mode": "aces"}}
+
+Unknown stages and keys, unknown modes and out-of-range values raise ``ValueError`` naming the key
+(``"unknown key 'grade.brightness'"``, ``"grade.contrast must lie in [-100.0, 100.0], got 150"``).
+
+:meth:`PostFX.to_lut` bakes grade and tone mapping into one :class:`~torchgrade.lut.LUT3D` while
+exposure and bloom (which look at neighbouring pixels or the whole frame) stay live.
+"""
+
+from __future__ import annotations
+
+import copy
+import inspect
+import json
+from pathlib import Path
+from typing import Optional
+
+import torch
+from torch import nn
+
+from .bloom import Bloom
+from .core import is_constant
+from .exposure import AutoExposure, auto_exposure
+from .grade import CONTROLS, ColorGrade
+from .lut import INTERPOLATIONS, LUT3D, bake_lut
+from .tonemap import ToneMap
+
+STAGES = {"exposure": AutoExposure, "bloom": Bloom, "grade": ColorGrade, "tonemap": ToneMap}
+"""The configurable stages, in the order they run, and their classes."""
+
+
+def stage_keys(stage: str) -> tuple:
+    """The argument names a stage's config accepts (its constructor's arguments)."""
+    if stage == "grade":
+        return ("aces",) + tuple(CONTROLS)
+    return tuple(name for name in inspect.signature(STAGES[stage]).parameters if name != "self")
+
+
+def build_stage(stage: str, spec) -> Optional[nn.Module]:
+    """A stage module from a module, a dict of arguments (``tonemap`` also a mode name) or ``None``.
+
+    Raises ``ValueError`` naming ``stage.key`` for unknown keys and for values the stage rejects.
+    """
+    if spec is None or isinstance(spec, nn.Module):
+        return spec
+    if stage == "tonemap" and isinstance(spec, str):
+        spec = {"mode": spec}
+    if not isinstance(spec, dict):
+        raise ValueError(f"{stage} must be a module, a dict of its arguments or None, got {type(spec).__name__}")
+    known = stage_keys(stage)
+    for key in spec:
+        if key not in known:
+            raise ValueError(f"unknown key '{stage}.{key}'; {stage} takes {', '.join(known)}")
+    try:
+        return STAGES[stage](**spec)
+    except (ValueError, TypeError) as error:
+        raise ValueError(_qualified(stage, str(error), spec)) from None
+
+
+def _qualified(stage: str, message: str, spec: dict) -> str:
+    """Prefix a stage's error with ``stage.`` when it starts with one of the given keys, else ``stage: ``."""
+    named = any(message.startswith(f"{key} ") for key in spec)
+    return f"{stage}.{message}" if named else f"{stage}: {message}"
+
+
+def is_identity_stage(module: nn.Module) -> bool:
+    """True for a stage that cannot change any image: an identity grade, a bloom of intensity 0 or no levels."""
+    if isinstance(module, ColorGrade):
+        return module.is_identity
+    if isinstance(module, Bloom):
+        return module.max_iterations == 0 or is_constant(module.intensity, 0.0)
+    return False
+
+
+def exposure_frame(exposure: AutoExposure, image: torch.Tensor, adapted: torch.Tensor, dt) -> tuple:
+    """One frame of ``exposure`` without state: ``(image, adapted, dt) -> (exposed, new adapted)``.
+
+    ``adapted`` has one value per image; ``<= 0`` starts a sequence (the frame adapts instantly).
+    """
+    settings = {key: getattr(exposure, key) for key in exposure.to_config()}
+    return auto_exposure(image, adapted, dt, **settings)
+
+
+class PostFX(nn.Module):
+    """A look: ``PostFX(exposure=None, bloom=None, grade=None, tonemap=None)``; see the module docstring.
+
+    ``lut`` (a :class:`~torchgrade.lut.LUT3D`, applied with ``interpolation``) replaces ``grade`` and
+    ``tonemap``; :meth:`to_lut` builds such a look. ``forward(image, dt=None)`` runs the stages in
+    order; ``dt`` (seconds since the previous frame) is passed to the exposure stage, which keeps the
+    adapted luminance between calls (see :class:`~torchgrade.AutoExposure`).
+    """
+
+    def __init__(self, exposure=None, bloom=None, grade=None, tonemap=None, lut: Optional[LUT3D] = None,
+                 interpolation: str = "tetrahedral"):
+        super().__init__()
+        if lut is not None and (grade is not None or tonemap is not None):
+            raise ValueError("a look takes either lut or grade/tonemap, not both")
+        if interpolation not in INTERPOLATIONS:
+            raise ValueError(f"interpolation must be one of {INTERPOLATIONS}, got {interpolation!r}")
+        given = {"exposure": exposure, "bloom": bloom, "grade": grade, "tonemap": tonemap}
+        for stage, spec in given.items():
+            module = build_stage(stage, spec)
+            setattr(self, stage, None if module is None or is_identity_stage(module) else module)
+        self.lut = lut
+        self.interpolation = interpolation
+
+    @classmethod
+    def from_config(cls, config) -> "PostFX":
+        """Build a look from a config dict or the path of a JSON file holding one."""
+        if isinstance(config, (str, Path)):
+            config = json.loads(Path(config).read_text())
+        if not isinstance(config, dict):
+            raise ValueError(f"a look config must be a dict, got {type(config).__name__}")
+        for key in config:
+            if key not in STAGES:
+                raise ValueError(f"unknown key '{key}'; a look config has {', '.join(STAGES)}")
+        return cls(**config)
+
+    def to_config(self) -> dict:
+        """The built stages' arguments as plain values (JSON-ready); ``PostFX.from_config`` inverts it."""
+        if self.lut is not None:
+            raise ValueError("a look baked to a LUT has no config; save the LUT with torchgrade.io.write_cube")
+        config = {}
+        for stage, module in self.stages().items():
+            config[stage] = module.config() if hasattr(module, "config") else module.to_config()
+        return config
+
+    def stages(self) -> dict:
+        """The built stages by name, in the order they run (``"lut"`` for a baked look)."""
+        names = ("exposure", "bloom", "grade", "tonemap", "lut")
+        return {name: getattr(self, name) for name in names if getattr(self, name) is not None}
+
+    def forward(self, image: torch.Tensor, dt=None) -> torch.Tensor:
+        if self.exposure is not None:
+            image = self.exposure(image, dt)
+        return self.finish(image)
+
+    def finish(self, image: torch.Tensor) -> torch.Tensor:
+        """The stages after exposure: bloom, then grade and tone mapping (or the baked LUT)."""
+        if self.bloom is not None:
+            image = self.bloom(image)
+        if self.lut is not None:
+            return self.lut(image, self.interpolation)
+        if self.grade is not None:
+            image = self.grade(image)
+        if self.tonemap is not None:
+            image = self.tonemap(image)
+        return image
+
+    def frame(self, image: torch.Tensor, adapted: torch.Tensor, dt) -> tuple:
+        """The look without state, for serving: ``(image, adapted, dt) -> (output, new adapted)``.
+
+        Needs an exposure stage; see :func:`exposure_frame` for ``adapted``.
+        """
+        if self.exposure is None:
+            raise ValueError("frame() needs an exposure stage; call the look directly")
+        exposed, adapted = exposure_frame(self.exposure, image, adapted, dt)
+        return self.finish(exposed), adapted
+
+    def to_lut(self, size: int = 33, interpolation: Optional[str] = None) -> "PostFX":
+        """An equivalent look with grade and tone mapping baked into a ``size``³ LogC-shaped LUT.
+
+        Exposure and bloom stay live (copied, so the new look keeps its own adaptation state). The
+        LUT's domain reaches LogC 1.0 (linear ≈ 58.9); a tone-mapped look clamps its output to
+        [0, 1] after the lookup. Without a tone mapper, graded values above the domain are clipped.
+        """
+        transform = nn.Sequential(*(m for m in (self.grade, self.tonemap) if m is not None))
+        if len(transform) == 0:
+            raise ValueError("nothing to bake: the look has neither a grade nor a tone mapper")
+        lut = bake_lut(transform, size=size, shaper="logc")
+        lut = LUT3D(lut.table.detach().float(), shaper=lut.shaper, domain=(lut.domain_min, lut.domain_max),
+                    output_range=lut.output_range)
+        return PostFX(
+            exposure=copy.deepcopy(self.exposure),
+            bloom=copy.deepcopy(self.bloom),
+            lut=lut,
+            interpolation=interpolation or self.interpolation,
+        )
+
+    def extra_repr(self) -> str:
+        return f"interpolation={self.interpolation!r}" if self.lut is not None else ""
