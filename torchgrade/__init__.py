@@ -1,13 +1,12 @@
 """torchgrade: differentiable HDR post-processing for PyTorch (bloom, grading, tone mapping, LUTs)."""
 
-from . import color, core, functional, io, scene
-from .grade import ColorGrade
+from . import color, core, functional, io, onnx, scene
+from .augment import RandomPostFX
 from .bloom import Bloom
 from .exposure import AutoExposure
-from .tonemap import ToneMap, TONEMAP_MODES
-from .augment import RandomPostFX
-
-__version__ = "0.1.0"
+from .grade import ColorGrade
 from .lut import LUT3D, bake_lut
 from .pipeline import PostFX
-from . import onnx
+from .tonemap import TONEMAP_MODES, ToneMap
+
+__version__ = "0.1.0"

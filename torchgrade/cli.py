@@ -11,27 +11,27 @@ import numpy as np
 import torch
 from torch import nn
 
-from . import TONEMAP_MODES, ColorGrade, ToneMap
+from . import TONEMAP_MODES, ColorGrade, PostFX, ToneMap
 from .color import linear_to_srgb
 from .io import read_exr, write_exr
 from .io.atomic import atomic_write
 from .scene import demo_scene
 
 
-def default_look() -> nn.Sequential:
-    """The demo's look: a gentle warm, contrasty grade in ACES, then ACES tone mapping."""
-    return nn.Sequential(
-        ColorGrade(
-            aces=True,
-            post_exposure=0.5,
-            temperature=8.0,
-            contrast=15.0,
-            saturation=10.0,
-            split_shadows=(0.45, 0.5, 0.56),
-            split_highlights=(0.56, 0.5, 0.45),
-        ),
-        ToneMap("aces"),
-    )
+DEFAULT_LOOK = {
+    "bloom": {"mode": "scattering", "threshold": 1.0, "knee": 0.5, "intensity": 0.6, "scatter": 0.7},
+    "grade": {
+        "aces": True,
+        "post_exposure": 0.5,
+        "temperature": 8.0,
+        "contrast": 15.0,
+        "saturation": 10.0,
+        "split_shadows": (0.45, 0.5, 0.56),
+        "split_highlights": (0.56, 0.5, 0.45),
+    },
+    "tonemap": "aces",
+}
+"""The demo's look: scattering bloom, a gentle warm and contrasty grade in ACES, ACES tone mapping."""
 
 
 def write_png(path, display_linear: torch.Tensor) -> None:
@@ -43,8 +43,8 @@ def write_png(path, display_linear: torch.Tensor) -> None:
     atomic_write(path, lambda temporary: Image.fromarray(pixels, "RGB").save(temporary, format="PNG"))
 
 
-def _stages(look: nn.Sequential) -> str:
-    return " -> ".join(type(stage).__name__ for stage in look)
+def _stages(look: nn.Module) -> str:
+    return " -> ".join(type(stage).__name__ for stage in look.children())
 
 
 def _write_output(path: Path, image: torch.Tensor) -> None:
@@ -57,7 +57,7 @@ def _write_output(path: Path, image: torch.Tensor) -> None:
 
 
 def run_demo(args: argparse.Namespace) -> str:
-    look = default_look()
+    look = PostFX.from_config(DEFAULT_LOOK)
     start = time.perf_counter()
     scene = demo_scene(args.height, args.width)
     with torch.no_grad():
