@@ -113,7 +113,7 @@ def pyramid_depth(height: int, width: int, max_iterations: int, downscale_limit:
     Sizes are Python ints here, as in kornia's pyramid functions, so tracing freezes the depth.
     An exporter serving every resolution from one graph has to fix the depth itself (for example
     the depth of the smallest frame it accepts). The other steps take their sizes from tensor shapes,
-    except :func:`_mirror_pad`'s count of reflections for levels narrower than the blur radius.
+    except :func:`mirror_pad`'s count of reflections for levels narrower than the blur radius.
     """
     depth, h, w = 0, height // 2, width // 2
     while depth < max_iterations:
@@ -145,35 +145,34 @@ def _block_counts(height: int, width: int, like: torch.Tensor) -> torch.Tensor:
     return (per_axis(height)[:, None] * per_axis(width)[None, :]).expand(1, 1, -1, -1)
 
 
-def _mirror_pad(light: torch.Tensor, radius: int) -> torch.Tensor:
+def mirror_pad(light: torch.Tensor, radius: int) -> torch.Tensor:
     """Extend the frame by ``radius`` pixels on every side with its mirror image about the edge.
 
-    Half-sample symmetric extension (``c b a | a b c | c b a``), repeated when the frame is narrower
-    than ``radius``. A symmetric kernel applied to it is a symmetric, row-stochastic operator, hence
-    also column-stochastic: every pixel keeps all of its light inside the frame, and a uniform frame
-    stays uniform (clamped edges magnify edge pixels; zero padding loses their light).
+    Half-sample symmetric extension (``c b a | a b c | c b a``), periodic with period ``2 · side``
+    so it repeats when the frame is narrower than ``radius``. A symmetric kernel applied to it is a
+    symmetric, row-stochastic operator, hence also column-stochastic: every pixel keeps all of its
+    light inside the frame, and a uniform frame stays uniform (clamped edges magnify edge pixels;
+    zero padding loses their light). Written as index arithmetic on the tensor's own sizes, so a
+    traced graph (ONNX) keeps working at every frame size.
     """
     for axis in (-2, -1):
-        done = 0
-        while done < radius:
-            step = min(radius - done, light.shape[axis] - 2 * done)
-            first, last = light.narrow(axis, 0, step), light.narrow(axis, light.shape[axis] - step, step)
-            light = torch.cat((first.flip(axis), light, last.flip(axis)), dim=axis)
-            done += step
+        side = light.shape[axis]
+        position = torch.arange(-radius, side + radius, device=light.device).remainder(2 * side)
+        light = light.index_select(axis, torch.where(position < side, position, 2 * side - 1 - position))
     return light
 
 
 def _gaussian(light: torch.Tensor) -> torch.Tensor:
     """The pyramid blur: ``kornia.filters.gaussian_blur2d`` over the mirrored frame (so it keeps the light)."""
     radius = BLUR_TAPS // 2
-    blurred = kornia.filters.gaussian_blur2d(_mirror_pad(light, radius), BLUR_TAPS, (BLUR_SIGMA, BLUR_SIGMA))
+    blurred = kornia.filters.gaussian_blur2d(mirror_pad(light, radius), BLUR_TAPS, (BLUR_SIGMA, BLUR_SIGMA))
     return blurred[..., radius:-radius, radius:-radius]
 
 
 def _bspline_refine(light: torch.Tensor) -> torch.Tensor:
     """The filter turning bilinear into cubic B-spline upsampling, over the mirrored frame."""
     kernel = torch.tensor([BSPLINE_AFTER_BILINEAR], dtype=light.dtype, device=light.device)
-    padded = _mirror_pad(light, len(BSPLINE_AFTER_BILINEAR) // 2)
+    padded = mirror_pad(light, len(BSPLINE_AFTER_BILINEAR) // 2)
     return kornia.filters.filter2d_separable(padded, kernel, kernel, padding="valid")
 
 

@@ -61,7 +61,6 @@ import onnx as onnx_lib  # the onnx package (absolute import), not this module
 import torch
 from torch import nn
 
-from . import bloom as bloom_module
 from .bloom import Bloom, bloom, pyramid_depth
 from .core import sanitize
 from .exposure import AutoExposure
@@ -81,30 +80,6 @@ Inputs = Union[torch.Tensor, Sequence[torch.Tensor]]
 
 
 # ---------------------------------------------------------------- export-ready modules
-
-
-def mirror_pad(light: torch.Tensor, radius: int) -> torch.Tensor:
-    """Bloom's half-sample symmetric extension (``c b a | a b c | c b a``) by index arithmetic.
-
-    Equal to :func:`torchgrade.bloom._mirror_pad`, whose loop takes its step sizes from Python ints
-    that tracing would freeze at the example's level sizes; here every size stays symbolic.
-    """
-    for axis in (-2, -1):
-        side = light.shape[axis]
-        position = torch.arange(-radius, side + radius, device=light.device).remainder(2 * side)
-        light = light.index_select(axis, torch.where(position < side, position, 2 * side - 1 - position))
-    return light
-
-
-@contextlib.contextmanager
-def _traceable_bloom():
-    """Swap bloom's mirror padding for :func:`mirror_pad` while a graph is traced."""
-    original = bloom_module._mirror_pad
-    bloom_module._mirror_pad = mirror_pad
-    try:
-        yield
-    finally:
-        bloom_module._mirror_pad = original
 
 
 class FixedDepthBloom(nn.Module):
@@ -447,7 +422,7 @@ def export(
     inputs = example_inputs(graph, module, example.float())
     names = input_names(graph)
     path = Path(path)
-    with _symbolics(opset), _traceable_bloom(), warnings.catch_warnings():
+    with _symbolics(opset), warnings.catch_warnings():
         warnings.simplefilter("ignore")  # tracer warnings: Python ints frozen by design (bloom depth)
         torch.onnx.export(
             graph, inputs, str(path), dynamo=False, opset_version=opset,
