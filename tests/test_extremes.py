@@ -23,6 +23,20 @@ STRONG_GRADE = dict(
 )
 
 
+class _Lookup(torch.nn.Module):
+    """A LUT with a fixed interpolation, as a module of its own."""
+
+    def __init__(self, lut, interpolation):
+        super().__init__()
+        self.lut, self.interpolation = lut, interpolation
+
+    def forward(self, image):
+        return self.lut(image, interpolation=self.interpolation)
+
+
+_LUT = tg.bake_lut(torch.nn.Sequential(tg.ColorGrade(**STRONG_GRADE), tg.ToneMap("aces")), size=9)
+
+
 def _modules():
     """(name, module factory, output is display-referred)."""
     modules = [(f"tonemap-{mode}", lambda mode=mode: tg.ToneMap(mode), True) for mode in tg.TONEMAP_MODES]
@@ -31,6 +45,11 @@ def _modules():
         ("grade-aces", lambda: tg.ColorGrade(aces=True, **STRONG_GRADE), False),
         ("autoexposure-log", lambda: tg.AutoExposure(metering="log"), False),
         ("autoexposure-reinhard", lambda: tg.AutoExposure(metering="mean", operator="reinhard"), False),
+        ("bloom-additive", lambda: tg.Bloom(intensity=0.8, threshold=0.8, downscale_limit=1), False),
+        ("bloom-scattering", lambda: tg.Bloom(mode="scattering", intensity=0.8, downscale_limit=1, bicubic_upsampling=True), False),
+        ("lut-trilinear", lambda: _Lookup(_LUT, "trilinear"), True),
+        ("lut-tetrahedral", lambda: _Lookup(_LUT, "tetrahedral"), True),
+        ("postfx", lambda: tg.PostFX(exposure={}, bloom={"mode": "scattering", "intensity": 0.5}, grade={"aces": True, **STRONG_GRADE}, tonemap="aces"), True),
     ]
     return modules
 
