@@ -58,40 +58,22 @@ D60_2_D65 = np.array([[0.98722400, -0.00611327, 0.0159533], [-0.00759836, 1.0018
 AP1_Y = np.array([0.272229, 0.674082, 0.0536895])
 
 
+def smoothstep_hue_weight(centered_hue):
+    """Unity's red-modifier weight: ``smoothstep(0, 1, 1 - |2 h / 135|)²``."""
+    u = min(max(1 - abs(2 * centered_hue / 135), 0), 1)
+    return (u * u * (3 - 2 * u)) ** 2
+
+
 def aces_pixel(rgb):
-    aces = SRGB_2_AP0 @ np.minimum(np.maximum(rgb, 0), 60)
-    ma, mi = aces.max(), aces.min()
-    sat = (max(ma, 1e-4) - max(mi, 1e-4)) / max(ma, 1e-2)
-    r, g, b = aces
-    yc = (r + g + b + 1.75 * math.sqrt(max(b * (b - g) + g * (g - r) + r * (r - b), 0))) / 3
-    x = (sat - 0.4) / 0.2
-    t = max(1 - abs(x / 2), 0)
-    s = (1 + math.copysign(1, x) * (1 - t * t)) / 2 if x != 0 else 0.5
-    gain = 0.05 * s
-    if yc <= 2 / 3 * 0.08:
-        glow = gain
-    elif yc >= 2 * 0.08:
-        glow = 0.0
-    else:
-        glow = gain * (0.08 / yc - 0.5)
-    aces = aces * (1 + glow)
-    r, g, b = aces
-    hue = 0.0 if r == g == b else math.degrees(math.atan2(math.sqrt(3) * (g - b), 2 * r - g - b))
-    hue = hue + 360 if hue < 0 else hue
-    centered = hue - 360 if hue > 180 else hue
-    u = min(max(1 - abs(2 * centered / 135), 0), 1)
-    weight = (u * u * (3 - 2 * u)) ** 2
-    aces[0] += weight * sat * (0.03 - aces[0]) * (1 - 0.82)
-    cg = np.maximum(AP0_2_AP1 @ aces, 0)
-    cg = cg @ AP1_Y + 0.96 * (cg - cg @ AP1_Y)
+    aces = rrt_glow_and_red(SRGB_2_AP0 @ np.clip(rgb, 0, 60), smoothstep_hue_weight)
+    cg = sat_adjust(np.maximum(AP0_2_AP1 @ aces, 0), 0.96, AP1_Y)  # Unity rounds AP1's luminance row
     post = cg * (2.785085 * cg + 0.107772) / (cg * (2.936045 * cg + 0.887122) + 0.806889)
     xyz = AP1_2_XYZ @ post
     total = max(xyz.sum(), 1e-4)
     cx, cy = xyz[0] / total, xyz[1] / total
     big_y = min(max(xyz[1], 0), 65504) ** 0.9811
     m = big_y / max(cy, 1e-4)
-    linear = XYZ_2_AP1 @ np.array([cx * m, big_y, (1 - cx - cy) * m])
-    linear = linear @ AP1_Y + 0.93 * (linear - linear @ AP1_Y)
+    linear = sat_adjust(XYZ_2_AP1 @ np.array([cx * m, big_y, (1 - cx - cy) * m]), 0.93, AP1_Y)
     return np.clip(XYZ_2_REC709 @ (D60_2_D65 @ (AP1_2_XYZ @ linear)), 0, 1)
 
 
@@ -164,8 +146,8 @@ def rrt_glow_and_red(aces, hue_weight):
     return aces
 
 
-def sat_adjust(rgb, factor):
-    return factor * rgb + (1 - factor) * (rgb @ AP1_RGB2Y)
+def sat_adjust(rgb, factor, weights=AP1_RGB2Y):
+    return factor * rgb + (1 - factor) * (rgb @ weights)
 
 
 def aces_reference_pixel(rgb):
@@ -281,8 +263,7 @@ def film_tone_map_channel(log_color, slope, toe, shoulder, black_clip, white_cli
 
 
 def unreal_filmic_pixel(rgb, slope=0.88, toe=0.55, shoulder=0.26, black_clip=0.0, white_clip=0.04):
-    smoothstep_weight = lambda h: (lambda u: u * u * (3 - 2 * u))(min(max(1 - abs(2 * h / 135), 0), 1)) ** 2
-    aces = rrt_glow_and_red(SRGB_2_AP0 @ np.clip(rgb, 0, 60), smoothstep_weight)
+    aces = rrt_glow_and_red(SRGB_2_AP0 @ np.clip(rgb, 0, 60), smoothstep_hue_weight)
     working = sat_adjust(np.maximum(AP0_2_AP1 @ aces, 0), 0.96)
     # Black as log10 = -1000: HLSL's -inf would make the final lerp 0 · inf.
     log_color = [math.log10(v) if v > 0 else -1000.0 for v in working]
