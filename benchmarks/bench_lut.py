@@ -1,19 +1,25 @@
 """Speed of applying a 33³ LUT to a 1920×1080 float32 frame on CPU, side by side with OpenColorIO.
 
 Every way of applying the same LUT (written once to a .cube file, so OpenColorIO reads exactly the
-table torchgrade uses) is timed as the median of repeated runs in this one process, and reported in
-ms, ms per megapixel, and as ratios to OpenColorIO's tetrahedral CPU processor and to a plain tensor
-copy (the memory floor). Temporary memory is the peak resident memory a method adds beyond its input
-and output, per pixel, measured in a child process run with glibc's mmap threshold fixed at 64 KiB
-(every large buffer a fresh mapping; that slows allocation, so no timing is taken there) after
-resetting the kernel's peak-RSS counter; the compiled kernels are not measured (n/a) to spare a
-second compilation.
+table torchgrade uses) is timed in this one process, round-robin: each of the repeated rounds runs
+every method once, so a change of machine load hits all of them alike; the median round is reported
+in ms, ms per megapixel, and as ratios to OpenColorIO's tetrahedral CPU processor and to a plain
+tensor copy (the memory floor). Compile time of the ``compile=True`` paths is their first call, with an empty inductor cache.
+Temporary memory is the peak resident memory a method adds beyond its input and output, per pixel,
+measured in a child process run with glibc's mmap threshold fixed at 64 KiB (every large buffer a
+fresh mapping; that slows allocation, so no timing is taken there) after resetting the kernel's
+peak-RSS counter, each method warmed up (compiled) first.
+
+Accuracy: a strong look (``ColorGrade(contrast=30, saturation=20, temperature=20)`` then
+``ToneMap("aces")``) baked to 33³ LogC LUTs with each output encoding, applied to every 4th pixel of
+the sample EXRs, against direct float64 evaluation, in 8-bit sRGB code values (p99.9 and max).
 
 Run: ``.venv/bin/python benchmarks/bench_lut.py`` (writes benchmarks/results/lut.json and lut.md).
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import platform
@@ -31,11 +37,17 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from torchgrade.io.cube import write_cube  # noqa: E402
-from torchgrade.lut import LUT3D, bake_lut, trilinear_grid_sample  # noqa: E402
+from torchgrade.color import linear_to_srgb  # noqa: E402
+from torchgrade.grade import ColorGrade  # noqa: E402
+from torchgrade.io import read_exr  # noqa: E402
+from torchgrade.lut import INTERPOLATIONS, LUT3D, OUTPUT_ENCODINGS, bake_lut, trilinear_grid_sample  # noqa: E402
+from torchgrade.tonemap import ToneMap  # noqa: E402
 
 COMMAND = ".venv/bin/python benchmarks/bench_lut.py"
 HEIGHT, WIDTH, SIZE, RUNS = 1080, 1920, 33, 7
 _MMAP_ENV = "MALLOC_MMAP_THRESHOLD_"
+EXR_DIR = ROOT.parent / "shared" / "data" / "exr"
+ACCURACY_IMAGES = ("Desk", "CandleGlass", "GoldenGate")
 
 
 def look(image: torch.Tensor) -> torch.Tensor:
@@ -45,16 +57,35 @@ def look(image: torch.Tensor) -> torch.Tensor:
     return (y / (0.6 + y)) ** 1.2
 
 
-def median_ms(run, prepare=lambda: None, runs: int = RUNS) -> float:
-    prepare()
-    run()  # warm-up
-    times = []
+def median_ms_round_robin(methods: dict, runs: int = RUNS) -> dict:
+    """Median ms of each ``(run, prepare)`` in ``methods``, timing every method once per round."""
+    times = {name: [] for name in methods}
     for _ in range(runs):
-        prepare()
-        start = time.perf_counter()
-        run()
-        times.append(time.perf_counter() - start)
-    return 1000.0 * statistics.median(times)
+        for name, (run, prepare) in methods.items():
+            prepare()
+            start = time.perf_counter()
+            run()
+            times[name].append(time.perf_counter() - start)
+    return {name: 1000.0 * statistics.median(values) for name, values in times.items()}
+
+
+def accuracy() -> list:
+    """Errors of 33³ LogC LUTs of the strong look on the sample EXRs, in 8-bit sRGB code values."""
+    strong_look = torch.nn.Sequential(ColorGrade(contrast=30.0, saturation=20.0, temperature=20.0), ToneMap("aces"))
+    luts = {encoding: bake_lut(strong_look, size=SIZE, output_encoding=encoding) for encoding in OUTPUT_ENCODINGS}
+    rows = []
+    with torch.no_grad():
+        for name in ACCURACY_IMAGES:
+            image = read_exr(EXR_DIR / f"{name}.exr")[:3, ::4, ::4].unsqueeze(0)
+            direct = srgb_codes(strong_look(image.double()))
+            for (encoding, lut), interpolation in itertools.product(luts.items(), INTERPOLATIONS):
+                error = (srgb_codes(lut(image, interpolation)) - direct).abs().flatten().numpy()
+                rows.append({"image": name, "output_encoding": encoding, "interpolation": interpolation, "p99_9": float(np.quantile(error, 0.999)), "max": float(error.max())})
+    return rows
+
+
+def srgb_codes(image: torch.Tensor) -> torch.Tensor:
+    return 255.0 * linear_to_srgb(image.double().clamp(0.0, 1.0))
 
 
 def _status_kib(field: str) -> int:
@@ -81,6 +112,9 @@ def main() -> None:
     import PyOpenColorIO as OCIO
 
     measure_memory = "--memory" in sys.argv
+    if not measure_memory:  # time cold compiles: a fresh inductor cache, which the memory child then reuses
+        inductor_cache = tempfile.TemporaryDirectory()
+        os.environ["TORCHINDUCTOR_CACHE_DIR"] = inductor_cache.name
 
     torch.manual_seed(0)
     image = torch.rand(1, 3, HEIGHT, WIDTH) * 1.1 - 0.05
@@ -102,33 +136,47 @@ def main() -> None:
     def restore():
         np.copyto(buffer, source)
 
+    def ocio_method(processor):
+        return lambda: processor.applyRGB(buffer), restore
+
+    def no_preparation():
+        pass
+
     methods = {
-        "plain tensor copy (memory floor)": (lambda: image.clone(), None),
-        "grid_sample 5-D, naive": (lambda: trilinear_grid_sample(image.clamp(0, 1), lut.table), None),
-        "torchgrade trilinear, eager": (lambda: lut(image, "trilinear"), None),
-        "torchgrade tetrahedral, eager": (lambda: lut(image, "tetrahedral"), None),
+        "plain tensor copy (memory floor)": (lambda: image.clone(), no_preparation),
+        "grid_sample 5-D, naive": (lambda: trilinear_grid_sample(image.clamp(0, 1), lut.table), no_preparation),
     }
+    for interpolation in ("tetrahedral", "trilinear"):
+        methods[f"torchgrade {interpolation}, eager (default)"] = (lambda mode=interpolation: lut(image, mode), no_preparation)
+        methods[f"torchgrade {interpolation}, compile=True"] = (lambda mode=interpolation: compiled(image, mode), no_preparation)
+    for interpolation, processor in processors.items():
+        methods[f"OpenColorIO CPU processor, {interpolation} (in place)"] = ocio_method(processor)
+
+    compile_s = {}
+    for name, (run, prepare) in methods.items():  # warm-up; the compiled paths compile here
+        prepare()
+        start = time.perf_counter()
+        run()
+        if "compile=True" in name:
+            compile_s[name] = time.perf_counter() - start
+
     if measure_memory:  # child process: memory only, with every large buffer a fresh mapping
-        memory = {name: temporary_bytes_per_pixel(run, frame_bytes, pixels) for name, (run, _) in methods.items()}
-        for interpolation, processor in processors.items():
-            restore()
-            memory[f"OpenColorIO CPU processor, {interpolation} (in place)"] = temporary_bytes_per_pixel(lambda: processor.applyRGB(buffer), 0, pixels)
+        memory = {}
+        for name, (run, prepare) in methods.items():
+            prepare()
+            output_bytes = 0 if name.startswith("OpenColorIO") else frame_bytes
+            memory[name] = temporary_bytes_per_pixel(run, output_bytes, pixels)
         print(json.dumps(memory))
         return
     child = subprocess.run([sys.executable, __file__, "--memory"], env={**os.environ, _MMAP_ENV: "65536"}, capture_output=True, text=True, check=True)
     memory = json.loads(child.stdout.strip().splitlines()[-1])
+    medians = median_ms_round_robin(methods)
     results = []
-    for name, (run, prepare) in methods.items():
-        results.append({"method": name, "ms": median_ms(run, prepare or (lambda: None)), "temporary_bytes_per_pixel": memory[name]})
-    for interpolation in ("tetrahedral", "trilinear"):
-        start = time.perf_counter()
-        compiled(image, interpolation)
-        compile_s = time.perf_counter() - start
-        ms = median_ms(lambda: compiled(image, interpolation))
-        results.append({"method": f"torchgrade {interpolation}, torch.compile", "ms": ms, "temporary_bytes_per_pixel": None, "compile_s": compile_s})
-    for interpolation, processor in processors.items():
-        name = f"OpenColorIO CPU processor, {interpolation} (in place)"
-        results.append({"method": name, "ms": median_ms(lambda: processor.applyRGB(buffer), restore), "temporary_bytes_per_pixel": memory[name]})
+    for name in methods:
+        result = {"method": name, "ms": medians[name], "temporary_bytes_per_pixel": memory[name]}
+        if name in compile_s:
+            result["compile_s"] = compile_s[name]
+        results.append(result)
 
     ocio = next(r["ms"] for r in results if r["method"].startswith("OpenColorIO CPU processor, tetrahedral"))
     copy = results[0]["ms"]
@@ -141,7 +189,7 @@ def main() -> None:
         "frame": f"{WIDTH}x{HEIGHT} float32, 1 frame",
         "lut": f"{SIZE}^3, linear shaper",
         "runs": RUNS,
-        "statistic": "median",
+        "statistic": "median of round-robin rounds",
         "threads": torch.get_num_threads(),
         "cpu_count": os.cpu_count(),
         "torch": torch.__version__,
@@ -149,6 +197,7 @@ def main() -> None:
         "platform": platform.platform(),
         "note": "shared machine: other processes may have been running during the measurement",
         "results": results,
+        "accuracy": accuracy() if EXR_DIR.is_dir() else [],
     }
     out = ROOT / "benchmarks" / "results"
     out.mkdir(parents=True, exist_ok=True)
@@ -162,7 +211,7 @@ def markdown(report: dict) -> str:
     lines = [
         f"# Applying a {report['lut']} LUT to {report['frame']} on CPU",
         "",
-        f"Median of {report['runs']} runs, {report['threads']} threads, torch {report['torch']}, "
+        f"Median of {report['runs']} round-robin rounds, {report['threads']} threads, torch {report['torch']}, "
         f"OpenColorIO {report['opencolorio']}. {report['note'].capitalize()}.",
         "",
         "| method | ms | ms/MP | × OCIO tetrahedral | × copy | temporary bytes/pixel |",
@@ -175,6 +224,16 @@ def markdown(report: dict) -> str:
             f"| {r['method']}{compile_note} | {r['ms']:.1f} | {r['ms_per_megapixel']:.1f} | "
             f"{r['ratio_to_ocio_tetrahedral']:.2f} | {r['ratio_to_copy']:.1f} | {memory} |"
         )
+    if report["accuracy"]:
+        lines += [
+            "",
+            "## Accuracy of a 33³ LogC LUT of a strong look (every 4th pixel, 8-bit sRGB code values vs direct float64)",
+            "",
+            "| image | output encoding | interpolation | p99.9 | max |",
+            "| --- | --- | --- | ---: | ---: |",
+        ]
+        for a in report["accuracy"]:
+            lines.append(f"| {a['image']} | {a['output_encoding']} | {a['interpolation']} | {a['p99_9']:.2f} | {a['max']:.1f} |")
     lines += ["", f"Reproduce: `{report['command']}`", ""]
     return "\n".join(lines)
 

@@ -53,6 +53,19 @@ def test_round_trip_keeps_the_table_bit_exact(tmp_path, shaper):
     torch.testing.assert_close(back(image), lut(image), atol=tolerance, rtol=0)
 
 
+def test_srgb_encoded_lut_is_written_with_linear_entries(tmp_path):
+    from torchgrade.tonemap import ToneMap
+
+    lut = bake_lut(ToneMap("reinhard"), size=9, shaper="linear", output_encoding="srgb")
+    assert lut.output_encoding == "srgb"
+    path = unique_cube(tmp_path)
+    write_cube(path, lut)
+    back = read_cube(path)
+    torch.testing.assert_close(back.table, lut.linear_table().float(), atol=1e-6, rtol=0)
+    image = torch.rand(1, 3, 16, 16)
+    assert torch.equal(back(image, "trilinear").clamp(0, 1), back(image, "trilinear"))
+
+
 def test_identity_lut_round_trips_exactly_on_lattice_points(tmp_path):
     path = unique_cube(tmp_path)
     write_cube(path, LUT3D(identity_table(17)))

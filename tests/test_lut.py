@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 import torch
 
-from torchgrade.color import linear_to_logc, linear_to_srgb
+from torchgrade.color import linear_to_logc, linear_to_srgb, logc_to_linear
 from torchgrade.lut import (
     LUT3D,
+    apply_lut,
     bake_lut,
     expects_hdr,
     identity_table,
@@ -104,6 +105,89 @@ def test_baked_logc_lut_reproduces_the_transform_on_lattice_points(interpolation
     image = inputs.reshape(1, -1, 1, 3).permute(0, 3, 1, 2)
     expected = mix(image)
     torch.testing.assert_close(lut.double()(image, interpolation), expected, atol=1e-6, rtol=0)
+
+
+@pytest.mark.parametrize("interpolation", ["trilinear", "tetrahedral"])
+def test_compiled_lookup_matches_eager(interpolation):
+    table = random_table(9, torch.float32)
+    image = torch.rand(1, 3, 24, 40) * 1.4 - 0.2
+    image[0, :, 3, 5] = float("nan")
+    image[0, :, 7, 9] = float("inf")
+    eager = LUT3D(table, shaper="logc")(image, interpolation)
+    lut = LUT3D(table, shaper="logc", compile=True)
+    compiled = lut(image, interpolation)
+    assert lut.compile  # the compiled path ran: no fallback
+    torch.testing.assert_close(compiled, eager, atol=2e-6, rtol=0)
+
+
+def test_compile_failure_falls_back_to_eager(monkeypatch):
+    import torchgrade.lut as lut_module
+
+    def broken(*args):
+        raise RuntimeError("no compiler")
+
+    monkeypatch.setattr(lut_module, "compiled_lookup", lambda: broken)
+    lut = LUT3D(random_table(4, torch.float32), compile=True)
+    image = torch.rand(1, 3, 4, 4)
+    with pytest.warns(RuntimeWarning, match="fell back to eager"):
+        out = lut(image)
+    assert not lut.compile and torch.equal(out, LUT3D(lut.table)(image))
+
+
+def test_cached_rows_follow_the_table():
+    lut = LUT3D(random_table(4, torch.float32))
+    image = torch.rand(1, 3, 5, 5)
+    before = lut(image)
+    with torch.no_grad():
+        lut.table.mul_(0.5)  # in place
+    torch.testing.assert_close(lut(image), 0.5 * before)
+    lut.table = torch.zeros(4, 4, 4, 3)  # replaced
+    assert torch.equal(lut(image), torch.zeros_like(image))
+    assert lut.double()(image.double()).dtype == torch.float64  # moved to another dtype
+
+
+def test_srgb_output_encoding_decodes_after_the_lookup():
+    size = 5
+    table = random_table(size) * 1.5 - 0.25  # negative and above-1 entries too
+    encoded = linear_to_srgb(table.clamp_min(0.0)) - 12.92 * (-table).clamp_min(0.0)  # sign-preserving
+    points = lattice(size).reshape(1, -1, 1, 3).permute(0, 3, 1, 2)
+    lut = LUT3D(encoded, shaper="linear", output_encoding="srgb").double()
+    expected = table.reshape(1, -1, 1, 3).permute(0, 3, 1, 2)
+    for interpolation in ("trilinear", "tetrahedral"):
+        torch.testing.assert_close(lut(points, interpolation), expected, atol=1e-12, rtol=0)
+    torch.testing.assert_close(lut.linear_table(), table, atol=1e-12, rtol=0)
+    functional = apply_lut(points, encoded, "linear", 0.0, 1.0, "tetrahedral", output_encoding="srgb")
+    torch.testing.assert_close(functional, expected, atol=1e-12, rtol=0)
+
+
+def test_tone_mapper_without_clip_is_the_clipped_curve_before_its_clip():
+    from torchgrade.tonemap import ToneMap, tonemap
+
+    image = torch.exp(torch.randn(1, 3, 16, 16, dtype=torch.float64) * 2.0)
+    unclipped = ToneMap("aces", clip=False)(image)
+    assert unclipped.max() > 1.0
+    assert torch.equal(unclipped.clamp(0.0, 1.0), tonemap(image, "aces"))
+    assert ToneMap("aces", clip=False).config()["clip"] is False and "clip" not in ToneMap("aces").config()
+
+
+def test_display_lut_is_baked_without_the_final_clip_and_clamps_after_the_lookup():
+    from torchgrade.grade import ColorGrade
+    from torchgrade.tonemap import ToneMap
+
+    tone = ToneMap("aces")
+    look = torch.nn.Sequential(ColorGrade(contrast=10.0), tone)
+    lut = bake_lut(look, size=9, output_encoding="srgb")
+    assert tone.clip  # restored after baking
+    assert lut.output_encoding == "srgb" and lut.output_range == (0.0, 1.0)
+    assert lut.linear_table().max() > 1.0  # ACES's curve beyond the clip is in the table
+    image = torch.exp(torch.randn(1, 3, 16, 16) * 2.0)
+    out = lut(image)
+    assert out.min() >= 0.0 and out.max() <= 1.0
+    low, high = lut.domain_min.double(), lut.domain_max.double()
+    points = logc_to_linear(low + lattice(9) * (high - low)).reshape(1, -1, 1, 3).permute(0, 3, 1, 2)
+    expected = look(points)
+    assert (expected == 1.0).any()  # some lattice points are clipped ...
+    torch.testing.assert_close(lut.double()(points), expected, atol=1e-6, rtol=0)  # ... and exact after the lookup
 
 
 def test_grid_sample_align_corners_hits_lattice_points():
@@ -306,10 +390,32 @@ def strong_look():
     return torch.nn.Sequential(ColorGrade(**STRONG_LOOK), ToneMap("aces"))
 
 
+@pytest.mark.parametrize("name", ["Desk", "CandleGlass", "GoldenGate"])
+def test_33_logc_tone_mapper_lut_p999_on_real_exrs(exr_dir, strong_look, name):
+    """The tone mapper alone as a 33³ sRGB-encoded LUT, fed the graded images: within 1 code value at p99.9.
+
+    The whole look's bar (max within 4 as well) is the xfail test below; this pins the part that is met
+    (with linear entries it is not: p99.9 up to 1.2).
+    """
+    from torchgrade.io import read_exr
+
+    grade, tone = strong_look
+    image = read_exr(exr_dir / f"{name}.exr")[:3, ::4, ::4].unsqueeze(0)
+    lut = bake_lut(tone, size=33, output_encoding="srgb")
+    with torch.no_grad():
+        graded = grade(image.double())
+        direct = srgb_codes(tone(graded))
+        for interpolation in ("tetrahedral", "trilinear"):
+            error = (srgb_codes(lut(graded.float(), interpolation)) - direct).abs()
+            assert p999(error) <= 1.0, (name, interpolation, p999(error))
+
+
 @pytest.mark.xfail(
     strict=True,
-    reason="not met yet: p99.9 tetrahedral 5.5 (Desk), 1.3 (CandleGlass), 4.8 (GoldenGate) codes; the grade's "
-    "and tone mapper's internal max(0)/clip kinks are baked into the table, and inputs above LogC's 58.9 clamp",
+    reason="not met: p99.9 tetrahedral 5.5 (Desk), 1.3 (CandleGlass), 2.1 (GoldenGate) codes, max 17.5 / 6.2 / 8.1 "
+    "(4.7 / 0.65 / 1.1 with output_encoding='srgb'); "
+    "the tone mapper's max(0) of the graded input is a kink oblique to the lattice (the grade's own clamps do not "
+    "matter), and 4.5% of Desk's pixels lie above LogC's 58.9, where the graded look still changes",
 )
 @pytest.mark.parametrize("name", ["Desk", "CandleGlass", "GoldenGate"])
 def test_33_logc_lut_accuracy_on_real_exrs(exr_dir, strong_look, name):

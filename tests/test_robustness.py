@@ -75,7 +75,7 @@ def test_non_contiguous_and_channels_last_inputs_give_the_same_result(name):
         (lambda: tg.ToneMap("hable", white_point=0.0), "white_point must lie in"),
         (lambda: tg.Bloom(scatter=0.99), "scatter"),
         (lambda: tg.Bloom(intensity=-1.0), "intensity"),
-        (lambda: tg.Bloom(mode="screen"), "mode"),
+        (lambda: tg.Bloom(mode="glare"), "mode"),
         (lambda: tg.AutoExposure(middle_grey=0.0), "middle_grey"),
         (lambda: tg.AutoExposure(metering="median"), "metering"),
         (lambda: tg.bake_lut(lambda x: x, size=300), "LUT size must be an integer from 2 to 256"),

@@ -46,9 +46,18 @@ from .grade import (
     split_toning,
     channel_mixer,
     shadows_midtones_highlights,
+    lift_gamma_gain,
+    lift_gamma_gain_coefficients,
+    saturation_curves,
     hue_shift,
     saturation,
+    fast_tonemap,
+    fast_tonemap_inverse,
+    yrgb_curves,
 )
+from .curves import evaluate_curve, monotone_tangents
+from .primary import primary_grade, offset_exposure, brightness, linear_contrast, log_contrast, log_gamma, primary_saturation
+from .dither import dither, dither_pattern
 from .exposure import auto_exposure, meter_luminance, adapt_luminance, exposure_operator, area_resize, halving_average
-from .bloom import bloom, bloom_threshold
+from .bloom import bloom, bloom_threshold, convolution_bloom, fft_convolve
 from .lut import apply_lut

@@ -1,10 +1,11 @@
 """3D LUTs: bake any per-pixel transform into a lattice, apply it with trilinear or tetrahedral interpolation.
 
-A :class:`LUT3D` maps a linear Rec.709 pixel ``x`` to an output colour in four steps::
+A :class:`LUT3D` maps a linear Rec.709 pixel ``x`` to an output colour in five steps::
 
     s = shaper(x)                                   # "linear": s = x; "logc": s = LogC(x); "curve": 1D table
     u = clamp((s - domain_min) / (domain_max - domain_min), 0, 1)      # per channel
     y = interpolate(table, u * (size - 1))          # trilinear or tetrahedral, lattice points exact
+    y = decode(y, output_encoding)                  # "linear": y; "srgb": sRGB decoding
     y = clamp(y, *output_range)                     # only for display-referred LUTs
 
 **Lattice and table layout.** ``table`` has shape ``(size, size, size, 3)`` indexed ``[b, g, r, channel]``,
@@ -20,14 +21,23 @@ every grade and tone mapper has its ``max(0, ·)`` kink, and no lattice points a
 inputs (which clamp to black, as the tone mappers do anyway). ``"curve"`` is a per-channel 1D table
 over a linear input range, as ``.cube`` files carry it (read from files, never baked).
 
-**Final clamp.** A display-referred LUT (one baked from a tone-mapped transform) records
-``output_range = (0, 1)`` and clamps *after* the lookup, so the clip is exact instead of interpolated.
-The tone mappers clip their own output, so today the table also holds clipped values; any transform
-that can evaluate without its final clip gains accuracy from this design without a change here.
+**Output encoding.** A table may store sRGB-encoded outputs (``output_encoding="srgb"``, decoded
+after the lookup, sign-preserving): the interpolation error is then spread evenly over display code
+values instead of piling up in the shadows. ``bake_lut`` stores linear outputs unless asked.
 
-**Speed.** The lookup is gather-based (integer lattice indices, one gather per vertex on a planar
-``(3, size³)`` table), with a ``grid_sample`` trilinear form kept for 4-D/5-D GridSample
-exporters. ``LUT3D(..., compile=True)`` runs the whole lookup as one ``torch.compile``d kernel.
+**Display-referred LUTs** (baked from a transform with a :class:`~torchgrade.ToneMap`) record
+``output_range = (0, 1)``: the clip happens *after* the lookup. A transform that ends with
+its tone mapper is baked with that tone mapper's clip off (``ToneMap.clip``), so the table holds a
+smooth curve and the clip is exact instead of interpolated. Kinks inside the transform (the tone
+mapper's ``max(0, ·)`` of its graded input, on surfaces oblique to the lattice) stay in the table and
+are what limits a 33³ LUT's accuracy on strong looks.
+
+**Speed.** The lookup is gather-based (integer lattice indices, one 1-D gather per vertex and channel
+on a planar ``(3, size³)`` table that :meth:`LUT3D.rows` converts once and caches), with a
+``grid_sample`` trilinear form kept for 4-D/5-D GridSample exporters. Every step is per pixel, so
+``LUT3D(..., compile=True)`` runs non-finite policy, shaper, index math, gathers, weights, decoding
+and clamp as one ``torch.compile``d pass with no temporary buffers; the eager default makes one pass
+per operation. benchmarks/bench_lut.py measures both against OpenColorIO.
 """
 
 from __future__ import annotations
@@ -35,6 +45,7 @@ from __future__ import annotations
 import contextlib
 import math
 import numbers
+import warnings
 from typing import Callable, Optional, Sequence
 
 import torch
@@ -341,12 +352,11 @@ class LUT3D(nn.Module):
         self.output_range = None if output_range is None else tuple(float(v) for v in output_range)
         self.output_encoding = output_encoding
         self.compile = bool(compile)
-        self._rows_cache = (None, None)
+        self._rows_cache = (None, None, None)
 
     def forward(self, image: torch.Tensor, interpolation: str = "tetrahedral") -> torch.Tensor:
         _check_arguments(image, self.shaper, interpolation, self.output_encoding)
-        run = compiled_lookup() if self.compile else lookup
-        return run(
+        arguments = (
             image,
             self.rows(working_dtype(image).dtype),
             self.size,
@@ -359,6 +369,13 @@ class LUT3D(nn.Module):
             self.curve_range,
             self.output_encoding,
         )
+        if self.compile:
+            try:
+                return compiled_lookup()(*arguments)
+            except Exception as error:  # no C++ compiler, unsupported device, ...: the eager path always works
+                warnings.warn(f"LUT3D(compile=True) fell back to eager: torch.compile failed with {error!r}", RuntimeWarning)
+                self.compile = False
+        return lookup(*arguments)
 
     def rows(self, dtype: torch.dtype) -> torch.Tensor:
         """The table as planar rows ``(3, S³)`` in ``dtype`` (:func:`planar_table`), what the kernels read.
@@ -369,11 +386,11 @@ class LUT3D(nn.Module):
         table = self.table
         if table.requires_grad and torch.is_grad_enabled():
             return planar_table(table.to(dtype))
-        key = (table.data_ptr(), table._version, table.device, dtype)
-        cached_key, rows = self._rows_cache
-        if cached_key != key:
+        key = (table.data_ptr(), table._version, dtype)
+        cached_table, cached_key, rows = self._rows_cache
+        if cached_table is not table or cached_key != key:
             rows = planar_table(table.detach().to(dtype))
-            self._rows_cache = (key, rows)
+            self._rows_cache = (table, key, rows)  # holding the table keeps its address from being reused
         return rows
 
     def linear_table(self) -> torch.Tensor:
@@ -456,6 +473,7 @@ def bake_lut(
     scene: Optional[torch.Tensor] = None,
     tolerance: float = 0.5,
     chunk: int = 1 << 21,
+    output_encoding: str = "linear",
 ) -> LUT3D:
     """Bake a per-pixel ``transform`` on ``(N, 3, H, W)`` tensors into a :class:`LUT3D`.
 
@@ -472,24 +490,26 @@ def bake_lut(
       against direct float64 evaluation). Sizes :data:`AUTO_SIZES` are tried in order, then the gap
       below the first that passes is bisected (error is assumed to fall as the size grows); if none
       passes, 256 is returned.
-    * A transform containing a :class:`~torchgrade.ToneMap` is display-referred: the table holds
-      sRGB-encoded outputs (``output_encoding="srgb"``, so interpolation error is spread evenly over
-      display code values) and the LUT clamps to [0, 1] after the lookup. When the transform *ends*
-      with the tone mapper, it is evaluated without its final clip (:func:`_final_clip_off`), so
-      the clip is applied exactly after the lookup instead of being interpolated.
+    * ``output_encoding``: how the table stores outputs (:data:`OUTPUT_ENCODINGS`). ``"srgb"`` spreads
+      the interpolation error evenly over display code values, which suits display-referred LUTs
+      (benchmarks/results/lut.md lists the gain on real images).
+    * A transform containing a :class:`~torchgrade.ToneMap` is display-referred: the LUT clamps to
+      [0, 1] after the lookup. When the transform *ends* with the tone mapper, it is evaluated
+      without its final clip (:func:`_final_clip_off`), so the clip is applied exactly after the
+      lookup instead of being interpolated.
     """
     if shaper == "auto":
         shaper = "logc" if expects_hdr(transform) else "linear"
     _check_choice(shaper, ("linear", "logc"), "bake shaper")
     domain = DEFAULT_DOMAINS[shaper] if scene is None else scene_domain(scene, shaper)
+    _check_choice(output_encoding, OUTPUT_ENCODINGS, "output encoding")
     display = bool(_tone_mappers(transform))
     output_range = (0.0, 1.0) if display else None
-    encoding = "srgb" if display else "linear"
 
     def bake(n: int) -> LUT3D:
         with _final_clip_off(transform) if display else contextlib.nullcontext():
-            table = encode_output(_evaluate_on_lattice(transform, n, shaper, domain, chunk), encoding)
-        return LUT3D(table, shaper=shaper, domain=domain, output_range=output_range, output_encoding=encoding)
+            table = encode_output(_evaluate_on_lattice(transform, n, shaper, domain, chunk), output_encoding)
+        return LUT3D(table, shaper=shaper, domain=domain, output_range=output_range, output_encoding=output_encoding)
 
     if size != "auto":
         return bake(check_size(size))
@@ -502,8 +522,8 @@ def bake_lut(
 def _final_clip_off(transform):
     """Within the block, the :class:`~torchgrade.ToneMap` that produces ``transform``'s output runs with ``clip=False``.
 
-    That tone mapper is ``transform`` itself or the last module of (nested) ``nn.Sequential``\ s; any
-    other transform is left as it is. Only valid when the LUT clamps to [0, 1] after the lookup.
+    That tone mapper is ``transform`` itself or the last module of nested ``nn.Sequential`` containers;
+    any other transform is left as it is. Only valid when the LUT clamps to [0, 1] after the lookup.
     """
     final = transform
     while isinstance(final, nn.Sequential) and len(final):

@@ -40,10 +40,11 @@ control becomes a graph input named as the control, per sample: scalars ``(batch
 (``post_exposure``, ``temperature``, ``tint``, ``contrast``, ``split_balance``,
 ``shadows_start``, ``shadows_end``, ``highlights_start``, ``highlights_end``, ``hue_shift``,
 ``saturation``), colours ``(batch, 3)`` (``color_filter``, ``split_shadows``,
-``split_highlights``, ``shadows``, ``midtones``, ``highlights``) and ``channel_mixer``
-``(batch, 3, 3)``, in Unity's units. Every grading step is then in the graph, so one model serves
-any look (and a different look per sample); :func:`grade_feeds` gives a grade's values.
-Only the ``aces`` switch stays baked.
+``split_highlights``, ``shadows``, ``midtones``, ``highlights``), trackballs ``(batch, 4)``
+(``lift``, ``gamma``, ``gain``) and ``channel_mixer`` ``(batch, 3, 3)``, in Unity's units. Every
+grading step is then in the graph, so one model serves any look (and a different look per
+sample); :func:`grade_feeds` gives a grade's values.
+Only the ``aces`` switch and the curves (a variable number of control points) stay baked.
 """
 
 from __future__ import annotations
@@ -155,14 +156,18 @@ class LUTLookup(nn.Module):
 
 
 class GradeWithInputs(nn.Module):
-    """``ColorGrade`` whose controls are graph inputs: ``forward(image, *controls)`` in :data:`CONTROLS` order."""
+    """``ColorGrade`` whose controls are graph inputs: ``forward(image, *controls)`` in :data:`CONTROLS` order.
 
-    def __init__(self, aces: bool):
+    Its curves (control points, not inputs) are baked into the graph.
+    """
+
+    def __init__(self, aces: bool, curves: Optional[dict] = None):
         super().__init__()
         self.aces = aces
+        self.curves = curves or {}
 
     def forward(self, image: torch.Tensor, *controls: torch.Tensor) -> torch.Tensor:
-        return color_grade(image, aces=self.aces, **dict(zip(CONTROLS, controls)))
+        return color_grade(image, aces=self.aces, **dict(zip(CONTROLS, controls)), **self.curves)
 
 
 class ExportGraph(nn.Module):
@@ -213,7 +218,7 @@ def export_graph(module: nn.Module, lut_backend: str = "strip", frame_size=DEFAU
             depth = pyramid_depth(*frame_size, stage.max_iterations, stage.downscale_limit)
             stages.append(FixedDepthBloom(stage, depth))
         elif isinstance(stage, ColorGrade) and grade_inputs:
-            stages.append(GradeWithInputs(stage.aces))
+            stages.append(GradeWithInputs(stage.aces, stage.curves()))
         else:
             stages.append(stage)
     if grade_inputs and not any(isinstance(s, GradeWithInputs) for s in stages):

@@ -1,11 +1,13 @@
-"""``PostFX``: the whole look, ``AutoExposure -> Bloom -> ColorGrade -> ToneMap``, built from arguments or a config.
+"""``PostFX``: the whole look, ``AutoExposure -> Bloom -> ColorGrade -> PrimaryGrade -> ToneMap -> Dither``,
+built from arguments or a config.
 
 Each stage is given as a module, a dict of its constructor arguments, or ``None``. Only the stages a
-scene needs are built ("model only what a scene requires"): a grade whose controls are all identity
-and a bloom of intensity 0 (or ``max_iterations`` 0) are dropped, so they cost nothing in PyTorch and
+scene needs are built ("model only what a scene requires"): a grade or primary grade whose controls are
+all identity, a bloom of intensity 0 (or ``max_iterations`` 0) and a dither of amplitude 0 are dropped, so they cost nothing in PyTorch and
 add no ONNX nodes. Tone mapping is never dropped when given (even ``"none"`` clips to [0, 1]).
 
-A config is a dict (or a JSON file) with the keys ``exposure``, ``bloom``, ``grade`` and ``tonemap``;
+A config is a dict (or a JSON file) with the keys ``exposure``, ``bloom``, ``grade``, ``primary``,
+``tonemap`` and ``dither`` (the last two optional stages are off unless given);
 each holds the arguments of its stage (``tonemap`` may also be just a mode name)::
 
     {"bloom": {"intensity": 0.8, "threshold": 1.2},
@@ -16,7 +18,8 @@ Unknown stages and keys, unknown modes and out-of-range values raise ``ValueErro
 (``"unknown key 'grade.brightness'"``, ``"grade.contrast must lie in [-100.0, 100.0], got 150"``).
 
 :meth:`PostFX.to_lut` bakes grade and tone mapping into one :class:`~torchgrade.lut.LUT3D` while
-exposure and bloom (which look at neighbouring pixels or the whole frame) stay live.
+exposure, bloom and dither (which depend on neighbouring pixels, the whole frame or the pixel's position)
+stay live.
 """
 
 from __future__ import annotations
@@ -32,19 +35,23 @@ from torch import nn
 
 from .bloom import Bloom
 from .core import is_constant
+from .dither import Dither
 from .exposure import AutoExposure, auto_exposure
-from .grade import CONTROLS, ColorGrade
+from .grade import CONTROLS, CURVES, ColorGrade
 from .lut import INTERPOLATIONS, LUT3D, bake_lut
+from .primary import PRIMARY_CONTROLS, PrimaryGrade
 from .tonemap import ToneMap
 
-STAGES = {"exposure": AutoExposure, "bloom": Bloom, "grade": ColorGrade, "tonemap": ToneMap}
+STAGES = {"exposure": AutoExposure, "bloom": Bloom, "grade": ColorGrade, "primary": PrimaryGrade, "tonemap": ToneMap, "dither": Dither}
 """The configurable stages, in the order they run, and their classes."""
 
 
 def stage_keys(stage: str) -> tuple:
     """The argument names a stage's config accepts (its constructor's arguments)."""
     if stage == "grade":
-        return ("aces",) + tuple(CONTROLS)
+        return ("aces",) + tuple(CONTROLS) + tuple(CURVES)
+    if stage == "primary":
+        return ("style",) + tuple(PRIMARY_CONTROLS)
     return tuple(name for name in inspect.signature(STAGES[stage]).parameters if name != "self")
 
 
@@ -76,8 +83,9 @@ def _qualified(stage: str, message: str, spec: dict) -> str:
 
 
 def is_identity_stage(module: nn.Module) -> bool:
-    """True for a stage that cannot change any image: an identity grade, a bloom of intensity 0 or no levels."""
-    if isinstance(module, ColorGrade):
+    """True for a stage that cannot change any image: an identity grade or primary grade, a dither of
+    amplitude 0, a bloom of intensity 0 or no levels."""
+    if isinstance(module, (ColorGrade, PrimaryGrade, Dither)):
         return module.is_identity
     if isinstance(module, Bloom):
         return module.max_iterations == 0 or is_constant(module.intensity, 0.0)
@@ -94,22 +102,23 @@ def exposure_frame(exposure: AutoExposure, image: torch.Tensor, adapted: torch.T
 
 
 class PostFX(nn.Module):
-    """A look: ``PostFX(exposure=None, bloom=None, grade=None, tonemap=None)``; see the module docstring.
+    """A look: ``PostFX(exposure=None, bloom=None, grade=None, tonemap=None, primary=None, dither=None)``;
+    see the module docstring.
 
-    ``lut`` (a :class:`~torchgrade.lut.LUT3D`, applied with ``interpolation``) replaces ``grade`` and
-    ``tonemap``; :meth:`to_lut` builds such a look. ``forward(image, dt=None)`` runs the stages in
+    ``lut`` (a :class:`~torchgrade.lut.LUT3D`, applied with ``interpolation``) replaces ``grade``,
+    ``primary`` and ``tonemap``; :meth:`to_lut` builds such a look. ``forward(image, dt=None)`` runs the stages in
     order; ``dt`` (seconds since the previous frame) is passed to the exposure stage, which keeps the
     adapted luminance between calls (see :class:`~torchgrade.AutoExposure`).
     """
 
     def __init__(self, exposure=None, bloom=None, grade=None, tonemap=None, lut: Optional[LUT3D] = None,
-                 interpolation: str = "tetrahedral"):
+                 interpolation: str = "tetrahedral", primary=None, dither=None):
         super().__init__()
-        if lut is not None and (grade is not None or tonemap is not None):
-            raise ValueError("a look takes either lut or grade/tonemap, not both")
+        if lut is not None and (grade is not None or primary is not None or tonemap is not None):
+            raise ValueError("a look takes either lut or grade/primary/tonemap, not both")
         if interpolation not in INTERPOLATIONS:
             raise ValueError(f"interpolation must be one of {INTERPOLATIONS}, got {interpolation!r}")
-        given = {"exposure": exposure, "bloom": bloom, "grade": grade, "tonemap": tonemap}
+        given = {"exposure": exposure, "bloom": bloom, "grade": grade, "primary": primary, "tonemap": tonemap, "dither": dither}
         for stage, spec in given.items():
             module = build_stage(stage, spec)
             setattr(self, stage, None if module is None or is_identity_stage(module) else module)
@@ -139,7 +148,7 @@ class PostFX(nn.Module):
 
     def stages(self) -> dict:
         """The built stages by name, in the order they run (``"lut"`` for a baked look)."""
-        names = ("exposure", "bloom", "grade", "tonemap", "lut")
+        names = ("exposure", "bloom", "grade", "primary", "tonemap", "lut", "dither")
         return {name: getattr(self, name) for name in names if getattr(self, name) is not None}
 
     def forward(self, image: torch.Tensor, dt=None) -> torch.Tensor:
@@ -148,16 +157,15 @@ class PostFX(nn.Module):
         return self.finish(image)
 
     def finish(self, image: torch.Tensor) -> torch.Tensor:
-        """The stages after exposure: bloom, then grade and tone mapping (or the baked LUT)."""
+        """The stages after exposure: bloom, then grade, primary grade and tone mapping (or the baked LUT), then dither."""
         if self.bloom is not None:
             image = self.bloom(image)
         if self.lut is not None:
-            return self.lut(image, self.interpolation)
-        if self.grade is not None:
-            image = self.grade(image)
-        if self.tonemap is not None:
-            image = self.tonemap(image)
-        return image
+            image = self.lut(image, self.interpolation)
+        for stage in (self.grade, self.primary, self.tonemap):
+            if stage is not None:
+                image = stage(image)
+        return image if self.dither is None else self.dither(image)
 
     def frame(self, image: torch.Tensor, adapted: torch.Tensor, dt) -> tuple:
         """The look without state, for serving: ``(image, adapted, dt) -> (output, new adapted)``.
@@ -170,13 +178,13 @@ class PostFX(nn.Module):
         return self.finish(exposed), adapted
 
     def to_lut(self, size: int = 33, interpolation: Optional[str] = None) -> "PostFX":
-        """An equivalent look with grade and tone mapping baked into a ``size``³ LogC-shaped LUT.
+        """An equivalent look with grade, primary grade and tone mapping baked into a ``size``³ LogC-shaped LUT.
 
-        Exposure and bloom stay live (copied, so the new look keeps its own adaptation state). The
+        Exposure, bloom and dither stay live (copied, so the new look keeps its own adaptation state). The
         LUT's domain reaches LogC 1.0 (linear ≈ 58.9); a tone-mapped look clamps its output to
         [0, 1] after the lookup. Without a tone mapper, graded values above the domain are clipped.
         """
-        transform = nn.Sequential(*(m for m in (self.grade, self.tonemap) if m is not None))
+        transform = nn.Sequential(*(m for m in (self.grade, self.primary, self.tonemap) if m is not None))
         if len(transform) == 0:
             raise ValueError("nothing to bake: the look has neither a grade nor a tone mapper")
         lut = bake_lut(transform, size=size, shaper="logc")
@@ -185,6 +193,7 @@ class PostFX(nn.Module):
         return PostFX(
             exposure=copy.deepcopy(self.exposure),
             bloom=copy.deepcopy(self.bloom),
+            dither=copy.deepcopy(self.dither),
             lut=lut,
             interpolation=interpolation or self.interpolation,
         )

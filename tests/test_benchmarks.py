@@ -1,0 +1,132 @@
+"""The benchmark's building blocks on tiny inputs: metrics against known values, and a few rows end to end."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from benchmarks import metrics, run  # noqa: E402
+from torchgrade.color import srgb_to_linear  # noqa: E402
+
+
+def display_of_codes(codes) -> torch.Tensor:
+    """Display-linear ``(1, 3, 1, N)`` pixels whose 8-bit sRGB codes are ``codes`` (an ``(N, 3)`` list)."""
+    return srgb_to_linear(torch.tensor(codes, dtype=torch.float64) / 255.0).t().reshape(1, 3, 1, -1)
+
+
+def test_srgb_codes_clamp_and_encode():
+    codes = metrics.srgb_codes(torch.tensor([-1.0, 1.0, 7.0]).reshape(1, 3, 1, 1))
+    assert codes.flatten().tolist() == pytest.approx([0.0, 255.0, 255.0])
+    assert float(metrics.srgb_codes(display_of_codes([[128, 128, 128]])).mean()) == pytest.approx(128.0)
+
+
+def test_one_code_shift_is_an_error_of_one():
+    reference = metrics.srgb_codes(display_of_codes([[100, 50, 200]] * 1000))
+    shifted = metrics.srgb_codes(display_of_codes([[101, 50, 200]] * 1000))
+    summary = metrics.code_error_summary(reference, shifted)
+    assert summary["max_error_8bit"] == pytest.approx(1.0)
+    assert summary["p999_error_8bit"] == pytest.approx(1.0)
+
+
+def test_p999_ignores_one_outlier_in_ten_thousand():
+    reference = torch.zeros(1, 3, 1, 10_000, dtype=torch.float64)
+    codes = reference.clone()
+    codes[0, 0, 0, 0] = 40.0
+    summary = metrics.code_error_summary(reference, codes)
+    assert summary["max_error_8bit"] == 40.0 and summary["p999_error_8bit"] == 0.0
+
+
+def test_delta_e2000_zero_for_identical_and_known_for_grey_steps():
+    codes = metrics.srgb_codes(display_of_codes([[10, 200, 30], [255, 255, 255], [0, 0, 0]]))
+    assert metrics.delta_e2000(codes, codes) == pytest.approx([0.0, 0.0, 0.0], abs=1e-9)
+    # Neutral greys: ΔE2000 reduces to ΔL / S_L with S_L = 1 at L* = 50 (CIE 2000 lightness weighting).
+    grey_a, grey_b = (display_of_codes([[v, v, v]]) for v in (118, 119))
+    lightness = [metrics.colour.XYZ_to_Lab(metrics.colour.sRGB_to_XYZ(metrics.pixels_of(metrics.srgb_codes(g))), metrics.D65)[0, 0]
+                 for g in (grey_a, grey_b)]
+    expected = abs(lightness[1] - lightness[0]) / (1 + 0.015 * (sum(lightness) / 2 - 50) ** 2 / (20 + (sum(lightness) / 2 - 50) ** 2) ** 0.5)
+    assert float(metrics.delta_e2000(metrics.srgb_codes(grey_a), metrics.srgb_codes(grey_b))[0]) == pytest.approx(expected, rel=1e-6)
+
+
+def test_sample_indices_are_distinct_and_fixed():
+    first, again = metrics.sample_indices(1000, 100), metrics.sample_indices(1000, 100)
+    assert torch.equal(first, again) and first.unique().numel() == 100
+    assert torch.equal(metrics.sample_indices(5, 10), torch.arange(5))
+
+
+def test_peak_rss_counts_a_new_buffer():
+    size_mb = metrics.peak_rss_mb(lambda: torch.ones(8 * 2**20 // 4))  # 8 MiB, written
+    if size_mb is None:
+        pytest.skip("no /proc/self/clear_refs")
+    assert size_mb >= 7.0
+
+
+def test_pareto_front_keeps_only_undominated_points():
+    points = [(1.0, 10.0, "fast"), (2.0, 12.0, "dominated"), (3.0, 1.0, "accurate"), (5.0, 0.5, "slowest")]
+    assert [name for _, _, name in run.pareto_front(points)] == ["fast", "accurate", "slowest"]
+
+
+def test_downscale_averages_by_an_integer_factor():
+    image = torch.arange(16.0).reshape(1, 1, 4, 4)
+    assert run.downscale(image, 2).flatten().tolist() == [2.5, 4.5, 10.5, 12.5]
+    assert run.downscale(image, None) is image
+
+
+@pytest.fixture(scope="module")
+def tiny_work(tmp_path_factory):
+    """The benchmark's workload on tiny images: accuracy scenes at most 24 pixels a side, a 48×64 frame."""
+    patch = pytest.MonkeyPatch()
+    patch.setattr(run, "FRAME", (48, 64))
+    patch.setattr(run, "DEMO_SIZE", (36, 64))
+    patch.setattr(run, "BATCHES", (1, 2))
+    patch.setattr(run, "BATCH_SIDE", 16)
+    plan = run.Plan(quick=True, device=torch.device("cpu"), out=tmp_path_factory.mktemp("out"), runs=1, scaling_runs=1,
+                    accuracy_side=24, delta_e_samples=500, resolutions=((16, 16),), compile=False)
+    yield run.Workload(plan, tmp_path_factory.mktemp("work"))
+    patch.undo()
+
+
+def row(work, name):
+    rows = dict(run.method_rows(work))
+    method, record = run.measure_row(work, name, rows[name])
+    assert "error" not in record, record
+    return method, record
+
+
+def test_direct_float32_row_matches_the_reference(tiny_work):
+    _, record = row(tiny_work, "direct float32")
+    assert record["max_error_8bit"] < 0.1 and record["mean_delta_e2000"] < 0.01 and record["ms"] > 0
+
+
+def test_opencolorio_applies_the_same_lut_as_torchgrade(tiny_work):
+    _, ours = row(tiny_work, run.lut_name(33, "logc", "tetrahedral"))
+    _, peer = row(tiny_work, "OpenColorIO 33³ logc tetrahedral")
+    # The same lattice; they differ by where the output is interpolated (torchgrade: sRGB-encoded
+    # entries, clip after the lookup; the .cube file: linear entries) and the .cube's 1D shaper.
+    assert ours["mean_delta_e2000"] < 0.5 and peer["mean_delta_e2000"] < 0.5
+
+
+def test_failing_row_records_its_error(tiny_work):
+    def broken():
+        raise RuntimeError("no compiler\nsecond line")
+
+    _, record = run.measure_row(tiny_work, "broken", broken)
+    assert record == {"method": "broken", "error": "RuntimeError: no compiler"}
+
+
+def test_report_and_plots(tiny_work, tmp_path):
+    _, record = row(tiny_work, run.lut_name(9, "linear", "trilinear"))
+    records = [record, {"method": "broken", "error": "RuntimeError: x"}]
+    run.add_ratios(records, {"plain frame copy": 1.0})
+    assert record["ratio_to_copy"] == record["ms"] and record["ratio_to_opencolorio"] is None
+    assert "failed: RuntimeError: x" in run.markdown_table(records)
+    run.plot_pareto(records, tmp_path / "pareto.png")
+    points = run.scaling(tiny_work)
+    run.plot_scaling(points, tmp_path / "scaling.png")
+    assert {p["path"] for p in points} == {"direct float32", run.lut_name(33, "logc", "tetrahedral")}
+    for name in ("pareto.png", "scaling.png"):
+        assert 0 < (tmp_path / name).stat().st_size < 200_000
