@@ -14,7 +14,6 @@ import sys
 from pathlib import Path
 
 import torch
-import torch.nn.functional as F
 
 import torchgrade as tg
 
@@ -30,17 +29,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--interpolation", choices=tg.lut.INTERPOLATIONS, default="tetrahedral")
     parser.add_argument("--lut-backend", choices=tg.onnx.LUT_BACKENDS, default="strip")
     parser.add_argument("--grade-inputs", action="store_true", help="grading controls as graph inputs")
-    parser.add_argument("--frame-size", type=int, nargs=2, default=tg.onnx.DEFAULT_FRAME_SIZE, metavar=("H", "W"),
-                        help="frame whose bloom pyramid depth the graph keeps; EXRs are verified at it (default 1080 1920)")
     parser.add_argument("--exr-dir", type=Path, default=DEFAULT_EXR_DIR)
     parser.add_argument("--images", nargs="+", default=DEFAULT_IMAGES, help="EXR files (in --exr-dir) to verify on")
     return parser.parse_args(argv)
-
-
-def load_image(path: Path, size) -> torch.Tensor:
-    """An EXR's RGB as a (1, 3, H, W) tensor resampled to ``size``: the graph's bloom depth is that size's."""
-    image = tg.io.read_exr(path)[:3].unsqueeze(0)
-    return F.interpolate(image, size=size, mode="bilinear", antialias=True, align_corners=False).clamp_min(0.0)
 
 
 def graph_inputs(look: tg.PostFX, image: torch.Tensor):
@@ -55,10 +46,9 @@ def main(argv=None) -> int:
     look = tg.PostFX.from_config(args.config).eval()
     if args.lut:
         look = look.to_lut(args.lut, args.interpolation)
-    tg.onnx.export(look, args.out, lut_backend=args.lut_backend, frame_size=tuple(args.frame_size),
-                   grade_inputs=args.grade_inputs)
+    tg.onnx.export(look, args.out, lut_backend=args.lut_backend, grade_inputs=args.grade_inputs)
     print(f"{args.out}: stages {' -> '.join(look.stages())}, {tg.onnx.node_count(args.out)} nodes")
-    images = [load_image(args.exr_dir / name, tuple(args.frame_size)) for name in args.images]
+    images = [tg.io.read_exr(args.exr_dir / name)[:3].unsqueeze(0) for name in args.images]
     for name, image in zip(args.images, images):
         error = tg.onnx.verify(look, args.out, graph_inputs(look, image))
         print(f"  {name} {tuple(image.shape[-2:])}: max abs error vs PyTorch {error:.2e}")

@@ -82,14 +82,14 @@ def test_bloom_matches(exported, mode, bicubic):
         assert display_error(module, path, hdr(shape)) <= TOLERANCE
 
 
-def test_bloom_depth_follows_frame_size(exported, tmp_path):
-    """A graph keeps the depth of its frame_size; a frame of another depth then differs from PyTorch."""
-    module = tg.Bloom(intensity=1.0)
-    image = hdr((1, 3, 64, 96))
-    matching = export(module, tmp_path / "matching.onnx", frame_size=(64, 96))
-    deeper = export(module, tmp_path / "deeper.onnx", frame_size=(1080, 1920))
-    assert display_error(module, matching, image) <= TOLERANCE
-    assert display_error(module, deeper, image) > 1e-3
+def test_one_bloom_graph_serves_frames_of_every_pyramid_depth(exported):
+    """PyTorch's depth follows the frame (9x9: 1 level ... 300x420: 6); the graph masks levels at run time."""
+    module = tg.Bloom(mode="scattering", intensity=0.9, scatter=0.6)
+    path = exported("bloom_every_depth", module)
+    sizes = [(9, 9), (16, 24), (37, 53), (64, 96), (133, 201), (300, 420)]
+    assert len({tg.bloom.pyramid_depth(h, w, 16, 2) for h, w in sizes}) == 6
+    for height, width in sizes:
+        assert display_error(module, path, hdr((1, 3, height, width))) <= TOLERANCE, (height, width)
 
 
 LUT = tg.bake_lut(torch.nn.Sequential(tg.ColorGrade(contrast=20, saturation=15), tg.ToneMap("neutral")), size=17)

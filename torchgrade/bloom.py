@@ -165,6 +165,17 @@ def pyramid_depth(height: int, width: int, max_iterations: int, downscale_limit:
     return depth
 
 
+def active_levels(image: torch.Tensor, max_iterations: int, downscale_limit: int) -> torch.Tensor:
+    """:func:`pyramid_depth` as a 0-d tensor computed from ``image``'s runtime shape (traceable).
+
+    Level ``n`` counts when ``floor(side / 2^(n+1)) >= downscale_limit`` for both sides, that is when
+    ``min(height, width) >= downscale_limit · 2^(n+1)``.
+    """
+    smaller_side = torch._shape_as_tensor(image)[-2:].min()
+    thresholds = downscale_limit * 2 ** torch.arange(2, max_iterations + 2)
+    return (smaller_side >= thresholds).sum()
+
+
 def _sum_pool(light: torch.Tensor) -> torch.Tensor:
     """2x2 sums, rounding the size up: blocks at odd edges sum the pixels they have.
 
@@ -322,11 +333,12 @@ def bevy_blend_factor(mip: int, max_mip: int, intensity, boost, curvature, high_
     return (intensity + low_frequency) * high_pass_weight
 
 
-def _glow(prefiltered: torch.Tensor, depth: int, level_weight, bicubic: bool, sigma=None) -> torch.Tensor:
+def _glow(prefiltered: torch.Tensor, depth: int, level_weight, bicubic: bool, sigma=None, active=None) -> torch.Tensor:
     """Build ``depth`` blurred levels from the prefilter and combine them back up to its resolution.
 
     Level ``k`` joins level ``k - 1`` as ``level + low`` (``level_weight`` None) or
-    ``lerp(level, low, level_weight(k))``.
+    ``lerp(level, low, level_weight(k))``. With ``active`` (a 0-d tensor, see :func:`active_levels`)
+    only the first ``active`` levels take part: deeper ones are built but masked out.
     """
     levels, light = [], prefiltered
     for _ in range(depth):
@@ -336,7 +348,8 @@ def _glow(prefiltered: torch.Tensor, depth: int, level_weight, bicubic: bool, si
     for k in range(depth - 1, 0, -1):
         level = levels[k - 1]
         low = _upsample(glow, level.shape[-2:], bicubic)
-        glow = level + low if level_weight is None else torch.lerp(level, low, level_weight(k))
+        joined = level + low if level_weight is None else torch.lerp(level, low, level_weight(k))
+        glow = joined if active is None else torch.where(k < active, joined, level)
     return _upsample(glow, prefiltered.shape[-2:], bicubic)
 
 
@@ -430,8 +443,11 @@ def _validate(mode, max_iterations, downscale_limit, controls: dict, dirt) -> No
     _check_texture(dirt, "dirt")
 
 
-def _level_weight(mode: str, depth: int, strength: torch.Tensor, param):
-    """How level ``k`` joins the one above (see :func:`_glow`): None (sum), ``scatter``, or Bevy's factor."""
+def _level_weight(mode: str, depth, strength: torch.Tensor, param):
+    """How level ``k`` joins the one above (see :func:`_glow`): None (sum), ``scatter``, or Bevy's factor.
+
+    ``depth`` is the number of levels taking part: an int, or a 0-d tensor under ``fixed_depth``.
+    """
     if mode == "scattering":
         scatter = param("scatter")
         return lambda k: scatter
@@ -439,7 +455,8 @@ def _level_weight(mode: str, depth: int, strength: torch.Tensor, param):
         boost, curvature, high_pass = (
             param(name) for name in ("low_frequency_boost", "low_frequency_boost_curvature", "high_pass_frequency")
         )
-        return lambda k: bevy_blend_factor(k, depth - 1, strength, boost, curvature, high_pass)
+        max_mip = depth - 1 if isinstance(depth, int) else (depth - 1).clamp_min(1)
+        return lambda k: bevy_blend_factor(k, max_mip, strength, boost, curvature, high_pass)
     return None
 
 
@@ -463,6 +480,8 @@ def bloom(
     low_frequency_boost: Param = 0.7,
     low_frequency_boost_curvature: Param = 0.95,
     high_pass_frequency: Param = 1.0,
+    *,
+    fixed_depth: int = None,
 ) -> torch.Tensor:
     """Bloom an HDR image ``(..., 3, H, W)``; see the module docstring for the passes and guarantees.
 
@@ -489,6 +508,11 @@ def bloom(
 
     Continuous parameters are numbers, 0-d tensors or per-sample ``(B,)`` tensors, differentiable.
 
+    ``fixed_depth``: build that many pyramid levels whatever the frame size and mask out, with tensor
+    arithmetic on the runtime shape (:func:`active_levels`), the levels this frame does not have. The
+    result equals the default path for every frame whose own depth is at most ``fixed_depth``; it is
+    the form a traced (ONNX) graph uses, so one graph serves every resolution.
+
     Identity cases return the input object untouched: ``intensity`` a plain 0 (in every mode,
     ``replace`` included), or a pyramid of depth 0 (a side of the quarter-resolution level below
     ``downscale_limit``, or ``max_iterations == 0``). In additive mode, when no block reaches the
@@ -504,7 +528,10 @@ def bloom(
     if _eager():
         _validate(mode, max_iterations, downscale_limit, controls, dirt)
     height, width = image.shape[-2:]
-    depth = pyramid_depth(height, width, max_iterations, downscale_limit)
+    if fixed_depth is None:
+        depth = active = pyramid_depth(height, width, max_iterations, downscale_limit)
+    else:
+        depth, active = fixed_depth, active_levels(image, min(max_iterations, fixed_depth), downscale_limit)
     if depth == 0 or is_constant(intensity, 0.0):
         return image
 
@@ -523,7 +550,8 @@ def bloom(
         strength = param("intensity")
         strength = strength.clamp(max=1.0) if mode in LERP_MODES else strength
         sigma = None if is_constant(anamorphic_ratio, 0.0) else anamorphic_sigma(param("anamorphic_ratio"))
-        glow = _glow(prefiltered, depth, _level_weight(mode, depth, strength, param), bicubic_upsampling, sigma)
+        mask = None if fixed_depth is None else active
+        glow = _glow(prefiltered, depth, _level_weight(mode, active, strength, param), bicubic_upsampling, sigma, mask)
         glow = _upsample(strength * glow, (height, width), bicubic_upsampling)
         if not is_constant(tint, 1.0):
             glow = glow * srgb_to_linear(color_param(tint, reference, "tint"))
@@ -535,6 +563,8 @@ def bloom(
         if dirt is not None and not is_constant(dirt_intensity, 0.0):
             out = out + param("dirt_intensity") * _resampled(dirt, (height, width), x) * glow
 
+    if fixed_depth is not None:
+        out = torch.where(active > 0, out, x)  # a frame too small for any level is not bloomed
     out = out.reshape(image.shape)
     if image.dtype == torch.float16:
         out = out.clamp(-HALF_MAX, HALF_MAX)
@@ -627,7 +657,9 @@ class _Controls(nn.Module):
         return ", ".join(f"{key}={value!r}" for key, value in self.to_config().items())
 
 
-_ARGUMENTS = tuple(inspect.signature(bloom).parameters)[1:]
+_ARGUMENTS = tuple(
+    name for name, parameter in inspect.signature(bloom).parameters.items() if parameter.kind is not parameter.KEYWORD_ONLY
+)[1:]
 """The settings :class:`Bloom` stores and passes to :func:`bloom`, in its signature's order."""
 _ALWAYS_IN_CONFIG = _ARGUMENTS[: _ARGUMENTS.index("tint")]
 """Unity's settings, always in a config; the engine options appear only when not at their defaults."""

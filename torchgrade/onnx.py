@@ -25,10 +25,11 @@ symbolic silently exports as means).
   onnxruntime runs from 1.17 but OpenVINO rejects and TensorRT has mis-mapped; tetrahedral stays
   on gathers.
 
-**Bloom.** The pyramid depth of :class:`~torchgrade.Bloom` depends on the frame size through
-Python integers, so one graph has one depth: the depth PyTorch uses for a ``frame_size`` frame
-(default 1080x1920). Other sizes get the same number of levels; they match PyTorch exactly
-whenever their own depth is the same (always when ``max_iterations`` binds).
+**Bloom.** In PyTorch the pyramid depth of :class:`~torchgrade.Bloom` follows the frame size
+through Python integers, which tracing would freeze. The graph instead holds every level a frame
+of up to :data:`MAX_FRAME_SIDE` pixels a side can have and masks out, from the runtime shape, the
+levels the frame at hand does not have (``bloom(..., fixed_depth=...)``), so one graph matches
+PyTorch at every resolution up to that size.
 
 **Exposure.** A model with an :class:`~torchgrade.AutoExposure` stage is stateless: it takes
 ``"image"``, ``"adapted"`` ``(batch,)`` (the previous frame's adapted luminance; ``<= 0`` starts
@@ -74,7 +75,6 @@ DEFAULT_OPSET = 17
 VOLUME_OPSET = 20
 """First opset with 5-D ``GridSample`` (mode spelled ``"linear"``)."""
 LUT_BACKENDS = ("strip", "gather", "volume")
-DEFAULT_FRAME_SIZE = (1080, 1920)
 """Frame (height, width) whose bloom pyramid depth an exported graph uses."""
 
 Inputs = Union[torch.Tensor, Sequence[torch.Tensor]]
@@ -83,18 +83,23 @@ Inputs = Union[torch.Tensor, Sequence[torch.Tensor]]
 # ---------------------------------------------------------------- export-ready modules
 
 
-class FixedDepthBloom(nn.Module):
-    """:class:`~torchgrade.Bloom` with its pyramid depth fixed, so one graph serves every frame size."""
+MAX_FRAME_SIDE = 16384
+"""Largest frame side an exported bloom serves exactly: the graph holds that frame's pyramid depth."""
 
-    def __init__(self, stage: Bloom, depth: int):
+
+class FixedDepthBloom(nn.Module):
+    """:class:`~torchgrade.Bloom` traced with ``fixed_depth``: every level a frame up to
+    :data:`MAX_FRAME_SIDE` can have is in the graph, and the levels a frame does not have are masked
+    out at run time, so one graph serves every frame size."""
+
+    def __init__(self, stage: Bloom):
         super().__init__()
         self.stage = stage
-        self.depth = depth
+        self.depth = pyramid_depth(MAX_FRAME_SIDE, MAX_FRAME_SIDE, stage.max_iterations, stage.downscale_limit)
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
         settings = {key: getattr(self.stage, key) for key in self.stage.to_config()}
-        settings.update(max_iterations=self.depth, downscale_limit=1)
-        return bloom(image, **settings)
+        return bloom(image, **settings, fixed_depth=self.depth)
 
 
 def strip_table(table: torch.Tensor) -> torch.Tensor:
@@ -204,8 +209,7 @@ def _look_stages(module: nn.Module) -> tuple:
     return None, [("module", module)]
 
 
-def export_graph(module: nn.Module, lut_backend: str = "strip", frame_size=DEFAULT_FRAME_SIZE,
-                 grade_inputs: bool = False) -> ExportGraph:
+def export_graph(module: nn.Module, lut_backend: str = "strip", grade_inputs: bool = False) -> ExportGraph:
     """The export-ready form of ``module`` (see the module docstring for each stage's form)."""
     if lut_backend not in LUT_BACKENDS:
         raise ValueError(f"lut_backend must be one of {LUT_BACKENDS}, got {lut_backend!r}")
@@ -215,8 +219,7 @@ def export_graph(module: nn.Module, lut_backend: str = "strip", frame_size=DEFAU
         if name == "lut":
             stages.append(LUTLookup(*stage, lut_backend))
         elif isinstance(stage, Bloom):
-            depth = pyramid_depth(*frame_size, stage.max_iterations, stage.downscale_limit)
-            stages.append(FixedDepthBloom(stage, depth))
+            stages.append(FixedDepthBloom(stage))
         elif isinstance(stage, ColorGrade) and grade_inputs:
             stages.append(GradeWithInputs(stage.aces, stage.curves()))
         else:
@@ -277,10 +280,8 @@ def example_inputs(graph: ExportGraph, module: nn.Module, image: torch.Tensor) -
 
 
 def default_example(graph: ExportGraph) -> torch.Tensor:
-    """A ``(2, 3, side, side)`` trace input, large enough that every fixed bloom depth is reached (side >= 64)."""
-    depths = [stage.depth for stage in graph.stages if isinstance(stage, FixedDepthBloom)]
-    side = max([64] + [2 ** (depth + 2) for depth in depths])
-    return torch.rand(2, 3, side, side, generator=torch.Generator().manual_seed(0)) * 4.0
+    """A ``(2, 3, 64, 64)`` trace input: every size is taken from runtime shapes, so any size traces."""
+    return torch.rand(2, 3, 64, 64, generator=torch.Generator().manual_seed(0)) * 4.0
 
 
 # ---------------------------------------------------------------- symbolics
@@ -402,7 +403,6 @@ def export(
     example: Optional[torch.Tensor] = None,
     opset: Optional[int] = None,
     lut_backend: str = "strip",
-    frame_size=DEFAULT_FRAME_SIZE,
     grade_inputs: bool = False,
 ) -> Path:
     """Export a torchgrade module or :class:`~torchgrade.PostFX` look to ``path``; returns the path.
@@ -415,14 +415,13 @@ def export(
         opset: default :data:`DEFAULT_OPSET` (17), or :data:`VOLUME_OPSET` (20) for
             ``lut_backend="volume"``; the volume backend needs at least 20.
         lut_backend: ``"strip"``, ``"gather"`` or ``"volume"`` (see the module docstring).
-        frame_size: ``(height, width)`` whose bloom pyramid depth the graph keeps.
         grade_inputs: expose the grading controls as graph inputs (see the module docstring).
     """
     minimum = VOLUME_OPSET if lut_backend == "volume" else 16
     opset = opset or (VOLUME_OPSET if lut_backend == "volume" else DEFAULT_OPSET)
     if opset < minimum:
         raise ValueError(f"lut_backend={lut_backend!r} needs opset >= {minimum}, got {opset}")
-    graph = export_graph(module, lut_backend, frame_size, grade_inputs)
+    graph = export_graph(module, lut_backend, grade_inputs)
     example = default_example(graph) if example is None else example
     inputs = example_inputs(graph, module, example.float())
     names = input_names(graph)
