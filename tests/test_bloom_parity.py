@@ -235,7 +235,7 @@ def test_a_point_light_becomes_the_kernel_image():
     assert glow.abs().sum().item() == pytest.approx(3 * 8.0)
 
 
-def test_convolution_bloom_identity_gradients_and_no_onnx(tmp_path):
+def test_convolution_bloom_identity_gradients_and_config():
     image = (torch.rand(1, 3, 6, 7, dtype=torch.float64) * 3).requires_grad_()
     kernel = (torch.rand(1, 3, 3, dtype=torch.float64) + 0.1).requires_grad_()
     intensity = torch.tensor(0.7, dtype=torch.float64, requires_grad=True)
@@ -245,8 +245,6 @@ def test_convolution_bloom_identity_gradients_and_no_onnx(tmp_path):
     assert tg.ConvolutionBloom(torch.ones(1, 3, 3), intensity=0.0)(plain) is plain
     module = tg.ConvolutionBloom(torch.ones(1, 3, 3), intensity=0.5)
     assert tg.ConvolutionBloom(**json.loads(json.dumps(module.to_config()))).to_config() == module.to_config()
-    with pytest.raises(NotImplementedError, match="fft_rfft2"):
-        tg.onnx.export(module, tmp_path / "convolution.onnx")
     with pytest.raises(ValueError, match="odd"):
         tg.ConvolutionBloom(torch.ones(1, 4, 3))
 
@@ -321,6 +319,23 @@ def test_defaults_are_bit_identical_and_options_round_trip_through_configs():
     look = tg.PostFX.from_config({"bloom": config, "tonemap": "neutral"})
     torch.testing.assert_close(look(image), tg.ToneMap("neutral")(module(image)))
     assert tg.PostFX(bloom=module).to_config()["bloom"] == config
+
+
+def test_direct_convolution_equals_the_fft_one():
+    light = torch.rand(2, 3, 11, 17, dtype=torch.float64)
+    kernel = torch.rand(3, 5, 7, dtype=torch.float64)
+    torch.testing.assert_close(tg.bloom.direct_convolve(light, kernel), tg.bloom.fft_convolve(light, kernel))
+
+
+def test_convolution_bloom_exports_to_onnx_at_two_shapes(tmp_path):
+    kernel = torch.rand(3, 9, 9, generator=torch.Generator().manual_seed(2)) + 0.05
+    module = tg.ConvolutionBloom(kernel, threshold=0.8, intensity=0.6)
+    path = tg.onnx.export(module, tmp_path / "convolution.onnx")
+    for shape in [(1, 3, 37, 53), (3, 3, 64, 96)]:
+        image = hdr(shape, seed=shape[0])
+        with torch.no_grad():
+            peak = float(module(image).abs().max())
+        assert tg.onnx.verify(module, path, image) / max(1.0, peak) <= 1e-4
 
 
 def test_options_export_to_onnx_at_two_shapes(tmp_path):

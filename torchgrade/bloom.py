@@ -584,6 +584,14 @@ def fft_convolve(light: torch.Tensor, kernel: torch.Tensor) -> torch.Tensor:
     return full[..., kh // 2 : kh // 2 + light.shape[-2], kw // 2 : kw // 2 + light.shape[-1]]
 
 
+def direct_convolve(light: torch.Tensor, kernel: torch.Tensor) -> torch.Tensor:
+    """:func:`fft_convolve` as a direct ``conv2d`` (the kernel flipped, zero padding, one group per
+    channel): the same linear convolution, in operators every ONNX runtime has."""
+    kh, kw = kernel.shape[-2:]
+    weight = kernel.expand(3, kh, kw).flip(-2, -1).unsqueeze(1)
+    return F.conv2d(light, weight, padding=(kh // 2, kw // 2), groups=3)
+
+
 def _check_kernel(kernel) -> None:
     _check_texture(kernel, "kernel", sides="odd")
     if not bool((kernel.detach().sum(dim=(-2, -1)) > 0).all()):
@@ -598,14 +606,10 @@ def convolution_bloom(
     ``T`` is :func:`bloom_threshold` at full resolution; ``kernel`` ``(1 or 3, kh, kw)`` with odd
     sides is the glow of a point light (centred, normalised to sum 1 per channel), so a point's
     light reappears as the kernel image around it. Light beyond the frame is lost (zero padding).
-    Not exportable to ONNX: the TorchScript exporter has no ``aten::fft_rfft2`` at opset 17.
+    ONNX export has no FFT at opset 17, so an exported graph convolves directly
+    (:func:`direct_convolve`): the same result, slower for large kernels.
     """
     check_image(image)
-    if torch.onnx.is_in_onnx_export():
-        raise NotImplementedError(
-            "ConvolutionBloom cannot be exported to ONNX: the TorchScript exporter has no symbolic for "
-            "aten::fft_rfft2 at opset 17; use Bloom for exported models"
-        )
     controls = {"threshold": threshold, "knee": knee, "intensity": intensity}
     _check_kernel(kernel)
     for name, value in controls.items():
@@ -619,7 +623,8 @@ def convolution_bloom(
     reference = x if image.dim() == 4 else x[0]
     threshold, knee, intensity = (scalar_param(value, reference, name) for name, value in controls.items())
     kernel = kernel.to(x.dtype)
-    glow = fft_convolve(x * _threshold_fraction(x, threshold, knee), kernel / kernel.sum(dim=(-2, -1), keepdim=True))
+    convolve = direct_convolve if torch.onnx.is_in_onnx_export() else fft_convolve
+    glow = convolve(x * _threshold_fraction(x, threshold, knee), kernel / kernel.sum(dim=(-2, -1), keepdim=True))
     out = (x + intensity * glow).reshape(image.shape)
     if image.dtype == torch.float16:
         out = out.clamp(-HALF_MAX, HALF_MAX)
