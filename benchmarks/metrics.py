@@ -84,17 +84,29 @@ def map_large_buffers() -> bool:
     return bool(libc.mallopt(m_mmap_threshold, 65536)) and bool(libc.mallopt(m_trim_threshold, 0))
 
 
+def release_free_memory() -> None:
+    """Hand the heap's free pages back to the system (glibc ``malloc_trim``); a no-op without glibc."""
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except OSError:
+        pass
+
+
 def peak_rss_mb(run) -> float | None:
     """Peak resident memory (MiB) that ``run()`` adds to the process, its output included.
 
-    Resets the kernel's peak-RSS counter (Linux ``/proc/self/clear_refs``), so ``None`` elsewhere.
+    Free heap pages are released first, so reusing them counts as growth, and again after ``run``
+    (the kernel updates its peak-RSS counter when pages are unmapped); the counter is reset before
+    ``run`` through ``/proc/self/clear_refs``. ``None`` where that file is not available (not Linux).
     """
+    release_free_memory()
     try:
         Path("/proc/self/clear_refs").write_text("5")
     except OSError:
         return None
     before = _status_kib("VmRSS")
     run()
+    release_free_memory()
     return max(0, _status_kib("VmHWM") - before) / 1024.0
 
 

@@ -9,9 +9,10 @@ runs live; the *per-pixel stage* (grade + tone map) is what the methods compute 
 **Rows** (:func:`method_rows`): the per-pixel stage computed directly in float64 (the reference),
 float32, bfloat16 and float16 (the library computes half inputs in float32: those rows measure the
 conversion and the quantisation of half inputs); baked into LUTs of 9, 17, 33 and 65 points per axis,
-linear or LogC shaper, trilinear or tetrahedral lookup; ``torch.compile``d (full run only); exported to
-ONNX and run by onnxruntime; and the same LUTs written as .cube files and applied by OpenColorIO's CPU
-processor. Two *whole-look* rows (bloom included) compare PyTorch and onnxruntime on the exported look.
+linear or LogC shaper, trilinear or tetrahedral lookup (plus 33³ and 65³ LogC LUTs whose lattice
+reaches the scenes' brightest pixel, ``bake_lut(scene=...)``, instead of LogC 1.0 ≈ 58.9);
+``torch.compile``d (full run only; a row whose compilation fails records why); exported to ONNX and
+run by onnxruntime; and the same LUTs written as .cube files and applied by OpenColorIO's CPU processor. Two *whole-look* rows (bloom included) compare PyTorch and onnxruntime on the exported look.
 
 **Accuracy** is measured on the whole look: the scene goes through bloom (in the row's dtype) and the
 row's per-pixel stage, and is compared with the float64 look, on the sample EXRs (Desk, CandleGlass,
@@ -42,6 +43,7 @@ Writes ``results.json``, ``results.md``, ``pareto.png`` and ``scaling.png`` to `
 from __future__ import annotations
 
 import argparse
+import copy
 import functools
 import json
 import os
@@ -79,6 +81,8 @@ FRAME = (1080, 1920)
 LUT_SIZES = (9, 17, 33, 65)
 SHAPERS = ("linear", "logc")
 INTERPOLATIONS = ("trilinear", "tetrahedral")
+FITTED_SIZES = (33, 65)
+"""Sizes also baked with the lattice reaching the scenes' brightest pixel (tetrahedral rows)."""
 PEER = "OpenColorIO 33³ logc tetrahedral"
 """The row every per-pixel row's time is also divided by (the peer a colourist would use)."""
 RESOLUTIONS = ((256, 256), (512, 512), (1024, 1024), (1080, 1920), (2160, 3840))
@@ -108,7 +112,7 @@ class Plan:
             quick=quick,
             device=torch.device(args.device),
             out=Path(args.out) if args.out else default_out,
-            runs=3 if quick else 5,
+            runs=2 if quick else 5,
             scaling_runs=3,
             accuracy_side=400 if quick else None,
             delta_e_samples=20_000 if quick else 200_000,
@@ -192,9 +196,14 @@ class Workload:
             return self.look.bloom(self.frame.to(dtype))
 
     @functools.lru_cache(maxsize=None)
-    def lut(self, size: int, shaper: str) -> LUT3D:
-        """The per-pixel stage baked (in float64) into a ``size``³ LUT, table stored in float32."""
-        baked = tg.bake_lut(self.per_pixel, size=size, shaper=shaper)
+    def lut(self, size: int, shaper: str, fitted: bool = False) -> LUT3D:
+        """The per-pixel stage baked (in float64) into a ``size``³ LUT, table stored in float32.
+
+        ``fitted``: the lattice reaches the brightest bloomed pixel of the accuracy scenes
+        (``bake_lut(scene=...)``) instead of the shaper's default top (LogC 1.0, linear ≈ 58.9).
+        """
+        scene = self.bloomed_strip(torch.float32).cpu() if fitted else None
+        baked = tg.bake_lut(self.per_pixel, size=size, shaper=shaper, scene=scene)
         return float32_lut(baked).to(self.plan.device)
 
     def timing_input(self, method: Method) -> torch.Tensor:
@@ -202,9 +211,11 @@ class Workload:
 
 
 def float32_lut(lut: LUT3D, compile: bool = False) -> LUT3D:
-    """``lut`` with its table in float32 (as served), optionally looked up through ``torch.compile``."""
-    return LUT3D(lut.table.detach().float(), shaper=lut.shaper, domain=(lut.domain_min, lut.domain_max),
-                 output_range=lut.output_range, compile=compile)
+    """A copy of ``lut`` with its table in float32 (as served), optionally looked up through ``torch.compile``."""
+    served = copy.deepcopy(lut)
+    served.table = lut.table.detach().float()
+    served.compile = compile
+    return served
 
 
 # ---------------------------------------------------------------- rows
@@ -230,7 +241,18 @@ def lut_rows(work: Workload) -> list:
         info = {"lut_size": size, "shaper": shaper, "interpolation": interpolation}
         return Method(lut_name(size, shaper, interpolation), "lut", lambda x: lut(x, interpolation), info=info)
 
-    return [(lut_name(*key), functools.partial(build, *key)) for key in lut_keys()]
+    def build_fitted(size):
+        lut = work.lut(size, "logc", fitted=True)
+        top = float(tg.color.logc_to_linear(lut.domain_max.double()).max())
+        info = {"lut_size": size, "shaper": "logc", "interpolation": "tetrahedral", "domain_top_linear": round(top, 1)}
+        return Method(fitted_lut_name(size), "lut", lambda x: lut(x, "tetrahedral"), info=info)
+
+    rows = [(lut_name(*key), functools.partial(build, *key)) for key in lut_keys()]
+    return rows + [(fitted_lut_name(size), functools.partial(build_fitted, size)) for size in FITTED_SIZES]
+
+
+def fitted_lut_name(size: int) -> str:
+    return f"LUT {size}³ logc tetrahedral, domain fitted to the scenes"
 
 
 def lut_keys() -> list:
@@ -245,6 +267,8 @@ def compile_rows(work: Workload) -> list:
         start = time.perf_counter()
         with torch.no_grad():
             apply(work.bloomed_frame(torch.float32))
+        if isinstance(module, LUT3D) and not module.compile:
+            raise RuntimeError("torch.compile failed; LUT3D fell back to its eager lookup")
         return Method(name, "torch.compile", apply, info={"compile_s": round(time.perf_counter() - start, 1)})
 
     rows = [("torch.compile direct float32", lambda: build("torch.compile direct float32", torch.compile(work.per_pixel)))]
@@ -471,6 +495,8 @@ def fmt(value, digits: int = 2) -> str:
 
 def row_note(record: dict) -> str:
     notes = []
+    if "domain_top_linear" in record:
+        notes.append(f"lattice up to linear {record['domain_top_linear']:g}")
     if "compile_s" in record:
         notes.append(f"compile {record['compile_s']:.0f} s")
     if "export_s" in record:
@@ -547,8 +573,8 @@ def plot_pareto(records: list, path: Path) -> None:
         points += [(x, y, r["method"]) for x, y, r in zip(xs, ys, rows)]
     front = pareto_front(points)
     ax.plot([p[0] for p in front], [p[1] for p in front], color="black", lw=1, ls="--", label="Pareto front")
-    for ms, error, name in front:
-        ax.annotate(name, (ms, error), fontsize=7, xytext=(4, 3), textcoords="offset points")
+    for rank, (ms, error, name) in enumerate(front):  # staggered: front points often share an error
+        ax.annotate(name, (ms, error), fontsize=7, xytext=(4, 3 - 10 * (rank % 4)), textcoords="offset points")
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("per-pixel stage, ms per megapixel at 1920×1080 (log)")
