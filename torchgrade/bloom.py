@@ -233,10 +233,32 @@ def anamorphic_sigma(ratio: torch.Tensor) -> torch.Tensor:
 
 
 def _bspline_refine(light: torch.Tensor) -> torch.Tensor:
-    """The filter turning bilinear into cubic B-spline upsampling, over the mirrored frame."""
-    kernel = torch.tensor([BSPLINE_AFTER_BILINEAR], dtype=light.dtype, device=light.device)
+    """The filter turning bilinear into cubic B-spline upsampling, over the mirrored frame, one axis at a time.
+
+    Sums of shifted views (:func:`_symmetric_filter`): on CPU about 7 times faster than
+    ``kornia.filters.filter2d_separable``, whose depthwise convolution oneDNN runs slowly.
+    """
     padded = mirror_pad(light, len(BSPLINE_AFTER_BILINEAR) // 2)
-    return kornia.filters.filter2d_separable(padded, kernel, kernel, padding="valid")
+    return _symmetric_filter(_symmetric_filter(padded, BSPLINE_AFTER_BILINEAR, -1), BSPLINE_AFTER_BILINEAR, -2)
+
+
+def _symmetric_filter(padded: torch.Tensor, weights, axis: int) -> torch.Tensor:
+    """``w_0 x_i + sum_j w_j (x_{i-j} + x_{i+j})`` along ``axis`` for a symmetric odd-length ``weights``.
+
+    ``padded`` carries ``radius = len(weights) // 2`` extra pixels at both ends of ``axis``; the result
+    drops them. Slices with constant bounds, so a traced graph keeps working at every frame size.
+    """
+    radius = len(weights) // 2
+
+    def shifted(offset: int) -> torch.Tensor:
+        index = [slice(None)] * padded.dim()
+        index[axis] = slice(radius + offset, (offset - radius) or None)
+        return padded[tuple(index)]
+
+    out = weights[radius] * shifted(0)
+    for j in range(1, radius + 1):
+        out = out + weights[radius + j] * (shifted(-j) + shifted(j))
+    return out
 
 
 def _cross_sum(values: torch.Tensor) -> torch.Tensor:
@@ -368,14 +390,18 @@ def softlight_blend(color: torch.Tensor, glow: torch.Tensor) -> torch.Tensor:
 
 
 _BLENDS = {
-    "additive": lambda image, glow, strength: image + glow,
-    "energy_conserving": lambda image, glow, strength: image * (1.0 - strength) + glow,
-    "mix": lambda image, glow, strength: image * (1.0 - strength) + glow,
+    "additive": lambda image, glow, strength: glow.add_(image),
+    "energy_conserving": lambda image, glow, strength: glow.addcmul_(image, 1.0 - strength),
+    "mix": lambda image, glow, strength: glow.addcmul_(image, 1.0 - strength),
     "screen": lambda image, glow, strength: screen_blend(image, glow),
     "softlight": lambda image, glow, strength: softlight_blend(image, glow),
     "replace": lambda image, glow, strength: glow,
 }
-"""Final passes of the modes other than scattering: ``(image, intensity * glow, intensity) -> output``."""
+"""Final passes of the modes other than scattering: ``(image, intensity * glow, intensity) -> output``.
+
+The linear ones write the output into the full-resolution ``glow`` (a fresh tensor): every new frame-sized
+buffer costs page faults, and on CPU that is a large part of bloom's time.
+"""
 
 
 def _resampled(texture: torch.Tensor, size, like: torch.Tensor) -> torch.Tensor:
@@ -555,13 +581,17 @@ def bloom(
         glow = _upsample(strength * glow, (height, width), bicubic_upsampling)
         if not is_constant(tint, 1.0):
             glow = glow * srgb_to_linear(color_param(tint, reference, "tint"))
+        lens = None
+        if dirt is not None and not is_constant(dirt_intensity, 0.0):
+            lens = param("dirt_intensity") * _resampled(dirt, (height, width), x) * glow
+            glow = glow.clone()  # the lens term keeps the glow for its gradient; the blend below overwrites it
         if mode == "scattering":
             kept = _nearest_upsample(1.0 - strength * fraction, (height, width))
-            out = torch.addcmul(glow, x, kept)
+            out = glow.addcmul_(x, kept)
         else:
             out = _BLENDS[mode](x, glow, strength)
-        if dirt is not None and not is_constant(dirt_intensity, 0.0):
-            out = out + param("dirt_intensity") * _resampled(dirt, (height, width), x) * glow
+        if lens is not None:
+            out = out + lens
 
     if fixed_depth is not None:
         out = torch.where(active > 0, out, x)  # a frame too small for any level is not bloomed
