@@ -8,6 +8,7 @@ is visible). ΔE2000 is computed by colour-science on CIE Lab (D65) of those sRG
 from __future__ import annotations
 
 import ctypes
+import functools
 import math
 import warnings
 from pathlib import Path
@@ -69,6 +70,15 @@ def _status_kib(field: str) -> int:
     raise KeyError(field)
 
 
+@functools.lru_cache(maxsize=None)
+def _glibc():
+    """glibc through ctypes, or None where there is no ``libc.so.6`` (not Linux with glibc)."""
+    try:
+        return ctypes.CDLL("libc.so.6")
+    except OSError:
+        return None
+
+
 def map_large_buffers() -> bool:
     """Make glibc serve every allocation above 64 KiB with its own mapping, returned to the system on free.
 
@@ -76,9 +86,8 @@ def map_large_buffers() -> bool:
     call allocates instead of heap pages kept from earlier calls. Slows allocation: call it after
     every timing. Returns False where glibc's ``mallopt`` is not available.
     """
-    try:
-        libc = ctypes.CDLL("libc.so.6")
-    except OSError:
+    libc = _glibc()
+    if libc is None:
         return False
     m_mmap_threshold, m_trim_threshold = -3, -1
     return bool(libc.mallopt(m_mmap_threshold, 65536)) and bool(libc.mallopt(m_trim_threshold, 0))
@@ -86,10 +95,9 @@ def map_large_buffers() -> bool:
 
 def release_free_memory() -> None:
     """Hand the heap's free pages back to the system (glibc ``malloc_trim``); a no-op without glibc."""
-    try:
-        ctypes.CDLL("libc.so.6").malloc_trim(0)
-    except OSError:
-        pass
+    libc = _glibc()
+    if libc is not None:
+        libc.malloc_trim(0)
 
 
 def peak_rss_mb(run) -> float | None:
