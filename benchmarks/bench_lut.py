@@ -11,8 +11,10 @@ fresh mapping; that slows allocation, so no timing is taken there) after resetti
 peak-RSS counter, each method warmed up (compiled) first.
 
 Accuracy: a strong look (``ColorGrade(contrast=30, saturation=20, temperature=20)`` then
-``ToneMap("aces")``) baked to 33³ LogC LUTs with each output encoding, applied to every 4th pixel of
-the sample EXRs, against direct float64 evaluation, in 8-bit sRGB code values (p99.9 and max).
+``ToneMap("aces")``) baked to 33³ LogC LUTs with each output encoding, and to 33³, 65³ and 129³ LUTs
+whose lattice follows the scene, applied to every 4th pixel of the sample EXRs, against direct
+float64 evaluation, in 8-bit sRGB code values (p99.9 and max). ``lut_floor.py`` asks what the best
+possible 33³ table would do on the same pixels.
 
 Run: ``.venv/bin/python benchmarks/bench_lut.py`` (writes benchmarks/results/lut.json and lut.md).
 """
@@ -36,8 +38,8 @@ import torch
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from benchmarks.metrics import srgb_codes  # noqa: E402
 from torchgrade.io.cube import write_cube  # noqa: E402
-from torchgrade.color import linear_to_srgb  # noqa: E402
 from torchgrade.grade import ColorGrade  # noqa: E402
 from torchgrade.io import read_exr  # noqa: E402
 from torchgrade.lut import INTERPOLATIONS, LUT3D, OUTPUT_ENCODINGS, bake_lut, trilinear_grid_sample  # noqa: E402
@@ -69,23 +71,35 @@ def median_ms_round_robin(methods: dict, runs: int = RUNS) -> dict:
     return {name: 1000.0 * statistics.median(values) for name, values in times.items()}
 
 
+def strong_look() -> torch.nn.Module:
+    """The strong look LUT accuracy is measured with: ``ColorGrade(contrast=30, saturation=20, temperature=20)``, ``ToneMap("aces")``."""
+    return torch.nn.Sequential(ColorGrade(contrast=30.0, saturation=20.0, temperature=20.0), ToneMap("aces"))
+
+
+def accuracy_image(name: str) -> torch.Tensor:
+    """Every 4th pixel of a sample EXR's RGB, ``(1, 3, H, W)`` float32: the pixels accuracy is measured on."""
+    return read_exr(EXR_DIR / f"{name}.exr")[:3, ::4, ::4].unsqueeze(0)
+
+
+ACCURACY_LUTS = [(SIZE, "default", encoding) for encoding in OUTPUT_ENCODINGS] + [(size, "scene", "srgb") for size in (SIZE, 65, 129)]
+"""(size, lattice domain, output encoding) of the LogC LUTs in the accuracy table: the default domain
+(up to linear 58.86), or the scene's range (``bake_lut(scene=image)``)."""
+
+
 def accuracy() -> list:
-    """Errors of 33³ LogC LUTs of the strong look on the sample EXRs, in 8-bit sRGB code values."""
-    strong_look = torch.nn.Sequential(ColorGrade(contrast=30.0, saturation=20.0, temperature=20.0), ToneMap("aces"))
-    luts = {encoding: bake_lut(strong_look, size=SIZE, output_encoding=encoding) for encoding in OUTPUT_ENCODINGS}
+    """Errors of LogC LUTs (:data:`ACCURACY_LUTS`) of the strong look on the sample EXRs, in 8-bit sRGB code values."""
+    look = strong_look()
     rows = []
     with torch.no_grad():
         for name in ACCURACY_IMAGES:
-            image = read_exr(EXR_DIR / f"{name}.exr")[:3, ::4, ::4].unsqueeze(0)
-            direct = srgb_codes(strong_look(image.double()))
-            for (encoding, lut), interpolation in itertools.product(luts.items(), INTERPOLATIONS):
+            image = accuracy_image(name)
+            direct = srgb_codes(look(image.double()))
+            for (size, domain, encoding), interpolation in itertools.product(ACCURACY_LUTS, INTERPOLATIONS):
+                lut = bake_lut(look, size=size, scene=image if domain == "scene" else None, output_encoding=encoding)
                 error = (srgb_codes(lut(image, interpolation)) - direct).abs().flatten().numpy()
-                rows.append({"image": name, "output_encoding": encoding, "interpolation": interpolation, "p99_9": float(np.quantile(error, 0.999)), "max": float(error.max())})
+                rows.append({"image": name, "size": size, "domain": domain, "output_encoding": encoding, "interpolation": interpolation,
+                             "p99_9": float(np.quantile(error, 0.999)), "max": float(error.max())})
     return rows
-
-
-def srgb_codes(image: torch.Tensor) -> torch.Tensor:
-    return 255.0 * linear_to_srgb(image.double().clamp(0.0, 1.0))
 
 
 def _status_kib(field: str) -> int:
@@ -227,13 +241,15 @@ def markdown(report: dict) -> str:
     if report["accuracy"]:
         lines += [
             "",
-            "## Accuracy of a 33³ LogC LUT of a strong look (every 4th pixel, 8-bit sRGB code values vs direct float64)",
+            "## Accuracy of LogC LUTs of a strong look (every 4th pixel, 8-bit sRGB code values vs direct float64)",
             "",
-            "| image | output encoding | interpolation | p99.9 | max |",
-            "| --- | --- | --- | ---: | ---: |",
+            "Lattice domain: the default (up to linear 58.86), or the scene's range (`bake_lut(scene=image)`).",
+            "",
+            "| image | size | domain | output encoding | interpolation | p99.9 | max |",
+            "| --- | ---: | --- | --- | --- | ---: | ---: |",
         ]
         for a in report["accuracy"]:
-            lines.append(f"| {a['image']} | {a['output_encoding']} | {a['interpolation']} | {a['p99_9']:.2f} | {a['max']:.1f} |")
+            lines.append(f"| {a['image']} | {a['size']}³ | {a['domain']} | {a['output_encoding']} | {a['interpolation']} | {a['p99_9']:.2f} | {a['max']:.1f} |")
     lines += ["", f"Reproduce: `{report['command']}`", ""]
     return "\n".join(lines)
 

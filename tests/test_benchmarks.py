@@ -10,7 +10,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks import metrics, run  # noqa: E402
+from benchmarks import lut_floor, metrics, run  # noqa: E402
 from torchgrade.color import srgb_to_linear  # noqa: E402
 
 
@@ -130,3 +130,44 @@ def test_report_and_plots(tiny_work, tmp_path):
     assert {p["path"] for p in points} == {"direct float32", run.lut_name(33, "logc", "tetrahedral")}
     for name in ("pareto.png", "scaling.png"):
         assert 0 < (tmp_path / name).stat().st_size < 200_000
+
+
+@pytest.mark.parametrize("interpolation", ["trilinear", "tetrahedral"])
+def test_lut_floor_interpolation_matrix_is_the_library_lookup(interpolation):
+    """interpolation_matrix raises unless its weights reproduce the library's kernel; rows sum to 1."""
+    coords = torch.rand(3, 500, dtype=torch.float64, generator=torch.Generator().manual_seed(1)) * 4.0
+    coords[:, :3] = torch.tensor([[0.0, 4.0, 2.0], [0.0, 4.0, 2.0], [0.0, 4.0, 2.0]])  # corners and a lattice point
+    matrix = lut_floor.interpolation_matrix(coords, 5, interpolation)
+    assert matrix.shape == (500, 125)
+    assert abs(matrix.sum(axis=1) - 1.0).max() < 1e-12
+
+
+def test_lut_floor_entry_interval_opens_where_the_display_clips():
+    low, high = lut_floor.entry_interval(torch.tensor([128.0, 2.0, 254.0]).numpy(), 4.0, "srgb")
+    assert low[0] == pytest.approx(124 / 255) and high[0] == pytest.approx(132 / 255)
+    assert low[1] == -float("inf") and high[2] == float("inf")  # below 0 or above 1 the clip shows black or white
+    low, high = lut_floor.entry_interval(torch.tensor([128.0]).numpy(), 1.0, "linear")
+    assert float(metrics.srgb_codes(torch.tensor(low).reshape(1, 1, 1, 1).expand(1, 3, 1, 1))[0, 0]) == pytest.approx(127.0)
+    assert float(metrics.srgb_codes(torch.tensor(high).reshape(1, 1, 1, 1).expand(1, 3, 1, 1))[0, 0]) == pytest.approx(129.0)
+
+
+def test_lut_floor_finds_a_table_when_one_exists_and_proves_when_none_can():
+    """Pixels read from a known table are met exactly; two pixels at one lattice point 10 codes apart are not within 4."""
+    coords = torch.rand(3, 200, dtype=torch.float64, generator=torch.Generator().manual_seed(2)) * 2.0
+    matrix = lut_floor.interpolation_matrix(coords, 3, "tetrahedral")
+    table = torch.rand(27, 3, dtype=torch.float64, generator=torch.Generator().manual_seed(3)).numpy() * 0.8 + 0.1
+    codes = (255.0 * (matrix @ table)).T  # sRGB-encoded entries display as 255 * entry
+    assert lut_floor.table_exists(matrix, codes, 0.01, "srgb") is True
+    twin = torch.tensor([[1.0, 1.0], [1.0, 1.0], [1.0, 1.0]], dtype=torch.float64)
+    twin_matrix = lut_floor.interpolation_matrix(twin, 3, "trilinear")
+    apart = torch.tensor([[100.0, 110.0]] * 3).numpy()
+    assert lut_floor.table_exists(twin_matrix, apart, 4.0, "srgb") is False
+    assert lut_floor.table_exists(twin_matrix, apart, 5.5, "linear") is True
+
+
+def test_no_33_logc_table_keeps_every_desk_pixel_within_4_codes(exr_dir):
+    """The claim of benchmarks/results/lut_floor.md that makes the LUT accuracy bar unreachable on Desk (tetrahedral, sRGB entries)."""
+    direct, coords, inside = lut_floor.measured_pixels("Desk")
+    assert 0.04 < 1.0 - inside.mean() < 0.05  # the pixels above the lattice top
+    matrix = lut_floor.interpolation_matrix(coords, lut_floor.SIZE, "tetrahedral")
+    assert lut_floor.table_exists(matrix, direct, 4.0, "srgb") is False

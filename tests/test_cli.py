@@ -1,9 +1,12 @@
-"""The torchgrade command: demo and grade, as a user runs them."""
+"""The torchgrade command: demo, grade and bake, as a user runs them."""
 
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
+import pytest
+import torch
 from PIL import Image
 
 import torchgrade as tg
@@ -46,4 +49,40 @@ def test_grade_command_reports_bad_arguments_without_a_traceback(exr_dir, tmp_pa
     assert main(["grade", str(exr_dir / "Desk.exr"), "-o", str(tmp_path / "x.png"), "--contrast", "500"]) == 2
     err = capsys.readouterr().err
     assert "must end in .png or .exr" in err and "contrast must lie in" in err
+    assert not list(tmp_path.iterdir())
+
+
+def test_bake_writes_the_cube_of_the_graded_look(tmp_path, capsys):
+    out = tmp_path / "look.cube"
+    assert main(["bake", "-o", str(out), "--size", "17", "--contrast", "20", "--saturation", "10", "--tonemap", "neutral"]) == 0
+    line = capsys.readouterr().out.strip()
+    assert line.startswith("bake: 17³ logc LUT of ColorGrade -> ToneMap") and str(out) in line
+    look = torch.nn.Sequential(tg.ColorGrade(contrast=20, saturation=10), tg.ToneMap("neutral"))
+    expected = tg.bake_lut(look, size=17)
+    written = tg.io.read_cube(out)
+    assert written.size == 17 and written.shaper == "curve"  # the LogC shaper travels as a 1D section
+    image = tg.scene.demo_scene(45, 80)
+    with torch.no_grad():
+        torch.testing.assert_close(written(image).clamp(0, 1), expected(image).float(), atol=2e-3, rtol=0)  # the display's clip
+
+
+def test_bake_from_a_config_names_the_stages_left_live_and_measures_the_scene(exr_dir, tmp_path, capsys):
+    out = tmp_path / "cinematic.cube"
+    config = Path(__file__).resolve().parents[1] / "export" / "looks" / "cinematic.json"
+    assert main(["bake", "--config", str(config), "-o", str(out), "--size", "9", "--scene", str(exr_dir / "CandleGlass.exr")]) == 0
+    line = capsys.readouterr().out.strip()
+    assert "not in the LUT (not per-pixel): exposure, bloom" in line and "on CandleGlass.exr:" in line
+    scene_top = float(tg.io.read_exr(exr_dir / "CandleGlass.exr")[:3].max())
+    assert float(out.read_text().splitlines()[2].split()[-1]) == pytest.approx(scene_top, rel=1e-4)  # LUT_1D_INPUT_RANGE
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (["--size", "300"], "LUT size must be an integer from 2 to 256"),
+    (["--size", "auto"], "needs scene=image"),
+    (["--config", "missing.json"], "missing.json"),
+    (["--config", "look.json", "--contrast", "20"], "give --config or grading flags, not both"),
+])
+def test_bake_reports_bad_arguments_without_writing(tmp_path, capsys, arguments, message):
+    assert main(["bake", "-o", str(tmp_path / "x.cube"), *arguments]) == 2
+    assert message in capsys.readouterr().err
     assert not list(tmp_path.iterdir())

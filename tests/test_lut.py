@@ -412,10 +412,11 @@ def test_33_logc_tone_mapper_lut_p999_on_real_exrs(exr_dir, strong_look, name):
 
 @pytest.mark.xfail(
     strict=True,
-    reason="not met: p99.9 tetrahedral 5.5 (Desk), 1.3 (CandleGlass), 2.1 (GoldenGate) codes, max 17.5 / 6.2 / 8.1 "
-    "(4.7 / 0.65 / 1.1 with output_encoding='srgb'); "
-    "the tone mapper's max(0) of the graded input is a kink oblique to the lattice (the grade's own clamps do not "
-    "matter), and 4.5% of Desk's pixels lie above LogC's 58.9, where the graded look still changes",
+    reason="not met, and on Desk not possible for any 33³ LogC table: benchmarks/lut_floor.py shows by linear "
+    "programming that no choice of entries keeps every Desk pixel within 4 codes, for either interpolation and "
+    "output encoding, because 4.5% of its pixels have a channel above the lattice top (58.86), which the lookup "
+    "clamps while the look still changes. Baked tables: p99.9 tetrahedral 5.5 / 1.3 / 2.1 codes, max 17.5 / 6.2 / "
+    "8.1 (Desk / CandleGlass / GoldenGate); for CandleGlass and GoldenGate tables within 4 codes exist",
 )
 @pytest.mark.parametrize("name", ["Desk", "CandleGlass", "GoldenGate"])
 def test_33_logc_lut_accuracy_on_real_exrs(exr_dir, strong_look, name):

@@ -92,14 +92,17 @@ def test_one_bloom_graph_serves_frames_of_every_pyramid_depth(exported):
         assert display_error(module, path, hdr((1, 3, height, width))) <= TOLERANCE, (height, width)
 
 
-LUT = tg.bake_lut(torch.nn.Sequential(tg.ColorGrade(contrast=20, saturation=15), tg.ToneMap("neutral")), size=17)
+LUT_LOOK = torch.nn.Sequential(tg.ColorGrade(contrast=20, saturation=15), tg.ToneMap("neutral"))
+LUTS = {encoding: tg.bake_lut(LUT_LOOK, size=17, output_encoding=encoding) for encoding in tg.lut.OUTPUT_ENCODINGS}
+LUT = LUTS["linear"]
 
 
+@pytest.mark.parametrize("encoding", tg.lut.OUTPUT_ENCODINGS)
 @pytest.mark.parametrize("interpolation", ["trilinear", "tetrahedral"])
 @pytest.mark.parametrize("backend, opset", [("strip", 17), ("gather", 17), ("volume", 20)])
-def test_lut_matches_in_both_interpolations(exported, interpolation, backend, opset):
-    module = tg.PostFX(lut=LUT, interpolation=interpolation)
-    path = exported(f"lut_{interpolation}_{backend}", module, lut_backend=backend)
+def test_lut_matches_in_both_interpolations_and_encodings(exported, interpolation, backend, opset, encoding):
+    module = tg.PostFX(lut=LUTS[encoding], interpolation=interpolation)
+    path = exported(f"lut_{interpolation}_{backend}_{encoding}", module, lut_backend=backend)
     model = onnx.load(str(path))
     assert model.opset_import[0].version == opset
     ops = collections.Counter(node.op_type for node in model.graph.node)

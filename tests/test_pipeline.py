@@ -115,10 +115,12 @@ def test_to_lut_keeps_bloom_and_exposure_live_and_bakes_the_rest():
         tg.PostFX(bloom={"intensity": 1.0}).to_lut()
 
 
-def test_to_lut_matches_the_look_on_the_demo_scene():
+@pytest.mark.parametrize("encoding", tg.lut.OUTPUT_ENCODINGS)
+def test_to_lut_matches_the_look_on_the_demo_scene(encoding):
     """Strong grade + Neutral with bloom, 33³ LogC LUT: within 4 sRGB codes at the 99.9th percentile."""
     look = tg.PostFX(bloom={"intensity": 0.6, "max_iterations": 5}, **STRONG_LOOK)
-    baked = look.to_lut(33)
+    baked = look.to_lut(33, output_encoding=encoding)
+    assert baked.lut.output_encoding == encoding
     scene = tg.scene.demo_scene(180, 320)
     with torch.no_grad():
         assert srgb_code_error(look(scene), baked(scene)) <= 4.0

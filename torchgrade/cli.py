@@ -1,4 +1,5 @@
-"""The ``torchgrade`` command: ``demo`` renders the built-in scene, ``grade`` grades an EXR file."""
+"""The ``torchgrade`` command: ``demo`` renders the built-in scene, ``grade`` grades an EXR file,
+``bake`` writes a look's grade and tone mapping as a ``.cube`` 3D LUT."""
 
 from __future__ import annotations
 
@@ -13,8 +14,9 @@ from torch import nn
 
 from . import TONEMAP_MODES, ColorGrade, PostFX, ToneMap
 from .color import linear_to_srgb
-from .io import read_exr, write_exr
+from .io import read_exr, write_cube, write_exr
 from .io.atomic import atomic_write
+from .lut import bake_lut, srgb_code_error
 from .scene import demo_scene
 
 
@@ -69,13 +71,21 @@ def run_demo(args: argparse.Namespace) -> str:
     return f"demo: {args.width}x{args.height}, {_stages(look)}, {elapsed * 1000:.0f} ms -> {args.output}"
 
 
+GRADING_FLAGS = {
+    "post_exposure": "stops",
+    "temperature": "-100..100",
+    "tint": "-100..100",
+    "contrast": "-100..100",
+    "hue_shift": "degrees, -180..180",
+    "saturation": "-100..100",
+}
+"""The grading controls ``grade`` and ``bake`` take as flags (``--post-exposure`` ...), with their units."""
+
+
 def _grade_from_args(args: argparse.Namespace) -> nn.Sequential:
-    controls = {
-        name: getattr(args, name)
-        for name in ("post_exposure", "temperature", "tint", "contrast", "hue_shift", "saturation")
-        if getattr(args, name) is not None
-    }
-    return nn.Sequential(ColorGrade(aces=args.tonemap == "aces", **controls), ToneMap(args.tonemap))
+    controls = {name: getattr(args, name) for name in GRADING_FLAGS if getattr(args, name) is not None}
+    tonemap = args.tonemap or "aces"
+    return nn.Sequential(ColorGrade(aces=tonemap == "aces", **controls), ToneMap(tonemap))
 
 
 def run_grade(args: argparse.Namespace) -> str:
@@ -88,6 +98,51 @@ def run_grade(args: argparse.Namespace) -> str:
     _write_output(Path(args.output), graded)
     height, width = image.shape[1:]
     return f"grade: {width}x{height}, {_stages(look)}, {elapsed * 1000:.0f} ms -> {args.output}"
+
+
+def _lut_size(text: str):
+    """``--size``: an integer, or ``auto`` (the smallest size within ``--tolerance`` on ``--scene``)."""
+    if text == "auto":
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer (points per axis) or auto, got {text!r}") from None
+
+
+def _look_to_bake(args: argparse.Namespace) -> tuple:
+    """The per-pixel transform to bake (from ``--config`` or the grading flags) and the stages left live."""
+    if args.config is None:
+        return _grade_from_args(args), []
+    given = [name for name in (*GRADING_FLAGS, "tonemap") if getattr(args, name) is not None]
+    if given:
+        raise ValueError(f"give --config or grading flags, not both (got --config and {', '.join('--' + n.replace('_', '-') for n in given)})")
+    look = PostFX.from_config(args.config)
+    transform = look.per_pixel_stages()
+    return transform, [name for name, stage in look.stages().items() if stage not in transform]
+
+
+def run_bake(args: argparse.Namespace) -> str:
+    transform, live = _look_to_bake(args)
+    scene = None if args.scene is None else read_exr(args.scene)[:3].unsqueeze(0)
+    start = time.perf_counter()
+    lut = bake_lut(transform, size=args.size, shaper=args.shaper, scene=scene, tolerance=args.tolerance, progress=True)
+    elapsed = time.perf_counter() - start
+    write_cube(args.output, lut, title=Path(args.output).stem)
+    line = f"bake: {lut.size}³ {lut.shaper} LUT of {_stages(transform)}, {elapsed:.1f} s -> {args.output}"
+    if scene is not None:
+        with torch.no_grad():
+            error = srgb_code_error(transform(scene.double()), lut(scene))
+        line += f"; on {Path(args.scene).name}: {error:.2f} 8-bit codes at p99.9"
+    if live:
+        line += f"; not in the LUT (not per-pixel): {', '.join(live)}"
+    return line
+
+
+def _add_grading_flags(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--tonemap", choices=TONEMAP_MODES, help="default aces")
+    for name, unit in GRADING_FLAGS.items():
+        parser.add_argument("--" + name.replace("_", "-"), type=float, help=unit)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -104,17 +159,18 @@ def _parser() -> argparse.ArgumentParser:
     grade = commands.add_parser("grade", help="grade and tone map an OpenEXR image")
     grade.add_argument("input", help="scene-referred linear OpenEXR file")
     grade.add_argument("--output", "-o", required=True, help=".png (sRGB, 8-bit) or .exr (display linear)")
-    grade.add_argument("--tonemap", choices=TONEMAP_MODES, default="aces")
-    for flag, unit in (
-        ("--post-exposure", "stops"),
-        ("--temperature", "-100..100"),
-        ("--tint", "-100..100"),
-        ("--contrast", "-100..100"),
-        ("--hue-shift", "degrees, -180..180"),
-        ("--saturation", "-100..100"),
-    ):
-        grade.add_argument(flag, type=float, help=unit)
+    _add_grading_flags(grade)
     grade.set_defaults(run=run_grade)
+
+    bake = commands.add_parser("bake", help="bake grade and tone mapping into a .cube 3D LUT")
+    bake.add_argument("--output", "-o", required=True, help=".cube file to write")
+    bake.add_argument("--config", help="look JSON (PostFX config); without it, the grading flags below")
+    bake.add_argument("--size", type=_lut_size, default=33, help="points per axis, 2..256, or auto (needs --scene; default 33)")
+    bake.add_argument("--shaper", choices=("auto", "linear", "logc"), default="auto", help="default auto: logc when the look tone maps")
+    bake.add_argument("--scene", help="EXR of what the LUT will be applied to: the lattice covers its range, --size auto measures on it")
+    bake.add_argument("--tolerance", type=float, default=0.5, help="--size auto: 8-bit sRGB codes at p99.9 (default 0.5)")
+    _add_grading_flags(bake)
+    bake.set_defaults(run=run_bake)
     return parser
 
 

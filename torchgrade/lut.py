@@ -51,6 +51,7 @@ from typing import Callable, Optional, Sequence
 import torch
 import torch.nn.functional as F
 from torch import nn
+from tqdm import tqdm
 
 from .color import linear_to_logc, linear_to_srgb, logc_to_linear, srgb_to_linear
 from .core import check_image, sanitize, to_input_dtype, working_dtype
@@ -279,10 +280,14 @@ def lookup(image, rows, size: int, shaper, domain_min, domain_max, interpolation
     """
     x = sanitize(working_dtype(image)).movedim(-3, 0)  # (3, ..., H, W): a view
     unit = lattice_unit(x.reshape(3, -1), shaper, domain_min, domain_max, curve, curve_range)
-    y = decode_output(_KERNELS[interpolation](unit * (size - 1), rows, size), output_encoding)
-    if output_range is not None:
-        y = y.clamp(*output_range)
+    y = table_output(_KERNELS[interpolation](unit * (size - 1), rows, size), output_encoding, output_range)
     return to_input_dtype(y.reshape(x.shape).movedim(0, -3), image)
+
+
+def table_output(values: torch.Tensor, output_encoding: str, output_range) -> torch.Tensor:
+    """A LUT's output from interpolated table values: :func:`decode_output`, then the clamp to ``output_range`` (if any)."""
+    y = decode_output(values, output_encoding)
+    return y if output_range is None else y.clamp(*output_range)
 
 
 def lattice_unit(points, shaper, domain_min, domain_max, curve=None, curve_range=(0.0, 1.0)) -> torch.Tensor:
@@ -474,6 +479,7 @@ def bake_lut(
     tolerance: float = 0.5,
     chunk: int = 1 << 21,
     output_encoding: str = "linear",
+    progress: bool = False,
 ) -> LUT3D:
     """Bake a per-pixel ``transform`` on ``(N, 3, H, W)`` tensors into a :class:`LUT3D`.
 
@@ -497,6 +503,8 @@ def bake_lut(
       [0, 1] after the lookup. When the transform *ends* with the tone mapper, it is evaluated
       without its final clip (:func:`_final_clip_off`), so the clip is applied exactly after the
       lookup instead of being interpolated.
+    * ``progress``: show a progress bar (tqdm, on stderr) while the lattice is evaluated; a 256³
+      bake of a grade and tone mapper takes seconds.
     """
     if shaper == "auto":
         shaper = "logc" if expects_hdr(transform) else "linear"
@@ -508,7 +516,7 @@ def bake_lut(
 
     def bake(n: int) -> LUT3D:
         with _final_clip_off(transform) if display else contextlib.nullcontext():
-            table = encode_output(_evaluate_on_lattice(transform, n, shaper, domain, chunk), output_encoding)
+            table = encode_output(_evaluate_on_lattice(transform, n, shaper, domain, chunk, progress), output_encoding)
         return LUT3D(table, shaper=shaper, domain=domain, output_range=output_range, output_encoding=output_encoding)
 
     if size != "auto":
@@ -545,17 +553,23 @@ def scene_domain(scene: torch.Tensor, shaper: str) -> tuple:
     return DEFAULT_DOMAINS[shaper][0], float(shaper_encode(top, shaper))
 
 
-def _evaluate_on_lattice(transform, size: int, shaper: str, domain, chunk: int) -> torch.Tensor:
-    """Evaluate ``transform`` at every lattice point, float64; returns the ``(S, S, S, 3)`` table."""
+def _evaluate_on_lattice(transform, size: int, shaper: str, domain, chunk: int, progress: bool = False) -> torch.Tensor:
+    """Evaluate ``transform`` at every lattice point, float64; returns the ``(S, S, S, 3)`` table.
+
+    ``progress`` shows a bar over the blue slices of the lattice.
+    """
     low, high = (torch.as_tensor(v, dtype=torch.float64) for v in domain)
     inputs = shaper_decode(low + lattice(size) * (high - low), shaper)  # (b, g, r, 3)
     slices_per_chunk = max(1, chunk // (size * size))
     outputs = []
+    bar = tqdm(total=size, desc=f"baking {size}³", unit="slice", disable=not progress, leave=False)
     for block in inputs.split(slices_per_chunk, dim=0):
         image = block.reshape(1, -1, size, 3).permute(0, 3, 1, 2)  # H = b·S + g, W = r
         result = transform(image)
         check_image(result, "transform output")
         outputs.append(result.double().permute(0, 2, 3, 1).reshape(-1, size, size, 3))
+        bar.update(block.shape[0])
+    bar.close()
     return torch.cat(outputs, dim=0)
 
 

@@ -67,7 +67,7 @@ from .bloom import Bloom, bloom, pyramid_depth
 from .core import sanitize
 from .exposure import AutoExposure
 from .grade import CONTROLS, ColorGrade, color_grade
-from .lut import LUT3D, lattice_unit, trilinear_grid_sample
+from .lut import LUT3D, lattice_unit, table_output, trilinear_grid_sample
 from .pipeline import PostFX, exposure_frame
 
 DEFAULT_OPSET = 17
@@ -157,7 +157,7 @@ class LUTLookup(nn.Module):
             y = trilinear_strip(unit, strip_table(table))
         else:
             y = trilinear_grid_sample(unit, table)
-        return y if lut.output_range is None else y.clamp(*lut.output_range)
+        return table_output(y, lut.output_encoding, lut.output_range)
 
 
 class GradeWithInputs(nn.Module):

@@ -177,19 +177,28 @@ class PostFX(nn.Module):
         exposed, adapted = exposure_frame(self.exposure, image, adapted, dt)
         return self.finish(exposed), adapted
 
-    def to_lut(self, size: int = 33, interpolation: Optional[str] = None) -> "PostFX":
+    def per_pixel_stages(self) -> nn.Sequential:
+        """Grade, primary grade and tone mapping (those built) as one transform: what a LUT can hold.
+
+        Raises ``ValueError`` when the look has none of them.
+        """
+        transform = nn.Sequential(*(m for m in (self.grade, self.primary, self.tonemap) if m is not None))
+        if len(transform) == 0:
+            raise ValueError("nothing to bake: the look has neither a grade nor a tone mapper")
+        return transform
+
+    def to_lut(self, size: int = 33, interpolation: Optional[str] = None, output_encoding: str = "linear") -> "PostFX":
         """An equivalent look with grade, primary grade and tone mapping baked into a ``size``³ LogC-shaped LUT.
 
         Exposure, bloom and dither stay live (copied, so the new look keeps its own adaptation state). The
         LUT's domain reaches LogC 1.0 (linear ≈ 58.9); a tone-mapped look clamps its output to
         [0, 1] after the lookup. Without a tone mapper, graded values above the domain are clipped.
+        ``output_encoding`` is passed to :func:`~torchgrade.bake_lut` and kept by the new LUT.
         """
-        transform = nn.Sequential(*(m for m in (self.grade, self.primary, self.tonemap) if m is not None))
-        if len(transform) == 0:
-            raise ValueError("nothing to bake: the look has neither a grade nor a tone mapper")
-        lut = bake_lut(transform, size=size, shaper="logc")
+        transform = self.per_pixel_stages()
+        lut = bake_lut(transform, size=size, shaper="logc", output_encoding=output_encoding)
         lut = LUT3D(lut.table.detach().float(), shaper=lut.shaper, domain=(lut.domain_min, lut.domain_max),
-                    output_range=lut.output_range)
+                    output_range=lut.output_range, output_encoding=lut.output_encoding)
         return PostFX(
             exposure=copy.deepcopy(self.exposure),
             bloom=copy.deepcopy(self.bloom),

@@ -16,6 +16,11 @@ coordinates, so every tool that reads Resolve .cube files applies the shaper its
 samples the shaper at evenly spaced linear values; between samples the shaper is linear, the one
 approximation of the interchange (see :data:`SHAPER_SIZE`).
 
+The format has no output clamp: a display-referred LUT (``output_range=(0, 1)``, baked without the
+tone mapper's final clip) is written as its table, whose entries may leave [0, 1] slightly, and the
+file read back has no ``output_range``. After a reader's lookup the display's own clip to [0, 1]
+gives the same result as the original LUT.
+
 Files are untrusted input: every size is checked against its limit and the amount of data is
 checked against the file size before anything large is allocated; malformed, truncated, non-finite
 or oversized files raise ``ValueError`` naming the problem.
