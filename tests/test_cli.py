@@ -66,19 +66,24 @@ def test_bake_writes_the_cube_of_the_graded_look(tmp_path, capsys):
         torch.testing.assert_close(written(image).clamp(0, 1), expected(image).float(), atol=2e-3, rtol=0)  # the display's clip
 
 
-def test_bake_from_a_config_names_the_stages_left_live_and_measures_the_scene(exr_dir, tmp_path, capsys):
+def test_bake_from_a_config_covers_the_scene_as_the_lut_receives_it(exr_dir, tmp_path, capsys):
+    """With exposure and bloom left live, the lattice covers the scene after them, and the error is measured there."""
     out = tmp_path / "cinematic.cube"
     config = Path(__file__).resolve().parents[1] / "export" / "looks" / "cinematic.json"
-    assert main(["bake", "--config", str(config), "-o", str(out), "--size", "9", "--scene", str(exr_dir / "CandleGlass.exr")]) == 0
+    scene_path = exr_dir / "CandleGlass.exr"
+    assert main(["bake", "--config", str(config), "-o", str(out), "--size", "9", "--scene", str(scene_path)]) == 0
     line = capsys.readouterr().out.strip()
-    assert "not in the LUT (not per-pixel): exposure, bloom" in line and "on CandleGlass.exr:" in line
-    scene_top = float(tg.io.read_exr(exr_dir / "CandleGlass.exr")[:3].max())
-    assert float(out.read_text().splitlines()[2].split()[-1]) == pytest.approx(scene_top, rel=1e-4)  # LUT_1D_INPUT_RANGE
+    assert "left live, not in the LUT: exposure, bloom" in line and "on CandleGlass.exr:" in line
+    look = tg.PostFX.from_config(config)
+    with torch.no_grad():
+        received = look.per_pixel_input(tg.io.read_exr(scene_path)[:3].unsqueeze(0))
+    assert float(out.read_text().splitlines()[2].split()[-1]) == pytest.approx(float(received.max()), rel=1e-4)  # LUT_1D_INPUT_RANGE
 
 
 @pytest.mark.parametrize("arguments, message", [
     (["--size", "300"], "LUT size must be an integer from 2 to 256"),
-    (["--size", "auto"], "needs scene=image"),
+    (["--size", "auto"], "--size auto needs --scene"),
+    (["--tolerance", "1"], "--tolerance goes with --size auto"),
     (["--config", "missing.json"], "missing.json"),
     (["--config", "look.json", "--contrast", "20"], "give --config or grading flags, not both"),
 ])
@@ -86,3 +91,11 @@ def test_bake_reports_bad_arguments_without_writing(tmp_path, capsys, arguments,
     assert main(["bake", "-o", str(tmp_path / "x.cube"), *arguments]) == 2
     assert message in capsys.readouterr().err
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("output, message", [("x.png", "must end in .cube"), ("missing/x.cube", "does not exist"), ("folder.cube", "folder.cube")])
+def test_bake_refuses_a_bad_output_before_baking(tmp_path, capsys, output, message):
+    (tmp_path / "folder.cube").mkdir()
+    assert main(["bake", "-o", str(tmp_path / output), "--size", "5"]) == 2
+    assert message in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["folder.cube"]

@@ -308,6 +308,8 @@ def test_bad_arguments_raise():
         bake_lut(mix, shaper="gamma")
     with pytest.raises(ValueError, match="scene"):
         bake_lut(mix, size="auto")
+    with pytest.raises(ValueError, match="tolerance above 0"):
+        bake_lut(mix, size="auto", scene=torch.rand(1, 3, 4, 4), tolerance=0.0)
 
 
 def test_auto_shaper_follows_tone_mapping():
@@ -414,9 +416,10 @@ def test_33_logc_tone_mapper_lut_p999_on_real_exrs(exr_dir, strong_look, name):
     strict=True,
     reason="not met, and on Desk not possible for any 33³ LogC table: benchmarks/lut_floor.py shows by linear "
     "programming that no choice of entries keeps every Desk pixel within 4 codes, for either interpolation and "
-    "output encoding, because 4.5% of its pixels have a channel above the lattice top (58.86), which the lookup "
-    "clamps while the look still changes. Baked tables: p99.9 tetrahedral 5.5 / 1.3 / 2.1 codes, max 17.5 / 6.2 / "
-    "8.1 (Desk / CandleGlass / GoldenGate); for CandleGlass and GoldenGate tables within 4 codes exist",
+    "output encoding (tetrahedral: because 4.5% of its pixels have a channel above the lattice top, 58.86, which the "
+    "lookup clamps while the look still changes; trilinear: even without them). Baked tables: p99.9 tetrahedral "
+    "5.5 / 1.3 / 2.1 codes, max 17.5 / 6.2 / 8.1 (Desk / CandleGlass / GoldenGate); for CandleGlass and GoldenGate "
+    "tables within 4 codes exist",
 )
 @pytest.mark.parametrize("name", ["Desk", "CandleGlass", "GoldenGate"])
 def test_33_logc_lut_accuracy_on_real_exrs(exr_dir, strong_look, name):

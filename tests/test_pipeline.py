@@ -1,6 +1,7 @@
-"""PostFX: stages built from modules, dicts and configs; identity stages dropped; config errors; to_lut."""
+"""PostFX: stages built from modules, dicts and configs; identity stages dropped; config errors; to_lut and its per-pixel input."""
 
 import json
+from pathlib import Path
 
 import pytest
 import torch
@@ -134,3 +135,13 @@ def test_to_lut_matches_the_look_on_real_exrs(exr_dir, name):
     image = F.avg_pool2d(tg.io.read_exr(exr_dir / f"{name}.exr")[:3][None], 4)
     with torch.no_grad():
         assert srgb_code_error(look(image), baked(image)) <= 5.0
+
+
+def test_per_pixel_input_is_the_first_frame_after_exposure_and_bloom_and_keeps_the_state():
+    look = tg.PostFX.from_config(Path(__file__).resolve().parents[1] / "export" / "looks" / "cinematic.json")
+    scene = tg.scene.demo_scene(36, 64)
+    with torch.no_grad():
+        received = look.per_pixel_input(scene)
+        assert look.exposure.adapted_luminance.numel() == 0  # untouched: no sequence started
+        expected = look.bloom(look.exposure(scene))
+    torch.testing.assert_close(received, expected)

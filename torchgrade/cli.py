@@ -110,32 +110,52 @@ def _lut_size(text: str):
         raise argparse.ArgumentTypeError(f"must be an integer (points per axis) or auto, got {text!r}") from None
 
 
-def _look_to_bake(args: argparse.Namespace) -> tuple:
-    """The per-pixel transform to bake (from ``--config`` or the grading flags) and the stages left live."""
+def _look_to_bake(args: argparse.Namespace) -> PostFX:
+    """The look to bake: from ``--config``, or from the grading flags."""
     if args.config is None:
-        return _grade_from_args(args), []
+        grade, tonemap = _grade_from_args(args)
+        return PostFX(grade=grade, tonemap=tonemap)
     given = [name for name in (*GRADING_FLAGS, "tonemap") if getattr(args, name) is not None]
     if given:
         raise ValueError(f"give --config or grading flags, not both (got --config and {', '.join('--' + n.replace('_', '-') for n in given)})")
-    look = PostFX.from_config(args.config)
-    transform = look.per_pixel_stages()
-    return transform, [name for name, stage in look.stages().items() if stage not in transform]
+    return PostFX.from_config(args.config)
+
+
+def _check_bake_arguments(args: argparse.Namespace) -> None:
+    """Refuse, before any baking, what would fail or be ignored afterwards."""
+    output = Path(args.output)
+    if output.suffix.lower() != ".cube":
+        raise ValueError(f"output must end in .cube, got {output}")
+    if not output.parent.is_dir():
+        raise ValueError(f"output folder {output.parent} does not exist")
+    if args.size == "auto" and args.scene is None:
+        raise ValueError("--size auto needs --scene, the image to measure the error on")
+    if args.tolerance is not None and (args.size != "auto" or args.tolerance <= 0):
+        raise ValueError(f"--tolerance goes with --size auto and must be above 0, got {args.tolerance}")
 
 
 def run_bake(args: argparse.Namespace) -> str:
-    transform, live = _look_to_bake(args)
-    scene = None if args.scene is None else read_exr(args.scene)[:3].unsqueeze(0)
+    _check_bake_arguments(args)
+    look = _look_to_bake(args)
+    transform = look.per_pixel_stages()
+    live = [name for name in look.stages() if name not in ("grade", "primary", "tonemap")]
+    scene = None
+    if args.scene is not None:
+        with torch.no_grad():
+            scene = look.per_pixel_input(read_exr(args.scene)[:3].unsqueeze(0))
+    tolerance = 0.5 if args.tolerance is None else args.tolerance
     start = time.perf_counter()
-    lut = bake_lut(transform, size=args.size, shaper=args.shaper, scene=scene, tolerance=args.tolerance, progress=True)
+    lut = bake_lut(transform, size=args.size, shaper=args.shaper, scene=scene, tolerance=tolerance, progress=True)
     elapsed = time.perf_counter() - start
-    write_cube(args.output, lut, title=Path(args.output).stem)
+    title = Path(args.output).stem.replace('"', "")
+    write_cube(args.output, lut, title=title)
     line = f"bake: {lut.size}³ {lut.shaper} LUT of {_stages(transform)}, {elapsed:.1f} s -> {args.output}"
     if scene is not None:
         with torch.no_grad():
             error = srgb_code_error(transform(scene.double()), lut(scene))
         line += f"; on {Path(args.scene).name}: {error:.2f} 8-bit codes at p99.9"
     if live:
-        line += f"; not in the LUT (not per-pixel): {', '.join(live)}"
+        line += f"; left live, not in the LUT: {', '.join(live)}"
     return line
 
 
@@ -167,8 +187,9 @@ def _parser() -> argparse.ArgumentParser:
     bake.add_argument("--config", help="look JSON (PostFX config); without it, the grading flags below")
     bake.add_argument("--size", type=_lut_size, default=33, help="points per axis, 2..256, or auto (needs --scene; default 33)")
     bake.add_argument("--shaper", choices=("auto", "linear", "logc"), default="auto", help="default auto: logc when the look tone maps")
-    bake.add_argument("--scene", help="EXR of what the LUT will be applied to: the lattice covers its range, --size auto measures on it")
-    bake.add_argument("--tolerance", type=float, default=0.5, help="--size auto: 8-bit sRGB codes at p99.9 (default 0.5)")
+    bake.add_argument("--scene", help="EXR the look will grade: the lattice covers its range after the look's exposure and bloom, "
+                      "and the error is reported on it")
+    bake.add_argument("--tolerance", type=float, help="with --size auto: 8-bit sRGB codes at p99.9 (default 0.5)")
     _add_grading_flags(bake)
     bake.set_defaults(run=run_bake)
     return parser
@@ -178,7 +199,7 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     try:
         print(args.run(args))
-    except (ValueError, TypeError, FileNotFoundError) as error:
+    except (ValueError, TypeError, OSError) as error:
         print(f"torchgrade {args.command}: error: {error}", file=sys.stderr)
         return 2
     return 0

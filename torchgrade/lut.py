@@ -503,8 +503,8 @@ def bake_lut(
       [0, 1] after the lookup. When the transform *ends* with the tone mapper, it is evaluated
       without its final clip (:func:`_final_clip_off`), so the clip is applied exactly after the
       lookup instead of being interpolated.
-    * ``progress``: show a progress bar (tqdm, on stderr) while the lattice is evaluated; a 256³
-      bake of a grade and tone mapper takes seconds.
+    * ``progress``: show a progress bar (tqdm, on stderr, when it is a terminal) while the lattice
+      is evaluated; a 256³ bake of a grade and tone mapper takes seconds.
     """
     if shaper == "auto":
         shaper = "logc" if expects_hdr(transform) else "linear"
@@ -523,6 +523,8 @@ def bake_lut(
         return bake(check_size(size))
     if scene is None:
         raise ValueError('bake_lut(size="auto") needs scene=image to measure the error on')
+    if not tolerance > 0:
+        raise ValueError(f'bake_lut(size="auto") needs a tolerance above 0 (8-bit codes), got {tolerance}')
     return _smallest_within(bake, transform, scene, tolerance)
 
 
@@ -556,20 +558,19 @@ def scene_domain(scene: torch.Tensor, shaper: str) -> tuple:
 def _evaluate_on_lattice(transform, size: int, shaper: str, domain, chunk: int, progress: bool = False) -> torch.Tensor:
     """Evaluate ``transform`` at every lattice point, float64; returns the ``(S, S, S, 3)`` table.
 
-    ``progress`` shows a bar over the blue slices of the lattice.
+    ``progress`` shows a bar over the blue slices of the lattice (on a terminal only).
     """
     low, high = (torch.as_tensor(v, dtype=torch.float64) for v in domain)
     inputs = shaper_decode(low + lattice(size) * (high - low), shaper)  # (b, g, r, 3)
     slices_per_chunk = max(1, chunk // (size * size))
     outputs = []
-    bar = tqdm(total=size, desc=f"baking {size}³", unit="slice", disable=not progress, leave=False)
-    for block in inputs.split(slices_per_chunk, dim=0):
-        image = block.reshape(1, -1, size, 3).permute(0, 3, 1, 2)  # H = b·S + g, W = r
-        result = transform(image)
-        check_image(result, "transform output")
-        outputs.append(result.double().permute(0, 2, 3, 1).reshape(-1, size, size, 3))
-        bar.update(block.shape[0])
-    bar.close()
+    with tqdm(total=size, desc=f"baking {size}³", unit="slice", disable=None if progress else True, leave=False) as bar:
+        for block in inputs.split(slices_per_chunk, dim=0):
+            image = block.reshape(1, -1, size, 3).permute(0, 3, 1, 2)  # H = b·S + g, W = r
+            result = transform(image)
+            check_image(result, "transform output")
+            outputs.append(result.double().permute(0, 2, 3, 1).reshape(-1, size, size, 3))
+            bar.update(block.shape[0])
     return torch.cat(outputs, dim=0)
 
 

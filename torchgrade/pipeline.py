@@ -177,6 +177,14 @@ class PostFX(nn.Module):
         exposed, adapted = exposure_frame(self.exposure, image, adapted, dt)
         return self.finish(exposed), adapted
 
+    def per_pixel_input(self, image: torch.Tensor) -> torch.Tensor:
+        """One frame as grade, primary grade and tone mapping (or a baked LUT) receive it: exposed as the
+        first frame of a sequence (the adaptation state is left alone), then bloomed. What
+        ``bake_lut(..., scene=)`` should see when the look's per-pixel stages are baked."""
+        if self.exposure is not None:
+            image, _ = exposure_frame(self.exposure, image, torch.zeros(image.shape[:-3], dtype=image.dtype, device=image.device), 0.0)
+        return image if self.bloom is None else self.bloom(image)
+
     def per_pixel_stages(self) -> nn.Sequential:
         """Grade, primary grade and tone mapping (those built) as one transform: what a LUT can hold.
 
