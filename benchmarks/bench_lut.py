@@ -70,9 +70,12 @@ def median_ms_round_robin(methods: dict, runs: int = RUNS) -> dict:
     return {name: 1000.0 * statistics.median(values) for name, values in times.items()}
 
 
-def strong_look() -> torch.nn.Module:
-    """The strong look LUT accuracy is measured with: ``ColorGrade(contrast=30, saturation=20, temperature=20)``, ``ToneMap("aces")``."""
-    return torch.nn.Sequential(ColorGrade(contrast=30.0, saturation=20.0, temperature=20.0), ToneMap("aces"))
+def strong_look(aces: bool = False) -> torch.nn.Module:
+    """The strong look LUT accuracy is measured with: ``ColorGrade(contrast=30, saturation=20, temperature=20)``, ``ToneMap("aces")``.
+
+    ``aces=True`` grades in ACEScc/ACEScg as Unity does when ACES tone mapping is selected (``ColorGrade(aces=True)``).
+    """
+    return torch.nn.Sequential(ColorGrade(contrast=30.0, saturation=20.0, temperature=20.0, aces=aces), ToneMap("aces"))
 
 
 def accuracy_image(name: str) -> torch.Tensor:

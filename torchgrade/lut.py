@@ -347,11 +347,9 @@ class LUT3D(nn.Module):
             self.table = nn.Parameter(table.detach().clone())
         else:
             self.register_buffer("table", table)
-        low, high = domain if domain is not None else DEFAULT_DOMAINS.get(shaper, (0.0, 1.0))
-        self.register_buffer("domain_min", _rgb(low, "domain min"))
-        self.register_buffer("domain_max", _rgb(high, "domain max"))
-        if bool((self.domain_max <= self.domain_min).any()):
-            raise ValueError(f"LUT domain max must exceed min, got {self.domain_min.tolist()} and {self.domain_max.tolist()}")
+        low, high = checked_domain(domain if domain is not None else DEFAULT_DOMAINS.get(shaper, (0.0, 1.0)))
+        self.register_buffer("domain_min", low)
+        self.register_buffer("domain_max", high)
         self.register_buffer("curve", None if curve is None else _check_curve(curve))
         self.curve_range = tuple(float(v) for v in curve_range)
         self.output_range = None if output_range is None else tuple(float(v) for v in output_range)
@@ -424,8 +422,23 @@ def _check_curve(curve: torch.Tensor) -> torch.Tensor:
     return curve
 
 
+def checked_domain(domain) -> tuple:
+    """A lattice domain ``(min, max)`` as two float32 RGB triples, or ``ValueError`` unless finite with max > min per channel."""
+    try:
+        low, high = domain
+    except (TypeError, ValueError):
+        raise ValueError(f"LUT domain must be a (min, max) pair, got {domain!r}") from None
+    low, high = _rgb(low, "domain min"), _rgb(high, "domain max")
+    if bool((high <= low).any()):
+        raise ValueError(f"LUT domain max must exceed min, got {low.tolist()} and {high.tolist()}")
+    return low, high
+
+
 def _rgb(value, name: str) -> torch.Tensor:
-    t = torch.as_tensor(value, dtype=torch.float32).detach().reshape(-1)
+    try:
+        t = torch.as_tensor(value, dtype=torch.float32).detach().reshape(-1)
+    except (TypeError, ValueError, RuntimeError):
+        raise ValueError(f"LUT {name} must be a finite number or RGB triple, got {value!r}") from None
     if t.numel() == 1:
         t = t.expand(3)
     if t.numel() != 3 or not bool(torch.isfinite(t).all()):
@@ -480,6 +493,7 @@ def bake_lut(
     chunk: int = 1 << 21,
     output_encoding: str = "linear",
     progress: bool = False,
+    domain: Optional[tuple] = None,
 ) -> LUT3D:
     """Bake a per-pixel ``transform`` on ``(N, 3, H, W)`` tensors into a :class:`LUT3D`.
 
@@ -491,6 +505,9 @@ def bake_lut(
       the choice is stored as ``lut.shaper`` and shown in ``repr(lut)``.
     * ``scene``: an image the LUT is for. The lattice domain then follows its dynamic range: the
       top is the scene's largest value (after the non-finite policy), the bottom stays at black.
+    * ``domain``: ``(min, max)`` of the lattice in shaper code values (numbers or RGB triples, as
+      :class:`LUT3D` takes them), overriding the shaper's default and the scene's range (a ``scene``
+      then only serves ``size="auto"``).
     * ``size``: 2..256, or ``"auto"`` with a ``scene``: the smallest size whose error on the scene is
       at most ``tolerance`` 8-bit sRGB code values at the 99.9th percentile (:func:`srgb_code_error`,
       against direct float64 evaluation). Sizes :data:`AUTO_SIZES` are tried in order, then the gap
@@ -509,7 +526,9 @@ def bake_lut(
     if shaper == "auto":
         shaper = "logc" if expects_hdr(transform) else "linear"
     _check_choice(shaper, ("linear", "logc"), "bake shaper")
-    domain = DEFAULT_DOMAINS[shaper] if scene is None else scene_domain(scene, shaper)
+    if domain is None:
+        domain = DEFAULT_DOMAINS[shaper] if scene is None else scene_domain(scene, shaper)
+    domain = checked_domain(domain)  # the lattice is baked where the lookup will find it
     _check_choice(output_encoding, OUTPUT_ENCODINGS, "output encoding")
     display = bool(_tone_mappers(transform))
     output_range = (0.0, 1.0) if display else None
