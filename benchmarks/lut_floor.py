@@ -68,8 +68,8 @@ NUMERICAL_DIFFICULTIES = 4
 """``linprog`` status when HiGHS's simplex stops on numerical trouble; its interior-point method is tried then."""
 ENTRY_RANGE = (-1.0, 2.0)
 """Table entries the programs may choose, in table units: one display range beyond either end. Unbounded, HiGHS meets
-the constraints with entries of ±1e17 that cancel, within its scaled tolerances but displaying 255 codes off; on Desk,
-widening the range to [-50, 51] changes no violation by more than 1e-9."""
+the constraints with entries of ±1e17 that cancel, within its scaled tolerances but displaying 255 codes off. On Desk's
+default lattice, widening the range to [-50, 51] changes the violations by at most 1.1e-7 (HiGHS's tolerance)."""
 FLOOR_RESOLUTION = 0.1
 """How close, in 8-bit codes, :func:`lowest_max_error` brings its lower and upper bounds."""
 LOOKS = {"Rec.709": False, "ACEScc/ACEScg": True}
