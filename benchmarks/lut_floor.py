@@ -265,8 +265,8 @@ def measured_scene(name: str, aces: bool) -> tuple:
 def lattice_domain(image: torch.Tensor, domain: str, bottom: float = 0.0) -> tuple:
     """A LogC lattice domain in code values, from linear ``bottom`` (black by default) to the top of ``domain``:
     ``"default"`` (58.86) or ``"scene"`` (the image's largest value)."""
-    low, high = DEFAULT_DOMAINS["logc"] if domain == "default" else scene_domain(image, "logc")
-    return (low if bottom == 0.0 else float(linear_to_logc(torch.tensor(bottom, dtype=torch.float64)))), high
+    _, high = DEFAULT_DOMAINS["logc"] if domain == "default" else scene_domain(image, "logc")
+    return float(linear_to_logc(torch.tensor(bottom, dtype=torch.float64))), high  # LogC of black is both domains' bottom
 
 
 def baked_errors(look, image: torch.Tensor, direct: np.ndarray, lattice: tuple, interpolation: str) -> np.ndarray:
