@@ -308,5 +308,5 @@ def test_bad_images_raise_clear_errors():
 
 
 def test_config_lists_only_what_changed():
-    assert tg.ColorGrade(contrast=20, aces=True).config() == {"aces": True, "contrast": 20}
-    assert tg.ColorGrade().config() == {}
+    assert tg.ColorGrade(contrast=20, aces=True).to_config() == {"aces": True, "contrast": 20}
+    assert tg.ColorGrade().to_config() == {}

@@ -233,12 +233,12 @@ def test_identity_settings_return_the_input_itself():
     image = torch.rand(2, 3, 5, 6)
     for aces in (False, True):
         grade = tg.ColorGrade(aces=aces, **IDENTITY_SETTINGS)
-        assert grade.is_identity and grade(image) is image and grade.config() == ({"aces": True} if aces else {})
+        assert grade.is_identity and grade(image) is image and grade.to_config() == ({"aces": True} if aces else {})
 
 
 def test_curves_and_trackballs_in_configs_round_trip():
     grade = tg.ColorGrade(**TAIL_LOOKS["everything"])
-    look = tg.PostFX.from_config({"grade": grade.config()})
+    look = tg.PostFX.from_config({"grade": grade.to_config()})
     image = torch.rand(1, 3, 4, 4, dtype=torch.float64) * 3
     torch.testing.assert_close(look(image), grade(image))
 

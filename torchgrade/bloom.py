@@ -745,6 +745,10 @@ class Bloom(_Controls):
     def forward(self, image: torch.Tensor) -> torch.Tensor:
         return bloom(image, **{name: getattr(self, name) for name in _ARGUMENTS})
 
+    def export_form(self) -> nn.Module:
+        """The fixed-depth form (:class:`FixedDepthBloom`) that one ONNX graph serves every frame size with."""
+        return FixedDepthBloom(self)
+
     def to_config(self) -> dict:
         """The constructor arguments as plain values (tensors as floats or lists of floats)."""
         config = {name: _plain(getattr(self, name)) for name in _ALWAYS_IN_CONFIG}
@@ -753,6 +757,25 @@ class Bloom(_Controls):
             if isinstance(value, torch.Tensor) or value != default:
                 config[name] = _plain(value)
         return config
+
+
+MAX_FRAME_SIDE = 16384
+"""Largest frame side an exported bloom serves exactly: the graph holds that frame's pyramid depth."""
+
+
+class FixedDepthBloom(nn.Module):
+    """:class:`Bloom` as a traced graph runs it: every level a frame up to :data:`MAX_FRAME_SIDE` a side
+    can have is built, and the levels a frame does not have are masked out at run time
+    (:func:`bloom`'s ``fixed_depth``), so one graph serves every frame size."""
+
+    def __init__(self, stage: Bloom):
+        super().__init__()
+        self.stage = stage
+        self.depth = pyramid_depth(MAX_FRAME_SIDE, MAX_FRAME_SIDE, stage.max_iterations, stage.downscale_limit)
+
+    def forward(self, image: torch.Tensor) -> torch.Tensor:
+        settings = {name: getattr(self.stage, name) for name in _ARGUMENTS}
+        return bloom(image, **settings, fixed_depth=self.depth)
 
 
 class ConvolutionBloom(_Controls):

@@ -144,6 +144,11 @@ def is_constant(value, constant) -> bool:
         return False
 
 
+def is_tracing() -> bool:
+    """True while tracing, compiling or exporting to ONNX: data-dependent checks and shortcuts are skipped."""
+    return torch.jit.is_tracing() or torch.compiler.is_compiling() or torch.onnx.is_in_onnx_export()
+
+
 _LOW_PRECISION = (torch.float16, torch.bfloat16)
 
 

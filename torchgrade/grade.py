@@ -73,7 +73,7 @@ from .core import (
     working_dtype,
 )
 from .curves import curve_points, evaluate_curve
-from .params import ParamModule
+from .stage import Control, Stage, controls_signature
 
 IDENTITY_MATRIX = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
 IDENTITY_TRACKBALL = (1.0, 1.0, 1.0, 0.0)
@@ -478,7 +478,7 @@ def _stored_curve(points):
     return tuple((float(x), float(y)) for x, y in points)
 
 
-class ColorGrade(ParamModule):
+class ColorGrade(Stage):
     """Colour grading layer with Unity's controls (see the module docstring for order and units).
 
     Every control accepts a number (colour: a triple; trackball: ``(r, g, b, w)``; mixer: a 3x3
@@ -486,24 +486,41 @@ class ColorGrade(ParamModule):
     an ``nn.Parameter`` to learn it. Curves (:data:`CURVES`) take control points ``((x, y), ...)``
     or an ``(N, 2)`` tensor, shared by the batch. Controls left at identity cost nothing; an
     all-identity grade returns its input unchanged.
+
+    Examples:
+        >>> import torch
+        >>> grade = ColorGrade(contrast=20, saturation=-100)
+        >>> out = grade(torch.rand(1, 3, 4, 4))
+        >>> bool(torch.allclose(out[:, 0], out[:, 1], atol=1e-5))  # saturation -100: grey
+        True
+        >>> ColorGrade().is_identity
+        True
     """
+
+    controls = {
+        "aces": Control(False),
+        **{name: Control(default, allowed) for name, (default, allowed) in CONTROLS.items()},
+        **{name: Control(None) for name in CURVES},
+    }
 
     def __init__(self, aces: bool = False, **controls):
         super().__init__()
-        unknown = set(controls) - set(CONTROLS) - set(CURVES)
-        if unknown:
-            raise ValueError(f"unknown ColorGrade control(s) {sorted(unknown)}; known: {', '.join((*CONTROLS, *CURVES))}")
-        self.aces = bool(aces)
-        for name, (default, (low, high)) in CONTROLS.items():
-            value = controls.get(name, default)
-            check_range(value, name, low, high)
-            self.set_param(name, value)
-        for name in CURVES:
-            points = controls.get(name)
-            check_curve(name, points)
-            self.set_param(name, _stored_curve(points))
+        self.init_controls(aces=bool(aces), **controls)
+
+    def check_control(self, name: str, value):
+        if name in CURVES:
+            check_curve(name, value)
+            return _stored_curve(value)
+        return value
+
+    def check_together(self) -> None:
         _check_zone(self.shadows_start, self.shadows_end, "shadows")
         _check_zone(self.highlights_start, self.highlights_end, "highlights")
+
+    def is_default(self, name: str) -> bool:
+        if name == "aces":
+            return not self.aces
+        return is_identity_control(name, getattr(self, name))
 
     @property
     def is_identity(self) -> bool:
@@ -512,15 +529,11 @@ class ColorGrade(ParamModule):
 
     def curves(self) -> dict:
         """The curves that change something, by name (as stored)."""
-        return {name: value for name, value in self.params().items() if name in CURVES and not is_identity_control(name, value)}
+        return {name: getattr(self, name) for name in CURVES if not self.is_default(name)}
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
-        return color_grade(image, aces=self.aces, **self.params())
+        self.check_learnable()
+        return color_grade(image, **self.params())
 
-    def config(self) -> dict:
-        """The non-identity controls and curves (and ``aces``) as plain values."""
-        changed = {k: v for k, v in self.plain_params().items() if not is_identity_control(k, v)}
-        return {"aces": self.aces, **changed} if self.aces else changed
 
-    def extra_repr(self) -> str:
-        return ", ".join(f"{k}={v}" for k, v in self.config().items()) or "identity"
+ColorGrade.__signature__ = controls_signature(ColorGrade.controls)

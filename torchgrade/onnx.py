@@ -27,7 +27,7 @@ symbolic silently exports as means).
 
 **Bloom.** In PyTorch the pyramid depth of :class:`~torchgrade.Bloom` follows the frame size
 through Python integers, which tracing would freeze. The graph instead holds every level a frame
-of up to :data:`MAX_FRAME_SIDE` pixels a side can have and masks out, from the runtime shape, the
+of up to :data:`~torchgrade.bloom.MAX_FRAME_SIDE` pixels a side can have and masks out, from the runtime shape, the
 levels the frame at hand does not have (``bloom(..., fixed_depth=...)``), so one graph matches
 PyTorch at every resolution up to that size.
 
@@ -63,7 +63,6 @@ import onnx as onnx_lib  # the onnx package (absolute import), not this module
 import torch
 from torch import nn
 
-from .bloom import Bloom, bloom, pyramid_depth
 from .core import sanitize
 from .exposure import AutoExposure
 from .grade import CONTROLS, ColorGrade, color_grade
@@ -81,25 +80,6 @@ Inputs = Union[torch.Tensor, Sequence[torch.Tensor]]
 
 
 # ---------------------------------------------------------------- export-ready modules
-
-
-MAX_FRAME_SIDE = 16384
-"""Largest frame side an exported bloom serves exactly: the graph holds that frame's pyramid depth."""
-
-
-class FixedDepthBloom(nn.Module):
-    """:class:`~torchgrade.Bloom` traced with ``fixed_depth``: every level a frame up to
-    :data:`MAX_FRAME_SIDE` can have is in the graph, and the levels a frame does not have are masked
-    out at run time, so one graph serves every frame size."""
-
-    def __init__(self, stage: Bloom):
-        super().__init__()
-        self.stage = stage
-        self.depth = pyramid_depth(MAX_FRAME_SIDE, MAX_FRAME_SIDE, stage.max_iterations, stage.downscale_limit)
-
-    def forward(self, image: torch.Tensor) -> torch.Tensor:
-        settings = {key: getattr(self.stage, key) for key in self.stage.to_config()}
-        return bloom(image, **settings, fixed_depth=self.depth)
 
 
 def strip_table(table: torch.Tensor) -> torch.Tensor:
@@ -218,12 +198,10 @@ def export_graph(module: nn.Module, lut_backend: str = "strip", grade_inputs: bo
     for name, stage in named:
         if name == "lut":
             stages.append(LUTLookup(*stage, lut_backend))
-        elif isinstance(stage, Bloom):
-            stages.append(FixedDepthBloom(stage))
         elif isinstance(stage, ColorGrade) and grade_inputs:
             stages.append(GradeWithInputs(stage.aces, stage.curves()))
         else:
-            stages.append(stage)
+            stages.append(stage.export_form() if hasattr(stage, "export_form") else stage)
     if grade_inputs and not any(isinstance(s, GradeWithInputs) for s in stages):
         raise ValueError("grade_inputs=True needs a ColorGrade stage (a look's grade, or a ColorGrade)")
     return ExportGraph(stages, exposure).eval()

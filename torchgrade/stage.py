@@ -1,0 +1,284 @@
+"""``Stage``: the one base of every torchgrade layer, and its table of controls.
+
+A stage declares its controls once, as a table ``{name: Control(default, range)}``. From that table
+the base stores each value (an ``nn.Parameter`` as a parameter, a tensor as a buffer, anything else
+as a plain attribute), validates it at construction, on assignment (``grade.contrast = 500`` raises)
+and, for values an optimiser moves, at forward (:meth:`Stage.check_learnable`), serialises it
+(:meth:`Stage.to_config` / :meth:`Stage.from_config`) and decides whether the stage can change an
+image at all (:attr:`Stage.is_identity`). :class:`~torchgrade.RandomPostFX` and the CLI read ranges
+from the same tables, so a range is written in exactly one place.
+
+Examples:
+    >>> import torch
+    >>> class Gain(Stage):
+    ...     controls = {"gain": Control(1.0, (0.0, 10.0))}
+    ...     def __init__(self, gain=1.0):
+    ...         super().__init__()
+    ...         self.init_controls(gain=gain)
+    ...     def forward(self, image):
+    ...         return image * self.gain
+    >>> Gain(2.0).to_config()
+    {'gain': 2.0}
+    >>> Gain().is_identity
+    True
+    >>> Gain(20.0)
+    Traceback (most recent call last):
+    ...
+    ValueError: gain must lie in [0.0, 10.0], got 20.0
+"""
+
+from __future__ import annotations
+
+import inspect
+import numbers
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import torch
+from torch import nn
+
+from .core import check_range, is_constant, is_tracing
+
+__all__ = ["Control", "Stage", "plain", "controls_signature"]
+
+KINDS = ("number", "int", "bool", "choice", "value")
+
+
+@dataclass(frozen=True)
+class Control:
+    """One control of a stage: its ``default`` (identity where the stage has one) and its ``range``.
+
+    ``kind`` says how values are checked:
+
+    * ``"number"``: a number, a sequence of numbers (colours, matrices) or a tensor, every element
+      in ``range = (low, high)``; may be a per-sample tensor or an ``nn.Parameter``.
+    * ``"int"``: a Python ``int`` (not ``bool``) in ``range``.
+    * ``"bool"``: ``True`` or ``False``.
+    * ``"choice"``: one of the strings in ``range``.
+    * ``"value"``: checked by the stage itself (:meth:`Stage.check_control`): textures, curves.
+
+    Examples:
+        >>> Control(0.0, (-100.0, 100.0)).kind
+        'number'
+        >>> Control("log", ("mean", "log")).kind
+        'choice'
+    """
+
+    default: Any
+    range: Any = None
+    kind: str = ""
+
+    def __post_init__(self):
+        if not self.kind:
+            object.__setattr__(self, "kind", _inferred_kind(self.default, self.range))
+        if self.kind not in KINDS:
+            raise ValueError(f"kind must be one of {KINDS}, got {self.kind!r}")
+
+
+def _inferred_kind(default, allowed) -> str:
+    if isinstance(default, bool):
+        return "bool"
+    if isinstance(default, str):
+        return "choice"
+    if isinstance(default, int) and allowed is not None:
+        return "int"
+    return "number" if allowed is not None else "value"
+
+
+def plain(value):
+    """A stored control as a plain, JSON-ready value: tensors as numbers or nested lists, tuples as lists.
+
+    Examples:
+        >>> plain(torch.tensor([1.0, 2.0]))
+        [1.0, 2.0]
+        >>> plain(((1.0, 0.0), (0.0, 1.0)))
+        [[1.0, 0.0], [0.0, 1.0]]
+    """
+    if isinstance(value, torch.Tensor):
+        return value.detach().cpu().tolist()
+    if isinstance(value, (tuple, list)):
+        return [plain(v) for v in value]
+    return value
+
+
+def controls_signature(controls: dict, leading: tuple = ()) -> inspect.Signature:
+    """A constructor signature listing ``leading`` parameters, then every control as a keyword with its default.
+
+    Stages that take ``**controls`` set it as ``__signature__`` so ``help()`` and IDEs show the names.
+
+    Examples:
+        >>> str(controls_signature({"contrast": Control(0.0, (-100.0, 100.0))}))
+        '(*, contrast=0.0)'
+    """
+    keyword = inspect.Parameter.KEYWORD_ONLY
+    parameters = list(leading)
+    parameters += [inspect.Parameter(name, keyword, default=control.default) for name, control in controls.items()]
+    return inspect.Signature(parameters)
+
+
+class Stage(nn.Module):
+    """Base of every stage: controls stored, validated and serialised from one table.
+
+    Subclasses set :attr:`controls` (or override :meth:`control_table` when the table depends on a
+    setting, as a tone mapper's on its mode), call :meth:`init_controls` in ``__init__`` and read
+    their controls as attributes. Cross-control rules (a zone's start below its end) go in
+    :meth:`check_together`; checks of a ``"value"`` control in :meth:`check_control`.
+
+    Examples:
+        >>> import torchgrade as tg
+        >>> grade = tg.ColorGrade(contrast=20)
+        >>> grade.to_config()
+        {'contrast': 20}
+        >>> grade.contrast = 500
+        Traceback (most recent call last):
+        ...
+        ValueError: contrast must lie in [-100.0, 100.0], got 500.0
+    """
+
+    controls: ClassVar[dict] = {}
+    """``{name: Control(default, range)}``, in the order the stage documents them."""
+
+    always_in_config: ClassVar[tuple] = ()
+    """Controls written by :meth:`to_config` even at their defaults (a stage's defining settings)."""
+
+    def __init__(self):
+        super().__init__()
+        self._control_names: list[str] = []
+
+    # ------------------------------------------------------------------ the table
+
+    def control_table(self) -> dict:
+        """This stage's controls, ``{name: Control}``; the class's :attr:`controls` unless overridden."""
+        return type(self).controls
+
+    def init_controls(self, **values) -> None:
+        """Check and store every control of the table: ``values[name]`` if given, else its default.
+
+        Raises ``ValueError`` for a name the table does not have, naming the known ones.
+        """
+        table = self.control_table()
+        unknown = [name for name in values if name not in table]
+        if unknown:
+            raise ValueError(f"unknown {type(self).__name__} control(s) {sorted(unknown)}; known: {', '.join(table)}")
+        for name, control in table.items():
+            self._store(name, self._checked(name, values.get(name, control.default)))
+        self.check_together()
+
+    def _checked(self, name: str, value):
+        control = self.control_table()[name]
+        if control.kind == "number":
+            _check_number(value, name, control.range)
+        elif control.kind == "int":
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not control.range[0] <= value <= control.range[1]:
+                raise ValueError(f"{name} must be an integer in [{control.range[0]}, {control.range[1]}], got {value!r}")
+            value = int(value)
+        elif control.kind == "bool":
+            if not isinstance(value, bool):
+                raise ValueError(f"{name} must be True or False, got {value!r}")
+        elif control.kind == "choice":
+            if value not in control.range:
+                raise ValueError(f"{name} must be one of {', '.join(map(repr, control.range))}, got {value!r}")
+        return self.check_control(name, value)
+
+    def check_control(self, name: str, value):
+        """Check (and return, possibly normalised) a ``"value"`` control; the base accepts anything."""
+        return value
+
+    def check_together(self) -> None:
+        """Rules between controls, run after construction and after every assignment; none by default."""
+
+    def _store(self, name: str, value) -> None:
+        for registry in (self._parameters, self._buffers):
+            registry.pop(name, None)
+        self.__dict__.pop(name, None)
+        if isinstance(value, nn.Parameter):
+            self.register_parameter(name, value)
+        elif isinstance(value, torch.Tensor):
+            self.register_buffer(name, value)
+        else:
+            object.__setattr__(self, name, value)
+        if name not in self._control_names:
+            self._control_names.append(name)
+
+    def set_param(self, name: str, value) -> None:
+        """Check and store control ``name`` (also what ``stage.name = value`` does)."""
+        self._store(name, self._checked(name, value))
+        self.check_together()
+
+    def __setattr__(self, name: str, value) -> None:
+        if name != "_control_names" and name in self.__dict__.get("_control_names", ()):
+            self.set_param(name, value)
+        else:
+            super().__setattr__(name, value)
+
+    def params(self) -> dict:
+        """The controls as stored (numbers, tensors or parameters), by name."""
+        return {name: getattr(self, name) for name in self._control_names}
+
+    # ------------------------------------------------------------------ checks at run time
+
+    def check_learnable(self) -> None:
+        """Raise ``ValueError`` naming a learnable control an optimiser moved outside its range (or to NaN).
+
+        Called by ``forward``; skipped while tracing or compiling (the graph carries no checks).
+        """
+        if is_tracing():
+            return
+        table = self.control_table()
+        for name, value in self._parameters.items():
+            control = table.get(name)
+            if control is not None and control.kind == "number" and value is not None:
+                _check_number(value, name, control.range)
+
+    # ------------------------------------------------------------------ identity and configs
+
+    def is_default(self, name: str) -> bool:
+        """True when control ``name`` is a plain value equal to its default (learnable values never are)."""
+        value, default = getattr(self, name), self.control_table()[name].default
+        if default is None or isinstance(default, (bool, str)):
+            return not isinstance(value, torch.Tensor) and value == default
+        return value is not None and is_constant(value, default)
+
+    @property
+    def is_identity(self) -> bool:
+        """True when the stage cannot change any image (it is then skipped and not exported).
+
+        The base: every control at its default. Stages whose default is not identity override it.
+        """
+        return all(self.is_default(name) for name in self._control_names)
+
+    def to_config(self) -> dict:
+        """The controls that differ from their defaults (and :attr:`always_in_config`), as plain values.
+
+        ``type(stage).from_config(stage.to_config())`` builds an equal stage.
+        """
+        return {
+            name: plain(getattr(self, name))
+            for name in self._control_names
+            if name in self.always_in_config or not self.is_default(name)
+        }
+
+    @classmethod
+    def from_config(cls, config: dict) -> "Stage":
+        """Build the stage from a dict of its constructor arguments (what :meth:`to_config` returns)."""
+        if not isinstance(config, dict):
+            raise ValueError(f"a {cls.__name__} config must be a dict, got {type(config).__name__}")
+        return cls(**config)
+
+    def export_form(self) -> nn.Module:
+        """The module an ONNX export traces for this stage; the stage itself unless it needs another form."""
+        return self
+
+    def extra_repr(self) -> str:
+        return ", ".join(f"{key}={value!r}" for key, value in self.to_config().items())
+
+
+def _check_number(value, name: str, allowed) -> None:
+    if isinstance(value, bool) or isinstance(value, str):
+        raise ValueError(f"{name} must be a number or a tensor, got {value!r}")
+    if isinstance(value, torch.Tensor) and (value.is_complex() or value.dtype == torch.bool):
+        raise ValueError(f"{name} must be a real number tensor, got {value.dtype}")
+    try:
+        check_range(value, name, *allowed)
+    except (TypeError, RuntimeError) as error:
+        raise ValueError(f"{name} must be numbers or a tensor: {error}") from None
