@@ -130,6 +130,12 @@ def check_range(value: Param, name: str, low: float, high: float) -> None:
         raise ValueError(f"{name} must lie in [{low}, {high}], got {t.tolist()}")
 
 
+def check_choice(name: str, value, choices) -> None:
+    """Raise ``ValueError`` naming ``name`` and the allowed ``choices`` unless ``value`` is one of them."""
+    if value not in tuple(choices):
+        raise ValueError(f"{name} must be one of {', '.join(map(repr, choices))}, got {value!r}")
+
+
 def is_constant(value, constant) -> bool:
     """True when ``value`` is a plain (non-learnable) value equal to ``constant`` everywhere.
 

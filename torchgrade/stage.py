@@ -37,7 +37,7 @@ from typing import Any, ClassVar
 import torch
 from torch import nn
 
-from .core import check_range, is_constant, is_tracing
+from .core import check_choice, check_range, is_constant, is_tracing
 
 __all__ = ["Control", "Stage", "plain", "controls_signature"]
 
@@ -138,6 +138,9 @@ class Stage(nn.Module):
     controls: ClassVar[dict] = {}
     """``{name: Control(default, range)}``, in the order the stage documents them."""
 
+    display_referred: ClassVar[bool] = False
+    """True for stages whose output is display-referred (tone mappers): a LUT baked through one clamps to [0, 1]."""
+
     always_in_config: ClassVar[tuple] = ()
     """Controls written by :meth:`to_config` even at their defaults (a stage's defining settings)."""
 
@@ -176,8 +179,7 @@ class Stage(nn.Module):
             if not isinstance(value, bool):
                 raise ValueError(f"{name} must be True or False, got {value!r}")
         elif control.kind == "choice":
-            if value not in control.range:
-                raise ValueError(f"{name} must be one of {', '.join(map(repr, control.range))}, got {value!r}")
+            check_choice(name, value, control.range)
         return self.check_control(name, value)
 
     def check_control(self, name: str, value):
