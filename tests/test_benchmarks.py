@@ -11,7 +11,8 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks import lut_floor, metrics, run  # noqa: E402
+from benchmarks import common, lut_floor, metrics  # noqa: E402
+from benchmarks.suite import measure, methods, report, workload  # noqa: E402
 from torchgrade.color import linear_to_logc, srgb_to_linear  # noqa: E402
 
 
@@ -60,7 +61,7 @@ def test_sample_indices_are_distinct_and_fixed():
 
 
 def test_peak_rss_counts_a_new_buffer():
-    size_mb = metrics.peak_rss_mb(lambda: torch.ones(8 * 2**20 // 4))  # 8 MiB, written
+    size_mb = common.peak_rss_mb(lambda: torch.ones(8 * 2**20 // 4))  # 8 MiB, written
     if size_mb is None:
         pytest.skip("no /proc/self/clear_refs")
     assert size_mb >= 7.0
@@ -68,32 +69,32 @@ def test_peak_rss_counts_a_new_buffer():
 
 def test_pareto_front_keeps_only_undominated_points():
     points = [(1.0, 10.0, "fast"), (2.0, 12.0, "dominated"), (3.0, 1.0, "accurate"), (5.0, 0.5, "slowest")]
-    assert [name for _, _, name in run.pareto_front(points)] == ["fast", "accurate", "slowest"]
+    assert [name for _, _, name in report.pareto_front(points)] == ["fast", "accurate", "slowest"]
 
 
 def test_downscale_averages_by_an_integer_factor():
     image = torch.arange(16.0).reshape(1, 1, 4, 4)
-    assert run.downscale(image, 2).flatten().tolist() == [2.5, 4.5, 10.5, 12.5]
-    assert run.downscale(image, None) is image
+    assert workload.downscale(image, 2).flatten().tolist() == [2.5, 4.5, 10.5, 12.5]
+    assert workload.downscale(image, None) is image
 
 
 @pytest.fixture(scope="module")
 def tiny_work(tmp_path_factory):
     """The benchmark's workload on tiny images: accuracy scenes at most 24 pixels a side, a 48×64 frame."""
     patch = pytest.MonkeyPatch()
-    patch.setattr(run, "FRAME", (48, 64))
-    patch.setattr(run, "DEMO_SIZE", (36, 64))
-    patch.setattr(run, "BATCHES", (1, 2))
-    patch.setattr(run, "BATCH_SIDE", 16)
-    plan = run.Plan(quick=True, device=torch.device("cpu"), out=tmp_path_factory.mktemp("out"), runs=1, scaling_runs=1,
+    patch.setattr(workload, "FRAME", (48, 64))
+    patch.setattr(workload, "DEMO_SIZE", (36, 64))
+    patch.setattr(workload, "BATCHES", (1, 2))
+    patch.setattr(workload, "BATCH_SIDE", 16)
+    plan = workload.Plan(quick=True, device=torch.device("cpu"), out=tmp_path_factory.mktemp("out"), runs=1, scaling_runs=1,
                     accuracy_side=24, delta_e_samples=500, resolutions=((16, 16),), compile=False)
-    yield run.Workload(plan, tmp_path_factory.mktemp("work"))
+    yield workload.Workload(plan, tmp_path_factory.mktemp("work"))
     patch.undo()
 
 
 def row(work, name):
-    rows = dict(run.method_rows(work))
-    method, record = run.measure_row(work, name, rows[name])
+    rows = dict(methods.method_rows(work))
+    method, record = measure.measure_row(work, name, rows[name])
     assert "error" not in record, record
     return method, record
 
@@ -104,7 +105,7 @@ def test_direct_float32_row_matches_the_reference(tiny_work):
 
 
 def test_opencolorio_applies_the_same_lut_as_torchgrade(tiny_work):
-    _, ours = row(tiny_work, run.lut_name(33, "logc", "tetrahedral"))
+    _, ours = row(tiny_work, methods.lut_name(33, "logc", "tetrahedral"))
     _, peer = row(tiny_work, "OpenColorIO 33³ logc tetrahedral")
     # The same lattice; they differ by where the output is interpolated (torchgrade: sRGB-encoded
     # entries, clip after the lookup; the .cube file: linear entries) and the .cube's 1D shaper.
@@ -115,20 +116,20 @@ def test_failing_row_records_its_error(tiny_work):
     def broken():
         raise RuntimeError("no compiler\nsecond line")
 
-    _, record = run.measure_row(tiny_work, "broken", broken)
+    _, record = measure.measure_row(tiny_work, "broken", broken)
     assert record == {"method": "broken", "error": "RuntimeError: no compiler"}
 
 
 def test_report_and_plots(tiny_work, tmp_path):
-    _, record = row(tiny_work, run.lut_name(9, "linear", "trilinear"))
+    _, record = row(tiny_work, methods.lut_name(9, "linear", "trilinear"))
     records = [record, {"method": "broken", "error": "RuntimeError: x"}]
-    run.add_ratios(records, {"plain frame copy": 1.0})
+    measure.add_ratios(records, {"plain frame copy": 1.0})
     assert record["ratio_to_copy"] == record["ms"] and record["ratio_to_opencolorio"] is None
-    assert "failed: RuntimeError: x" in run.markdown_table(records)
-    run.plot_pareto(records, tmp_path / "pareto.png")
-    points = run.scaling(tiny_work)
-    run.plot_scaling(points, tmp_path / "scaling.png")
-    assert {p["path"] for p in points} == {"direct float32", run.lut_name(33, "logc", "tetrahedral")}
+    assert "failed: RuntimeError: x" in report.markdown_table(records)
+    report.plot_pareto(records, tmp_path / "pareto.png")
+    points = measure.scaling(tiny_work)
+    report.plot_scaling(points, tmp_path / "scaling.png")
+    assert {p["path"] for p in points} == {"direct float32", methods.lut_name(33, "logc", "tetrahedral")}
     for name in ("pareto.png", "scaling.png"):
         assert 0 < (tmp_path / name).stat().st_size < 200_000
 

@@ -1,0 +1,177 @@
+"""What the benchmarks share: the interleaved timer, peak-memory readers, OpenColorIO processors, the sample EXRs.
+
+Nothing here measures on its own; each benchmark says what it measures with these and how to run it
+(for example ``.venv/bin/python benchmarks/run.py --quick``, which uses every part of this module).
+
+Timing alternates the things compared (A B A B …: every round runs each once), so a change of machine
+load during the run hits all of them alike, and reports medians. Peak memory is read from the kernel's
+peak-RSS counter (Linux) or from CUDA's allocator statistics.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import functools
+import statistics
+import time
+from pathlib import Path
+from typing import Callable, Optional
+
+import numpy as np
+import torch
+
+import torchgrade as tg
+
+ROOT = Path(__file__).resolve().parents[1]
+EXR_DIR = ROOT.parent / "shared" / "data" / "exr"
+"""The OpenEXR project's sample images (BSD-3), shared beside the repository."""
+
+
+def sample_exr(name: str, to_rec709: bool = False) -> torch.Tensor:
+    """The RGB of sample image ``name`` (e.g. ``"Desk"``) as a ``(1, 3, H, W)`` float32 tensor."""
+    return tg.io.read_exr(EXR_DIR / f"{name}.exr", to_rec709=to_rec709)[:3].unsqueeze(0)
+
+
+# ---------------------------------------------------------------- timing
+
+
+def synchronizer(device: torch.device) -> Callable[[], None]:
+    """A call that waits for ``device``'s queued work (CUDA runs asynchronously), a no-op on the CPU."""
+    return (lambda: torch.cuda.synchronize(device)) if device.type == "cuda" else (lambda: None)
+
+
+def _run_and_reset(call) -> tuple:
+    return call if isinstance(call, tuple) else (call, None)
+
+
+def interleaved_ms(calls: dict, runs: int, warmup: int = 1, sync: Optional[Callable[[], None]] = None) -> dict:
+    """Wall times in ms, ``{name: [runs times]}``, of each call in ``calls``, every round running each call once.
+
+    A call is ``run`` or ``(run, reset)``: ``reset`` (or None) runs untimed before each ``run``, e.g. to restore a
+    buffer an in-place call overwrites. ``warmup`` untimed rounds come first. ``sync`` (see :func:`synchronizer`)
+    brackets each timed call. Autograd is off: no benchmark times a backward pass.
+    """
+    sync = sync or (lambda: None)
+    pairs = {name: _run_and_reset(call) for name, call in calls.items()}
+    times = {name: [] for name in calls}
+    with torch.no_grad():
+        for attempt in range(warmup + runs):
+            for name, (run, reset) in pairs.items():
+                if reset:
+                    reset()
+                sync()
+                start = time.perf_counter()
+                run()
+                sync()
+                if attempt >= warmup:
+                    times[name].append((time.perf_counter() - start) * 1000.0)
+    return times
+
+
+def median_ms(calls: dict, runs: int, warmup: int = 1, sync: Optional[Callable[[], None]] = None) -> dict:
+    """Median ms of each call, ``{name: ms}``, timed by :func:`interleaved_ms`."""
+    return {name: statistics.median(times) for name, times in interleaved_ms(calls, runs, warmup, sync).items()}
+
+
+# ---------------------------------------------------------------- peak memory
+
+
+def status_kib(field: str) -> int:
+    """A ``/proc/self/status`` field in KiB, e.g. ``"VmRSS"`` (resident now) or ``"VmHWM"`` (peak resident)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith(field + ":"):
+            return int(line.split()[1])
+    raise KeyError(field)
+
+
+@functools.lru_cache(maxsize=None)
+def _glibc():
+    """glibc through ctypes, or None where there is no ``libc.so.6`` (not Linux with glibc)."""
+    try:
+        return ctypes.CDLL("libc.so.6")
+    except OSError:
+        return None
+
+
+def map_large_buffers() -> bool:
+    """Make glibc serve every allocation above 64 KiB with its own mapping, returned to the system on free.
+
+    Peak resident memory then rises and falls with each buffer, so :func:`peak_rss_mb` sees what a
+    call allocates instead of heap pages kept from earlier calls. Slows allocation: call it after
+    every timing. Returns False where glibc's ``mallopt`` is not available.
+    """
+    libc = _glibc()
+    if libc is None:
+        return False
+    m_mmap_threshold, m_trim_threshold = -3, -1
+    return bool(libc.mallopt(m_mmap_threshold, 65536)) and bool(libc.mallopt(m_trim_threshold, 0))
+
+
+def release_free_memory() -> None:
+    """Hand the heap's free pages back to the system (glibc ``malloc_trim``); a no-op without glibc."""
+    libc = _glibc()
+    if libc is not None:
+        libc.malloc_trim(0)
+
+
+def peak_rss_mb(run) -> float | None:
+    """Peak resident memory (MiB) that ``run()`` adds to the process, its output included.
+
+    Free heap pages are released first, so reusing them counts as growth, and again after ``run``
+    (the kernel updates its peak-RSS counter when pages are unmapped); the counter is reset before
+    ``run`` through ``/proc/self/clear_refs``. ``None`` where that file is not available (not Linux).
+    """
+    release_free_memory()
+    try:
+        Path("/proc/self/clear_refs").write_text("5")
+    except OSError:
+        return None
+    before = status_kib("VmRSS")
+    run()
+    release_free_memory()
+    return max(0, status_kib("VmHWM") - before) / 1024.0
+
+
+def peak_cuda_mb(run, device) -> float:
+    """Peak CUDA memory (MiB) that ``run()`` allocates beyond what was allocated before."""
+    torch.cuda.synchronize(device)
+    torch.cuda.reset_peak_memory_stats(device)
+    before = torch.cuda.memory_allocated(device)
+    run()
+    torch.cuda.synchronize(device)
+    return (torch.cuda.max_memory_allocated(device) - before) / 2**20
+
+
+# ---------------------------------------------------------------- OpenColorIO
+
+
+def ocio_processor(cube_path, interpolation: str):
+    """OpenColorIO's default CPU processor applying the .cube file at ``cube_path`` (``"trilinear"`` or ``"tetrahedral"``).
+
+    OpenColorIO caches files by path: give each table its own path.
+    """
+    import PyOpenColorIO as OCIO
+
+    mode = {"trilinear": OCIO.INTERP_LINEAR, "tetrahedral": OCIO.INTERP_TETRAHEDRAL}[interpolation]
+    transform = OCIO.FileTransform(src=str(cube_path), interpolation=mode)
+    return OCIO.Config.CreateRaw().getProcessor(transform).getDefaultCPUProcessor()
+
+
+def packed_rgb(image: torch.Tensor) -> np.ndarray:
+    """A ``(1, 3, H, W)`` image as OpenColorIO's packed RGB float32 buffer ``(H, W, 3)``."""
+    return np.ascontiguousarray(image.detach().cpu().float()[0].permute(1, 2, 0).numpy())
+
+
+def ocio_apply(processor, image: torch.Tensor) -> torch.Tensor:
+    """``processor`` applied to a ``(1, 3, H, W)`` image, as a new ``(1, 3, H, W)`` float32 tensor."""
+    buffer = packed_rgb(image)
+    processor.applyRGB(buffer)
+    return torch.from_numpy(buffer).permute(2, 0, 1).unsqueeze(0)
+
+
+def ocio_in_place(processor, image: torch.Tensor) -> tuple:
+    """``(run, reset)`` for the timer: ``processor`` applied in place to a packed copy of ``image``, which
+    ``reset`` restores (untimed), so every run sees the same input."""
+    source = packed_rgb(image)
+    buffer = source.copy()
+    return (lambda: processor.applyRGB(buffer)), (lambda: np.copyto(buffer, source))

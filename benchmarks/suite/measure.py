@@ -1,0 +1,130 @@
+"""The suite's measurements: each row's accuracy on the scenes, its speed and peak memory at 1920×1080, and scaling.
+
+Accuracy pools the scenes against the float64 look (8-bit sRGB code errors, mean ΔE2000 on sampled pixels);
+speed is the median of interleaved runs (:func:`benchmarks.common.median_ms`). Part of
+``.venv/bin/python benchmarks/run.py [--quick] [--out DIR]``.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Optional
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+import torchgrade as tg
+from benchmarks import common, metrics
+from benchmarks.suite import workload
+from benchmarks.suite.methods import PEER, Method, lut_name, method_rows
+from benchmarks.suite.workload import Workload, as_strip
+
+
+def timing_input(work: Workload, method: Method) -> torch.Tensor:
+    """The 1920×1080 frame a row is timed on: the scene for a whole-look row, else the frame after bloom."""
+    return work.frame.to(method.dtype) if method.whole_look else work.bloomed_frame(method.dtype)
+
+
+def accuracy(work: Workload, method: Method) -> dict:
+    """Errors of ``method``'s whole look on the accuracy scenes against the float64 look (see ``benchmarks/run.py``)."""
+    with torch.no_grad():
+        if method.whole_look:
+            output = as_strip(method.apply(scene.to(method.dtype)) for scene in work.scenes.values())
+        else:
+            output = method.apply(work.bloomed_strip(method.dtype))
+    codes = metrics.srgb_codes(output.reshape(work.reference_codes.shape))
+    summary = metrics.code_error_summary(work.reference_codes, codes)
+    reference, sample = (c[..., work.delta_e_pixels] for c in (work.reference_codes, codes))
+    summary["mean_delta_e2000"] = float(np.mean(metrics.delta_e2000(reference, sample)))
+    return summary
+
+
+def speed(work: Workload, method: Method) -> float:
+    timed = {method.name: method.timed_call(timing_input(work, method))}
+    return common.median_ms(timed, work.plan.runs, sync=common.synchronizer(work.plan.device))[method.name]
+
+
+def measure_row(work: Workload, name: str, build: Callable[[], Method]):
+    """Build and measure one row; a row that fails records its error instead of stopping the run."""
+    try:
+        method = build()
+        record = {"method": name, "family": method.family, "dtype": str(method.dtype).replace("torch.", ""),
+                  "timed": "whole look" if method.whole_look else "per-pixel stage",
+                  "device": "cpu" if method.host else work.plan.device.type, **method.info}
+        record.update(accuracy(work, method))
+        record["ms"] = speed(work, method)
+        return method, record
+    except Exception as error:  # noqa: BLE001 — e.g. torch.compile without a working compiler
+        return None, {"method": name, "error": f"{type(error).__name__}: {str(error).splitlines()[0] if str(error) else ''}"}
+
+
+def measure_rows(work: Workload) -> tuple:
+    """Accuracy and speed of every row, with a progress bar; returns the built methods and their records."""
+    methods, records = {}, []
+    bar = tqdm(method_rows(work), desc="rows", unit="row")
+    for name, build in bar:
+        bar.set_postfix_str(name)
+        method, record = measure_row(work, name, build)
+        records.append(record)
+        if method is not None:
+            methods[name] = method
+    return methods, records
+
+
+def baselines(work: Workload) -> dict:
+    """Timed-only references: the plain frame copy (the memory floor) and bloom, which every look adds."""
+    frame = work.frame
+    calls = {
+        "plain frame copy": lambda: frame.clone(),
+        "bloom float32": lambda: work.look.bloom(frame),
+        "bloom float64": lambda: work.look.bloom(work.frame.double()),
+    }
+    return common.median_ms(calls, work.plan.runs, sync=common.synchronizer(work.plan.device))
+
+
+def add_ratios(records: list, base: dict) -> None:
+    """ms per megapixel at 1920×1080, and ratios to the frame copy and (per-pixel rows) to OpenColorIO."""
+    megapixels = workload.FRAME[0] * workload.FRAME[1] / 1e6
+    peer = next((r["ms"] for r in records if r["method"] == PEER and "ms" in r), None)
+    for record in records:
+        if "ms" not in record:
+            continue
+        record["ms_per_megapixel"] = record["ms"] / megapixels
+        record["ratio_to_copy"] = record["ms"] / base["plain frame copy"]
+        per_pixel = record["timed"] == "per-pixel stage"
+        record["ratio_to_opencolorio"] = record["ms"] / peer if peer and per_pixel else None
+
+
+def peak_memory(work: Workload, method: Method) -> Optional[float]:
+    run, reset = method.timed_call(timing_input(work, method))
+    if reset:
+        reset()
+    with torch.no_grad():
+        if work.plan.device.type == "cuda" and not method.host:
+            return common.peak_cuda_mb(run, work.plan.device)
+        return common.peak_rss_mb(run)
+
+
+def record_peak_memory(work: Workload, methods: dict, records: list) -> None:
+    """Peak memory of every built row, after all timing (the allocator setting slows allocation)."""
+    common.map_large_buffers()
+    for record in tqdm(records, desc="memory", unit="row"):
+        if record["method"] in methods:
+            record["peak_memory_mb"] = peak_memory(work, methods[record["method"]])
+
+
+def scaling(work: Workload) -> list:
+    """ms and ms per megapixel of the direct float32 and 33³ LogC tetrahedral stages by resolution and by batch."""
+    lut = work.lut(33, "logc")
+    paths = {"direct float32": work.per_pixel, lut_name(33, "logc", "tetrahedral"): lambda x: lut(x, "tetrahedral")}
+    shapes = [("resolution", 1, h, w) for h, w in work.plan.resolutions]
+    shapes += [("batch", b, workload.BATCH_SIDE, workload.BATCH_SIDE) for b in workload.BATCHES]
+    sync = common.synchronizer(work.plan.device)
+    points = []
+    for kind, batch, height, width in tqdm(shapes, desc="scaling", unit="shape"):
+        image = tg.scene.demo_scene(height, width).to(work.plan.device).expand(batch, -1, -1, -1).contiguous()
+        calls = {path: (lambda apply=apply: apply(image)) for path, apply in paths.items()}
+        for path, ms in common.median_ms(calls, work.plan.scaling_runs, sync=sync).items():
+            points.append({"path": path, "kind": kind, "batch": batch, "height": height, "width": width, "ms": ms,
+                           "ms_per_megapixel": ms / (batch * height * width / 1e6)})
+    return points
