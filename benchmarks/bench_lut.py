@@ -6,9 +6,9 @@ every method once, so a change of machine load hits all of them alike; the media
 in ms, ms per megapixel, and as ratios to OpenColorIO's tetrahedral CPU processor and to a plain
 tensor copy (the memory floor). Compile time of the ``compile=True`` paths is their first call, with an empty inductor cache.
 Temporary memory is the peak resident memory a method adds beyond its input and output, per pixel,
-measured in a child process run with glibc's mmap threshold fixed at 64 KiB (every large buffer a
+measured in a child process with glibc's mmap threshold fixed at 64 KiB (every large buffer a
 fresh mapping; that slows allocation, so no timing is taken there) after resetting the kernel's
-peak-RSS counter, each method warmed up (compiled) first.
+peak-RSS counter, each method warmed up (compiled) first (:mod:`benchmarks.common`).
 
 Accuracy: a strong look (``ColorGrade(contrast=30, saturation=20, temperature=20)`` then
 ``ToneMap("aces")``) baked to 33³ LogC LUTs with each output encoding, and to 33³, 65³ and 129³ LUTs
@@ -24,7 +24,6 @@ from __future__ import annotations
 import json
 import os
 import platform
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -37,17 +36,14 @@ import torch
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+import torchgrade as tg  # noqa: E402
+from benchmarks.common import (  # noqa: E402
+    EXR_DIR, map_large_buffers, median_ms, ocio_in_place, ocio_processor, peak_rss_mb, run_and_reset, sample_exr)
 from benchmarks.metrics import srgb_codes  # noqa: E402
-from torchgrade.io.cube import write_cube  # noqa: E402
-from torchgrade.grade import ColorGrade  # noqa: E402
-from torchgrade.io import read_exr  # noqa: E402
-from torchgrade.lut import INTERPOLATIONS, LUT3D, OUTPUT_ENCODINGS, bake_lut, trilinear_grid_sample  # noqa: E402
-from torchgrade.tonemap import ToneMap  # noqa: E402
+from torchgrade.lut import INTERPOLATIONS, OUTPUT_ENCODINGS, trilinear_grid_sample  # noqa: E402
 
 COMMAND = ".venv/bin/python benchmarks/bench_lut.py"
 HEIGHT, WIDTH, SIZE, RUNS = 1080, 1920, 33, 7
-_MMAP_ENV = "MALLOC_MMAP_THRESHOLD_"
-EXR_DIR = ROOT.parent / "shared" / "data" / "exr"
 ACCURACY_IMAGES = ("Desk", "CandleGlass", "GoldenGate")
 
 
@@ -58,29 +54,17 @@ def look(image: torch.Tensor) -> torch.Tensor:
     return (y / (0.6 + y)) ** 1.2
 
 
-def median_ms_round_robin(methods: dict, runs: int = RUNS) -> dict:
-    """Median ms of each ``(run, prepare)`` in ``methods``, timing every method once per round."""
-    times = {name: [] for name in methods}
-    for _ in range(runs):
-        for name, (run, prepare) in methods.items():
-            prepare()
-            start = time.perf_counter()
-            run()
-            times[name].append(time.perf_counter() - start)
-    return {name: 1000.0 * statistics.median(values) for name, values in times.items()}
-
-
 def strong_look(aces: bool = False) -> torch.nn.Module:
     """The strong look LUT accuracy is measured with: ``ColorGrade(contrast=30, saturation=20, temperature=20)``, ``ToneMap("aces")``.
 
     ``aces=True`` grades in ACEScc/ACEScg as Unity does when ACES tone mapping is selected (``ColorGrade(aces=True)``).
     """
-    return torch.nn.Sequential(ColorGrade(contrast=30.0, saturation=20.0, temperature=20.0, aces=aces), ToneMap("aces"))
+    return torch.nn.Sequential(tg.ColorGrade(contrast=30.0, saturation=20.0, temperature=20.0, aces=aces), tg.ToneMap("aces"))
 
 
 def accuracy_image(name: str) -> torch.Tensor:
     """Every 4th pixel of a sample EXR's RGB, ``(1, 3, H, W)`` float32: the pixels accuracy is measured on."""
-    return read_exr(EXR_DIR / f"{name}.exr")[:3, ::4, ::4].unsqueeze(0)
+    return sample_exr(name)[..., ::4, ::4]
 
 
 ACCURACY_LUTS = [(SIZE, "default", encoding) for encoding in OUTPUT_ENCODINGS] + [(size, "scene", "srgb") for size in (SIZE, 65, 129)]
@@ -97,7 +81,7 @@ def accuracy() -> list:
             image = accuracy_image(name)
             direct = srgb_codes(look(image.double()))
             for size, domain, encoding in ACCURACY_LUTS:
-                lut = bake_lut(look, size=size, scene=image if domain == "scene" else None, output_encoding=encoding)
+                lut = tg.bake_lut(look, size=size, scene=image if domain == "scene" else None, output_encoding=encoding)
                 for interpolation in INTERPOLATIONS:
                     error = (srgb_codes(lut(image, interpolation)) - direct).abs().flatten().numpy()
                     rows.append({"image": name, "size": size, "domain": domain, "output_encoding": encoding, "interpolation": interpolation,
@@ -105,24 +89,72 @@ def accuracy() -> list:
     return rows
 
 
-def _status_kib(field: str) -> int:
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith(field + ":"):
-            return int(line.split()[1])
-    raise KeyError(field)
-
-
 def temporary_bytes_per_pixel(run, output_bytes: int, pixels: int):
-    """Peak resident memory during ``run()`` beyond what was resident before and its output."""
-    try:
-        Path("/proc/self/clear_refs").write_text("5")  # reset the peak-RSS counter (Linux >= 4.0)
-    except OSError:
-        return None
-    before = _status_kib("VmRSS")
-    result = run()
-    peak = _status_kib("VmHWM")
-    del result
-    return max(0.0, ((peak - before) * 1024 - output_bytes) / pixels)
+    """Peak resident memory during ``run()`` beyond what was resident before and its output, per pixel."""
+    peak_mb = peak_rss_mb(run)
+    return None if peak_mb is None else max(0.0, (peak_mb * 2**20 - output_bytes) / pixels)
+
+
+def lookup_methods(image: torch.Tensor, lut, folder: str) -> dict:
+    """Every way of applying ``lut`` to ``image``, as timer calls ``run`` or ``(run, reset)`` by name (the copy first)."""
+    compiled = tg.LUT3D(lut.table, shaper="linear", compile=True)
+    path = os.path.join(folder, "bench.cube")
+    tg.io.write_cube(path, lut)
+    methods = {
+        "plain tensor copy (memory floor)": lambda: image.clone(),
+        "grid_sample 5-D, naive": lambda: trilinear_grid_sample(image.clamp(0, 1), lut.table),
+    }
+    for interpolation in ("tetrahedral", "trilinear"):
+        methods[f"torchgrade {interpolation}, eager (default)"] = lambda mode=interpolation: lut(image, mode)
+        methods[f"torchgrade {interpolation}, compile=True"] = lambda mode=interpolation: compiled(image, mode)
+    for interpolation in ("tetrahedral", "trilinear"):
+        processor = ocio_processor(path, interpolation)
+        methods[f"OpenColorIO CPU processor, {interpolation} (in place)"] = ocio_in_place(processor, image)
+    return methods
+
+
+def warm_up(methods: dict) -> dict:
+    """Run every method once (the compiled paths compile here); returns the compile paths' first-call seconds."""
+    compile_s = {}
+    for name, call in methods.items():
+        run, reset = run_and_reset(call)
+        if reset:
+            reset()
+        start = time.perf_counter()
+        with torch.no_grad():
+            run()
+        if "compile=True" in name:
+            compile_s[name] = time.perf_counter() - start
+    return compile_s
+
+
+def memory_per_pixel(methods: dict, frame_bytes: int, pixels: int) -> dict:
+    """:func:`temporary_bytes_per_pixel` of every method, with every large buffer a fresh mapping (slows allocation)."""
+    map_large_buffers()
+    memory = {}
+    for name, call in methods.items():
+        run, reset = run_and_reset(call)
+        if reset:
+            reset()
+        output_bytes = 0 if name.startswith("OpenColorIO") else frame_bytes  # OpenColorIO writes in place
+        with torch.no_grad():
+            memory[name] = temporary_bytes_per_pixel(run, output_bytes, pixels)
+    return memory
+
+
+def speed_rows(methods: dict, compile_s: dict, memory: dict, pixels: int) -> list:
+    """Medians of interleaved rounds, with ratios to OpenColorIO's tetrahedral processor and to the copy."""
+    medians = median_ms(methods, RUNS, warmup=0)  # warmed up by :func:`warm_up`
+    ocio = next(ms for name, ms in medians.items() if name.startswith("OpenColorIO CPU processor, tetrahedral"))
+    copy = next(iter(medians.values()))
+    results = []
+    for name, ms in medians.items():
+        result = {"method": name, "ms": ms, "temporary_bytes_per_pixel": memory[name]}
+        if name in compile_s:
+            result["compile_s"] = compile_s[name]
+        result.update(ms_per_megapixel=ms / (pixels / 1e6), ratio_to_ocio_tetrahedral=ms / ocio, ratio_to_copy=ms / copy)
+        results.append(result)
+    return results
 
 
 def main() -> None:
@@ -136,71 +168,16 @@ def main() -> None:
     torch.manual_seed(0)
     image = torch.rand(1, 3, HEIGHT, WIDTH) * 1.1 - 0.05
     pixels, frame_bytes = HEIGHT * WIDTH, image.numel() * 4
-    lut = bake_lut(look, size=SIZE, shaper="linear")
+    lut = tg.bake_lut(look, size=SIZE, shaper="linear")
     lut.table = lut.table.float()
-    compiled = LUT3D(lut.table, shaper="linear", compile=True)
     with tempfile.TemporaryDirectory() as folder:
-        path = os.path.join(folder, "bench.cube")
-        write_cube(path, lut)
-        config = OCIO.Config.CreateRaw()
-        processors = {
-            name: config.getProcessor(OCIO.FileTransform(src=path, interpolation=mode)).getDefaultCPUProcessor()
-            for name, mode in (("tetrahedral", OCIO.INTERP_TETRAHEDRAL), ("trilinear", OCIO.INTERP_LINEAR))
-        }
-    source = np.ascontiguousarray(image[0].permute(1, 2, 0).numpy())
-    buffer = np.empty_like(source)
-
-    def restore():
-        np.copyto(buffer, source)
-
-    def ocio_method(processor):
-        return lambda: processor.applyRGB(buffer), restore
-
-    def no_preparation():
-        pass
-
-    methods = {
-        "plain tensor copy (memory floor)": (lambda: image.clone(), no_preparation),
-        "grid_sample 5-D, naive": (lambda: trilinear_grid_sample(image.clamp(0, 1), lut.table), no_preparation),
-    }
-    for interpolation in ("tetrahedral", "trilinear"):
-        methods[f"torchgrade {interpolation}, eager (default)"] = (lambda mode=interpolation: lut(image, mode), no_preparation)
-        methods[f"torchgrade {interpolation}, compile=True"] = (lambda mode=interpolation: compiled(image, mode), no_preparation)
-    for interpolation, processor in processors.items():
-        methods[f"OpenColorIO CPU processor, {interpolation} (in place)"] = ocio_method(processor)
-
-    compile_s = {}
-    for name, (run, prepare) in methods.items():  # warm-up; the compiled paths compile here
-        prepare()
-        start = time.perf_counter()
-        run()
-        if "compile=True" in name:
-            compile_s[name] = time.perf_counter() - start
-
-    if measure_memory:  # child process: memory only, with every large buffer a fresh mapping
-        memory = {}
-        for name, (run, prepare) in methods.items():
-            prepare()
-            output_bytes = 0 if name.startswith("OpenColorIO") else frame_bytes
-            memory[name] = temporary_bytes_per_pixel(run, output_bytes, pixels)
-        print(json.dumps(memory))
+        methods = lookup_methods(image, lut, folder)
+    compile_s = warm_up(methods)
+    if measure_memory:  # child process: memory only, away from the timings
+        print(json.dumps(memory_per_pixel(methods, frame_bytes, pixels)))
         return
-    child = subprocess.run([sys.executable, __file__, "--memory"], env={**os.environ, _MMAP_ENV: "65536"}, capture_output=True, text=True, check=True)
+    child = subprocess.run([sys.executable, __file__, "--memory"], capture_output=True, text=True, check=True)
     memory = json.loads(child.stdout.strip().splitlines()[-1])
-    medians = median_ms_round_robin(methods)
-    results = []
-    for name in methods:
-        result = {"method": name, "ms": medians[name], "temporary_bytes_per_pixel": memory[name]}
-        if name in compile_s:
-            result["compile_s"] = compile_s[name]
-        results.append(result)
-
-    ocio = next(r["ms"] for r in results if r["method"].startswith("OpenColorIO CPU processor, tetrahedral"))
-    copy = results[0]["ms"]
-    for r in results:
-        r["ms_per_megapixel"] = r["ms"] / (pixels / 1e6)
-        r["ratio_to_ocio_tetrahedral"] = r["ms"] / ocio
-        r["ratio_to_copy"] = r["ms"] / copy
     report = {
         "command": COMMAND,
         "frame": f"{WIDTH}x{HEIGHT} float32, 1 frame",
@@ -213,7 +190,7 @@ def main() -> None:
         "opencolorio": OCIO.__version__,
         "platform": platform.platform(),
         "note": "shared machine: other processes may have been running during the measurement",
-        "results": results,
+        "results": speed_rows(methods, compile_s, memory, pixels),
         "accuracy": accuracy() if EXR_DIR.is_dir() else [],
     }
     out = ROOT / "benchmarks" / "results"

@@ -40,7 +40,8 @@ def synchronizer(device: torch.device) -> Callable[[], None]:
     return (lambda: torch.cuda.synchronize(device)) if device.type == "cuda" else (lambda: None)
 
 
-def _run_and_reset(call) -> tuple:
+def run_and_reset(call) -> tuple:
+    """A timer call (``run`` or ``(run, reset)``, see :func:`interleaved_ms`) as ``(run, reset or None)``."""
     return call if isinstance(call, tuple) else (call, None)
 
 
@@ -52,7 +53,7 @@ def interleaved_ms(calls: dict, runs: int, warmup: int = 1, sync: Optional[Calla
     brackets each timed call. Autograd is off: no benchmark times a backward pass.
     """
     sync = sync or (lambda: None)
-    pairs = {name: _run_and_reset(call) for name, call in calls.items()}
+    pairs = {name: run_and_reset(call) for name, call in calls.items()}
     times = {name: [] for name in calls}
     with torch.no_grad():
         for attempt in range(warmup + runs):

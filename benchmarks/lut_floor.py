@@ -55,7 +55,7 @@ sys.path.insert(0, str(ROOT))
 from benchmarks.bench_lut import ACCURACY_IMAGES, SIZE, accuracy_image, strong_look  # noqa: E402
 from benchmarks.metrics import srgb_codes  # noqa: E402
 from torchgrade.color import linear_to_logc, srgb_to_linear  # noqa: E402
-from torchgrade.lut import DEFAULT_DOMAINS, INTERPOLATIONS, _KERNELS, bake_lut, lattice_unit, scene_domain  # noqa: E402
+from torchgrade.lut import DEFAULT_DOMAINS, INTERPOLATIONS, bake_lut, lattice_unit, scene_domain, tetrahedral, trilinear  # noqa: E402
 
 COMMAND = ".venv/bin/python benchmarks/lut_floor.py"
 MAX_BAR, P999_BAR = 4.0, 1.0
@@ -78,6 +78,8 @@ DOMAINS = ("default", "scene")
 SWEEP_IMAGE = "Desk"
 SWEEP_BOTTOMS = (0.005, 0.01, 0.02)
 """Linear values at the bottom of the lattice in the sweep, beside black (its top is the scene's largest value)."""
+LIBRARY_KERNELS = {"trilinear": trilinear, "tetrahedral": tetrahedral}
+"""The library's lookups that :func:`interpolation_matrix` checks its weights against."""
 
 
 def vertex_weights(coords: torch.Tensor, size: int, interpolation: str) -> tuple:
@@ -111,7 +113,7 @@ def interpolation_matrix(coords: torch.Tensor, size: int, interpolation: str) ->
     matrix = csr_matrix((weights.ravel(), (rows, index.ravel())), shape=(index.shape[0], size**3))
     matrix.eliminate_zeros()  # an entry is read only where its weight is not 0
     table = torch.rand(3, size**3, dtype=torch.float64, generator=torch.Generator().manual_seed(0))
-    library = _KERNELS[interpolation](coords, table, size).numpy()
+    library = LIBRARY_KERNELS[interpolation](coords, table, size).numpy()
     mismatch = np.abs(matrix @ table.numpy().T - library.T).max()
     if mismatch > 1e-9:
         raise AssertionError(f"{interpolation} weights differ from the library's kernel by {mismatch}")
