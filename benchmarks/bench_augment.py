@@ -7,26 +7,30 @@ Three layers on the same batch (default 32x3x224x224 float32, CPU, torch's defau
 * ``RandomPostFX``, full set: every grading control, bloom, and a per-sample tone mapper.
 
 The ranges are in the JSON. Runs are interleaved (one of each layer per round), so a busy machine slows all of them alike; the
-median of the rounds after a warm-up is reported, with its ratio to ColorJiggle's median.
+median of the rounds after a warm-up is reported (:func:`benchmarks.common.median_ms`), with its ratio to ColorJiggle's median.
 Writes ``benchmarks/results/augment.json`` and ``augment.md``. With ``--device cuda`` it measures
 on the GPU (default batch 256 there) and writes ``augment_cuda.json`` / ``augment_cuda.md``.
+
+    .venv/bin/python benchmarks/bench_augment.py [--device cuda] [--batch N] [--resolution N] [--rounds N]
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import platform
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import kornia
 import torch
 from kornia.augmentation import ColorJiggle
 
-import torchgrade as tg
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import torchgrade as tg  # noqa: E402
+from benchmarks.common import median_ms, synchronizer  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -63,29 +67,10 @@ def batch(size: int, resolution: int, device: str) -> torch.Tensor:
     return (4.0 * torch.rand(size, 3, resolution, resolution, generator=generator)).to(device)
 
 
-def time_once(layer, images: torch.Tensor) -> float:
-    """Seconds for one forward pass, synchronised on CUDA."""
-    if images.is_cuda:
-        torch.cuda.synchronize()
-    start = time.perf_counter()
-    with torch.no_grad():
-        layer(images)
-    if images.is_cuda:
-        torch.cuda.synchronize()
-    return time.perf_counter() - start
-
-
 def measure(images: torch.Tensor, rounds: int, warmup: int) -> dict:
-    """Median seconds per batch of each layer, rounds interleaved across layers."""
-    timed = layers()
-    for _ in range(warmup):
-        for layer in timed.values():
-            time_once(layer, images)
-    seconds = {label: [] for label in timed}
-    for _ in range(rounds):
-        for label, layer in timed.items():
-            seconds[label].append(time_once(layer, images))
-    return {label: statistics.median(values) for label, values in seconds.items()}
+    """Median ms per batch of each layer, rounds interleaved across layers."""
+    calls = {label: functools.partial(layer, images) for label, layer in layers().items()}
+    return median_ms(calls, rounds, warmup, sync=synchronizer(images.device))
 
 
 def report(medians: dict, images: torch.Tensor, rounds: int, command: str) -> dict:
@@ -93,11 +78,11 @@ def report(medians: dict, images: torch.Tensor, rounds: int, command: str) -> di
     rows = [
         {
             "layer": label,
-            "ms_per_batch": round(1e3 * s, 2),
-            "images_per_s": round(images.shape[0] / s, 1),
-            "ratio_to_colorjiggle": round(s / baseline, 3),
+            "ms_per_batch": round(ms, 2),
+            "images_per_s": round(1e3 * images.shape[0] / ms, 1),
+            "ratio_to_colorjiggle": round(ms / baseline, 3),
         }
-        for label, s in medians.items()
+        for label, ms in medians.items()
     ]
     return {
         "batch": list(images.shape),

@@ -2,7 +2,7 @@
 
 Measures float32 bloom at 1920x1080 in each mode, how the time grows with resolution (512^2 to 4K)
 and with ``max_iterations``; each timing is the median (and minimum) of several runs, with the copy
-timed alongside it so that both see the same machine load. Results go to
+timed alternately with it (:func:`benchmarks.common.interleaved_ms`) so that both see the same machine load. Results go to
 ``benchmarks/results/bloom.json`` and ``bloom.md``.
 
 Run from the repository root::
@@ -21,7 +21,10 @@ from pathlib import Path
 
 import torch
 
-import torchgrade as tg
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import torchgrade as tg  # noqa: E402
+from benchmarks.common import interleaved_ms  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 COMMAND = ".venv/bin/python benchmarks/bench_bloom.py"
@@ -42,33 +45,19 @@ def hdr_frame(height: int, width: int) -> torch.Tensor:
     return torch.rand(1, 3, height, width, generator=generator) * 4.0
 
 
-def seconds(function, repeats: int) -> list[float]:
-    function()  # warm-up
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        function()
-        times.append(time.perf_counter() - start)
-    return times
-
-
 def measure(frame: torch.Tensor, repeats: int, **settings) -> dict:
     """Median and minimum milliseconds of bloom and of a copy of ``frame``, interleaved run by run."""
-    bloom_times, copy_times = [], []
-    with torch.no_grad():
-        tg.functional.bloom(frame, **settings)
-        for _ in range(repeats):
-            copy_times += seconds(frame.clone, 3)
-            bloom_times += seconds(lambda: tg.functional.bloom(frame, **settings), 1)
-    bloom_ms, copy_ms = statistics.median(bloom_times) * 1e3, statistics.median(copy_times) * 1e3
+    times = interleaved_ms({"copy": frame.clone, "bloom": lambda: tg.functional.bloom(frame, **settings)}, repeats)
+    bloom_times, copy_times = times["bloom"], times["copy"]
+    bloom_ms, copy_ms = statistics.median(bloom_times), statistics.median(copy_times)
     return {
         "height": frame.shape[-2],
         "width": frame.shape[-1],
         "settings": settings,
         "bloom_ms": round(bloom_ms, 2),
-        "bloom_min_ms": round(min(bloom_times) * 1e3, 2),
+        "bloom_min_ms": round(min(bloom_times), 2),
         "copy_ms": round(copy_ms, 3),
-        "copy_min_ms": round(min(copy_times) * 1e3, 3),
+        "copy_min_ms": round(min(copy_times), 3),
         "ratio_to_copy": round(bloom_ms / copy_ms, 1),
         "ratio_of_minima": round(min(bloom_times) / min(copy_times), 1),
         "ms_per_megapixel": round(bloom_ms / (frame.shape[-2] * frame.shape[-1] / 1e6), 2),

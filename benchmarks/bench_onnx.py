@@ -3,41 +3,30 @@
     .venv/bin/python benchmarks/bench_onnx.py
 
 Writes benchmarks/results/onnx.json and onnx.md. Latencies are the median of 5 runs after a warm-up,
-batch 1, float32, CPU, in one process on this machine.
+batch 1, float32, CPU, in one process on this machine, onnxruntime and PyTorch alternating run by run
+(:func:`benchmarks.common.median_ms`).
 """
 
 from __future__ import annotations
 
 import json
 import platform
-import statistics
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import torch
 
-import torchgrade as tg
-
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import torchgrade as tg  # noqa: E402
+from benchmarks.common import median_ms  # noqa: E402
+
 LOOK = ROOT / "export" / "looks" / "cinematic.json"
 RESULTS = ROOT / "benchmarks" / "results"
 HEIGHT, WIDTH, REPEATS = 1080, 1920, 5
 COMMAND = ".venv/bin/python benchmarks/bench_onnx.py"
-
-
-def eager_ms(look: tg.PostFX, inputs) -> float:
-    """Median ms of the stateless look in PyTorch (as the graph computes it), after a warm-up."""
-    run = (lambda: look.frame(*inputs)) if isinstance(inputs, tuple) else (lambda: look(inputs))
-    with torch.no_grad():
-        run()
-        times = []
-        for _ in range(REPEATS):
-            start = time.perf_counter()
-            run()
-            times.append((time.perf_counter() - start) * 1000.0)
-    return statistics.median(times)
 
 
 def graph_inputs(look: tg.PostFX, image: torch.Tensor):
@@ -45,12 +34,20 @@ def graph_inputs(look: tg.PostFX, image: torch.Tensor):
 
 
 def measure(name: str, look: tg.PostFX, image: torch.Tensor, folder: Path, **options) -> dict:
+    """Export ``look``; time onnxruntime and the stateless look in PyTorch (as the graph computes it), alternately."""
     path = tg.onnx.export(look, folder / f"{name}.onnx", **options)
     inputs = graph_inputs(look, image)
+    runner = tg.onnx.session(path)
+    feeds = tg.onnx.feeds(runner, look, inputs)
+    calls = {
+        "onnxruntime": lambda: runner.run(None, feeds),
+        "pytorch": (lambda: look.frame(*inputs)) if isinstance(inputs, tuple) else (lambda: look(inputs)),
+    }
+    medians = median_ms(calls, REPEATS)
     return {
         "nodes": tg.onnx.node_count(path),
-        "onnxruntime_ms": round(tg.onnx.latency_ms(path, inputs, look, REPEATS), 1),
-        "pytorch_ms": round(eager_ms(look, inputs), 1),
+        "onnxruntime_ms": round(medians["onnxruntime"], 1),
+        "pytorch_ms": round(medians["pytorch"], 1),
     }
 
 

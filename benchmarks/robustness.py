@@ -19,10 +19,10 @@ import torch
 from tqdm import tqdm
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
+sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
 import torchgrade as tg  # noqa: E402
-from conftest import EXR_DIR  # noqa: E402
+from benchmarks.common import EXR_DIR  # noqa: E402
 from test_extremes import MODULES, _families  # noqa: E402
 
 DTYPES = {"float32": torch.float32, "float16": torch.float16, "bfloat16": torch.bfloat16}
