@@ -17,7 +17,6 @@ from torch import nn
 import torchgrade as tg
 from benchmarks import metrics
 from benchmarks.common import ROOT, sample_exr
-from torchgrade.lut import LUT3D
 
 LOOK = {
     "bloom": {"mode": "scattering", "threshold": 1.0, "knee": 0.5, "intensity": 0.6, "scatter": 0.7},
@@ -113,7 +112,7 @@ class Workload:
             return self.look.bloom(self.frame.to(dtype))
 
     @functools.lru_cache(maxsize=None)
-    def lut(self, size: int, shaper: str, fitted: bool = False) -> LUT3D:
+    def lut(self, size: int, shaper: str, fitted: bool = False) -> tg.LUT3D:
         """The per-pixel stage baked (in float64) into a ``size``³ LUT, table stored in float32.
 
         ``fitted``: the lattice reaches the brightest bloomed pixel of the accuracy scenes
@@ -124,7 +123,7 @@ class Workload:
         return float32_lut(baked).to(self.plan.device)
 
 
-def float32_lut(lut: LUT3D, compile: bool = False) -> LUT3D:
+def float32_lut(lut: tg.LUT3D, compile: bool = False) -> tg.LUT3D:
     """A copy of ``lut`` with its table in float32 (as served), optionally looked up through ``torch.compile``."""
     served = copy.deepcopy(lut)
     served.table = lut.table.detach().float()
