@@ -193,7 +193,7 @@ def test_tone_mapper_without_clip_is_the_clipped_curve_before_its_clip():
     unclipped = ToneMap("aces", clip=False)(image)
     assert unclipped.max() > 1.0
     assert torch.equal(unclipped.clamp(0.0, 1.0), tonemap(image, "aces"))
-    assert ToneMap("aces", clip=False).config()["clip"] is False and "clip" not in ToneMap("aces").config()
+    assert ToneMap("aces", clip=False).to_config()["clip"] is False and "clip" not in ToneMap("aces").to_config()
 
 
 def test_display_lut_is_baked_without_the_final_clip_and_clamps_after_the_lookup():

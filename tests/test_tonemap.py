@@ -425,3 +425,58 @@ def test_bad_configuration_names_the_problem():
         tg.ToneMap("reinhard_extended", white_point=-1.0)
     with pytest.raises(ValueError, match="white_point"):
         tg.ToneMap("aces", white_point=3.0)
+
+
+# --- the registry and the ToneMap stage
+
+
+@pytest.mark.parametrize("mode", tg.TONEMAP_MODES)
+def test_every_curve_clips_only_when_asked(mode):
+    from torchgrade.tonemap import TONE_MAPPERS
+
+    image = torch.exp(torch.randn(1, 3, 8, 8, dtype=torch.float64) * 3.0)
+    curve = TONE_MAPPERS[mode].curve
+    unclipped = curve(image, clip=False)
+    assert torch.equal(curve(image), unclipped.clamp(0.0, 1.0))
+    assert torch.equal(tonemap(image, mode, clip=False), unclipped)
+
+
+@pytest.mark.parametrize("mode", tg.TONEMAP_MODES)
+def test_stage_controls_are_the_mode_controls_and_round_trip(mode):
+    from torchgrade.tonemap import TONE_MAPPERS
+
+    layer = tg.ToneMap(mode, clip=False)
+    assert list(layer.control_table()) == ["mode", "clip", *TONE_MAPPERS[mode].controls]
+    assert layer.to_config() == {"mode": mode, "clip": False, **{name: c.default for name, c in TONE_MAPPERS[mode].controls.items()}}
+    assert tg.ToneMap.from_config(layer.to_config()).to_config() == layer.to_config()
+    assert layer.display_referred and not layer.is_identity and layer.expects_hdr == (mode != "none")
+
+
+def test_signature_shows_every_curve_parameter():
+    import inspect
+
+    from torchgrade.tonemap import TONE_MAPPERS
+
+    signature = inspect.signature(tg.ToneMap)
+    assert list(signature.parameters)[:4] == ["mode", "white_point", "exposure_bias", "clip"]
+    assert {name for entry in TONE_MAPPERS.values() for name in entry.controls} <= set(signature.parameters)
+
+
+def test_assigning_a_mode_resets_the_curve_parameters_and_keeps_clip():
+    layer = tg.ToneMap("unreal_filmic", slope=torch.nn.Parameter(torch.tensor(0.9)), clip=False)
+    layer.mode = "reinhard_extended"
+    assert layer.to_config() == {"mode": "reinhard_extended", "clip": False, "white_point": 4.0}
+    assert list(layer.parameters()) == [] and not hasattr(layer, "slope")
+    with pytest.raises(ValueError, match="unknown tone mapping mode 'filmic2'"):
+        layer.mode = "filmic2"
+    with pytest.raises(ValueError, match="white_point must lie in"):
+        layer.white_point = 0.0
+    assert layer.to_config() == {"mode": "reinhard_extended", "clip": False, "white_point": 4.0}
+
+
+def test_a_learnable_parameter_moved_out_of_range_raises_at_forward():
+    layer = tg.ToneMap("hable", exposure_bias=torch.nn.Parameter(torch.tensor(2.0)))
+    with torch.no_grad():
+        layer.exposure_bias.fill_(0.0)
+    with pytest.raises(ValueError, match="exposure_bias must lie in"):
+        layer(torch.rand(1, 3, 2, 2))

@@ -9,7 +9,7 @@ import torch
 
 import torchgrade as tg
 from torchgrade.functional import tonemap
-from torchgrade.tonemap import _AGX_GODOT_INSET, _AGX_GODOT_OUTSET
+from torchgrade.tonemap.agx_curves import _AGX_GODOT_INSET, _AGX_GODOT_OUTSET
 
 from test_color import pixels, rows
 from test_tonemap import glsl_mat3, hdr_samples, ref_filmic, ref_unreal_filmic
@@ -133,7 +133,7 @@ def test_per_sample_controls_equal_separate_runs(mode, name, values):
 
 def test_controls_are_stored_validated_and_learnable():
     layer = tg.ToneMap("unreal_filmic", slope=torch.nn.Parameter(torch.tensor(0.9)), white_clip=0.1)
-    assert layer.config() == {"mode": "unreal_filmic", "slope": pytest.approx(0.9), "toe": 0.55, "shoulder": 0.26,
+    assert layer.to_config() == {"mode": "unreal_filmic", "slope": pytest.approx(0.9), "toe": 0.55, "shoulder": 0.26,
                               "black_clip": 0.0, "white_clip": 0.1}
     layer(torch.rand(1, 3, 4, 4) * 5).sum().backward()
     assert torch.isfinite(layer.slope.grad)

@@ -1,0 +1,93 @@
+"""Fits of ACES 1.x as games ship them: Unity's (``AcesTonemap``), Stephen Hill's and Krzysztof Narkowicz's."""
+
+from __future__ import annotations
+
+import torch
+
+from ..color import convert, luminance, unity_to_aces
+from .aces_rrt import DIM_SURROUND_GAMMA, ODT_SAT_FACTOR, RRT_SAT_FACTOR, ap1_to_rec709, rrt_glow_and_red_modifier, smoothstep_hue_weight
+from .base import apply_rows, display, limited
+
+__all__ = ["aces_fitted", "aces", "aces_hill", "aces_narkowicz"]
+
+_ACES_FIT = dict(a=2.785085, b=0.107772, c=2.936045, d=0.887122, e=0.806889)
+"""Luminance fit of RRT 1.0.3 + ODT RGBmonitor_100nits_dim (Unity AcesTonemap; RMSE 0.0013)."""
+
+
+def _lerp_to_luminance(rgb: torch.Tensor, factor: float) -> torch.Tensor:
+    """``lerp(Y, rgb, factor)`` with AP1 luminance (Unity's RRT/ODT desaturation)."""
+    y = luminance(rgb, "ap1")
+    return y + factor * (rgb - y)
+
+
+def _dark_to_dim_surround(rgb: torch.Tensor) -> torch.Tensor:
+    """Unity's ``darkSurround_to_dimSurround``: ``Y → Y^0.9811`` in xyY, chromaticity kept, with 1e-4 floors."""
+    xyz = convert(rgb, "ap1_to_xyz")
+    big_x, big_y, big_z = xyz.split(1, dim=-3)
+    total = (big_x + big_y + big_z).clamp_min(1e-4)
+    x, y = big_x / total, big_y / total
+    new_y = big_y.clamp(0.0, 65504.0)
+    new_y = torch.where(new_y > 0, torch.where(new_y > 0, new_y, torch.ones_like(new_y)) ** DIM_SURROUND_GAMMA, new_y)
+    m = new_y / y.clamp_min(1e-4)
+    xyz = torch.cat((x * m, new_y, (1.0 - x - y) * m), dim=-3)
+    return convert(xyz, "xyz_to_ap1")
+
+
+def aces_fitted(aces: torch.Tensor) -> torch.Tensor:
+    """Unity ``AcesTonemap`` on ACES2065-1 input: RRT glow and red modifier, desaturation, the luminance
+    fit ``x (a x + b) / (x (c x + d) + e)`` of RRT+ODT (RGB monitor, 100 nits, dim), dim surround,
+    ODT desaturation, then AP1 → XYZ → D60→D65 → Rec.709; not clipped.
+
+    Examples:
+        >>> round(float(aces_fitted(torch.zeros(3, 1, 1)).max()), 6)
+        0.0
+    """
+    aces = rrt_glow_and_red_modifier(aces, smoothstep_hue_weight)
+    acescg = _lerp_to_luminance(convert(aces, "ap0_to_ap1").clamp_min(0.0), RRT_SAT_FACTOR)
+    k = _ACES_FIT
+    fitted = acescg * (k["a"] * acescg + k["b"]) / (acescg * (k["c"] * acescg + k["d"]) + k["e"])
+    return ap1_to_rec709(_lerp_to_luminance(_dark_to_dim_surround(fitted), ODT_SAT_FACTOR))
+
+
+def aces(image: torch.Tensor, clip: bool = True) -> torch.Tensor:
+    """ACES filmic tone mapping as Unity does it: ``AcesTonemap(unity_to_ACES(min(x, 60)))`` (HDR §3.5).
+
+    Examples:
+        >>> [round(v, 3) for v in aces(torch.tensor([0.18, 1.0, 100.0]).expand(3, 1, 3))[0, 0].tolist()]
+        [0.108, 0.63, 0.945]
+    """
+    return display(aces_fitted(unity_to_aces(limited(image))), clip)
+
+
+_HILL_INPUT = ((0.59719, 0.35458, 0.04823), (0.07600, 0.90834, 0.01566), (0.02840, 0.13383, 0.83777))
+_HILL_OUTPUT = ((1.60475, -0.53108, -0.07367), (-0.10208, 1.10813, -0.00605), (-0.00327, -0.07276, 1.07602))
+
+
+def aces_hill(image: torch.Tensor, clip: bool = True) -> torch.Tensor:
+    """Stephen Hill's ACES fit (BakingLab ``ACES.hlsl``, ``ACESFitted``): sRGB → RRT-saturation/AP1
+    input matrix, ``RRTAndODTFit(v) = (v (v + 0.0245786) - 0.000090537) / (v (0.983729 v + 0.432951) + 0.238081)``,
+    output matrix back to linear Rec.709 (ODT sRGB, 100 nits).
+
+    Examples:
+        >>> [round(v, 3) for v in aces_hill(torch.tensor([0.18, 1.0, 5.0]).expand(3, 1, 3))[0, 0].tolist()]
+        [0.106, 0.619, 0.931]
+    """
+    v = apply_rows(_HILL_INPUT, limited(image))
+    fitted = (v * (v + 0.0245786) - 0.000090537) / (v * (0.983729 * v + 0.4329510) + 0.238081)
+    return display(apply_rows(_HILL_OUTPUT, fitted), clip)
+
+
+_NARKOWICZ_EXPOSURE = 0.6
+"""Narkowicz's input scale: his curve was fitted to ACES with the input exposed by 0.6 (the blog's ``x *= 0.6``)."""
+
+
+def aces_narkowicz(image: torch.Tensor, clip: bool = True) -> torch.Tensor:
+    """Krzysztof Narkowicz's ACES luminance fit ("ACES Filmic Tone Mapping Curve", 2016), per channel:
+    ``x (2.51 x + 0.03) / (x (2.43 x + 0.59) + 0.14)`` with ``x = 0.6 · c``.
+
+    Examples:
+        >>> [round(v, 3) for v in aces_narkowicz(torch.tensor([0.18, 1.0, 5.0]).expand(3, 1, 3))[0, 0].tolist()]
+        [0.14, 0.673, 0.954]
+    """
+    x = limited(image) * _NARKOWICZ_EXPOSURE
+    return display(x * (2.51 * x + 0.03) / (x * (2.43 * x + 0.59) + 0.14), clip)

@@ -1,0 +1,168 @@
+"""The ACES 1.x RRT's building blocks that every ACES-based rendering here shares.
+
+Unity's ACES fit (:func:`~torchgrade.tonemap.aces`), Unreal's filmic curve and the ACES 1.0.3
+reference (:func:`~torchgrade.tonemap.aces_reference`) all start with the RRT's glow and red
+modifier and desaturate in AP1 before and after their tone scale; they differ in the hue weight
+of the red modifier and in how they compute AP1 luminance. Constants: Unity ``ACES.hlsl``, from
+the ACES 1.0.3 RRT and ODT (aces-dev ``rrt.ctl``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+from ..color import convert, matrix, safe_sqrt
+
+__all__ = [
+    "RRT_SAT_FACTOR",
+    "ODT_SAT_FACTOR",
+    "DIM_SURROUND_GAMMA",
+    "smoothstep_hue_weight",
+    "cubic_basis_hue_weight",
+    "rrt_glow_and_red_modifier",
+    "ap1_desaturate",
+    "ap1_dim_surround",
+    "ap1_to_rec709",
+]
+
+_RRT_GLOW_GAIN, _RRT_GLOW_MID = 0.05, 0.08
+_RRT_RED_SCALE, _RRT_RED_PIVOT, _RRT_RED_HUE, _RRT_RED_WIDTH = 0.82, 0.03, 0.0, 135.0
+RRT_SAT_FACTOR = 0.96
+"""The RRT's desaturation towards AP1 luminance, before its tone scale."""
+ODT_SAT_FACTOR = 0.93
+"""The ODT's desaturation towards AP1 luminance, after the dim-surround step."""
+DIM_SURROUND_GAMMA = 0.9811
+"""The ODT's dark → dim surround compensation: ``Y → Y^0.9811``."""
+
+
+def _rgb_saturation(rgb: torch.Tensor) -> torch.Tensor:
+    """ACES ``rgb_2_saturation``: ``(max(ma, 1e-4) - max(mi, 1e-4)) / max(ma, 1e-2)``."""
+    high = rgb.amax(dim=-3, keepdim=True)
+    low = rgb.amin(dim=-3, keepdim=True)
+    return (high.clamp_min(1e-4) - low.clamp_min(1e-4)) / high.clamp_min(1e-2)
+
+
+def _rgb_yc(rgb: torch.Tensor) -> torch.Tensor:
+    """ACES ``rgb_2_yc``: ``(r + g + b + 1.75 sqrt(b(b-g) + g(g-r) + r(r-b))) / 3``."""
+    r, g, b = rgb.split(1, dim=-3)
+    chroma = safe_sqrt(b * (b - g) + g * (g - r) + r * (r - b))
+    return (r + g + b + 1.75 * chroma) / 3.0
+
+
+def _rgb_hue_degrees(rgb: torch.Tensor) -> torch.Tensor:
+    """ACES ``rgb_2_hue`` in [0, 360): ``atan2(sqrt(3)(g - b), 2r - g - b)``; 0 for neutrals."""
+    r, g, b = rgb.split(1, dim=-3)
+    y = 3.0**0.5 * (g - b)
+    x = 2.0 * r - g - b
+    neutral_pixel = (x == 0) & (y == 0)
+    hue = torch.atan2(y, torch.where(neutral_pixel, torch.ones_like(x), x)) * (180.0 / math.pi)  # rad2deg has no ONNX export
+    hue = torch.where(neutral_pixel, torch.zeros_like(hue), hue)
+    return torch.where(hue < 0, hue + 360.0, hue)
+
+
+def _sigmoid_shaper(x: torch.Tensor) -> torch.Tensor:
+    """ACES ``sigmoid_shaper``: a 0..1 sigmoid spanning -2..2."""
+    t = (1.0 - torch.abs(x / 2.0)).clamp_min(0.0)
+    return (1.0 + torch.sign(x) * (1.0 - t * t)) / 2.0
+
+
+def _glow(yc: torch.Tensor, gain: torch.Tensor, mid: float) -> torch.Tensor:
+    """ACES ``glow_fwd``: full gain below 2/3·mid, none above 2·mid, ``gain (mid / yc - 1/2)`` between."""
+    between = gain * (mid / yc.clamp_min(2.0 / 3.0 * mid) - 0.5)
+    return torch.where(yc <= 2.0 / 3.0 * mid, gain, torch.where(yc >= 2.0 * mid, torch.zeros_like(gain), between))
+
+
+def _smoothstep(edge0, edge1, x: torch.Tensor) -> torch.Tensor:
+    t = ((x - edge0) / (edge1 - edge0)).clamp(0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def smoothstep_hue_weight(centered_hue: torch.Tensor) -> torch.Tensor:
+    """The red modifier's hue weight as Unity and Unreal approximate it: ``smoothstep(0, 1, 1 - |2h / 135|)²``.
+
+    Examples:
+        >>> smoothstep_hue_weight(torch.tensor([0.0, 67.5])).tolist()
+        [1.0, 0.0]
+    """
+    return _smoothstep(0.0, 1.0, 1.0 - torch.abs(2.0 * centered_hue / _RRT_RED_WIDTH)) ** 2
+
+
+def cubic_basis_hue_weight(centered_hue: torch.Tensor) -> torch.Tensor:
+    """ACES ``cubic_basis_shaper(h, 135)``: the uniform cubic B-spline on knots ``-w/2 .. w/2``, times 3/2.
+
+    With ``u = 4 |h| / w`` (knot intervals from the centre): ``(4 - 6u² + 3u³) / 6`` for ``u < 1``,
+    ``(2 - u)³ / 6`` for ``1 ≤ u < 2``, 0 beyond; the 3/2 makes the peak 1.
+
+    Examples:
+        >>> cubic_basis_hue_weight(torch.tensor([0.0, 67.5])).tolist()
+        [1.0, 0.0]
+    """
+    u = torch.abs(centered_hue) * (4.0 / _RRT_RED_WIDTH)
+    inner = (4.0 - 6.0 * u * u + 3.0 * u * u * u) / 6.0
+    outer = (2.0 - u).clamp_min(0.0) ** 3 / 6.0
+    return 1.5 * torch.where(u < 1.0, inner, outer)
+
+
+def rrt_glow_and_red_modifier(aces: torch.Tensor, hue_weight) -> torch.Tensor:
+    """The ACES RRT's first two modules on ACES2065-1 (RRT 1.0.3, ``rrt.ctl``).
+
+    Glow: ``aces · (1 + glow_fwd(yc, 0.05 · sigmoid_shaper((s - 0.4) / 0.2), 0.08))`` with ``s`` the
+    saturation; red modifier: ``r += w(h) · s · (0.03 - r) · (1 - 0.82)`` with ``h`` the hue centred on
+    red (degrees) and ``hue_weight`` the function ``w``.
+
+    Examples:
+        >>> grey = torch.full((3, 1, 1), 0.18)
+        >>> torch.equal(rrt_glow_and_red_modifier(grey, smoothstep_hue_weight), grey)  # no saturation: no glow
+        True
+    """
+    saturation = _rgb_saturation(aces)
+    s = _sigmoid_shaper((saturation - 0.4) / 0.2)
+    aces = aces * (1.0 + _glow(_rgb_yc(aces), _RRT_GLOW_GAIN * s, _RRT_GLOW_MID))
+
+    centered = _rgb_hue_degrees(aces) - _RRT_RED_HUE
+    centered = torch.where(centered < -180.0, centered + 360.0, torch.where(centered > 180.0, centered - 360.0, centered))
+    red, green_blue = aces.split((1, 2), dim=-3)
+    red = red + hue_weight(centered) * saturation * (_RRT_RED_PIVOT - red) * (1.0 - _RRT_RED_SCALE)
+    return torch.cat((red, green_blue), dim=-3)
+
+
+def _ap1_y(rgb: torch.Tensor) -> torch.Tensor:
+    """ACES ``AP1_RGB2Y``: luminance of ACEScg, the middle row of the AP1 → XYZ matrix (full precision)."""
+    return torch.einsum("j,...jhw->...hw", matrix("ap1_to_xyz", rgb)[1], rgb).unsqueeze(-3)
+
+
+def ap1_desaturate(rgb: torch.Tensor, factor: float) -> torch.Tensor:
+    """ACES ``calc_sat_adjust_matrix(factor, AP1_RGB2Y)``: ``Y + factor (rgb - Y)``, ``Y`` the AP1 luminance.
+
+    Examples:
+        >>> grey = torch.full((3, 1, 1), 0.5, dtype=torch.float64)
+        >>> torch.allclose(ap1_desaturate(grey, RRT_SAT_FACTOR), grey)
+        True
+    """
+    y = _ap1_y(rgb)
+    return y + factor * (rgb - y)
+
+
+def ap1_dim_surround(rgb: torch.Tensor) -> torch.Tensor:
+    """ACES ``darkSurround_to_dimSurround``: ``Y → Y^0.9811`` keeping xy, i.e. ``rgb · Y^(0.9811 - 1)``.
+
+    ``Y`` is AP1 luminance floored at 1e-10, as OpenColorIO's ``ACES_DarkToDim10``; it leaves
+    near-black pixels where they are.
+
+    Examples:
+        >>> ap1_dim_surround(torch.ones(3, 1, 1, dtype=torch.float64)).flatten().tolist()
+        [1.0, 1.0, 1.0]
+    """
+    return rgb * _ap1_y(rgb).clamp_min(1e-10) ** (DIM_SURROUND_GAMMA - 1.0)
+
+
+def ap1_to_rec709(rgb: torch.Tensor) -> torch.Tensor:
+    """The ODTs' last step: AP1 → XYZ → Bradford D60 → D65 → linear Rec.709.
+
+    Examples:
+        >>> ap1_to_rec709(torch.zeros(3, 1, 1)).flatten().tolist()
+        [0.0, 0.0, 0.0]
+    """
+    return convert(convert(convert(rgb, "ap1_to_xyz"), "d60_to_d65"), "xyz_to_rec709")

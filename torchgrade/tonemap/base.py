@@ -1,0 +1,95 @@
+"""What every tone mapping curve shares: the input limit, the display clip and the registry entry.
+
+Every curve clamps its input to ``[0, limit]`` first (:func:`limited`) and ends with :func:`display`,
+which clips to [0, 1] unless the caller asks for the unclipped display value (``clip=False``, as a
+LUT that clips after its lookup does).
+"""
+
+from __future__ import annotations
+
+import inspect
+from typing import Callable, NamedTuple
+
+import torch
+
+from ..core import apply_matrix
+from ..stage import Control
+
+__all__ = ["TONEMAP_INPUT_LIMIT", "WHITE_POINT_RANGE", "ToneMapper", "limited", "display", "apply_rows", "no_tonemap"]
+
+TONEMAP_INPUT_LIMIT = 60.0
+"""Inputs are clamped to this before tone mapping (Catlike Coding, HDR §3.3: 'a limit of 60')."""
+
+WHITE_POINT_RANGE = (1e-3, 1e4)
+"""Valid ``[low, high]`` of ``white_point``, which means the same in every mode that takes it."""
+
+
+class ToneMapper(NamedTuple):
+    """One tone mapping mode: its ``curve`` and its ``controls`` ``{name: Control(default, range)}``.
+
+    ``curve(image, clip=True, **controls)`` takes scene-referred linear Rec.709 and returns
+    display-referred linear Rec.709, clipped to [0, 1] when ``clip``.
+
+    Examples:
+        >>> entry = ToneMapper.of(no_tonemap)
+        >>> entry.controls
+        {}
+    """
+
+    curve: Callable[..., torch.Tensor]
+    controls: dict
+
+    @classmethod
+    def of(cls, curve: Callable[..., torch.Tensor], **ranges: tuple) -> "ToneMapper":
+        """The entry of ``curve`` with a control per ``ranges`` item, its default from ``curve``'s own signature.
+
+        Examples:
+            >>> def lift(image, amount=0.5, clip=True):
+            ...     return display(image + amount, clip)
+            >>> ToneMapper.of(lift, amount=(0.0, 1.0)).controls["amount"]
+            Control(default=0.5, range=(0.0, 1.0), kind='number')
+        """
+        defaults = inspect.signature(curve).parameters
+        return cls(curve, {name: Control(defaults[name].default, allowed) for name, allowed in ranges.items()})
+
+
+def limited(image: torch.Tensor, limit=TONEMAP_INPUT_LIMIT) -> torch.Tensor:
+    """``clamp(image, 0, limit)``: black for negative (out-of-gamut) values, ``limit`` a number or a tensor.
+
+    Examples:
+        >>> limited(torch.tensor([-1.0, 0.5, 100.0])).tolist()
+        [0.0, 0.5, 60.0]
+    """
+    return torch.minimum(image.clamp_min(0.0), torch.as_tensor(limit, dtype=image.dtype, device=image.device))
+
+
+def display(image: torch.Tensor, clip: bool) -> torch.Tensor:
+    """A curve's last step: the display range [0, 1] when ``clip``, else the curve's own values.
+
+    Examples:
+        >>> display(torch.tensor([-0.5, 1.5]), clip=True).tolist()
+        [0.0, 1.0]
+        >>> display(torch.tensor([-0.5, 1.5]), clip=False).tolist()
+        [-0.5, 1.5]
+    """
+    return image.clamp(0.0, 1.0) if clip else image
+
+
+def apply_rows(rows, image: torch.Tensor) -> torch.Tensor:
+    """Apply a constant 3x3 matrix, given as rows, to every pixel of ``(..., 3, H, W)``.
+
+    Examples:
+        >>> apply_rows(((0, 1, 0), (1, 0, 0), (0, 0, 1)), torch.tensor([1.0, 2.0, 3.0]).reshape(3, 1, 1)).flatten().tolist()
+        [2.0, 1.0, 3.0]
+    """
+    return apply_matrix(torch.tensor(rows, dtype=image.dtype, device=image.device), image)
+
+
+def no_tonemap(image: torch.Tensor, clip: bool = True) -> torch.Tensor:
+    """No curve: the display simply clips to [0, 1].
+
+    Examples:
+        >>> no_tonemap(torch.tensor([0.5, 3.0]).reshape(1, 2, 1).expand(3, 2, 1)).flatten().tolist()
+        [0.5, 1.0, 0.5, 1.0, 0.5, 1.0]
+    """
+    return display(image, clip)

@@ -1,0 +1,110 @@
+"""``ToneMap``: the tone mapping stage, whose controls are its mode's."""
+
+from __future__ import annotations
+
+import inspect
+
+import torch
+
+from ..core import Param
+from ..stage import Control, Stage, controls_signature
+from .registry import TONE_MAPPERS, TONEMAP_MODES, tone_mapper, tonemap
+
+__all__ = ["ToneMap"]
+
+
+class ToneMap(Stage):
+    """Tone mapping layer: ``ToneMap(mode="neutral", clip=True, **curve_params)``; see :data:`TONEMAP_MODES`.
+
+    Each mode takes the parameters of its curve, with that curve's defaults (``white_point``: 4 for
+    ``reinhard_extended`` and ``reinhard_luminance``, 11.2 for ``hable`` and ``filmic``;
+    ``exposure_bias``: 2; Hable's six ``filmic`` parameters; Unreal's ``slope``, ``toe``, ``shoulder``,
+    ``black_clip``, ``white_clip``) and ranges (:data:`~torchgrade.tonemap.TONE_MAPPERS`). Each accepts
+    a number, a 0-d or per-sample ``(B,)`` tensor, or an ``nn.Parameter`` to learn it; ``None`` means
+    the mode's default. Assigning ``mode`` resets the curve parameters to the new mode's defaults.
+    ``clip=False`` leaves the display values unclipped (a LUT baked through it clips after its lookup).
+
+    Examples:
+        >>> import torch
+        >>> layer = ToneMap("reinhard_extended", white_point=2.0)
+        >>> layer(torch.full((1, 3, 1, 1), 1.0)).flatten().tolist()
+        [0.625, 0.625, 0.625]
+        >>> layer.to_config()
+        {'mode': 'reinhard_extended', 'white_point': 2.0}
+        >>> layer.mode = "hable"
+        >>> layer.to_config()
+        {'mode': 'hable', 'exposure_bias': 2.0, 'white_point': 11.2}
+        >>> ToneMap("agx", slope=0.9)
+        Traceback (most recent call last):
+        ...
+        ValueError: tone mapper 'agx' takes no 'slope'; it takes no parameters
+    """
+
+    controls = {"mode": Control("neutral", TONEMAP_MODES), "clip": Control(True)}
+    """The controls of every mode; :meth:`control_table` adds the mode's curve parameters."""
+
+    display_referred = True
+
+    def __init__(
+        self, mode: str = "neutral", white_point: Param | None = None, exposure_bias: Param | None = None, clip: bool = True, **curve_params: Param
+    ):
+        super().__init__()
+        given = {"white_point": white_point, "exposure_bias": exposure_bias, **curve_params}
+        self._use_mode(mode, bool(clip), {name: value for name, value in given.items() if value is not None})
+
+    def _use_mode(self, mode: str, clip: bool, curve_params: dict) -> None:
+        """Replace every control by ``mode``'s, from ``curve_params`` and the mode's defaults."""
+        curve_controls = tone_mapper(mode).controls
+        for name in curve_params:
+            if name not in curve_controls:
+                raise ValueError(f"tone mapper {mode!r} takes no {name!r}; it takes {list(curve_controls) or 'no parameters'}")
+        for name in self._control_names:
+            delattr(self, name)
+        self._control_names = []
+        self.mode = mode  # the table depends on it
+        self.init_controls(mode=mode, clip=clip, **curve_params)
+
+    def control_table(self) -> dict:
+        return {**type(self).controls, **TONE_MAPPERS[self.mode].controls}
+
+    def set_param(self, name: str, value) -> None:
+        if name == "mode" and value != self.mode:
+            self._use_mode(value, self.clip, {})
+        else:
+            super().set_param(name, value)
+
+    @property
+    def always_in_config(self) -> tuple:
+        """The mode and every curve parameter: a tone mapper's config names its whole curve."""
+        return ("mode", *TONE_MAPPERS[self.mode].controls)
+
+    @property
+    def is_identity(self) -> bool:
+        """Tone mapping is never skipped: even ``"none"`` clips to the display range."""
+        return False
+
+    @property
+    def expects_hdr(self) -> bool:
+        """True when a curve maps scene-referred input (any mode but ``"none"``): a LUT baked through it needs an HDR shaper."""
+        return self.mode != "none"
+
+    def forward(self, image: torch.Tensor) -> torch.Tensor:
+        self.check_learnable()
+        return tonemap(image, **self.params())
+
+
+def _signature() -> inspect.Signature:
+    """``(mode, white_point, exposure_bias, clip, *, <every other curve parameter of any mode>)``, ``None`` meaning the mode's default."""
+    positional = inspect.Parameter.POSITIONAL_OR_KEYWORD
+    leading = [
+        inspect.Parameter("mode", positional, default="neutral"),
+        inspect.Parameter("white_point", positional, default=None),
+        inspect.Parameter("exposure_bias", positional, default=None),
+        inspect.Parameter("clip", positional, default=True),
+    ]
+    named = {parameter.name for parameter in leading}
+    others = {name: Control(None) for entry in TONE_MAPPERS.values() for name in entry.controls if name not in named}
+    return controls_signature(others, leading=tuple(leading))
+
+
+ToneMap.__signature__ = _signature()

@@ -1,0 +1,83 @@
+"""The registry of tone mappers: each mode's curve and controls, and :func:`tonemap`, which applies one by name.
+
+A new tone mapper is one file in this package (its curve, ending with
+:func:`~torchgrade.tonemap.base.display`, and the ranges of its parameters) plus its entry here.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from ..core import Param, check_choice, check_image, sanitize, to_input_dtype, working_dtype
+from .aces1_reference import aces_reference
+from .aces_fits import aces, aces_hill, aces_narkowicz
+from .agx_curves import agx, agx_godot
+from .base import WHITE_POINT_RANGE, ToneMapper, no_tonemap
+from .filmic_curves import FILMIC_RANGES, HABLE_RANGES, UNREAL_FILMIC_RANGES, filmic, hable, neutral, unreal_filmic
+from .khronos_pbr import khronos_pbr_neutral
+from .reinhard_curves import reinhard, reinhard_extended, reinhard_luminance
+
+__all__ = ["TONE_MAPPERS", "TONEMAP_MODES", "tone_mapper", "tonemap"]
+
+TONE_MAPPERS = {
+    "none": ToneMapper.of(no_tonemap),
+    "reinhard": ToneMapper.of(reinhard),
+    "reinhard_extended": ToneMapper.of(reinhard_extended, white_point=WHITE_POINT_RANGE),
+    "reinhard_luminance": ToneMapper.of(reinhard_luminance, white_point=WHITE_POINT_RANGE),
+    "neutral": ToneMapper.of(neutral),
+    "aces": ToneMapper.of(aces),
+    "hable": ToneMapper.of(hable, **HABLE_RANGES),
+    "filmic": ToneMapper.of(filmic, **FILMIC_RANGES),
+    "unreal_filmic": ToneMapper.of(unreal_filmic, **UNREAL_FILMIC_RANGES),
+    "aces_reference": ToneMapper.of(aces_reference),
+    "aces_hill": ToneMapper.of(aces_hill),
+    "aces_narkowicz": ToneMapper.of(aces_narkowicz),
+    "agx": ToneMapper.of(agx),
+    "agx_godot": ToneMapper.of(agx_godot),
+    "khronos_pbr_neutral": ToneMapper.of(khronos_pbr_neutral),
+}
+"""Every tone mapper by mode name: its curve and its controls (defaults are the curve's own)."""
+
+TONEMAP_MODES = tuple(TONE_MAPPERS)
+"""Every ``ToneMap`` mode."""
+
+
+def tone_mapper(mode: str) -> ToneMapper:
+    """The registry entry of ``mode``; ``ValueError`` naming the known modes for any other.
+
+    Examples:
+        >>> list(tone_mapper("hable").controls)
+        ['exposure_bias', 'white_point']
+        >>> tone_mapper("filmic2")  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        ValueError: unknown tone mapping mode 'filmic2': mode must be one of 'none', ...
+    """
+    try:
+        check_choice("mode", mode, TONEMAP_MODES)
+    except ValueError as error:
+        raise ValueError(f"unknown tone mapping mode {mode!r}: {error}") from None
+    return TONE_MAPPERS[mode]
+
+
+def tonemap(image: torch.Tensor, mode: str = "neutral", clip: bool = True, **params: Param) -> torch.Tensor:
+    """Apply tone mapper ``mode`` (one of :data:`TONEMAP_MODES`) with its parameters.
+
+    The input passes the library's non-finite policy first; float16/bfloat16 inputs are computed in
+    float32 and returned in their own dtype. ``clip=False`` skips the final clip to [0, 1] (used
+    when baking a LUT that clips after its lookup, :func:`torchgrade.lut.bake_lut`).
+
+    Examples:
+        >>> image = torch.full((1, 3, 1, 1), 8.0)
+        >>> tonemap(image, "reinhard_extended", white_point=4.0).flatten().tolist()
+        [1.0, 1.0, 1.0]
+        >>> tonemap(image, "reinhard_luminance", clip=False, white_point=4.0).flatten().tolist()
+        [1.333333134651184, 1.333333134651184, 1.333333134651184]
+    """
+    check_image(image)
+    entry = tone_mapper(mode)
+    unknown = set(params) - set(entry.controls)
+    if unknown:
+        raise ValueError(f"tone mapper {mode!r} takes {list(entry.controls) or 'no parameters'}, got {sorted(unknown)}")
+    working = sanitize(working_dtype(image))
+    return to_input_dtype(entry.curve(working, clip=clip, **params), image)
