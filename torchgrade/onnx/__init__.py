@@ -63,6 +63,7 @@ Examples:
 from .exporter import DEFAULT_OPSET, VOLUME_OPSET, export
 from .graph import (GRADE_INPUTS, ExportGraph, GradeWithInputs, default_example, example_inputs, export_graph, frame_of,
                     grade_feeds, grade_of, has_state, input_names, output_names)
+from .look import export_look, graph_inputs
 from .symbolics import SYMBOLICS, symbolics
 from .verify import Inputs, feeds, latency_ms, node_count, reference, session, verify
 from ..lut import LUT_BACKENDS, LUTLookup, strip_table, trilinear_strip
@@ -71,7 +72,7 @@ __all__ = [
     "DEFAULT_OPSET", "VOLUME_OPSET", "export",
     "GRADE_INPUTS", "ExportGraph", "GradeWithInputs", "default_example", "example_inputs", "export_graph", "frame_of",
     "grade_feeds", "grade_of", "has_state", "input_names", "output_names",
-    "SYMBOLICS", "symbolics",
+    "export_look", "graph_inputs", "SYMBOLICS", "symbolics",
     "Inputs", "feeds", "latency_ms", "node_count", "reference", "session", "verify",
     "LUT_BACKENDS", "LUTLookup", "strip_table", "trilinear_strip",
 ]
