@@ -5,6 +5,7 @@
 
 Prints, for the exported file: the max abs error against PyTorch on each EXR (display-referred,
 outputs in [0, 1] for a tone-mapped look), the node count and the median onnxruntime latency.
+The work is :func:`torchgrade.onnx.export_look`, which ``torchgrade export`` runs too.
 """
 
 from __future__ import annotations
@@ -12,8 +13,6 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-
-import torch
 
 import torchgrade as tg
 
@@ -34,26 +33,13 @@ def parse_args(argv=None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def graph_inputs(look: tg.PostFX, image: torch.Tensor):
-    """The image, plus a starting adaptation state and dt = 0 when the look has exposure."""
-    if look.exposure is None:
-        return image
-    return image, torch.zeros(image.shape[0]), torch.tensor(0.0)
-
-
 def main(argv=None) -> int:
     args = parse_args(argv)
     look = tg.PostFX.from_config(args.config).eval()
     if args.lut:
         look = look.to_lut(args.lut, args.interpolation)
-    tg.onnx.export(look, args.out, lut_backend=args.lut_backend, grade_inputs=args.grade_inputs)
-    print(f"{args.out}: stages {' -> '.join(look.stages())}, {tg.onnx.node_count(args.out)} nodes")
-    images = [tg.io.read_exr(args.exr_dir / name)[:3].unsqueeze(0) for name in args.images]
-    for name, image in zip(args.images, images):
-        error = tg.onnx.verify(look, args.out, graph_inputs(look, image))
-        print(f"  {name} {tuple(image.shape[-2:])}: max abs error vs PyTorch {error:.2e}")
-    latency = tg.onnx.latency_ms(args.out, graph_inputs(look, images[0]), look)
-    print(f"  onnxruntime latency on {args.images[0]}: {latency:.1f} ms (median of 5)")
+    images = {name: tg.io.read_exr(args.exr_dir / name)[:3].unsqueeze(0) for name in args.images}
+    print("\n".join(tg.onnx.export_look(look, args.out, images, args.lut_backend, args.grade_inputs)))
     return 0
 
 

@@ -99,3 +99,22 @@ def test_bake_refuses_a_bad_output_before_baking(tmp_path, capsys, output, messa
     assert main(["bake", "-o", str(tmp_path / output), "--size", "5"]) == 2
     assert message in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["folder.cube"]
+
+
+def test_export_writes_a_verified_onnx_file_and_reports_it(tmp_path, capsys):
+    config = tmp_path / "look.json"
+    config.write_text('{"exposure": {"speed": 1.5}, "grade": {"contrast": 15}, "tonemap": "neutral"}')
+    out = tmp_path / "look.onnx"
+    assert main(["export", "--config", str(config), "--out", str(out), "--width", "48", "--height", "32"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert out.exists() and len(lines) == 3
+    assert "exposure -> grade -> tonemap" in lines[0] and int(lines[0].split()[-2]) == tg.onnx.node_count(out)
+    assert "(32, 48)" in lines[1] and float(lines[1].split()[-1]) < 1e-4
+    assert lines[2].endswith("ms (median of 5)")
+
+
+def test_export_reports_a_bad_output_without_a_traceback(tmp_path, capsys):
+    config = tmp_path / "look.json"
+    config.write_text('{"tonemap": "neutral"}')
+    assert main(["export", "--config", str(config), "--out", str(tmp_path / "look.txt")]) == 2
+    assert "export: error: output must be a .onnx file" in capsys.readouterr().err

@@ -147,7 +147,7 @@ def test_compiled_lookup_matches_eager(interpolation):
 
 
 def test_compile_failure_falls_back_to_eager(monkeypatch):
-    import torchgrade.lut as lut_module
+    import torchgrade.lut.lut3d as lut_module
 
     def broken(*args):
         raise RuntimeError("no compiler")

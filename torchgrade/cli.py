@@ -1,5 +1,6 @@
 """The ``torchgrade`` command: ``demo`` renders the built-in scene, ``grade`` grades an EXR file,
-``bake`` writes a look's grade and tone mapping as a ``.cube`` 3D LUT."""
+``bake`` writes a look's grade and tone mapping as a ``.cube`` 3D LUT, ``export`` writes a look as ONNX and
+verifies it on onnxruntime."""
 
 from __future__ import annotations
 
@@ -16,7 +17,8 @@ from . import TONEMAP_MODES, ColorGrade, PostFX, ToneMap
 from .color import linear_to_srgb
 from .io import read_exr, write_cube, write_exr
 from .io.atomic import atomic_write
-from .lut import bake_lut, srgb_code_error
+from .lut import INTERPOLATIONS, LUT_BACKENDS, bake_lut, srgb_code_error
+from .onnx import export_look
 from .scene import demo_scene
 
 
@@ -159,6 +161,20 @@ def run_bake(args: argparse.Namespace) -> str:
     return line
 
 
+def run_export(args: argparse.Namespace) -> str:
+    output = Path(args.out)
+    if output.suffix.lower() != ".onnx" or not output.parent.is_dir():
+        raise ValueError(f"output must be a .onnx file in an existing folder, got {output}")
+    look = PostFX.from_config(args.config).eval()
+    if args.lut is not None:
+        look = look.to_lut(args.lut, args.interpolation)
+    if args.scene:
+        images = {Path(path).name: read_exr(path)[:3].unsqueeze(0) for path in args.scene}
+    else:
+        images = {"demo scene": demo_scene(args.height, args.width)}
+    return "\n".join(export_look(look, output, images, args.lut_backend, args.grade_inputs))
+
+
 def _add_grading_flags(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--tonemap", choices=TONEMAP_MODES, help="default aces")
     for name, unit in GRADING_FLAGS.items():
@@ -192,6 +208,18 @@ def _parser() -> argparse.ArgumentParser:
     bake.add_argument("--tolerance", type=float, help="with --size auto: 8-bit sRGB codes at p99.9 (default 0.5)")
     _add_grading_flags(bake)
     bake.set_defaults(run=run_bake)
+
+    export = commands.add_parser("export", help="export a look to ONNX; print node count, error vs PyTorch and latency")
+    export.add_argument("--config", required=True, help="look JSON (PostFX config)")
+    export.add_argument("--out", "-o", required=True, help=".onnx file to write")
+    export.add_argument("--lut", type=int, metavar="SIZE", help="bake grade and tone mapping into a SIZE³ LUT first")
+    export.add_argument("--interpolation", choices=INTERPOLATIONS, default="tetrahedral", help="the LUT's (with --lut)")
+    export.add_argument("--lut-backend", choices=LUT_BACKENDS, default="strip", help="the LUT's graph form (default strip, opset 17)")
+    export.add_argument("--grade-inputs", action="store_true", help="grading controls as graph inputs")
+    export.add_argument("--scene", nargs="+", help="EXR files to verify on (default: the built-in scene)")
+    export.add_argument("--width", type=int, default=320, help="built-in scene width")
+    export.add_argument("--height", type=int, default=180, help="built-in scene height")
+    export.set_defaults(run=run_export)
     return parser
 
 

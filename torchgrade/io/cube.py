@@ -33,8 +33,10 @@ import os
 import numpy as np
 import torch
 
-from ..lut import LUT3D, MAX_SIZE, MIN_SIZE, lattice_unit, shaper_decode
+from ..lut import LUT3D, MAX_SIZE, MIN_SIZE, SHAPERS
 from .atomic import atomic_write
+
+__all__ = ["read_cube", "write_cube", "cube_text", "shaper_samples", "SHAPER_SIZE", "MAX_SHAPER_SIZE"]
 
 SHAPER_SIZE = 65536
 """Points of the 1D shaper written for LogC LUTs (Resolve's largest 1D size)."""
@@ -55,15 +57,22 @@ def write_cube(path, lut: LUT3D, title: str = "torchgrade", shaper_size: int = S
 
 
 def cube_text(lut: LUT3D, title: str = "torchgrade", shaper_size: int = SHAPER_SIZE) -> str:
-    """The .cube file contents of ``lut``: Adobe form for a linear shaper, Resolve form otherwise."""
+    """The .cube file contents of ``lut``: Adobe form for a shaper without a 1D section, Resolve form otherwise.
+
+    Examples:
+        >>> from torchgrade.lut import identity_table
+        >>> cube_text(LUT3D(identity_table(2))).splitlines()[:4]
+        ['TITLE "torchgrade"', 'DOMAIN_MIN 0.0 0.0 0.0', 'DOMAIN_MAX 1.0 1.0 1.0', 'LUT_3D_SIZE 2']
+    """
     if '"' in title or "\n" in title:
         raise ValueError(f"cube title must not contain quotes or newlines, got {title!r}")
-    if lut.shaper == "linear":
+    section = shaper_samples(lut, shaper_size)
+    if section is None:
         lines = [f'TITLE "{title}"']
         lines += [f"DOMAIN_MIN {_numbers(lut.domain_min)}", f"DOMAIN_MAX {_numbers(lut.domain_max)}"]
         lines += [f"LUT_3D_SIZE {lut.size}"]
     else:
-        low, high, shaper = shaper_samples(lut, shaper_size)
+        low, high, shaper = section
         lines = [f"# {title}"]  # OpenColorIO's Resolve reader rejects the TITLE keyword
         lines += [f"LUT_1D_SIZE {shaper_size}", f"LUT_1D_INPUT_RANGE {low!r} {high!r}"]
         lines += [f"LUT_3D_SIZE {lut.size}", "LUT_3D_INPUT_RANGE 0.0 1.0"]
@@ -73,22 +82,24 @@ def cube_text(lut: LUT3D, title: str = "torchgrade", shaper_size: int = SHAPER_S
 
 
 def shaper_samples(lut: LUT3D, count: int):
-    """The Resolve 1D section of a shaped LUT: ``(low, high, (count, 3) normalised lattice coordinates)``.
+    """The Resolve 1D section of ``lut``'s shaper, ``(low, high, (count, 3) lattice coordinates)``, or ``None``.
 
-    Samples are evenly spaced over the linear range the lattice covers, ``[low, high]``; each holds
-    :func:`~torchgrade.lut.lattice_unit` of its value, the coordinate the 3D table is read at.
+    The shaper object gives it (:meth:`~torchgrade.lut.Shaper.cube_section`); a shaper whose
+    ``cube_domain_form`` is true (linear) has none: the Adobe ``DOMAIN_MIN/MAX`` keywords state it.
+
+    Examples:
+        >>> from torchgrade.lut import identity_table
+        >>> low, high, samples = shaper_samples(LUT3D(identity_table(2), "logc"), 16)
+        >>> samples.shape
+        torch.Size([16, 3])
     """
+    shaper = SHAPERS[lut.shaper]
+    if shaper.cube_domain_form:
+        return None
     if not MIN_SIZE <= count <= MAX_SHAPER_SIZE:
         raise ValueError(f"shaper size must be from {MIN_SIZE} to {MAX_SHAPER_SIZE}, got {count}")
     with torch.no_grad():
-        if lut.shaper == "curve":
-            low, high = lut.curve_range
-        else:
-            low = float(shaper_decode(lut.domain_min.double(), lut.shaper).min())
-            high = float(shaper_decode(lut.domain_max.double(), lut.shaper).max())
-        linear = torch.linspace(low, high, count, dtype=torch.float64).expand(3, count)
-        unit = lattice_unit(linear, lut.shaper, lut.domain_min.double(), lut.domain_max.double(), lut.curve, lut.curve_range)
-    return low, high, unit.t()
+        return shaper.cube_section(lut, count)
 
 
 def _numbers(values: torch.Tensor) -> str:

@@ -1,0 +1,42 @@
+"""3D LUTs: bake any per-pixel transform into a lattice, apply it with trilinear or tetrahedral interpolation.
+
+The package holds one family per file:
+
+* :mod:`~torchgrade.lut.shapers`: the 1D shapers before the lattice (:data:`SHAPERS`), each with
+  its encoding, default domain and ``.cube`` form;
+* :mod:`~torchgrade.lut.kernels`: the interpolations (:data:`KERNELS`), each with its gather form
+  and its ``GridSample`` graph forms by export backend;
+* :mod:`~torchgrade.lut.lattice`: sizes, lattice coordinates, table layouts, domains;
+* :mod:`~torchgrade.lut.lut3d`: :class:`LUT3D` (a :class:`~torchgrade.stage.Stage`), its lookup
+  and compile cache, and :class:`LUTLookup`, its ONNX export form;
+* :mod:`~torchgrade.lut.bake`: :func:`bake_lut`, automatic sizing and the error report.
+
+Examples:
+    >>> import torch
+    >>> import torchgrade as tg
+    >>> lut = tg.bake_lut(lambda image: image.clamp(0, 1) ** 2, size=9)
+    >>> round(float(lut(torch.full((1, 3, 1, 1), 0.5), "trilinear").mean()), 2)
+    0.25
+"""
+
+from .bake import AUTO_SIZES, bake_lut, expects_hdr, is_display_referred, scene_domain, srgb_code_error
+from .kernels import (BACKENDS, INTERPOLATIONS, KERNELS, LUT_BACKENDS, Kernel, strip_table, tetrahedral, trilinear,
+                      trilinear_grid_sample, trilinear_strip, trilinear_strip_lookup)
+from .lattice import MAX_SIZE, MIN_SIZE, check_size, checked_domain, identity_table, lattice, planar_table
+from .lut3d import (LUT3D, OUTPUT_ENCODINGS, LUTLookup, apply_lut, compiled_lookup, decode_output, encode_output,
+                    lookup, table_output)
+from .shapers import (DEFAULT_DOMAINS, LOGC_BLACK, SHAPERS, CurveShaper, LinearShaper, LogCShaper, Shaper, lattice_unit,
+                      sample_curve, shaper_decode, shaper_encode)
+
+_KERNELS = KERNELS  # the name benchmarks/lut_floor.py imports; each entry is callable as (coords, rows, size)
+
+__all__ = [
+    "AUTO_SIZES", "bake_lut", "expects_hdr", "is_display_referred", "scene_domain", "srgb_code_error",
+    "BACKENDS", "INTERPOLATIONS", "KERNELS", "LUT_BACKENDS", "Kernel", "strip_table", "tetrahedral", "trilinear",
+    "trilinear_grid_sample", "trilinear_strip", "trilinear_strip_lookup",
+    "MAX_SIZE", "MIN_SIZE", "check_size", "checked_domain", "identity_table", "lattice", "planar_table",
+    "LUT3D", "OUTPUT_ENCODINGS", "LUTLookup", "apply_lut", "compiled_lookup", "decode_output", "encode_output",
+    "lookup", "table_output",
+    "DEFAULT_DOMAINS", "LOGC_BLACK", "SHAPERS", "CurveShaper", "LinearShaper", "LogCShaper", "Shaper", "lattice_unit",
+    "sample_curve", "shaper_decode", "shaper_encode",
+]

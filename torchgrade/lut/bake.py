@@ -1,0 +1,219 @@
+"""Baking: evaluate any per-pixel transform on a LUT's lattice, pick its size, and report its error.
+
+**Display-referred LUTs** (baked from a transform containing a display-referred stage, a tone
+mapper: :attr:`~torchgrade.stage.Stage.display_referred`) record ``output_range = (0, 1)``: the clip
+happens *after* the lookup. A transform that ends with its tone mapper is baked with that tone
+mapper's ``clip`` off, so the table holds a smooth curve and the clip is exact instead of
+interpolated. Kinks inside the transform (the tone mapper's ``max(0, ·)`` of its graded input, on
+surfaces oblique to the lattice) stay in the table and are what limits a 33³ LUT's accuracy on
+strong looks.
+
+Examples:
+    >>> import torch
+    >>> lut = bake_lut(lambda image: image * 0.5, size=3)
+    >>> lut(torch.full((1, 3, 1, 1), 0.5)).flatten().tolist()
+    [0.25, 0.25, 0.25]
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+from typing import Callable, Optional
+
+import torch
+from torch import nn
+from tqdm import tqdm
+
+from ..color import linear_to_srgb
+from ..core import check_choice, check_image, sanitize
+from .lattice import MIN_SIZE, check_size, checked_domain, lattice
+from .lut3d import LUT3D, OUTPUT_ENCODINGS, encode_output
+from .shapers import DEFAULT_DOMAINS, SHAPERS
+
+__all__ = ["AUTO_SIZES", "bake_lut", "expects_hdr", "is_display_referred", "scene_domain", "srgb_code_error"]
+
+AUTO_SIZES = (3, 5, 9, 17, 33, 65, 129, 256)
+"""Sizes tried first by ``bake_lut(size="auto")`` before bisecting between the last two."""
+
+
+def _modules(transform) -> list:
+    return list(transform.modules()) if isinstance(transform, nn.Module) else []
+
+
+def is_display_referred(transform) -> bool:
+    """Whether ``transform``'s output is display-referred: it is or contains a stage flagged so (a tone mapper).
+
+    Examples:
+        >>> is_display_referred(lambda image: image)
+        False
+    """
+    return any(getattr(m, "display_referred", False) for m in _modules(transform))
+
+
+def expects_hdr(transform) -> bool:
+    """The rule behind ``shaper="auto"``: does ``transform`` take scene-referred (HDR) input?
+
+    An explicit ``transform.expects_hdr`` attribute wins; otherwise a transform containing a module
+    whose ``expects_hdr`` is true (a tone mapper with a curve) is HDR. Everything else (a grade
+    alone, a plain function) is treated as taking [0, 1] input.
+
+    Examples:
+        >>> expects_hdr(lambda image: image)
+        False
+    """
+    declared = getattr(transform, "expects_hdr", None)
+    if declared is not None:
+        return bool(declared)
+    return any(getattr(m, "expects_hdr", False) for m in _modules(transform))
+
+
+def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper: str = "auto",
+             scene: Optional[torch.Tensor] = None, tolerance: float = 0.5, chunk: int = 1 << 21,
+             output_encoding: str = "linear", progress: bool = False, domain: Optional[tuple] = None) -> LUT3D:
+    """Bake a per-pixel ``transform`` on ``(N, 3, H, W)`` tensors into a :class:`~torchgrade.LUT3D`.
+
+    The transform is evaluated once on the lattice, in float64 and in shaper space, and the float64
+    table kept (lattice point ``u`` is fed ``shaper.decode(min + u (max - min))``), ``chunk`` points at
+    a time. The table stays connected to the transform's parameters, so a LUT can be fitted by
+    gradient descent.
+
+    * ``shaper``: ``"linear"``, ``"logc"`` or ``"auto"`` (``"logc"`` when :func:`expects_hdr`);
+      the choice is stored as ``lut.shaper`` and shown in ``repr(lut)``.
+    * ``scene``: an image the LUT is for. The lattice domain then follows its dynamic range: the
+      top is the scene's largest value (after the non-finite policy), the bottom stays at black.
+    * ``domain``: ``(min, max)`` of the lattice in shaper code values (numbers or RGB triples, as
+      :class:`~torchgrade.LUT3D` takes them), overriding the shaper's default and the scene's range
+      (a ``scene`` then only serves ``size="auto"``).
+    * ``size``: 2..256, or ``"auto"`` with a ``scene``: the smallest size whose error on the scene is
+      at most ``tolerance`` 8-bit sRGB code values at the 99.9th percentile (:func:`srgb_code_error`,
+      against direct float64 evaluation). Sizes :data:`AUTO_SIZES` are tried in order, then the gap
+      below the first that passes is bisected (error is assumed to fall as the size grows); if none
+      passes, 256 is returned.
+    * ``output_encoding``: how the table stores outputs (:data:`~torchgrade.lut.OUTPUT_ENCODINGS`).
+      ``"srgb"`` spreads the interpolation error evenly over display code values, which suits
+      display-referred LUTs (benchmarks/results/lut.md lists the gain on real images).
+    * A display-referred transform (see the module docstring) gives a LUT that clamps to [0, 1]
+      after the lookup, baked with the final tone mapper's clip off.
+    * ``progress``: show a progress bar (tqdm, on stderr, when it is a terminal) while the lattice
+      is evaluated; a 256³ bake of a grade and tone mapper takes seconds.
+
+    Examples:
+        >>> bake_lut(lambda image: image, size=5, shaper="logc").shaper
+        'logc'
+    """
+    if shaper == "auto":
+        shaper = "logc" if expects_hdr(transform) else "linear"
+    check_choice("bake shaper", shaper, DEFAULT_DOMAINS)
+    if domain is None:
+        domain = DEFAULT_DOMAINS[shaper] if scene is None else scene_domain(scene, shaper)
+    domain = checked_domain(domain)  # the lattice is baked where the lookup will find it
+    check_choice("output encoding", output_encoding, OUTPUT_ENCODINGS)
+    display = is_display_referred(transform)
+    output_range = (0.0, 1.0) if display else None
+
+    def bake(n: int) -> LUT3D:
+        with _final_clip_off(transform) if display else contextlib.nullcontext():
+            table = encode_output(_evaluate_on_lattice(transform, n, shaper, domain, chunk, progress), output_encoding)
+        return LUT3D(table, shaper=shaper, domain=domain, output_range=output_range, output_encoding=output_encoding)
+
+    if size != "auto":
+        return bake(check_size(size))
+    if scene is None:
+        raise ValueError('bake_lut(size="auto") needs scene=image to measure the error on')
+    if not tolerance > 0:
+        raise ValueError(f'bake_lut(size="auto") needs a tolerance above 0 (8-bit codes), got {tolerance}')
+    return _smallest_within(bake, transform, scene, tolerance)
+
+
+@contextlib.contextmanager
+def _final_clip_off(transform):
+    """Within the block, the display-referred stage that produces ``transform``'s output runs with ``clip=False``.
+
+    That stage is ``transform`` itself or the last module of nested ``nn.Sequential`` containers;
+    any other transform is left as it is. Only valid when the LUT clamps to [0, 1] after the lookup.
+    """
+    final = transform
+    while isinstance(final, nn.Sequential) and len(final):
+        final = final[-1]
+    if not getattr(final, "display_referred", False) or not getattr(final, "clip", False):
+        yield
+        return
+    final.clip = False
+    try:
+        yield
+    finally:
+        final.clip = True
+
+
+def scene_domain(scene: torch.Tensor, shaper: str) -> tuple:
+    """Lattice domain ``(black, shaper(max(scene)))`` in shaper code values, for :func:`bake_lut`.
+
+    Examples:
+        >>> import torch
+        >>> scene_domain(torch.full((1, 3, 2, 2), 4.0), "linear")
+        (0.0, 4.0)
+    """
+    check_image(scene, "scene")
+    top = sanitize(scene.detach().double()).max().clamp_min(1e-3)
+    return DEFAULT_DOMAINS[shaper][0], float(SHAPERS[shaper].encode(top))
+
+
+def _evaluate_on_lattice(transform, size: int, shaper: str, domain, chunk: int, progress: bool = False) -> torch.Tensor:
+    """Evaluate ``transform`` at every lattice point, float64; returns the ``(S, S, S, 3)`` table.
+
+    ``progress`` shows a bar over the blue slices of the lattice (on a terminal only).
+    """
+    low, high = (torch.as_tensor(v, dtype=torch.float64) for v in domain)
+    inputs = SHAPERS[shaper].decode(low + lattice(size) * (high - low))  # (b, g, r, 3)
+    slices_per_chunk = max(1, chunk // (size * size))
+    outputs = []
+    with tqdm(total=size, desc=f"baking {size}³", unit="slice", disable=None if progress else True, leave=False) as bar:
+        for block in inputs.split(slices_per_chunk, dim=0):
+            image = block.reshape(1, -1, size, 3).permute(0, 3, 1, 2)  # H = b·S + g, W = r
+            result = transform(image)
+            check_image(result, "transform output")
+            outputs.append(result.double().permute(0, 2, 3, 1).reshape(-1, size, size, 3))
+            bar.update(block.shape[0])
+    return torch.cat(outputs, dim=0)
+
+
+def srgb_code_error(reference: torch.Tensor, approximation: torch.Tensor, quantile: float = 0.999) -> float:
+    """Absolute error in 8-bit sRGB code values, ``255 |srgb(clamp(a, 0, 1)) - srgb(clamp(b, 0, 1))|``, at ``quantile``.
+
+    Examples:
+        >>> import torch
+        >>> srgb_code_error(torch.ones(4), torch.ones(4))
+        0.0
+    """
+    codes = [255.0 * linear_to_srgb(t.detach().double().clamp(0.0, 1.0)) for t in (reference, approximation)]
+    error = (codes[0] - codes[1]).abs().flatten()
+    rank = max(1, math.ceil(quantile * error.numel()))
+    return float(error.kthvalue(rank).values)
+
+
+def _smallest_within(bake: Callable[[int], LUT3D], transform, scene: torch.Tensor, tolerance: float) -> LUT3D:
+    """The LUT of the smallest size whose :func:`srgb_code_error` on ``scene`` is within ``tolerance``."""
+    with torch.no_grad():
+        reference = transform(sanitize(scene.double()))
+
+    def passes(lut: LUT3D) -> bool:
+        with torch.no_grad():
+            return srgb_code_error(reference, lut(scene.double())) <= tolerance
+
+    smaller = MIN_SIZE - 1
+    for candidate in AUTO_SIZES:
+        lut = bake(candidate)
+        if passes(lut):
+            break
+        smaller = candidate
+    else:
+        return lut
+    while candidate - smaller > 1:
+        middle = (candidate + smaller) // 2
+        trial = bake(middle)
+        if passes(trial):
+            candidate, lut = middle, trial
+        else:
+            smaller = middle
+    return lut

@@ -1,0 +1,216 @@
+"""LUT interpolation kernels: a registry of interpolations, each with its gather form and its graph forms.
+
+Every interpolation has a **gather form**, ``kernel(coords (3, P), rows (3, S³), size) -> (3, P)``:
+integer lattice indices and one 1-D gather per vertex and channel on the planar table
+(:func:`~torchgrade.lut.planar_table`). That is what :class:`~torchgrade.LUT3D` runs, and what an
+ONNX export writes as ``Gather`` nodes. An interpolation may also have **grid forms**, one per
+export backend, ``form(unit (N, 3, H, W) in [0, 1], table (S, S, S, 3)) -> (N, 3, H, W)`` built on
+``grid_sample``, for runtimes that prefer ``GridSample`` (see :data:`BACKENDS`).
+
+A new interpolation is one function here plus one :class:`Kernel` line in :data:`KERNELS`; a new
+graph form of an existing one is one function plus one entry in its ``grids``.
+
+Examples:
+    >>> import torch
+    >>> rows = torch.arange(8.0).expand(3, 8)
+    >>> KERNELS["trilinear"](torch.full((3, 1), 0.5), rows, 2).flatten().tolist()
+    [3.5, 3.5, 3.5]
+    >>> KERNELS["trilinear"].graph_form("strip") is trilinear_strip_lookup
+    True
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Optional
+
+import torch
+import torch.nn.functional as F
+
+__all__ = ["Kernel", "KERNELS", "INTERPOLATIONS", "BACKENDS", "LUT_BACKENDS", "tetrahedral", "trilinear",
+           "trilinear_grid_sample", "strip_table", "trilinear_strip", "trilinear_strip_lookup"]
+
+
+def _cell(coords: torch.Tensor, size: int):
+    """Split lattice coordinates ``(3, P)`` in [0, S-1] into the cell's flat int32 base index and the fractions.
+
+    The index is formed in floating point (exact: at most 255³ < 2²⁴) and converted once.
+    """
+    corner = coords.floor().clamp(max=size - 2)
+    fraction = coords - corner
+    base = (corner[0] + size * corner[1] + (size * size) * corner[2]).to(torch.int32)
+    return base, fraction.unbind(0)
+
+
+def tetrahedral(coords: torch.Tensor, table: torch.Tensor, size: int) -> torch.Tensor:
+    """Tetrahedral interpolation of a planar table ``(3, S³)`` at lattice coordinates ``(3, P)`` -> ``(3, P)``.
+
+    The cube cell is split along its main diagonal into 6 tetrahedra, picked by the order of the
+    fractions ``f_a >= f_b >= f_c`` (Kasson, Nin and Plouffe 1995; the scheme OpenColorIO uses)::
+
+        y = c000 + f_a (v1 - c000) + f_b (v2 - v1) + f_c (c111 - v2)
+
+    where ``v1`` steps from ``c000`` along the largest fraction's axis and ``v2 = c111`` minus a step
+    along the smallest one's. Exact on lattice points and continuous across cells; on ties the
+    ambiguous vertex gets weight 0. Every step is per pixel and per table row (one 1-D gather per
+    vertex and channel), so ``torch.compile`` fuses it into a single pass over the pixels.
+
+    Examples:
+        >>> rows = torch.arange(8.0).expand(3, 8)
+        >>> tetrahedral(torch.tensor([[1.0], [0.0], [1.0]]), rows, 2).flatten().tolist()
+        [5.0, 5.0, 5.0]
+    """
+    base, (fr, fg, fb) = _cell(coords, size)
+    f_max = torch.maximum(torch.maximum(fr, fg), fb)
+    f_min = torch.minimum(torch.minimum(fr, fg), fb)
+    f_mid = fr + fg + fb - f_max - f_min
+    plane = size * size
+    stride_max = torch.where(fr >= fg, torch.where(fr >= fb, 1, plane), torch.where(fg >= fb, size, plane))
+    stride_min = torch.where(fr < fg, torch.where(fr < fb, 1, plane), torch.where(fg < fb, size, plane))
+    diagonal = 1 + size + plane
+    v1_index = base + stride_max
+    v2_index = base + (diagonal - stride_min)
+    c111_index = base + diagonal
+
+    def channel(row: torch.Tensor) -> torch.Tensor:
+        c000, v1, v2, c111 = row[base], row[v1_index], row[v2_index], row[c111_index]
+        return c000 + f_max * (v1 - c000) + f_mid * (v2 - v1) + f_min * (c111 - v2)
+
+    return torch.stack([channel(row) for row in table.unbind(0)])
+
+
+def trilinear(coords: torch.Tensor, table: torch.Tensor, size: int) -> torch.Tensor:
+    """Trilinear interpolation of a planar table ``(3, S³)`` at lattice coordinates ``(3, P)`` -> ``(3, P)``.
+
+    ``y = lerp_b(lerp_g(lerp_r(c000, c100), lerp_r(c010, c110)), lerp_g(...))`` over the 8 corners,
+    per table row as in :func:`tetrahedral`.
+
+    Examples:
+        >>> rows = torch.arange(8.0).expand(3, 8)
+        >>> trilinear(torch.tensor([[0.5], [0.0], [0.0]]), rows, 2).flatten().tolist()
+        [0.5, 0.5, 0.5]
+    """
+    base, (fr, fg, fb) = _cell(coords, size)
+
+    def channel(row: torch.Tensor) -> torch.Tensor:
+        def lerp_r(index):
+            low = row[index]
+            return low + fr * (row[index + 1] - low)
+
+        def lerp_g(index):
+            low = lerp_r(index)
+            return low + fg * (lerp_r(index + size) - low)
+
+        low = lerp_g(base)
+        return low + fb * (lerp_g(base + size * size) - low)
+
+    return torch.stack([channel(row) for row in table.unbind(0)])
+
+
+def trilinear_grid_sample(unit: torch.Tensor, table: torch.Tensor) -> torch.Tensor:
+    """Trilinear lookup with 5-D ``grid_sample``: ``unit`` ``(N, 3, H, W)`` in [0, 1] -> ``(N, 3, H, W)``.
+
+    The volume is ``(1, 3, D=b, H=g, W=r)`` and the grid holds ``(x, y, z) = (r, g, b)`` mapped to
+    [-1, 1]. With ``align_corners=True`` -1 and +1 are the *centres* of the first and last lattice
+    points, so ``u = i / (S - 1)`` lands exactly on lattice point ``i`` (with ``align_corners=False``
+    they would be the outer edges of the texels and every lookup would be off by half a cell).
+
+    Examples:
+        >>> from torchgrade.lut import identity_table
+        >>> trilinear_grid_sample(torch.full((1, 3, 1, 1), 0.25), identity_table(3)).flatten().tolist()
+        [0.25, 0.25, 0.25]
+    """
+    volume = table.permute(3, 0, 1, 2).unsqueeze(0).expand(unit.shape[0], -1, -1, -1, -1)
+    grid = (unit * 2.0 - 1.0).permute(0, 2, 3, 1).unsqueeze(1)
+    return F.grid_sample(volume, grid, mode="bilinear", padding_mode="border", align_corners=True).squeeze(2)
+
+
+def strip_table(table: torch.Tensor) -> torch.Tensor:
+    """A ``(S, S, S, 3)`` table ``[b, g, r]`` as a ``(1, 3, S, S²)`` strip image: row ``g``, column ``b·S + r``.
+
+    Examples:
+        >>> strip_table(torch.zeros(5, 5, 5, 3)).shape
+        torch.Size([1, 3, 5, 25])
+    """
+    size = table.shape[0]
+    return table.permute(3, 1, 0, 2).reshape(1, 3, size, size * size)
+
+
+def trilinear_strip(unit: torch.Tensor, strip: torch.Tensor) -> torch.Tensor:
+    """Trilinear lookup of ``unit`` ``(N, 3, H, W)`` in [0, 1] with two 4-D ``grid_sample``s on a strip.
+
+    Bilinear sampling at column ``b0·S + r``, row ``g`` interpolates red and green inside blue slice
+    ``b0`` (red never crosses into the next slice: at ``r = S - 1`` its neighbour has weight 0);
+    the two slices around ``b`` are then blended. ``align_corners=True`` puts -1 and +1 on the
+    centres of the first and last texels, so lattice points are sampled exactly. 4-D GridSample
+    exports at opset 16, which OpenVINO and TensorRT accept.
+
+    Examples:
+        >>> from torchgrade.lut import identity_table
+        >>> strip = strip_table(identity_table(3))
+        >>> trilinear_strip(torch.full((1, 3, 1, 1), 0.75), strip).flatten().tolist()
+        [0.75, 0.75, 0.75]
+    """
+    size = strip.shape[-2]
+    n, _, height, width = unit.shape
+    r, g, b = (unit * (size - 1)).unbind(1)
+    low_slice = b.floor().clamp(max=size - 2)
+    blend = (b - low_slice).unsqueeze(1)
+    rows = g / (size - 1) * 2.0 - 1.0
+    columns = (low_slice * size + r) / (size * size - 1) * 2.0 - 1.0
+    step = 2.0 * size / (size * size - 1)
+
+    def sample(x):
+        grid = torch.stack((x, rows), dim=-1).reshape(1, n * height, width, 2)
+        values = F.grid_sample(strip, grid, mode="bilinear", padding_mode="border", align_corners=True)
+        return values.reshape(3, n, height, width).transpose(0, 1)
+
+    low = sample(columns)
+    return low + blend * (sample(columns + step) - low)
+
+
+def trilinear_strip_lookup(unit: torch.Tensor, table: torch.Tensor) -> torch.Tensor:
+    """:func:`trilinear_strip` on a ``(S, S, S, 3)`` table (laid out by :func:`strip_table`), a grid form.
+
+    Examples:
+        >>> from torchgrade.lut import identity_table
+        >>> trilinear_strip_lookup(torch.full((1, 3, 1, 1), 0.5), identity_table(3)).flatten().tolist()
+        [0.5, 0.5, 0.5]
+    """
+    return trilinear_strip(unit, strip_table(table))
+
+
+@dataclass(frozen=True)
+class Kernel:
+    """One interpolation: its ``gather`` form (called by ``kernel(coords, rows, size)``) and its ``grids`` by backend.
+
+    Examples:
+        >>> KERNELS["tetrahedral"].graph_form("strip") is None
+        True
+    """
+
+    gather: Callable[[torch.Tensor, torch.Tensor, int], torch.Tensor]
+    grids: dict = field(default_factory=dict)
+
+    def __call__(self, coords: torch.Tensor, rows: torch.Tensor, size: int) -> torch.Tensor:
+        return self.gather(coords, rows, size)
+
+    def graph_form(self, backend: str) -> Optional[Callable[[torch.Tensor, torch.Tensor], torch.Tensor]]:
+        """The grid form an export with ``backend`` uses, or ``None`` to export the gather form."""
+        return self.grids.get(backend)
+
+
+KERNELS = {
+    "trilinear": Kernel(trilinear, {"strip": trilinear_strip_lookup, "volume": trilinear_grid_sample}),
+    "tetrahedral": Kernel(tetrahedral),
+}
+"""The interpolations by name, what ``LUT3D(...)(image, interpolation)`` takes."""
+
+INTERPOLATIONS = tuple(KERNELS)
+
+BACKENDS = {"strip": 16, "gather": 16, "volume": 20}
+"""Export backends of a LUT and the lowest opset each needs: ``"strip"`` (4-D ``GridSample`` on the
+2-D strip layout where a kernel has that form, else gathers), ``"gather"`` (gathers only) and
+``"volume"`` (5-D ``GridSample``, opset 20, which OpenVINO rejects and TensorRT has mis-mapped)."""
+
+LUT_BACKENDS = tuple(BACKENDS)

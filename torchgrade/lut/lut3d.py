@@ -1,0 +1,324 @@
+"""``LUT3D``: a baked 3D LUT as a stage, its lookup, its compile cache and its export form.
+
+A :class:`LUT3D` maps a linear Rec.709 pixel ``x`` to an output colour in five steps::
+
+    s = shaper(x)                                   # torchgrade.lut.shapers: linear, logc, curve
+    u = clamp((s - domain_min) / (domain_max - domain_min), 0, 1)      # per channel
+    y = interpolate(table, u * (size - 1))          # torchgrade.lut.kernels: trilinear, tetrahedral
+    y = decode(y, output_encoding)                  # "linear": y; "srgb": sRGB decoding
+    y = clamp(y, *output_range)                     # only for display-referred LUTs
+
+**Output encoding.** A table may store sRGB-encoded outputs (``output_encoding="srgb"``, decoded
+after the lookup, sign-preserving): the interpolation error is then spread evenly over display code
+values instead of piling up in the shadows.
+
+**Speed.** The lookup is gather-based on a planar ``(3, size³)`` table that :meth:`LUT3D.rows`
+converts once and caches. Every step is per pixel, so ``LUT3D(..., compile=True)`` runs non-finite
+policy, shaper, index math, gathers, weights, decoding and clamp as one ``torch.compile``d pass
+with no temporary buffers; the eager default makes one pass per operation.
+benchmarks/bench_lut.py measures both against OpenColorIO.
+
+Examples:
+    >>> import torch
+    >>> from torchgrade.lut import identity_table
+    >>> lut = LUT3D(identity_table(5))
+    >>> lut(torch.full((1, 3, 2, 2), 0.3)).flatten()[:3].tolist()  # doctest: +ELLIPSIS
+    [0.3..., 0.3..., 0.3...]
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import Callable, Optional
+
+import torch
+from torch import nn
+
+from ..color import linear_to_srgb, srgb_to_linear
+from ..core import check_choice, check_image, sanitize, to_input_dtype, working_dtype
+from ..stage import Control, Stage
+from .kernels import BACKENDS, KERNELS
+from .lattice import check_size, checked_domain, planar_table
+from .shapers import SHAPERS, lattice_unit
+
+__all__ = ["LUT3D", "LUTLookup", "OUTPUT_ENCODINGS", "apply_lut", "lookup", "compiled_lookup",
+           "decode_output", "encode_output", "table_output"]
+
+OUTPUT_ENCODINGS = ("linear", "srgb")
+"""How table entries are stored: linear values, or sRGB-encoded values decoded after the lookup."""
+
+
+def decode_output(values: torch.Tensor, encoding: str) -> torch.Tensor:
+    """Linear output of interpolated table values: identity, or :func:`torchgrade.color.srgb_to_linear`.
+
+    sRGB decoding is sign-preserving (linear segment below 0) and defined above 1, so any table encodes.
+
+    Examples:
+        >>> import torch
+        >>> decode_output(torch.tensor([1.0]), "srgb").tolist()
+        [1.0]
+    """
+    return values if encoding == "linear" else srgb_to_linear(values)
+
+
+def encode_output(values: torch.Tensor, encoding: str) -> torch.Tensor:
+    """Table entries of linear outputs: the inverse of :func:`decode_output`.
+
+    Examples:
+        >>> import torch
+        >>> encode_output(torch.tensor([0.5]), "linear").tolist()
+        [0.5]
+    """
+    return values if encoding == "linear" else linear_to_srgb(values)
+
+
+def table_output(values: torch.Tensor, output_encoding: str, output_range) -> torch.Tensor:
+    """A LUT's output from interpolated table values: :func:`decode_output`, then the clamp to ``output_range`` (if any).
+
+    Examples:
+        >>> import torch
+        >>> table_output(torch.tensor([1.5]), "linear", (0.0, 1.0)).tolist()
+        [1.0]
+    """
+    y = decode_output(values, output_encoding)
+    return y if output_range is None else y.clamp(*output_range)
+
+
+def _check_arguments(image: torch.Tensor, shaper: str, interpolation: str, output_encoding: str) -> None:
+    check_image(image)
+    check_choice("interpolation", interpolation, KERNELS)
+    check_choice("shaper", shaper, SHAPERS)
+    check_choice("output encoding", output_encoding, OUTPUT_ENCODINGS)
+
+
+def apply_lut(image: torch.Tensor, table: torch.Tensor, shaper: str = "linear", domain_min=0.0, domain_max=1.0,
+              interpolation: str = "tetrahedral", output_range=None, curve: Optional[torch.Tensor] = None,
+              curve_range=(0.0, 1.0), output_encoding: str = "linear") -> torch.Tensor:
+    """Apply a 3D LUT to a linear image ``(..., 3, H, W)``; see the module docstring for the steps.
+
+    Non-finite pixels follow the library policy (:func:`torchgrade.core.sanitize`) before the
+    shaper; inputs outside the domain clamp to it. Differentiable with respect to the image and the
+    table; float16/bfloat16 are computed in float32.
+
+    Examples:
+        >>> import torch
+        >>> from torchgrade.lut import identity_table
+        >>> apply_lut(torch.full((1, 3, 1, 1), 2.0), identity_table(3)).flatten().tolist()
+        [1.0, 1.0, 1.0]
+    """
+    _check_arguments(image, shaper, interpolation, output_encoding)
+    rows = planar_table(table.to(working_dtype(image).dtype))
+    return lookup(image, rows, table.shape[0], shaper, domain_min, domain_max, interpolation, output_range, curve, curve_range, output_encoding)
+
+
+def lookup(image, rows, size: int, shaper, domain_min, domain_max, interpolation, output_range, curve, curve_range, output_encoding) -> torch.Tensor:
+    """:func:`apply_lut` on a planar table ``rows`` ``(3, size³)`` already in the image's working dtype.
+
+    One pass per pixel from input to output: non-finite policy, shaper, lattice coordinates,
+    interpolation, output decoding and clamp. Arguments are not checked (see :func:`apply_lut`);
+    this is the function ``LUT3D(..., compile=True)`` compiles.
+
+    Examples:
+        >>> import torch
+        >>> from torchgrade.lut import identity_table, planar_table
+        >>> rows = planar_table(identity_table(2))
+        >>> x = torch.full((1, 3, 1, 1), 0.5)
+        >>> lookup(x, rows, 2, "linear", 0.0, 1.0, "trilinear", None, None, (0.0, 1.0), "linear").flatten().tolist()
+        [0.5, 0.5, 0.5]
+    """
+    x = sanitize(working_dtype(image)).movedim(-3, 0)  # (3, ..., H, W): a view
+    unit = lattice_unit(x.reshape(3, -1), shaper, domain_min, domain_max, curve, curve_range)
+    y = table_output(KERNELS[interpolation](unit * (size - 1), rows, size), output_encoding, output_range)
+    return to_input_dtype(y.reshape(x.shape).movedim(0, -3), image)
+
+
+_COMPILED = None
+
+
+def compiled_lookup() -> Callable:
+    """:func:`lookup` through ``torch.compile`` (created once, on first use; pixel counts become dynamic
+    after the first recompile, so new frame sizes do not compile again).
+
+    Examples:
+        >>> compiled_lookup() is compiled_lookup()
+        True
+    """
+    global _COMPILED
+    if _COMPILED is None:
+        _COMPILED = torch.compile(lookup)
+    return _COMPILED
+
+
+def _pair(value, name: str):
+    try:
+        low, high = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a (low, high) pair of numbers, got {value!r}") from None
+    if not low < high:
+        raise ValueError(f"{name} must have low < high, got {value!r}")
+    return low, high
+
+
+class LUT3D(Stage):
+    """A baked 3D LUT: ``LUT3D(table, shaper="linear")(image, interpolation="tetrahedral")``.
+
+    The table, the lattice domain and a curve shaper's curve are tensors (buffers, or the table a
+    parameter); the settings below are controls, checked on assignment and listed by ``to_config``.
+
+    Args:
+        table: ``(S, S, S, 3)`` indexed ``[b, g, r, channel]`` (red fastest), ``2 <= S <= 256``.
+        shaper: a name in :data:`~torchgrade.lut.SHAPERS` (``"curve"`` needs ``curve`` ``(n, 3)`` and ``curve_range``).
+        domain: ``(min, max)`` of the lattice in shaper code values, numbers or RGB triples;
+            default the shaper's ``default_domain``.
+        output_range: ``(low, high)`` clamp applied after the lookup, or ``None``.
+        output_encoding: ``"linear"`` (entries are linear outputs) or ``"srgb"`` (entries are
+            sRGB-encoded and decoded after the lookup; :meth:`linear_table` gives linear entries).
+        learnable: hold the table as an ``nn.Parameter`` (fit a LUT by gradient descent).
+        compile: run the lookup through ``torch.compile``: one fused pass over the pixels, several
+            times faster than eager, but the first call per interpolation and dtype compiles
+            (seconds; see benchmarks/results/lut.md).
+
+    Examples:
+        >>> from torchgrade.lut import identity_table
+        >>> lut = LUT3D(identity_table(3), shaper="logc")
+        >>> lut.to_config(), lut.is_identity
+        ({'shaper': 'logc'}, False)
+    """
+
+    controls = {
+        "shaper": Control("linear", tuple(SHAPERS)),
+        "output_range": Control(None),
+        "curve_range": Control((0.0, 1.0)),
+        "output_encoding": Control("linear", OUTPUT_ENCODINGS),
+        "compile": Control(False),
+    }
+
+    def __init__(self, table: torch.Tensor, shaper: str = "linear", domain=None, output_range=None,
+                 curve: Optional[torch.Tensor] = None, curve_range=(0.0, 1.0), learnable: bool = False,
+                 compile: bool = False, output_encoding: str = "linear"):
+        super().__init__()
+        check_choice("shaper", shaper, SHAPERS)
+        _check_table(table)
+        if (shaper == "curve") != (curve is not None):
+            raise ValueError("a 'curve' shaper needs curve=(n, 3) table, and only it takes one")
+        self.size = table.shape[0]
+        if learnable:
+            self.table = nn.Parameter(table.detach().clone())
+        else:
+            self.register_buffer("table", table)
+        low, high = checked_domain(domain if domain is not None else SHAPERS[shaper].default_domain)
+        self.register_buffer("domain_min", low)
+        self.register_buffer("domain_max", high)
+        self.register_buffer("curve", None if curve is None else _check_curve(curve))
+        self._rows_cache = (None, None, None)
+        self.init_controls(shaper=shaper, output_range=output_range, curve_range=curve_range,
+                           output_encoding=output_encoding, compile=bool(compile))
+
+    def check_control(self, name: str, value):
+        if name == "output_range":
+            return None if value is None else _pair(value, name)
+        if name == "curve_range":
+            return _pair(value, name)
+        return value
+
+    @property
+    def is_identity(self) -> bool:
+        """Never: a table is not checked for being the identity, so a LUT always runs."""
+        return False
+
+    def forward(self, image: torch.Tensor, interpolation: str = "tetrahedral") -> torch.Tensor:
+        _check_arguments(image, self.shaper, interpolation, self.output_encoding)
+        arguments = (image, self.rows(working_dtype(image).dtype), self.size, self.shaper, self.domain_min, self.domain_max,
+                     interpolation, self.output_range, self.curve, self.curve_range, self.output_encoding)
+        if self.compile:
+            try:
+                return compiled_lookup()(*arguments)
+            except Exception as error:  # no C++ compiler, unsupported device, ...: the eager path always works
+                warnings.warn(f"LUT3D(compile=True) fell back to eager: torch.compile failed with {error!r}", RuntimeWarning)
+                self.compile = False
+        return lookup(*arguments)
+
+    def rows(self, dtype: torch.dtype) -> torch.Tensor:
+        """The table as planar rows ``(3, S³)`` in ``dtype`` (:func:`~torchgrade.lut.planar_table`), what the kernels read.
+
+        Cached until the table is replaced, moved or modified in place; computed on every call while
+        gradients flow to the table, so autograd sees the conversion.
+        """
+        table = self.table
+        if table.requires_grad and torch.is_grad_enabled():
+            return planar_table(table.to(dtype))
+        key = (table.data_ptr(), table._version, dtype)
+        cached_table, cached_key, rows = self._rows_cache
+        if cached_table is not table or cached_key != key:
+            rows = planar_table(table.detach().to(dtype))
+            self._rows_cache = (table, key, rows)  # holding the table keeps its address from being reused
+        return rows
+
+    def linear_table(self) -> torch.Tensor:
+        """The table with linear output values (decoded by ``output_encoding``), as a ``.cube`` file holds it."""
+        return decode_output(self.table, self.output_encoding)
+
+    def export_form(self, interpolation: str = "tetrahedral", backend: str = "strip") -> nn.Module:
+        """The module an ONNX export traces for this LUT looked up with ``interpolation``, in ``backend``'s graph form."""
+        check_choice("interpolation", interpolation, KERNELS)
+        check_choice("lut_backend", backend, BACKENDS)
+        return LUTLookup(self, interpolation, backend)
+
+    def extra_repr(self) -> str:
+        domain = f"domain=({_short(self.domain_min)}, {_short(self.domain_max)})"
+        clamp = f", output_range={self.output_range}" if self.output_range else ""
+        encoding = f", output_encoding={self.output_encoding!r}" if self.output_encoding != "linear" else ""
+        return f"size={self.size}, shaper={self.shaper!r}, {domain}{clamp}{encoding}"
+
+
+class LUTLookup(nn.Module):
+    """A :class:`LUT3D` lookup with a fixed interpolation and graph form: what an ONNX export traces.
+
+    With a grid form for ``backend`` (:meth:`~torchgrade.lut.Kernel.graph_form`) the lattice
+    coordinates go to ``grid_sample``; otherwise the LUT's own gather lookup is traced.
+
+    Examples:
+        >>> import torch
+        >>> from torchgrade.lut import identity_table
+        >>> lookup = LUT3D(identity_table(3)).export_form("trilinear", "strip")
+        >>> lookup(torch.full((1, 3, 1, 1), 0.5)).flatten().tolist()
+        [0.5, 0.5, 0.5]
+    """
+
+    def __init__(self, lut: LUT3D, interpolation: str, backend: str):
+        super().__init__()
+        self.lut = lut
+        self.interpolation = interpolation
+        self.grid = KERNELS[interpolation].graph_form(backend)
+
+    def forward(self, image: torch.Tensor) -> torch.Tensor:
+        if self.grid is None:
+            return self.lut(image, self.interpolation)
+        lut = self.lut
+        x = sanitize(image)
+        n, _, height, width = x.shape
+        points = x.transpose(0, 1).reshape(3, -1)
+        unit = lattice_unit(points, lut.shaper, lut.domain_min, lut.domain_max, lut.curve, lut.curve_range)
+        unit = unit.reshape(3, n, height, width).transpose(0, 1)
+        y = self.grid(unit, lut.table.to(x.dtype))
+        return table_output(y, lut.output_encoding, lut.output_range)
+
+
+def _check_table(table) -> None:
+    if not isinstance(table, torch.Tensor) or not table.is_floating_point():
+        raise TypeError(f"LUT table must be a floating-point tensor, got {getattr(table, 'dtype', type(table).__name__)}")
+    size = table.shape[0] if table.dim() == 4 else None
+    if table.dim() != 4 or table.shape != (size, size, size, 3):
+        raise ValueError(f"LUT table must have shape (S, S, S, 3), got {tuple(table.shape)}")
+    check_size(size)
+
+
+def _check_curve(curve: torch.Tensor) -> torch.Tensor:
+    if curve.dim() != 2 or curve.shape[1] != 3 or curve.shape[0] < 2:
+        raise ValueError(f"shaper curve must have shape (n >= 2, 3), got {tuple(curve.shape)}")
+    return curve
+
+
+def _short(t: torch.Tensor):
+    values = [round(v, 6) for v in t.tolist()]
+    return values[0] if len(set(values)) == 1 else tuple(values)

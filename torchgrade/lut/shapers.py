@@ -1,0 +1,212 @@
+"""LUT shapers: the 1D curve a :class:`~torchgrade.LUT3D` applies per channel before its lattice.
+
+A shaper decides where the lattice's points go. Each is an object that knows its encoding
+(linear input -> shaper code values), its decoding (for baking: the linear value a lattice point
+is fed), its default lattice domain, and its ``.cube`` form (the Resolve 1D section
+:func:`torchgrade.io.write_cube` writes, or the Adobe ``DOMAIN_MIN/MAX`` form alone).
+Its ONNX form is its encoding itself: every encoding is made of traceable operators (LogC's
+``Log``/``Where``, a curve's ``Gather``), so the exporter traces it as it runs in PyTorch.
+
+A new shaper is one :class:`Shaper` subclass here plus one line in :data:`SHAPERS`.
+
+Examples:
+    >>> import torch
+    >>> round(float(SHAPERS["logc"].encode(torch.zeros(1))), 4) == round(LOGC_BLACK, 4)
+    True
+    >>> SHAPERS["linear"].default_domain
+    (0.0, 1.0)
+"""
+
+from __future__ import annotations
+
+from typing import Optional
+
+import torch
+
+from ..color import linear_to_logc, logc_to_linear
+
+__all__ = ["Shaper", "LinearShaper", "LogCShaper", "CurveShaper", "SHAPERS", "LOGC_BLACK", "DEFAULT_DOMAINS",
+           "shaper_encode", "shaper_decode", "sample_curve", "lattice_unit"]
+
+LOGC_BLACK = float(linear_to_logc(torch.tensor(0.0, dtype=torch.float64)))
+"""LogC code value of linear 0 (≈ 0.064 with Unity's constants): the bottom of the LogC lattice."""
+
+
+class Shaper:
+    """A per-channel 1D curve before the lattice: ``encode`` linear ``(3, P)`` points to code values.
+
+    ``curve`` and ``curve_range`` are the data of a tabulated shaper (:class:`CurveShaper`);
+    analytic shapers ignore them.
+
+    Examples:
+        >>> import torch
+        >>> SHAPERS["linear"].encode(torch.ones(3, 2)).shape
+        torch.Size([3, 2])
+    """
+
+    name = ""
+    default_domain = (0.0, 1.0)
+    """Lattice domain ``(min, max)`` in code values when a LUT is given none."""
+    bakeable = True
+    """Whether :func:`~torchgrade.bake_lut` can bake through it (it has :meth:`decode`)."""
+    cube_domain_form = False
+    """Whether a ``.cube`` file states it with the Adobe ``DOMAIN_MIN/MAX`` keywords alone (no 1D section)."""
+
+    def encode(self, points: torch.Tensor, curve: Optional[torch.Tensor] = None, curve_range=(0.0, 1.0)) -> torch.Tensor:
+        """Shaper code values of linear points."""
+        raise NotImplementedError
+
+    def decode(self, codes: torch.Tensor) -> torch.Tensor:
+        """Linear values of code values (the inverse of :meth:`encode`)."""
+        raise NotImplementedError(f"the {self.name!r} shaper has no inverse")
+
+    def linear_range(self, domain_min: torch.Tensor, domain_max: torch.Tensor, curve_range) -> tuple:
+        """``(low, high)``: the linear input range the lattice covers, over all channels."""
+        return float(self.decode(domain_min.double()).min()), float(self.decode(domain_max.double()).max())
+
+    def cube_section(self, lut, count: int) -> tuple:
+        """The Resolve ``.cube`` 1D section of ``lut``: ``(low, high, (count, 3) lattice coordinates)``.
+
+        Samples are evenly spaced over :meth:`linear_range`; each holds :func:`lattice_unit` of its
+        value, the coordinate the 3D table is read at, so a reader applies the shaper itself.
+        """
+        low, high = self.linear_range(lut.domain_min, lut.domain_max, lut.curve_range)
+        linear = torch.linspace(low, high, count, dtype=torch.float64).expand(3, count)
+        unit = lattice_unit(linear, self, lut.domain_min.double(), lut.domain_max.double(), lut.curve, lut.curve_range)
+        return low, high, unit.t()
+
+
+class LinearShaper(Shaper):
+    """No shaping: the lattice spreads evenly over ``[0, 1]``; a ``.cube`` gets the Adobe ``DOMAIN`` form.
+
+    Examples:
+        >>> LinearShaper().cube_domain_form
+        True
+    """
+
+    name = "linear"
+    cube_domain_form = True
+
+    def encode(self, points, curve=None, curve_range=(0.0, 1.0)):
+        return points
+
+    def decode(self, codes):
+        return codes
+
+
+class LogCShaper(Shaper):
+    """Unity's ARRI LogC curve (Catlike Coding, Color Grading §3.4): the lattice reaches linear ≈ 58.9.
+
+    The domain starts at ``LogC(0)``, not 0 as in the document: a lattice plane then lies exactly on
+    black, where every grade and tone mapper has its ``max(0, ·)`` kink, and no lattice points are
+    spent on negative inputs.
+
+    Examples:
+        >>> import torch
+        >>> round(float(LogCShaper().decode(torch.tensor(1.0))), 1)
+        58.9
+    """
+
+    name = "logc"
+    default_domain = (LOGC_BLACK, 1.0)
+
+    def encode(self, points, curve=None, curve_range=(0.0, 1.0)):
+        return linear_to_logc(points)
+
+    def decode(self, codes):
+        return logc_to_linear(codes)
+
+
+class CurveShaper(Shaper):
+    """A per-channel 1D table over a linear input range, as ``.cube`` files carry it (read, never baked).
+
+    Examples:
+        >>> import torch
+        >>> ramp = torch.linspace(0.0, 1.0, 5).unsqueeze(1).expand(5, 3)
+        >>> CurveShaper().encode(torch.full((3, 1), 0.5), ramp, (0.0, 2.0)).flatten().tolist()
+        [0.25, 0.25, 0.25]
+    """
+
+    name = "curve"
+    bakeable = False
+
+    def encode(self, points, curve=None, curve_range=(0.0, 1.0)):
+        return sample_curve(points, curve, curve_range)
+
+    def linear_range(self, domain_min, domain_max, curve_range):
+        return tuple(curve_range)
+
+
+SHAPERS = {shaper.name: shaper for shaper in (LinearShaper(), LogCShaper(), CurveShaper())}
+"""The shapers by name, what ``LUT3D(shaper=...)`` takes."""
+
+DEFAULT_DOMAINS = {name: shaper.default_domain for name, shaper in SHAPERS.items() if shaper.bakeable}
+"""Lattice domain of each bakeable shaper, in shaper code values (LogC 1.0 is linear ≈ 58.86)."""
+
+
+def _shaper(shaper) -> Shaper:
+    return SHAPERS[shaper] if isinstance(shaper, str) else shaper
+
+
+def shaper_encode(points: torch.Tensor, shaper, curve: Optional[torch.Tensor] = None, curve_range=(0.0, 1.0)) -> torch.Tensor:
+    """Shaper code values of linear ``(3, P)`` points; ``shaper`` is a name or a :class:`Shaper`.
+
+    Examples:
+        >>> import torch
+        >>> shaper_encode(torch.ones(3, 1), "linear").flatten().tolist()
+        [1.0, 1.0, 1.0]
+    """
+    return _shaper(shaper).encode(points, curve, curve_range)
+
+
+def shaper_decode(codes: torch.Tensor, shaper) -> torch.Tensor:
+    """Linear values of shaper code values: the inverse of :func:`shaper_encode`.
+
+    Examples:
+        >>> import torch
+        >>> round(float(shaper_decode(torch.tensor(LOGC_BLACK), "logc")), 6)
+        0.0
+    """
+    return _shaper(shaper).decode(codes)
+
+
+def sample_curve(points: torch.Tensor, curve: torch.Tensor, curve_range) -> torch.Tensor:
+    """Per-channel 1D table lookup on ``(3, P)`` points, linear interpolation, inputs clamped to ``curve_range``.
+
+    ``curve`` is ``(n, 3)``; entry ``k`` is the output at ``lo + k (hi - lo) / (n - 1)`` (a ``.cube`` 1D
+    shaper, as Resolve and OpenColorIO read it).
+
+    Examples:
+        >>> import torch
+        >>> curve = torch.tensor([[0.0] * 3, [1.0] * 3])
+        >>> sample_curve(torch.full((3, 1), 0.25), curve, (0.0, 1.0)).flatten().tolist()
+        [0.25, 0.25, 0.25]
+    """
+    lo, hi = curve_range
+    n = curve.shape[0]
+    position = ((points - lo) / (hi - lo)).clamp(0.0, 1.0) * (n - 1)
+    index = position.floor().clamp(max=n - 2)
+    fraction = position - index
+    planar = curve.to(points).t()
+    lower = torch.gather(planar, 1, index.long())
+    upper = torch.gather(planar, 1, index.long() + 1)
+    return lower + fraction * (upper - lower)
+
+
+def lattice_unit(points, shaper, domain_min, domain_max, curve=None, curve_range=(0.0, 1.0)) -> torch.Tensor:
+    """Normalised lattice coordinates ``u = clamp((shaper(x) - min) / (max - min), 0, 1)`` of ``(3, P)`` points.
+
+    Examples:
+        >>> import torch
+        >>> lattice_unit(torch.tensor([[2.0], [0.5], [-1.0]]), "linear", 0.0, 1.0).flatten().tolist()
+        [1.0, 0.5, 0.0]
+    """
+    low = _channel_column(domain_min, points)
+    high = _channel_column(domain_max, points)
+    codes = shaper_encode(points, shaper, curve, curve_range)
+    return ((codes - low) / (high - low)).clamp(0.0, 1.0)
+
+
+def _channel_column(value, like: torch.Tensor) -> torch.Tensor:
+    """A number or RGB triple as a ``(3, 1)`` column in ``like``'s dtype and device."""
+    return torch.as_tensor(value, dtype=like.dtype, device=like.device).reshape(-1, 1).expand(3, 1)

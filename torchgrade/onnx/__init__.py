@@ -1,0 +1,78 @@
+"""ONNX export of torchgrade modules and looks, and verification with onnxruntime.
+
+``export(module, path)`` writes one ONNX file that serves every batch size and resolution: the
+image input ``"image"`` ``(batch, 3, height, width)`` and the output ``"output"`` have dynamic axes.
+
+**Exporter and opset.** torchgrade uses PyTorch's TorchScript-based exporter
+(``torch.onnx.export(..., dynamo=False)``) at **opset 17** by default. Opset 17 keeps every model
+within the operators that OpenVINO and TensorRT accept (the "Deployment portability" rule of the
+design), and the exporter turns a look into a graph in about a second, where the dynamo exporter
+takes minutes for the bloom pyramid's symbolic shapes and cannot lower to opset 17 (its
+down-conversion writes opset-18 ``Split`` attributes into opset-17 files). Where PyTorch's
+symbolic functions are missing or wrong for an op torchgrade uses, :mod:`~torchgrade.onnx.symbolics`
+supplies them for the duration of the export.
+
+**Stages.** The exporter asks each stage for its :meth:`~torchgrade.stage.Stage.export_form`
+(:mod:`~torchgrade.onnx.graph`); a look lists its stages.
+
+**LUTs.** ``lut_backend`` picks how a :class:`~torchgrade.lut.LUT3D` is looked up in the graph
+(the LUT's ``export_form(interpolation, backend)``, from the kernel registry :data:`torchgrade.lut.KERNELS`):
+
+* ``"strip"`` (default, opset 17): trilinear lookups use the 2-D strip layout, the ``(S, S, S)``
+  volume laid out as an ``S x S²`` image sampled by two 4-D ``GridSample`` nodes and a lerp;
+  tetrahedral lookups use gathers (no GridSample form exists for them);
+* ``"gather"`` (opset 17): both interpolations as ``Gather`` nodes, exactly PyTorch's kernels;
+* ``"volume"`` (opset 20): trilinear with one 5-D ``GridSample`` (mode ``"linear"``), which
+  onnxruntime runs from 1.17 but OpenVINO rejects and TensorRT has mis-mapped; tetrahedral stays
+  on gathers.
+
+**Bloom.** In PyTorch the pyramid depth of :class:`~torchgrade.Bloom` follows the frame size
+through Python integers, which tracing would freeze. The graph instead holds every level a frame
+of up to :data:`~torchgrade.bloom.MAX_FRAME_SIDE` pixels a side can have and masks out, from the runtime shape, the
+levels the frame at hand does not have (``bloom(..., fixed_depth=...)``), so one graph matches
+PyTorch at every resolution up to that size.
+
+**Exposure.** A model with an :class:`~torchgrade.AutoExposure` stage is stateless: it takes
+``"image"``, ``"adapted"`` ``(batch,)`` (the previous frame's adapted luminance; ``<= 0`` starts
+a sequence) and ``"dt"`` (seconds, a scalar), and returns ``"output"`` and ``"adapted"``
+(named ``"adapted_out"``) for the next frame.
+
+**Verification.** :func:`verify` runs a file on onnxruntime and returns the max abs difference
+from PyTorch; :func:`latency_ms` times it (:mod:`~torchgrade.onnx.verify`).
+
+**Grading controls as inputs.** With ``grade_inputs=True`` every :class:`~torchgrade.ColorGrade`
+control becomes a graph input named as the control, per sample: scalars ``(batch,)``
+(``post_exposure``, ``temperature``, ``tint``, ``contrast``, ``split_balance``,
+``shadows_start``, ``shadows_end``, ``highlights_start``, ``highlights_end``, ``hue_shift``,
+``saturation``), colours ``(batch, 3)`` (``color_filter``, ``split_shadows``,
+``split_highlights``, ``shadows``, ``midtones``, ``highlights``), trackballs ``(batch, 4)``
+(``lift``, ``gamma``, ``gain``) and ``channel_mixer`` ``(batch, 3, 3)``, in Unity's units. Every
+grading step is then in the graph, so one model serves any look (and a different look per
+sample); :func:`grade_feeds` gives a grade's values.
+Only the ``aces`` switch and the curves (a variable number of control points) stay baked.
+
+Examples:
+    >>> import tempfile, torch, torchgrade as tg
+    >>> lut = tg.bake_lut(tg.ColorGrade(contrast=20), size=9)
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     path = export(tg.PostFX(lut=lut, interpolation="trilinear"), folder + "/lut.onnx")
+    ...     verify(lut.export_form("trilinear"), path, torch.rand(1, 3, 8, 8)) < 1e-5
+    True
+"""
+
+from .exporter import DEFAULT_OPSET, VOLUME_OPSET, export
+from .graph import (GRADE_INPUTS, ExportGraph, GradeWithInputs, default_example, example_inputs, export_graph, frame_of,
+                    grade_feeds, grade_of, has_state, input_names, output_names)
+from .look import export_look, graph_inputs
+from .symbolics import SYMBOLICS, symbolics
+from .verify import Inputs, feeds, latency_ms, node_count, reference, session, verify
+from ..lut import LUT_BACKENDS, LUTLookup, strip_table, trilinear_strip
+
+__all__ = [
+    "DEFAULT_OPSET", "VOLUME_OPSET", "export",
+    "GRADE_INPUTS", "ExportGraph", "GradeWithInputs", "default_example", "example_inputs", "export_graph", "frame_of",
+    "grade_feeds", "grade_of", "has_state", "input_names", "output_names",
+    "export_look", "graph_inputs", "SYMBOLICS", "symbolics",
+    "Inputs", "feeds", "latency_ms", "node_count", "reference", "session", "verify",
+    "LUT_BACKENDS", "LUTLookup", "strip_table", "trilinear_strip",
+]

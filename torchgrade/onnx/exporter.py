@@ -1,0 +1,77 @@
+"""``export``: one ONNX file per look, with dynamic batch, height and width.
+
+Examples:
+    >>> import tempfile, torchgrade as tg
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     path = export(tg.ToneMap("reinhard"), folder + "/tonemap.onnx")
+    ...     print(path.suffix)
+    .onnx
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+from typing import Optional, Sequence
+
+import onnx as onnx_lib  # the onnx package (absolute import), not this package
+import torch
+from torch import nn
+
+from ..lut import BACKENDS
+from .graph import default_example, example_inputs, export_graph, input_names, output_names
+from .symbolics import symbolics
+
+__all__ = ["DEFAULT_OPSET", "VOLUME_OPSET", "export"]
+
+DEFAULT_OPSET = 17
+"""Opset of every export unless a 5-D GridSample LUT asks for :data:`VOLUME_OPSET`."""
+VOLUME_OPSET = BACKENDS["volume"]
+"""First opset with 5-D ``GridSample`` (mode spelled ``"linear"``)."""
+
+
+def _dynamic_axes(names: Sequence[str]) -> dict:
+    axes = {"image": {0: "batch", 2: "height", 3: "width"}, "output": {0: "batch", 2: "height", 3: "width"}}
+    axes.update({name: {0: "batch"} for name in names if name not in axes and name != "dt"})
+    return axes
+
+
+def export(module: nn.Module, path, *, example: Optional[torch.Tensor] = None, opset: Optional[int] = None,
+           lut_backend: str = "strip", grade_inputs: bool = False) -> Path:
+    """Export a torchgrade module or :class:`~torchgrade.PostFX` look to ``path``; returns the path.
+
+    Args:
+        module: any torchgrade module, a ``PostFX`` look, or an ``nn.Module`` built from them that
+            maps an image to an image.
+        example: image to trace with (default :func:`~torchgrade.onnx.default_example`); the graph
+            keeps batch, height and width dynamic.
+        opset: default :data:`DEFAULT_OPSET` (17), or :data:`VOLUME_OPSET` (20) for
+            ``lut_backend="volume"``; each backend needs at least its opset in
+            :data:`~torchgrade.lut.BACKENDS`.
+        lut_backend: ``"strip"``, ``"gather"`` or ``"volume"`` (see :data:`~torchgrade.lut.BACKENDS`).
+        grade_inputs: expose the grading controls as graph inputs (see :mod:`torchgrade.onnx`).
+
+    Examples:
+        >>> import torchgrade as tg
+        >>> export(tg.ToneMap(), "never.onnx", lut_backend="volume", opset=17)
+        Traceback (most recent call last):
+        ...
+        ValueError: lut_backend='volume' needs opset >= 20, got 17
+    """
+    minimum = BACKENDS.get(lut_backend, 0)
+    opset = opset or max(DEFAULT_OPSET, minimum)
+    if opset < minimum:
+        raise ValueError(f"lut_backend={lut_backend!r} needs opset >= {minimum}, got {opset}")
+    graph = export_graph(module, lut_backend, grade_inputs)
+    example = default_example(graph) if example is None else example
+    inputs = example_inputs(graph, module, example.float())
+    names = input_names(graph)
+    path = Path(path)
+    with symbolics(opset), warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # tracer warnings: Python ints frozen by design (bloom depth)
+        torch.onnx.export(
+            graph, inputs, str(path), dynamo=False, opset_version=opset,
+            input_names=names, output_names=output_names(graph), dynamic_axes=_dynamic_axes(names),
+        )
+    onnx_lib.checker.check_model(str(path))
+    return path

@@ -1,0 +1,234 @@
+"""The export-ready form of a look: each stage's :meth:`~torchgrade.stage.Stage.export_form` in one graph.
+
+The exporter asks, it does not look inside: a look (anything with a ``stages()`` method, as
+:class:`~torchgrade.PostFX`) lists its stages; each stage gives its export form, and the export
+options its ``export_form`` accepts by name (``interpolation`` and ``backend`` for a LUT) are
+passed to it; a stage that keeps state between frames gives its stateless frame function.
+Only ``grade_inputs`` is grade-specific: :class:`GradeWithInputs` turns a
+:class:`~torchgrade.ColorGrade`'s number controls (:data:`GRADE_INPUTS`) into graph inputs.
+
+Examples:
+    >>> import torchgrade as tg
+    >>> graph = export_graph(tg.ToneMap("neutral"))
+    >>> input_names(graph), output_names(graph)
+    (['image'], ['output'])
+"""
+
+from __future__ import annotations
+
+import functools
+import inspect
+from typing import Callable, Optional, Sequence
+
+import torch
+from torch import nn
+
+from ..exposure import AutoExposure
+from ..grade import ColorGrade, color_grade
+from ..lut import BACKENDS
+from ..pipeline import exposure_frame
+
+__all__ = ["GRADE_INPUTS", "GradeWithInputs", "ExportGraph", "export_graph", "grade_feeds", "grade_of", "frame_of", "has_state",
+           "input_names", "output_names", "example_inputs", "default_example"]
+
+GRADE_INPUTS = tuple(name for name, control in ColorGrade.controls.items() if control.kind == "number")
+"""The :class:`~torchgrade.ColorGrade` controls a ``grade_inputs`` graph takes as inputs, in input order."""
+
+
+def frame_of(stage: nn.Module) -> Optional[Callable]:
+    """The stateless frame function ``(image, adapted, dt) -> (image, adapted)`` of a stage that keeps
+    state between frames, or ``None`` for a stateless stage.
+
+    A stage's own ``frame`` method is used; :class:`~torchgrade.AutoExposure`, which has none,
+    gets :func:`~torchgrade.pipeline.exposure_frame`.
+
+    Examples:
+        >>> import torchgrade as tg
+        >>> frame_of(tg.ToneMap()) is None, frame_of(tg.AutoExposure()) is None
+        (True, False)
+    """
+    frame = getattr(stage, "frame", None)
+    if frame is None and isinstance(stage, AutoExposure):
+        frame = functools.partial(exposure_frame, stage)
+    return frame
+
+
+class GradeWithInputs(nn.Module):
+    """``ColorGrade`` whose controls are graph inputs: ``forward(image, *controls)`` in :data:`GRADE_INPUTS` order.
+
+    Its curves (control points, not inputs) and the ``aces`` switch are baked into the graph.
+
+    Examples:
+        >>> import torch
+        >>> feeds = grade_feeds(None, 1)
+        >>> GradeWithInputs(False)(torch.ones(1, 3, 2, 2), *feeds.values()).shape
+        torch.Size([1, 3, 2, 2])
+    """
+
+    def __init__(self, aces: bool, curves: Optional[dict] = None):
+        super().__init__()
+        self.aces = aces
+        self.curves = curves or {}
+
+    def forward(self, image: torch.Tensor, *controls: torch.Tensor) -> torch.Tensor:
+        return color_grade(image, aces=self.aces, **dict(zip(GRADE_INPUTS, controls)), **self.curves)
+
+
+class ExportGraph(nn.Module):
+    """The stages of a look as one graph: ``(image[, adapted, dt][, *controls]) -> output[, adapted]``.
+
+    Examples:
+        >>> import torchgrade as tg
+        >>> len(ExportGraph([tg.ToneMap()]).stages)
+        1
+    """
+
+    def __init__(self, stages: Sequence[nn.Module], exposure: Optional[nn.Module] = None):
+        super().__init__()
+        self.stages = nn.ModuleList(stages)
+        self.exposure = exposure
+
+    def forward(self, image: torch.Tensor, *extra: torch.Tensor):
+        if self.exposure is not None:
+            adapted, dt, *controls = extra
+            image, adapted = frame_of(self.exposure)(image, adapted, dt)
+        else:
+            controls = list(extra)
+        for stage in self.stages:
+            image = stage(image, *controls) if isinstance(stage, GradeWithInputs) else stage(image)
+        return (image, adapted) if self.exposure is not None else image
+
+
+def _look_stages(module: nn.Module) -> tuple:
+    """``(stateful first stage or None, [stage, ...], options)`` of any exportable module."""
+    listed = getattr(module, "stages", None)
+    stages = list(listed().values()) if callable(listed) else [module]
+    options = {"interpolation": getattr(module, "interpolation", "tetrahedral")} if callable(listed) else {}
+    stateful = stages.pop(0) if stages and frame_of(stages[0]) is not None else None
+    return stateful, stages, options
+
+
+def has_state(module: nn.Module) -> bool:
+    """Whether ``module``'s graph carries state between frames (inputs ``adapted``, ``dt``; output ``adapted_out``).
+
+    Examples:
+        >>> import torchgrade as tg
+        >>> has_state(tg.PostFX(exposure={}, tonemap="neutral")), has_state(tg.ToneMap())
+        (True, False)
+    """
+    return _look_stages(module)[0] is not None
+
+
+def _export_form(stage: nn.Module, options: dict) -> nn.Module:
+    """``stage.export_form(...)`` with the options it takes by name; the stage itself without one."""
+    form = getattr(stage, "export_form", None)
+    if form is None:
+        return stage
+    accepted = inspect.signature(form).parameters
+    return form(**{name: value for name, value in options.items() if name in accepted})
+
+
+def export_graph(module: nn.Module, lut_backend: str = "strip", grade_inputs: bool = False) -> ExportGraph:
+    """The export-ready form of ``module`` (see the module docstring for how each stage is asked).
+
+    Examples:
+        >>> import torchgrade as tg
+        >>> export_graph(tg.ColorGrade(contrast=10), grade_inputs=True).stages[0].aces
+        False
+    """
+    if lut_backend not in BACKENDS:
+        raise ValueError(f"lut_backend must be one of {tuple(BACKENDS)}, got {lut_backend!r}")
+    exposure, named, options = _look_stages(module)
+    options["backend"] = lut_backend
+    stages = []
+    for stage in named:
+        if grade_inputs and isinstance(stage, ColorGrade):
+            stages.append(GradeWithInputs(stage.aces, stage.curves()))
+        else:
+            stages.append(_export_form(stage, options))
+    if grade_inputs and not any(isinstance(s, GradeWithInputs) for s in stages):
+        raise ValueError("grade_inputs=True needs a ColorGrade stage (a look's grade, or a ColorGrade)")
+    return ExportGraph(stages, exposure).eval()
+
+
+def grade_of(module: nn.Module) -> Optional[ColorGrade]:
+    """The grade whose controls feed a ``grade_inputs`` graph: a grade itself, or a look's ``grade``.
+
+    Examples:
+        >>> import torchgrade as tg
+        >>> grade_of(tg.PostFX(grade={"contrast": 10})).contrast
+        10
+    """
+    if isinstance(module, ColorGrade):
+        return module
+    return getattr(module, "grade", None)
+
+
+def grade_feeds(grade: Optional[ColorGrade], batch: int) -> dict:
+    """Per-sample control tensors of ``grade`` (identity controls for ``None``), for a ``grade_inputs`` model.
+
+    Examples:
+        >>> grade_feeds(None, 2)["channel_mixer"].shape
+        torch.Size([2, 3, 3])
+    """
+    values = grade.params() if grade is not None else {}
+    feeds = {}
+    for name in GRADE_INPUTS:
+        default = ColorGrade.controls[name].default
+        shape = (batch,) + torch.as_tensor(default).shape
+        value = torch.as_tensor(values.get(name, default), dtype=torch.float32).detach()
+        feeds[name] = value if value.shape == shape else value.expand(shape).clone()
+    return feeds
+
+
+def input_names(graph: ExportGraph) -> list:
+    """Graph input names, in the order :class:`ExportGraph` takes them.
+
+    Examples:
+        >>> import torchgrade as tg
+        >>> input_names(export_graph(tg.AutoExposure()))
+        ['image', 'adapted', 'dt']
+    """
+    names = ["image"] + (["adapted", "dt"] if graph.exposure is not None else [])
+    if any(isinstance(s, GradeWithInputs) for s in graph.stages):
+        names += list(GRADE_INPUTS)
+    return names
+
+
+def output_names(graph: ExportGraph) -> list:
+    """Graph output names: ``output``, and ``adapted_out`` for a graph with exposure state.
+
+    Examples:
+        >>> import torchgrade as tg
+        >>> output_names(export_graph(tg.AutoExposure()))
+        ['output', 'adapted_out']
+    """
+    return ["output", "adapted_out"] if graph.exposure is not None else ["output"]
+
+
+def example_inputs(graph: ExportGraph, module: nn.Module, image: torch.Tensor) -> tuple:
+    """Inputs to trace ``graph`` with: the image, the exposure state and the grading controls.
+
+    Examples:
+        >>> import torchgrade as tg
+        >>> len(example_inputs(export_graph(tg.AutoExposure()), None, default_example(None)))
+        3
+    """
+    batch = image.shape[0]
+    inputs = [image]
+    if graph.exposure is not None:
+        inputs += [torch.full((batch,), 0.5), torch.tensor(1.0 / 30.0)]
+    if any(isinstance(s, GradeWithInputs) for s in graph.stages):
+        # Controls that require grad are never treated as identity, so every grading step is traced.
+        inputs += [v.requires_grad_() for v in grade_feeds(grade_of(module), batch).values()]
+    return tuple(inputs)
+
+
+def default_example(graph: Optional[ExportGraph]) -> torch.Tensor:
+    """A ``(2, 3, 64, 64)`` trace input: every size is taken from runtime shapes, so any size traces.
+
+    Examples:
+        >>> default_example(None).shape
+        torch.Size([2, 3, 64, 64])
+    """
+    return torch.rand(2, 3, 64, 64, generator=torch.Generator().manual_seed(0)) * 4.0
