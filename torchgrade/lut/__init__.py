@@ -28,7 +28,6 @@ from .lut3d import (LUT3D, OUTPUT_ENCODINGS, LUTLookup, apply_lut, compiled_look
 from .shapers import (DEFAULT_DOMAINS, LOGC_BLACK, SHAPERS, CurveShaper, LinearShaper, LogCShaper, Shaper, lattice_unit,
                       sample_curve, shaper_decode, shaper_encode)
 
-_KERNELS = KERNELS  # the name benchmarks/lut_floor.py imports; each entry is callable as (coords, rows, size)
 
 __all__ = [
     "AUTO_SIZES", "bake_lut", "expects_hdr", "is_display_referred", "scene_domain", "srgb_code_error",
