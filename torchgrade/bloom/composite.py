@@ -72,8 +72,8 @@ def bevy_blend_factor(mip: int, max_mip: int, intensity, boost, curvature, high_
 
     Examples:
         >>> t = torch.tensor
-        >>> bevy_blend_factor(2, 4, t(0.3), t(0.7), t(0.95), t(1.0))
-        tensor(0.3000)
+        >>> round(float(bevy_blend_factor(2, 4, t(0.3), t(0.7), t(0.95), t(1.0))), 4)  # 0.3 + 0.49 boost
+        0.79
     """
     x = mip / max_mip
     low_frequency = (1.0 - torch.pow(1.0 - x, 1.0 / (1.0 - curvature))) * boost * (1.0 - intensity)
@@ -133,7 +133,7 @@ def lerp_blend(image, glow, strength, fraction):
     """``lerp(image, glow, strength)`` given ``strength * glow``: ``glow + image * (1 - strength)``.
 
     Examples:
-        >>> lerp_blend(torch.ones(1), torch.full((1,), 1.5), 0.5, None)
+        >>> lerp_blend(torch.ones(1), torch.full((1,), 1.5), torch.tensor(0.5), None)
         tensor([2.])
     """
     return glow.addcmul_(image, 1.0 - strength)

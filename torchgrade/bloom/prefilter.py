@@ -89,8 +89,8 @@ def karis_mean(image: torch.Tensor, means: torch.Tensor) -> torch.Tensor:
 
     Examples:
         >>> image = torch.zeros(1, 3, 2, 2); image[..., 0, 0] = 9.0
-        >>> karis_mean(image, sum_pool(image) / 4).flatten()
-        tensor([0.2500, 0.2500, 0.2500])
+        >>> karis_mean(image, sum_pool(image) / 4).flatten()  # the plain mean is 2.25
+        tensor([0.2903, 0.2903, 0.2903])
     """
     weight = 1.0 / (1.0 + luminance(image).clamp_min(0.0))
     return torch.minimum(sum_pool(image * weight) / sum_pool(weight), means)

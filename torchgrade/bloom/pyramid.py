@@ -175,9 +175,8 @@ def bspline_refine(light: torch.Tensor) -> torch.Tensor:
     ``kornia.filters.filter2d_separable``, whose depthwise convolution oneDNN runs slowly.
 
     Examples:
-        >>> bspline_refine(torch.ones(1, 1, 2, 3))
-        tensor([[[[1., 1., 1.],
-                  [1., 1., 1.]]]])
+        >>> bool(torch.allclose(bspline_refine(torch.ones(1, 1, 2, 3)), torch.ones(1, 1, 2, 3)))
+        True
     """
     padded = mirror_pad(light, len(BSPLINE_AFTER_BILINEAR) // 2)
     return _symmetric_filter(_symmetric_filter(padded, BSPLINE_AFTER_BILINEAR, -1), BSPLINE_AFTER_BILINEAR, -2)
