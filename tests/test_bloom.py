@@ -378,3 +378,30 @@ def test_non_finite_pixels_follow_the_sanitize_policy(exr_dir):
     elsewhere = torch.ones(40, 40, dtype=torch.bool)
     elsewhere[20, 20] = False
     assert ((out - bloom(frame))[..., elsewhere].abs() < 0.05).all()
+
+
+# --- the stage ------------------------------------------------------------------------------------
+
+
+def test_stage_identity_assignment_and_table():
+    assert tg.Bloom(max_iterations=0).is_identity and tg.Bloom(intensity=0).is_identity
+    assert not tg.Bloom().is_identity
+    assert not tg.Bloom(intensity=torch.nn.Parameter(torch.tensor(0.0))).is_identity
+    stage = tg.Bloom()
+    with pytest.raises(ValueError, match="scatter"):
+        stage.scatter = 0.99
+    with pytest.raises(ValueError, match="mode"):
+        stage.mode = "glow"
+    stage.intensity = 2
+    assert stage.intensity == 2.0 and isinstance(stage.intensity, float)
+    assert tg.Bloom.controls["scatter"].range == (0.05, 0.95)
+    assert tg.Bloom.controls["mode"].range == tg.bloom.BLOOM_MODES
+
+
+def test_learnable_control_moved_out_of_range_raises_at_forward():
+    scatter = torch.nn.Parameter(torch.tensor(0.5))
+    stage = tg.Bloom(mode="scattering", scatter=scatter)
+    with torch.no_grad():
+        scatter.fill_(2.0)
+    with pytest.raises(ValueError, match="scatter"):
+        stage(torch.rand(1, 3, 16, 16))

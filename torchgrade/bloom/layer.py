@@ -28,6 +28,7 @@ the mode's composite (:mod:`~torchgrade.bloom.composite`).
 from __future__ import annotations
 
 import math
+import numbers
 
 import torch
 from torch import nn
@@ -176,11 +177,11 @@ def bloom(
 def _bloomed(image: torch.Tensor, settings: dict, fixed_depth=None) -> torch.Tensor:
     """:func:`bloom` on checked ``settings``: depth, identity shortcuts, working precision, prefilter, composite."""
     height, width = image.shape[-2:]
-    levels = (settings["max_iterations"], settings["downscale_limit"])
+    most, limit = settings["max_iterations"], settings["downscale_limit"]
     if fixed_depth is None:
-        depth = active = pyramid_depth(height, width, *levels)
+        depth = active = pyramid_depth(height, width, most, limit)
     else:
-        depth, active = fixed_depth, active_levels(image, min(levels[0], fixed_depth), levels[1])
+        depth, active = fixed_depth, active_levels(image, min(most, fixed_depth), limit)
     if depth == 0 or is_constant(settings["intensity"], 0.0):
         return image
 
@@ -283,7 +284,7 @@ class Bloom(Stage):
         return _as_floats(value) if self.control_table()[name].kind == "number" else value
 
     def is_default(self, name: str) -> bool:
-        # a control given as a tensor stays in the config, as it always has
+        # a tensor (a per-sample value, a buffer) is written even at its default: a config lists every tensor it was given
         return not isinstance(getattr(self, name), torch.Tensor) and super().is_default(name)
 
     @property
@@ -305,7 +306,7 @@ def _as_floats(value):
     """Python numbers as floats, sequences of them as tuples of floats; tensors as they are."""
     if isinstance(value, torch.Tensor):
         return value
-    return float(value) if isinstance(value, (int, float)) else tuple(float(v) for v in value)
+    return float(value) if isinstance(value, numbers.Real) else tuple(float(v) for v in value)
 
 
 MAX_FRAME_SIDE = 16384
