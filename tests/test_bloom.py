@@ -7,7 +7,7 @@ import torch
 import torch.nn.functional as F
 
 import torchgrade as tg
-from torchgrade.bloom import _upsample
+from torchgrade.bloom import upsample
 
 bloom = tg.functional.bloom
 
@@ -153,7 +153,7 @@ def cubic_bspline(t: float) -> float:
 
 def test_bicubic_upsampling_is_the_cubic_bspline_away_from_borders():
     coarse = torch.rand(1, 1, 16, 16, dtype=torch.float64)
-    fine = _upsample(coarse * 4, (32, 32), bicubic=True)  # light sums: 4 fine pixels per coarse pixel
+    fine = upsample(coarse * 4, (32, 32), bicubic=True)  # light sums: 4 fine pixels per coarse pixel
     # fine pixel i sits at coarse coordinate (i + 0.5) / 2 - 0.5
     taps = range(-3, 4)
     expected = torch.zeros(32, 32, dtype=torch.float64)
@@ -168,7 +168,7 @@ def test_bicubic_upsampling_is_the_cubic_bspline_away_from_borders():
 
 def test_bilinear_upsampling_is_torch_bilinear_away_from_borders():
     coarse = torch.rand(1, 3, 9, 7, dtype=torch.float64)
-    fine = _upsample(coarse * 4, (18, 14), bicubic=False)
+    fine = upsample(coarse * 4, (18, 14), bicubic=False)
     reference = F.interpolate(coarse, scale_factor=2, mode="bilinear", align_corners=False)
     torch.testing.assert_close(fine[..., 1:-1, 1:-1], reference[..., 1:-1, 1:-1], rtol=1e-12, atol=1e-12)
 
@@ -378,3 +378,30 @@ def test_non_finite_pixels_follow_the_sanitize_policy(exr_dir):
     elsewhere = torch.ones(40, 40, dtype=torch.bool)
     elsewhere[20, 20] = False
     assert ((out - bloom(frame))[..., elsewhere].abs() < 0.05).all()
+
+
+# --- the stage ------------------------------------------------------------------------------------
+
+
+def test_stage_identity_assignment_and_table():
+    assert tg.Bloom(max_iterations=0).is_identity and tg.Bloom(intensity=0).is_identity
+    assert not tg.Bloom().is_identity
+    assert not tg.Bloom(intensity=torch.nn.Parameter(torch.tensor(0.0))).is_identity
+    stage = tg.Bloom()
+    with pytest.raises(ValueError, match="scatter"):
+        stage.scatter = 0.99
+    with pytest.raises(ValueError, match="mode"):
+        stage.mode = "glow"
+    stage.intensity = 2
+    assert stage.intensity == 2.0 and isinstance(stage.intensity, float)
+    assert tg.Bloom.controls["scatter"].range == (0.05, 0.95)
+    assert tg.Bloom.controls["mode"].range == tg.bloom.BLOOM_MODES
+
+
+def test_learnable_control_moved_out_of_range_raises_at_forward():
+    scatter = torch.nn.Parameter(torch.tensor(0.5))
+    stage = tg.Bloom(mode="scattering", scatter=scatter)
+    with torch.no_grad():
+        scatter.fill_(2.0)
+    with pytest.raises(ValueError, match="scatter"):
+        stage(torch.rand(1, 3, 16, 16))

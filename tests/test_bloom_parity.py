@@ -346,3 +346,12 @@ def test_options_export_to_onnx_at_two_shapes(tmp_path):
         with torch.no_grad():
             peak = float(module(image).abs().max())
         assert tg.onnx.verify(module, path, image) / max(1.0, peak) <= 1e-4
+
+
+def test_convolution_stage_export_form_identity_and_checks():
+    stage = tg.ConvolutionBloom(torch.rand(3, 5, 5, generator=torch.Generator().manual_seed(1)) + 0.1, threshold=0.5)
+    image = hdr((1, 3, 12, 15))
+    torch.testing.assert_close(stage.export_form()(image), stage(image))
+    assert tg.ConvolutionBloom(torch.ones(1, 3, 3), intensity=0).is_identity and not stage.is_identity
+    with pytest.raises(ValueError, match="kernel"):
+        stage.kernel = torch.zeros(1, 3, 3)
