@@ -10,6 +10,8 @@ Constants are Unity's (``com.unity.render-pipelines.core/ShaderLibrary/Color.hls
 
 from __future__ import annotations
 
+import math
+
 import torch
 
 from .core import apply_matrix
@@ -266,3 +268,115 @@ def primaries_to_rec709_matrix(chromaticities) -> torch.Tensor:
     to_xyz = rgb_to_xyz_matrix(chromaticities)
     adapt = bradford_adaptation(chromaticities[3], REC709_CHROMATICITIES[3])
     return torch.linalg.inv(rgb_to_xyz_matrix(REC709_CHROMATICITIES)) @ adapt @ to_xyz
+
+
+AP0_CHROMATICITIES = ((0.7347, 0.2653), (0.0, 1.0), (0.0001, -0.0770), (0.32168, 0.33767))
+"""ACES AP0 (ACES2065-1) primaries and the ACES white (SMPTE ST 2065-1)."""
+
+AP1_CHROMATICITIES = ((0.713, 0.293), (0.165, 0.830), (0.128, 0.044), (0.32168, 0.33767))
+"""ACES AP1 (ACEScg, ACEScct) primaries and the ACES white (S-2014-004)."""
+
+REC2020_CHROMATICITIES = ((0.708, 0.292), (0.170, 0.797), (0.131, 0.046), (0.3127, 0.3290))
+"""ITU-R BT.2020 / BT.2100 primaries and D65 white."""
+
+P3_D65_CHROMATICITIES = ((0.680, 0.320), (0.265, 0.690), (0.150, 0.060), (0.3127, 0.3290))
+"""Display P3 (SMPTE EG 432-1 P3 primaries, D65 white)."""
+
+MATRICES["rec709_to_rec2020"] = torch.linalg.inv(primaries_to_rec709_matrix(REC2020_CHROMATICITIES))
+MATRICES["rec2020_to_rec709"] = primaries_to_rec709_matrix(REC2020_CHROMATICITIES)
+MATRICES["rec709_to_p3"] = torch.linalg.inv(primaries_to_rec709_matrix(P3_D65_CHROMATICITIES))
+MATRICES["p3_to_rec709"] = primaries_to_rec709_matrix(P3_D65_CHROMATICITIES)
+
+# SMPTE ST 2084 constants.
+PQ_M1, PQ_M2 = 2610.0 / 16384.0, 2523.0 / 4096.0 * 128.0
+PQ_C1, PQ_C2, PQ_C3 = 3424.0 / 4096.0, 2413.0 / 4096.0 * 32.0, 2392.0 / 4096.0 * 32.0
+PQ_PEAK = 10000.0
+"""Luminance (cd/m²) of PQ code value 1."""
+
+
+def linear_to_pq(image: torch.Tensor, reference: float = 100.0) -> torch.Tensor:
+    """SMPTE ST 2084 inverse EOTF of ``image * reference`` cd/m², negatives clamped to 0.
+
+    ``E' = ((c1 + c2 Y^m1) / (1 + c3 Y^m1))^m2`` with ``Y = image * reference / 10000``; the
+    default ``reference`` puts 1.0 at 100 cd/m² (OpenColorIO's scene/display convention).
+
+    Examples:
+        >>> round(float(linear_to_pq(torch.tensor(1.0))), 4)  # 100 cd/m²
+        0.5081
+        >>> float(linear_to_pq(torch.tensor(10000.0), reference=1.0))
+        1.0
+    """
+    y_m1 = safe_pow(image * (reference / PQ_PEAK), PQ_M1)
+    return safe_pow((PQ_C1 + PQ_C2 * y_m1) / (1.0 + PQ_C3 * y_m1), PQ_M2)
+
+
+def pq_to_linear(code: torch.Tensor, reference: float = 100.0) -> torch.Tensor:
+    """SMPTE ST 2084 EOTF, in units of ``reference`` cd/m²: ``10000 (max(E'^(1/m2) - c1, 0) / (c2 - c3 E'^(1/m2)))^(1/m1)``.
+
+    Examples:
+        >>> round(float(pq_to_linear(torch.tensor(0.5081))), 2)
+        1.0
+        >>> float(pq_to_linear(torch.tensor(1.0), reference=1.0))
+        10000.0
+    """
+    e = safe_pow(code.clamp(max=1.0), 1.0 / PQ_M2)
+    return PQ_PEAK / reference * safe_pow((e - PQ_C1).clamp_min(0.0) / (PQ_C2 - PQ_C3 * e), 1.0 / PQ_M1)
+
+
+# ITU-R BT.2100 HLG constants.
+HLG_A = 0.17883277
+HLG_B = 1.0 - 4.0 * HLG_A
+HLG_C = 0.5 - HLG_A * math.log(4.0 * HLG_A)
+
+
+def hlg_oetf(image: torch.Tensor) -> torch.Tensor:
+    """ITU-R BT.2100 HLG OETF of scene light ``E`` in ``[0, 1]``: ``sqrt(3 E)`` up to 1/12, else ``a ln(12 E - b) + c``.
+
+    Examples:
+        >>> [round(v, 4) for v in hlg_oetf(torch.tensor([1.0 / 12.0, 1.0])).tolist()]
+        [0.5, 1.0]
+    """
+    low = safe_sqrt(3.0 * image)
+    high = HLG_A * torch.log((12.0 * image).clamp_min(1.0) - HLG_B) + HLG_C
+    return torch.where(image <= 1.0 / 12.0, low, high)
+
+
+def hlg_inverse_oetf(code: torch.Tensor) -> torch.Tensor:
+    """Inverse of :func:`hlg_oetf`: ``E'²/3`` up to 0.5, else ``(exp((E' - c) / a) + b) / 12``.
+
+    Examples:
+        >>> [round(v, 4) for v in hlg_inverse_oetf(torch.tensor([0.5, 1.0])).tolist()]
+        [0.0833, 1.0]
+    """
+    low = code.clamp_min(0.0) ** 2 / 3.0
+    high = (torch.exp((code.clamp(0.5, 2.0) - HLG_C) / HLG_A) + HLG_B) / 12.0
+    return torch.where(code <= 0.5, low, high)
+
+
+# ACEScct (S-2016-001): a linear toe below 2^-7, ACEScc's log segment above.
+ACESCCT_CUT_LINEAR = 0.0078125
+ACESCCT_CUT_LOG = 0.155251141552511
+ACESCCT_A, ACESCCT_B = 10.5402377416545, 0.0729055341958355
+
+
+def linear_to_acescct(image: torch.Tensor) -> torch.Tensor:
+    """ACEScg (AP1) -> ACEScct: ``A x + B`` up to 2^-7, else ``(log2(x) + 9.72) / 17.52`` (S-2016-001).
+
+    Examples:
+        >>> [round(v, 4) for v in linear_to_acescct(torch.tensor([0.0, 0.18])).tolist()]
+        [0.0729, 0.4136]
+    """
+    log = (torch.log2(image.clamp_min(ACESCCT_CUT_LINEAR)) + 9.72) / 17.52
+    return torch.where(image <= ACESCCT_CUT_LINEAR, ACESCCT_A * image + ACESCCT_B, log)
+
+
+def acescct_to_linear(code: torch.Tensor) -> torch.Tensor:
+    """ACEScct -> ACEScg (AP1), the inverse of :func:`linear_to_acescct`, saturating at 65504 like ACEScc.
+
+    Examples:
+        >>> round(float(acescct_to_linear(torch.tensor(0.4135884))), 4)
+        0.18
+    """
+    top = (math.log2(_HALF_MAX) + 9.72) / 17.52
+    log = torch.exp2(code.clamp(ACESCCT_CUT_LOG, top) * 17.52 - 9.72)
+    return torch.where(code <= ACESCCT_CUT_LOG, (code - ACESCCT_B) / ACESCCT_A, log)
