@@ -106,7 +106,7 @@ def aces2_output(image: torch.Tensor, peak_luminance: float = 100.0, limiting_pr
     to ``limiting_primaries``; the result is expressed in ``display_primaries`` (default: the
     limiting ones) and encoded:
 
-    * ``"linear"``: display-linear, ``1.0`` = peak, in ``[0, 1]``;
+    * ``"linear"``: display-linear, ``1.0`` = peak, clipped to ``[0, 1]``;
     * ``"bt1886"``: ``L^(1/2.4)`` (BT.1886 with black 0), OpenColorIO's "Rec.1886 Rec.709 - Display";
     * ``"pq"``: SMPTE ST 2084 of ``L * peak`` cd/m², OpenColorIO's "Rec.2100-PQ - Display".
 
@@ -136,7 +136,9 @@ def aces2_output(image: torch.Tensor, peak_luminance: float = 100.0, limiting_pr
     ap1 = _apply(_AP0_TO_AP1, aces).clamp(0.0, output.tone.forward_limit)
     rgb = output.render(_apply(torch.linalg.inv(_AP0_TO_AP1), ap1))
     rgb = _apply(_rgb_to_rgb(PRIMARIES[limiting_primaries], PRIMARIES[display_primaries]), rgb)
-    linear = rgb / (peak / REFERENCE_LUMINANCE)
+    # Display values below 0 do not exist: clip where a limiting gamut pokes out of the container
+    # (P3's red lies just outside Rec.2020), rather than mirror them through the encoding as OpenColorIO does.
+    linear = (rgb / (peak / REFERENCE_LUMINANCE)).clamp(0.0, 1.0)
     if encoding == "bt1886":
         return color.safe_pow(linear, 1.0 / 2.4)
     if encoding == "pq":
