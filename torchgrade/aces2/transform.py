@@ -117,12 +117,12 @@ def aces2_output(image: torch.Tensor, peak_luminance: float = 100.0, limiting_pr
 
     Examples:
         >>> grey = torch.full((1, 3, 1, 1), 0.18)
-        >>> sdr = aces2_output(grey, encoding="bt1886")
+        >>> sdr = aces2_output(grey, encoding="bt1886")  # OpenColorIO: 0.3831
         >>> round(float(sdr[0, 0, 0, 0]), 3)
-        0.382
+        0.383
         >>> hdr = aces2_output(grey, 1000.0, "p3_d65", "rec2020", encoding="linear")
         >>> round(float(hdr[0, 1, 0, 0]) * 1000.0, 1)  # cd/m²
-        14.2
+        14.5
     """
     check_image(image)
     display_primaries = display_primaries or limiting_primaries
