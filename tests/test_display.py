@@ -8,6 +8,10 @@ import numpy as np
 import pytest
 import torch
 
+import torchgrade.aces2.cam
+import torchgrade.aces2.gamut
+import torchgrade.aces2.tables
+import torchgrade.aces2.tonescale
 import torchgrade.aces2.transform
 from torchgrade import color
 
@@ -82,7 +86,8 @@ def test_encodings_pass_gradcheck():
         assert torch.autograd.gradcheck(fn, (x,))
 
 
-@pytest.mark.parametrize("module", [color, torchgrade.aces2.transform])
+@pytest.mark.parametrize("module", [color, torchgrade.aces2.cam, torchgrade.aces2.tonescale, torchgrade.aces2.gamut,
+                                    torchgrade.aces2.tables, torchgrade.aces2.transform])
 def test_docstring_examples_run(module):
     result = doctest.testmod(module, extraglobs={"torch": torch}, optionflags=doctest.ELLIPSIS)
     assert result.attempted > 0 and result.failed == 0

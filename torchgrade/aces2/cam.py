@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import torch
 
-from ..color import rgb_to_xyz_matrix, safe_pow
+from ..color import AP0_CHROMATICITIES, rgb_to_xyz_matrix, safe_pow
 
 __all__ = ["CAM16_PRIMARIES", "JMhParams", "jmh_params", "rgb_to_aab", "aab_to_jmh", "jmh_to_rgb", "y_to_j", "a_to_y"]
 
@@ -38,18 +38,33 @@ _BASE_CONE_TO_AAB = ((2.0, 1.0, 1.0 / 20.0), (1.0, -12.0 / 11.0, 1.0 / 11.0), (1
 
 
 def model_gamma() -> float:
-    """``c z`` of the CAM: ``0.59 (1.48 + sqrt(Y_b / 100))``."""
+    """``c z`` of the CAM: ``0.59 (1.48 + sqrt(Y_b / 100))``.
+
+    Examples:
+        >>> round(model_gamma(), 4)
+        1.1371
+    """
     return SURROUND_C * (1.48 + math.sqrt(Y_B / REFERENCE_LUMINANCE))
 
 
 def cone_compress(v: torch.Tensor) -> torch.Tensor:
-    """Signed post-adaptation compression ``sign(v) |v|^0.42 / (27.13 + |v|^0.42)``."""
+    """Signed post-adaptation compression ``sign(v) |v|^0.42 / (27.13 + |v|^0.42)``.
+
+    Examples:
+        >>> [round(v, 4) for v in cone_compress(torch.tensor([-1.0, 0.0, 1.0, 1e4])).tolist()]
+        [-0.0355, 0.0, 0.0355, 0.6382]
+    """
     p = safe_pow(v.abs(), 0.42)
     return torch.sign(v) * p / (NL_OFFSET + p)
 
 
 def cone_expand(v: torch.Tensor) -> torch.Tensor:
-    """Inverse of :func:`cone_compress`, with ``|v|`` limited to 0.99 as in the reference."""
+    """Inverse of :func:`cone_compress`, with ``|v|`` limited to 0.99 as in the reference.
+
+    Examples:
+        >>> [round(v, 4) for v in cone_expand(cone_compress(torch.tensor([0.5, 100.0]))).tolist()]
+        [0.5, 100.0]
+    """
     r = v.abs().clamp(max=RA_LIMIT)
     return torch.sign(v) * safe_pow(NL_OFFSET * r / (1.0 - r), 1.0 / 0.42)
 
@@ -68,7 +83,13 @@ class JMhParams:
 
 
 def jmh_params(chromaticities) -> JMhParams:
-    """CAM constants for RGB with the given primaries and white, adapted fully to that white."""
+    """CAM constants for RGB with the given primaries and white, adapted fully to that white.
+
+    Examples:
+        >>> p = jmh_params(AP0_CHROMATICITIES)
+        >>> round(p.cz, 4), round(p.f_l_n, 6)
+        (1.1371, 0.007937)
+    """
     k = 1.0 / (5.0 * L_A + 1.0)
     k4 = k**4
     f_l = 0.2 * k4 * (5.0 * L_A) + 0.1 * (1.0 - k4) ** 2 * (5.0 * L_A) ** (1.0 / 3.0)
@@ -94,7 +115,13 @@ def _apply(m: torch.Tensor, v: torch.Tensor, dim: int) -> torch.Tensor:
 
 
 def rgb_to_aab(rgb: torch.Tensor, p: JMhParams, dim: int = -3) -> torch.Tensor:
-    """RGB -> ``(A, a, b)``: cone matrix, signed compression, opponent matrix (A normalised to white = 1)."""
+    """RGB -> ``(A, a, b)``: cone matrix, signed compression, opponent matrix (A normalised to white = 1).
+
+    Examples:
+        >>> p = jmh_params(AP0_CHROMATICITIES)
+        >>> round(float(rgb_to_aab(torch.ones(1, 3, 1, 1, dtype=torch.float64), p)[0, 0]), 6)  # white: A = 1
+        1.0
+    """
     return _apply(p.cone_to_aab, cone_compress(_apply(p.rgb_to_cone, rgb, dim)), dim)
 
 
@@ -111,6 +138,13 @@ def aab_to_jmh(aab: torch.Tensor, p: JMhParams, dim: int = -3):
     """``J = 100 A^cz``, ``M = |(a, b)|``, ``h = atan2(b, a)`` in degrees; ``A <= 0`` is black (0, 0, 0).
 
     Returns ``(J, M, h, cos h, sin h)``, trigonometry from ``(a, b)`` directly.
+
+    Examples:
+        >>> p = jmh_params(AP0_CHROMATICITIES)
+        >>> rgb = torch.tensor([0.5, 0.2, 0.1], dtype=torch.float64).reshape(1, 3, 1, 1)
+        >>> j, m, h, _, _ = aab_to_jmh(rgb_to_aab(rgb, p), p)
+        >>> [round(float(v), 2) for v in (j, m, h)]
+        [58.62, 52.42, 26.24]
     """
     a_, a, b = aab.unbind(dim)
     lit = a_ > 0
@@ -125,18 +159,38 @@ def aab_to_jmh(aab: torch.Tensor, p: JMhParams, dim: int = -3):
 
 
 def jmh_to_rgb(j, m, cos_h, sin_h, p: JMhParams, dim: int = -3) -> torch.Tensor:
-    """Inverse model: ``A = (J / 100)^(1/cz)``, ``(a, b) = M (cos h, sin h)``, then the matrices back to RGB."""
+    """Inverse model: ``A = (J / 100)^(1/cz)``, ``(a, b) = M (cos h, sin h)``, then the matrices back to RGB.
+
+    Examples:
+        >>> p = jmh_params(AP0_CHROMATICITIES)
+        >>> rgb = torch.tensor([0.5, 0.2, 0.1], dtype=torch.float64).reshape(1, 3, 1, 1)
+        >>> j, m, _, cos_h, sin_h = aab_to_jmh(rgb_to_aab(rgb, p), p)
+        >>> [round(v, 6) for v in jmh_to_rgb(j, m, cos_h, sin_h, p).flatten().tolist()]
+        [0.5, 0.2, 0.1]
+    """
     a_ = safe_pow(j / J_SCALE, 1.0 / p.cz)
     aab = torch.stack((a_, m * cos_h, m * sin_h), dim)
     return _apply(p.cone_to_rgb, cone_expand(_apply(p.aab_to_cone, aab, dim)), dim)
 
 
 def a_to_y(a: torch.Tensor, p: JMhParams) -> torch.Tensor:
-    """Luminance in cd/m² (RGB 1.0 -> 100) of an achromatic colour with response ``A >= 0``: ``ra^-1(A_w A) / F_L_n``."""
+    """Luminance in cd/m² (RGB 1.0 -> 100) of an achromatic colour with response ``A >= 0``: ``ra^-1(A_w A) / F_L_n``.
+
+    Examples:
+        >>> p = jmh_params(AP0_CHROMATICITIES)
+        >>> round(float(a_to_y(torch.tensor(1.0, dtype=torch.float64), p)), 6)  # scene white
+        100.0
+    """
     return cone_expand(p.a_w_j * a.clamp_min(0.0)) / p.f_l_n
 
 
 def y_to_j(y: torch.Tensor, p: JMhParams) -> torch.Tensor:
-    """Lightness ``J = 100 (ra(|y| F_L_n) / A_w)^cz`` of an achromatic colour of luminance ``y`` cd/m², odd in ``y``."""
+    """Lightness ``J = 100 (ra(|y| F_L_n) / A_w)^cz`` of an achromatic colour of luminance ``y`` cd/m², odd in ``y``.
+
+    Examples:
+        >>> p = jmh_params(AP0_CHROMATICITIES)
+        >>> [round(v, 6) for v in y_to_j(torch.tensor([100.0, -100.0], dtype=torch.float64), p).tolist()]
+        [100.0, -100.0]
+    """
     ra = cone_compress(y.abs() * p.f_l_n)
     return torch.sign(y) * J_SCALE * safe_pow(ra / p.a_w_j, p.cz)

@@ -33,13 +33,23 @@ def _nonzero(x: torch.Tensor) -> torch.Tensor:
 
 
 def focus_j(cusp_j, mid_j: float, limit_j_max: float):
-    """Focus point on the J axis: ``lerp(J_cusp, J_mid, min(1, 1.3 - J_cusp / J_max))``."""
+    """Focus point on the J axis: ``lerp(J_cusp, J_mid, min(1, 1.3 - J_cusp / J_max))``.
+
+    Examples:
+        >>> round(float(focus_j(torch.tensor(60.0), 34.1, 100.0)), 2)  # 0.7 of the way from 60 to 34.1
+        41.87
+    """
     w = (CUSP_MID_BLEND - cusp_j / limit_j_max).clamp(max=1.0)
     return cusp_j + (mid_j - cusp_j) * w
 
 
 def focus_gain(j, threshold, limit_j_max: float, focus_dist: float):
-    """Slope gain ``J_max d``, times ``1 + log10((J_max - thr) / max(1e-4, J_max - J))²`` above ``thr``."""
+    """Slope gain ``J_max d``, times ``1 + log10((J_max - thr) / max(1e-4, J_max - J))²`` above ``thr``.
+
+    Examples:
+        >>> [round(v, 2) for v in focus_gain(torch.tensor([10.0, 99.0]), torch.tensor(80.0), 100.0, 1.35).tolist()]
+        [135.0, 363.51]
+    """
     above = j > threshold
     ratio = (limit_j_max - threshold) / (limit_j_max - j).clamp_min(0.0001)
     adjust = torch.log10(torch.where(above, ratio, torch.ones_like(ratio)))
@@ -47,7 +57,12 @@ def focus_gain(j, threshold, limit_j_max: float, focus_dist: float):
 
 
 def solve_j_intersect(j, m, focus, limit_j_max: float, gain):
-    """J where the compression line through (J, M) meets the J axis: the stable root of its quadratic."""
+    """J where the compression line through (J, M) meets the J axis: the stable root of its quadratic.
+
+    Examples:
+        >>> float(solve_j_intersect(torch.tensor(50.0), torch.tensor(0.0), torch.tensor(40.0), 100.0, torch.tensor(135.0)))  # M = 0: J itself
+        50.0
+    """
     ms = m / gain
     a = ms / focus
     below = j < focus
@@ -60,7 +75,12 @@ def solve_j_intersect(j, m, focus, limit_j_max: float, gain):
 
 
 def compression_slope(j_intersect, focus, limit_j_max: float, gain):
-    """Slope dJ/dM of the line: ``s (J_i - J_focus) / (J_focus gain)``, ``s = J_i`` below focus else ``J_max - J_i``."""
+    """Slope dJ/dM of the line: ``s (J_i - J_focus) / (J_focus gain)``, ``s = J_i`` below focus else ``J_max - J_i``.
+
+    Examples:
+        >>> round(float(compression_slope(torch.tensor(50.0), torch.tensor(40.0), 100.0, torch.tensor(135.0))), 4)  # 50 * 10 / (40 * 135)
+        0.0926
+    """
     scale = torch.where(j_intersect < focus, j_intersect, limit_j_max - j_intersect)
     return scale * (j_intersect - focus) / (focus * gain)
 
@@ -72,7 +92,14 @@ def _line_hull_m(j_axis, slope, inv_gamma, j_max, m_max, j_ref):
 
 
 def hull_boundary_m(cusp_j, cusp_m, limit_j_max: float, top_inv, bottom_inv, j_intersect, slope, j_cusp_intersect):
-    """M of the limiting hull on the line: smooth minimum (cubic, width ``0.12 M_cusp``) of lower and upper curves."""
+    """M of the limiting hull on the line: smooth minimum (cubic, width ``0.12 M_cusp``) of lower and upper curves.
+
+    Examples:
+        >>> t = torch.tensor
+        >>> m = hull_boundary_m(t(60.0), t(70.0), 100.0, t(1.1), 0.88, t(60.0), t(0.0), t(60.0))
+        >>> round(float(m), 2)  # through the cusp: M_cusp - 0.12 M_cusp / 6 (smooth minimum)
+        68.6
+    """
     lower = _line_hull_m(j_intersect, slope, bottom_inv, cusp_j, cusp_m, j_cusp_intersect)
     upper = _line_hull_m(limit_j_max - j_intersect, -slope, top_inv, limit_j_max - cusp_j, cusp_m,
                          limit_j_max - j_cusp_intersect)
@@ -102,7 +129,14 @@ class GamutParams:
         self.hues, self.cusps, self.reach = hues, cusps, reach
 
     def cusp(self, h: torch.Tensor):
-        """``(J_cusp, M_cusp, 1/gamma_top)`` at hue ``h``: linear in the non-uniform hue table."""
+        """``(J_cusp, M_cusp, 1/gamma_top)`` at hue ``h``: linear in the non-uniform hue table.
+
+        Examples:
+            >>> from torchgrade.aces2.transform import _output
+            >>> p = _output(100.0, "rec709").gamut
+            >>> [round(float(v), 1) for v in p.cusp(torch.tensor([120.0], dtype=torch.float64))]  # J, M, 1/gamma of the green-yellow cusp
+            [86.8, 57.3, 1.1]
+        """
         hues = self.hues.to(dtype=h.dtype, device=h.device)
         table = self.cusps.to(dtype=h.dtype, device=h.device)
         hi = torch.searchsorted(hues, h.detach().contiguous()).clamp(1, hues.numel() - 1)
@@ -112,7 +146,13 @@ class GamutParams:
         return row.unbind(-1)
 
     def reach_m(self, h: torch.Tensor) -> torch.Tensor:
-        """AP1 reach M at ``J_max``, linear between whole degrees."""
+        """AP1 reach M at ``J_max``, linear between whole degrees.
+
+        Examples:
+            >>> from torchgrade.aces2.transform import _output
+            >>> round(float(_output(100.0, "rec709").gamut.reach_m(torch.tensor(0.0, dtype=torch.float64))), 1)
+            166.8
+        """
         table = self.reach.to(dtype=h.dtype, device=h.device)
         base = torch.floor(h.detach())
         t = h - base
@@ -121,7 +161,16 @@ class GamutParams:
 
 
 def gamut_compress(j, m, h, reach_m, p: GamutParams):
-    """Compressed ``(J, M)``: ``J <= 0`` -> black, ``M <= 0`` or ``J > J_max`` -> ``(J, 0)``, else the hull mapping."""
+    """Compressed ``(J, M)``: ``J <= 0`` -> black, ``M <= 0`` or ``J > J_max`` -> ``(J, 0)``, else the hull mapping.
+
+    Examples:
+        >>> from torchgrade.aces2.transform import _output
+        >>> p = _output(100.0, "rec709").gamut
+        >>> j, m, h = (torch.tensor([v], dtype=torch.float64) for v in (50.0, 300.0, 120.0))
+        >>> j_out, m_out = gamut_compress(j, m, h, p.reach_m(h), p)
+        >>> bool(m_out < m)  # far outside Rec.709: pulled in
+        True
+    """
     cusp_j, cusp_m, top_inv = p.cusp(h)
     focus = focus_j(cusp_j, p.mid_j, p.limit_j_max)
     threshold = cusp_j + (p.limit_j_max - cusp_j) * FOCUS_GAIN_BLEND

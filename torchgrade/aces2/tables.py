@@ -16,7 +16,7 @@ from .cam import REFERENCE_LUMINANCE, JMhParams, aab_to_jmh, jmh_to_rgb, rgb_to_
 from .gamut import (FOCUS_GAIN_BLEND, SMOOTH_CUSPS, SMOOTH_M, compression_slope, focus_gain, focus_j,
                     hull_boundary_m, solve_j_intersect)
 
-__all__ = ["reach_m_table", "hue_and_cusp_tables", "upper_hull_gamma"]
+__all__ = ["reach_m_table", "hue_table", "hue_and_cusp_tables", "upper_hull_gamma"]
 
 _F64 = torch.float64
 _TEST_POSITIONS = (0.01, 0.1, 0.5, 0.8, 0.99)
@@ -51,7 +51,15 @@ def _step_then_bisect(inside, step: float, stop: float, tolerance: float, rows: 
 
 
 def reach_m_table(reach: JMhParams, limit_j_max: float) -> torch.Tensor:
-    """(360,) M at ``J_max`` where each whole-degree hue leaves the reach (AP1) gamut, to 0.01."""
+    """(360,) M at ``J_max`` where each whole-degree hue leaves the reach (AP1) gamut, to 0.01.
+
+    Examples:
+        >>> from torchgrade.color import AP1_CHROMATICITIES
+        >>> from torchgrade.aces2.cam import jmh_params
+        >>> table = reach_m_table(jmh_params(AP1_CHROMATICITIES), 100.0)
+        >>> table.shape, bool((table > 0).all())
+        (torch.Size([360]), True)
+    """
     hues = torch.arange(360, dtype=_F64)
     j = torch.full_like(hues, limit_j_max)
     return _step_then_bisect(lambda m: (_to_rgb(j, m, hues, reach) >= 0).all(-1), 50.0, 1300.0, 1e-2, 360)
@@ -117,7 +125,13 @@ def _sample_counts(hues: list) -> list:
 
 
 def hue_table(corner_hues: list) -> torch.Tensor:
-    """(363,) hues: 360 samples, as uniform as possible, through every corner hue, plus wrap entries."""
+    """(363,) hues: 360 samples, as uniform as possible, through every corner hue, plus wrap entries.
+
+    Examples:
+        >>> hues = hue_table([30.5, 100.2, 200.0])
+        >>> hues.shape, [round(v, 1) for v in hues[32:34].tolist()]  # 30.5 sampled exactly
+        (torch.Size([363]), [30.5, 31.5])
+    """
     counts = _sample_counts(corner_hues)
     bounds = [0.0] + corner_hues + [360.0]
     sizes = [counts[0]] + [b - a for a, b in zip(counts, counts[1:])] + [360 - counts[-1]]
@@ -145,7 +159,14 @@ def _cusp_at(hues: torch.Tensor, rgb_corners: torch.Tensor, jmh_corners: torch.T
 
 def hue_and_cusp_tables(reach: JMhParams, limit: JMhParams, peak: float, limit_j_max: float, forward_limit: float):
     """(363,) hue table and (363, 2) ``(J_cusp, M_cusp)`` of the limiting gamut, M widened by ``1 + 0.27 * 0.12``
-    so the smoothed hull still encloses the true cusp."""
+    so the smoothed hull still encloses the true cusp.
+
+    Examples:
+        >>> from torchgrade.aces2.transform import _output
+        >>> p = _output(100.0, "rec709").gamut
+        >>> p.hues.shape, p.cusps.shape  # J, M, 1/gamma_top per hue
+        (torch.Size([363]), torch.Size([363, 3]))
+    """
     reach_jmh = _reach_corners(reach, limit_j_max, forward_limit)
     rgb_corners, jmh_corners = _display_corners(limit, peak)
     hues = hue_table(_merged_hues(reach_jmh[1:7, 2].tolist(), jmh_corners[1:7, 2].tolist()))
@@ -157,7 +178,14 @@ def hue_and_cusp_tables(reach: JMhParams, limit: JMhParams, peak: float, limit_j
 def upper_hull_gamma(hues, cusps, limit: JMhParams, peak: float, limit_j_max: float, mid_j: float,
                      focus_dist: float, lower_inv: float) -> torch.Tensor:
     """(363,) ``1/gamma`` of the upper hull per hue: the smallest gamma (to 1e-5, in steps of 0.4 then
-    bisection) whose approximate hull puts all five test points on the upper edge outside the cube."""
+    bisection) whose approximate hull puts all five test points on the upper edge outside the cube.
+
+    Examples:
+        >>> from torchgrade.aces2.transform import _output
+        >>> top = _output(100.0, "rec709").gamut.cusps[:, 2]
+        >>> bool(((top > 1 / 5.2) & (top < 2.5)).all())  # 1/gamma with gamma in (0.4, 5.2]
+        True
+    """
     h, cusp_j, cusp_m = hues[1:361], cusps[1:361, 0], cusps[1:361, 1]
     focus = focus_j(cusp_j, mid_j, limit_j_max)
     threshold = cusp_j + (limit_j_max - cusp_j) * FOCUS_GAIN_BLEND

@@ -37,6 +37,11 @@ def tonescale_params(peak: float) -> ToneScale:
 
     ``r_hit`` (the scene value that reaches peak) moves from 128 to 896 as the peak goes from 100 to
     10000 cd/m², log-linearly; ``g = 1.15``, flare ``t_1 = 0.04``.
+
+    Examples:
+        >>> t = tonescale_params(1000.0)
+        >>> t.forward_limit, round(t.c_t, 4)  # 8 r_hit, grey target / 100
+        (4096.0, 0.1467)
     """
     n, n_r, g, c, c_d, w_g, t_1 = peak, 100.0, 1.15, 0.18, 10.013, 0.14, 0.04
     r_hit = 128.0 + (896.0 - 128.0) * math.log(n / n_r) / math.log(10000.0 / 100.0)
@@ -53,7 +58,13 @@ def tonescale_params(peak: float) -> ToneScale:
 
 
 def daniele_tonescale(y: torch.Tensor, t: ToneScale) -> torch.Tensor:
-    """``f = m_2 (Y / (Y + s_2))^g``, ``Y_ts = 100 max(0, f² / (f + t_1))`` for ``Y >= 0`` in cd/m²."""
+    """``f = m_2 (Y / (Y + s_2))^g``, ``Y_ts = 100 max(0, f² / (f + t_1))`` for ``Y >= 0`` in cd/m².
+
+    Examples:
+        >>> t = tonescale_params(1000.0)
+        >>> [round(v, 2) for v in daniele_tonescale(torch.tensor([0.0, 18.0, 51200.0], dtype=torch.float64), t).tolist()]
+        [0.0, 14.51, 1000.0]
+    """
     y = y.clamp_min(0.0)
     f = t.m_2 * safe_pow(y / (y + t.s_2), t.g)
     return 100.0 * f * f / (f + t.t_1)
@@ -70,7 +81,13 @@ class ChromaParams:
 
 
 def chroma_params(t: ToneScale) -> ChromaParams:
-    """``compr = 2.4 (1 + 3.3 log10(n/100))``, ``sat = max(0.2, 1.3 (1 - 0.69 log10(n/100)))``."""
+    """``compr = 2.4 (1 + 3.3 log10(n/100))``, ``sat = max(0.2, 1.3 (1 - 0.69 log10(n/100)))``.
+
+    Examples:
+        >>> c = chroma_params(tonescale_params(100.0))
+        >>> c.sat, c.compr, round(c.norm_scale, 4)
+        (1.3, 2.4, 1.0001)
+    """
     return ChromaParams(
         sat=max(0.2, 1.3 - 1.3 * 0.69 * t.log_peak),
         sat_thr=0.5 / t.peak,
@@ -80,7 +97,13 @@ def chroma_params(t: ToneScale) -> ChromaParams:
 
 
 def chroma_norm(cos_h: torch.Tensor, sin_h: torch.Tensor, c: ChromaParams) -> torch.Tensor:
-    """Hue-dependent normaliser of M: a third-order Fourier series in ``h`` fitted by the Academy."""
+    """Hue-dependent normaliser of M: a third-order Fourier series in ``h`` fitted by the Academy.
+
+    Examples:
+        >>> c = chroma_params(tonescale_params(100.0))
+        >>> round(float(chroma_norm(torch.tensor(1.0), torch.tensor(0.0), c)), 2)  # h = 0
+        112.83
+    """
     cos2, sin2 = 2.0 * cos_h * cos_h - 1.0, 2.0 * cos_h * sin_h
     cos3, sin3 = 4.0 * cos_h**3 - 3.0 * cos_h, 3.0 * sin_h - 4.0 * sin_h**3
     series = 11.34072 * cos_h + 16.46899 * cos2 + 7.88380 * cos3
@@ -92,6 +115,10 @@ def toe(x: torch.Tensor, limit, k1: torch.Tensor, k2: torch.Tensor) -> torch.Ten
     """Quadratic toe that leaves ``x > limit`` unchanged: root of ``y² + (k1 - k3 x) y - k2 k3 x = 0``.
 
     ``k2 >= 0.001`` and ``k1 <- sqrt(k1² + k2²)``, ``k3 = (limit + k1) / (limit + k2)`` (aces-core ``toe``).
+
+    Examples:
+        >>> [round(v, 4) for v in toe(torch.tensor([0.05, 2.0]), 1.0, torch.tensor(0.5), torch.tensor(0.5)).tolist()]
+        [0.0412, 2.0]
     """
     k2 = k2.clamp_min(0.001)
     k1 = torch.sqrt(k1 * k1 + k2 * k2)
@@ -103,7 +130,14 @@ def toe(x: torch.Tensor, limit, k1: torch.Tensor, k2: torch.Tensor) -> torch.Ten
 
 def chroma_compress(j, m, j_ts, norm, reach_m, limit_j_max: float, cz: float, c: ChromaParams):
     """Tone-mapped colourfulness: ``M (J_ts / J)^(1/cz)``, then an expansion toe near white and a
-    compression toe towards ``limit = (J_ts / J_max)^(1/cz) reach_M``, all in units of ``norm``."""
+    compression toe towards ``limit = (J_ts / J_max)^(1/cz) reach_M``, all in units of ``norm``.
+
+    Examples:
+        >>> c = chroma_params(tonescale_params(100.0))
+        >>> one = torch.tensor(1.0)
+        >>> float(chroma_compress(one * 50, one * 0, one * 40, one * 100, one * 150, 100.0, 1.1371, c))  # grey stays grey
+        0.0
+    """
     inv_cz = 1.0 / cz
     nj = j_ts / limit_j_max
     snj = (1.0 - nj).clamp_min(0.0)

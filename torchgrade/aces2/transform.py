@@ -53,7 +53,13 @@ class Aces2Output:
                                  torch.cat((cusps, top[:, None]), -1), reach_m_table(reach, limit_j_max))
 
     def render(self, aces: torch.Tensor) -> torch.Tensor:
-        """ACES2065-1 ``(..., 3, H, W)`` -> linear RGB in the limiting primaries, 1.0 = 100 cd/m², in ``[0, peak/100]``."""
+        """ACES2065-1 ``(..., 3, H, W)`` -> linear RGB in the limiting primaries, 1.0 = 100 cd/m², in ``[0, peak/100]``.
+
+        Examples:
+            >>> out = _output(100.0, "rec709").render(torch.full((1, 3, 1, 1), 1e4))
+            >>> [round(v, 4) for v in out.flatten().tolist()]  # white limited to peak
+            [1.0, 1.0, 1.0]
+        """
         aab = rgb_to_aab(aces, self.aces)
         j, m, h, cos_h, sin_h = aab_to_jmh(aab, self.aces)
         j_ts = y_to_j(daniele_tonescale(a_to_y(aab.select(-3, 0), self.aces), self.tone), self.aces)
