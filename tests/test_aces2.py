@@ -1,5 +1,6 @@
 """ACES 2.0 Output Transform against OpenColorIO's builtin ACES 2.0 views, plus formula invariants."""
 
+import functools
 import math
 
 import numpy as np
@@ -44,6 +45,7 @@ def _ours(rgb: np.ndarray, dtype=torch.float32, **kwargs) -> np.ndarray:
     return aces2_output(image, **kwargs)[0, :, :, 0].T.double().numpy()
 
 
+@functools.lru_cache(maxsize=None)
 def _sample(exr_dir, name: str) -> np.ndarray:
     """Pixels of one image exposed so the median of its positive Rec.709 luminances is 0.18.
 
@@ -156,6 +158,13 @@ def test_non_finite_pixels_do_not_spread():
     keep = torch.ones(4, 4, dtype=torch.bool)
     keep[1, 2] = False
     assert torch.equal(aces2_output(image)[..., keep], aces2_output(bad)[..., keep])
+
+
+def test_autocast_does_not_lower_the_precision():
+    image = torch.exp2(torch.empty(1, 3, 8, 8).uniform_(-6, 6))
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        under = aces2_output(image, encoding="bt1886")
+    assert under.dtype == torch.float32 and torch.equal(under, aces2_output(image, encoding="bt1886"))
 
 
 def test_tables_are_cached_per_peak_and_primaries():

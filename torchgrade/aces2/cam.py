@@ -129,9 +129,9 @@ def _safe_hypot_atan2(a: torch.Tensor, b: torch.Tensor):
     """``sqrt(a²+b²)`` and ``atan2(b, a)`` with finite gradients at the origin (hue 0 there)."""
     r2 = a * a + b * b
     zero = r2 <= 0
-    m = torch.sqrt(torch.where(zero, torch.ones_like(r2), r2))
-    hue = torch.atan2(torch.where(zero, torch.zeros_like(b), b), torch.where(zero, torch.ones_like(a), a))
-    return torch.where(zero, torch.zeros_like(m), m), hue
+    m = torch.sqrt(torch.where(zero, 1.0, r2))
+    hue = torch.atan2(torch.where(zero, 0.0, b), torch.where(zero, 1.0, a))
+    return torch.where(zero, 0.0, m), hue
 
 
 def aab_to_jmh(aab: torch.Tensor, p: JMhParams, dim: int = -3):
@@ -151,11 +151,11 @@ def aab_to_jmh(aab: torch.Tensor, p: JMhParams, dim: int = -3):
     j = J_SCALE * safe_pow(a_, p.cz)
     m, hue = _safe_hypot_atan2(a, b)
     chromatic = lit & (m > 0)
-    safe_m = torch.where(chromatic, m, torch.ones_like(m))
-    cos_h = torch.where(chromatic, a / safe_m, torch.ones_like(m))
-    sin_h = torch.where(chromatic, b / safe_m, torch.zeros_like(m))
-    h = torch.where(lit, torch.remainder(torch.rad2deg(hue), 360.0), torch.zeros_like(hue))
-    return j, torch.where(lit, m, torch.zeros_like(m)), h, cos_h, sin_h
+    safe_m = torch.where(chromatic, m, 1.0)
+    cos_h = torch.where(chromatic, a / safe_m, 1.0)
+    sin_h = torch.where(chromatic, b / safe_m, 0.0)
+    h = torch.where(lit, torch.remainder(torch.rad2deg(hue), 360.0), 0.0)
+    return j, torch.where(lit, m, 0.0), h, cos_h, sin_h
 
 
 def jmh_to_rgb(j, m, cos_h, sin_h, p: JMhParams, dim: int = -3) -> torch.Tensor:

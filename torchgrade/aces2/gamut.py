@@ -29,7 +29,7 @@ COMPRESSION_THRESHOLD = 0.75
 
 
 def _nonzero(x: torch.Tensor) -> torch.Tensor:
-    return torch.where(x == 0, torch.ones_like(x), x)
+    return torch.where(x == 0, 1.0, x)
 
 
 def focus_j(cusp_j, mid_j: float, limit_j_max: float):
@@ -52,7 +52,7 @@ def focus_gain(j, threshold, limit_j_max: float, focus_dist: float):
     """
     above = j > threshold
     ratio = (limit_j_max - threshold) / (limit_j_max - j).clamp_min(0.0001)
-    adjust = torch.log10(torch.where(above, ratio, torch.ones_like(ratio)))
+    adjust = torch.log10(torch.where(above, ratio, 1.0))
     return limit_j_max * focus_dist * (adjust * adjust + 1.0)
 
 
@@ -113,8 +113,8 @@ def _remap_m(m, gamut_m, reach_m):
     proportion = (gamut_m / reach_m).clamp_min(COMPRESSION_THRESHOLD)
     threshold = proportion * gamut_m
     active = (m > threshold) & (proportion < 1.0)
-    gamut_off = torch.where(active, gamut_m - threshold, torch.ones_like(m))
-    reach_off = torch.where(active, reach_m - threshold, 2.0 * torch.ones_like(m))
+    gamut_off = torch.where(active, gamut_m - threshold, 1.0)
+    reach_off = torch.where(active, reach_m - threshold, 2.0)
     scale = reach_off / (reach_off / gamut_off - 1.0)
     nd = (m - threshold) / scale
     return torch.where(active, threshold + scale * nd / (1.0 + nd), m)
@@ -181,8 +181,8 @@ def gamut_compress(j, m, h, reach_m, p: GamutParams):
     gamut_m = hull_boundary_m(cusp_j, cusp_m, p.limit_j_max, top_inv, p.lower_inv, j_i, slope, j_ic)
     reach_bound = _line_hull_m(j_i, slope, p.model_gamma_inv, p.limit_j_max, reach_m, p.limit_j_max)
     active = (j > 0) & (m > 0) & (j <= p.limit_j_max) & (gamut_m > 0)
-    safe_gamut = torch.where(active, gamut_m, torch.ones_like(m))
-    safe_reach = torch.where(active, reach_bound, 2.0 * torch.ones_like(m))
-    m_out = _remap_m(torch.where(active, m, torch.zeros_like(m)), safe_gamut, safe_reach)
+    safe_gamut = torch.where(active, gamut_m, 1.0)
+    safe_reach = torch.where(active, reach_bound, 2.0)
+    m_out = _remap_m(torch.where(active, m, 0.0), safe_gamut, safe_reach)
     j_out = torch.where(active, j_i + m_out * slope, j.clamp_min(0.0))
-    return j_out, torch.where(active, m_out, torch.zeros_like(m))
+    return j_out, torch.where(active, m_out, 0.0)

@@ -82,6 +82,7 @@ def _rgb_to_rgb(source, target) -> torch.Tensor:
 
 
 _AP0_TO_AP1 = _rgb_to_rgb(color.AP0_CHROMATICITIES, color.AP1_CHROMATICITIES)
+_AP1_TO_AP0 = torch.linalg.inv(_AP0_TO_AP1)
 _REC709_TO_AP0 = torch.linalg.inv(color.primaries_to_rec709_matrix(color.AP0_CHROMATICITIES))
 
 
@@ -118,8 +119,9 @@ def aces2_output(image: torch.Tensor, peak_luminance: float = 100.0, limiting_pr
 
     Matches OpenColorIO's "ACES 2.0 - SDR 100 nits (Rec.709)" and "ACES 2.0 - HDR 1000 nits
     (Rec.2020)" / "(P3 D65)" views (Academy ACES 2.0; see ``tests/test_aces2.py`` for the measured
-    distance). Differentiable with respect to the image; tables are built once per
-    ``(peak_luminance, limiting_primaries)``.
+    distance). Differentiable with respect to the image. ``peak_luminance`` is a number in
+    ``[100, 10000]`` cd/m², not a tensor: the gamut tables are searched for it, once per
+    ``(peak_luminance, limiting_primaries)`` and then cached.
 
     Examples:
         >>> grey = torch.full((1, 3, 1, 1), 0.18)
@@ -133,20 +135,25 @@ def aces2_output(image: torch.Tensor, peak_luminance: float = 100.0, limiting_pr
     check_image(image)
     display_primaries = display_primaries or limiting_primaries
     _check(peak_luminance, limiting_primaries, display_primaries, encoding, input_space)
-    peak = float(peak_luminance)
     if image.dtype in (torch.float16, torch.bfloat16):
         raise TypeError(f"aces2_output needs float32 or float64 input (its CAM overflows {image.dtype})")
-    x = sanitize(image)
+    # The CAM's powers and the table lookups need float32 or better, whatever autocast is active.
+    with torch.autocast(device_type=image.device.type, enabled=False):
+        linear = _display_linear(sanitize(image), float(peak_luminance), limiting_primaries, display_primaries,
+                                 input_space)
+        if encoding == "bt1886":
+            return color.safe_pow(linear, 1.0 / 2.4)
+        if encoding == "pq":
+            return color.linear_to_pq(linear, reference=float(peak_luminance))
+        return linear
+
+
+def _display_linear(x: torch.Tensor, peak: float, limiting: str, display: str, input_space: str) -> torch.Tensor:
     aces = _apply(_REC709_TO_AP0, x) if input_space == "rec709" else x
-    output = _output(peak, limiting_primaries)
+    output = _output(peak, limiting)
     ap1 = _apply(_AP0_TO_AP1, aces).clamp(0.0, output.tone.forward_limit)
-    rgb = output.render(_apply(torch.linalg.inv(_AP0_TO_AP1), ap1))
-    rgb = _apply(_rgb_to_rgb(PRIMARIES[limiting_primaries], PRIMARIES[display_primaries]), rgb)
+    rgb = output.render(_apply(_AP1_TO_AP0, ap1))
+    rgb = _apply(_rgb_to_rgb(PRIMARIES[limiting], PRIMARIES[display]), rgb)
     # Display values below 0 do not exist: clip where a limiting gamut pokes out of the container
     # (P3's red lies just outside Rec.2020), rather than mirror them through the encoding as OpenColorIO does.
-    linear = (rgb / (peak / REFERENCE_LUMINANCE)).clamp(0.0, 1.0)
-    if encoding == "bt1886":
-        return color.safe_pow(linear, 1.0 / 2.4)
-    if encoding == "pq":
-        return color.linear_to_pq(linear, reference=peak)
-    return linear
+    return (rgb / (peak / REFERENCE_LUMINANCE)).clamp(0.0, 1.0)
