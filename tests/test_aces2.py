@@ -99,6 +99,16 @@ def test_matches_opencolorio_on_aces_input_out_of_gamut(target):
     assert np.percentile(d, 99.9) <= 0.5 and d.max() <= 2.0
 
 
+@pytest.mark.parametrize("peak", [500.0, 2000.0, 4000.0])
+def test_peak_luminance_matches_the_other_hdr_views(peak):
+    view = f"ACES 2.0 - HDR {int(peak)} nits (Rec.2020)"
+    aces = _random_aces(1500, 4)
+    ref = _display(_ocio("ACES2065-1", "Rec.2100-PQ - Display", view, aces))
+    ours = _ours(aces, input_space="aces", encoding="pq", peak_luminance=peak, limiting_primaries="rec2020")
+    d = np.abs(ours - ref) * 1023
+    assert np.percentile(d, 99.9) <= 0.5 and d.max() <= 2.0
+
+
 def test_float64_agrees_with_float32():
     aces = _random_aces(2000, 2)
     single = _ours(aces, input_space="aces")
