@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import torch
 
-from ..color import AP0_CHROMATICITIES, rgb_to_xyz_matrix, safe_pow
+from ..color import rgb_to_xyz_matrix, safe_pow
 
 __all__ = ["CAM16_PRIMARIES", "JMhParams", "jmh_params", "rgb_to_aab", "aab_to_jmh", "jmh_to_rgb", "y_to_j", "a_to_y"]
 
@@ -86,6 +86,7 @@ def jmh_params(chromaticities) -> JMhParams:
     """CAM constants for RGB with the given primaries and white, adapted fully to that white.
 
     Examples:
+        >>> from torchgrade.color import AP0_CHROMATICITIES
         >>> p = jmh_params(AP0_CHROMATICITIES)
         >>> round(p.cz, 4), round(p.f_l_n, 6)
         (1.1371, 0.007937)
@@ -118,6 +119,7 @@ def rgb_to_aab(rgb: torch.Tensor, p: JMhParams, dim: int = -3) -> torch.Tensor:
     """RGB -> ``(A, a, b)``: cone matrix, signed compression, opponent matrix (A normalised to white = 1).
 
     Examples:
+        >>> from torchgrade.color import AP0_CHROMATICITIES
         >>> p = jmh_params(AP0_CHROMATICITIES)
         >>> round(float(rgb_to_aab(torch.ones(1, 3, 1, 1, dtype=torch.float64), p)[0, 0]), 6)  # white: A = 1
         1.0
@@ -140,6 +142,7 @@ def aab_to_jmh(aab: torch.Tensor, p: JMhParams, dim: int = -3):
     Returns ``(J, M, h, cos h, sin h)``, trigonometry from ``(a, b)`` directly.
 
     Examples:
+        >>> from torchgrade.color import AP0_CHROMATICITIES
         >>> p = jmh_params(AP0_CHROMATICITIES)
         >>> rgb = torch.tensor([0.5, 0.2, 0.1], dtype=torch.float64).reshape(1, 3, 1, 1)
         >>> j, m, h, _, _ = aab_to_jmh(rgb_to_aab(rgb, p), p)
@@ -162,6 +165,7 @@ def jmh_to_rgb(j, m, cos_h, sin_h, p: JMhParams, dim: int = -3) -> torch.Tensor:
     """Inverse model: ``A = (J / 100)^(1/cz)``, ``(a, b) = M (cos h, sin h)``, then the matrices back to RGB.
 
     Examples:
+        >>> from torchgrade.color import AP0_CHROMATICITIES
         >>> p = jmh_params(AP0_CHROMATICITIES)
         >>> rgb = torch.tensor([0.5, 0.2, 0.1], dtype=torch.float64).reshape(1, 3, 1, 1)
         >>> j, m, _, cos_h, sin_h = aab_to_jmh(rgb_to_aab(rgb, p), p)
@@ -177,6 +181,7 @@ def a_to_y(a: torch.Tensor, p: JMhParams) -> torch.Tensor:
     """Luminance in cd/m² (RGB 1.0 -> 100) of an achromatic colour with response ``A >= 0``: ``ra^-1(A_w A) / F_L_n``.
 
     Examples:
+        >>> from torchgrade.color import AP0_CHROMATICITIES
         >>> p = jmh_params(AP0_CHROMATICITIES)
         >>> round(float(a_to_y(torch.tensor(1.0, dtype=torch.float64), p)), 6)  # scene white
         100.0
@@ -188,6 +193,7 @@ def y_to_j(y: torch.Tensor, p: JMhParams) -> torch.Tensor:
     """Lightness ``J = 100 (ra(|y| F_L_n) / A_w)^cz`` of an achromatic colour of luminance ``y`` cd/m², odd in ``y``.
 
     Examples:
+        >>> from torchgrade.color import AP0_CHROMATICITIES
         >>> p = jmh_params(AP0_CHROMATICITIES)
         >>> [round(v, 6) for v in y_to_j(torch.tensor([100.0, -100.0], dtype=torch.float64), p).tolist()]
         [100.0, -100.0]
