@@ -150,7 +150,8 @@ def test_gradcheck_on_hdr_colours_out_of_gamut_included():
 @pytest.mark.parametrize("dtype", (torch.float32, torch.float64))
 def test_extremes_give_finite_outputs_and_gradients(dtype):
     tiny = torch.finfo(dtype).tiny
-    values = [0.0, tiny, tiny / 4, 1e-30, 0.18, 60.0, 65504.0, 1e30, -1e30, -0.5, float("nan"), float("inf"), -float("inf")]
+    values = [0.0, tiny, tiny / 4, 1e-30, 0.18, 60.0, 65504.0, 1e30, -1e30, -0.5,
+              float("nan"), float("inf"), -float("inf")]
     n = len(values)
     grid = torch.tensor(values, dtype=dtype)
     image = torch.stack((grid, grid.roll(1), grid.roll(5)))[None, :, :, None].clone().requires_grad_()

@@ -244,7 +244,8 @@ def unity_to_aces(image: torch.Tensor) -> torch.Tensor:
     """Linear Rec.709 -> ACES2065-1 (AP0), Unity ``unity_to_ACES``.
 
     Examples:
-        >>> [round(v, 4) for v in unity_to_aces(torch.ones(1, 3, 1, 1)).flatten().tolist()]  # D65 white -> near ACES white
+        >>> # D65 white -> near the ACES white
+        >>> [round(v, 4) for v in unity_to_aces(torch.ones(1, 3, 1, 1)).flatten().tolist()]
         [1.0, 1.0, 0.9998]
     """
     return convert(image, "srgb_to_ap0")
@@ -329,7 +330,8 @@ def rgb_to_hsv(image: torch.Tensor) -> torch.Tensor:
     their gradients are finite.
 
     Examples:
-        >>> [round(v, 4) for v in rgb_to_hsv(torch.tensor([1.0, 0.5, 0.0]).reshape(1, 3, 1, 1)).flatten().tolist()]  # orange
+        >>> orange = torch.tensor([1.0, 0.5, 0.0]).reshape(1, 3, 1, 1)
+        >>> [round(v, 4) for v in rgb_to_hsv(orange).flatten().tolist()]
         [0.0833, 1.0, 1.0]
     """
     r, g, b = image.unbind(CHANNEL)
@@ -351,7 +353,8 @@ def hsv_to_rgb(image: torch.Tensor) -> torch.Tensor:
     """HSV (hue in turns) -> RGB: ``V * lerp(1, clamp(|frac(H + k) * 6 - 3| - 1, 0, 1), S)`` (Unity ``HsvToRgb``).
 
     Examples:
-        >>> [round(v, 4) for v in hsv_to_rgb(torch.tensor([0.0, 1.0, 2.0]).reshape(1, 3, 1, 1)).flatten().tolist()]  # saturated red
+        >>> red = torch.tensor([0.0, 1.0, 2.0]).reshape(1, 3, 1, 1)  # hue 0, saturation 1, value 2
+        >>> [round(v, 4) for v in hsv_to_rgb(red).flatten().tolist()]
         [2.0, 0.0, 0.0]
     """
     hue, saturation, value = (c.unsqueeze(CHANNEL) for c in image.unbind(CHANNEL))
@@ -374,7 +377,8 @@ def rgb_to_xyz_matrix(chromaticities) -> torch.Tensor:
     """RGB -> XYZ for primaries and white given as ``((xr, yr), (xg, yg), (xb, yb), (xw, yw))`` (SMPTE RP 177).
 
     Examples:
-        >>> [round(v, 4) for v in rgb_to_xyz_matrix(REC709_CHROMATICITIES)[1].flatten().tolist()]  # Y row: luminance weights
+        >>> # the Y row: Rec.709 luminance weights
+        >>> [round(v, 4) for v in rgb_to_xyz_matrix(REC709_CHROMATICITIES)[1].tolist()]
         [0.2126, 0.7152, 0.0722]
     """
     primaries = torch.stack([_xy_to_xyz(x, y) for x, y in chromaticities[:3]], dim=1)
@@ -387,7 +391,8 @@ def bradford_adaptation(source_white, target_white) -> torch.Tensor:
 
     Examples:
         >>> m = bradford_adaptation(AP0_CHROMATICITIES[3], REC709_CHROMATICITIES[3])
-        >>> [round(v, 4) for v in (m @ rgb_to_xyz_matrix(AP0_CHROMATICITIES).sum(1)).flatten().tolist()]  # ACES white -> D65 XYZ
+        >>> # the ACES white goes to the XYZ of D65
+        >>> [round(v, 4) for v in (m @ rgb_to_xyz_matrix(AP0_CHROMATICITIES).sum(1)).tolist()]
         [0.9505, 1.0, 1.0891]
     """
     source, target = _BRADFORD @ _xy_to_xyz(*source_white), _BRADFORD @ _xy_to_xyz(*target_white)
@@ -448,7 +453,8 @@ def linear_to_pq(image: torch.Tensor, reference: float = 100.0) -> torch.Tensor:
 
 
 def pq_to_linear(code: torch.Tensor, reference: float = 100.0) -> torch.Tensor:
-    """SMPTE ST 2084 EOTF, in units of ``reference`` cd/m²: ``10000 (max(E'^(1/m2) - c1, 0) / (c2 - c3 E'^(1/m2)))^(1/m1)``.
+    """SMPTE ST 2084 EOTF in units of ``reference`` cd/m²:
+    ``10000 (max(E'^(1/m2) - c1, 0) / (c2 - c3 E'^(1/m2)))^(1/m1)``.
 
     Examples:
         >>> round(float(pq_to_linear(torch.tensor(0.5081))), 2)

@@ -60,7 +60,8 @@ def solve_j_intersect(j, m, focus, limit_j_max: float, gain):
     """J where the compression line through (J, M) meets the J axis: the stable root of its quadratic.
 
     Examples:
-        >>> float(solve_j_intersect(torch.tensor(50.0), torch.tensor(0.0), torch.tensor(40.0), 100.0, torch.tensor(135.0)))  # M = 0: J itself
+        >>> t = torch.tensor
+        >>> float(solve_j_intersect(t(50.0), t(0.0), t(40.0), 100.0, t(135.0)))  # M = 0: J itself
         50.0
     """
     ms = m / gain
@@ -78,7 +79,8 @@ def compression_slope(j_intersect, focus, limit_j_max: float, gain):
     """Slope dJ/dM of the line: ``s (J_i - J_focus) / (J_focus gain)``, ``s = J_i`` below focus else ``J_max - J_i``.
 
     Examples:
-        >>> round(float(compression_slope(torch.tensor(50.0), torch.tensor(40.0), 100.0, torch.tensor(135.0))), 4)  # 50 * 10 / (40 * 135)
+        >>> t = torch.tensor
+        >>> round(float(compression_slope(t(50.0), t(40.0), 100.0, t(135.0))), 4)  # 50 * 10 / (40 * 135)
         0.0926
     """
     scale = torch.where(j_intersect < focus, j_intersect, limit_j_max - j_intersect)
@@ -134,7 +136,8 @@ class GamutParams:
         Examples:
             >>> from torchgrade.aces2.transform import _output
             >>> p = _output(100.0, "rec709").gamut
-            >>> [round(float(v), 1) for v in p.cusp(torch.tensor([120.0], dtype=torch.float64))]  # J, M, 1/gamma of the green-yellow cusp
+            >>> # J, M, 1/gamma of the green-yellow cusp
+            >>> [round(float(v), 1) for v in p.cusp(torch.tensor([120.0], dtype=torch.float64))]
             [86.8, 57.3, 1.1]
         """
         hues = self.hues.to(dtype=h.dtype, device=h.device)

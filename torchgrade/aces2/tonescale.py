@@ -62,7 +62,8 @@ def daniele_tonescale(y: torch.Tensor, t: ToneScale) -> torch.Tensor:
 
     Examples:
         >>> t = tonescale_params(1000.0)
-        >>> [round(v, 2) for v in daniele_tonescale(torch.tensor([0.0, 18.0, 51200.0], dtype=torch.float64), t).tolist()]
+        >>> y = torch.tensor([0.0, 18.0, 51200.0], dtype=torch.float64)  # black, grey, r_hit
+        >>> [round(v, 2) for v in daniele_tonescale(y, t).tolist()]
         [0.0, 14.51, 1000.0]
     """
     y = y.clamp_min(0.0)
@@ -135,7 +136,8 @@ def chroma_compress(j, m, j_ts, norm, reach_m, limit_j_max: float, cz: float, c:
     Examples:
         >>> c = chroma_params(tonescale_params(100.0))
         >>> one = torch.tensor(1.0)
-        >>> float(chroma_compress(one * 50, one * 0, one * 40, one * 100, one * 150, 100.0, 1.1371, c))  # grey stays grey
+        >>> # grey stays grey
+        >>> float(chroma_compress(one * 50, one * 0, one * 40, one * 100, one * 150, 100.0, 1.1371, c))
         0.0
     """
     inv_cz = 1.0 / cz

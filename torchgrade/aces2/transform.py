@@ -53,7 +53,8 @@ class Aces2Output:
                                  torch.cat((cusps, top[:, None]), -1), reach_m_table(reach, limit_j_max))
 
     def render(self, aces: torch.Tensor) -> torch.Tensor:
-        """ACES2065-1 ``(..., 3, H, W)`` -> linear RGB in the limiting primaries, 1.0 = 100 cd/m², in ``[0, peak/100]``.
+        """ACES2065-1 ``(..., 3, H, W)`` -> linear RGB in the limiting primaries, 1.0 = 100 cd/m²,
+        in ``[0, peak/100]``.
 
         Examples:
             >>> out = _output(100.0, "rec709").render(torch.full((1, 3, 1, 1), 1e4))
@@ -92,7 +93,8 @@ def _apply(m: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
 
 def _check(peak_luminance, limiting_primaries, display_primaries, encoding, input_space) -> None:
     if isinstance(peak_luminance, bool) or not isinstance(peak_luminance, (int, float)):
-        raise TypeError(f"peak_luminance must be a number of cd/m² (tables are cached per value), got {type(peak_luminance).__name__}")
+        kind = type(peak_luminance).__name__
+        raise TypeError(f"peak_luminance must be a number of cd/m² (tables are cached per value), got {kind}")
     if not (100.0 <= float(peak_luminance) <= 10000.0):
         raise ValueError(f"peak_luminance must be in [100, 10000] cd/m², got {peak_luminance}")
     for name, value, choices in (("limiting_primaries", limiting_primaries, tuple(PRIMARIES)),
