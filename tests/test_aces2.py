@@ -191,6 +191,9 @@ def test_bad_arguments_raise_clear_errors():
         aces2_output(image, peak_luminance=50.0)
     with pytest.raises(ValueError, match="limiting_primaries"):
         aces2_output(image, limiting_primaries="ap0")
+    with pytest.raises(TypeError, match="peak_luminance"):
+        aces2_output(image, peak_luminance=torch.tensor(1000.0, requires_grad=True))
+    assert torch.equal(aces2_output(image, peak_luminance=torch.tensor(1000.0)), aces2_output(image, 1000.0))
     with pytest.raises(TypeError, match="float16"):
         aces2_output(image.half())
     with pytest.raises(ValueError, match="channel"):

@@ -91,11 +91,18 @@ def _apply(m: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
     return apply_matrix(m.to(dtype=image.dtype, device=image.device), image)
 
 
-def _check(peak_luminance, limiting_primaries, display_primaries, encoding, input_space) -> None:
+def _peak(peak_luminance) -> float:
+    """The peak as a float: a number or a 0-d tensor without gradient (the tables are searched per value)."""
+    if isinstance(peak_luminance, torch.Tensor) and peak_luminance.numel() == 1 and not peak_luminance.requires_grad:
+        return float(peak_luminance)
     if isinstance(peak_luminance, bool) or not isinstance(peak_luminance, (int, float)):
         kind = type(peak_luminance).__name__
         raise TypeError(f"peak_luminance must be a number of cd/m² (tables are cached per value), got {kind}")
-    if not (100.0 <= float(peak_luminance) <= 10000.0):
+    return float(peak_luminance)
+
+
+def _check(peak_luminance: float, limiting_primaries, display_primaries, encoding, input_space) -> None:
+    if not (100.0 <= peak_luminance <= 10000.0):
         raise ValueError(f"peak_luminance must be in [100, 10000] cd/m², got {peak_luminance}")
     for name, value, choices in (("limiting_primaries", limiting_primaries, tuple(PRIMARIES)),
                                  ("display_primaries", display_primaries, tuple(PRIMARIES)),
@@ -121,9 +128,9 @@ def aces2_output(image: torch.Tensor, peak_luminance: float = 100.0, limiting_pr
 
     Matches OpenColorIO's "ACES 2.0 - SDR 100 nits (Rec.709)" and "ACES 2.0 - HDR 1000 nits
     (Rec.2020)" / "(P3 D65)" views (Academy ACES 2.0; see ``tests/test_aces2.py`` for the measured
-    distance). Differentiable with respect to the image. ``peak_luminance`` is a number in
-    ``[100, 10000]`` cd/m², not a tensor: the gamut tables are searched for it, once per
-    ``(peak_luminance, limiting_primaries)`` and then cached.
+    distance). Differentiable with respect to the image. ``peak_luminance`` is a number (or a
+    0-d tensor without gradient) in ``[100, 10000]`` cd/m², not a learnable parameter: the gamut
+    tables are searched for it, once per ``(peak_luminance, limiting_primaries)``, then cached.
 
     Examples:
         >>> grey = torch.full((1, 3, 1, 1), 0.18)
@@ -136,17 +143,17 @@ def aces2_output(image: torch.Tensor, peak_luminance: float = 100.0, limiting_pr
     """
     check_image(image)
     display_primaries = display_primaries or limiting_primaries
-    _check(peak_luminance, limiting_primaries, display_primaries, encoding, input_space)
+    peak = _peak(peak_luminance)
+    _check(peak, limiting_primaries, display_primaries, encoding, input_space)
     if image.dtype in (torch.float16, torch.bfloat16):
         raise TypeError(f"aces2_output needs float32 or float64 input (its CAM overflows {image.dtype})")
     # The CAM's powers and the table lookups need float32 or better, whatever autocast is active.
     with torch.autocast(device_type=image.device.type, enabled=False):
-        linear = _display_linear(sanitize(image), float(peak_luminance), limiting_primaries, display_primaries,
-                                 input_space)
+        linear = _display_linear(sanitize(image), peak, limiting_primaries, display_primaries, input_space)
         if encoding == "bt1886":
             return color.safe_pow(linear, 1.0 / 2.4)
         if encoding == "pq":
-            return color.linear_to_pq(linear, reference=float(peak_luminance))
+            return color.linear_to_pq(linear, reference=peak)
         return linear
 
 
