@@ -9,7 +9,6 @@ Source: Academy aces-output (ACES 2.0 Output Transforms) and OpenColorIO's built
 from __future__ import annotations
 
 import functools
-import math
 
 import torch
 
