@@ -1,0 +1,191 @@
+"""ACES 2.0 gamut compression: pull (J, M) along a focus-directed line onto the limiting gamut's hull.
+
+Source: Academy aces-core ``Lib.Academy.OutputTransform.ctl`` (``gamutMapper``) and OpenColorIO
+``ops/fixedfunction/ACES2/Transform.cpp`` (``compressGamut``). The hull at a hue is approximated by
+two power curves meeting at the cusp (lower gamma fixed per peak, upper gamma from the cusp table)
+joined by a smooth minimum; colours beyond 0.75 of the hull (more when the hull is near the reach
+boundary) are compressed with a Reinhard curve that maps the AP1 reach boundary onto the hull.
+
+The helpers work on tensors of any shape and dtype, so the cusp-table builder and the per-pixel
+path share them.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from ..color import safe_pow, safe_sqrt
+
+__all__ = ["GamutParams", "gamut_compress", "focus_gain", "solve_j_intersect", "compression_slope",
+           "hull_boundary_m", "focus_j"]
+
+SMOOTH_CUSPS = 0.12
+SMOOTH_M = 0.27
+CUSP_MID_BLEND = 1.3
+FOCUS_GAIN_BLEND = 0.3
+FOCUS_DISTANCE = 1.35
+FOCUS_DISTANCE_SCALING = 1.75
+COMPRESSION_THRESHOLD = 0.75
+
+
+def _nonzero(x: torch.Tensor) -> torch.Tensor:
+    return torch.where(x == 0, 1.0, x)
+
+
+def focus_j(cusp_j, mid_j: float, limit_j_max: float):
+    """Focus point on the J axis: ``lerp(J_cusp, J_mid, min(1, 1.3 - J_cusp / J_max))``.
+
+    Examples:
+        >>> round(float(focus_j(torch.tensor(60.0), 34.1, 100.0)), 2)  # 0.7 of the way from 60 to 34.1
+        41.87
+    """
+    w = (CUSP_MID_BLEND - cusp_j / limit_j_max).clamp(max=1.0)
+    return cusp_j + (mid_j - cusp_j) * w
+
+
+def focus_gain(j, threshold, limit_j_max: float, focus_dist: float):
+    """Slope gain ``J_max d``, times ``1 + log10((J_max - thr) / max(1e-4, J_max - J))²`` above ``thr``.
+
+    Examples:
+        >>> [round(v, 2) for v in focus_gain(torch.tensor([10.0, 99.0]), torch.tensor(80.0), 100.0, 1.35).tolist()]
+        [135.0, 363.51]
+    """
+    above = j > threshold
+    ratio = (limit_j_max - threshold) / (limit_j_max - j).clamp_min(0.0001)
+    adjust = torch.log10(torch.where(above, ratio, 1.0))
+    return limit_j_max * focus_dist * (adjust * adjust + 1.0)
+
+
+def solve_j_intersect(j, m, focus, limit_j_max: float, gain):
+    """J where the compression line through (J, M) meets the J axis: the stable root of its quadratic.
+
+    Examples:
+        >>> t = torch.tensor
+        >>> float(solve_j_intersect(t(50.0), t(0.0), t(40.0), 100.0, t(135.0)))  # M = 0: J itself
+        50.0
+    """
+    ms = m / gain
+    a = ms / focus
+    below = j < focus
+    b_lo = 1.0 - ms
+    lo = 2.0 * j / _nonzero(b_lo + safe_sqrt(b_lo * b_lo + 4.0 * a * j))
+    b_hi = -(1.0 + ms + limit_j_max * a)
+    c_hi = limit_j_max * ms + j
+    hi = -2.0 * c_hi / _nonzero(b_hi - safe_sqrt(b_hi * b_hi - 4.0 * a * c_hi))
+    return torch.where(below, lo, hi)
+
+
+def compression_slope(j_intersect, focus, limit_j_max: float, gain):
+    """Slope dJ/dM of the line: ``s (J_i - J_focus) / (J_focus gain)``, ``s = J_i`` below focus else ``J_max - J_i``.
+
+    Examples:
+        >>> t = torch.tensor
+        >>> round(float(compression_slope(t(50.0), t(40.0), 100.0, t(135.0))), 4)  # 50 * 10 / (40 * 135)
+        0.0926
+    """
+    scale = torch.where(j_intersect < focus, j_intersect, limit_j_max - j_intersect)
+    return scale * (j_intersect - focus) / (focus * gain)
+
+
+def _line_hull_m(j_axis, slope, inv_gamma, j_max, m_max, j_ref):
+    """Approximate M where ``J = slope M + J_axis`` meets ``J = J_max (M / M_max)^gamma`` (reference method)."""
+    shifted = j_ref * safe_pow(j_axis / j_ref, inv_gamma)
+    return shifted * m_max / _nonzero(j_max - slope * m_max)
+
+
+def hull_boundary_m(cusp_j, cusp_m, limit_j_max: float, top_inv, bottom_inv, j_intersect, slope, j_cusp_intersect):
+    """M of the limiting hull on the line: smooth minimum (cubic, width ``0.12 M_cusp``) of lower and upper curves.
+
+    Examples:
+        >>> t = torch.tensor
+        >>> m = hull_boundary_m(t(60.0), t(70.0), 100.0, t(1.1), 0.88, t(60.0), t(0.0), t(60.0))
+        >>> round(float(m), 2)  # through the cusp: M_cusp - 0.12 M_cusp / 6 (smooth minimum)
+        68.6
+    """
+    lower = _line_hull_m(j_intersect, slope, bottom_inv, cusp_j, cusp_m, j_cusp_intersect)
+    upper = _line_hull_m(limit_j_max - j_intersect, -slope, top_inv, limit_j_max - cusp_j, cusp_m,
+                         limit_j_max - j_cusp_intersect)
+    width = SMOOTH_CUSPS * cusp_m
+    h = (width - (lower - upper).abs()).clamp_min(0.0) / width
+    return torch.minimum(lower, upper) - h * h * h * width / 6.0
+
+
+def _remap_m(m, gamut_m, reach_m):
+    """Reinhard-style compression above ``threshold = max(gamut/reach, 0.75) gamut``, reach -> gamut."""
+    proportion = (gamut_m / reach_m).clamp_min(COMPRESSION_THRESHOLD)
+    threshold = proportion * gamut_m
+    active = (m > threshold) & (proportion < 1.0)
+    gamut_off = torch.where(active, gamut_m - threshold, 1.0)
+    reach_off = torch.where(active, reach_m - threshold, 2.0)
+    scale = reach_off / (reach_off / gamut_off - 1.0)
+    nd = (m - threshold) / scale
+    return torch.where(active, threshold + scale * nd / (1.0 + nd), m)
+
+
+class GamutParams:
+    """Per-peak constants and hue tables of the gamut compression (see :mod:`.tables`)."""
+
+    def __init__(self, limit_j_max, mid_j, focus_dist, lower_inv, model_gamma_inv, hues, cusps, reach):
+        self.limit_j_max, self.mid_j, self.focus_dist = limit_j_max, mid_j, focus_dist
+        self.lower_inv, self.model_gamma_inv = lower_inv, model_gamma_inv
+        self.hues, self.cusps, self.reach = hues, cusps, reach
+
+    def cusp(self, h: torch.Tensor):
+        """``(J_cusp, M_cusp, 1/gamma_top)`` at hue ``h``: linear in the non-uniform hue table.
+
+        Examples:
+            >>> from torchgrade.aces2.transform import _output
+            >>> p = _output(100.0, "rec709").gamut
+            >>> # J, M, 1/gamma of the green-yellow cusp
+            >>> [round(float(v), 1) for v in p.cusp(torch.tensor([120.0], dtype=torch.float64))]
+            [86.8, 57.3, 1.1]
+        """
+        hues = self.hues.to(dtype=h.dtype, device=h.device)
+        table = self.cusps.to(dtype=h.dtype, device=h.device)
+        hi = torch.searchsorted(hues, h.detach().contiguous()).clamp(1, hues.numel() - 1)
+        lo_hue, hi_hue = hues[hi - 1], hues[hi]
+        t = ((h - lo_hue) / (hi_hue - lo_hue)).unsqueeze(-1)
+        row = table[hi - 1] + (table[hi] - table[hi - 1]) * t
+        return row.unbind(-1)
+
+    def reach_m(self, h: torch.Tensor) -> torch.Tensor:
+        """AP1 reach M at ``J_max``, linear between whole degrees.
+
+        Examples:
+            >>> from torchgrade.aces2.transform import _output
+            >>> round(float(_output(100.0, "rec709").gamut.reach_m(torch.tensor(0.0, dtype=torch.float64))), 1)
+            166.8
+        """
+        table = self.reach.to(dtype=h.dtype, device=h.device)
+        base = torch.floor(h.detach())
+        t = h - base
+        i = base.long().remainder(360)
+        return table[i] + (table[(i + 1).remainder(360)] - table[i]) * t
+
+
+def gamut_compress(j, m, h, reach_m, p: GamutParams):
+    """Compressed ``(J, M)``: ``J <= 0`` -> black, ``M <= 0`` or ``J > J_max`` -> ``(J, 0)``, else the hull mapping.
+
+    Examples:
+        >>> from torchgrade.aces2.transform import _output
+        >>> p = _output(100.0, "rec709").gamut
+        >>> j, m, h = (torch.tensor([v], dtype=torch.float64) for v in (50.0, 300.0, 120.0))
+        >>> j_out, m_out = gamut_compress(j, m, h, p.reach_m(h), p)
+        >>> bool(m_out < m)  # far outside Rec.709: pulled in
+        True
+    """
+    cusp_j, cusp_m, top_inv = p.cusp(h)
+    focus = focus_j(cusp_j, p.mid_j, p.limit_j_max)
+    threshold = cusp_j + (p.limit_j_max - cusp_j) * FOCUS_GAIN_BLEND
+    gain = focus_gain(j, threshold, p.limit_j_max, p.focus_dist)
+    j_i = solve_j_intersect(j, m, focus, p.limit_j_max, gain)
+    slope = compression_slope(j_i, focus, p.limit_j_max, gain)
+    j_ic = solve_j_intersect(cusp_j, cusp_m, focus, p.limit_j_max, gain)
+    gamut_m = hull_boundary_m(cusp_j, cusp_m, p.limit_j_max, top_inv, p.lower_inv, j_i, slope, j_ic)
+    reach_bound = _line_hull_m(j_i, slope, p.model_gamma_inv, p.limit_j_max, reach_m, p.limit_j_max)
+    active = (j > 0) & (m > 0) & (j <= p.limit_j_max) & (gamut_m > 0)
+    safe_gamut = torch.where(active, gamut_m, 1.0)
+    safe_reach = torch.where(active, reach_bound, 2.0)
+    m_out = _remap_m(torch.where(active, m, 0.0), safe_gamut, safe_reach)
+    j_out = torch.where(active, j_i + m_out * slope, j.clamp_min(0.0))
+    return j_out, torch.where(active, m_out, 0.0)

@@ -1,0 +1,167 @@
+"""The ACES 2.0 Output Transform: scene-referred ACES2065-1 or linear Rec.709 -> display.
+
+Source: Academy aces-output (ACES 2.0 Output Transforms) and OpenColorIO's builtin
+``ACES-OUTPUT - ACES2065-1_to_CIE-XYZ-D65 - <target>_2.0``: AP1 clamp to ``[0, 8 r_hit]``, CAM
+(JMh), tonescale, chroma compression, gamut compression to the limiting primaries, white limiting
+(clamp to ``[0, peak/100]``), then the display encoding (BT.1886 or SMPTE ST 2084).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import torch
+
+from .. import color
+from ..core import apply_matrix, check_image, sanitize
+from .cam import REFERENCE_LUMINANCE, aab_to_jmh, jmh_params, jmh_to_rgb, rgb_to_aab, a_to_y, y_to_j
+from .gamut import FOCUS_DISTANCE, FOCUS_DISTANCE_SCALING, GamutParams, gamut_compress
+from .tables import hue_and_cusp_tables, reach_m_table, upper_hull_gamma
+from .tonescale import chroma_compress, chroma_norm, chroma_params, daniele_tonescale, tonescale_params
+
+__all__ = ["PRIMARIES", "ENCODINGS", "Aces2Output", "aces2_output"]
+
+PRIMARIES = {
+    "rec709": color.REC709_CHROMATICITIES,
+    "p3_d65": color.P3_D65_CHROMATICITIES,
+    "rec2020": color.REC2020_CHROMATICITIES,
+}
+"""Limiting and display primaries by name (all D65 white)."""
+
+ENCODINGS = ("linear", "bt1886", "pq")
+
+
+class Aces2Output:
+    """Float64 constants and hue tables for one (peak luminance, limiting primaries); see :func:`aces2_output`."""
+
+    def __init__(self, peak_luminance: float, limiting_primaries: str):
+        peak = float(peak_luminance)
+        self.peak, self.limiting = peak, limiting_primaries
+        self.aces = jmh_params(color.AP0_CHROMATICITIES)
+        self.limit = jmh_params(PRIMARIES[limiting_primaries])
+        reach = jmh_params(color.AP1_CHROMATICITIES)
+        self.tone = tonescale_params(peak)
+        self.chroma = chroma_params(self.tone)
+        limit_j_max = float(y_to_j(torch.tensor(peak, dtype=torch.float64), self.aces))
+        mid_j = float(y_to_j(torch.tensor(self.tone.c_t * 100.0, dtype=torch.float64), self.aces))
+        focus_dist = FOCUS_DISTANCE * (1.0 + FOCUS_DISTANCE_SCALING * self.tone.log_peak)
+        lower_inv = 1.0 / (1.14 + 0.07 * self.tone.log_peak)
+        hues, cusps = hue_and_cusp_tables(reach, self.limit, peak, limit_j_max, self.tone.forward_limit)
+        top = upper_hull_gamma(hues, cusps, self.limit, peak, limit_j_max, mid_j, focus_dist, lower_inv)
+        self.gamut = GamutParams(limit_j_max, mid_j, focus_dist, lower_inv, 1.0 / self.aces.cz, hues,
+                                 torch.cat((cusps, top[:, None]), -1), reach_m_table(reach, limit_j_max))
+
+    def render(self, aces: torch.Tensor) -> torch.Tensor:
+        """ACES2065-1 ``(..., 3, H, W)`` -> linear RGB in the limiting primaries, 1.0 = 100 cd/m²,
+        in ``[0, peak/100]``.
+
+        Examples:
+            >>> out = _output(100.0, "rec709").render(torch.full((1, 3, 1, 1), 1e4))
+            >>> [round(v, 4) for v in out.flatten().tolist()]  # white limited to peak
+            [1.0, 1.0, 1.0]
+        """
+        aab = rgb_to_aab(aces, self.aces)
+        j, m, h, cos_h, sin_h = aab_to_jmh(aab, self.aces)
+        j_ts = y_to_j(daniele_tonescale(a_to_y(aab.select(-3, 0), self.aces), self.tone), self.aces)
+        reach_m = self.gamut.reach_m(h)
+        norm = chroma_norm(cos_h, sin_h, self.chroma)
+        m_ts = chroma_compress(j, m, j_ts, norm, reach_m, self.gamut.limit_j_max, self.aces.cz, self.chroma)
+        j_out, m_out = gamut_compress(j_ts, m_ts, h, reach_m, self.gamut)
+        rgb = jmh_to_rgb(j_out, m_out, cos_h, sin_h, self.limit)
+        return rgb.clamp(0.0, self.peak / REFERENCE_LUMINANCE)
+
+
+@functools.lru_cache(maxsize=8)
+def _output(peak: float, limiting: str) -> Aces2Output:
+    return Aces2Output(peak, limiting)
+
+
+def _rgb_to_rgb(source, target) -> torch.Tensor:
+    """Linear RGB -> RGB through XYZ without adaptation (OpenColorIO's ``ADAPTATION_NONE``)."""
+    return torch.linalg.inv(color.rgb_to_xyz_matrix(target)) @ color.rgb_to_xyz_matrix(source)
+
+
+_AP0_TO_AP1 = _rgb_to_rgb(color.AP0_CHROMATICITIES, color.AP1_CHROMATICITIES)
+_AP1_TO_AP0 = torch.linalg.inv(_AP0_TO_AP1)
+_REC709_TO_AP0 = torch.linalg.inv(color.primaries_to_rec709_matrix(color.AP0_CHROMATICITIES))
+
+
+def _apply(m: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
+    return apply_matrix(m.to(dtype=image.dtype, device=image.device), image)
+
+
+def _peak(peak_luminance) -> float:
+    """The peak as a float: a number or a 0-d tensor without gradient (the tables are searched per value)."""
+    if isinstance(peak_luminance, torch.Tensor) and peak_luminance.numel() == 1 and not peak_luminance.requires_grad:
+        return float(peak_luminance)
+    if isinstance(peak_luminance, bool) or not isinstance(peak_luminance, (int, float)):
+        kind = type(peak_luminance).__name__
+        raise TypeError(f"peak_luminance must be a number of cd/m² (tables are cached per value), got {kind}")
+    return float(peak_luminance)
+
+
+def _check(peak_luminance: float, limiting_primaries, display_primaries, encoding, input_space) -> None:
+    if not (100.0 <= peak_luminance <= 10000.0):
+        raise ValueError(f"peak_luminance must be in [100, 10000] cd/m², got {peak_luminance}")
+    for name, value, choices in (("limiting_primaries", limiting_primaries, tuple(PRIMARIES)),
+                                 ("display_primaries", display_primaries, tuple(PRIMARIES)),
+                                 ("encoding", encoding, ENCODINGS), ("input_space", input_space, ("rec709", "aces"))):
+        if value not in choices:
+            raise ValueError(f"{name} must be one of {choices}, got {value!r}")
+
+
+def aces2_output(image: torch.Tensor, peak_luminance: float = 100.0, limiting_primaries: str = "rec709",
+                 display_primaries: str | None = None, encoding: str = "linear",
+                 input_space: str = "rec709") -> torch.Tensor:
+    r"""ACES 2.0 Output Transform of a scene-referred ``(..., 3, H, W)`` image.
+
+    ``input_space`` is ``"rec709"`` (linear Rec.709, Bradford-adapted to AP0) or ``"aces"``
+    (ACES2065-1). The image is sanitised (NaN -> 0, ±Inf -> ±65504), AP1-clamped to
+    ``[0, 8 r_hit]`` and rendered for a display of ``peak_luminance`` cd/m² whose gamut is limited
+    to ``limiting_primaries``; the result is expressed in ``display_primaries`` (default: the
+    limiting ones) and encoded:
+
+    * ``"linear"``: display-linear, ``1.0`` = peak, clipped to ``[0, 1]``;
+    * ``"bt1886"``: ``L^(1/2.4)`` (BT.1886 with black 0), OpenColorIO's "Rec.1886 Rec.709 - Display";
+    * ``"pq"``: SMPTE ST 2084 of ``L * peak`` cd/m², OpenColorIO's "Rec.2100-PQ - Display".
+
+    Matches OpenColorIO's "ACES 2.0 - SDR 100 nits (Rec.709)" and "ACES 2.0 - HDR 1000 nits
+    (Rec.2020)" / "(P3 D65)" views (Academy ACES 2.0; see ``tests/test_aces2.py`` for the measured
+    distance). Differentiable with respect to the image. ``peak_luminance`` is a number (or a
+    0-d tensor without gradient) in ``[100, 10000]`` cd/m², not a learnable parameter: the gamut
+    tables are searched for it, once per ``(peak_luminance, limiting_primaries)``, then cached.
+
+    Examples:
+        >>> grey = torch.full((1, 3, 1, 1), 0.18)
+        >>> sdr = aces2_output(grey, encoding="bt1886")  # OpenColorIO: 0.3831
+        >>> round(float(sdr[0, 0, 0, 0]), 3)
+        0.383
+        >>> hdr = aces2_output(grey, 1000.0, "p3_d65", "rec2020", encoding="linear")
+        >>> round(float(hdr[0, 1, 0, 0]) * 1000.0, 1)  # cd/m²
+        14.5
+    """
+    check_image(image)
+    display_primaries = display_primaries or limiting_primaries
+    peak = _peak(peak_luminance)
+    _check(peak, limiting_primaries, display_primaries, encoding, input_space)
+    if image.dtype in (torch.float16, torch.bfloat16):
+        raise TypeError(f"aces2_output needs float32 or float64 input (its CAM overflows {image.dtype})")
+    # The CAM's powers and the table lookups need float32 or better, whatever autocast is active.
+    with torch.autocast(device_type=image.device.type, enabled=False):
+        linear = _display_linear(sanitize(image), peak, limiting_primaries, display_primaries, input_space)
+        if encoding == "bt1886":
+            return color.safe_pow(linear, 1.0 / 2.4)
+        if encoding == "pq":
+            return color.linear_to_pq(linear, reference=peak)
+        return linear
+
+
+def _display_linear(x: torch.Tensor, peak: float, limiting: str, display: str, input_space: str) -> torch.Tensor:
+    aces = _apply(_REC709_TO_AP0, x) if input_space == "rec709" else x
+    output = _output(peak, limiting)
+    ap1 = _apply(_AP0_TO_AP1, aces).clamp(0.0, output.tone.forward_limit)
+    rgb = output.render(_apply(_AP1_TO_AP0, ap1))
+    rgb = _apply(_rgb_to_rgb(PRIMARIES[limiting], PRIMARIES[display]), rgb)
+    # Display values below 0 do not exist: clip where a limiting gamut pokes out of the container
+    # (P3's red lies just outside Rec.2020), rather than mirror them through the encoding as OpenColorIO does.
+    return (rgb / (peak / REFERENCE_LUMINANCE)).clamp(0.0, 1.0)
