@@ -17,6 +17,7 @@ Examples:
 """
 
 from .aces1_reference import aces_reference
+from .aces2_curves import aces2_hdr, aces2_sdr
 from .aces_fits import aces, aces_fitted, aces_hill, aces_narkowicz
 from .agx_curves import agx, agx_godot
 from .base import TONEMAP_INPUT_LIMIT, ToneMapper, no_tonemap
@@ -47,6 +48,8 @@ __all__ = [
     "aces_hill",
     "aces_narkowicz",
     "aces_reference",
+    "aces2_sdr",
+    "aces2_hdr",
     "agx",
     "agx_godot",
     "khronos_pbr_neutral",

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import torch
 
-from ..color import safe_pow, safe_sqrt
+from ...color import safe_pow, safe_sqrt
 
 __all__ = ["ToneScale", "tonescale_params", "daniele_tonescale", "ChromaParams", "chroma_params", "chroma_compress"]
 

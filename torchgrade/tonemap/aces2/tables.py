@@ -55,7 +55,7 @@ def reach_m_table(reach: JMhParams, limit_j_max: float) -> torch.Tensor:
 
     Examples:
         >>> from torchgrade.color import AP1_CHROMATICITIES
-        >>> from torchgrade.aces2.cam import jmh_params
+        >>> from torchgrade.tonemap.aces2.cam import jmh_params
         >>> table = reach_m_table(jmh_params(AP1_CHROMATICITIES), 100.0)
         >>> table.shape, bool((table > 0).all())
         (torch.Size([360]), True)
@@ -162,7 +162,7 @@ def hue_and_cusp_tables(reach: JMhParams, limit: JMhParams, peak: float, limit_j
     so the smoothed hull still encloses the true cusp.
 
     Examples:
-        >>> from torchgrade.aces2.transform import _output
+        >>> from torchgrade.tonemap.aces2.transform import _output
         >>> p = _output(100.0, "rec709").gamut
         >>> p.hues.shape, p.cusps.shape  # J, M, 1/gamma_top per hue
         (torch.Size([363]), torch.Size([363, 3]))
@@ -181,7 +181,7 @@ def upper_hull_gamma(hues, cusps, limit: JMhParams, peak: float, limit_j_max: fl
     bisection) whose approximate hull puts all five test points on the upper edge outside the cube.
 
     Examples:
-        >>> from torchgrade.aces2.transform import _output
+        >>> from torchgrade.tonemap.aces2.transform import _output
         >>> top = _output(100.0, "rec709").gamut.cusps[:, 2]
         >>> bool(((top > 1 / 5.2) & (top < 2.5)).all())  # 1/gamma with gamma in (0.4, 5.2]
         True

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import torch
 
-from ..color import safe_pow, safe_sqrt
+from ...color import safe_pow, safe_sqrt
 
 __all__ = ["GamutParams", "gamut_compress", "focus_gain", "solve_j_intersect", "compression_slope",
            "hull_boundary_m", "focus_j"]
@@ -134,7 +134,7 @@ class GamutParams:
         """``(J_cusp, M_cusp, 1/gamma_top)`` at hue ``h``: linear in the non-uniform hue table.
 
         Examples:
-            >>> from torchgrade.aces2.transform import _output
+            >>> from torchgrade.tonemap.aces2.transform import _output
             >>> p = _output(100.0, "rec709").gamut
             >>> # J, M, 1/gamma of the green-yellow cusp
             >>> [round(float(v), 1) for v in p.cusp(torch.tensor([120.0], dtype=torch.float64))]
@@ -152,7 +152,7 @@ class GamutParams:
         """AP1 reach M at ``J_max``, linear between whole degrees.
 
         Examples:
-            >>> from torchgrade.aces2.transform import _output
+            >>> from torchgrade.tonemap.aces2.transform import _output
             >>> round(float(_output(100.0, "rec709").gamut.reach_m(torch.tensor(0.0, dtype=torch.float64))), 1)
             166.8
         """
@@ -167,7 +167,7 @@ def gamut_compress(j, m, h, reach_m, p: GamutParams):
     """Compressed ``(J, M)``: ``J <= 0`` -> black, ``M <= 0`` or ``J > J_max`` -> ``(J, 0)``, else the hull mapping.
 
     Examples:
-        >>> from torchgrade.aces2.transform import _output
+        >>> from torchgrade.tonemap.aces2.transform import _output
         >>> p = _output(100.0, "rec709").gamut
         >>> j, m, h = (torch.tensor([v], dtype=torch.float64) for v in (50.0, 300.0, 120.0))
         >>> j_out, m_out = gamut_compress(j, m, h, p.reach_m(h), p)

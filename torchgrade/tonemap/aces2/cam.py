@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import torch
 
-from ..color import rgb_to_xyz_matrix, safe_pow
+from ...color import rgb_to_xyz_matrix, safe_pow
 
 __all__ = ["CAM16_PRIMARIES", "JMhParams", "jmh_params", "rgb_to_aab", "aab_to_jmh", "jmh_to_rgb", "y_to_j", "a_to_y"]
 

@@ -12,8 +12,8 @@ import functools
 
 import torch
 
-from .. import color
-from ..core import apply_matrix, check_image, sanitize
+from ... import color
+from ...core import apply_matrix, check_image, sanitize
 from .cam import REFERENCE_LUMINANCE, aab_to_jmh, jmh_params, jmh_to_rgb, rgb_to_aab, a_to_y, y_to_j
 from .gamut import FOCUS_DISTANCE, FOCUS_DISTANCE_SCALING, GamutParams, gamut_compress
 from .tables import hue_and_cusp_tables, reach_m_table, upper_hull_gamma
