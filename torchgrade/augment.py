@@ -45,8 +45,10 @@ from torch import nn
 from .bloom import BLOOM_MODES, bloom
 from .color import linear_to_srgb, srgb_to_linear
 from .core import check_image, to_input_dtype, working_dtype
-from .grade import CONTROLS, color_grade
+from .grade import ColorGrade, color_grade
 from .tonemap import TONEMAP_MODES, tonemap
+
+__all__ = ["RandomPostFX", "tonemap_per_sample", "GRADE_CONTROLS", "BLOOM_CONTROLS", "COLOUR_CONTROLS", "INPUT_SPACES"]
 
 GRADE_CONTROLS = (
     "post_exposure",
@@ -92,7 +94,7 @@ def _checked_range(name: str, value, allowed: tuple) -> tuple | None:
 
 def _is_identity(name: str, pair: tuple) -> bool:
     """True when a grading range is the single value at which the control changes nothing."""
-    identity = CONTROLS[name][0]
+    identity = ColorGrade.controls[name].default
     identity = identity[0] if isinstance(identity, tuple) else identity
     return pair[0] == pair[1] == identity
 
@@ -167,7 +169,7 @@ class RandomPostFX(nn.Module):
     ):
         super().__init__()
         given = dict(locals())  # the range arguments, by name
-        grade_ranges = {name: _checked_range(name, given[name], CONTROLS[name][1]) for name in GRADE_CONTROLS}
+        grade_ranges = {name: _checked_range(name, given[name], ColorGrade.controls[name].range) for name in GRADE_CONTROLS}
         self.grade_ranges = {name: r for name, r in grade_ranges.items() if r is not None and not _is_identity(name, r)}
         bloom_ranges = {name: _checked_range(name, given[name], allowed) for name, (_, allowed) in BLOOM_CONTROLS.items()}
         self.bloom_ranges = {name: r for name, r in bloom_ranges.items() if r is not None}
