@@ -14,10 +14,10 @@ from hypothesis import given, settings, strategies as st
 import torchgrade as tg
 from torchgrade import functional as F
 
-from test_color import pixels, random_rgb, rows
-from test_grade import LUM709, sample_pixels, srgb_decode, unity_grade_pixel
-from test_onnx import SHAPES, STEP_TOLERANCE, TOLERANCE, display_error, hdr
-from test_tonemap import AP0_2_AP1, AP1_Y, SRGB_2_AP0
+from reference.pixels import LUM709, pixels, random_rgb, rows
+from reference.tonemap import AP0_2_AP1, AP1_Y, SRGB_2_AP0
+from reference.grade import sample_pixels, srgb_decode, unity_grade_pixel
+from reference.onnx import display_error, hdr, SHAPES, STEP_TOLERANCE, TOLERANCE
 
 # ---------------------------------------------------------------- references
 
