@@ -123,6 +123,10 @@ def area_resize(image: torch.Tensor, size: int) -> torch.Tensor:
     Two matrix products (rows, then columns), so any ``H, W`` (including 1x1) works and the sizes
     stay symbolic under ONNX export; kornia's antialiased ``resize`` derives its blur kernel from
     the input size with Python numbers, which fixes it to the exported resolution.
+
+    Examples:
+        >>> area_resize(torch.arange(6.0).reshape(1, 2, 3), 1).tolist()  # one cell: the mean
+        [[[2.5]]]
     """
     rows = _area_weights(image.shape[-2], size, image)
     columns = _area_weights(image.shape[-1], size, image)
@@ -130,7 +134,12 @@ def area_resize(image: torch.Tensor, size: int) -> torch.Tensor:
 
 
 def halving_average(grid: torch.Tensor) -> torch.Tensor:
-    """Average 2x2 blocks of a ``(N, C, 2^k, 2^k)`` grid until it is 1x1, as a mip chain does."""
+    """Average 2x2 blocks of a ``(N, C, 2^k, 2^k)`` grid until it is 1x1, as a mip chain does.
+
+    Examples:
+        >>> halving_average(torch.arange(16.0).reshape(1, 1, 4, 4)).flatten().tolist()
+        [7.5]
+    """
     while grid.shape[-1] > 1:
         grid = F.avg_pool2d(grid, 2)
     return grid
@@ -145,6 +154,10 @@ def meter_luminance(image: torch.Tensor, metering: str = "log") -> torch.Tensor:
     log-average ``exp(mean(log(δ + L))) - δ`` (Reinhard et al. 2002, Eq. 1, "the key"), taken per
     pixel before any averaging so that a few very bright pixels barely move it. Unlike Reinhard's
     form, δ is subtracted again, so a uniform frame meters exactly its luminance.
+
+    Examples:
+        >>> [round(v, 4) for v in meter_luminance(torch.full((2, 3, 8, 8), 0.5), 'mean').tolist()]
+        [0.5, 0.5]
     """
     check_image(image)
     check_choice("metering", metering, METERING_MODES)
@@ -166,6 +179,11 @@ def adapt_luminance(
     docstring): ``dt = 0`` keeps ``adapted``, a long ``dt`` reaches ``metered``. As in HDRP's
     automatic exposure, ``speed_to_light`` (the scene got brighter: ``metered > adapted``) and
     ``speed_to_dark`` (it got darker) replace ``speed`` when given. Arguments broadcast.
+
+    Examples:
+        >>> adapted, metered = torch.tensor(1.0), torch.tensor(2.0)
+        >>> adapt_luminance(adapted, metered, torch.tensor(0.0)).item(), adapt_luminance(adapted, metered, torch.tensor(100.0)).item()
+        (1.0, 2.0)
     """
     if speed_to_light is not None or speed_to_dark is not None:
         to_light = speed if speed_to_light is None else speed_to_light
@@ -187,6 +205,10 @@ def exposure_operator(
       ``compressed = scaled * (1 + scaled / max_luminance²) / (1 + scaled)`` (Reinhard 2002, Eq. 4),
       computed as ``(middle_grey / adapted) * (1 + scaled / max_luminance²) / (1 + scaled)``, which
       never divides by ``L``. Negative luminances (out-of-gamut pixels) use the curve's slope at 0.
+
+    Examples:
+        >>> exposure_operator(torch.full((3, 1, 1), 0.72), torch.tensor(0.72), 0.18, 16.0).flatten().tolist()
+        [0.18000000715255737, 0.18000000715255737, 0.18000000715255737]
     """
     gain = middle_grey / adapted
     if operator == "exposure":
@@ -234,6 +256,11 @@ def auto_exposure(
     respect to the image (through the operator and the metering), ``middle_grey`` and the other
     continuous controls. Bounds: ``MIN_LUMINANCE`` (1e-3) keeps the gain of a black frame finite;
     ``MAX_ADAPTED`` (65504) sets no upper limit. The document's ``[0.3, 1.0]`` can be passed instead.
+
+    Examples:
+        >>> exposed, adapted = auto_exposure(torch.full((1, 3, 4, 4), 0.72), None, metering='mean')
+        >>> round(exposed.mean().item(), 4), [round(v, 4) for v in adapted.tolist()]
+        (0.18, [0.72])
     """
     check_image(image)
     controls = dict(
