@@ -127,6 +127,13 @@ class PostFX(nn.Module):
     ``primary`` and ``tonemap``; :meth:`to_lut` builds such a look. ``forward(image, dt=None)`` runs the stages in
     order; ``dt`` (seconds since the previous frame) is passed to the exposure stage, which keeps the
     adapted luminance between calls (see :class:`~torchgrade.AutoExposure`).
+
+    Examples:
+        >>> look = PostFX(grade={"contrast": 20, "saturation": 0.0}, bloom={"intensity": 0.0}, tonemap="aces")
+        >>> list(look.stages())  # the identity bloom is not built
+        ['grade', 'tonemap']
+        >>> look.to_config()
+        {'grade': {'contrast': 20}, 'tonemap': {'mode': 'aces'}}
     """
 
     def __init__(self, exposure=None, bloom=None, grade=None, tonemap=None, lut: Optional[LUT3D] = None,
