@@ -10,24 +10,11 @@ import torch
 
 from torchgrade import color
 
+from reference.pixels import EXTREMES, pixels, random_rgb, rows
+
 with warnings.catch_warnings():
     warnings.simplefilter("ignore")
     import colour
-
-EXTREMES = [0.0, 1e-8, 0.18, 1.0, 60.0, 65504.0, 1e30]
-
-
-def pixels(values, dtype=torch.float64):
-    """A (1, 3, 1, N) image whose N pixels are the rows of ``values`` (N x 3)."""
-    return torch.as_tensor(np.asarray(values, dtype=np.float64), dtype=dtype).T.reshape(1, 3, 1, -1)
-
-
-def rows(image):
-    return image.reshape(3, -1).T.detach().double().numpy()
-
-
-def random_rgb(n=300, high=4.0, seed=1):
-    return np.random.default_rng(seed).uniform(0.0, high, size=(n, 3))
 
 
 def test_srgb_matches_colour_science_both_ways():

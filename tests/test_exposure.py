@@ -304,6 +304,25 @@ def test_config_round_trip():
     assert tg.AutoExposure(**config).to_config() == config
 
 
+def test_frame_is_forward_without_state():
+    module = tg.AutoExposure(speed=2.0, metering="mean")
+    module(torch.rand(2, 3, 8, 8) * 4)
+    state = module.adapted_luminance.clone()
+    image = torch.rand(2, 3, 8, 8)
+    exposed, adapted = module.frame(image, state, 0.1)
+    assert torch.equal(module.adapted_luminance, state)
+    torch.testing.assert_close(module(image, dt=0.1), exposed)
+    torch.testing.assert_close(module.adapted_luminance, adapted)
+
+
+def test_learnable_control_moved_out_of_range_raises_at_forward():
+    module = tg.AutoExposure(middle_grey=torch.nn.Parameter(torch.tensor(0.18)))
+    with torch.no_grad():
+        module.middle_grey.fill_(-1.0)
+    with pytest.raises(ValueError, match="middle_grey"):
+        module(torch.rand(1, 3, 4, 4))
+
+
 # ---------------------------------------------------------------- ONNX
 
 

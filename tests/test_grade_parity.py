@@ -3,6 +3,7 @@
 transcription of the 1980 algorithm), OpenColorIO's GradingPrimaryTransform, and TPDF dither statistics."""
 
 import colorsys
+import inspect
 import math
 
 import numpy as np
@@ -14,10 +15,10 @@ from hypothesis import given, settings, strategies as st
 import torchgrade as tg
 from torchgrade import functional as F
 
-from test_color import pixels, random_rgb, rows
-from test_grade import LUM709, sample_pixels, srgb_decode, unity_grade_pixel
-from test_onnx import SHAPES, STEP_TOLERANCE, TOLERANCE, display_error, hdr
-from test_tonemap import AP0_2_AP1, AP1_Y, SRGB_2_AP0
+from reference.pixels import LUM709, pixels, random_rgb, rows
+from reference.tonemap import AP0_2_AP1, AP1_Y, SRGB_2_AP0
+from reference.grade import sample_pixels, srgb_decode, unity_grade_pixel
+from reference.onnx import display_error, hdr, SHAPES, STEP_TOLERANCE, TOLERANCE
 
 # ---------------------------------------------------------------- references
 
@@ -433,6 +434,19 @@ def test_primary_and_dither_stages_in_a_look():
     torch.testing.assert_close(tg.PostFX.from_config(look.to_config())(image), expected)
     baked = look.to_lut(size=17)
     assert list(baked.stages()) == ["lut", "dither"]
+
+
+def test_primary_and_dither_are_stages_checked_from_their_tables():
+    assert [p for p in inspect.signature(tg.PrimaryGrade).parameters] == list(tg.PrimaryGrade.controls)
+    grade = tg.PrimaryGrade(saturation=torch.nn.Parameter(torch.tensor(1.5)))
+    with torch.no_grad():
+        grade.saturation.fill_(20.0)
+    with pytest.raises(ValueError, match=r"saturation must lie in \[0.0, 10.0\]"):
+        grade(torch.rand(1, 3, 2, 2))
+    layer = tg.Dither(seed=3, size=16)
+    layer.seed = 4
+    assert torch.equal(layer.pattern, tg.Dither(seed=4, size=16).pattern)
+    assert tg.Dither.from_config(layer.to_config()).to_config() == layer.to_config() == {"amplitude": 1 / 255, "seed": 4, "size": 16}
 
 
 # ---------------------------------------------------------------- ONNX

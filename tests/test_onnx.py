@@ -11,13 +11,7 @@ import torch
 import torchgrade as tg
 from torchgrade.onnx import export, grade_feeds, node_count, session, verify
 
-SHAPES = [(1, 3, 37, 53), (3, 3, 64, 96)]
-"""Two batch sizes, two resolutions (the first odd in both sides); exports trace at (2, 3, 64, 64)."""
-TOLERANCE = 1e-4
-STEP_TOLERANCE = 1e-3
-"""A grade_inputs graph evaluates every grading step; PyTorch skips steps at identity, and some identity
-evaluations are not exact (white balance at temperature = tint = 0 is Unity's formula, gains 1 +- 1e-6,
-and split toning's gamma round trip). Looks with such steps left at identity agree to this (display)."""
+from reference.onnx import display_error, hdr, SHAPES, STEP_TOLERANCE, TOLERANCE
 
 FULL_GRADE = dict(
     post_exposure=0.5, temperature=20, tint=5, contrast=30, color_filter=(1.0, 0.9, 0.8), hue_shift=10, saturation=20,
@@ -25,21 +19,6 @@ FULL_GRADE = dict(
     channel_mixer=((1.1, 0.0, 0.0), (0.0, 0.9, 0.1), (0.0, 0.0, 1.0)),
     shadows=(1.0, 0.9, 1.0), midtones=(1.0, 1.0, 1.1), highlights=(0.9, 1.0, 1.0),
 )
-
-
-def hdr(shape, seed=1) -> torch.Tensor:
-    """Scene-referred noise: mostly below 2, a tail up to ~60, some exact zeros."""
-    generator = torch.Generator().manual_seed(seed)
-    image = torch.rand(shape, generator=generator) ** 4 * 60.0
-    image[..., ::7, ::5] = 0.0
-    return image
-
-
-def display_error(module, path, inputs) -> float:
-    """verify()'s max abs error, relative to the output's peak where that exceeds 1 (scene-referred stages)."""
-    with torch.no_grad():
-        peak = float(module(inputs).abs().max())
-    return verify(module, path, inputs) / max(1.0, peak)
 
 
 @pytest.fixture(scope="module")

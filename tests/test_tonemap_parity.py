@@ -11,8 +11,8 @@ import torchgrade as tg
 from torchgrade.functional import tonemap
 from torchgrade.tonemap.agx_curves import _AGX_GODOT_INSET, _AGX_GODOT_OUTSET
 
-from test_color import pixels, rows
-from test_tonemap import glsl_mat3, hdr_samples, ref_filmic, ref_unreal_filmic
+from reference.pixels import pixels, rows
+from reference.tonemap import glsl_mat3, hdr_samples, ref_filmic, ref_unreal_filmic
 
 with warnings.catch_warnings():
     warnings.simplefilter("ignore")

@@ -1,4 +1,12 @@
-"""torchgrade: differentiable HDR post-processing for PyTorch (bloom, grading, tone mapping, LUTs)."""
+"""torchgrade: differentiable HDR post-processing for PyTorch (bloom, grading, tone mapping, LUTs).
+
+Examples:
+    >>> import torch
+    >>> import torchgrade as tg
+    >>> look = tg.PostFX(grade={"contrast": 20}, tonemap="neutral")
+    >>> look(torch.rand(1, 3, 8, 8) * 4).shape
+    torch.Size([1, 3, 8, 8])
+"""
 
 from . import color, core, curves, functional, io, onnx, scene
 from .augment import RandomPostFX
@@ -12,3 +20,25 @@ from .primary import PrimaryGrade
 from .tonemap import TONEMAP_MODES, ToneMap
 
 __version__ = "0.1.0"
+
+__all__ = [
+    "color",
+    "core",
+    "curves",
+    "functional",
+    "io",
+    "onnx",
+    "scene",
+    "RandomPostFX",
+    "Bloom",
+    "ConvolutionBloom",
+    "Dither",
+    "AutoExposure",
+    "ColorGrade",
+    "LUT3D",
+    "bake_lut",
+    "PostFX",
+    "PrimaryGrade",
+    "TONEMAP_MODES",
+    "ToneMap",
+]

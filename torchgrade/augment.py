@@ -45,8 +45,10 @@ from torch import nn
 from .bloom import BLOOM_MODES, bloom
 from .color import linear_to_srgb, srgb_to_linear
 from .core import check_image, to_input_dtype, working_dtype
-from .grade import CONTROLS, color_grade
+from .grade import ColorGrade, color_grade
 from .tonemap import TONEMAP_MODES, tonemap
+
+__all__ = ["RandomPostFX", "tonemap_per_sample", "GRADE_CONTROLS", "BLOOM_CONTROLS", "COLOUR_CONTROLS", "INPUT_SPACES"]
 
 GRADE_CONTROLS = (
     "post_exposure",
@@ -92,7 +94,7 @@ def _checked_range(name: str, value, allowed: tuple) -> tuple | None:
 
 def _is_identity(name: str, pair: tuple) -> bool:
     """True when a grading range is the single value at which the control changes nothing."""
-    identity = CONTROLS[name][0]
+    identity = ColorGrade.controls[name].default
     identity = identity[0] if isinstance(identity, tuple) else identity
     return pair[0] == pair[1] == identity
 
@@ -108,7 +110,14 @@ def _checked_tonemap(value) -> tuple:
 
 
 def tonemap_per_sample(images: torch.Tensor, choice: torch.Tensor, modes: tuple) -> torch.Tensor:
-    """Tone map sample ``i`` of ``images`` with ``modes[choice[i]]``, each mode evaluated once on its samples."""
+    """Tone map sample ``i`` of ``images`` with ``modes[choice[i]]``, each mode evaluated once on its samples.
+
+    Examples:
+        >>> images = torch.full((2, 3, 1, 1), 4.0)
+        >>> out = tonemap_per_sample(images, torch.tensor([1, 0]), ("none", "reinhard"))
+        >>> out.flatten().tolist()
+        [0.800000011920929, 0.800000011920929, 0.800000011920929, 1.0, 1.0, 1.0]
+    """
     if len(modes) == 1:
         return tonemap(images, modes[0])
     order = torch.argsort(choice, stable=True)
@@ -141,6 +150,15 @@ class RandomPostFX(nn.Module):
     ``forward(x, generator=None, params=None)``: parameters are drawn from ``generator`` (a
     ``torch.Generator``; the global generator when None), or taken from ``params`` to replay a
     previous draw. The parameters used are kept in ``last_params`` (see :meth:`sample_params`).
+
+    Examples:
+        >>> augment = RandomPostFX(contrast=(-30, 30), saturation=(-20, 20), tonemap="neutral")
+        >>> images = torch.rand(4, 3, 8, 8) * 4
+        >>> out = augment(images, generator=torch.Generator().manual_seed(0))
+        >>> sorted(augment.last_params)
+        ['batch_prob', 'contrast', 'saturation', 'tonemap']
+        >>> torch.equal(augment(images, params=augment.last_params), out)  # replayed exactly
+        True
     """
 
     def __init__(
@@ -167,7 +185,7 @@ class RandomPostFX(nn.Module):
     ):
         super().__init__()
         given = dict(locals())  # the range arguments, by name
-        grade_ranges = {name: _checked_range(name, given[name], CONTROLS[name][1]) for name in GRADE_CONTROLS}
+        grade_ranges = {name: _checked_range(name, given[name], ColorGrade.controls[name].range) for name in GRADE_CONTROLS}
         self.grade_ranges = {name: r for name, r in grade_ranges.items() if r is not None and not _is_identity(name, r)}
         bloom_ranges = {name: _checked_range(name, given[name], allowed) for name, (_, allowed) in BLOOM_CONTROLS.items()}
         self.bloom_ranges = {name: r for name, r in bloom_ranges.items() if r is not None}

@@ -23,12 +23,36 @@ import torch
 
 Param = Union[float, int, torch.Tensor]
 
+__all__ = [
+    "Param",
+    "HALF_MAX",
+    "check_image",
+    "sanitize",
+    "scalar_param",
+    "color_param",
+    "matrix_param",
+    "apply_matrix",
+    "check_range",
+    "check_choice",
+    "is_constant",
+    "is_tracing",
+    "working_dtype",
+    "to_input_dtype",
+]
+
 HALF_MAX = 65504.0
 """Largest finite half-float value: the bound of the non-finite policy."""
 
 
 def check_image(image: torch.Tensor, name: str = "image") -> None:
-    """Raise a clear error unless ``image`` is a non-empty floating tensor shaped ``(..., 3, H, W)``."""
+    """Raise a clear error unless ``image`` is a non-empty floating tensor shaped ``(..., 3, H, W)``.
+
+    Examples:
+        >>> check_image(torch.zeros(1, 4, 2, 2))
+        Traceback (most recent call last):
+        ...
+        ValueError: image must have shape (..., 3, H, W) with 3 colour channels, got (1, 4, 2, 2)
+    """
     if not isinstance(image, torch.Tensor):
         raise TypeError(f"{name} must be a torch.Tensor, got {type(image).__name__}")
     if not image.is_floating_point():
@@ -46,6 +70,10 @@ def sanitize(image: torch.Tensor) -> torch.Tensor:
     """Apply the non-finite policy: NaN -> 0, values bounded to [-65504, 65504] (so ±Inf -> ±65504).
 
     ``clamp`` keeps NaN, so the clamped copy is then fixed in place: one new frame instead of two.
+
+    Examples:
+        >>> sanitize(torch.tensor([float('nan'), float('inf'), -1.0])).tolist()
+        [0.0, 65504.0, -1.0]
     """
     return image.clamp(-HALF_MAX, HALF_MAX).nan_to_num_(nan=0.0)
 
@@ -75,7 +103,13 @@ def _per_sample(t: torch.Tensor, image: torch.Tensor, name: str, trailing: int) 
 
 
 def scalar_param(value: Param, image: torch.Tensor, name: str) -> torch.Tensor:
-    """A scalar control as a tensor that broadcasts against ``image``: 0-d, or ``(B, 1, 1, 1)``."""
+    """A scalar control as a tensor that broadcasts against ``image``: 0-d, or ``(B, 1, 1, 1)``.
+
+    Examples:
+        >>> image = torch.zeros(2, 3, 4, 4)
+        >>> scalar_param(0.5, image, 'gain').shape, scalar_param(torch.tensor([1.0, 2.0]), image, 'gain').shape
+        (torch.Size([]), torch.Size([2, 1, 1, 1]))
+    """
     t = _as_tensor(value, image, name)
     if t.dim() == 0:
         return t
@@ -85,7 +119,12 @@ def scalar_param(value: Param, image: torch.Tensor, name: str) -> torch.Tensor:
 
 
 def color_param(value, image: torch.Tensor, name: str) -> torch.Tensor:
-    """An RGB control as ``(3, 1, 1)`` or per sample ``(B, 3, 1, 1)``; accepts a 3-sequence or tensor."""
+    """An RGB control as ``(3, 1, 1)`` or per sample ``(B, 3, 1, 1)``; accepts a 3-sequence or tensor.
+
+    Examples:
+        >>> color_param((1.0, 0.5, 0.25), torch.zeros(1, 3, 2, 2), 'tint').shape
+        torch.Size([3, 1, 1])
+    """
     t = _as_tensor(value, image, name) if isinstance(value, torch.Tensor) else _sequence(value, image, name)
     if t.shape == (3,):
         return t.reshape(3, 1, 1)
@@ -95,7 +134,12 @@ def color_param(value, image: torch.Tensor, name: str) -> torch.Tensor:
 
 
 def matrix_param(value, image: torch.Tensor, name: str) -> torch.Tensor:
-    """A 3x3 colour matrix as ``(3, 3)`` or per sample ``(B, 3, 3)``."""
+    """A 3x3 colour matrix as ``(3, 3)`` or per sample ``(B, 3, 3)``.
+
+    Examples:
+        >>> matrix_param(((1, 0, 0), (0, 1, 0), (0, 0, 1)), torch.zeros(1, 3, 2, 2), 'mixer').shape
+        torch.Size([3, 3])
+    """
     t = _as_tensor(value, image, name) if isinstance(value, torch.Tensor) else _sequence(value, image, name)
     if t.shape == (3, 3) or (t.dim() == 3 and t.shape[1:] == (3, 3)):
         if t.dim() == 3:
@@ -112,7 +156,13 @@ def _sequence(value, image: torch.Tensor, name: str) -> torch.Tensor:
 
 
 def apply_matrix(matrix: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
-    """``out[..., i, h, w] = sum_j matrix[..., i, j] * image[..., j, h, w]`` for (3,3) or (B,3,3) matrices."""
+    """``out[..., i, h, w] = sum_j matrix[..., i, j] * image[..., j, h, w]`` for (3,3) or (B,3,3) matrices.
+
+    Examples:
+        >>> swap = torch.tensor([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+        >>> apply_matrix(swap, torch.tensor([1.0, 2.0, 3.0]).reshape(3, 1, 1)).flatten().tolist()
+        [2.0, 1.0, 3.0]
+    """
     if matrix.dim() == 2:
         return torch.einsum("ij,...jhw->...ihw", matrix, image)
     return torch.einsum("bij,bjhw->bihw", matrix, image)
@@ -122,6 +172,12 @@ def check_range(value: Param, name: str, low: float, high: float) -> None:
     """Raise ``ValueError`` naming ``name`` and its range when a concrete value lies outside [low, high].
 
     Tensors that require grad are checked too (on detached values); NaN parameters are rejected.
+
+    Examples:
+        >>> check_range(150.0, 'contrast', -100.0, 100.0)
+        Traceback (most recent call last):
+        ...
+        ValueError: contrast must lie in [-100.0, 100.0], got 150.0
     """
     t = value.detach() if isinstance(value, torch.Tensor) else torch.as_tensor(value, dtype=torch.float64)
     if t.numel() == 0:
@@ -131,7 +187,14 @@ def check_range(value: Param, name: str, low: float, high: float) -> None:
 
 
 def check_choice(name: str, value, choices) -> None:
-    """Raise ``ValueError`` naming ``name`` and the allowed ``choices`` unless ``value`` is one of them."""
+    """Raise ``ValueError`` naming ``name`` and the allowed ``choices`` unless ``value`` is one of them.
+
+    Examples:
+        >>> check_choice('metering', 'spot', ('mean', 'log'))
+        Traceback (most recent call last):
+        ...
+        ValueError: metering must be one of 'mean', 'log', got 'spot'
+    """
     if value not in tuple(choices):
         raise ValueError(f"{name} must be one of {', '.join(map(repr, choices))}, got {value!r}")
 
@@ -140,6 +203,10 @@ def is_constant(value, constant) -> bool:
     """True when ``value`` is a plain (non-learnable) value equal to ``constant`` everywhere.
 
     Learnable parameters (``requires_grad``) are never constant: they may move during training.
+
+    Examples:
+        >>> is_constant((0.5, 0.5, 0.5), 0.5), is_constant(torch.nn.Parameter(torch.tensor(0.5)), 0.5)
+        (True, False)
     """
     if isinstance(value, torch.Tensor) and value.requires_grad:
         return False
@@ -151,7 +218,12 @@ def is_constant(value, constant) -> bool:
 
 
 def is_tracing() -> bool:
-    """True while tracing, compiling or exporting to ONNX: data-dependent checks and shortcuts are skipped."""
+    """True while tracing, compiling or exporting to ONNX: data-dependent checks and shortcuts are skipped.
+
+    Examples:
+        >>> is_tracing()
+        False
+    """
     return torch.jit.is_tracing() or torch.compiler.is_compiling() or torch.onnx.is_in_onnx_export()
 
 
@@ -159,12 +231,23 @@ _LOW_PRECISION = (torch.float16, torch.bfloat16)
 
 
 def working_dtype(image: torch.Tensor) -> torch.Tensor:
-    """float16/bfloat16 images are computed in float32 (no silent overflow); others as they are."""
+    """float16/bfloat16 images are computed in float32 (no silent overflow); others as they are.
+
+    Examples:
+        >>> working_dtype(torch.zeros(1, dtype=torch.float16)).dtype, working_dtype(torch.zeros(1, dtype=torch.float64)).dtype
+        (torch.float32, torch.float64)
+    """
     return image.float() if image.dtype in _LOW_PRECISION else image
 
 
 def to_input_dtype(result: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
-    """Cast a float32 result back to the input's low-precision dtype, bounded to its finite range."""
+    """Cast a float32 result back to the input's low-precision dtype, bounded to its finite range.
+
+    Examples:
+        >>> half = torch.zeros(1, dtype=torch.float16)
+        >>> to_input_dtype(torch.tensor([1e6]), half).tolist()  # bounded to half's finite range
+        [65504.0]
+    """
     if result.dtype == image.dtype:
         return result
     return result.clamp(-HALF_MAX, HALF_MAX).to(image.dtype)

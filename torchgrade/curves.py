@@ -20,7 +20,43 @@ points; the ``x`` positions are fixed (their gradient is not computed).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any, Optional
+
 import torch
+
+from .core import check_range
+from .stage import Control
+
+__all__ = [
+    "CurveControl",
+    "curve_points",
+    "monotone_tangents",
+    "hermite",
+    "evaluate_curve",
+    "curve_is_identity",
+    "check_curve",
+    "stored_curve",
+]
+
+
+@dataclass(frozen=True)
+class CurveControl(Control):
+    """A curve control of a stage's table: control points, ``None`` (identity) by default.
+
+    ``periodic``: the curve wraps in hue (turns) instead of being clamped at its ends. ``flat``: the
+    ``y`` of a flat curve that changes nothing (``None``: the diagonal from (0, 0) to (1, 1) does).
+    Curves have a variable number of points, so they are never ONNX graph inputs.
+
+    Examples:
+        >>> hue_vs_sat = CurveControl(periodic=True, flat=0.5)
+        >>> hue_vs_sat.kind, hue_vs_sat.default
+        ('value', None)
+    """
+
+    default: Any = None
+    periodic: bool = False
+    flat: Optional[float] = None
 
 
 def curve_points(points, like: torch.Tensor, name: str = "curve") -> tuple:
@@ -28,6 +64,11 @@ def curve_points(points, like: torch.Tensor, name: str = "curve") -> tuple:
 
     Raises ``ValueError`` naming ``name`` unless there are at least two points, shaped ``(N, 2)``,
     with strictly increasing ``x``.
+
+    Examples:
+        >>> x, y = curve_points(((0.0, 0.25), (1.0, 0.75)), torch.empty(()))
+        >>> x.tolist(), y.tolist()
+        ([0.0, 1.0], [0.25, 0.75])
     """
     if isinstance(points, torch.Tensor):
         table = points.to(device=like.device, dtype=like.dtype)
@@ -50,6 +91,10 @@ def monotone_tangents(x: torch.Tensor, y: torch.Tensor, periodic: bool = False) 
 
     For a periodic curve ``x`` must lie within one turn; the last interval runs from the last point
     to the first one a turn later.
+
+    Examples:
+        >>> monotone_tangents(torch.tensor([0.0, 0.5, 1.0]), torch.tensor([0.0, 0.5, 1.0])).tolist()
+        [1.0, 1.0, 1.0]
     """
     if periodic:
         x, y = torch.cat((x, x[:1] + 1.0)), torch.cat((y, y[:1]))
@@ -74,6 +119,11 @@ def hermite(x: torch.Tensor, y: torch.Tensor, tangents: torch.Tensor, t: torch.T
 
     With ``s = (t - x_k) / h`` on interval ``k`` of width ``h``:
     ``(2s³ - 3s² + 1) y_k + (s³ - 2s² + s) h m_k + (3s² - 2s³) y_{k+1} + (s³ - s²) h m_{k+1}``.
+
+    Examples:
+        >>> x, y = torch.tensor([0.0, 1.0]), torch.tensor([0.0, 1.0])
+        >>> hermite(x, y, torch.ones(2), torch.tensor([0.25])).tolist()
+        [0.25]
     """
     interval = torch.zeros_like(t, dtype=torch.long)
     for knot in x[1:-1]:
@@ -94,7 +144,12 @@ def hermite(x: torch.Tensor, y: torch.Tensor, tangents: torch.Tensor, t: torch.T
 
 
 def evaluate_curve(points, t: torch.Tensor, periodic: bool = False, name: str = "curve") -> torch.Tensor:
-    """The monotone spline through ``points`` at ``t``: clamped ends, or wrapped to one turn if ``periodic``."""
+    """The monotone spline through ``points`` at ``t``: clamped ends, or wrapped to one turn if ``periodic``.
+
+    Examples:
+        >>> evaluate_curve(((0.0, 0.0), (0.5, 0.8), (1.0, 1.0)), torch.tensor([0.5, 2.0])).tolist()
+        [0.800000011920929, 1.0]
+    """
     x, y = curve_points(points, t, name)
     if periodic and x[-1] >= x[0] + 1.0:
         raise ValueError(f"{name} is periodic: its x values must lie within one turn, got {x.tolist()}")
@@ -103,3 +158,57 @@ def evaluate_curve(points, t: torch.Tensor, periodic: bool = False, name: str = 
         x, y, tangents = torch.cat((x, x[:1] + 1.0)), torch.cat((y, y[:1])), torch.cat((tangents, tangents[:1]))
         return hermite(x, y, tangents, x[0] + torch.remainder(t - x[0], 1.0))
     return hermite(x, y, tangents, t.clamp(x[0].item(), x[-1].item()))
+
+
+def curve_is_identity(points, flat: Optional[float]) -> bool:
+    """True for a curve that changes nothing: None, no points, all ``y == flat``, or (``flat`` None) the diagonal.
+
+    Learnable curves (``requires_grad``) are never identity.
+
+    Examples:
+        >>> curve_is_identity(((0.0, 0.5), (0.5, 0.5)), flat=0.5), curve_is_identity(((0.0, 0.0), (1.0, 1.0)), None)
+        (True, True)
+        >>> curve_is_identity(((0.0, 0.2), (1.0, 1.0)), None)
+        False
+    """
+    if points is None:
+        return True
+    if isinstance(points, torch.Tensor) and points.requires_grad:
+        return False
+    table = torch.as_tensor(points, dtype=torch.float64).reshape(-1, 2)
+    if table.numel() == 0:
+        return True
+    x, y = table.unbind(1)
+    if flat is not None:
+        return bool((y == flat).all())
+    return bool(x[0] == 0.0 and x[-1] == 1.0 and (y == x).all())
+
+
+def check_curve(name: str, points, periodic: bool = False) -> None:
+    """Raise ``ValueError`` naming curve ``name`` unless its points are valid: ``x`` strictly increasing in
+    [0, 1] (periodic curves: [0, 1)), ``y`` in [0, 1]. None and no points are valid (identity).
+
+    Examples:
+        >>> check_curve("hue_vs_hue", ((0.0, 0.5), (1.0, 0.5)), periodic=True)
+        Traceback (most recent call last):
+        ...
+        ValueError: hue_vs_hue x values must lie in [0, 1), got [0.0, 1.0]
+    """
+    if points is None or (not isinstance(points, torch.Tensor) and len(points) == 0):
+        return
+    x, y = curve_points(points, torch.empty((), dtype=torch.float64), name)
+    if x[0] < 0.0 or x[-1] > 1.0 or (periodic and x[-1] >= 1.0):
+        raise ValueError(f"{name} x values must lie in [0, 1{')' if periodic else ']'}, got {x.tolist()}")
+    check_range(y, f"{name} y", 0.0, 1.0)
+
+
+def stored_curve(points):
+    """A curve as a stage keeps it: a tensor as given, a sequence as a tuple of (x, y) float pairs.
+
+    Examples:
+        >>> stored_curve([[0, 0.5], [1, 0.5]])
+        ((0.0, 0.5), (1.0, 0.5))
+    """
+    if points is None or isinstance(points, torch.Tensor):
+        return points
+    return tuple((float(x), float(y)) for x, y in points)

@@ -24,16 +24,23 @@ from typing import Optional
 import torch
 
 from .color import linear_to_srgb, srgb_to_linear
-from .core import Param, check_image, check_range, is_constant, sanitize, scalar_param, to_input_dtype, working_dtype
-from .params import ParamModule
+from .core import Param, check_image, is_constant, sanitize, scalar_param, to_input_dtype, working_dtype
+from .stage import Control, Stage
+
+__all__ = ["Dither", "dither", "dither_pattern", "tile_pattern", "DEFAULT_AMPLITUDE"]
 
 DEFAULT_AMPLITUDE = 1.0 / 255.0
 """Half-width of the noise: one 8-bit sRGB code value."""
-AMPLITUDE_RANGE = (0.0, 16.0 / 255.0)
 
 
 def dither_pattern(size: int = 64, generator: Optional[torch.Generator] = None, dtype=torch.float32) -> torch.Tensor:
-    """A ``(size, size)`` tile of triangular noise on [-1, 1]: ``u1 + u2 - 1`` of two uniform draws."""
+    """A ``(size, size)`` tile of triangular noise on [-1, 1]: ``u1 + u2 - 1`` of two uniform draws.
+
+    Examples:
+        >>> tile = dither_pattern(8, torch.Generator().manual_seed(0))
+        >>> tile.shape, bool(tile.abs().max() <= 1.0)
+        (torch.Size([8, 8]), True)
+    """
     if size < 1:
         raise ValueError(f"dither pattern size must be at least 1, got {size}")
     uniform = torch.rand(2, size, size, generator=generator, dtype=torch.float64)
@@ -41,7 +48,12 @@ def dither_pattern(size: int = 64, generator: Optional[torch.Generator] = None, 
 
 
 def tile_pattern(pattern: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
-    """``pattern`` repeated over ``like``'s last two dimensions, as ``(H, W)``: pixel ``(y, x)`` takes ``pattern[y % S, x % S]``."""
+    """``pattern`` repeated over ``like``'s last two dimensions, as ``(H, W)``: pixel ``(y, x)`` takes ``pattern[y % S, x % S]``.
+
+    Examples:
+        >>> tile_pattern(torch.tensor([[1.0, 2.0], [3.0, 4.0]]), torch.empty(3, 3, 3)).tolist()
+        [[1.0, 2.0, 1.0], [3.0, 4.0, 3.0], [1.0, 2.0, 1.0]]
+    """
     rows = torch.arange(like.shape[-2], device=like.device).remainder(pattern.shape[-2])
     columns = torch.arange(like.shape[-1], device=like.device).remainder(pattern.shape[-1])
     return pattern.to(device=like.device, dtype=like.dtype).index_select(-2, rows).index_select(-1, columns)
@@ -52,6 +64,12 @@ def dither(image: torch.Tensor, pattern: torch.Tensor, amplitude: Param = DEFAUL
 
     ``image`` is display-referred linear; ``encode``/``decode`` are the sRGB transfer functions.
     ``amplitude`` 0 returns ``image`` itself.
+
+    Examples:
+        >>> image = torch.full((1, 3, 4, 4), 0.5)
+        >>> out = dither(image, dither_pattern(4, torch.Generator().manual_seed(0)))
+        >>> bool((out - image).abs().max() < 0.01), dither(image, torch.ones(4, 4), 0.0) is image
+        (True, True)
     """
     check_image(image)
     if is_constant(amplitude, 0.0):
@@ -61,23 +79,44 @@ def dither(image: torch.Tensor, pattern: torch.Tensor, amplitude: Param = DEFAUL
     return to_input_dtype(srgb_to_linear((linear_to_srgb(x) + noise).clamp(0.0, 1.0)), image)
 
 
-class Dither(ParamModule):
+class Dither(Stage):
     """Deband dithering layer, after tone mapping: ``Dither(amplitude=1/255, seed=0, size=64)``.
 
     ``amplitude`` (number, ``(B,)`` tensor or ``nn.Parameter``, 0..16/255) is the half-width of the
     triangular noise in sRGB values (1/255: one 8-bit code); 0 makes the layer an identity. ``seed``
-    (an int) draws the noise tile, so the same seed gives the same noise; the functional
-    :func:`dither` takes any tile, for instance from :func:`dither_pattern` with a ``torch.Generator``.
+    (an int) draws the noise tile of ``size x size`` pixels, so the same seed gives the same noise;
+    the functional :func:`dither` takes any tile, for instance from :func:`dither_pattern` with a
+    ``torch.Generator``.
+
+    Examples:
+        >>> layer = Dither(seed=3, size=16)
+        >>> layer.to_config()
+        {'amplitude': 0.00392156862745098, 'seed': 3, 'size': 16}
+        >>> Dither(amplitude=0.0).is_identity
+        True
     """
+
+    controls = {
+        "amplitude": Control(DEFAULT_AMPLITUDE, (0.0, 16.0 / 255.0)),
+        # torch.Generator.manual_seed's range.
+        "seed": Control(0, (-(2**63), 2**64 - 1)),
+        "size": Control(64, (1, 4096)),
+    }
+    always_in_config = ("amplitude", "seed", "size")
 
     def __init__(self, amplitude: Param = DEFAULT_AMPLITUDE, seed: int = 0, size: int = 64):
         super().__init__()
-        check_range(amplitude, "amplitude", *AMPLITUDE_RANGE)
-        if isinstance(seed, bool) or not isinstance(seed, int):
-            raise TypeError(f"seed must be an int, got {type(seed).__name__}")
-        self.set_param("amplitude", amplitude)
-        self.seed, self.size = seed, int(size)
-        self.register_buffer("pattern", dither_pattern(self.size, torch.Generator().manual_seed(seed)), persistent=False)
+        self.init_controls(amplitude=amplitude, seed=seed, size=size)
+        self.draw_pattern()
+
+    def draw_pattern(self) -> None:
+        """Draw the noise tile from ``seed`` (a buffer, so it follows ``.to()``; not saved: the seed rebuilds it)."""
+        self.register_buffer("pattern", dither_pattern(self.size, torch.Generator().manual_seed(self.seed)), persistent=False)
+
+    def set_param(self, name: str, value) -> None:
+        super().set_param(name, value)
+        if name in ("seed", "size"):
+            self.draw_pattern()
 
     @property
     def is_identity(self) -> bool:
@@ -85,11 +124,5 @@ class Dither(ParamModule):
         return is_constant(self.amplitude, 0.0)
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
+        self.check_learnable()
         return dither(image, self.pattern, self.amplitude)
-
-    def config(self) -> dict:
-        """Amplitude, seed and tile size as plain values."""
-        return {"amplitude": self.plain_params()["amplitude"], "seed": self.seed, "size": self.size}
-
-    def extra_repr(self) -> str:
-        return ", ".join(f"{k}={v}" for k, v in self.config().items())

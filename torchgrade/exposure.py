@@ -30,15 +30,26 @@ float32 and returned in their own dtype; the adapted luminance is float32 for th
 
 from __future__ import annotations
 
-import numbers
 from typing import Optional
 
 import torch
 import torch.nn.functional as F
-from torch import nn
 
 from .color import luminance
-from .core import HALF_MAX, Param, check_image, sanitize, scalar_param
+from .core import HALF_MAX, Param, check_choice, check_image, check_range, is_tracing, sanitize, scalar_param, to_input_dtype, working_dtype
+from .stage import Control, Stage
+
+__all__ = [
+    "AutoExposure",
+    "auto_exposure",
+    "meter_luminance",
+    "adapt_luminance",
+    "exposure_operator",
+    "area_resize",
+    "halving_average",
+    "METERING_MODES",
+    "OPERATORS",
+]
 
 METERING_SIZE = 64
 """Side of the square grid the frame is resampled to before the 2x2 averaging (a power of two)."""
@@ -52,57 +63,44 @@ MIN_LUMINANCE = 1e-3
 MAX_ADAPTED = HALF_MAX
 """Default upper bound of the adapted luminance: the non-finite policy's bound, so no limit in practice."""
 
+SMALLEST = 1e-30
+"""Lower bound of the controls that must be positive: a gain of ``0.18 / 1e-30`` stays finite in float32."""
+
 METERING_MODES = ("mean", "log")
 OPERATORS = ("exposure", "reinhard")
 
 
-def _tracing() -> bool:
-    """True while TorchScript tracing or torch.export/dynamo runs: data-dependent checks are skipped."""
-    return torch.jit.is_tracing() or torch.compiler.is_compiling()
-
-
-def _float64(value, name: str) -> torch.Tensor:
-    """A control's concrete values, detached, in float64, for checking."""
-    if isinstance(value, torch.Tensor):
-        return value.detach().double()
-    if isinstance(value, numbers.Real) and not isinstance(value, bool):
-        return torch.tensor(float(value), dtype=torch.float64)
-    raise TypeError(f"parameter {name!r} must be a number or a tensor, got {type(value).__name__}")
-
-
-def _check(value, name: str, requirement: str, holds) -> None:
-    """Raise ``ValueError`` naming ``name`` unless ``holds(value)`` is true for every element (NaN fails)."""
-    t = _float64(value, name)
-    if not bool(holds(t).all()):
-        raise ValueError(f"{name} must be {requirement}, got {t.tolist()}")
-
-
-def _check_positive(value, name: str) -> None:
-    _check(value, name, "a finite number > 0", lambda t: torch.isfinite(t) & (t > 0))
-
-
-def _check_non_negative(value, name: str) -> None:
-    _check(value, name, "a finite number >= 0", lambda t: torch.isfinite(t) & (t >= 0))
-
-
-def _check_choice(value: str, name: str, choices) -> None:
-    if value not in choices:
-        raise ValueError(f"{name} must be one of {choices}, got {value!r}")
-
-
-_SPEEDS = ("speed", "speed_to_light", "speed_to_dark")
-
-
-def _check_controls(controls: dict, metering: str, operator: str) -> None:
-    """Validate the controls of :func:`auto_exposure`: speeds >= 0, the others > 0, bounds ordered."""
-    for name, value in controls.items():
-        if value is not None:
-            (_check_non_negative if name in _SPEEDS else _check_positive)(value, name)
-    low, high = _float64(controls["min_luminance"], "min_luminance"), _float64(controls["max_adapted"], "max_adapted")
+def _check_bounds(min_luminance, max_adapted) -> None:
+    low, high = (torch.as_tensor(v, dtype=torch.float64).detach() for v in (min_luminance, max_adapted))
     if bool((low > high).any()):
         raise ValueError(f"min_luminance ({low.tolist()}) must not exceed max_adapted ({high.tolist()})")
-    _check_choice(metering, "metering", METERING_MODES)
-    _check_choice(operator, "operator", OPERATORS)
+
+
+def _checked_control(name: str, value):
+    """Control ``name`` of :attr:`AutoExposure.controls`, checked (a list made a tensor): the table's
+    choices or range, and a positive control (range from :data:`SMALLEST`) named as such."""
+    value = _from_list(value)
+    control = AutoExposure.controls[name]
+    if control.kind == "choice":
+        check_choice(name, value, control.range)
+    elif value is not None:
+        t = value.detach() if isinstance(value, torch.Tensor) else torch.as_tensor(value, dtype=torch.float64)
+        if control.range[0] > 0 and not bool((t > 0).all()):
+            raise ValueError(f"{name} must be a number > 0, got {t.tolist()}")
+        check_range(value, name, *control.range)
+    return value
+
+
+def _check_controls(controls: dict) -> None:
+    """Validate :func:`auto_exposure`'s controls against :attr:`AutoExposure.controls` and order the bounds."""
+    for name, value in controls.items():
+        _checked_control(name, value)
+    _check_bounds(controls["min_luminance"], controls["max_adapted"])
+
+
+def _from_list(value):
+    """A per-sample control written as a list (as :meth:`AutoExposure.to_config` writes it) as a tensor."""
+    return torch.tensor(value, dtype=torch.get_default_dtype()) if isinstance(value, (list, tuple)) else value
 
 
 def _area_weights(size_in, size_out: int, like: torch.Tensor) -> torch.Tensor:
@@ -125,6 +123,10 @@ def area_resize(image: torch.Tensor, size: int) -> torch.Tensor:
     Two matrix products (rows, then columns), so any ``H, W`` (including 1x1) works and the sizes
     stay symbolic under ONNX export; kornia's antialiased ``resize`` derives its blur kernel from
     the input size with Python numbers, which fixes it to the exported resolution.
+
+    Examples:
+        >>> area_resize(torch.arange(6.0).reshape(1, 2, 3), 1).tolist()  # one cell: the mean
+        [[[2.5]]]
     """
     rows = _area_weights(image.shape[-2], size, image)
     columns = _area_weights(image.shape[-1], size, image)
@@ -132,7 +134,12 @@ def area_resize(image: torch.Tensor, size: int) -> torch.Tensor:
 
 
 def halving_average(grid: torch.Tensor) -> torch.Tensor:
-    """Average 2x2 blocks of a ``(N, C, 2^k, 2^k)`` grid until it is 1x1, as a mip chain does."""
+    """Average 2x2 blocks of a ``(N, C, 2^k, 2^k)`` grid until it is 1x1, as a mip chain does.
+
+    Examples:
+        >>> halving_average(torch.arange(16.0).reshape(1, 1, 4, 4)).flatten().tolist()
+        [7.5]
+    """
     while grid.shape[-1] > 1:
         grid = F.avg_pool2d(grid, 2)
     return grid
@@ -147,9 +154,13 @@ def meter_luminance(image: torch.Tensor, metering: str = "log") -> torch.Tensor:
     log-average ``exp(mean(log(δ + L))) - δ`` (Reinhard et al. 2002, Eq. 1, "the key"), taken per
     pixel before any averaging so that a few very bright pixels barely move it. Unlike Reinhard's
     form, δ is subtracted again, so a uniform frame meters exactly its luminance.
+
+    Examples:
+        >>> [round(v, 4) for v in meter_luminance(torch.full((2, 3, 8, 8), 0.5), 'mean').tolist()]
+        [0.5, 0.5]
     """
     check_image(image)
-    _check_choice(metering, "metering", METERING_MODES)
+    check_choice("metering", metering, METERING_MODES)
     lum = luminance(sanitize(image)).clamp_min(0).reshape(-1, 1, image.shape[-2], image.shape[-1])
     if metering == "log":
         lum = torch.log(lum + LOG_DELTA)
@@ -168,6 +179,11 @@ def adapt_luminance(
     docstring): ``dt = 0`` keeps ``adapted``, a long ``dt`` reaches ``metered``. As in HDRP's
     automatic exposure, ``speed_to_light`` (the scene got brighter: ``metered > adapted``) and
     ``speed_to_dark`` (it got darker) replace ``speed`` when given. Arguments broadcast.
+
+    Examples:
+        >>> adapted, metered = torch.tensor(1.0), torch.tensor(2.0)
+        >>> adapt_luminance(adapted, metered, torch.tensor(0.0)).item(), adapt_luminance(adapted, metered, torch.tensor(100.0)).item()
+        (1.0, 2.0)
     """
     if speed_to_light is not None or speed_to_dark is not None:
         to_light = speed if speed_to_light is None else speed_to_light
@@ -189,17 +205,17 @@ def exposure_operator(
       ``compressed = scaled * (1 + scaled / max_luminance²) / (1 + scaled)`` (Reinhard 2002, Eq. 4),
       computed as ``(middle_grey / adapted) * (1 + scaled / max_luminance²) / (1 + scaled)``, which
       never divides by ``L``. Negative luminances (out-of-gamut pixels) use the curve's slope at 0.
+
+    Examples:
+        >>> exposure_operator(torch.full((3, 1, 1), 0.72), torch.tensor(0.72), 0.18, 16.0).flatten().tolist()
+        [0.18000000715255737, 0.18000000715255737, 0.18000000715255737]
     """
     gain = middle_grey / adapted
     if operator == "exposure":
         return image * gain
-    _check_choice(operator, "operator", OPERATORS)
+    check_choice("operator", operator, OPERATORS)
     scaled = (luminance(image) * gain).clamp_min(0)
     return image * (gain * (1 + scaled / (max_luminance * max_luminance)) / (1 + scaled))
-
-
-def _compute_dtype(image: torch.Tensor) -> torch.dtype:
-    return torch.float32 if image.dtype in (torch.float16, torch.bfloat16) else image.dtype
 
 
 def _previous_state(adapted: Param, image: torch.Tensor) -> torch.Tensor:
@@ -240,17 +256,23 @@ def auto_exposure(
     respect to the image (through the operator and the metering), ``middle_grey`` and the other
     continuous controls. Bounds: ``MIN_LUMINANCE`` (1e-3) keeps the gain of a black frame finite;
     ``MAX_ADAPTED`` (65504) sets no upper limit. The document's ``[0.3, 1.0]`` can be passed instead.
+
+    Examples:
+        >>> exposed, adapted = auto_exposure(torch.full((1, 3, 4, 4), 0.72), None, metering='mean')
+        >>> round(exposed.mean().item(), 4), [round(v, 4) for v in adapted.tolist()]
+        (0.18, [0.72])
     """
     check_image(image)
     controls = dict(
-        middle_grey=middle_grey, max_luminance=max_luminance, speed=speed, speed_to_light=speed_to_light,
-        speed_to_dark=speed_to_dark, min_luminance=min_luminance, max_adapted=max_adapted,
+        middle_grey=middle_grey, max_luminance=max_luminance, speed=speed, metering=metering, operator=operator,
+        speed_to_light=speed_to_light, speed_to_dark=speed_to_dark, min_luminance=min_luminance, max_adapted=max_adapted,
     )
-    if not _tracing():
-        _check_controls(controls, metering, operator)
-        _check_non_negative(dt, "dt")
-    x = image.to(_compute_dtype(image))
-    c = {name: None if value is None else scalar_param(value, x, name) for name, value in controls.items()}
+    if not is_tracing():
+        _check_controls(controls)
+        check_range(dt, "dt", 0.0, HALF_MAX)
+    x = working_dtype(image)
+    numbers = {name: value for name, value in controls.items() if name not in ("metering", "operator")}
+    c = {name: None if value is None else scalar_param(value, x, name) for name, value in numbers.items()}
     metered = meter_luminance(x, metering).reshape(x.shape[:-3] + (1, 1, 1))
     metered = torch.minimum(torch.maximum(metered, c["min_luminance"]), c["max_adapted"])
     if adapted is None:
@@ -261,31 +283,50 @@ def auto_exposure(
         moved = adapt_luminance(previous, metered, dt, c["speed"], c["speed_to_light"], c["speed_to_dark"])
         new = torch.where(previous > 0, moved, metered)
     exposed = exposure_operator(sanitize(x), new, c["middle_grey"], c["max_luminance"], operator)
-    return sanitize(exposed).to(image.dtype), new.reshape(x.shape[:-3])
+    return to_input_dtype(sanitize(exposed), image), new.reshape(x.shape[:-3])
 
 
-def _from_list(value):
-    """A per-sample control written as a list (as :meth:`AutoExposure.to_config` writes it) as a tensor."""
-    return torch.tensor(value, dtype=torch.get_default_dtype()) if isinstance(value, (list, tuple)) else value
-
-
-class AutoExposure(nn.Module):
+class AutoExposure(Stage):
     """Eye adaptation for stills and video, keeping the adapted luminance per sample.
 
     ``forward(image, dt=None)``: with ``dt`` in seconds since the previous frame, the state
     ``adapted_luminance`` (shape ``image.shape[:-3]``) moves towards the frame's metered luminance
     (see :func:`auto_exposure`); with ``dt=None`` (stills, training batches) or on the first
     frame after construction or :meth:`reset`, it adapts instantly. Changing the batch size in a
-    sequence raises ``ValueError``; call :meth:`reset` between sequences.
+    sequence raises ``ValueError``; call :meth:`reset` between sequences. :meth:`frame` is one
+    frame without state, for serving.
 
     ``operator="exposure"`` (default) returns the scene-referred image scaled by
     ``middle_grey / adapted`` for the rest of the pipeline; ``operator="reinhard"`` returns the
     document's display-referred operator, which uses ``max_luminance``. The stored state is
     detached (gradients flow within a frame, not across frames); use :func:`auto_exposure` to
     backpropagate through time. An ``nn.Parameter`` control is registered as a module parameter.
-    ``to_config()`` returns the constructor arguments as plain values (per-sample tensors as
+    ``to_config()`` returns every constructor argument as plain values (per-sample tensors as
     lists, which the constructor accepts): ``AutoExposure(**module.to_config())``.
+
+    Examples:
+        >>> layer = AutoExposure(metering="mean")
+        >>> out = layer(torch.full((1, 3, 4, 4), 0.72))
+        >>> round(out.mean().item(), 4), [round(v, 4) for v in layer.adapted_luminance.tolist()]
+        (0.18, [0.72])
+        >>> AutoExposure(middle_grey=0.0)
+        Traceback (most recent call last):
+        ...
+        ValueError: middle_grey must be a number > 0, got 0.0
     """
+
+    controls = {
+        "middle_grey": Control(0.18, (SMALLEST, HALF_MAX)),
+        "max_luminance": Control(16.0, (SMALLEST, HALF_MAX)),
+        "speed": Control(1.0, (0.0, HALF_MAX)),
+        "metering": Control("log", METERING_MODES),
+        "operator": Control("exposure", OPERATORS),
+        "speed_to_light": Control(None, (0.0, HALF_MAX)),
+        "speed_to_dark": Control(None, (0.0, HALF_MAX)),
+        "min_luminance": Control(MIN_LUMINANCE, (SMALLEST, HALF_MAX)),
+        "max_adapted": Control(MAX_ADAPTED, (SMALLEST, HALF_MAX)),
+    }
+    always_in_config = tuple(controls)
 
     adapted_luminance: torch.Tensor
 
@@ -303,28 +344,22 @@ class AutoExposure(nn.Module):
         max_adapted: Param = MAX_ADAPTED,
     ) -> None:
         super().__init__()
-        controls = dict(
-            middle_grey=middle_grey, max_luminance=max_luminance, speed=speed, speed_to_light=speed_to_light,
-            speed_to_dark=speed_to_dark, min_luminance=min_luminance, max_adapted=max_adapted,
+        self.init_controls(
+            middle_grey=middle_grey, max_luminance=max_luminance, speed=speed, metering=metering, operator=operator,
+            speed_to_light=speed_to_light, speed_to_dark=speed_to_dark, min_luminance=min_luminance, max_adapted=max_adapted,
         )
-        controls = {name: _from_list(value) for name, value in controls.items()}
-        _check_controls(controls, metering, operator)
-        for name, value in controls.items():
-            setattr(self, name, value)  # an nn.Parameter registers itself
-        self.metering = metering
-        self.operator = operator
         self.register_buffer("adapted_luminance", torch.empty(0))
 
-    _CONFIG_KEYS = (
-        "middle_grey", "max_luminance", "speed", "metering", "operator",
-        "speed_to_light", "speed_to_dark", "min_luminance", "max_adapted",
-    )
+    def check_control(self, name: str, value):
+        return _checked_control(name, value)
 
-    def to_config(self) -> dict:
-        """The constructor arguments as plain Python values (tensors as nested lists)."""
-        def plain(value):
-            return value.detach().cpu().tolist() if isinstance(value, torch.Tensor) else value
-        return {key: plain(getattr(self, key)) for key in self._CONFIG_KEYS}
+    def check_together(self) -> None:
+        _check_bounds(self.min_luminance, self.max_adapted)
+
+    @property
+    def is_identity(self) -> bool:
+        """Never: the stage exposes every frame, whatever its controls."""
+        return False
 
     def reset(self) -> None:
         """Forget the adapted luminance: the next frame adapts instantly."""
@@ -341,16 +376,23 @@ class AutoExposure(nn.Module):
             )
         return self.adapted_luminance
 
+    def frame(self, image: torch.Tensor, adapted: Optional[torch.Tensor], dt: Param) -> tuple[torch.Tensor, torch.Tensor]:
+        """One frame with these controls, stateless: ``(image, adapted, dt) -> (exposed, new adapted)``.
+
+        ``adapted`` has one value per image (``image.shape[:-3]``); ``None`` or ``<= 0`` starts a
+        sequence (the frame adapts instantly). The stored :attr:`adapted_luminance` is left alone.
+
+        Examples:
+            >>> layer = AutoExposure(metering="mean")
+            >>> exposed, adapted = layer.frame(torch.full((2, 3, 4, 4), 0.36), torch.zeros(2), 0.0)
+            >>> [round(v, 4) for v in adapted.tolist()], layer.adapted_luminance.numel()
+            ([0.36, 0.36], 0)
+        """
+        self.check_learnable()
+        return auto_exposure(image, adapted, dt, **self.params())
+
     def forward(self, image: torch.Tensor, dt: Optional[Param] = None) -> torch.Tensor:
         check_image(image)
-        exposed, adapted = auto_exposure(
-            image,
-            self._history(image, dt),
-            0.0 if dt is None else dt,
-            **{key: getattr(self, key) for key in self._CONFIG_KEYS},
-        )
+        exposed, adapted = self.frame(image, self._history(image, dt), 0.0 if dt is None else dt)
         self.adapted_luminance = adapted.detach()
         return exposed
-
-    def extra_repr(self) -> str:
-        return ", ".join(f"{key}={value!r}" for key, value in self.to_config().items())

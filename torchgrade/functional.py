@@ -1,4 +1,13 @@
-"""The pure, differentiable functions behind torchgrade's modules, in one namespace."""
+"""The pure, differentiable functions behind torchgrade's modules, in one namespace.
+
+Examples:
+    >>> import torch
+    >>> from torchgrade import functional as F
+    >>> image = torch.rand(1, 3, 4, 4) * 8
+    >>> out = F.tonemap(F.color_grade(image, contrast=20), "neutral")
+    >>> bool(out.min() >= 0 and out.max() <= 1)
+    True
+"""
 
 from .color import (
     aces_to_acescc,
@@ -36,8 +45,8 @@ from .tonemap import (
     agx_godot,
     khronos_pbr_neutral,
 )
-from .grade import (
-    color_grade,
+from .grade import color_grade
+from .grade_steps import (
     post_exposure,
     white_balance,
     white_balance_coefficients,
@@ -61,3 +70,77 @@ from .dither import dither, dither_pattern
 from .exposure import auto_exposure, meter_luminance, adapt_luminance, exposure_operator, area_resize, halving_average
 from .bloom import bloom, bloom_threshold, convolution_bloom, fft_convolve
 from .lut import apply_lut
+
+__all__ = [
+    "aces_to_acescc",
+    "aces_to_acescg",
+    "aces_to_unity",
+    "acescc_to_aces",
+    "acescg_to_aces",
+    "acescg_to_unity",
+    "hsv_to_rgb",
+    "linear_to_lms",
+    "linear_to_logc",
+    "linear_to_srgb",
+    "lms_to_linear",
+    "logc_to_linear",
+    "luminance",
+    "rgb_to_hsv",
+    "srgb_to_linear",
+    "unity_to_aces",
+    "unity_to_acescg",
+    "tonemap",
+    "reinhard",
+    "reinhard_extended",
+    "reinhard_luminance",
+    "neutral",
+    "aces",
+    "hable",
+    "filmic",
+    "unreal_filmic",
+    "aces_reference",
+    "aces_hill",
+    "aces_narkowicz",
+    "agx",
+    "agx_godot",
+    "khronos_pbr_neutral",
+    "color_grade",
+    "post_exposure",
+    "white_balance",
+    "white_balance_coefficients",
+    "contrast",
+    "color_filter",
+    "split_toning",
+    "channel_mixer",
+    "shadows_midtones_highlights",
+    "lift_gamma_gain",
+    "lift_gamma_gain_coefficients",
+    "saturation_curves",
+    "hue_shift",
+    "saturation",
+    "fast_tonemap",
+    "fast_tonemap_inverse",
+    "yrgb_curves",
+    "evaluate_curve",
+    "monotone_tangents",
+    "primary_grade",
+    "offset_exposure",
+    "brightness",
+    "linear_contrast",
+    "log_contrast",
+    "log_gamma",
+    "primary_saturation",
+    "dither",
+    "dither_pattern",
+    "auto_exposure",
+    "meter_luminance",
+    "adapt_luminance",
+    "exposure_operator",
+    "area_resize",
+    "halving_average",
+    "bloom",
+    "bloom_threshold",
+    "convolution_bloom",
+    "fft_convolve",
+    "apply_lut",
+]

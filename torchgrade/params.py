@@ -33,6 +33,10 @@ class ParamModule(nn.Module):
         """The controls as stored (numbers, tensors or parameters), by name."""
         return {name: getattr(self, name) for name in self._control_names}
 
+    def to_config(self) -> dict:
+        """The layer's ``config()``, under the name every stage answers to."""
+        return self.config()
+
     def plain_params(self) -> dict:
         """The controls as plain Python values (tensors become nested lists), by name."""
         return {name: _plain(value) for name, value in self.params().items()}

@@ -36,29 +36,42 @@ from torch import nn
 from .bloom import Bloom
 from .core import is_constant
 from .dither import Dither
-from .exposure import AutoExposure, auto_exposure
-from .grade import CONTROLS, CURVES, ColorGrade
+from .exposure import AutoExposure
+from .grade import ColorGrade
 from .lut import INTERPOLATIONS, LUT3D, bake_lut
-from .primary import PRIMARY_CONTROLS, PrimaryGrade
+from .primary import PrimaryGrade
 from .tonemap import ToneMap
+
+__all__ = ["PostFX", "STAGES", "stage_keys", "build_stage", "is_identity_stage", "exposure_frame"]
 
 STAGES = {"exposure": AutoExposure, "bloom": Bloom, "grade": ColorGrade, "primary": PrimaryGrade, "tonemap": ToneMap, "dither": Dither}
 """The configurable stages, in the order they run, and their classes."""
 
 
 def stage_keys(stage: str) -> tuple:
-    """The argument names a stage's config accepts (its constructor's arguments)."""
-    if stage == "grade":
-        return ("aces",) + tuple(CONTROLS) + tuple(CURVES)
-    if stage == "primary":
-        return ("style",) + tuple(PRIMARY_CONTROLS)
-    return tuple(name for name in inspect.signature(STAGES[stage]).parameters if name != "self")
+    """The argument names a stage's config accepts: its constructor's signature (built from its controls).
+
+    Examples:
+        >>> stage_keys("dither")
+        ('amplitude', 'seed', 'size')
+        >>> stage_keys("primary")[:3]
+        ('style', 'offset', 'exposure')
+    """
+    return tuple(inspect.signature(STAGES[stage]).parameters)
 
 
 def build_stage(stage: str, spec) -> Optional[nn.Module]:
     """A stage module from a module, a dict of arguments (``tonemap`` also a mode name) or ``None``.
 
     Raises ``ValueError`` naming ``stage.key`` for unknown keys and for values the stage rejects.
+
+    Examples:
+        >>> build_stage("tonemap", "aces")
+        ToneMap(mode='aces')
+        >>> build_stage("grade", {"contrast": 150})
+        Traceback (most recent call last):
+        ...
+        ValueError: grade.contrast must lie in [-100.0, 100.0], got 150.0
     """
     if spec is None or isinstance(spec, nn.Module):
         return spec
@@ -83,22 +96,27 @@ def _qualified(stage: str, message: str, spec: dict) -> str:
 
 
 def is_identity_stage(module: nn.Module) -> bool:
-    """True for a stage that cannot change any image: an identity grade or primary grade, a dither of
-    amplitude 0, a bloom of intensity 0 or no levels."""
-    if isinstance(module, (ColorGrade, PrimaryGrade, Dither)):
+    """True for a stage that cannot change any image, as the stage itself says (``is_identity``).
+
+    Examples:
+        >>> is_identity_stage(ColorGrade()), is_identity_stage(Dither(amplitude=0.0)), is_identity_stage(AutoExposure())
+        (True, True, False)
+    """
+    if hasattr(module, "is_identity"):
         return module.is_identity
-    if isinstance(module, Bloom):
-        return module.max_iterations == 0 or is_constant(module.intensity, 0.0)
-    return False
+    # Until Bloom answers is_identity itself (it becomes a Stage), its intensity and depth decide.
+    return isinstance(module, Bloom) and (module.max_iterations == 0 or is_constant(module.intensity, 0.0))
 
 
 def exposure_frame(exposure: AutoExposure, image: torch.Tensor, adapted: torch.Tensor, dt) -> tuple:
-    """One frame of ``exposure`` without state: ``(image, adapted, dt) -> (exposed, new adapted)``.
+    """``exposure.frame(image, adapted, dt)``: one frame without state (see :meth:`AutoExposure.frame`).
 
-    ``adapted`` has one value per image; ``<= 0`` starts a sequence (the frame adapts instantly).
+    Examples:
+        >>> exposed, adapted = exposure_frame(AutoExposure(), torch.ones(1, 3, 2, 2), torch.zeros(1), 0.0)
+        >>> exposed.shape, adapted.shape
+        (torch.Size([1, 3, 2, 2]), torch.Size([1]))
     """
-    settings = {key: getattr(exposure, key) for key in exposure.to_config()}
-    return auto_exposure(image, adapted, dt, **settings)
+    return exposure.frame(image, adapted, dt)
 
 
 class PostFX(nn.Module):
@@ -109,6 +127,13 @@ class PostFX(nn.Module):
     ``primary`` and ``tonemap``; :meth:`to_lut` builds such a look. ``forward(image, dt=None)`` runs the stages in
     order; ``dt`` (seconds since the previous frame) is passed to the exposure stage, which keeps the
     adapted luminance between calls (see :class:`~torchgrade.AutoExposure`).
+
+    Examples:
+        >>> look = PostFX(grade={"contrast": 20, "saturation": 0.0}, bloom={"intensity": 0.0}, tonemap="aces")
+        >>> list(look.stages())  # the identity bloom is not built
+        ['grade', 'tonemap']
+        >>> look.to_config()
+        {'grade': {'contrast': 20}, 'tonemap': {'mode': 'aces'}}
     """
 
     def __init__(self, exposure=None, bloom=None, grade=None, tonemap=None, lut: Optional[LUT3D] = None,
@@ -143,7 +168,7 @@ class PostFX(nn.Module):
             raise ValueError("a look baked to a LUT has no config; save the LUT with torchgrade.io.write_cube")
         config = {}
         for stage, module in self.stages().items():
-            config[stage] = module.config() if hasattr(module, "config") else module.to_config()
+            config[stage] = module.to_config()
         return config
 
     def stages(self) -> dict:
@@ -170,11 +195,11 @@ class PostFX(nn.Module):
     def frame(self, image: torch.Tensor, adapted: torch.Tensor, dt) -> tuple:
         """The look without state, for serving: ``(image, adapted, dt) -> (output, new adapted)``.
 
-        Needs an exposure stage; see :func:`exposure_frame` for ``adapted``.
+        Needs an exposure stage; see :meth:`AutoExposure.frame` for ``adapted``.
         """
         if self.exposure is None:
             raise ValueError("frame() needs an exposure stage; call the look directly")
-        exposed, adapted = exposure_frame(self.exposure, image, adapted, dt)
+        exposed, adapted = self.exposure.frame(image, adapted, dt)
         return self.finish(exposed), adapted
 
     def per_pixel_input(self, image: torch.Tensor) -> torch.Tensor:
@@ -182,7 +207,7 @@ class PostFX(nn.Module):
         first frame of a sequence (the adaptation state is left alone), then bloomed. What
         ``bake_lut(..., scene=)`` should see when the look's per-pixel stages are baked."""
         if self.exposure is not None:
-            image, _ = exposure_frame(self.exposure, image, torch.zeros(image.shape[:-3], dtype=image.dtype, device=image.device), 0.0)
+            image, _ = self.exposure.frame(image, None, 0.0)
         return image if self.bloom is None else self.bloom(image)
 
     def per_pixel_stages(self) -> nn.Sequential:

@@ -18,43 +18,61 @@ contrasts and gammas multiply); its black/white clamps (off by default) are not 
 
 from __future__ import annotations
 
+import inspect
+
 import torch
 
 from .color import CHANNEL, safe_pow
-from .core import Param, check_image, check_range, color_param, is_constant, sanitize, scalar_param, to_input_dtype, working_dtype
-from .params import ParamModule
+from .core import Param, check_choice, check_image, color_param, is_constant, sanitize, scalar_param, to_input_dtype, working_dtype
+from .stage import Control, Stage, controls_signature
 
-STYLES = ("linear", "log")
+__all__ = [
+    "PrimaryGrade",
+    "primary_grade",
+    "style_defaults",
+    "offset_exposure",
+    "brightness",
+    "linear_contrast",
+    "log_contrast",
+    "log_gamma",
+    "primary_saturation",
+    "STYLE_CONTROLS",
+    "DEFAULT_PIVOT",
+    "OCIO_LUMA",
+]
+
+STYLE_CONTROLS = {
+    "linear": ("offset", "exposure", "contrast", "saturation", "pivot"),
+    "log": ("brightness", "contrast", "gamma", "saturation", "pivot", "pivot_black", "pivot_white"),
+}
+"""The controls each of OpenColorIO's styles has."""
+STYLES = tuple(STYLE_CONTROLS)
 OCIO_LUMA = (0.2126, 0.7152, 0.0722)
 """OpenColorIO's Rec.709 luma weights (4 digits) for primary saturation."""
 DEFAULT_PIVOT = {"linear": 0.18, "log": -0.2}
 """OpenColorIO's default contrast pivot of each style (linear: stops above 0.18; log: ``2a - 1``)."""
-
-# Each control: its identity (or default), allowed range and the styles that have it.
-PRIMARY_CONTROLS = {
-    "offset": ((0.0, 0.0, 0.0), (-10.0, 10.0), ("linear",)),
-    "exposure": ((0.0, 0.0, 0.0), (-20.0, 20.0), ("linear",)),
-    "brightness": ((0.0, 0.0, 0.0), (-1023.0, 1023.0), ("log",)),
-    "contrast": ((1.0, 1.0, 1.0), (0.0, 10.0), STYLES),
-    "gamma": ((1.0, 1.0, 1.0), (0.01, 10.0), ("log",)),
-    "saturation": (1.0, (0.0, 10.0), STYLES),
-    "pivot": (None, (-10.0, 10.0), STYLES),
-    "pivot_black": (0.0, (-1.0, 2.0), ("log",)),
-    "pivot_white": (1.0, (-1.0, 2.0), ("log",)),
-}
 PIVOTS = ("pivot", "pivot_black", "pivot_white")
 """Where contrast and gamma turn: they change nothing by themselves."""
 
 
 def style_defaults(style: str) -> dict:
-    """Every control of ``style`` and its default (``pivot``: :data:`DEFAULT_PIVOT`)."""
-    if style not in STYLES:
-        raise ValueError(f"style must be one of {STYLES}, got {style!r}")
-    return {
-        name: DEFAULT_PIVOT[style] if name == "pivot" else default
-        for name, (default, _, styles) in PRIMARY_CONTROLS.items()
-        if style in styles
-    }
+    """Every control of ``style`` and its default (``pivot``: :data:`DEFAULT_PIVOT`).
+
+    Examples:
+        >>> style_defaults("log")["pivot"], list(style_defaults("linear"))
+        (-0.2, ['offset', 'exposure', 'contrast', 'saturation', 'pivot'])
+    """
+    return {name: control.default for name, control in _style_table(style).items()}
+
+
+def _style_table(style: str) -> dict:
+    """The controls of ``style`` in :attr:`PrimaryGrade.controls` order, ``pivot`` defaulting to the style's."""
+    check_choice("style", style, STYLES)
+    table = {}
+    for name, control in PrimaryGrade.controls.items():
+        if name in STYLE_CONTROLS[style]:
+            table[name] = Control(DEFAULT_PIVOT[style], control.range) if name == "pivot" else control
+    return table
 
 
 def _changed(controls: dict, defaults: dict) -> set:
@@ -68,36 +86,66 @@ def _mirrored_pow(x: torch.Tensor, exponent: torch.Tensor) -> torch.Tensor:
 
 
 def offset_exposure(image: torch.Tensor, offset=(0.0, 0.0, 0.0), exposure=(0.0, 0.0, 0.0)) -> torch.Tensor:
-    """OpenColorIO linear offset and exposure: ``(rgb + offset) · 2^exposure``."""
+    """OpenColorIO linear offset and exposure: ``(rgb + offset) · 2^exposure``.
+
+    Examples:
+        >>> offset_exposure(torch.full((3, 1, 1), 0.25), offset=(0.25, 0.25, 0.25), exposure=(1.0, 0.0, 0.0)).flatten().tolist()
+        [1.0, 0.5, 0.5]
+    """
     return (image + color_param(offset, image, "offset")) * torch.exp2(color_param(exposure, image, "exposure"))
 
 
 def brightness(image: torch.Tensor, amount=(0.0, 0.0, 0.0)) -> torch.Tensor:
-    """OpenColorIO log brightness, in 10-bit code values scaled by 6.25: ``rgb + amount · 6.25 / 1023``."""
+    """OpenColorIO log brightness, in 10-bit code values scaled by 6.25: ``rgb + amount · 6.25 / 1023``.
+
+    Examples:
+        >>> round(brightness(torch.zeros(3, 1, 1), (1023.0, 0.0, 0.0)).flatten()[0].item(), 4)
+        6.25
+    """
     return image + color_param(amount, image, "brightness") * (6.25 / 1023.0)
 
 
 def linear_contrast(image: torch.Tensor, contrast=(1.0, 1.0, 1.0), pivot: Param = 0.18) -> torch.Tensor:
-    """OpenColorIO linear contrast: ``sign(x) · p · |x / p|^contrast`` with ``p = 0.18 · 2^pivot``."""
+    """OpenColorIO linear contrast: ``sign(x) · p · |x / p|^contrast`` with ``p = 0.18 · 2^pivot``.
+
+    Examples:
+        >>> linear_contrast(torch.full((3, 1, 1), 0.18), (2.0, 2.0, 2.0), pivot=0.0).flatten().tolist()  # the pivot stays
+        [0.18000000715255737, 0.18000000715255737, 0.18000000715255737]
+    """
     p = 0.18 * torch.exp2(scalar_param(pivot, image, "pivot"))
     return p * _mirrored_pow(image / p, color_param(contrast, image, "contrast"))
 
 
 def log_contrast(image: torch.Tensor, contrast=(1.0, 1.0, 1.0), pivot: Param = -0.2) -> torch.Tensor:
-    """OpenColorIO log contrast: ``(x - a) · contrast + a`` with ``a = 0.5 + 0.5 · pivot``."""
+    """OpenColorIO log contrast: ``(x - a) · contrast + a`` with ``a = 0.5 + 0.5 · pivot``.
+
+    Examples:
+        >>> log_contrast(torch.full((3, 1, 1), 0.4), (2.0, 2.0, 2.0)).flatten().tolist()  # pivot -0.2: a = 0.4 stays
+        [0.4000000059604645, 0.4000000059604645, 0.4000000059604645]
+    """
     a = 0.5 + 0.5 * scalar_param(pivot, image, "pivot")
     return (image - a) * color_param(contrast, image, "contrast") + a
 
 
 def log_gamma(image: torch.Tensor, gamma=(1.0, 1.0, 1.0), pivot_black: Param = 0.0, pivot_white: Param = 1.0) -> torch.Tensor:
-    """OpenColorIO log gamma: ``sign(n) |n|^(1/gamma) · (white - black) + black``, ``n = (x - black) / (white - black)``."""
+    """OpenColorIO log gamma: ``sign(n) |n|^(1/gamma) · (white - black) + black``, ``n = (x - black) / (white - black)``.
+
+    Examples:
+        >>> log_gamma(torch.full((3, 1, 1), 0.25), (0.5, 0.5, 0.5)).flatten().tolist()  # n^(1/0.5)
+        [0.0625, 0.0625, 0.0625]
+    """
     black = scalar_param(pivot_black, image, "pivot_black")
     span = scalar_param(pivot_white, image, "pivot_white") - black
     return _mirrored_pow((image - black) / span, 1.0 / color_param(gamma, image, "gamma")) * span + black
 
 
 def primary_saturation(image: torch.Tensor, amount: Param = 1.0) -> torch.Tensor:
-    """OpenColorIO primary saturation: ``Y + amount · (rgb - Y)``, ``Y`` with :data:`OCIO_LUMA`."""
+    """OpenColorIO primary saturation: ``Y + amount · (rgb - Y)``, ``Y`` with :data:`OCIO_LUMA`.
+
+    Examples:
+        >>> primary_saturation(torch.tensor([1.0, 0.0, 0.0]).reshape(3, 1, 1), 0.0).flatten().tolist()
+        [0.2125999927520752, 0.2125999927520752, 0.2125999927520752]
+    """
     weights = torch.tensor(OCIO_LUMA, dtype=image.dtype, device=image.device).reshape(3, 1, 1)
     luma = (image * weights).sum(dim=CHANNEL, keepdim=True)
     return luma + (image - luma) * scalar_param(amount, image, "saturation")
@@ -106,8 +154,15 @@ def primary_saturation(image: torch.Tensor, amount: Param = 1.0) -> torch.Tensor
 def primary_grade(image: torch.Tensor, style: str = "linear", **controls) -> torch.Tensor:
     """OpenColorIO primary grading of ``style`` (see the module docstring); identity returns ``image`` itself.
 
-    Controls: those of :data:`PRIMARY_CONTROLS` that the style has; those not given take
-    :func:`style_defaults`.
+    Controls: those of :attr:`PrimaryGrade.controls` that the style has (:data:`STYLE_CONTROLS`);
+    those not given take :func:`style_defaults`.
+
+    Examples:
+        >>> image = torch.full((1, 3, 1, 1), 0.5)
+        >>> primary_grade(image, "linear", exposure=(1.0, 1.0, 1.0)).flatten().tolist()
+        [1.0, 1.0, 1.0]
+        >>> primary_grade(image, "log", pivot=0.3) is image  # a pivot alone changes nothing
+        True
     """
     check_image(image)
     defaults = style_defaults(style)
@@ -132,43 +187,73 @@ def primary_grade(image: torch.Tensor, style: str = "linear", **controls) -> tor
     return to_input_dtype(x, image)
 
 
-class PrimaryGrade(ParamModule):
+class PrimaryGrade(Stage):
     """OpenColorIO-style primary grading layer: ``PrimaryGrade(style="linear", offset=(0, 0, 0),
     exposure=(0, 0, 0), contrast=(1, 1, 1), pivot=None, saturation=1.0)``; ``style="log"`` has
     ``brightness``, ``contrast``, ``gamma``, ``pivot``, ``pivot_black``, ``pivot_white``, ``saturation``.
 
     Colours are triples or per-sample ``(B, 3)``, the others numbers or ``(B,)``; any can be an
-    ``nn.Parameter``. ``pivot=None`` takes OpenColorIO's default of the style (0.18, or -0.2 in log).
-    Controls of the other style must stay at identity. An identity grade returns its input itself.
+    ``nn.Parameter``. ``pivot=None`` (or any control ``None``) takes OpenColorIO's default of the
+    style (pivot 0.18, or -0.2 in log). Controls of the other style must stay at identity. The style
+    is set at construction. An identity grade returns its input itself.
+
+    Examples:
+        >>> grade = PrimaryGrade("log", contrast=(1.2, 1.2, 1.2))
+        >>> grade.to_config()
+        {'style': 'log', 'contrast': [1.2, 1.2, 1.2]}
+        >>> PrimaryGrade(gamma=(2.0, 1.0, 1.0))
+        Traceback (most recent call last):
+        ...
+        ValueError: gamma is not a control of the linear style; it has offset, exposure, contrast, saturation, pivot
     """
+
+    # Each control, its identity (or default) and its allowed range; STYLE_CONTROLS says which style has it.
+    controls = {
+        "style": Control("linear", STYLES),
+        "offset": Control((0.0, 0.0, 0.0), (-10.0, 10.0)),
+        "exposure": Control((0.0, 0.0, 0.0), (-20.0, 20.0)),
+        "brightness": Control((0.0, 0.0, 0.0), (-1023.0, 1023.0)),
+        "contrast": Control((1.0, 1.0, 1.0), (0.0, 10.0)),
+        "gamma": Control((1.0, 1.0, 1.0), (0.01, 10.0)),
+        "saturation": Control(1.0, (0.0, 10.0)),
+        "pivot": Control(None, (-10.0, 10.0)),
+        "pivot_black": Control(0.0, (-1.0, 2.0)),
+        "pivot_white": Control(1.0, (-1.0, 2.0)),
+    }
+    always_in_config = ("style",)
 
     def __init__(self, style: str = "linear", **controls):
         super().__init__()
-        defaults = style_defaults(style)
-        self.style = style
-        for name, value in controls.items():
-            if name not in PRIMARY_CONTROLS:
-                raise ValueError(f"unknown PrimaryGrade control {name!r}; known: {', '.join(PRIMARY_CONTROLS)}")
-            if name not in defaults and not is_constant(value, PRIMARY_CONTROLS[name][0]):
-                raise ValueError(f"{name} is not a control of the {style} style; it has {', '.join(defaults)}")
-        for name, default in defaults.items():
-            value = default if controls.get(name) is None else controls[name]
-            check_range(value, name, *PRIMARY_CONTROLS[name][1])
-            self.set_param(name, value)
+        object.__setattr__(self, "style", style)  # the table depends on it: see control_table
+        table = self.control_table()
+        given = {name: value for name, value in controls.items() if value is not None}
+        for name, value in list(given.items()):
+            if name in self.controls and name not in table and is_constant(value, self.controls[name].default):
+                del given[name]
+            elif name in self.controls and name not in table:
+                raise ValueError(f"{name} is not a control of the {style} style; it has {', '.join(list(table)[1:])}")
+        self.init_controls(style=style, **given)
+
+    def control_table(self) -> dict:
+        """The style's controls, ``pivot`` defaulting to the style's own (:data:`DEFAULT_PIVOT`)."""
+        return {"style": self.controls["style"], **_style_table(self.style)}
+
+    def check_control(self, name: str, value):
+        if name == "style" and value != self.style:
+            raise ValueError(f"a PrimaryGrade's style is set at construction; build a new one for {value!r}")
+        return value
 
     @property
     def is_identity(self) -> bool:
         """True when no control changes the image (then skipped by ``PostFX`` and not exported)."""
-        return not _changed(self.params(), style_defaults(self.style))
+        return all(self.is_default(name) for name in self._control_names if name not in ("style", *PIVOTS))
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
-        return primary_grade(image, self.style, **self.params())
+        self.check_learnable()
+        return primary_grade(image, **self.params())
 
-    def config(self) -> dict:
-        """The style and the controls that differ from their defaults, as plain values."""
-        defaults = style_defaults(self.style)
-        changed = {name: value for name, value in self.plain_params().items() if not is_constant(value, defaults[name])}
-        return {"style": self.style, **changed}
 
-    def extra_repr(self) -> str:
-        return ", ".join(f"{k}={v}" for k, v in self.config().items())
+PrimaryGrade.__signature__ = controls_signature(
+    {name: control for name, control in PrimaryGrade.controls.items() if name != "style"},
+    leading=(inspect.Parameter("style", inspect.Parameter.POSITIONAL_OR_KEYWORD, default="linear"),),
+)

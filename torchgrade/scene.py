@@ -12,6 +12,8 @@ import torch
 
 from .color import srgb_to_linear
 
+__all__ = ["CHART_SRGB", "demo_scene"]
+
 # sRGB values of the ColorChecker Classic patches (X-Rite, 2009 formulation), row by row.
 CHART_SRGB = (
     (115, 82, 68), (194, 150, 130), (98, 122, 157), (87, 108, 67), (133, 128, 177), (103, 189, 170),
@@ -55,7 +57,13 @@ def _chart(u: torch.Tensor, v: torch.Tensor, like: torch.Tensor) -> tuple[torch.
 
 
 def demo_scene(height: int = 360, width: int = 640, dtype: torch.dtype = torch.float32) -> torch.Tensor:
-    """Render the demo room as a ``(1, 3, height, width)`` scene-referred linear Rec.709 tensor."""
+    """Render the demo room as a ``(1, 3, height, width)`` scene-referred linear Rec.709 tensor.
+
+    Examples:
+        >>> scene = demo_scene(16, 24)
+        >>> scene.shape, bool(scene.max() > 1.0)  # scene-referred: brighter than white
+        (torch.Size([1, 3, 16, 24]), True)
+    """
     if height < 8 or width < 8:
         raise ValueError(f"demo scene needs at least 8x8 pixels, got {height}x{width}")
     like = torch.empty(0, dtype=dtype)

@@ -51,7 +51,8 @@ class Control:
     ``kind`` says how values are checked:
 
     * ``"number"``: a number, a sequence of numbers (colours, matrices) or a tensor, every element
-      in ``range = (low, high)``; may be a per-sample tensor or an ``nn.Parameter``.
+      in ``range = (low, high)``; may be a per-sample tensor or an ``nn.Parameter``. A number
+      control whose default is ``None`` (not set) also accepts ``None``.
     * ``"int"``: a Python ``int`` (not ``bool``) in ``range``.
     * ``"bool"``: ``True`` or ``False``.
     * ``"choice"``: one of the strings in ``range``.
@@ -169,8 +170,11 @@ class Stage(nn.Module):
 
     def _checked(self, name: str, value):
         control = self.control_table()[name]
+        value = self.check_control(name, value)
         if control.kind == "number":
-            _check_number(value, name, control.range)
+            # A number control that defaults to None ("not set", as a speed that falls back on another) keeps None.
+            if not (value is None and control.default is None):
+                _check_number(value, name, control.range)
         elif control.kind == "int":
             if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not control.range[0] <= value <= control.range[1]:
                 raise ValueError(f"{name} must be an integer in [{control.range[0]}, {control.range[1]}], got {value!r}")
@@ -180,10 +184,14 @@ class Stage(nn.Module):
                 raise ValueError(f"{name} must be True or False, got {value!r}")
         elif control.kind == "choice":
             check_choice(name, value, control.range)
-        return self.check_control(name, value)
+        return value
 
     def check_control(self, name: str, value):
-        """Check (and return, possibly normalised) a ``"value"`` control; the base accepts anything."""
+        """Check (and return, possibly normalised) a control before its kind's check; the base accepts anything.
+
+        The checks of ``"value"`` controls live here, and a stage's own rule for any control (stated
+        in its own words, or a list normalised to a tensor) runs before the table's range check.
+        """
         return value
 
     def check_together(self) -> None:

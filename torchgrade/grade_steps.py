@@ -1,0 +1,389 @@
+"""The steps of Unity's colour grade, one pure, differentiable function each.
+
+Each function takes and returns ``(..., 3, H, W)`` tensors; controls broadcast as the library's
+conventions say (numbers, 0-d, per-sample). :func:`torchgrade.grade.color_grade` chains them in
+Unity's order and skips the steps left at identity; see :mod:`torchgrade.grade` for the order,
+units and sources.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from .color import (
+    ACESCC_MIDGRAY,
+    CHANNEL,
+    REC709_LUMINANCE,
+    LOGC_A,
+    LOGC_B,
+    LOGC_C,
+    LOGC_D,
+    aces_to_acescc,
+    aces_to_acescg,
+    acescc_to_aces,
+    hsv_to_rgb,
+    linear_to_lms,
+    lms_to_linear,
+    luminance,
+    rgb_to_hsv,
+    safe_pow,
+    safe_sqrt,
+    srgb_to_linear,
+    unity_to_aces,
+)
+from .core import HALF_MAX, Param, apply_matrix, color_param, matrix_param, scalar_param
+from .curves import evaluate_curve
+
+__all__ = [
+    "IDENTITY_MATRIX",
+    "IDENTITY_TRACKBALL",
+    "post_exposure",
+    "white_balance_coefficients",
+    "white_balance",
+    "contrast",
+    "color_filter",
+    "soft_light",
+    "split_toning",
+    "channel_mixer",
+    "smoothstep",
+    "shadows_midtones_highlights",
+    "lift_gamma_gain_coefficients",
+    "lift_gamma_gain",
+    "hue_shift",
+    "saturation_curves",
+    "saturation",
+    "fast_tonemap",
+    "fast_tonemap_inverse",
+    "yrgb_curves",
+]
+
+IDENTITY_MATRIX = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+IDENTITY_TRACKBALL = (1.0, 1.0, 1.0, 0.0)
+"""A lift, gamma or gain trackball that changes nothing: white, offset 0."""
+
+
+def _channels(t: torch.Tensor) -> torch.Tensor:
+    """A scalar parameter (0-d or (B,1,1,1)) as a single-channel map that can be concatenated to RGB."""
+    return t.reshape(t.shape[:1] + (1, 1, 1)) if t.dim() else t.reshape(1, 1, 1)
+
+
+def post_exposure(image: torch.Tensor, stops: Param) -> torch.Tensor:
+    """Post exposure: ``rgb · 2^stops``.
+
+    Examples:
+        >>> post_exposure(torch.full((3, 1, 1), 0.25), 2.0).flatten().tolist()
+        [1.0, 1.0, 1.0]
+    """
+    return image * torch.exp2(scalar_param(stops, image, "post_exposure"))
+
+
+def white_balance_coefficients(temperature: torch.Tensor, tint: torch.Tensor) -> torch.Tensor:
+    """LMS gains of Unity's ``ColorUtils.ColorBalanceToLMSCoeffs(temperature, tint)``.
+
+    ``x = 0.31271 - t1·(0.1 if t1 < 0 else 0.05)``, ``y = 2.87x - 3x² - 0.27509508 + t2·0.05`` with
+    ``t1 = temperature/65``, ``t2 = tint/65``; the white ``(x, y)`` goes to CAT02 LMS and the gains are
+    D65's LMS ``(0.949237, 1.03542, 1.08728)`` divided by it. Returns ``(..., 3, 1, 1)``.
+
+    Examples:
+        >>> gains = white_balance_coefficients(torch.tensor(0.0), torch.tensor(0.0))
+        >>> bool(torch.allclose(gains, torch.ones(3, 1, 1), atol=1e-5))
+        True
+    """
+    t1, t2 = _channels(temperature) / 65.0, _channels(tint) / 65.0
+    x = 0.31271 - torch.where(t1 < 0, t1 * 0.1, t1 * 0.05)
+    y = 2.87 * x - 3.0 * x * x - 0.27509508 + t2 * 0.05
+    big_x, big_z = x / y, (1.0 - x - y) / y
+    lms = torch.cat(
+        (
+            0.7328 * big_x + 0.4296 - 0.1624 * big_z,
+            -0.7036 * big_x + 1.6975 + 0.0061 * big_z,
+            0.0030 * big_x + 0.0136 + 0.9834 * big_z,
+        ),
+        dim=-3,
+    )
+    d65 = torch.tensor((0.949237, 1.03542, 1.08728), dtype=lms.dtype, device=lms.device).reshape(3, 1, 1)
+    return d65 / lms
+
+
+def white_balance(image: torch.Tensor, temperature: Param = 0.0, tint: Param = 0.0) -> torch.Tensor:
+    """White balance: scale in LMS by :func:`white_balance_coefficients` (Unity ``ColorGradeWhiteBalance``).
+
+    Examples:
+        >>> warm = white_balance(torch.full((3, 1, 1), 0.5), temperature=50.0).flatten()
+        >>> bool(warm[0] > warm[2])
+        True
+    """
+    gains = white_balance_coefficients(scalar_param(temperature, image, "temperature"), scalar_param(tint, image, "tint"))
+    return lms_to_linear(linear_to_lms(image) * gains)
+
+
+def contrast(image: torch.Tensor, amount: Param, aces: bool = False) -> torch.Tensor:
+    """Contrast about mid grey in log space: ``(log(x) - 0.4135884) · (1 + amount/100) + 0.4135884``.
+
+    Linear mode uses LogC and returns linear Rec.709; ``aces=True`` uses ACEScc and returns ACEScg
+    (Unity ``ColorGradingContrast``). In LogC, ``c log10(a x + b) + d``, the encode, the scaling and
+    the decode fold into one power: ``((a x + b)^k · 10^((d - 0.4135884)(k - 1) / c) - b) / a``.
+
+    Examples:
+        >>> out = contrast(torch.tensor([0.05, 1.0, 1.0]).reshape(3, 1, 1), 50.0).flatten()
+        >>> bool(out[0] < 0.05 and out[1] > 1.0)  # shadows darker, highlights brighter
+        True
+    """
+    k = 1.0 + scalar_param(amount, image, "contrast") * 0.01
+    if aces:
+        log = aces_to_acescc(unity_to_aces(image))
+        return aces_to_acescg(acescc_to_aces((log - ACESCC_MIDGRAY) * k + ACESCC_MIDGRAY))
+    base = (LOGC_A * image + LOGC_B).clamp_min(torch.finfo(image.dtype).tiny)
+    gain = torch.pow(10.0, (LOGC_D - ACESCC_MIDGRAY) * (k - 1.0) / LOGC_C)
+    return (base**k * gain - LOGC_B) / LOGC_A
+
+
+def color_filter(image: torch.Tensor, color) -> torch.Tensor:
+    """Colour filter: multiply by the colour, given sRGB-encoded as in Unity's picker (HDR allowed).
+
+    Examples:
+        >>> color_filter(torch.ones(3, 1, 1), (1.0, 1.0, 0.0)).flatten().tolist()
+        [1.0, 1.0, 0.0]
+    """
+    return image * srgb_to_linear(color_param(color, image, "color_filter"))
+
+
+def soft_light(base: torch.Tensor, blend: torch.Tensor) -> torch.Tensor:
+    """Soft-light blend (Unity ``SoftLight``, after Adobe): below 0.5 ``2ab + a²(1 - 2b)``, else
+    ``sqrt(a)(2b - 1) + 2a(1 - b)``.
+
+    Examples:
+        >>> soft_light(torch.tensor([0.3]), torch.tensor([0.5])).tolist()  # a 0.5 blend changes nothing
+        [0.30000001192092896]
+    """
+    darken = 2.0 * base * blend + base * base * (1.0 - 2.0 * blend)
+    lighten = safe_sqrt(base) * (2.0 * blend - 1.0) + 2.0 * base * (1.0 - blend)
+    return torch.where(blend >= 0.5, lighten, darken)
+
+
+def split_toning(
+    image: torch.Tensor, shadows=(0.5, 0.5, 0.5), highlights=(0.5, 0.5, 0.5), balance: Param = 0.0, luminance_weights="rec709"
+) -> torch.Tensor:
+    """Split toning in gamma 2.2 space (Unity ``ColorGradeSplitToning``).
+
+    ``t = saturate(Y(saturate(c)) + balance/100)``; the shadow tint ``lerp(0.5, shadows, 1 - t)`` and the
+    highlight tint ``lerp(0.5, highlights, t)`` are soft-light blended in turn. Grey 0.5 tints are neutral.
+
+    Examples:
+        >>> image = torch.rand(3, 2, 2)
+        >>> bool(torch.allclose(split_toning(image), image, atol=1e-5))  # grey tints: neutral
+        True
+    """
+    gamma = safe_pow(image, 1.0 / 2.2)
+    t = (luminance(gamma.clamp(0.0, 1.0), luminance_weights) + scalar_param(balance, image, "split_balance") * 0.01).clamp(0.0, 1.0)
+    shadow_tint = 0.5 + (color_param(shadows, image, "split_shadows") - 0.5) * (1.0 - t)
+    highlight_tint = 0.5 + (color_param(highlights, image, "split_highlights") - 0.5) * t
+    return safe_pow(soft_light(soft_light(gamma, shadow_tint), highlight_tint), 2.2)
+
+
+def channel_mixer(image: torch.Tensor, mixer=IDENTITY_MATRIX) -> torch.Tensor:
+    """Channel mixer: ``rgb' = M · rgb``, rows are the output channels (1.0 = Unity's 100%).
+
+    Examples:
+        >>> swap = ((0.0, 1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, 1.0))
+        >>> channel_mixer(torch.tensor([1.0, 2.0, 3.0]).reshape(3, 1, 1), swap).flatten().tolist()
+        [2.0, 1.0, 3.0]
+    """
+    return apply_matrix(matrix_param(mixer, image, "channel_mixer"), image)
+
+
+def smoothstep(edge0, edge1, x: torch.Tensor) -> torch.Tensor:
+    """HLSL ``smoothstep``: ``t²(3 - 2t)`` with ``t = saturate((x - edge0) / (edge1 - edge0))``.
+
+    Examples:
+        >>> smoothstep(0.0, 1.0, torch.tensor([-1.0, 0.5, 2.0])).tolist()
+        [0.0, 0.5, 1.0]
+    """
+    t = ((x - edge0) / (edge1 - edge0)).clamp(0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def shadows_midtones_highlights(
+    image: torch.Tensor,
+    shadows=(1.0, 1.0, 1.0),
+    midtones=(1.0, 1.0, 1.0),
+    highlights=(1.0, 1.0, 1.0),
+    shadows_start: Param = 0.0,
+    shadows_end: Param = 0.3,
+    highlights_start: Param = 0.55,
+    highlights_end: Param = 1.0,
+    luminance_weights="rec709",
+) -> torch.Tensor:
+    """Zone tints (Unity ``ColorGradingShadowsMidtonesHighlights``), colours sRGB-encoded as in Unity.
+
+    ``ws = 1 - smoothstep(s0, s1, Y)``, ``wh = smoothstep(h0, h1, Y)``, ``wm = 1 - ws - wh``;
+    ``rgb' = rgb · (S ws + M wm + H wh)``.
+
+    Examples:
+        >>> image = torch.rand(3, 2, 2)
+        >>> bool(torch.equal(shadows_midtones_highlights(image), image))  # white tints change nothing
+        True
+    """
+    lum = luminance(image, luminance_weights)
+    shadow_weight = 1.0 - smoothstep(
+        scalar_param(shadows_start, image, "shadows_start"), scalar_param(shadows_end, image, "shadows_end"), lum
+    )
+    highlight_weight = smoothstep(
+        scalar_param(highlights_start, image, "highlights_start"), scalar_param(highlights_end, image, "highlights_end"), lum
+    )
+    tint = (
+        srgb_to_linear(color_param(shadows, image, "shadows")) * shadow_weight
+        + srgb_to_linear(color_param(midtones, image, "midtones")) * (1.0 - shadow_weight - highlight_weight)
+        + srgb_to_linear(color_param(highlights, image, "highlights")) * highlight_weight
+    )
+    return image * tint
+
+
+def _trackball(value, image: torch.Tensor, name: str) -> tuple:
+    """A trackball ``(r, g, b, w)``, or per sample ``(B, 4)``, as its colour and its offset ``w``."""
+    t = value if isinstance(value, torch.Tensor) else torch.as_tensor(value, dtype=image.dtype, device=image.device)
+    if t.dim() not in (1, 2) or t.shape[-1] != 4:
+        raise ValueError(f"parameter {name!r} must be a trackball (r, g, b, w) or per-sample (B, 4), got shape {tuple(t.shape)}")
+    return color_param(t[..., :3], image, name), scalar_param(t[..., 3], image, name)
+
+
+def _minus_luminance(rgb: torch.Tensor) -> torch.Tensor:
+    """``rgb - Y(rgb)`` for colours ``(..., 3, 1, 1)``, as ``sum_j w_j (rgb_i - rgb_j)`` with the Rec.709
+    weights normalised to sum 1 (Unity's sum to 1.0000001), so a grey colour gives exactly 0."""
+    weights = torch.tensor(REC709_LUMINANCE, dtype=rgb.dtype, device=rgb.device)
+    weights = (weights / weights.sum()).reshape(3, 1, 1)
+    return ((rgb.unsqueeze(-3) - rgb.unsqueeze(-4)) * weights).sum(dim=-3)
+
+
+def _balanced(value, image: torch.Tensor, name: str, scale: float) -> tuple:
+    """A trackball's colour decoded and scaled, minus its luminance (so it leaves luminance alone), and its ``w``."""
+    rgb, offset = _trackball(value, image, name)
+    return _minus_luminance(srgb_to_linear(rgb) * scale), offset
+
+
+def lift_gamma_gain_coefficients(lift, gamma, gain, image: torch.Tensor) -> tuple:
+    """Unity ``ColorUtils.PrepareLiftGammaGain``: ``(lift, 1 / gamma, gain)`` as ``(..., 3, 1, 1)``.
+
+    With ``dec`` the sRGB decode and ``Y`` Rec.709 luminance, for each trackball ``(rgb, w)``:
+    ``lift = l - Y(l) + w`` with ``l = dec(rgb) · 0.15``; ``1 / max(g - Y(g) + w + 1, 1e-3)`` with
+    ``g = dec(rgb) · 0.8``; ``gain = k - Y(k) + w + 1`` with ``k = dec(rgb) · 0.8``. ``Y`` uses
+    weights summing to exactly 1 (see :func:`_minus_luminance`), so identity trackballs give exactly
+    ``(0, 1, 1)`` where Unity's are off by 1e-7.
+
+    Examples:
+        >>> lift, inverse_gamma, gain = lift_gamma_gain_coefficients(IDENTITY_TRACKBALL, IDENTITY_TRACKBALL, IDENTITY_TRACKBALL, torch.ones(3, 1, 1))
+        >>> lift.flatten().tolist(), inverse_gamma.flatten().tolist(), gain.flatten().tolist()
+        ([0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [1.0, 1.0, 1.0])
+    """
+    lift_rgb, lift_offset = _balanced(lift, image, "lift", 0.15)
+    gamma_rgb, gamma_offset = _balanced(gamma, image, "gamma", 0.8)
+    gain_rgb, gain_offset = _balanced(gain, image, "gain", 0.8)
+    inverse_gamma = 1.0 / (gamma_rgb + gamma_offset + 1.0).clamp_min(1e-3)
+    return lift_rgb + lift_offset, inverse_gamma, gain_rgb + gain_offset + 1.0
+
+
+def lift_gamma_gain(image: torch.Tensor, lift=IDENTITY_TRACKBALL, gamma=IDENTITY_TRACKBALL, gain=IDENTITY_TRACKBALL) -> torch.Tensor:
+    """Lift, gamma, gain (Unity ``LiftGammaGainHDR``): ``c = rgb · gain + lift``, ``sign(c) |c|^(1/gamma)``.
+
+    The trackballs are prepared by :func:`lift_gamma_gain_coefficients`; the power is mirrored for
+    negative values (ACEScg can be negative).
+
+    Examples:
+        >>> lift_gamma_gain(torch.full((3, 1, 1), 0.5), gain=(1.0, 1.0, 1.0, 1.0)).flatten().tolist()  # offset 1: double
+        [1.0, 1.0, 1.0]
+    """
+    lift_t, inverse_gamma, gain_t = lift_gamma_gain_coefficients(lift, gamma, gain, image)
+    c = image * gain_t + lift_t
+    return torch.sign(c) * safe_pow(c.abs(), inverse_gamma)
+
+
+def hue_shift(image: torch.Tensor, degrees: Param, hue_vs_hue=None) -> torch.Tensor:
+    """Hue shift in HSV, wrapping around the colour wheel (Unity ``ColorGradingHueShift``); RGB ≥ 0.
+
+    With a ``hue_vs_hue`` curve the shifted hue ``h`` moves on by ``curve(h) - 0.5`` turns (URP ``LutBuilderHdr``).
+
+    Examples:
+        >>> red = torch.tensor([1.0, 0.0, 0.0]).reshape(3, 1, 1)
+        >>> [round(v, 4) for v in hue_shift(red, 120.0).flatten().tolist()]
+        [0.0, 1.0, 0.0]
+    """
+    hue, sat, value = rgb_to_hsv(image).split(1, dim=-3)
+    hue = torch.remainder(hue + scalar_param(degrees, image, "hue_shift") / 360.0, 1.0)
+    if hue_vs_hue is not None:
+        hue = torch.remainder(hue + evaluate_curve(hue_vs_hue, hue, periodic=True, name="hue_vs_hue") - 0.5, 1.0)
+    return hsv_to_rgb(torch.cat((hue, sat, value), dim=-3))
+
+
+def saturation_curves(image: torch.Tensor, hue_vs_sat=None, sat_vs_sat=None, lum_vs_sat=None, luminance_weights="rec709") -> torch.Tensor:
+    """The saturation factor of the curves (URP ``LutBuilderHdr``), ``(..., 1, H, W)``; RGB ≥ 0.
+
+    ``2 HueVsSat(h) · 2 SatVsSat(s) · 2 LumVsSat(Y)`` of the pixel's HSV hue, HSV saturation and
+    luminance; curves not given count as 1.
+
+    Examples:
+        >>> flat = ((0.0, 0.5), (0.5, 0.5))
+        >>> saturation_curves(torch.rand(3, 2, 2), hue_vs_sat=flat).unique().tolist()
+        [1.0]
+    """
+    hue, sat, _ = rgb_to_hsv(image).split(1, dim=-3)
+    axes = {"hue_vs_sat": (hue_vs_sat, hue, True), "sat_vs_sat": (sat_vs_sat, sat, False)}
+    if lum_vs_sat is not None:
+        axes["lum_vs_sat"] = (lum_vs_sat, luminance(image, luminance_weights), False)
+    factor = torch.ones_like(hue)
+    for name, (points, value, periodic) in axes.items():
+        if points is not None:
+            factor = factor * (2.0 * evaluate_curve(points, value, periodic, name))
+    return factor
+
+
+def saturation(image: torch.Tensor, amount: Param, luminance_weights="rec709", factor=None) -> torch.Tensor:
+    """Saturation about luminance: ``Y + (rgb - Y)(1 + amount/100)``; -100 gives grey ``Y``.
+
+    ``factor`` (from :func:`saturation_curves`) multiplies ``1 + amount/100``, as URP does.
+
+    Examples:
+        >>> grey = saturation(torch.tensor([1.0, 0.0, 0.0]).reshape(3, 1, 1), -100.0).flatten()
+        >>> bool(grey[0] == grey[1] == grey[2])
+        True
+    """
+    lum = luminance(image, luminance_weights)
+    scale = 1.0 + scalar_param(amount, image, "saturation") * 0.01
+    return lum + (image - lum) * (scale if factor is None else scale * factor)
+
+
+def fast_tonemap(image: torch.Tensor) -> torch.Tensor:
+    """Unity ``FastTonemap``: ``c / (1 + max(r, g, b))`` (the max taken ≥ 0), HDR into [0, 1).
+
+    Examples:
+        >>> fast_tonemap(torch.tensor([3.0, 1.0, 0.0]).reshape(3, 1, 1)).flatten().tolist()
+        [0.75, 0.25, 0.0]
+    """
+    return image / (1.0 + image.amax(dim=CHANNEL, keepdim=True).clamp_min(0.0))
+
+
+def fast_tonemap_inverse(image: torch.Tensor) -> torch.Tensor:
+    """Unity ``FastTonemapInvert``: ``c / (1 - max(r, g, b))``, the divisor kept ≥ 1/65505 (outputs ≤ 65505).
+
+    Examples:
+        >>> fast_tonemap_inverse(torch.tensor([0.75, 0.25, 0.0]).reshape(3, 1, 1)).flatten().tolist()
+        [3.0, 1.0, 0.0]
+    """
+    return image / (1.0 - image.amax(dim=CHANNEL, keepdim=True)).clamp_min(1.0 / (1.0 + HALF_MAX))
+
+
+def yrgb_curves(image: torch.Tensor, master=None, red=None, green=None, blue=None) -> torch.Tensor:
+    """Master, then red/green/blue curves in FastTonemap space, then ``max(0)`` (URP ``LutBuilderHdr``).
+
+    The master curve maps each channel; each colour curve its own. Curves not given leave values alone.
+
+    Examples:
+        >>> image = torch.rand(3, 2, 2)
+        >>> bool(torch.allclose(yrgb_curves(image, master=((0.0, 0.0), (1.0, 1.0))), image, atol=1e-6))
+        True
+    """
+    x = fast_tonemap(image)
+    if master is not None:
+        x = evaluate_curve(master, x, name="curve_master")
+    curves = {"curve_red": red, "curve_green": green, "curve_blue": blue}
+    channels = [c if p is None else evaluate_curve(p, c, name=n) for c, (n, p) in zip(x.split(1, dim=CHANNEL), curves.items())]
+    return fast_tonemap_inverse(torch.cat(channels, dim=CHANNEL)).clamp_min(0.0)
