@@ -9,7 +9,6 @@ import torch.nn.functional as F
 
 import torchgrade as tg
 from torchgrade.lut import srgb_code_error
-from torchgrade.pipeline import exposure_frame
 
 STRONG_LOOK = {
     "grade": {"post_exposure": 0.5, "temperature": 20, "contrast": 30, "saturation": 20},
@@ -102,7 +101,7 @@ def test_frame_is_the_stateless_form_of_forward():
     frame_second, _ = look.frame(second, adapted, 0.1)
     torch.testing.assert_close(frame_first, out_first)
     torch.testing.assert_close(frame_second, out_second)
-    _, expected = exposure_frame(tg.AutoExposure(speed=2.0), first, start, 0.1)
+    _, expected = tg.AutoExposure(speed=2.0).frame(first, start, 0.1)
     torch.testing.assert_close(adapted, expected)
 
 

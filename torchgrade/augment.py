@@ -42,7 +42,7 @@ import numbers
 import torch
 from torch import nn
 
-from .bloom import BLOOM_MODES, bloom
+from .bloom import BLOOM_MODES, Bloom, bloom
 from .color import linear_to_srgb, srgb_to_linear
 from .core import check_image, to_input_dtype, working_dtype
 from .grade import ColorGrade, color_grade
@@ -66,12 +66,8 @@ GRADE_CONTROLS = (
 COLOUR_CONTROLS = ("split_shadows", "split_highlights")
 """Controls sampled as an RGB colour: each channel drawn independently inside the range."""
 
-BLOOM_CONTROLS = {
-    "bloom_threshold": ("threshold", (0.0, math.inf)),
-    "bloom_intensity": ("intensity", (0.0, math.inf)),
-    "bloom_scatter": ("scatter", (0.05, 0.95)),
-}
-"""Bloom controls: the argument of :func:`torchgrade.bloom.bloom` each one sets, and its allowed range."""
+BLOOM_CONTROLS = {f"bloom_{name}": (name, Bloom.controls[name].range) for name in ("threshold", "intensity", "scatter")}
+"""Bloom controls: the argument of :func:`torchgrade.bloom.bloom` each one sets, and its range (``Bloom``'s own)."""
 
 INPUT_SPACES = ("linear", "srgb")
 

@@ -16,7 +16,13 @@ from .color import (
     acescc_to_aces,
     acescg_to_aces,
     acescg_to_unity,
+    acescct_to_linear,
+    hlg_inverse_oetf,
+    hlg_oetf,
     hsv_to_rgb,
+    linear_to_acescct,
+    linear_to_pq,
+    pq_to_linear,
     linear_to_lms,
     linear_to_logc,
     linear_to_srgb,
@@ -44,7 +50,10 @@ from .tonemap import (
     agx,
     agx_godot,
     khronos_pbr_neutral,
+    aces2_sdr,
+    aces2_hdr,
 )
+from .tonemap.aces2 import aces2_output
 from .grade import color_grade
 from .grade_steps import (
     post_exposure,
@@ -72,6 +81,15 @@ from .bloom import bloom, bloom_threshold, convolution_bloom, fft_convolve
 from .lut import apply_lut
 
 __all__ = [
+    "acescct_to_linear",
+    "hlg_inverse_oetf",
+    "hlg_oetf",
+    "linear_to_acescct",
+    "linear_to_pq",
+    "pq_to_linear",
+    "aces2_sdr",
+    "aces2_hdr",
+    "aces2_output",
     "aces_to_acescc",
     "aces_to_acescg",
     "aces_to_unity",

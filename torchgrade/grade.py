@@ -63,7 +63,7 @@ from .stage import Control, Stage, controls_signature
 
 from . import grade_steps
 
-__all__ = ["ColorGrade", "color_grade", "active_steps", "is_identity_control", "CONTROLS", *grade_steps.__all__]
+__all__ = ["ColorGrade", "color_grade", "active_steps", "is_identity_control", *grade_steps.__all__]
 
 # Which controls make each step do something; the zone limits alone change nothing.
 _STEPS = {
@@ -269,7 +269,3 @@ class ColorGrade(Stage):
 
 
 ColorGrade.__signature__ = controls_signature(ColorGrade.controls)
-
-CONTROLS = {name: (control.default, control.range) for name, control in ColorGrade.controls.items() if control.kind == "number"}
-"""``{name: (default, range)}`` of the numeric grading controls, in graph-input order: a view of
-:attr:`ColorGrade.controls` kept for the ONNX exporter, which reads it by this name."""

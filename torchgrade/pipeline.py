@@ -34,7 +34,6 @@ import torch
 from torch import nn
 
 from .bloom import Bloom
-from .core import is_constant
 from .dither import Dither
 from .exposure import AutoExposure
 from .grade import ColorGrade
@@ -42,7 +41,7 @@ from .lut import INTERPOLATIONS, LUT3D, bake_lut
 from .primary import PrimaryGrade
 from .tonemap import ToneMap
 
-__all__ = ["PostFX", "STAGES", "stage_keys", "build_stage", "is_identity_stage", "exposure_frame"]
+__all__ = ["PostFX", "STAGES", "stage_keys", "build_stage", "is_identity_stage"]
 
 STAGES = {"exposure": AutoExposure, "bloom": Bloom, "grade": ColorGrade, "primary": PrimaryGrade, "tonemap": ToneMap, "dither": Dither}
 """The configurable stages, in the order they run, and their classes."""
@@ -102,21 +101,7 @@ def is_identity_stage(module: nn.Module) -> bool:
         >>> is_identity_stage(ColorGrade()), is_identity_stage(Dither(amplitude=0.0)), is_identity_stage(AutoExposure())
         (True, True, False)
     """
-    if hasattr(module, "is_identity"):
-        return module.is_identity
-    # Until Bloom answers is_identity itself (it becomes a Stage), its intensity and depth decide.
-    return isinstance(module, Bloom) and (module.max_iterations == 0 or is_constant(module.intensity, 0.0))
-
-
-def exposure_frame(exposure: AutoExposure, image: torch.Tensor, adapted: torch.Tensor, dt) -> tuple:
-    """``exposure.frame(image, adapted, dt)``: one frame without state (see :meth:`AutoExposure.frame`).
-
-    Examples:
-        >>> exposed, adapted = exposure_frame(AutoExposure(), torch.ones(1, 3, 2, 2), torch.zeros(1), 0.0)
-        >>> exposed.shape, adapted.shape
-        (torch.Size([1, 3, 2, 2]), torch.Size([1]))
-    """
-    return exposure.frame(image, adapted, dt)
+    return bool(getattr(module, "is_identity", False))
 
 
 class PostFX(nn.Module):

@@ -16,17 +16,14 @@ Examples:
 
 from __future__ import annotations
 
-import functools
 import inspect
 from typing import Callable, Optional, Sequence
 
 import torch
 from torch import nn
 
-from ..exposure import AutoExposure
 from ..grade import ColorGrade, color_grade
 from ..lut import BACKENDS
-from ..pipeline import exposure_frame
 
 __all__ = ["GRADE_INPUTS", "GradeWithInputs", "ExportGraph", "export_graph", "grade_feeds", "grade_of", "frame_of", "has_state",
            "input_names", "output_names", "example_inputs", "default_example"]
@@ -39,18 +36,14 @@ def frame_of(stage: nn.Module) -> Optional[Callable]:
     """The stateless frame function ``(image, adapted, dt) -> (image, adapted)`` of a stage that keeps
     state between frames, or ``None`` for a stateless stage.
 
-    A stage's own ``frame`` method is used; :class:`~torchgrade.AutoExposure`, which has none,
-    gets :func:`~torchgrade.pipeline.exposure_frame`.
+    It is the stage's own ``frame`` method (:meth:`~torchgrade.AutoExposure.frame`).
 
     Examples:
         >>> import torchgrade as tg
         >>> frame_of(tg.ToneMap()) is None, frame_of(tg.AutoExposure()) is None
         (True, False)
     """
-    frame = getattr(stage, "frame", None)
-    if frame is None and isinstance(stage, AutoExposure):
-        frame = functools.partial(exposure_frame, stage)
-    return frame
+    return getattr(stage, "frame", None)
 
 
 class GradeWithInputs(nn.Module):
