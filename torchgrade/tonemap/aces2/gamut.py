@@ -16,7 +16,7 @@ import torch
 
 from ...color import safe_pow, safe_sqrt
 
-__all__ = ["GamutParams", "gamut_compress", "focus_gain", "solve_j_intersect", "compression_slope",
+__all__ = ["count_below", "GamutParams", "gamut_compress", "focus_gain", "solve_j_intersect", "compression_slope",
            "hull_boundary_m", "focus_j"]
 
 SMOOTH_CUSPS = 0.12
@@ -122,6 +122,29 @@ def _remap_m(m, gamut_m, reach_m):
     return torch.where(active, threshold + scale * nd / (1.0 + nd), m)
 
 
+def count_below(table: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
+    """How many entries of the ascending 1-D ``table`` lie below each ``x``: ``torch.searchsorted(table, x)``.
+
+    Written as ``ceil(log2(n))`` branchless halving steps of gathers because ONNX has no search
+    operator: the same indices in eager PyTorch and in an exported graph.
+
+    Examples:
+        >>> table = torch.tensor([0.0, 1.0, 2.0, 3.0, 4.0])
+        >>> x = torch.tensor([-1.0, 0.0, 0.5, 4.0, 9.0])
+        >>> count_below(table, x).tolist() == torch.searchsorted(table, x).tolist()
+        True
+    """
+    n = int(table.shape[0])  # a constant table: its size may be frozen into a traced graph
+    count = torch.zeros(x.shape, dtype=torch.long, device=x.device)
+    step = 1 << (n.bit_length() - 1)
+    while step:
+        candidate = count + step
+        below = table[(candidate - 1).clamp(max=n - 1)] < x
+        count = torch.where((candidate <= n) & below, candidate, count)
+        step >>= 1
+    return count
+
+
 class GamutParams:
     """Per-peak constants and hue tables of the gamut compression (see :mod:`.tables`)."""
 
@@ -142,7 +165,7 @@ class GamutParams:
         """
         hues = self.hues.to(dtype=h.dtype, device=h.device)
         table = self.cusps.to(dtype=h.dtype, device=h.device)
-        hi = torch.searchsorted(hues, h.detach().contiguous()).clamp(1, hues.numel() - 1)
+        hi = count_below(hues, h.detach()).clamp(1, hues.numel() - 1)
         lo_hue, hi_hue = hues[hi - 1], hues[hi]
         t = ((h - lo_hue) / (hi_hue - lo_hue)).unsqueeze(-1)
         row = table[hi - 1] + (table[hi] - table[hi - 1]) * t
