@@ -1,0 +1,43 @@
+"""The ``torchgrade`` command: ``demo`` renders the built-in scene, ``grade`` grades an EXR file,
+``bake`` writes a look's grade and tone mapping as a ``.cube`` 3D LUT, ``export`` writes a look as ONNX and
+verifies it on onnxruntime. One module per subcommand, each adding its own parser.
+
+Examples:
+    >>> main(["grade", "missing.exr", "-o", "out.png"])  # one line on stderr, status 2
+    2
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from .bake import add_bake
+from .demo import add_demo
+from .export import add_export
+from .grade import add_grade
+
+__all__ = ["main"]
+
+SUBCOMMANDS = (add_demo, add_grade, add_bake, add_export)
+"""Each subcommand's parser builder, in the order ``--help`` lists them."""
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="torchgrade", description="Differentiable HDR post-processing.")
+    commands = parser.add_subparsers(dest="command", required=True)
+    for add in SUBCOMMANDS:
+        add(commands)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line ``argv``; a bad input prints one line on stderr and returns 2, never a traceback."""
+    args = _parser().parse_args(argv)
+    try:
+        print(args.run(args))
+    except (ValueError, TypeError, OSError) as error:
+        print(f"torchgrade {args.command}: error: {error}", file=sys.stderr)
+        return 2
+    return 0
+

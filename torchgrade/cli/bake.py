@@ -1,0 +1,99 @@
+"""``torchgrade bake``: bake a look's grade and tone mapping into a ``.cube`` 3D LUT.
+
+Examples:
+    >>> import tempfile, pathlib
+    >>> from torchgrade.cli import main
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     main(["bake", "-o", str(pathlib.Path(folder) / "look.cube"), "--size", "5", "--contrast", "20"])  # doctest: +ELLIPSIS
+    bake: 5³ logc LUT of ColorGrade -> ToneMap, ... s -> ...look.cube
+    0
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import torch
+
+from ..io import read_exr, write_cube
+from ..lut import bake_lut, srgb_code_error
+from ..pipeline import PostFX
+from .common import GRADING_FLAGS, add_grading_flags, grade_from_args, stages_label
+
+__all__ = ["run_bake", "add_bake"]
+
+
+def _lut_size(text: str):
+    """``--size``: an integer, or ``auto`` (the smallest size within ``--tolerance`` on ``--scene``)."""
+    if text == "auto":
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer (points per axis) or auto, got {text!r}") from None
+
+
+def _look_to_bake(args: argparse.Namespace) -> PostFX:
+    """The look to bake: from ``--config``, or from the grading flags."""
+    if args.config is None:
+        grade, tonemap = grade_from_args(args)
+        return PostFX(grade=grade, tonemap=tonemap)
+    given = [name for name in (*GRADING_FLAGS, "tonemap") if getattr(args, name) is not None]
+    if given:
+        raise ValueError(f"give --config or grading flags, not both (got --config and {', '.join('--' + n.replace('_', '-') for n in given)})")
+    return PostFX.from_config(args.config)
+
+
+def _check_bake_arguments(args: argparse.Namespace) -> None:
+    """Refuse, before any baking, what would fail or be ignored afterwards."""
+    output = Path(args.output)
+    if output.suffix.lower() != ".cube":
+        raise ValueError(f"output must end in .cube, got {output}")
+    if not output.parent.is_dir():
+        raise ValueError(f"output folder {output.parent} does not exist")
+    if args.size == "auto" and args.scene is None:
+        raise ValueError("--size auto needs --scene, the image to measure the error on")
+    if args.tolerance is not None and (args.size != "auto" or args.tolerance <= 0):
+        raise ValueError(f"--tolerance goes with --size auto and must be above 0, got {args.tolerance}")
+
+
+def run_bake(args: argparse.Namespace) -> str:
+    """Check the arguments, bake, write the ``.cube``; the line to print (with the error on ``--scene``)."""
+    _check_bake_arguments(args)
+    look = _look_to_bake(args)
+    transform = look.per_pixel_stages()
+    live = [name for name in look.stages() if name not in ("grade", "primary", "tonemap")]
+    scene = None
+    if args.scene is not None:
+        with torch.no_grad():
+            scene = look.per_pixel_input(read_exr(args.scene)[:3].unsqueeze(0))
+    tolerance = 0.5 if args.tolerance is None else args.tolerance
+    start = time.perf_counter()
+    lut = bake_lut(transform, size=args.size, shaper=args.shaper, scene=scene, tolerance=tolerance, progress=True)
+    elapsed = time.perf_counter() - start
+    title = Path(args.output).stem.replace('"', "")
+    write_cube(args.output, lut, title=title)
+    line = f"bake: {lut.size}³ {lut.shaper} LUT of {stages_label(transform)}, {elapsed:.1f} s -> {args.output}"
+    if scene is not None:
+        with torch.no_grad():
+            error = srgb_code_error(transform(scene.double()), lut(scene))
+        line += f"; on {Path(args.scene).name}: {error:.2f} 8-bit codes at p99.9"
+    if live:
+        line += f"; left live, not in the LUT: {', '.join(live)}"
+    return line
+
+
+def add_bake(commands) -> None:
+    """The ``bake`` subcommand and its flags."""
+    bake = commands.add_parser("bake", help="bake grade and tone mapping into a .cube 3D LUT")
+    bake.add_argument("--output", "-o", required=True, help=".cube file to write")
+    bake.add_argument("--config", help="look JSON (PostFX config); without it, the grading flags below")
+    bake.add_argument("--size", type=_lut_size, default=33, help="points per axis, 2..256, or auto (needs --scene; default 33)")
+    bake.add_argument("--shaper", choices=("auto", "linear", "logc"), default="auto", help="default auto: logc when the look tone maps")
+    bake.add_argument("--scene", help="EXR the look will grade: the lattice covers its range after the look's exposure and bloom, "
+                      "and the error is reported on it")
+    bake.add_argument("--tolerance", type=float, help="with --size auto: 8-bit sRGB codes at p99.9 (default 0.5)")
+    add_grading_flags(bake)
+    bake.set_defaults(run=run_bake)

@@ -1,0 +1,73 @@
+"""What the subcommands share: writing images, the grading flags and the look they build.
+
+Examples:
+    >>> import argparse
+    >>> args = argparse.Namespace(tonemap=None, post_exposure=None, temperature=None, tint=None,
+    ...                           contrast=20.0, hue_shift=None, saturation=None)
+    >>> stages_label(grade_from_args(args))
+    'ColorGrade -> ToneMap'
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from .. import TONEMAP_MODES, ColorGrade, ToneMap
+from ..color import linear_to_srgb
+from ..io import write_exr
+from ..io.atomic import atomic_write
+
+__all__ = ["GRADING_FLAGS", "write_png", "write_image", "stages_label", "grade_from_args", "add_grading_flags"]
+
+GRADING_FLAGS = {
+    "post_exposure": "stops",
+    "temperature": "-100..100",
+    "tint": "-100..100",
+    "contrast": "-100..100",
+    "hue_shift": "degrees, -180..180",
+    "saturation": "-100..100",
+}
+"""The grading controls ``grade`` and ``bake`` take as flags (``--post-exposure`` ...), with their units."""
+
+
+def write_png(path, display_linear: torch.Tensor) -> None:
+    """Write a display-referred linear ``(3, H, W)`` image as an 8-bit sRGB PNG (atomically)."""
+    from PIL import Image
+
+    codes = (linear_to_srgb(display_linear.clamp(0.0, 1.0)) * 255.0).round().to(torch.uint8)
+    pixels = np.ascontiguousarray(codes.permute(1, 2, 0).cpu().numpy())
+    atomic_write(path, lambda temporary: Image.fromarray(pixels, "RGB").save(temporary, format="PNG"))
+
+
+def stages_label(look: nn.Module) -> str:
+    """The stage classes of ``look`` in order, ``"A -> B"``, for the one line each subcommand prints."""
+    return " -> ".join(type(stage).__name__ for stage in look.children())
+
+
+def write_image(path: Path, image: torch.Tensor) -> None:
+    """Write a display-referred ``(3, H, W)`` image to ``.png`` (8-bit sRGB) or ``.exr`` (linear)."""
+    if path.suffix.lower() == ".exr":
+        write_exr(path, image)
+    elif path.suffix.lower() == ".png":
+        write_png(path, image)
+    else:
+        raise ValueError(f"output must end in .png or .exr, got {path}")
+
+
+def grade_from_args(args: argparse.Namespace) -> nn.Sequential:
+    """``ColorGrade`` (in ACES when tone mapping with ``aces``) and ``ToneMap`` from the grading flags."""
+    controls = {name: getattr(args, name) for name in GRADING_FLAGS if getattr(args, name) is not None}
+    tonemap = args.tonemap or "aces"
+    return nn.Sequential(ColorGrade(aces=tonemap == "aces", **controls), ToneMap(tonemap))
+
+
+def add_grading_flags(parser: argparse.ArgumentParser) -> None:
+    """``--tonemap`` and one flag per :data:`GRADING_FLAGS` control."""
+    parser.add_argument("--tonemap", choices=TONEMAP_MODES, help="default aces")
+    for name, unit in GRADING_FLAGS.items():
+        parser.add_argument("--" + name.replace("_", "-"), type=float, help=unit)
