@@ -1,0 +1,52 @@
+"""RGB <-> HSV (hue in turns), exact and with finite gradients at grey and black."""
+
+from __future__ import annotations
+
+import torch
+
+from .spaces import CHANNEL
+
+__all__ = [
+    "rgb_to_hsv", "hsv_to_rgb",
+]
+
+def rgb_to_hsv(image: torch.Tensor) -> torch.Tensor:
+    """RGB -> HSV with hue in turns [0, 1), for non-negative RGB.
+
+    The exact hexcone model (Smith 1978): ``V = max``, ``S = (max - min) / max``, hue from the
+    dominant channel. Unlike Unity's ``RgbToHsv`` there is no ``1e-4`` bias, so HSV round trips are
+    exact; at grey (undefined hue) and black (undefined saturation) hue and saturation are 0 and
+    their gradients are finite.
+
+    Examples:
+        >>> orange = torch.tensor([1.0, 0.5, 0.0]).reshape(1, 3, 1, 1)
+        >>> [round(v, 4) for v in rgb_to_hsv(orange).flatten().tolist()]
+        [0.0833, 1.0, 1.0]
+    """
+    r, g, b = image.unbind(CHANNEL)
+    value, argmax = image.max(dim=CHANNEL)
+    delta = value - image.min(dim=CHANNEL).values
+    chromatic = delta > 0
+    safe_delta = torch.where(chromatic, delta, torch.ones_like(delta))
+    hue_r = torch.remainder((g - b) / safe_delta, 6.0)
+    hue_g = (b - r) / safe_delta + 2.0
+    hue_b = (r - g) / safe_delta + 4.0
+    hue = torch.where(argmax == 0, hue_r, torch.where(argmax == 1, hue_g, hue_b)) / 6.0
+    hue = torch.where(chromatic, hue, torch.zeros_like(hue))
+    lit = value > 0
+    saturation = torch.where(lit, delta / torch.where(lit, value, torch.ones_like(value)), torch.zeros_like(value))
+    return torch.stack((hue, saturation, value), dim=CHANNEL)
+
+
+def hsv_to_rgb(image: torch.Tensor) -> torch.Tensor:
+    """HSV (hue in turns) -> RGB: ``V * lerp(1, clamp(|frac(H + k) * 6 - 3| - 1, 0, 1), S)`` (Unity ``HsvToRgb``).
+
+    Examples:
+        >>> red = torch.tensor([0.0, 1.0, 2.0]).reshape(1, 3, 1, 1)  # hue 0, saturation 1, value 2
+        >>> [round(v, 4) for v in hsv_to_rgb(red).flatten().tolist()]
+        [2.0, 0.0, 0.0]
+    """
+    hue, saturation, value = (c.unsqueeze(CHANNEL) for c in image.unbind(CHANNEL))
+    offsets = torch.tensor((0.0, 2.0 / 3.0, 1.0 / 3.0), dtype=image.dtype, device=image.device).reshape(3, 1, 1)
+    ramp = (torch.abs(torch.frac(hue + offsets + 1.0) * 6.0 - 3.0) - 1.0).clamp(0.0, 1.0)
+    return value * (1.0 + saturation * (ramp - 1.0))
