@@ -1,0 +1,101 @@
+"""Decoding an untrusted OpenEXR file: budget checked from the headers first, library errors fatal.
+
+The bindings decode every channel of every part at once, and report some damage (a corrupt chunk
+table, a chunk that fails to decompress) only by printing to the process's standard error and
+leaving the damaged part out or partly filled. So the budget counts everything the bindings will
+decode, and whatever the library prints while decoding turns into a ``ValueError``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+import tempfile
+
+import OpenEXR
+
+from .layout import ExrPart
+
+__all__ = ["MAX_BYTES", "MAX_PIXELS", "check_budget", "decode"]
+
+MAX_PIXELS = 1 << 28
+"""Largest window (268 megapixels) read_exr accepts by default."""
+
+MAX_BYTES = 1 << 31
+"""Default bound (2 GiB) on the memory a read may take: every decoded sample, counted at 4 bytes
+because the headers the bindings expose do not say whether a channel is half or float, plus the
+float32 tensor returned."""
+
+
+def check_budget(path, parts: list[ExrPart], window: str, output_channels: int, max_pixels: int, max_bytes: int) -> None:
+    """Raise ``ValueError`` naming the numbers when decoding ``parts`` would pass either bound.
+
+    Examples:
+        >>> import pathlib, tempfile, torch, torchgrade as tg
+        >>> path = pathlib.Path(tempfile.mkdtemp()) / "rgb.exr"
+        >>> tg.io.write_exr(path, torch.zeros(3, 64, 64))
+        >>> from torchgrade.io.exr.layout import exr_info
+        >>> check_budget(path, exr_info(path), "data", 3, max_pixels=1 << 20, max_bytes=1000)
+        Traceback (most recent call last):
+        ValueError: ...rgb.exr: reading needs about 98304 bytes (49152 decoded + 49152 returned), above the budget of 1000 bytes (max_bytes)
+    """
+    for part in parts:
+        if part.deep:
+            raise ValueError(f"{path}: part {part.index} holds deep data ({part.kind}), which read_exr does not read; "
+                             "flatten it first (e.g. with OpenImageIO's oiiotool --flatten)")
+        height, width = part.size()
+        if height <= 0 or width <= 0 or height * width > max_pixels:
+            raise ValueError(f"{path}: part {part.index} data window {width}x{height} is empty or above the "
+                             f"budget of {max_pixels} pixels (max_pixels)")
+    decoded = sum(4 * _samples(part) for part in parts)
+    height, width = parts[0].size(window)
+    if height * width > max_pixels:
+        raise ValueError(f"{path}: {window} window {width}x{height} is above the budget of {max_pixels} pixels (max_pixels)")
+    returned = 4 * output_channels * height * width
+    if decoded + returned > max_bytes:
+        raise ValueError(f"{path}: reading needs about {decoded + returned} bytes ({decoded} decoded + {returned} returned), "
+                         f"above the budget of {max_bytes} bytes (max_bytes)")
+
+
+def _samples(part: ExrPart) -> int:
+    height, width = part.size()
+    return sum(-(-height // ys) * -(-width // xs) for xs, ys in part.channels.values())
+
+
+@contextlib.contextmanager
+def _captured_stderr():
+    """Collect what native code writes to file descriptor 2 (the process's stderr) meanwhile."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as sink:
+        os.dup2(sink.fileno(), 2)
+        messages = []
+        try:
+            yield messages
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            sink.seek(0)
+            messages.extend(sink.read().decode("utf-8", "replace").splitlines())
+
+
+def decode(path, parts: list[ExrPart]):
+    """Every part's channels as ``{name: numpy array}`` dicts, one per part, or ``ValueError``.
+
+    The library's own complaints (printed while decoding) and any part or channel missing from the
+    result reject the file; a ``MemoryError`` becomes a ``ValueError`` too.
+    """
+    try:
+        with _captured_stderr() as messages:
+            opened = OpenEXR.File(str(path), separate_channels=True)
+            decoded = [{name: channel.pixels for name, channel in part.channels.items()} for part in opened.parts]
+    except MemoryError:
+        raise ValueError(f"{path}: not enough memory to decode the pixels (use a smaller max_bytes)") from None
+    except Exception as error:
+        raise ValueError(f"{path}: cannot decode OpenEXR pixels ({error})") from None
+    if messages:
+        raise ValueError(f"{path}: damaged OpenEXR file ({messages[0].replace(str(path) + ': ', '')})")
+    if len(decoded) != len(parts) or any(set(d) != set(p.channels) for d, p in zip(decoded, parts)):
+        raise ValueError(f"{path}: damaged OpenEXR file (the library returned fewer parts or channels than the header lists)")
+    return decoded
