@@ -22,13 +22,14 @@ _ROWS = 256
 
 
 def _wanted(part: ExrPart, view, layer: str) -> dict[str, str]:
-    """``{channel: full name}`` of ``layer`` in ``view`` (None: the part's default view)."""
+    """``{channel: full name}`` of ``layer`` in ``view`` (None: the part's default view), else in no view."""
     view = view if view is not None else (part.views[0] if part.views else None)
-    found = {}
-    for name in part.channels:
-        if split_channel_name(name, part.views)[:2] == (view, layer):
-            found[split_channel_name(name, part.views)[2]] = name
-    return found
+    split = {name: split_channel_name(name, part.views) for name in part.channels}
+    for owner in (view, None):
+        found = {letter: name for name, (v, lay, letter) in split.items() if (v, lay) == (owner, layer)}
+        if found:
+            return found
+    return {}
 
 
 def _choose(path, parts: list[ExrPart], part, view, layer) -> tuple[ExrPart, dict[str, str]]:
