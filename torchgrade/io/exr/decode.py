@@ -3,7 +3,9 @@
 The bindings decode every channel of every part at once, and report some damage (a corrupt chunk
 table, a chunk that fails to decompress) only by printing to the process's standard error and
 leaving the damaged part out or partly filled. So the budget counts everything the bindings will
-decode, and whatever the library prints while decoding turns into a ``ValueError``.
+decode, and whatever the library prints while decoding (to stdout or stderr) turns into a
+``ValueError``. The redirection is process-wide: output other threads write meanwhile is
+swallowed with it.
 """
 
 from __future__ import annotations
@@ -64,18 +66,21 @@ def _samples(part: ExrPart) -> int:
 
 
 @contextlib.contextmanager
-def _captured_stderr():
-    """Collect what native code writes to file descriptor 2 (the process's stderr) meanwhile."""
+def _captured_output():
+    """Collect what native code writes to file descriptors 1 and 2 (stdout, stderr) meanwhile."""
+    sys.stdout.flush()
     sys.stderr.flush()
-    saved = os.dup(2)
+    saved = [os.dup(1), os.dup(2)]
     with tempfile.TemporaryFile() as sink:
+        os.dup2(sink.fileno(), 1)
         os.dup2(sink.fileno(), 2)
         messages = []
         try:
             yield messages
         finally:
-            os.dup2(saved, 2)
-            os.close(saved)
+            for descriptor, copy in enumerate(saved, start=1):
+                os.dup2(copy, descriptor)
+                os.close(copy)
             sink.seek(0)
             messages.extend(sink.read().decode("utf-8", "replace").splitlines())
 
@@ -87,7 +92,7 @@ def decode(path, parts: list[ExrPart]):
     result reject the file; a ``MemoryError`` becomes a ``ValueError`` too.
     """
     try:
-        with _captured_stderr() as messages:
+        with _captured_output() as messages:
             opened = OpenEXR.File(str(path), separate_channels=True)
             decoded = [{name: channel.pixels for name, channel in part.channels.items()} for part in opened.parts]
     except MemoryError:
