@@ -27,6 +27,19 @@ def window(x_min, y_min, x_max, y_max):
     return (np.array([x_min, y_min], np.int32), np.array([x_max, y_max], np.int32))
 
 
+FORMATS = ["Adjuster", "Rec709", "Rec709_YC", "XYZ", "beachball_multipart.0001", "beachball_singlepart.0001",
+           "displaywindow_t01", "displaywindow_t02", "displaywindow_t03", "displaywindow_t04"]
+
+
+@pytest.mark.parametrize("name", FORMATS)
+def test_every_format_sample_reads_its_default_rgb_in_both_windows(exr_dir, name):
+    path = exr_dir / "formats" / f"{name}.exr"
+    part = tg.io.exr_info(path)[0]
+    for window in ("data", "display"):
+        image = tg.io.read_exr(path, window=window)
+        assert image.shape[0] in (3, 4) and image.shape[1:] == part.size(window) and not image.isnan().any()
+
+
 def test_luminance_chroma_file_matches_its_rgb_twin(exr_dir):
     # The same picture stored as RGB and as Y + 2x2-subsampled RY/BY (OpenEXR's sample pair).
     error = srgb_codes(tg.io.read_exr(exr_dir / "formats" / "Rec709_YC.exr"), tg.io.read_exr(exr_dir / "formats" / "Rec709.exr"))

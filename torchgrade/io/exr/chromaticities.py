@@ -26,8 +26,8 @@ def rgb_to_xyz(chromaticities) -> torch.Tensor:
     Raises ``ValueError`` for a white with y <= 0 or primaries that span no colour space.
 
     Examples:
-        >>> rgb_to_xyz(((1.0, 0.0), (0.0, 1.0), (0.0, 0.0), (1 / 3, 1 / 3))).diagonal().tolist()
-        [1.0, 1.0, 1.0]
+        >>> rgb_to_xyz(((1.0, 0.0), (0.0, 1.0), (0.0, 0.0), (1 / 3, 1 / 3))).round(decimals=6).tolist()  # XYZ "primaries"
+        [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
     """
     values = torch.tensor(chromaticities, dtype=torch.float64)
     if values.shape != (4, 2) or not torch.isfinite(values).all():

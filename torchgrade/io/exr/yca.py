@@ -24,7 +24,7 @@ def luminance_weights(chromaticities) -> torch.Tensor:
     """The RGB -> Y weights of a file (OpenEXR's ``computeYw``), summing to 1.
 
     Examples:
-        >>> luminance_weights(((0.64, 0.33), (0.3, 0.6), (0.15, 0.06), (0.3127, 0.329))).round(decimals=4).tolist()
+        >>> [round(w, 4) for w in luminance_weights(((0.64, 0.33), (0.3, 0.6), (0.15, 0.06), (0.3127, 0.329))).tolist()]
         [0.2126, 0.7152, 0.0722]
     """
     row = rgb_to_xyz(chromaticities)[1]
@@ -86,8 +86,8 @@ def yca_to_rgb(y, ry, by, weights: torch.Tensor) -> torch.Tensor:
 
     Examples:
         >>> rgb = yca_to_rgb(torch.ones(4, 4), torch.zeros(2, 2), torch.full((2, 2), 0.5), torch.tensor((0.2126, 0.7152, 0.0722)))
-        >>> rgb[:, 0, 0].tolist()  # B = 1.5 Y, R = Y, G keeps Y
-        [1.0, 0.9495849609375, 1.5]
+        >>> rgb[:, 0, 0].tolist()  # R = Y, B = 1.5 Y, G what keeps Y; rounded to half
+        [1.0, 0.94970703125, 1.5]
     """
     y = torch.as_tensor(y).float()
     if ry is None or by is None:
