@@ -49,7 +49,7 @@ def test_luminance_chroma_file_matches_its_rgb_twin(exr_dir):
 def test_constant_chroma_gives_rgb_by_the_definition_of_ry_and_by():
     weights = luminance_weights(REC709)
     y, ry, by = torch.full((6, 8), 2.0), torch.full((3, 4), 0.25), torch.full((3, 4), -0.5)
-    rgb = yca_to_rgb(y, ry, by, weights)
+    rgb = yca_to_rgb(y, ry, by, weights).float()
     red, blue = 1.25 * 2.0, 0.5 * 2.0  # RY = (R - Y) / Y, BY = (B - Y) / Y
     green = (2.0 - weights[0] * red - weights[2] * blue) / weights[1]
     expected = torch.tensor((red, green.item(), blue)).half().float()

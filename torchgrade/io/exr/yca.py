@@ -36,18 +36,22 @@ def _half(values: torch.Tensor) -> torch.Tensor:
 
 
 def _upsample(samples: torch.Tensor, length: int, before: int = 0) -> torch.Tensor:
-    """Fill in the odd positions 0..length-1 (and ``before`` = 1: position -1) along dim 0.
+    """Fill in the odd positions 0..length-1 (and ``before`` = 1: position -1) along dim 0, in half.
 
     Samples past either end repeat the end sample, as OpenEXR pads its line buffers.
     """
-    last = samples.shape[0] - 1
-    centres = torch.arange(-before, length // 2)
-    odd = torch.zeros((len(centres),) + samples.shape[1:])
-    for distance, weight in enumerate(_TAPS.tolist()):  # one tap at a time: no (n, 7, ...) temporary
-        odd += weight * (samples[(centres - distance).clamp(0, last)] + samples[(centres + 1 + distance).clamp(0, last)])
-    result = samples.new_empty((length + before,) + samples.shape[1:])
+    taps = len(_TAPS)
+    padded = torch.cat((samples[:1].expand(taps, *samples.shape[1:]), samples, samples[-1:].expand(taps, *samples.shape[1:])))
+    count = length // 2 + before
+    odd = torch.zeros((count,) + samples.shape[1:])
+    start = taps - before  # padded index of the sample just below the first odd position
+    weights = _TAPS.tolist()
+    # in place, one tap at a time (no temporaries), summed in OpenEXR's order: farthest below first
+    for offset, weight in [(-d, w) for d, w in reversed(list(enumerate(weights)))] + [(1 + d, w) for d, w in enumerate(weights)]:
+        odd.add_(padded[start + offset:start + offset + count], alpha=weight)
+    result = samples.new_empty((length + before,) + samples.shape[1:], dtype=torch.float16)
     result[before::2] = samples[: (length + 1) // 2]
-    result[1 - before::2] = _half(odd)
+    result[1 - before::2] = odd
     return result
 
 
@@ -78,25 +82,44 @@ def _fix_saturation(rgb: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
     return torch.where(own > ceiling, _half(pulled), centre)
 
 
-def yca_to_rgb(y, ry, by, weights: torch.Tensor) -> torch.Tensor:
-    """RGB ``(3, H, W)`` float32 from full-resolution Y and 2×2-subsampled RY, BY ``(H/2, W/2)``.
+def _extended_rows(height: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Which Y row and which reconstructed chroma row make each of the rows -1..height.
+
+    As OpenEXR's line buffers: the row above the top repeats row 0's luminance with chroma
+    filtered at row -1; the row below the bottom is row height-2 (the last row that carries chroma
+    when the height is even).
+    """
+    below = max(height - 2, 0)
+    luma = torch.cat((torch.tensor([0]), torch.arange(height), torch.tensor([below])))
+    chroma = torch.cat((torch.arange(height + 1), torch.tensor([below + 1])))
+    return luma, chroma
+
+
+def yca_to_rgb(y, ry, by, weights: torch.Tensor, rows: int = 32) -> torch.Tensor:
+    """RGB ``(3, H, W)`` from full-resolution Y and 2×2-subsampled RY, BY ``(H/2, W/2)``.
 
     ``weights`` are the file's luminance weights (:func:`luminance_weights`). Without chroma
-    (``ry``/``by`` None) the image is grey.
+    (``ry``/``by`` None) the image is grey. The result is float16: every value is a half, as
+    OpenEXR's. Chroma is reconstructed in half, then RGB computed ``rows`` lines at a time, so the
+    temporaries stay a fraction of the image.
 
     Examples:
         >>> rgb = yca_to_rgb(torch.ones(4, 4), torch.zeros(2, 2), torch.full((2, 2), 0.5), torch.tensor((0.2126, 0.7152, 0.0722)))
         >>> rgb[:, 0, 0].tolist()  # R = Y, B = 1.5 Y, G what keeps Y; rounded to half
         [1.0, 0.94970703125, 1.5]
     """
-    y = torch.as_tensor(y).float()
+    y = torch.as_tensor(y).half()
     if ry is None or by is None:
         return y.expand(3, -1, -1).clone()
     height, width = y.shape
     chroma = torch.stack((torch.as_tensor(ry).float(), torch.as_tensor(by).float()), dim=-1)
-    chroma = _upsample(chroma.transpose(0, 1), width).transpose(0, 1)
-    chroma = _upsample(chroma, height, before=1)
-    rows = torch.cat((y[:1], y, y[-2:-1] if height > 1 else y[-1:]))
-    chroma = torch.cat((chroma, chroma[-2:-1] if height > 1 else chroma[-1:]))
-    rgb = _to_rgb(rows, chroma[..., 0], chroma[..., 1], weights)
-    return _fix_saturation(rgb, weights)
+    chroma = _upsample(_upsample(chroma.transpose(0, 1), width).transpose(0, 1), height, before=1)
+    luma_rows, chroma_rows = _extended_rows(height)
+    image = torch.empty(3, height, width, dtype=torch.float16)
+    for top in range(0, height, rows):
+        bottom = min(top + rows, height)
+        strip = slice(top, bottom + 2)  # extended rows top-1 .. bottom
+        part = chroma[chroma_rows[strip]].float()
+        rgb = _to_rgb(y[luma_rows[strip]].float(), part[..., 0], part[..., 1], weights)
+        image[:, top:bottom] = _fix_saturation(rgb, weights)
+    return image
