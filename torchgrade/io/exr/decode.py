@@ -30,15 +30,17 @@ because the headers the bindings expose do not say whether a channel is half or 
 float32 tensor returned."""
 
 
-def check_budget(path, parts: list[ExrPart], window: str, output_channels: int, max_pixels: int, max_bytes: int) -> None:
-    """Raise ``ValueError`` naming the numbers when decoding ``parts`` would pass either bound.
+def check_budget(path, parts: list[ExrPart], chosen: ExrPart, window: str, output_channels: int, max_pixels: int,
+                 max_bytes: int) -> None:
+    """Raise ``ValueError`` naming the numbers when decoding ``parts`` and returning ``chosen`` would pass either bound.
 
     Examples:
         >>> import pathlib, tempfile, torch, torchgrade as tg
         >>> path = pathlib.Path(tempfile.mkdtemp()) / "rgb.exr"
         >>> tg.io.write_exr(path, torch.zeros(3, 64, 64))
         >>> from torchgrade.io.exr.layout import exr_info
-        >>> check_budget(path, exr_info(path), "data", 3, max_pixels=1 << 20, max_bytes=1000)
+        >>> parts = exr_info(path)
+        >>> check_budget(path, parts, parts[0], "data", 3, max_pixels=1 << 20, max_bytes=1000)
         Traceback (most recent call last):
         ValueError: ...rgb.exr: reading needs about 98304 bytes (49152 decoded + 49152 returned), above the budget of 1000 bytes (max_bytes)
     """
@@ -51,7 +53,7 @@ def check_budget(path, parts: list[ExrPart], window: str, output_channels: int, 
             raise ValueError(f"{path}: part {part.index} data window {width}x{height} is empty or above the "
                              f"budget of {max_pixels} pixels (max_pixels)")
     decoded = sum(4 * _samples(part) for part in parts)
-    height, width = parts[0].size(window)
+    height, width = chosen.size(window)
     if height * width > max_pixels:
         raise ValueError(f"{path}: {window} window {width}x{height} is above the budget of {max_pixels} pixels (max_pixels)")
     returned = 4 * output_channels * height * width

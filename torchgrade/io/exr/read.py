@@ -61,10 +61,13 @@ def _planes(path, part: ExrPart, channels: dict[str, str], pixels: dict, layer) 
     if letters & {"R", "G", "B"}:
         zeros = np.zeros(part.size(), dtype=np.float16)
         return [pixels.pop(channels[c]) if c in letters else zeros for c in "RGB"] + alpha
+    if "Y" in letters and not letters & {"RY", "BY"}:
+        return [pixels.pop(channels["Y"])] * 3 + alpha
     if "Y" in letters:
         weights = luminance_weights(part.chromaticities or REC709_CHROMATICITIES)
-        chroma = [pixels.pop(channels[c]) if c in letters else None for c in ("RY", "BY")]
-        return list(yca_to_rgb(pixels.pop(channels["Y"]), *chroma, weights)) + alpha
+        ry, by = (pixels.pop(channels[c]) if c in letters else None for c in ("RY", "BY"))
+        ry, by = (ry if ry is not None else np.zeros_like(by)), (by if by is not None else np.zeros_like(ry))
+        return list(yca_to_rgb(pixels.pop(channels["Y"]), ry, by, weights)) + alpha
     return [pixels.pop(channels[c]) for c in sorted(letters)]
 
 
@@ -134,7 +137,7 @@ def read_exr(path, to_rec709: bool = False, *, adaptation: str = "bradford", lay
     chosen, channels = _choose(path, parts, part, view, layer)
     colour = channels.keys() & {"R", "G", "B", "Y"}
     count = (3 + ("A" in channels)) if colour else len(channels)
-    check_budget(path, parts, window, count, max_pixels, max_bytes)
+    check_budget(path, parts, chosen, window, count, max_pixels, max_bytes)
     matrix = to_rec709_matrix(chosen.chromaticities, adaptation) if to_rec709 and colour and chosen.chromaticities else None
     pixels = decode(path, parts)[chosen.index]
     image = _place(_planes(path, chosen, channels, pixels, layer), chosen, window)

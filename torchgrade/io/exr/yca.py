@@ -98,8 +98,7 @@ def _extended_rows(height: int) -> tuple[torch.Tensor, torch.Tensor]:
 def yca_to_rgb(y, ry, by, weights: torch.Tensor, rows: int = 32) -> torch.Tensor:
     """RGB ``(3, H, W)`` from full-resolution Y and 2×2-subsampled RY, BY ``(H/2, W/2)``.
 
-    ``weights`` are the file's luminance weights (:func:`luminance_weights`). Without chroma
-    (``ry``/``by`` None) the image is grey. The result is float16: every value is a half, as
+    ``weights`` are the file's luminance weights (:func:`luminance_weights`). The result is float16: every value is a half, as
     OpenEXR's. Chroma is reconstructed in half, then RGB computed ``rows`` lines at a time, so the
     temporaries stay a fraction of the image.
 
@@ -109,8 +108,6 @@ def yca_to_rgb(y, ry, by, weights: torch.Tensor, rows: int = 32) -> torch.Tensor
         [1.0, 0.94970703125, 1.5]
     """
     y = torch.as_tensor(y).half()
-    if ry is None or by is None:
-        return y.expand(3, -1, -1).clone()
     height, width = y.shape
     chroma = torch.stack((torch.as_tensor(ry).float(), torch.as_tensor(by).float()), dim=-1)
     chroma = _upsample(_upsample(chroma.transpose(0, 1), width).transpose(0, 1), height, before=1)
