@@ -36,9 +36,9 @@ def check_budget(path, parts: list[ExrPart], chosen: ExrPart, window: str, outpu
 
     Examples:
         >>> import pathlib, tempfile, torch, torchgrade as tg
+        >>> from torchgrade.io import exr_info
         >>> path = pathlib.Path(tempfile.mkdtemp()) / "rgb.exr"
         >>> tg.io.write_exr(path, torch.zeros(3, 64, 64))
-        >>> from torchgrade.io.exr.layout import exr_info
         >>> parts = exr_info(path)
         >>> check_budget(path, parts, parts[0], "data", 3, max_pixels=1 << 20, max_bytes=1000)
         Traceback (most recent call last):
@@ -92,6 +92,14 @@ def decode(path, parts: list[ExrPart]):
 
     The library's own complaints (printed while decoding) and any part or channel missing from the
     result reject the file; a ``MemoryError`` becomes a ``ValueError`` too.
+
+    Examples:
+        >>> import pathlib, tempfile, torch, torchgrade as tg
+        >>> from torchgrade.io import exr_info
+        >>> path = pathlib.Path(tempfile.mkdtemp()) / "rgb.exr"
+        >>> tg.io.write_exr(path, torch.zeros(3, 2, 4))
+        >>> {name: array.shape for name, array in decode(path, exr_info(path))[0].items()}
+        {'B': (2, 4), 'G': (2, 4), 'R': (2, 4)}
     """
     try:
         with _captured_output() as messages:
