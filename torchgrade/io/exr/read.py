@@ -51,12 +51,22 @@ def _choose(path, parts: list[ExrPart], part, view, layer) -> tuple[ExrPart, dic
                      f"(layers by part, as view:layer: {held}; choose with layer=, view=, part=)")
 
 
-def _planes(path, part: ExrPart, channels: dict[str, str], pixels: dict, layer) -> list:
-    """The layer's planes, colour first: RGB(A) as OpenEXR's RGBA interface gives it, or every channel."""
-    letters = set(channels)
+def _check_sizes(path, part: ExrPart, channels: dict[str, str], pixels: dict) -> None:
+    """Every channel full size, but RY and BY at 2×2 subsampling, and decoded at that size."""
+    height, width = part.size()
     for letter, name in channels.items():
-        if part.channels[name] != (1, 1) and letter not in ("RY", "BY"):
-            raise ValueError(f"{path}: channel {name} is subsampled {part.channels[name]}; only RY and BY may be")
+        sampling = (2, 2) if letter in ("RY", "BY") and {"Y"} <= channels.keys() else (1, 1)
+        if part.channels[name] != sampling:
+            raise ValueError(f"{path}: channel {name} has sampling {part.channels[name]}; read_exr reads {sampling}")
+        expected = (-(-height // sampling[1]), -(-width // sampling[0]))
+        if getattr(pixels[name], "shape", None) != expected:
+            raise ValueError(f"{path}: channel {name} decoded as {getattr(pixels[name], 'shape', None)}, not {expected}")
+
+
+def _planes(path, part: ExrPart, channels: dict[str, str], pixels: dict) -> list:
+    """The layer's planes, colour first: RGB(A) as OpenEXR's RGBA interface gives it, or every channel."""
+    _check_sizes(path, part, channels, pixels)
+    letters = set(channels)
     alpha = [pixels.pop(channels["A"])] if "A" in letters else []
     if letters & {"R", "G", "B"}:
         zeros = np.zeros(part.size(), dtype=np.float16)
@@ -140,7 +150,7 @@ def read_exr(path, to_rec709: bool = False, *, adaptation: str = "bradford", lay
     check_budget(path, parts, chosen, window, count, max_pixels, max_bytes)
     matrix = to_rec709_matrix(chosen.chromaticities, adaptation) if to_rec709 and colour and chosen.chromaticities else None
     pixels = decode(path, parts)[chosen.index]
-    image = _place(_planes(path, chosen, channels, pixels, layer), chosen, window)
+    image = _place(_planes(path, chosen, channels, pixels), chosen, window)
     if matrix is not None:
         _convert(image, matrix)
     return image
