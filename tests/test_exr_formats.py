@@ -107,6 +107,14 @@ def test_default_read_is_the_default_views_main_layer_only(layered):
     assert tg.io.read_exr(layered).unique().tolist() == [1.0]  # not mask.R, not the left view
 
 
+def test_an_aov_in_a_plain_file_does_not_replace_the_main_channel(tmp_path):
+    planes = {"R": np.ones((2, 3), np.float32), "G": np.ones((2, 3), np.float32), "B": np.ones((2, 3), np.float32),
+              "mask.R": np.zeros((2, 3), np.float32)}
+    OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}, planes).write(str(tmp_path / "aov.exr"))
+    assert tg.io.read_exr(tmp_path / "aov.exr").eq(1).all()
+    assert tg.io.read_exr(tmp_path / "aov.exr", layer="mask").tolist() == [[[0.0] * 3] * 2, [[0.0] * 3] * 2, [[0.0] * 3] * 2]
+
+
 @pytest.mark.parametrize("options, expected", [({"layer": "diffuse"}, [2.0] * 3), ({"view": "left"}, [3.0, 3.0, 3.0, 0.5]),
                                                ({"layer": "mask"}, [5.0, 0.0, 0.0])])  # as OpenEXR: missing G, B are 0
 def test_any_layer_or_view_reads_on_request(layered, options, expected):

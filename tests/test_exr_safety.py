@@ -58,6 +58,17 @@ def test_library_complaints_reject_the_file_and_are_not_printed(exr_dir):
     assert result.stdout.startswith("rejected") and "EXR_ERR" not in result.stderr, result.stderr[-500:]
 
 
+def test_reads_in_several_threads_leave_stdout_and_stderr_where_they_were(exr_dir):
+    from concurrent.futures import ThreadPoolExecutor
+
+    before = [os.fstat(descriptor)[:2] for descriptor in (1, 2)]
+    paths = [exr_dir / "Garden.exr", exr_dir / "formats" / "Rec709.exr"] * 4
+    with ThreadPoolExecutor(4) as pool:
+        shapes = [image.shape for image in pool.map(tg.io.read_exr, paths)]
+    assert shapes == [(3, 493, 874), (3, 406, 610)] * 4
+    assert [os.fstat(descriptor)[:2] for descriptor in (1, 2)] == before
+
+
 PEAK = """
 import sys, torchgrade as tg
 def status(key):

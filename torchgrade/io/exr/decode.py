@@ -5,7 +5,7 @@ table, a chunk that fails to decompress) only by printing to the process's stand
 leaving the damaged part out or partly filled. So the budget counts everything the bindings will
 decode, and whatever the library prints while decoding (to stdout or stderr) turns into a
 ``ValueError``. The redirection is process-wide: output other threads write meanwhile is
-swallowed with it.
+swallowed with it, and reads in several threads decode one at a time.
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ import contextlib
 import os
 import sys
 import tempfile
+import threading
 
 import OpenEXR
 
@@ -67,13 +68,18 @@ def _samples(part: ExrPart) -> int:
     return sum(-(-height // ys) * -(-width // xs) for xs, ys in part.channels.values())
 
 
+_REDIRECTING = threading.Lock()
+"""Held while file descriptors 1 and 2 point elsewhere: two threads redirecting at once would
+restore each other's redirection instead of the real stdout and stderr."""
+
+
 @contextlib.contextmanager
 def _captured_output():
     """Collect what native code writes to file descriptors 1 and 2 (stdout, stderr) meanwhile."""
-    sys.stdout.flush()
-    sys.stderr.flush()
-    saved = [os.dup(1), os.dup(2)]
-    with tempfile.TemporaryFile() as sink:
+    with _REDIRECTING, tempfile.TemporaryFile() as sink:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        saved = [os.dup(1), os.dup(2)]
         os.dup2(sink.fileno(), 1)
         os.dup2(sink.fileno(), 2)
         messages = []

@@ -66,7 +66,7 @@ def split_channel_name(name: str, views: tuple[str, ...]) -> tuple[str | None, s
         return default, "", name
     if views and pieces[-2] in views:
         return pieces[-2], ".".join(pieces[:-2]), pieces[-1]
-    return (None if views else default), ".".join(pieces[:-1]), pieces[-1]
+    return None, ".".join(pieces[:-1]), pieces[-1]
 
 
 def _window(box) -> tuple[int, int, int, int]:
