@@ -55,8 +55,8 @@ def check_budget(path, parts: list[ExrPart], chosen: ExrPart, window: str, outpu
                              f"budget of {max_pixels} pixels (max_pixels)")
     decoded = sum(4 * _samples(part) for part in parts)
     height, width = chosen.size(window)
-    if height * width > max_pixels:
-        raise ValueError(f"{path}: {window} window {width}x{height} is above the budget of {max_pixels} pixels (max_pixels)")
+    if height <= 0 or width <= 0 or height * width > max_pixels:
+        raise ValueError(f"{path}: {window} window {width}x{height} is empty or above the budget of {max_pixels} pixels (max_pixels)")
     returned = 4 * output_channels * height * width
     if decoded + returned > max_bytes:
         raise ValueError(f"{path}: reading needs about {decoded + returned} bytes ({decoded} decoded + {returned} returned), "
