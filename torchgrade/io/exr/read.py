@@ -17,7 +17,7 @@ from .yca import luminance_weights, yca_to_rgb
 __all__ = ["read_exr"]
 
 WINDOWS = ("data", "display")
-_ROWS = 256
+_STRIP_LINES = 256
 """Rows converted at a time by the colour matrix: bounds its temporary to a strip of the image."""
 
 
@@ -100,8 +100,8 @@ def _place(planes: list, part: ExrPart, window: str) -> torch.Tensor:
 
 def _convert(image: torch.Tensor, matrix: torch.Tensor) -> None:
     matrix = matrix.float()
-    for top in range(0, image.shape[1], _ROWS):
-        strip = image[:3, top:top + _ROWS]
+    for top in range(0, image.shape[1], _STRIP_LINES):
+        strip = image[:3, top:top + _STRIP_LINES]
         strip.copy_(torch.einsum("ij,jhw->ihw", matrix, strip))
 
 

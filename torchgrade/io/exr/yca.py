@@ -95,12 +95,12 @@ def _extended_rows(height: int) -> tuple[torch.Tensor, torch.Tensor]:
     return luma, chroma
 
 
-def yca_to_rgb(y, ry, by, weights: torch.Tensor, rows: int = 32) -> torch.Tensor:
+def yca_to_rgb(y, ry, by, weights: torch.Tensor, lines_per_strip: int = 32) -> torch.Tensor:
     """RGB ``(3, H, W)`` from full-resolution Y and 2×2-subsampled RY, BY ``(H/2, W/2)``.
 
-    ``weights`` are the file's luminance weights (:func:`luminance_weights`). The result is float16: every value is a half, as
-    OpenEXR's. Chroma is reconstructed in half, then RGB computed ``rows`` lines at a time, so the
-    temporaries stay a fraction of the image.
+    ``weights`` are the file's luminance weights (:func:`luminance_weights`). The result is float16:
+    every value is a half, as OpenEXR's. Chroma is reconstructed in half, then RGB computed
+    ``lines_per_strip`` lines at a time, so the temporaries stay a fraction of the image.
 
     Examples:
         >>> rgb = yca_to_rgb(torch.ones(4, 4), torch.zeros(2, 2), torch.full((2, 2), 0.5), torch.tensor((0.2126, 0.7152, 0.0722)))
@@ -113,8 +113,8 @@ def yca_to_rgb(y, ry, by, weights: torch.Tensor, rows: int = 32) -> torch.Tensor
     chroma = _upsample(_upsample(chroma.transpose(0, 1), width).transpose(0, 1), height, before=1)
     luma_rows, chroma_rows = _extended_rows(height)
     image = torch.empty(3, height, width, dtype=torch.float16)
-    for top in range(0, height, rows):
-        bottom = min(top + rows, height)
+    for top in range(0, height, lines_per_strip):
+        bottom = min(top + lines_per_strip, height)
         strip = slice(top, bottom + 2)  # extended rows top-1 .. bottom
         part = chroma[chroma_rows[strip]].float()
         rgb = _to_rgb(y[luma_rows[strip]].float(), part[..., 0], part[..., 1], weights)
