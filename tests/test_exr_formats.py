@@ -172,6 +172,14 @@ def test_stereo_frame_reads_the_same_from_one_part_or_many(exr_dir):
         torch.testing.assert_close(one, many, atol=0, rtol=0)
 
 
+def test_a_layer_of_a_view_reads_the_same_from_one_part_or_many(exr_dir):
+    single, multi = exr_dir / "formats" / "beachball_singlepart.0001.exr", exr_dir / "formats" / "beachball_multipart.0001.exr"
+    one = tg.io.read_exr(single, layer="forward", view="left", window="display")
+    many = tg.io.read_exr(multi, layer="forward", view="left", window="display")
+    assert one.shape == (2, 1556, 2048)  # u, v
+    torch.testing.assert_close(one, many, atol=0, rtol=0)
+
+
 @pytest.mark.parametrize("name", ["displaywindow_t01", "displaywindow_t02", "displaywindow_t03", "displaywindow_t04"])
 def test_display_window_places_the_data_window(exr_dir, name):
     path = exr_dir / "formats" / f"{name}.exr"

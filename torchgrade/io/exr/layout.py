@@ -39,6 +39,8 @@ class ExrPart:
     chromaticities: tuple | None
     channels: dict = field(repr=False)
     layers: dict = field(repr=False)
+    names: dict = field(repr=False)
+    """``{full channel name: (view, layer, channel)}``."""
 
     @property
     def deep(self) -> bool:
@@ -84,16 +86,20 @@ def _chromaticities(header: dict):
 def _describe(index: int, part) -> ExrPart:
     header = part.header
     views = tuple(header.get("multiView") or ())
-    if not views and header.get("view"):
-        views = (str(header["view"]),)
-    channels, layers = {}, {}
+    part_view = header.get("view")  # in a multi-part file, every channel of the part is in its view
+    if not views and part_view:
+        views = (str(part_view),)
+    channels, layers, names = {}, {}, {}
     for channel in header.get("channels") or ():
         channels[channel.name] = (int(channel.xSampling), int(channel.ySampling))
         view, layer, letter = split_channel_name(channel.name, views)
+        if part_view and not header.get("multiView"):
+            view, layer = str(part_view), channel.name.rpartition(".")[0]
+        names[channel.name] = (view, layer, letter)
         layers.setdefault((view, layer), []).append(letter)
     kind = str(header.get("type", OpenEXR.scanlineimage)).split(".")[-1]
     return ExrPart(index, header.get("name"), kind, _window(header["dataWindow"]), _window(header["displayWindow"]),
-                   views, _chromaticities(header), channels, {key: sorted(value) for key, value in layers.items()})
+                   views, _chromaticities(header), channels, {key: sorted(value) for key, value in layers.items()}, names)
 
 
 def exr_info(path) -> list[ExrPart]:

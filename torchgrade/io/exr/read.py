@@ -11,7 +11,7 @@ from ...color import REC709_CHROMATICITIES
 from ...core import check_choice
 from .chromaticities import ADAPTATIONS, to_rec709_matrix
 from .decode import MAX_BYTES, MAX_PIXELS, check_budget, decode
-from .layout import ExrPart, exr_info, split_channel_name
+from .layout import ExrPart, exr_info
 from .yca import luminance_weights, yca_to_rgb
 
 __all__ = ["read_exr"]
@@ -24,9 +24,8 @@ _STRIP_LINES = 256
 def _wanted(part: ExrPart, view, layer: str) -> dict[str, str]:
     """``{channel: full name}`` of ``layer`` in ``view`` (None: the part's default view), else in no view."""
     view = view if view is not None else (part.views[0] if part.views else None)
-    split = {name: split_channel_name(name, part.views) for name in part.channels}
     for owner in (view, None):
-        found = {letter: name for name, (v, lay, letter) in split.items() if (v, lay) == (owner, layer)}
+        found = {letter: name for name, (v, lay, letter) in part.names.items() if (v, lay) == (owner, layer)}
         if found:
             return found
     return {}
@@ -45,7 +44,7 @@ def _choose(path, parts: list[ExrPart], part, view, layer) -> tuple[ExrPart, dic
         channels = _wanted(candidate, view, layer or "")
         if channels and (layer is not None or channels.keys() & {"R", "G", "B", "Y"}):
             return candidate, channels
-    held = {p.index: sorted(f"{v}:{lay or '(main)'}" if v else lay or "(main)" for v, lay in p.layers) for p in candidates}
+    held = {p.index: sorted(f"{v}:{lay or '(main)'}" if v else lay or "(main)" for v, lay in p.layers) for p in parts}
     what = f"layer {layer!r}" if layer is not None else "R, G, B or Y channels in the main layer"
     raise ValueError(f"{path}: no {what}{'' if view is None else f' of view {view!r}'} "
                      f"(layers by part, as view:layer: {held}; choose with layer=, view=, part=)")
