@@ -40,6 +40,13 @@ def test_every_format_sample_reads_its_default_rgb_in_both_windows(exr_dir, name
         assert image.shape[0] in (3, 4) and image.shape[1:] == part.size(window) and not image.isnan().any()
 
 
+@pytest.mark.parametrize("name", ["WideFloatRange", "Desk", "formats/beachball_multipart.0001", "formats/Rec709_YC"])
+def test_sample_sizes_read_from_the_header_match_the_decoded_arrays(exr_dir, name):
+    path = exr_dir / f"{name}.exr"
+    decoded = [{n: c.pixels.dtype.itemsize for n, c in p.channels.items()} for p in OpenEXR.File(str(path), separate_channels=True).parts]
+    assert [part.sample_bytes for part in tg.io.exr_info(path)] == decoded
+
+
 def test_luminance_chroma_file_matches_its_rgb_twin(exr_dir):
     # The same picture stored as RGB and as Y + 2x2-subsampled RY/BY (OpenEXR's sample pair).
     error = srgb_codes(tg.io.read_exr(exr_dir / "formats" / "Rec709_YC.exr"), tg.io.read_exr(exr_dir / "formats" / "Rec709.exr"))

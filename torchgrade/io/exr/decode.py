@@ -26,9 +26,8 @@ MAX_PIXELS = 1 << 28
 """Largest window (268 megapixels) read_exr accepts by default."""
 
 MAX_BYTES = 1 << 31
-"""Default bound (2 GiB) on the memory a read may take: every decoded sample, counted at 4 bytes
-because the headers the bindings expose do not say whether a channel is half or float, plus the
-float32 tensor returned."""
+"""Default bound (2 GiB) on the memory a read may take: every sample the bindings decode (2 bytes
+half, 4 float), plus the float32 tensor returned."""
 
 
 def check_budget(path, parts: list[ExrPart], chosen: ExrPart, window: str, output_channels: int, max_pixels: int,
@@ -43,7 +42,7 @@ def check_budget(path, parts: list[ExrPart], chosen: ExrPart, window: str, outpu
         >>> parts = exr_info(path)
         >>> check_budget(path, parts, parts[0], "data", 3, max_pixels=1 << 20, max_bytes=1000)
         Traceback (most recent call last):
-        ValueError: ...rgb.exr: reading needs about 98304 bytes (49152 decoded + 49152 returned), above the budget of 1000 bytes (max_bytes)
+        ValueError: ...rgb.exr: reading needs about 73728 bytes (24576 decoded + 49152 returned), above the budget of 1000 bytes (max_bytes)
     """
     for part in parts:
         if part.deep:
@@ -53,7 +52,7 @@ def check_budget(path, parts: list[ExrPart], chosen: ExrPart, window: str, outpu
         if height <= 0 or width <= 0 or height * width > max_pixels:
             raise ValueError(f"{path}: part {part.index} data window {width}x{height} is empty or above the "
                              f"budget of {max_pixels} pixels (max_pixels)")
-    decoded = sum(4 * _samples(part) for part in parts)
+    decoded = sum(_decoded_bytes(part) for part in parts)
     height, width = chosen.size(window)
     if height <= 0 or width <= 0 or height * width > max_pixels:
         raise ValueError(f"{path}: {window} window {width}x{height} is empty or above the budget of {max_pixels} pixels (max_pixels)")
@@ -63,9 +62,9 @@ def check_budget(path, parts: list[ExrPart], chosen: ExrPart, window: str, outpu
                          f"above the budget of {max_bytes} bytes (max_bytes)")
 
 
-def _samples(part: ExrPart) -> int:
+def _decoded_bytes(part: ExrPart) -> int:
     height, width = part.size()
-    return sum(-(-height // ys) * -(-width // xs) for xs, ys in part.channels.values())
+    return sum(part.sample_bytes[name] * -(-height // ys) * -(-width // xs) for name, (xs, ys) in part.channels.items())
 
 
 _REDIRECTING = threading.Lock()

@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 
 import OpenEXR
 
+from .sample_types import sample_bytes
+
 __all__ = ["ExrPart", "exr_info", "split_channel_name"]
 
 _DEEP = (OpenEXR.deepscanline, OpenEXR.deeptile)
@@ -41,6 +43,8 @@ class ExrPart:
     layers: dict = field(repr=False)
     names: dict = field(repr=False)
     """``{full channel name: (view, layer, channel)}``."""
+    sample_bytes: dict = field(repr=False)
+    """``{full channel name: 2 (half) or 4 (float, uint)}``; 4 where the header bytes did not say."""
 
     @property
     def deep(self) -> bool:
@@ -83,7 +87,7 @@ def _chromaticities(header: dict):
     return tuple((float(values[i]), float(values[i + 1])) for i in range(0, 8, 2))
 
 
-def _describe(index: int, part) -> ExrPart:
+def _describe(index: int, part, sizes: dict[str, int] | None) -> ExrPart:
     header = part.header
     views = tuple(header.get("multiView") or ())
     part_view = header.get("view")  # in a multi-part file, every channel of the part is in its view
@@ -99,7 +103,8 @@ def _describe(index: int, part) -> ExrPart:
         layers.setdefault((view, layer), []).append(letter)
     kind = str(header.get("type", OpenEXR.scanlineimage)).split(".")[-1]
     return ExrPart(index, header.get("name"), kind, _window(header["dataWindow"]), _window(header["displayWindow"]),
-                   views, _chromaticities(header), channels, {key: sorted(value) for key, value in layers.items()}, names)
+                   views, _chromaticities(header), channels, {key: sorted(value) for key, value in layers.items()}, names,
+                   sizes if sizes is not None and sizes.keys() == channels.keys() else dict.fromkeys(channels, 4))
 
 
 def exr_info(path) -> list[ExrPart]:
@@ -117,6 +122,7 @@ def exr_info(path) -> list[ExrPart]:
     """
     try:
         opened = OpenEXR.File(str(path), header_only=True)
-        return [_describe(index, part) for index, part in enumerate(opened.parts)]
+        sizes = sample_bytes(path) or []
+        return [_describe(index, part, sizes[index] if index < len(sizes) else None) for index, part in enumerate(opened.parts)]
     except Exception as error:  # the bindings raise RuntimeError/OSError/ValueError/UnicodeError for damaged headers
         raise ValueError(f"{path}: not a readable OpenEXR file ({error})") from None
