@@ -1,0 +1,153 @@
+"""Untrusted OpenEXR input and safe writes: deep files, budgets, library errors, memory, permissions."""
+
+import os
+import stat
+import struct
+import subprocess
+import sys
+import time
+
+import pytest
+import torch
+
+import torchgrade as tg
+from torchgrade.cli import main
+
+
+def declared_size(source, target, size):
+    """Copy ``source`` with its data and display windows rewritten in the header to ``size``×``size``."""
+    data = bytearray(source.read_bytes())
+    for name in (b"dataWindow", b"displayWindow"):
+        at = data.index(name + b"\0box2i\0") + len(name) + 7 + 4
+        data[at:at + 16] = struct.pack("<4i", 0, 0, size - 1, size - 1)
+    target.write_bytes(bytes(data))
+    return target
+
+
+def test_deep_file_is_refused_from_its_header(exr_dir):
+    start = time.perf_counter()
+    with pytest.raises(ValueError, match="deep data"):
+        tg.io.read_exr(exr_dir / "formats" / "deep_Balls.exr")
+    assert time.perf_counter() - start < 1.0  # nothing decoded
+
+
+def test_decompression_bomb_is_refused_before_decoding(tmp_path):
+    small = tmp_path / "small.exr"
+    tg.io.write_exr(small, torch.zeros(3, 16, 16))
+    bomb = declared_size(small, tmp_path / "bomb.exr", 16000)
+    start = time.perf_counter()
+    with pytest.raises(ValueError, match=r"4608000000 bytes.*max_bytes"):  # 16000² × 3 × (2 + 4)
+        tg.io.read_exr(bomb)
+    assert time.perf_counter() - start < 1.0
+
+
+def test_budget_is_configurable_and_names_the_numbers(tmp_path):
+    path = tmp_path / "rgb.exr"
+    tg.io.write_exr(path, torch.ones(3, 64, 64))
+    decoded, returned = 64 * 64 * 3 * 2, 64 * 64 * 3 * 4  # half samples, float32 tensor
+    with pytest.raises(ValueError, match=rf"{decoded + returned} bytes \({decoded} decoded \+ {returned} returned\).*1000 bytes"):
+        tg.io.read_exr(path, max_bytes=1000)
+    with pytest.raises(ValueError, match="64x64 .* 100 pixels"):
+        tg.io.read_exr(path, max_pixels=100)
+    assert tg.io.read_exr(path, max_bytes=decoded + returned).shape == (3, 64, 64)
+
+
+def test_library_complaints_reject_the_file_and_are_not_printed(exr_dir):
+    damaged = exr_dir / "damaged" / "asan_heap-oob_4cb169_978_5f00ce89c3847e739b256efc49f312cf_exr"
+    code = "import sys, torchgrade as tg\ntry:\n    tg.io.read_exr(sys.argv[1])\nexcept ValueError as e:\n    print('rejected', e)"
+    result = subprocess.run([sys.executable, "-c", code, str(damaged)], capture_output=True, text=True, timeout=120)
+    assert result.stdout.startswith("rejected") and "EXR_ERR" not in result.stderr, result.stderr[-500:]
+
+
+def test_reads_in_several_threads_leave_stdout_and_stderr_where_they_were(exr_dir):
+    from concurrent.futures import ThreadPoolExecutor
+
+    before = [os.fstat(descriptor)[:2] for descriptor in (1, 2)]
+    paths = [exr_dir / "Garden.exr", exr_dir / "formats" / "Rec709.exr"] * 4
+    with ThreadPoolExecutor(4) as pool:
+        shapes = [image.shape for image in pool.map(tg.io.read_exr, paths)]
+    assert shapes == [(3, 493, 874), (3, 406, 610)] * 4
+    assert [os.fstat(descriptor)[:2] for descriptor in (1, 2)] == before
+
+
+PEAK = """
+import sys, torchgrade as tg
+def status(key):
+    return int(next(line for line in open("/proc/self/status") if line.startswith(key)).split()[1])
+with open("/proc/self/clear_refs", "w") as clear:
+    clear.write("5")  # resets the peak (VmHWM) to the resident size now
+before = status("VmRSS")
+image = tg.io.read_exr(sys.argv[1])
+print((status("VmHWM") - before) * 1024 / (image.numel() * 4))
+"""
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/clear_refs"), reason="needs Linux's peak-memory reset")
+@pytest.mark.parametrize("half", [True, False])
+def test_peak_memory_of_a_read_is_at_most_one_and_a_half_times_the_tensor(tmp_path, half):
+    path = tmp_path / "big.exr"
+    tg.io.write_exr(path, torch.rand(3, 2048, 2048), half=half)
+    result = subprocess.run([sys.executable, "-c", PEAK, str(path)], capture_output=True, text=True, timeout=300)
+    ratio = float(result.stdout.split()[-1])
+    assert ratio < 1.6, ratio  # at most the decoded samples (0.5× half, 1× float, freed plane by plane) + the tensor
+
+
+def test_new_files_follow_the_umask_and_rewrites_keep_the_mode(tmp_path):
+    old = os.umask(0o022)
+    try:
+        tg.io.write_exr(tmp_path / "new.exr", torch.ones(3, 2, 2))
+        assert stat.S_IMODE((tmp_path / "new.exr").stat().st_mode) == 0o644
+        os.chmod(tmp_path / "new.exr", 0o664)
+        tg.io.write_exr(tmp_path / "new.exr", torch.zeros(3, 2, 2))
+        assert stat.S_IMODE((tmp_path / "new.exr").stat().st_mode) == 0o664
+        os.umask(0o077)
+        tg.io.write_exr(tmp_path / "private.exr", torch.ones(3, 2, 2))
+        assert stat.S_IMODE((tmp_path / "private.exr").stat().st_mode) == 0o600
+    finally:
+        os.umask(old)
+
+
+def test_writing_through_a_symlink_replaces_its_target_and_keeps_the_link(tmp_path):
+    target, link = tmp_path / "shot.exr", tmp_path / "latest.exr"
+    tg.io.write_exr(target, torch.ones(3, 2, 2))
+    link.symlink_to(target.name)
+    tg.io.write_exr(link, torch.full((3, 2, 2), 2.0))
+    assert link.is_symlink() and tg.io.read_exr(target).unique().tolist() == [2.0]
+
+
+FULL_DISK = """
+import os, resource, signal, sys, torch, torchgrade as tg
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+resource.setrlimit(resource.RLIMIT_FSIZE, (20000, 20000))
+try:
+    tg.io.write_exr(sys.argv[1], torch.rand(3, 256, 256), half=False)
+except OSError as error:
+    print("OSError", error)
+"""
+
+
+def test_an_io_failure_while_writing_is_an_oserror_and_leaves_the_old_file(tmp_path):
+    path = tmp_path / "shot.exr"
+    tg.io.write_exr(path, torch.ones(3, 2, 2))
+    before = path.read_bytes()
+    # a file-size limit makes writes fail with EFBIG, as a full disk fails them with ENOSPC
+    result = subprocess.run([sys.executable, "-c", FULL_DISK, str(path)], capture_output=True, text=True, timeout=120)
+    assert result.stdout.startswith("OSError"), result.stdout + result.stderr[-500:]
+    assert path.read_bytes() == before and os.listdir(tmp_path) == ["shot.exr"]
+
+
+@pytest.mark.parametrize("name", ["formats/deep_Balls.exr", "damaged/asan_heap-oob_7f171b7ab3a2_937_b4e2415c399c2ab39548de911223769d_exr",
+                                  "damaged/NULL_pointer"])
+def test_grade_command_reports_a_bad_input_in_one_line(exr_dir, tmp_path, capsys, name):
+    assert main(["grade", str(exr_dir / name), "-o", str(tmp_path / "out.png")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("torchgrade grade: error:") and not (tmp_path / "out.png").exists()
+
+
+def test_grade_command_grades_luminance_chroma_in_colour(exr_dir, tmp_path):
+    import numpy as np
+    from PIL import Image
+
+    assert main(["grade", str(exr_dir / "formats" / "Rec709_YC.exr"), "-o", str(tmp_path / "out.png")]) == 0
+    pixels = torch.from_numpy(np.array(Image.open(tmp_path / "out.png"), dtype=np.float32))
+    assert (pixels[..., 0] - pixels[..., 2]).abs().mean() > 5  # not grey

@@ -1,0 +1,14 @@
+"""OpenEXR reading and writing through the OpenEXR 3.x bindings (``OpenEXR.File``).
+
+Files are untrusted input: the headers are read on their own first (:func:`exr_info`), deep files
+and files whose decoding would pass the pixel or byte budget are refused before any pixel is
+decoded, and any damage the library reports rejects the file with a ``ValueError`` naming it.
+"""
+
+from .chromaticities import ADAPTATIONS
+from .decode import MAX_BYTES, MAX_PIXELS
+from .layout import ExrPart, exr_info
+from .read import read_exr
+from .write import write_exr
+
+__all__ = ["ADAPTATIONS", "MAX_BYTES", "MAX_PIXELS", "ExrPart", "exr_info", "read_exr", "write_exr"]

@@ -1,0 +1,155 @@
+"""``read_exr``: one layer of one view of one part of an OpenEXR file, as a float32 tensor."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ...color import REC709_CHROMATICITIES
+from ...core import check_choice
+from .chromaticities import ADAPTATIONS, to_rec709_matrix
+from .decode import MAX_BYTES, MAX_PIXELS, check_budget, decode
+from .layout import ExrPart, exr_info
+from .yca import luminance_weights, yca_to_rgb
+
+__all__ = ["read_exr"]
+
+WINDOWS = ("data", "display")
+_STRIP_LINES = 256
+"""Rows converted at a time by the colour matrix: bounds its temporary to a strip of the image."""
+
+
+def _wanted(part: ExrPart, view, layer: str) -> dict[str, str]:
+    """``{channel: full name}`` of ``layer`` in ``view`` (None: the part's default view), else in no view."""
+    view = view if view is not None else (part.views[0] if part.views else None)
+    for owner in (view, None):
+        found = {letter: name for name, (v, lay, letter) in part.names.items() if (v, lay) == (owner, layer)}
+        if found:
+            return found
+    return {}
+
+
+def _choose(path, parts: list[ExrPart], part, view, layer) -> tuple[ExrPart, dict[str, str]]:
+    """The part to read and its channels: ``part`` by index or name, else the first that has the layer."""
+    if part is not None:
+        matches = [p for p in parts if part in (p.index, p.name)]
+        if not matches:
+            raise ValueError(f"{path}: no part {part!r} (parts: {[(p.index, p.name) for p in parts]})")
+        candidates = matches
+    else:
+        candidates = [p for p in parts if view is None or view in p.views]
+    for candidate in candidates:
+        channels = _wanted(candidate, view, layer or "")
+        if channels and (layer is not None or channels.keys() & {"R", "G", "B", "Y"}):
+            return candidate, channels
+    held = {p.index: sorted(f"{v}:{lay or '(main)'}" if v else lay or "(main)" for v, lay in p.layers) for p in parts}
+    what = f"layer {layer!r}" if layer is not None else "R, G, B or Y channels in the main layer"
+    raise ValueError(f"{path}: no {what}{'' if view is None else f' of view {view!r}'} "
+                     f"(layers by part, as view:layer: {held}; choose with layer=, view=, part=)")
+
+
+def _check_sizes(path, part: ExrPart, channels: dict[str, str], pixels: dict) -> None:
+    """Every channel full size, but RY and BY at 2×2 subsampling, and decoded at that size."""
+    height, width = part.size()
+    for letter, name in channels.items():
+        sampling = (2, 2) if letter in ("RY", "BY") and {"Y"} <= channels.keys() else (1, 1)
+        if part.channels[name] != sampling:
+            raise ValueError(f"{path}: channel {name} has sampling {part.channels[name]}; read_exr reads {sampling}")
+        expected = (-(-height // sampling[1]), -(-width // sampling[0]))
+        if getattr(pixels[name], "shape", None) != expected:
+            raise ValueError(f"{path}: channel {name} decoded as {getattr(pixels[name], 'shape', None)}, not {expected}")
+
+
+def _planes(path, part: ExrPart, channels: dict[str, str], pixels: dict) -> list:
+    """The layer's planes, colour first: RGB(A) as OpenEXR's RGBA interface gives it, or every channel."""
+    _check_sizes(path, part, channels, pixels)
+    letters = set(channels)
+    alpha = [pixels.pop(channels["A"])] if "A" in letters else []
+    if letters & {"R", "G", "B"}:
+        zeros = np.zeros(part.size(), dtype=np.float16)
+        return [pixels.pop(channels[c]) if c in letters else zeros for c in "RGB"] + alpha
+    if "Y" in letters and not letters & {"RY", "BY"}:
+        return [pixels.pop(channels["Y"])] * 3 + alpha
+    if "Y" in letters:
+        weights = luminance_weights(part.chromaticities or REC709_CHROMATICITIES)
+        ry, by = (pixels.pop(channels[c]) if c in letters else None for c in ("RY", "BY"))
+        ry, by = (ry if ry is not None else np.zeros_like(by)), (by if by is not None else np.zeros_like(ry))
+        return list(yca_to_rgb(pixels.pop(channels["Y"]), ry, by, weights)) + alpha
+    return [pixels.pop(channels[c]) for c in sorted(letters)]
+
+
+def _place(planes: list, part: ExrPart, window: str) -> torch.Tensor:
+    """Copy the planes into one float32 tensor over the chosen window, dropping each plane as it goes."""
+    height, width = part.size(window)
+    image = torch.zeros(len(planes), height, width) if window == "display" else torch.empty(len(planes), height, width)
+    dx0, dy0, dx1, dy1 = part.data_window
+    wx0, wy0 = (dx0, dy0) if window == "data" else part.display_window[:2]
+    x0, y0 = max(dx0, wx0), max(dy0, wy0)
+    x1, y1 = min(dx1, wx0 + width - 1), min(dy1, wy0 + height - 1)
+    for index in range(len(planes)):
+        plane, planes[index] = planes[index], None
+        if x1 >= x0 and y1 >= y0:
+            source = torch.as_tensor(plane[y0 - dy0:y1 - dy0 + 1, x0 - dx0:x1 - dx0 + 1])
+            image[index, y0 - wy0:y1 - wy0 + 1, x0 - wx0:x1 - wx0 + 1].copy_(source)
+        del plane
+    return image
+
+
+def _convert(image: torch.Tensor, matrix: torch.Tensor) -> None:
+    matrix = matrix.float()
+    for top in range(0, image.shape[1], _STRIP_LINES):
+        strip = image[:3, top:top + _STRIP_LINES]
+        strip.copy_(torch.einsum("ij,jhw->ihw", matrix, strip))
+
+
+def read_exr(path, to_rec709: bool = False, *, adaptation: str = "bradford", layer: str | None = None,
+             view: str | None = None, part: int | str | None = None, window: str = "data",
+             max_pixels: int = MAX_PIXELS, max_bytes: int = MAX_BYTES) -> torch.Tensor:
+    """Read one layer of an OpenEXR file as a float32 tensor ``(C, H, W)``.
+
+    By default this is what OpenEXR's RGBA interface gives: the main layer (channels ``R``, ``G``,
+    ``B``, ``A``, or luminance/chroma ``Y``, ``RY``, ``BY``) of the default view (the first of a
+    ``multiView`` attribute) of the first part that has one, as ``(3, H, W)`` RGB or ``(4, H, W)``
+    RGBA; missing R, G or B are zeros, luminance/chroma is reconstructed to RGB as OpenEXR does
+    (see :mod:`torchgrade.io.exr.yca`), a Y-only file is grey. Other channels (``mask.R``,
+    ``left.R``) never mix in. :func:`exr_info` lists what a file holds.
+
+    Args:
+        to_rec709: convert RGB from the file's ``chromaticities`` to linear Rec.709 (files without
+            the attribute are Rec.709 already); ``adaptation`` says how the white is moved to D65:
+            ``"bradford"`` (ACES convention) or ``"none"`` (see ``ADAPTATIONS``).
+        layer: a layer name (``"diffuse"``); a colour layer reads as above, any other as all its
+            channels in name order. view: a view of a multi-view file or part (``"left"``).
+        part: a part index or name; by default the first part holding the layer in the view.
+        window: ``"data"`` (the pixels stored) or ``"display"`` (the frame: outside the data window
+            is 0, so frames of a sequence share one size).
+        max_pixels, max_bytes: the budget checked from the headers before decoding (ValueError).
+
+    Raises ``ValueError`` for damaged, deep, over-budget files and for a missing layer, view or part.
+
+    Examples:
+        >>> import pathlib, tempfile, torch
+        >>> from torchgrade.io import write_exr
+        >>> path = pathlib.Path(tempfile.mkdtemp()) / "rgba.exr"
+        >>> write_exr(path, torch.ones(4, 2, 3))
+        >>> read_exr(path).shape, read_exr(path, window="display").shape
+        (torch.Size([4, 2, 3]), torch.Size([4, 2, 3]))
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no such EXR file: {path}")
+    check_choice("window", window, WINDOWS)
+    check_choice("adaptation", adaptation, ADAPTATIONS)
+    parts = exr_info(path)
+    chosen, channels = _choose(path, parts, part, view, layer)
+    colour = channels.keys() & {"R", "G", "B", "Y"}
+    count = (3 + ("A" in channels)) if colour else len(channels)
+    check_budget(path, parts, chosen, window, count, max_pixels, max_bytes)
+    matrix = to_rec709_matrix(chosen.chromaticities, adaptation) if to_rec709 and colour and chosen.chromaticities else None
+    pixels = decode(path, parts)[chosen.index]
+    image = _place(_planes(path, chosen, channels, pixels), chosen, window)
+    if matrix is not None:
+        _convert(image, matrix)
+    return image
