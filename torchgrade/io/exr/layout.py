@@ -30,6 +30,16 @@ class ExrPart:
     name to its ``(x_sampling, y_sampling)``. Windows are ``(x_min, y_min, x_max, y_max)``, inclusive.
     ``chromaticities`` is ``((xr, yr), (xg, yg), (xb, yb), (xw, yw))`` or ``None`` (Rec.709 by the
     OpenEXR convention).
+
+    Examples:
+        >>> import tempfile, pathlib, torch
+        >>> from torchgrade.io import exr_info, write_exr
+        >>> with tempfile.TemporaryDirectory() as folder:
+        ...     path = pathlib.Path(folder) / "frame.exr"
+        ...     write_exr(path, torch.zeros(3, 2, 4))
+        ...     part = exr_info(path)[0]
+        >>> part.data_window
+        (0, 0, 3, 1)
     """
 
     index: int

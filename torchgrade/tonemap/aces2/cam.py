@@ -71,7 +71,13 @@ def cone_expand(v: torch.Tensor) -> torch.Tensor:
 
 @dataclass(frozen=True)
 class JMhParams:
-    """float64 constants of the CAM for one RGB space (see :func:`jmh_params`)."""
+    """float64 constants of the CAM for one RGB space (see :func:`jmh_params`).
+
+    Examples:
+        >>> from torchgrade.color import AP1_CHROMATICITIES
+        >>> tuple(jmh_params(AP1_CHROMATICITIES).rgb_to_cone.shape)
+        (3, 3)
+    """
 
     rgb_to_cone: torch.Tensor
     cone_to_rgb: torch.Tensor

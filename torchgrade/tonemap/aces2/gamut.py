@@ -146,7 +146,14 @@ def count_below(table: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
 
 
 class GamutParams:
-    """Per-peak constants and hue tables of the gamut compression (see :mod:`.tables`)."""
+    """Per-peak constants and hue tables of the gamut compression (see :mod:`.tables`).
+
+    Examples:
+        >>> from torchgrade.tonemap.aces2.transform import Aces2Output
+        >>> params = Aces2Output(100.0, "rec709").gamut
+        >>> params.hues.ndim, params.cusps.shape[-1]
+        (1, 3)
+    """
 
     def __init__(self, limit_j_max, mid_j, focus_dist, lower_inv, model_gamma_inv, hues, cusps, reach):
         self.limit_j_max, self.mid_j, self.focus_dist = limit_j_max, mid_j, focus_dist

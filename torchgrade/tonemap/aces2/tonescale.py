@@ -20,7 +20,12 @@ __all__ = ["ToneScale", "tonescale_params", "daniele_tonescale", "ChromaParams",
 
 @dataclass(frozen=True)
 class ToneScale:
-    """Constants of the curve for one peak luminance (cd/m²)."""
+    """Constants of the curve for one peak luminance (cd/m²).
+
+    Examples:
+        >>> tonescale_params(1000.0).peak
+        1000.0
+    """
 
     peak: float
     s_2: float
@@ -73,7 +78,12 @@ def daniele_tonescale(y: torch.Tensor, t: ToneScale) -> torch.Tensor:
 
 @dataclass(frozen=True)
 class ChromaParams:
-    """Chroma compression constants for one peak luminance."""
+    """Chroma compression constants for one peak luminance.
+
+    Examples:
+        >>> chroma_params(tonescale_params(100.0)).sat
+        1.3
+    """
 
     sat: float
     sat_thr: float

@@ -32,7 +32,13 @@ ENCODINGS = ("linear", "bt1886", "pq")
 
 
 class Aces2Output:
-    """Float64 constants and hue tables for one (peak luminance, limiting primaries); see :func:`aces2_output`."""
+    """Float64 constants and hue tables for one (peak luminance, limiting primaries); see :func:`aces2_output`.
+
+    Examples:
+        >>> output = Aces2Output(100.0, "rec709")
+        >>> output.peak, output.limiting
+        (100.0, 'rec709')
+    """
 
     def __init__(self, peak_luminance: float, limiting_primaries: str):
         peak = float(peak_luminance)
