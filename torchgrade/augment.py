@@ -340,3 +340,6 @@ class RandomPostFX(IntensityAugmentationBase2D):
             settings.append("aces=True")
         settings += [f"input_space={self.input_space!r}", f"p={self.p}", f"same_on_batch={self.same_on_batch}"]
         return ", ".join(settings)
+
+
+torch.serialization.add_safe_globals([RandomPostFX])  # so torch.load(weights_only=True) reads a saved layer back
