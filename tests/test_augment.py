@@ -257,7 +257,7 @@ def test_pickles_and_runs_in_dataloader_workers():
     [
         (dict(contrast=(30.0, -30.0)), "contrast must be None or a"),
         (dict(contrast=(-150.0, 0.0)), r"contrast .* inside \[-100.0, 100.0\]"),
-        (dict(hue_shift=30.0), "hue_shift must be None or a"),
+        (dict(hue_shift=-30.0), "hue_shift must be None or a"),
         (dict(saturation=(0.0, float("nan"))), "saturation"),
         (dict(split_shadows=(0.0, 1.5)), "split_shadows"),
         (dict(bloom_scatter=(0.0, 0.5), bloom_mode="scattering"), "bloom_scatter"),
@@ -281,4 +281,4 @@ def test_bad_images_raise():
     with pytest.raises(TypeError, match="floating-point"):
         layer(torch.zeros(2, 3, 4, 4, dtype=torch.uint8))
     with pytest.raises(ValueError, match=r"\(B, 3, H, W\)"):
-        layer(torch.zeros(2, 2, 3, 4, 4))
+        layer(torch.zeros(1, 2, 2, 3, 4, 4))

@@ -36,73 +36,26 @@ and ``p < 1`` skipped samples stay scene-referred (to tone map every sample, fol
 
 from __future__ import annotations
 
-import math
+import inspect
 import numbers
+import threading
 
 import torch
+from kornia.augmentation import IntensityAugmentationBase2D
 from torch import nn
 
-from .bloom import BLOOM_MODES, Bloom, bloom
+from .augment_ranges import (BLOOM_CONTROLS, COLOUR_CONTROLS, GRADE_CONTROLS, INPUT_SPACES, checked_range,
+                             checked_tonemap, grade_identity, is_identity_range)
+from .bloom import BLOOM_MODES, bloom
 from .color import linear_to_srgb, srgb_to_linear
-from .core import check_image, to_input_dtype, working_dtype
+from .core import check_image, is_tracing, to_input_dtype, working_dtype
 from .grade import ColorGrade, color_grade
-from .tonemap import TONEMAP_MODES, tonemap
+from .tonemap import tonemap
 
 __all__ = ["RandomPostFX", "tonemap_per_sample", "GRADE_CONTROLS", "BLOOM_CONTROLS", "COLOUR_CONTROLS", "INPUT_SPACES"]
 
-GRADE_CONTROLS = (
-    "post_exposure",
-    "temperature",
-    "tint",
-    "contrast",
-    "split_shadows",
-    "split_highlights",
-    "split_balance",
-    "hue_shift",
-    "saturation",
-)
-"""The :func:`torchgrade.grade.color_grade` controls ``RandomPostFX`` samples, in Unity's order."""
-
-COLOUR_CONTROLS = ("split_shadows", "split_highlights")
-"""Controls sampled as an RGB colour: each channel drawn independently inside the range."""
-
-BLOOM_CONTROLS = {f"bloom_{name}": (name, Bloom.controls[name].range) for name in ("threshold", "intensity", "scatter")}
-"""Bloom controls: the argument of :func:`torchgrade.bloom.bloom` each one sets, and its range (``Bloom``'s own)."""
-
-INPUT_SPACES = ("linear", "srgb")
-
-
-def _checked_range(name: str, value, allowed: tuple) -> tuple | None:
-    """``value`` as a ``(min, max)`` pair of floats, or None; ``ValueError`` naming ``name`` otherwise."""
-    if value is None:
-        return None
-    low, high = allowed
-    message = f"{name} must be None or a (min, max) pair with min <= max inside [{low}, {high}], got {value!r}"
-    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 2:
-        raise ValueError(message)
-    if any(isinstance(v, bool) or not isinstance(v, numbers.Real) for v in value):
-        raise ValueError(message)
-    pair = (float(value[0]), float(value[1]))
-    if not (low <= pair[0] <= pair[1] <= high) or not all(math.isfinite(v) for v in pair):
-        raise ValueError(message)
-    return pair
-
-
-def _is_identity(name: str, pair: tuple) -> bool:
-    """True when a grading range is the single value at which the control changes nothing."""
-    identity = ColorGrade.controls[name].default
-    identity = identity[0] if isinstance(identity, tuple) else identity
-    return pair[0] == pair[1] == identity
-
-
-def _checked_tonemap(value) -> tuple:
-    """``tonemap`` as a tuple of mode names (empty for None)."""
-    if value is None:
-        return ()
-    modes = (value,) if isinstance(value, str) else tuple(value)
-    if not modes or any(mode not in TONEMAP_MODES for mode in modes):
-        raise ValueError(f"tonemap must be None, one of {TONEMAP_MODES} or a non-empty sequence of them, got {value!r}")
-    return modes
+SRGB_TOLERANCE = 1e-3
+"""How far above 1 an sRGB input may reach (rounding of an earlier step) before it is refused as 0..255 data."""
 
 
 def tonemap_per_sample(images: torch.Tensor, choice: torch.Tensor, modes: tuple) -> torch.Tensor:
@@ -123,14 +76,20 @@ def tonemap_per_sample(images: torch.Tensor, choice: torch.Tensor, modes: tuple)
     return mapped.index_select(0, torch.argsort(order))
 
 
-class RandomPostFX(nn.Module):
-    """Random per-sample post-processing of a batch ``(B, 3, H, W)`` (or one image ``(3, H, W)``).
+class RandomPostFX(IntensityAugmentationBase2D):
+    """Random per-sample post-processing of a batch ``(B, 3, H, W)``, one image ``(3, H, W)`` or clips ``(B, T, 3, H, W)``.
+
+    A kornia intensity augmentation: inside ``kornia.augmentation.AugmentationSequential`` its draw is
+    recorded and replayed like ``ColorJiggle``'s, ``inverse()`` leaves it out (it moves no pixel) and
+    masks, boxes and keypoints pass through untouched.
 
     Args:
         post_exposure, temperature, tint, contrast, split_balance, hue_shift, saturation: ``(min, max)``
-            ranges in :class:`torchgrade.ColorGrade`'s units (stops; -100..100; hue in degrees), or None.
+            ranges in :class:`torchgrade.ColorGrade`'s units (stops; -100..100; hue in degrees), a
+            magnitude ``x`` meaning ``(-x, x)`` as in kornia, or None.
         split_shadows, split_highlights: ``(min, max)`` range of each gamma-space channel of the
-            split-toning colours, inside [0, 1] (0.5 is neutral), or None. ``split_balance`` needs one of them.
+            split-toning colours, inside [0, 1] (0.5 is neutral; a magnitude ``x`` is ``0.5 ± x``), or None.
+            ``split_balance`` needs one of them.
         bloom_threshold, bloom_intensity, bloom_scatter: ``(min, max)`` ranges of :func:`torchgrade.bloom.bloom`'s
             controls (threshold in gamma space), or None. Bloom runs when any of them is given (unless
             ``bloom_intensity=(0, 0)``); the others keep ``Bloom``'s defaults. ``bloom_scatter`` needs ``bloom_mode="scattering"``.
@@ -138,22 +97,29 @@ class RandomPostFX(nn.Module):
         tonemap: None (no tone mapping), a mode of :data:`torchgrade.TONEMAP_MODES`, or a sequence of
             modes chosen uniformly per sample.
         aces: grade in ACEScc/ACEScg as :class:`torchgrade.ColorGrade` does.
-        input_space: ``"linear"`` (scene-referred HDR) or ``"srgb"`` (sRGB-encoded LDR in [0, 1]).
+        input_space: ``"linear"`` (scene-referred HDR) or ``"srgb"`` (sRGB-encoded LDR in [0, 1]; 0..255
+            floats raise ``ValueError`` rather than being clamped).
         p: probability that a sample is changed; the others are returned unchanged.
         same_on_batch: one draw for the whole batch (kornia's meaning, ``p`` included).
         keepdim: return a single ``(3, H, W)`` image as ``(3, H, W)`` rather than ``(1, 3, H, W)``.
+        same_on_frame: for clips ``(B, T, 3, H, W)``, one look per clip (kornia ``VideoSequential``'s
+            default) rather than one per frame; parameters then hold ``B`` rows, else ``B * T``.
 
     ``forward(x, generator=None, params=None)``: parameters are drawn from ``generator`` (a
     ``torch.Generator``; the global generator when None), or taken from ``params`` to replay a
-    previous draw. The parameters used are kept in ``last_params`` (see :meth:`sample_params`).
+    previous draw. The parameters used are kept in ``last_params`` (see :meth:`sample_params`), one
+    copy per thread, so threads sharing the layer each read back their own draw; to pass a draw
+    along explicitly, draw it with :meth:`sample_params` and give it as ``params``.
 
     Examples:
-        >>> augment = RandomPostFX(contrast=(-30, 30), saturation=(-20, 20), tonemap="neutral")
+        >>> augment = RandomPostFX(contrast=(-30, 30), saturation=20, tonemap="neutral")
         >>> images = torch.rand(4, 3, 8, 8) * 4
         >>> out = augment(images, generator=torch.Generator().manual_seed(0))
         >>> sorted(augment.last_params)
         ['batch_prob', 'contrast', 'saturation', 'tonemap']
         >>> torch.equal(augment(images, params=augment.last_params), out)  # replayed exactly
+        True
+        >>> RandomPostFX.from_config(augment.to_config()).ranges == augment.ranges
         True
     """
 
@@ -178,24 +144,24 @@ class RandomPostFX(nn.Module):
         p: float = 1.0,
         same_on_batch: bool = False,
         keepdim: bool = False,
+        same_on_frame: bool = True,
     ):
-        super().__init__()
         given = dict(locals())  # the range arguments, by name
-        grade_ranges = {name: _checked_range(name, given[name], ColorGrade.controls[name].range) for name in GRADE_CONTROLS}
-        self.grade_ranges = {name: r for name, r in grade_ranges.items() if r is not None and not _is_identity(name, r)}
-        bloom_ranges = {name: _checked_range(name, given[name], allowed) for name, (_, allowed) in BLOOM_CONTROLS.items()}
+        super().__init__(p=p, same_on_batch=bool(same_on_batch), keepdim=bool(keepdim))
+        grade_ranges = {name: checked_range(name, given[name], ColorGrade.controls[name].range, grade_identity(name))
+                        for name in GRADE_CONTROLS}
+        self.grade_ranges = {name: r for name, r in grade_ranges.items() if r is not None and not is_identity_range(name, r)}
+        bloom_ranges = {name: checked_range(name, given[name], allowed) for name, (_, allowed) in BLOOM_CONTROLS.items()}
         self.bloom_ranges = {name: r for name, r in bloom_ranges.items() if r is not None}
         if self.bloom_ranges.get("bloom_intensity") == (0.0, 0.0):
             self.bloom_ranges = {}
         self.bloom_mode = bloom_mode
-        self.tonemap = _checked_tonemap(tonemap)
+        self.tonemap = checked_tonemap(tonemap)
         self.aces = bool(aces)
         self.input_space = input_space
-        self.p = p
-        self.same_on_batch = bool(same_on_batch)
-        self.keepdim = bool(keepdim)
+        self.same_on_frame = bool(same_on_frame)
         self._check_settings()
-        self.last_params: dict | None = None
+        self._local = threading.local()
 
     def _check_settings(self) -> None:
         if self.bloom_mode not in BLOOM_MODES:
@@ -245,20 +211,31 @@ class RandomPostFX(nn.Module):
             params["tonemap"] = (uniform[:, -1] * len(self.tonemap)).long().clamp_max(len(self.tonemap) - 1)
         return params
 
+    def forward_parameters(self, batch_shape) -> dict:
+        """kornia's hook: the draw for a batch of ``batch_shape[0]`` images, from the global generator, with
+        the input shape kornia's mask and box handlers read."""
+        return {**self.sample_params(batch_shape[0]), "forward_input_shape": torch.tensor(tuple(batch_shape))}
+
+    @property
+    def last_params(self) -> dict | None:
+        """The parameters of this thread's last call (None before it has one)."""
+        return getattr(self._local, "params", None)
+
     def _param_names(self) -> set:
         return {"batch_prob", *self.ranges, *(("tonemap",) if self.tonemap else ())}
 
-    def _checked_params(self, params: dict, images: torch.Tensor) -> dict:
+    def _checked_params(self, params: dict, rows: int, device) -> dict:
         """Replayed parameters, checked against this layer's controls and the batch, on the images' device."""
         expected = self._param_names()
+        if isinstance(params, dict):
+            params = {name: value for name, value in params.items() if name != "forward_input_shape"}  # kornia's, unused
         if not isinstance(params, dict) or set(params) != expected:
             given = sorted(params) if isinstance(params, dict) else type(params).__name__
             raise ValueError(f"params must be a dict with keys {sorted(expected)} (see last_params), got {given}")
-        batch = images.shape[0]
         for name, value in params.items():
-            if not isinstance(value, torch.Tensor) or value.dim() == 0 or value.shape[0] != batch:
-                raise ValueError(f"params[{name!r}] must be a tensor with {batch} per-sample values, got {value!r}")
-        return {name: value.to(images.device) for name, value in params.items()}
+            if not isinstance(value, torch.Tensor) or value.dim() == 0 or value.shape[0] != rows:
+                raise ValueError(f"params[{name!r}] must be a tensor with {rows} per-sample values, got {value!r}")
+        return {name: value.to(device) for name, value in params.items()}
 
     def transform(self, images: torch.Tensor, params: dict) -> torch.Tensor:
         """Apply ``params`` to every sample of ``images`` (B, 3, H, W), ignoring ``batch_prob``."""
@@ -275,22 +252,83 @@ class RandomPostFX(nn.Module):
             x = linear_to_srgb(x).clamp(0.0, 1.0)
         return to_input_dtype(x, images)
 
-    def forward(self, x: torch.Tensor, generator: torch.Generator | None = None, params: dict | None = None) -> torch.Tensor:
-        check_image(x)
-        if x.dim() not in (3, 4):
-            raise ValueError(f"RandomPostFX takes (3, H, W) or (B, 3, H, W) images, got shape {tuple(x.shape)}")
-        images = x if x.dim() == 4 else x.unsqueeze(0)
-        if params is None:
-            params = self.sample_params(images.shape[0], generator, images.device)
-        else:
-            params = self._checked_params(params, images)
-        self.last_params = params
+    def apply_transform(self, input: torch.Tensor, params: dict, flags: dict, transform=None) -> torch.Tensor:
+        """kornia's hook: :meth:`transform`."""
+        return self.transform(input, params)
+
+    def _check_display_range(self, images: torch.Tensor) -> None:
+        """Refuse 0..255 floats given as sRGB (kornia would clamp them to white); reads one number back."""
+        if self.input_space == "srgb" and not is_tracing():
+            peak = float(images.detach().max())
+            if peak > 1.0 + SRGB_TOLERANCE:
+                raise ValueError(f'input_space="srgb" takes images in [0, 1], got values up to {peak:g}: '
+                                 "divide 0..255 images by 255")
+
+    def _graded(self, images: torch.Tensor, params: dict) -> torch.Tensor:
         if self.p == 0 or self.is_identity:
-            out = images
+            return images
+        self._check_display_range(images)
+        applied = params["batch_prob"].bool().reshape(-1, 1, 1, 1)
+        return torch.where(applied, self.transform(images, params), images)
+
+    def forward(self, x: torch.Tensor, generator: torch.Generator | None = None, params: dict | None = None,
+                **container_args) -> torch.Tensor:
+        """Grade ``x`` with a new draw (or ``params``). ``container_args`` (``data_keys`` ...) are what
+        kornia's containers pass along with an image; an intensity layer needs none of them."""
+        check_image(x)
+        if x.dim() not in (3, 4, 5):
+            raise ValueError(f"RandomPostFX takes (3, H, W), (B, 3, H, W) or (B, T, 3, H, W) images, got shape {tuple(x.shape)}")
+        images = x if x.dim() == 4 else x.reshape(-1, *x.shape[-3:])
+        clips, frames = (x.shape[0], x.shape[1]) if x.dim() == 5 else (images.shape[0], 1)
+        rows = clips if self.same_on_frame else images.shape[0]
+        if params is None:
+            params = self.sample_params(rows, generator, images.device)
         else:
-            applied = params["batch_prob"].reshape(-1, 1, 1, 1)
-            out = torch.where(applied, self.transform(images, params), images)
-        return out.squeeze(0) if self.keepdim and x.dim() == 3 else out
+            params = self._checked_params(params, rows, images.device)
+        self._local.params = params
+        self._commit_state(params=params)
+        per_image = params if rows == images.shape[0] else {k: v.repeat_interleave(frames, 0) for k, v in params.items()}
+        out = self._graded(images, per_image)
+        if x.dim() == 5 or (self.keepdim and x.dim() == 3):
+            return out.reshape(x.shape)
+        return out
+
+    def to_config(self) -> dict:
+        """The layer's arguments that differ from their defaults, as plain values (JSON-ready).
+
+        ``RandomPostFX.from_config(layer.to_config())`` builds a layer that draws the same looks.
+        """
+        config = {name: list(pair) for name, pair in self.ranges.items()}
+        settings = {"bloom_mode": self.bloom_mode if self.bloom_ranges else "additive",
+                    "tonemap": list(self.tonemap) or None, "aces": self.aces, "input_space": self.input_space,
+                    "p": self.p, "same_on_batch": self.same_on_batch, "keepdim": self.keepdim,
+                    "same_on_frame": self.same_on_frame}
+        defaults = {"bloom_mode": "additive", "tonemap": None, "aces": False, "input_space": "linear", "p": 1.0,
+                    "same_on_batch": False, "keepdim": False, "same_on_frame": True}
+        config.update({name: value for name, value in settings.items() if value != defaults[name]})
+        return config
+
+    @classmethod
+    def from_config(cls, config: dict) -> "RandomPostFX":
+        """Build the layer from a dict of its arguments (what :meth:`to_config` returns)."""
+        if not isinstance(config, dict):
+            raise ValueError(f"a RandomPostFX config must be a dict, got {type(config).__name__}")
+        known = set(inspect.signature(cls).parameters)
+        unknown = sorted(set(config) - known)
+        if unknown:
+            raise ValueError(f"unknown RandomPostFX argument(s) {unknown}; known: {', '.join(sorted(known))}")
+        return cls(**config)
+
+    def __getstate__(self) -> dict:
+        state = dict(super().__getstate__())
+        state.pop("_local", None)  # per-thread draws stay with their thread: a copy starts without one
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        super().__setstate__(state)
+        self._local = threading.local()
+
+    __repr__ = nn.Module.__repr__  # kornia's own repr lists only p and same_on_batch
 
     def extra_repr(self) -> str:
         settings = [f"{name}={r}" for name, r in self.ranges.items()]
@@ -302,3 +340,6 @@ class RandomPostFX(nn.Module):
             settings.append("aces=True")
         settings += [f"input_space={self.input_space!r}", f"p={self.p}", f"same_on_batch={self.same_on_batch}"]
         return ", ".join(settings)
+
+
+torch.serialization.add_safe_globals([RandomPostFX])  # so torch.load(weights_only=True) reads a saved layer back

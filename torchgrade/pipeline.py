@@ -41,7 +41,7 @@ from .lut import INTERPOLATIONS, LUT3D, bake_lut
 from .primary import PrimaryGrade
 from .tonemap import ToneMap
 
-__all__ = ["PostFX", "STAGES", "stage_keys", "build_stage", "is_identity_stage"]
+__all__ = ["PostFX", "STAGES", "SAFE_GLOBALS", "stage_keys", "build_stage", "is_identity_stage"]
 
 STAGES = {"exposure": AutoExposure, "bloom": Bloom, "grade": ColorGrade, "primary": PrimaryGrade, "tonemap": ToneMap, "dither": Dither}
 """The configurable stages, in the order they run, and their classes."""
@@ -156,6 +156,46 @@ class PostFX(nn.Module):
             config[stage] = module.to_config()
         return config
 
+    def get_extra_state(self) -> dict:
+        """What ``state_dict()`` carries beside the tensors: each stage's config and which tensors are learnable.
+
+        Plain values only, so ``torch.load(path, weights_only=True)`` reads it back and
+        ``PostFX().load_state_dict(state)`` rebuilds the look (a look baked to a LUT loads into a look
+        built with a LUT of the same size).
+        """
+        return {
+            "stages": {name: module.to_config() for name, module in self.stages().items() if name != "lut"},
+            "parameters": sorted(name for name, _ in self.named_parameters()),
+            "interpolation": self.interpolation,
+        }
+
+    def set_extra_state(self, state: dict) -> None:
+        self.interpolation = state["interpolation"]
+
+    def _load_from_state_dict(self, state_dict, prefix, *args) -> None:
+        extra = state_dict.get(prefix + "_extra_state")
+        if isinstance(extra, dict) and self.lut is None:
+            for stage in STAGES:
+                config = extra["stages"].get(stage)
+                setattr(self, stage, None if config is None else self._saved_stage(stage, config, extra, state_dict, prefix))
+        super()._load_from_state_dict(state_dict, prefix, *args)
+
+    @staticmethod
+    def _saved_stage(stage: str, config: dict, extra: dict, state_dict: dict, prefix: str) -> nn.Module:
+        """A stage rebuilt from its saved config, its own tensors (learnable ones as parameters) at their saved shapes."""
+        module = build_stage(stage, config)
+        start = f"{prefix}{stage}."
+        for key, value in state_dict.items():
+            name = key[len(start):]
+            if not key.startswith(start) or "." in name:
+                continue  # nested modules are built by the stage itself
+            value = nn.Parameter(value.clone()) if f"{stage}.{name}" in extra["parameters"] else value.clone()
+            if name in getattr(module, "_control_names", ()):
+                module.set_param(name, value)
+            else:
+                setattr(module, name, value)
+        return module
+
     def stages(self) -> dict:
         """The built stages by name, in the order they run (``"lut"`` for a baked look)."""
         names = ("exposure", "bloom", "grade", "primary", "tonemap", "lut", "dither")
@@ -227,3 +267,10 @@ class PostFX(nn.Module):
 
     def extra_repr(self) -> str:
         return f"interpolation={self.interpolation!r}" if self.lut is not None else ""
+
+
+SAFE_GLOBALS = (PostFX, LUT3D, *STAGES.values())
+"""The classes a saved look is made of. Registered with ``torch.serialization.add_safe_globals`` when
+torchgrade is imported, so ``torch.load(path, weights_only=True)`` reads back a ``torch.save(look)``."""
+
+torch.serialization.add_safe_globals(list(SAFE_GLOBALS))

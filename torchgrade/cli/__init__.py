@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from .. import __version__
 from .bake import add_bake
 from .demo import add_demo
 from .export import add_export
@@ -25,6 +26,7 @@ SUBCOMMANDS = (add_demo, add_grade, add_bake, add_export)
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="torchgrade", description="Differentiable HDR post-processing.")
+    parser.add_argument("--version", action="version", version=f"torchgrade {__version__}")
     commands = parser.add_subparsers(dest="command", required=True)
     for add in SUBCOMMANDS:
         add(commands)

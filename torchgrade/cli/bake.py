@@ -19,8 +19,7 @@ import torch
 
 from ..io import read_exr, write_cube
 from ..lut import bake_lut, srgb_code_error
-from ..pipeline import PostFX
-from .common import GRADING_FLAGS, add_grading_flags, grade_from_args, stages_label
+from .common import add_grading_flags, look_from_args, stages_label
 
 __all__ = ["run_bake", "add_bake"]
 
@@ -33,17 +32,6 @@ def _lut_size(text: str):
         return int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"must be an integer (points per axis) or auto, got {text!r}") from None
-
-
-def _look_to_bake(args: argparse.Namespace) -> PostFX:
-    """The look to bake: from ``--config``, or from the grading flags."""
-    if args.config is None:
-        grade, tonemap = grade_from_args(args)
-        return PostFX(grade=grade, tonemap=tonemap)
-    given = [name for name in (*GRADING_FLAGS, "tonemap") if getattr(args, name) is not None]
-    if given:
-        raise ValueError(f"give --config or grading flags, not both (got --config and {', '.join('--' + n.replace('_', '-') for n in given)})")
-    return PostFX.from_config(args.config)
 
 
 def _check_bake_arguments(args: argparse.Namespace) -> None:
@@ -62,7 +50,7 @@ def _check_bake_arguments(args: argparse.Namespace) -> None:
 def run_bake(args: argparse.Namespace) -> str:
     """Check the arguments, bake, write the ``.cube``; the line to print (with the error on ``--scene``)."""
     _check_bake_arguments(args)
-    look = _look_to_bake(args)
+    look = look_from_args(args)
     transform = look.per_pixel_stages()
     live = [name for name in look.stages() if name not in ("grade", "primary", "tonemap")]
     scene = None

@@ -21,8 +21,10 @@ from .. import TONEMAP_MODES, ColorGrade, ToneMap
 from ..color import linear_to_srgb
 from ..io import write_exr
 from ..io.atomic import atomic_write
+from ..pipeline import PostFX
 
-__all__ = ["GRADING_FLAGS", "write_png", "write_image", "stages_label", "grade_from_args", "add_grading_flags"]
+__all__ = ["GRADING_FLAGS", "write_png", "write_image", "stages_label", "grade_from_args", "given_grading_flags", "look_from_args",
+           "add_grading_flags"]
 
 GRADING_FLAGS = {
     "post_exposure": "stops",
@@ -64,6 +66,22 @@ def grade_from_args(args: argparse.Namespace) -> nn.Sequential:
     controls = {name: getattr(args, name) for name in GRADING_FLAGS if getattr(args, name) is not None}
     tonemap = args.tonemap or "aces"
     return nn.Sequential(ColorGrade(aces=tonemap == "aces", **controls), ToneMap(tonemap))
+
+
+def given_grading_flags(args: argparse.Namespace) -> list:
+    """The grading flags set on the command line, as the user typed them (``--contrast``)."""
+    return ["--" + name.replace("_", "-") for name in (*GRADING_FLAGS, "tonemap") if getattr(args, name) is not None]
+
+
+def look_from_args(args: argparse.Namespace) -> PostFX:
+    """The look a subcommand applies: from ``--config``, or from the grading flags."""
+    if args.config is None:
+        grade, tonemap = grade_from_args(args)
+        return PostFX(grade=grade, tonemap=tonemap)
+    given = given_grading_flags(args)
+    if given:
+        raise ValueError(f"give --config or grading flags, not both (got --config and {', '.join(given)})")
+    return PostFX.from_config(args.config)
 
 
 def add_grading_flags(parser: argparse.ArgumentParser) -> None:

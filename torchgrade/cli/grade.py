@@ -1,4 +1,8 @@
-"""``torchgrade grade``: grade and tone map an OpenEXR image to PNG or EXR.
+"""``torchgrade grade``: grade and tone map an OpenEXR image, or a shot of them, to PNG, TIFF or EXR.
+
+A shot is several inputs, a folder, a glob or a ``name.%04d.exr`` pattern, graded in frame order with
+the look's eye adaptation carried from frame to frame; ``-o`` then names the frames with a pattern
+(``out.%04d.png``).
 
 Examples:
     >>> import tempfile, pathlib, torch
@@ -16,33 +20,84 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
+from functools import partial
 
-import torch
+from ..io import read_cube, read_exr
+from ..pipeline import PostFX
+from .common import add_grading_flags, given_grading_flags, look_from_args, stages_label
+from .outputs import BIT_DEPTHS, check_output, write_frame
+from .shot import grade_shot, output_paths, shot_frames
 
-from ..io import read_exr
-from .common import add_grading_flags, grade_from_args, stages_label, write_image
+__all__ = ["run_grade", "add_grade", "look_to_grade"]
 
-__all__ = ["run_grade", "add_grade"]
+
+def look_to_grade(args: argparse.Namespace) -> PostFX:
+    """The look ``grade`` applies: ``--config`` or the grading flags, with ``--lut`` in place of grade and tone mapping."""
+    if args.lut is None:
+        return look_from_args(args)
+    if given_grading_flags(args):
+        raise ValueError(f"--lut replaces grade and tone mapping: give it without {', '.join(given_grading_flags(args))}")
+    config = {} if args.config is None else PostFX.from_config(args.config).to_config()
+    if {"grade", "primary", "tonemap"} & set(config):
+        raise ValueError("--lut replaces grade and tone mapping: the --config look may keep only exposure, bloom and dither")
+    return PostFX(**config, lut=read_cube(args.lut))
+
+
+def _reader(args: argparse.Namespace):
+    """Read a frame's RGB as asked, over its display window so every frame of a shot keeps its frame."""
+    read = partial(read_exr, to_rec709=args.to_rec709, layer=args.layer, view=args.view, part=args.part, window="display")
+    return lambda path: read(path)[:3]
 
 
 def run_grade(args: argparse.Namespace) -> str:
-    """Grade ``args.input`` with the grading flags and write ``args.output``; the line to print."""
-    image = read_exr(args.input)[:3]
-    look = grade_from_args(args)
+    """Grade the frames ``args.inputs`` names and write them to ``args.output``; the line to print."""
+    depth = check_output(args.output, args.bit_depth, args.scene_referred)
+    frames = shot_frames(args.inputs)
+    outputs = output_paths(args.output, frames)
+    look = look_to_grade(args)
+    if args.scene_referred and look.lut is not None:
+        raise ValueError("--scene-referred stops before tone mapping, which --lut holds")
+    if args.jobs < 1 or args.fps <= 0:
+        raise ValueError(f"--jobs must be 1 or more and --fps above 0, got {args.jobs} and {args.fps}")
+    sizes = {}
+
+    def write(index, image):
+        sizes[index] = tuple(image.shape[1:])
+        write_frame(outputs[index], image, depth)
+
     start = time.perf_counter()
-    with torch.no_grad():
-        graded = look(image.unsqueeze(0))[0]
+    grade_shot(look, frames, _reader(args), write, 1.0 / args.fps, args.scene_referred, args.jobs, len(frames) > 1 and not args.quiet)
     elapsed = time.perf_counter() - start
-    write_image(Path(args.output), graded)
-    height, width = image.shape[1:]
-    return f"grade: {width}x{height}, {stages_label(look)}, {elapsed * 1000:.0f} ms -> {args.output}"
+    height, width = sizes[0]
+    if len(frames) == 1:
+        return f"grade: {width}x{height}, {stages_label(look)}, {elapsed * 1000:.0f} ms -> {args.output}"
+    return f"grade: {len(frames)} frames, {width}x{height}, {stages_label(look)}, {len(frames) / elapsed:.1f} fps -> {args.output}"
+
+
+def _add_shot_flags(grade: argparse.ArgumentParser) -> None:
+    grade.add_argument("--config", help="look JSON (PostFX config); without it, the grading flags below")
+    grade.add_argument("--lut", help=".cube 3D LUT applied in place of grade and tone mapping")
+    grade.add_argument("--fps", type=float, default=24.0, help="frame rate of the shot, for eye adaptation (default 24)")
+    grade.add_argument("--jobs", "-j", type=int, default=1, help="frames graded at once (looks without eye adaptation)")
+    grade.add_argument("--bit-depth", choices=sorted({d for depths in BIT_DEPTHS.values() for d in depths}),
+                       help="png: 8 (default) or 16; tif: 16 (default) or float; exr: half (default) or float")
+    grade.add_argument("--scene-referred", action="store_true",
+                       help="write the frame before tone mapping (after exposure, bloom and grade): .exr or float .tif")
+    grade.add_argument("--layer", help="EXR layer to read (default the RGB(A) layer)")
+    grade.add_argument("--view", help="view of a multi-view EXR")
+    grade.add_argument("--part", type=lambda text: int(text) if text.isdigit() else text,
+                       help="part of a multi-part EXR, by index or name")
+    grade.add_argument("--to-rec709", action="store_true", help="convert from the file's chromaticities to Rec.709")
+    grade.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
 
 
 def add_grade(commands) -> None:
     """The ``grade`` subcommand and its flags."""
-    grade = commands.add_parser("grade", help="grade and tone map an OpenEXR image")
-    grade.add_argument("input", help="scene-referred linear OpenEXR file")
-    grade.add_argument("--output", "-o", required=True, help=".png (sRGB, 8-bit) or .exr (display linear)")
+    grade = commands.add_parser("grade", help="grade and tone map an OpenEXR image or a shot of them")
+    grade.add_argument("inputs", nargs="+", metavar="input",
+                       help="scene-referred linear OpenEXR: files, folders, globs or name.%%04d.exr patterns")
+    grade.add_argument("--output", "-o", required=True,
+                       help=".png (sRGB), .tif (sRGB or float linear) or .exr (linear); out.%%04d.png for a shot")
+    _add_shot_flags(grade)
     add_grading_flags(grade)
     grade.set_defaults(run=run_grade)

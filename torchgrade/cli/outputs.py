@@ -1,0 +1,91 @@
+"""The image files ``grade`` writes: sRGB PNG (8 or 16 bits), TIFF (16-bit sRGB or 32-bit float linear) and
+linear OpenEXR, display-referred or, before tone mapping, scene-referred.
+
+Pillow writes 16-bit PNG only in greyscale, so 16-bit RGB PNG goes through ``pypng`` and TIFF through
+``tifffile`` (both in the ``torchgrade[formats]`` extra, imported only when such a file is asked for).
+
+Examples:
+    >>> check_output("shot.%04d.tif", bit_depth=None, scene_referred=False)
+    '16'
+    >>> check_output("shot.png", bit_depth="float", scene_referred=False)
+    Traceback (most recent call last):
+    ...
+    ValueError: --bit-depth float does not fit .png; .png takes 8, 16
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ..color import linear_to_srgb
+from ..io import write_exr
+from ..io.atomic import atomic_write
+from .common import write_png
+
+__all__ = ["BIT_DEPTHS", "check_output", "write_frame"]
+
+BIT_DEPTHS = {".png": ("8", "16"), ".tif": ("16", "float"), ".tiff": ("16", "float"), ".exr": ("half", "float")}
+"""The sample formats each output extension takes, its default first."""
+
+
+def check_output(path, bit_depth: str | None, scene_referred: bool) -> str:
+    """The bit depth ``path`` will be written with; ``ValueError`` for an extension, depth or space it cannot hold."""
+    suffix = Path(path).suffix.lower()
+    if suffix not in BIT_DEPTHS:
+        raise ValueError(f"output must end in .png or .exr, or .tif/.tiff, got {path}")
+    depths = BIT_DEPTHS[suffix]
+    depth = depths[0] if bit_depth is None else bit_depth
+    if depth not in depths:
+        raise ValueError(f"--bit-depth {depth} does not fit {suffix}; {suffix} takes {', '.join(depths)}")
+    if scene_referred and depth not in ("half", "float"):
+        raise ValueError(f"--scene-referred values exceed 1: write them to .exr or a float .tif, not {suffix} at {depth} bits")
+    return depth
+
+
+def _codes(display_linear: torch.Tensor, maximum: int) -> np.ndarray:
+    """sRGB-encoded integer codes ``(H, W, 3)`` of a display-referred linear image."""
+    encoded = linear_to_srgb(display_linear.clamp(0.0, 1.0)) * maximum
+    return np.ascontiguousarray(encoded.round().permute(1, 2, 0).cpu().numpy())
+
+
+def _write_png16(path: Path, display_linear: torch.Tensor) -> None:
+    import png
+
+    codes = _codes(display_linear, 65535).astype(np.uint16)
+    height, width = codes.shape[:2]
+    writer = png.Writer(width, height, greyscale=False, bitdepth=16)
+    rows = codes.reshape(height, width * 3)
+    atomic_write(path, lambda temporary: _save_with(temporary, lambda file: writer.write(file, rows)))
+
+
+def _save_with(temporary, write) -> None:
+    with open(temporary, "wb") as file:
+        write(file)
+
+
+def _write_tiff(path: Path, image: torch.Tensor, depth: str) -> None:
+    import tifffile
+
+    if depth == "float":
+        pixels = np.ascontiguousarray(image.detach().float().permute(1, 2, 0).cpu().numpy())
+    else:
+        pixels = _codes(image, 65535).astype(np.uint16)
+    atomic_write(path, lambda temporary: tifffile.imwrite(temporary, pixels, photometric="rgb"))
+
+
+def write_frame(path, image: torch.Tensor, depth: str) -> None:
+    """Write a ``(3, H, W)`` linear image to ``path`` in the format its extension and ``depth`` name.
+
+    Integer formats (PNG, 16-bit TIFF) are sRGB-encoded and clamped to [0, 1]; EXR and float TIFF stay linear.
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".exr":
+        write_exr(path, image, half=depth == "half")
+    elif suffix == ".png":
+        write_png(path, image) if depth == "8" else _write_png16(path, image)
+    else:
+        _write_tiff(path, image, depth)

@@ -1,0 +1,152 @@
+"""A shot: the frames ``grade`` reads (files, folders, globs, ``name.%04d.exr`` patterns) in frame order,
+where each one is written, and the per-frame function that grades them with the look's eye adaptation
+carried from frame to frame.
+
+Examples:
+    >>> import tempfile, pathlib, torch
+    >>> from torchgrade.io import write_exr
+    >>> folder = pathlib.Path(tempfile.mkdtemp())
+    >>> for number in (10, 9, 11):
+    ...     write_exr(folder / f"plate.{number:04d}.exr", torch.full((3, 2, 2), 0.18))
+    >>> [path.name for path in shot_frames([str(folder / "plate.%04d.exr")])]
+    ['plate.0009.exr', 'plate.0010.exr', 'plate.0011.exr']
+    >>> output_paths("out/graded.%04d.png", shot_frames([str(folder)]))[0]
+    PosixPath('out/graded.0009.png')
+"""
+
+from __future__ import annotations
+
+import glob
+import re
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import torch
+from tqdm import tqdm
+
+from ..pipeline import PostFX
+
+__all__ = ["shot_frames", "frame_number", "output_paths", "render_frame", "grade_shot"]
+
+PRINTF_FRAME = re.compile(r"%(0?\d*)d")
+"""A frame number in a file name, as ffmpeg, Nuke and OpenImageIO write it: ``%04d``, ``%d``."""
+
+
+def _frame_key(path: Path) -> tuple:
+    """Frame order: the name without its trailing digits, then the number (so 9 before 10)."""
+    match = re.search(r"(\d+)$", path.stem)
+    return (path.stem[: match.start()] if match else path.stem, int(match.group(1)) if match else -1, path.name)
+
+
+def _pattern_frames(path: Path) -> list:
+    width = PRINTF_FRAME.search(path.name).group(1)
+    digits = rf"\d{{{int(width)}}}" if width.startswith("0") else r"\d+"
+    parts = PRINTF_FRAME.split(path.name)
+    name = re.compile("".join(re.escape(part) if i % 2 == 0 else digits for i, part in enumerate(parts)) + "$")
+    folder = path.parent
+    found = [child for child in folder.iterdir() if name.match(child.name)] if folder.is_dir() else []
+    if not found:
+        raise FileNotFoundError(f"no frames match {path}")
+    return found
+
+
+def _expand(text: str) -> list:
+    path = Path(text)
+    if PRINTF_FRAME.search(path.name):
+        return sorted(_pattern_frames(path), key=_frame_key)
+    if path.is_dir():
+        found = [child for child in path.iterdir() if child.suffix.lower() == ".exr" and child.is_file()]
+        if not found:
+            raise FileNotFoundError(f"no EXR files in folder {path}")
+        return sorted(found, key=_frame_key)
+    if glob.has_magic(text):
+        found = [Path(name) for name in glob.glob(text) if Path(name).is_file()]
+        if not found:
+            raise FileNotFoundError(f"no files match {text}")
+        return sorted(found, key=_frame_key)
+    if not path.is_file():
+        raise FileNotFoundError(f"no such EXR file: {path}")
+    return [path]
+
+
+def shot_frames(inputs) -> list:
+    """The EXR files ``inputs`` name, each folder, glob or ``%04d`` pattern in frame order, in the order given.
+
+    Raises ``FileNotFoundError`` naming an input that names no file (a folder without EXR files says so).
+    """
+    return [frame for text in inputs for frame in _expand(text)]
+
+
+def frame_number(path: Path, index: int) -> int:
+    """The number a frame's output carries: its file name's trailing digits, else its place in the shot from 1.
+
+    Examples:
+        >>> frame_number(Path("plate.0042.exr"), 0), frame_number(Path("desk.exr"), 2)
+        (42, 3)
+    """
+    match = re.search(r"(\d+)$", path.stem)
+    return int(match.group(1)) if match else index + 1
+
+
+def output_paths(output: str, frames: list) -> list:
+    """Where each frame is written: ``output`` for a single frame, else ``output``'s ``%04d`` filled with its number."""
+    if not PRINTF_FRAME.search(Path(output).name):
+        if len(frames) > 1:
+            raise ValueError(f"{len(frames)} frames need an output pattern with a frame number, such as out.%04d.png; got {output}")
+        return [Path(output)]
+    folder, name = Path(output).parent, Path(output).name
+    paths = [folder / PRINTF_FRAME.sub(lambda match: f"%{match.group(1)}d" % frame_number(frame, i), name, count=1)
+             for i, frame in enumerate(frames)]
+    if len(set(paths)) < len(paths):
+        raise ValueError(f"two frames carry the same number, so would both write one file of {output}")
+    return paths
+
+
+def render_frame(look: PostFX, image: torch.Tensor, adapted, dt: float, scene_referred: bool = False) -> tuple:
+    """Grade one ``(3, H, W)`` frame: ``(image, adapted, dt) -> (output, adapted)``, stateless like ``PostFX.frame``.
+
+    ``adapted`` is the eye adaptation of the previous frame (None starts a shot). ``scene_referred`` stops
+    before tone mapping: exposure, bloom, grade and primary grade only.
+
+    Examples:
+        >>> look = PostFX(exposure={"metering": "mean"}, tonemap="aces")
+        >>> out, adapted = render_frame(look, torch.full((3, 2, 2), 0.36), None, 1 / 24)
+        >>> out.shape, round(adapted.item(), 2)
+        (torch.Size([3, 2, 2]), 0.36)
+    """
+    batch = image.unsqueeze(0)
+    with torch.no_grad():
+        if look.exposure is not None:
+            batch, adapted = look.exposure.frame(batch, adapted, dt)
+        if scene_referred:
+            for stage in (look.bloom, look.grade, look.primary):
+                batch = batch if stage is None else stage(batch)
+        else:
+            batch = look.finish(batch)
+    return batch[0], adapted
+
+
+def grade_shot(look: PostFX, frames: list, read, write, dt: float, scene_referred=False, jobs=1, progress=True) -> None:
+    """Read, grade and write every frame with a progress bar (frames, fps, ETA).
+
+    Eye adaptation runs in frame order, one frame after the other; a look without it may grade ``jobs``
+    frames at a time.
+    """
+    if jobs > 1 and look.exposure is not None:
+        raise ValueError("--jobs needs a look without eye adaptation: exposure carries from each frame to the next")
+    bar = tqdm(total=len(frames), unit="frame", disable=not progress, dynamic_ncols=True)
+
+    def one(index, adapted=None):
+        output, adapted = render_frame(look, read(frames[index]), adapted, dt, scene_referred)
+        write(index, output)
+        bar.update()
+        return adapted
+
+    with bar:
+        if jobs > 1:
+            with ThreadPoolExecutor(jobs) as pool:
+                list(pool.map(one, range(len(frames))))
+        else:
+            adapted = None
+            for index in range(len(frames)):
+                adapted = one(index, adapted)
