@@ -152,7 +152,7 @@ MALFORMED = {
     "empty domain": "DOMAIN_MIN 1 0 0\nDOMAIN_MAX 1 1 1\nLUT_3D_SIZE 2\n" + _table_rows(2),
     "non-finite domain": "DOMAIN_MIN 0 0 0\nDOMAIN_MAX inf 1 1\nLUT_3D_SIZE 2\n" + _table_rows(2),
     "shaper too large": "LUT_1D_SIZE 10000000\nLUT_3D_SIZE 2\n" + _table_rows(2),
-    "1D only": "LUT_1D_SIZE 2\n0 0 0\n1 1 1\n",
+    "1D only, truncated": "LUT_1D_SIZE 3\n0 0 0\n1 1 1\n",
     "empty": "",
 }
 
