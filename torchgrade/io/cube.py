@@ -224,7 +224,9 @@ def _keyword_numbers(keyword: str, rest: str, line: int, path) -> list:
     if len(words) != _KEYWORDS[keyword] or not all(_NUMBER.match(w) for w in words):
         raise ValueError(f"{path}: line {line}: {keyword} takes {_KEYWORDS[keyword]} number(s), got {rest[:80]!r}")
     numbers = [float(w) for w in words]
-    if not np.isfinite(np.float32(numbers)).all():
+    with np.errstate(over="ignore"):
+        finite = np.isfinite(np.float32(numbers)).all()
+    if not finite:
         raise ValueError(f"{path}: line {line}: {keyword} must be finite in float32, got {rest!r}")
     return numbers
 
@@ -251,7 +253,8 @@ def _check_header(header: dict, path):
 
 def _check_span(name: str, low, high, path) -> None:
     """Refuse a range whose width is not a positive normal float32: a lookup divides by it in float32."""
-    width = np.float32(high) - np.float32(low)
+    with np.errstate(over="ignore"):
+        width = np.float32(high) - np.float32(low)
     if not (np.isfinite(width).all() and (width >= np.finfo(np.float32).tiny).all()):
         raise ValueError(f"{path}: {name} must span a positive, finite float32 width, got {low} to {high}")
 
@@ -281,17 +284,37 @@ def _read_rows(blocks, sizes, path) -> np.ndarray:
         part = _block_rows(block, line, path)
         if filled + len(part) > rows:
             raise ValueError(f"{path}: line {_row_line(block, line, rows - filled)}: more than the {rows} data rows declared")
-        finite = np.isfinite(part).all(axis=1)
-        if not finite.all():
-            bad = _row_line(block, line, int(np.argmin(finite)))
-            raise ValueError(f"{path}: line {bad}: NaN, infinite or beyond float32 range")
         values[filled : filled + len(part)] = part
+        bad = _first_bad_row(values[: filled + len(part)], filled, shaper_size)
+        if bad is not None:
+            raise ValueError(f"{path}: line {_row_line(block, line, bad - filled)}: {_BAD_ROW[bad < shaper_size]}")
         filled += len(part)
         end_line = line + block.count(b"\n")
     if filled != rows:
         raise ValueError(f"{path}: the file ends at line {end_line} after {filled} of {rows} data rows "
                          f"({shaper_size} 1D + {table_size}³ 3D)")
     return values
+
+
+_BAD_ROW = {
+    False: "NaN, infinite or beyond float32 range",
+    True: "NaN, infinite, or the 1D entries so far span more than float32 holds",
+}
+
+
+def _first_bad_row(values: np.ndarray, start: int, shaper_size: int):
+    """The first row from ``start`` on that is not finite or, in the 1D section, widens the span past float32.
+
+    The span bound matters because the 1D lookup interpolates ``lower + t (upper - lower)``: entries
+    of -3e38 and 3e38 are finite, their difference is not, and ``0 × inf`` is NaN.
+    """
+    finite = np.isfinite(values[start:]).all(axis=1)
+    if start < shaper_size:
+        shaper = values[:shaper_size]
+        with np.errstate(over="ignore", invalid="ignore"):
+            span = np.maximum.accumulate(shaper) - np.minimum.accumulate(shaper)
+        finite[: len(shaper) - start] &= np.isfinite(span[start:]).all(axis=1)
+    return None if finite.all() else start + int(np.argmin(finite))
 
 
 def _block_rows(block: bytes, line: int, path) -> np.ndarray:

@@ -6,7 +6,8 @@ A reader that splits a whole file into Python strings needs tens of bytes per sh
 parser can hand each block to a vectorised reader and still report the line a problem is on.
 
 Lines may be arbitrarily long when they are comments (they are shortened to their ``#``, which keeps
-the line count); any other line longer than :data:`MAX_LINE_BYTES` is refused.
+the line count); any other line is refused once more than :data:`MAX_LINE_BYTES` of it are held
+waiting for its end, so memory stays within a block and a line.
 """
 
 from __future__ import annotations
@@ -29,12 +30,13 @@ _NOT_TEXT = re.compile(rb"[^\x20-\x7e\t\n\v\f\r]")
 def line_blocks(handle: BinaryIO, path, comment: bytes = b"#") -> Iterator[tuple]:
     """Yield ``(number of the block's first line, bytes)``; each block is whole lines, each ending in ``\\n``.
 
-    Raises ``ValueError`` naming the line for bytes that are not printable ASCII or whitespace or an over-long line that is not a comment.
+    A last line without a line end comes as a block of its own. Raises ``ValueError`` naming the line
+    for bytes that are neither printable ASCII nor whitespace, or for an over-long line that is not a comment.
 
     Examples:
         >>> import io
         >>> list(line_blocks(io.BytesIO(b"a\\r\\nb\\rc"), "x"))
-        [(1, b'a\\nb\\nc\\n')]
+        [(1, b'a\\nb\\n'), (3, b'c\\n')]
     """
     carry, line = b"", 1
     while True:
