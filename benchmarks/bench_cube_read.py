@@ -54,10 +54,10 @@ def timed_read(path: Path) -> dict:
 
 
 def comment_file(path: Path) -> None:
-    """A 256³ header followed by 200 MB of comment lines and no data."""
+    """A 256³ header and one data row followed by 200 MB of comment lines: all of it read as data lines."""
     line = b"# " + b"c" * 77 + b"\n"
     with open(path, "wb") as handle:
-        handle.write(b"LUT_3D_SIZE 256\n")
+        handle.write(b"LUT_3D_SIZE 256\n0 0 0\n")
         for _ in range(COMMENT_BYTES // (len(line) * 1024)):
             handle.write(line * 1024)
 
