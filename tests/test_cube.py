@@ -332,3 +332,10 @@ def test_a_comment_longer_than_any_line_limit_is_skipped_and_other_long_lines_re
     path.write_text("LUT_3D_SIZE 17\n" + " " * long + _table_rows(17))
     with pytest.raises(ValueError, match="line 2: longer than"):
         read_cube(path)
+
+
+def test_1d_file_with_a_constant_channel_keeps_that_constant(tmp_path):
+    path = tmp_path / "flat.cube"
+    path.write_text("LUT_1D_SIZE 2\n0 3e38 0.25\n1 3e38 0.25\n")
+    out = read_cube(path)(torch.rand(1, 3, 4, 4))
+    assert torch.all(out[:, 1] == np.float32(3e38)) and torch.all(out[:, 2] == 0.25)

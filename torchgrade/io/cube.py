@@ -21,9 +21,14 @@ tone mapper's final clip) is written as its table, whose entries may leave [0, 1
 file read back has no ``output_range``. After a reader's lookup the display's own clip to [0, 1]
 gives the same result as the original LUT.
 
+A 1D-only file (``LUT_1D_SIZE`` and no ``LUT_3D_SIZE``, as Resolve writes per-channel curves) is
+read as a ``"curve"`` shaper before a 2³ identity table on the curve's range (see :func:`read_cube`).
+
 Files are untrusted input: every size is checked against its limit and the amount of data is
-checked against the file size before anything large is allocated; malformed, truncated, non-finite
-or oversized files raise ``ValueError`` naming the problem.
+checked against the file size before anything large is allocated; the data are then read in blocks
+(:mod:`torchgrade.io.lines`) straight into the one float32 table, so a read holds little more than
+the table. Malformed, truncated, non-finite (in float32) or oversized files raise ``ValueError``
+naming the problem and its line.
 """
 
 from __future__ import annotations
@@ -162,13 +167,15 @@ def read_cube(path) -> LUT3D:
 def _curve_only(curve: torch.Tensor, curve_range) -> LUT3D:
     """A 1D transform as a LUT3D: the curve as shaper, then a 2³ table that is the identity on the curve's outputs.
 
-    The lattice domain is the curve's range per channel (widened where a channel is constant), so no
-    output is clipped and trilinear and tetrahedral lookups both reproduce the shaper's value.
+    The lattice domain is the curve's range per channel, so no output is clipped and trilinear and
+    tetrahedral lookups both reproduce the shaper's value. A constant channel's table is that constant
+    whatever the domain, which is then [0, 1] (widening its empty range could round back to empty).
     """
     low, high = curve.min(dim=0).values, curve.max(dim=0).values
-    high = torch.where(high > low, high, low + 1.0)
     table = identity_table(2) * (high - low) + low
-    return LUT3D(table, "curve", (low, high), curve=curve, curve_range=curve_range)
+    flat = high == low
+    domain = (torch.where(flat, 0.0, low), torch.where(flat, 1.0, high))
+    return LUT3D(table, "curve", domain, curve=curve, curve_range=curve_range)
 
 
 _KEYWORDS = {
@@ -183,10 +190,11 @@ _KEYWORDS = {
 """Keyword -> count of numbers it takes (``None``: free text)."""
 
 _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\Z")
-"""A decimal number as strtod reads it, without Python's extras (``1_0``, ``nan``, ``infinity``)."""
+"""A decimal number, without the extras Python's ``float`` takes (``1_0``, ``nan``, ``infinity``)."""
 
 _CONTENT_LINE = re.compile(rb"^[ \t]*[^#\s]", re.MULTILINE)
-_COMMENT_LINE = re.compile(rb"^[ \t]*#.*$", re.MULTILINE)
+_TRAILING_COMMENT = re.compile(rb"^[ \t]*[^#\s][^\n]*#", re.MULTILINE)
+"""A ``#`` after a row's numbers: numpy's reader would drop it, OpenColorIO and colour-science refuse it."""
 
 
 def _read_header(blocks, path):
@@ -323,15 +331,19 @@ def _block_rows(block: bytes, line: int, path) -> np.ndarray:
     numpy rejects ``1_0`` (which Python's ``float`` takes), and a row of two or four numbers; the
     line is then found by a slower scan that is only run on failure.
     """
-    text = _COMMENT_LINE.sub(b"", block) if b"#" in block else block
-    if text.isspace():
-        return np.empty((0, 3), dtype=np.float32)
+    if block.isspace() or block.count(b"\n#") + block.startswith(b"#") == block.count(b"\n"):
+        return np.empty((0, 3), dtype=np.float32)  # only blank or only comment lines, counted at memchr speed
+    if b"#" in block and _TRAILING_COMMENT.search(block):
+        raise ValueError(_bad_row_message(block, line, path))
     try:
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # 1e39 overflows float32 to inf: refused below with its line
-            part = np.loadtxt(io.BytesIO(text), dtype=np.float32, ndmin=2, comments=None)
+            # Blocks of only comments hold no rows; 1e39 overflows float32 to inf, refused later with its line.
+            warnings.simplefilter("ignore")
+            part = np.loadtxt(io.BytesIO(block), dtype=np.float32, ndmin=2, comments="#")
     except ValueError:
         part = None
+    if part is not None and part.size == 0:
+        return np.empty((0, 3), dtype=np.float32)
     if part is None or part.shape[1] != 3:
         raise ValueError(_bad_row_message(block, line, path))
     return part
