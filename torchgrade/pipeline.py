@@ -14,8 +14,10 @@ each holds the arguments of its stage (``tonemap`` may also be just a mode name)
      "grade": {"aces": true, "contrast": 20, "saturation": 10},
      "tonemap": {"mode": "aces"}}
 
-Unknown stages and keys, unknown modes and out-of-range values raise ``ValueError`` naming the key
-(``"unknown key 'grade.brightness'"``, ``"grade.contrast must lie in [-100.0, 100.0], got 150"``).
+Unknown stages and keys, unknown modes, values of the wrong JSON type and out-of-range values raise
+``ValueError`` naming the key (``"unknown key 'grade.brightness'"``, ``"grade.contrast must lie in
+[-100.0, 100.0], got 150"``). A list where a control takes one number (or one colour, one matrix) is
+per-sample, and becomes the tensor :meth:`PostFX.to_config` wrote it from (:mod:`torchgrade.config`).
 
 :meth:`PostFX.to_lut` bakes grade and tone mapping into one :class:`~torchgrade.lut.LUT3D` while
 exposure, bloom and dither (which depend on neighbouring pixels, the whole frame or the pixel's position)
@@ -26,7 +28,6 @@ from __future__ import annotations
 
 import copy
 import inspect
-import json
 from pathlib import Path
 from typing import Optional
 
@@ -156,6 +157,7 @@ class PostFX(nn.Module):
         rebuilds a per-sample look.
 
         Examples:
+            >>> import json
             >>> look = PostFX(grade=ColorGrade(contrast=torch.tensor([10.0, 20.0])))
             >>> PostFX.from_config(json.loads(json.dumps(look.to_config()))).grade.contrast
             tensor([10., 20.])
