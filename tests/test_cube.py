@@ -152,7 +152,7 @@ MALFORMED = {
     "empty domain": "DOMAIN_MIN 1 0 0\nDOMAIN_MAX 1 1 1\nLUT_3D_SIZE 2\n" + _table_rows(2),
     "non-finite domain": "DOMAIN_MIN 0 0 0\nDOMAIN_MAX inf 1 1\nLUT_3D_SIZE 2\n" + _table_rows(2),
     "shaper too large": "LUT_1D_SIZE 10000000\nLUT_3D_SIZE 2\n" + _table_rows(2),
-    "1D only": "LUT_1D_SIZE 2\n0 0 0\n1 1 1\n",
+    "1D only, truncated": "LUT_1D_SIZE 3\n0 0 0\n1 1 1\n",
     "empty": "",
 }
 
@@ -190,3 +190,152 @@ def test_failed_write_leaves_the_existing_file_untouched(tmp_path):
         write_cube(path, LUT3D(identity_table(2), shaper="logc"), shaper_size=1)
     assert path.read_text() == "original"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.cube"]
+
+
+# ---------------------------------------------------------------- the grammar other readers accept
+
+colour = pytest.importorskip("colour")
+
+ONE_D = "LUT_1D_SIZE 3\nLUT_1D_INPUT_RANGE -0.5 4\n0 0 0\n0.5 1.5 3\n2 2.5 5\n"
+"""A 1D-only file with an input range and outputs beyond [0, 1]: nothing may be clipped."""
+
+SPELLINGS = {
+    "LF": ONE_D,
+    "CRLF": ONE_D.replace("\n", "\r\n"),
+    "CR": ONE_D.replace("\n", "\r"),
+    "tabs": ONE_D.replace("LUT_1D_SIZE 3", "LUT_1D_SIZE\t3").replace("0.5 1.5 3", "0.5\t1.5 \t3"),
+    "long title": 'TITLE "' + "t" * 5000 + '"\n' + ONE_D,
+    "long comment": "#" + "c" * 5000 + "\n" + ONE_D,
+    "comment among rows": ONE_D.replace("0 0 0\n", "0 0 0\n   # a note\n\n"),
+    "no final line end": ONE_D[:-1],
+}
+
+
+@pytest.mark.parametrize("name", sorted(SPELLINGS))
+def test_1d_files_in_every_spelling_apply_like_colour_science(tmp_path, name):
+    path = tmp_path / "curve.cube"
+    path.write_bytes(SPELLINGS[name].encode())
+    rgb = np.random.default_rng(0).uniform(-0.5, 4.0, (64, 3))  # inside the input range: colour extrapolates, OCIO clamps
+    expected = colour.io.read_LUT(str(path)).apply(rgb)
+    image = torch.from_numpy(rgb.T.copy()).float().reshape(1, 3, 8, 8)
+    for interpolation in ("tetrahedral", "trilinear"):
+        ours = read_cube(path)(image, interpolation).reshape(3, -1).T.double().numpy()
+        np.testing.assert_allclose(ours, expected, atol=1e-5, rtol=0)
+
+
+def test_1d_file_applies_like_opencolorio(tmp_path):
+    path = unique_cube(tmp_path)
+    x = np.linspace(0.0, 1.0, 33)
+    rows = np.stack((x**2.2, np.sqrt(x) * 3.0, 1.0 - x), axis=1)  # a gamma, an HDR lift, a decreasing curve
+    with open(path, "w") as handle:
+        handle.write("LUT_1D_SIZE 33\nLUT_1D_INPUT_RANGE -0.25 2\n" + "".join(f"{r:.9g} {g:.9g} {b:.9g}\n" for r, g, b in rows))
+    image = torch.rand(1, 3, 32, 32) * 3.0 - 0.5
+    for interpolation in ("tetrahedral", "trilinear"):
+        torch.testing.assert_close(read_cube(path)(image, interpolation), ocio_apply(path, image, "trilinear"), atol=1e-4, rtol=0)
+
+
+def test_opencolorio_resolve_cube_with_crlf_and_tabs_reads_like_opencolorio(tmp_path):
+    path = _baked_by_opencolorio(tmp_path, "resolve_cube", True)
+    text = open(path).read().replace("\n", "\r\n").replace("LUT_3D_SIZE ", "LUT_3D_SIZE\t")
+    spelled = unique_cube(tmp_path)
+    open(spelled, "w", newline="").write(text)
+    image = torch.rand(1, 3, 16, 16) * 4.0 - 0.1
+    torch.testing.assert_close(read_cube(spelled)(image), ocio_apply(spelled, image, "tetrahedral"), atol=1e-4, rtol=0)
+
+
+# ---------------------------------------------------------------- errors name their line
+
+BAD_LINES = {
+    "underscore in a number": ("LUT_3D_SIZE 2\n" + _table_rows(2).replace("0.5 0.25 0.125", "1_0 0 0", 1), 2),
+    "beyond float32": ("LUT_3D_SIZE 2\n# x\n" + _table_rows(2).replace("0.5 0.25 0.125\n", "1e39 0 0\n", 2), 3),
+    "shaper beyond float32": ("LUT_1D_SIZE 2\nLUT_3D_SIZE 2\n0 0 0\n-1e39 1 1\n" + _table_rows(2), 4),
+    "shaper nan": ("LUT_1D_SIZE 2\nLUT_3D_SIZE 2\n0 0 0\nnan 1 1\n" + _table_rows(2), 4),
+    "four numbers": ("LUT_3D_SIZE 2\n\n" + _table_rows(2).replace("0.5 0.25 0.125", "0 0 0 0", 1), 3),
+    "trailing comment": ("LUT_3D_SIZE 2\n" + _table_rows(2).replace("0.5 0.25 0.125", "0 0 0 # x", 1), 2),
+    "one row too many": ("LUT_3D_SIZE 2\n" + _table_rows(2) + "0 0 0\n", 10),
+    "unknown keyword": ("TITLE \"a\"\nLUT_3D_SIZE 2\nLUT_3D_SIZ 2\n" + _table_rows(2), 3),
+    "size written 1_0": ("LUT_3D_SIZE 1_0\n" + _table_rows(2), 1),
+    "crlf and a bad row": ("LUT_3D_SIZE 2\r\n" + _table_rows(2).replace("\n", "\r\n").replace("0.5 0.25 0.125", "x", 1), 2),
+    "cr and a bad row": ("LUT_3D_SIZE 2\r\r" + _table_rows(2).replace("\n", "\r").replace("0.5 0.25 0.125", "x", 2), 3),
+    "non-ASCII": ("LUT_3D_SIZE 2\n" + _table_rows(2).replace("0.5 0.25 0.125", "0 0 \u00e9", 3), 2),
+    "control byte": ("LUT_3D_SIZE 2\n0\x1c0 0\n" + _table_rows(2), 2),
+}
+
+
+@pytest.mark.parametrize("name", sorted(BAD_LINES))
+def test_malformed_rows_raise_value_error_naming_the_line(tmp_path, name):
+    text, line = BAD_LINES[name]
+    path = tmp_path / "bad.cube"
+    path.write_bytes(text.encode())
+    with pytest.raises(ValueError, match=f"line {line}:"):
+        read_cube(path)
+
+
+RANGES = {
+    "1D range below float32's smallest step": "LUT_1D_SIZE 2\nLUT_1D_INPUT_RANGE 0 1e-50\nLUT_3D_SIZE 2\n0 0 0\n1 1 1\n",
+    "1D range wider than float32": "LUT_1D_SIZE 2\nLUT_1D_INPUT_RANGE -3e38 3e38\nLUT_3D_SIZE 2\n0 0 0\n1 1 1\n",
+    "3D domain below float32's smallest step": "DOMAIN_MIN 0 0 0\nDOMAIN_MAX 1 1e-50 1\nLUT_3D_SIZE 2\n",
+    "3D range beyond float32": "LUT_3D_SIZE 2\nLUT_3D_INPUT_RANGE 0 1e39\n",
+}
+
+
+@pytest.mark.parametrize("name", sorted(RANGES))
+def test_ranges_a_float32_lookup_cannot_divide_by_are_refused_at_read(tmp_path, name):
+    path = tmp_path / "range.cube"
+    path.write_text(RANGES[name] + _table_rows(2))
+    with pytest.raises(ValueError, match="RANGE|domain"):
+        read_cube(path)
+
+
+def test_extreme_shaper_entries_give_finite_lookups_or_are_refused(tmp_path):
+    """Shaper entries are lattice coordinates: a finite one clamps to the lattice's edge, unless two are
+    so far apart that interpolating between them overflows float32 (-3e38 to 3e38), which is refused."""
+    path = tmp_path / "shaper.cube"
+    path.write_text("LUT_1D_SIZE 3\nLUT_3D_SIZE 2\n-1e38 -1e38 -1e38\n0 0 0\n2e38 2e38 2e38\n" + _table_rows(2))
+    assert torch.isfinite(read_cube(path)(torch.rand(1, 3, 4, 4) * 2 - 0.5)).all()
+    path.write_text("LUT_1D_SIZE 3\nLUT_3D_SIZE 2\n-3e38 -3e38 -3e38\n0 0 0\n3e38 3e38 3e38\n" + _table_rows(2))
+    with pytest.raises(ValueError, match="line 5: .*span"):
+        read_cube(path)
+
+
+# ---------------------------------------------------------------- memory and long lines
+
+
+def test_reading_keeps_about_one_table_in_memory(tmp_path, monkeypatch):
+    import tracemalloc
+
+    from torchgrade.io import lines
+
+    path = unique_cube(tmp_path)
+    write_cube(path, LUT3D(torch.rand(48, 48, 48, 3)))
+    monkeypatch.setattr(lines, "BLOCK_BYTES", 1 << 16)  # small blocks, so the table dominates what a read holds
+    table_bytes = 48**3 * 3 * 4
+    tracemalloc.start()
+    try:
+        lut = read_cube(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert lut.size == 48 and peak < 1.5 * table_bytes
+
+
+def test_a_comment_longer_than_any_line_limit_is_skipped_and_other_long_lines_refused(tmp_path, monkeypatch):
+    from torchgrade.io import lines
+    from torchgrade.io.lines import MAX_LINE_BYTES
+
+    monkeypatch.setattr(lines, "BLOCK_BYTES", 1 << 16)  # the long lines span many reads, as in a large file
+
+    path = tmp_path / "long.cube"
+    long = 3 * MAX_LINE_BYTES // 2  # within the file-size allowance of a 17³ table
+    path.write_text("# " + "c" * long + "\nLUT_3D_SIZE 17\n" + _table_rows(17))
+    assert read_cube(path).size == 17
+    path.write_text("LUT_3D_SIZE 17\n" + " " * long + _table_rows(17))
+    with pytest.raises(ValueError, match="line 2: longer than"):
+        read_cube(path)
+
+
+def test_1d_file_with_a_constant_channel_keeps_that_constant(tmp_path):
+    path = tmp_path / "flat.cube"
+    path.write_text("LUT_1D_SIZE 2\n0 3e38 0.25\n1 3e38 0.25\n")
+    out = read_cube(path)(torch.rand(1, 3, 4, 4))
+    assert torch.all(out[:, 1] == np.float32(3e38)) and torch.all(out[:, 2] == 0.25)

@@ -37,7 +37,12 @@ __all__ = [
     "curve_is_identity",
     "check_curve",
     "stored_curve",
+    "MAX_CURVE_POINTS",
 ]
+
+MAX_CURVE_POINTS = 256
+"""Most control points a curve takes: a drawn grading curve has a handful; the bound keeps an untrusted
+config from building a million-point spline that every pixel then searches."""
 
 
 @dataclass(frozen=True)
@@ -186,7 +191,8 @@ def curve_is_identity(points, flat: Optional[float]) -> bool:
 
 def check_curve(name: str, points, periodic: bool = False) -> None:
     """Raise ``ValueError`` naming curve ``name`` unless its points are valid: ``x`` strictly increasing in
-    [0, 1] (periodic curves: [0, 1)), ``y`` in [0, 1]. None and no points are valid (identity).
+    [0, 1] (periodic curves: [0, 1)), ``y`` in [0, 1], at most :data:`MAX_CURVE_POINTS` points. None and
+    no points are valid (identity).
 
     Examples:
         >>> check_curve("hue_vs_hue", ((0.0, 0.5), (1.0, 0.5)), periodic=True)
@@ -194,7 +200,13 @@ def check_curve(name: str, points, periodic: bool = False) -> None:
         ...
         ValueError: hue_vs_hue x values must lie in [0, 1), got [0.0, 1.0]
     """
-    if points is None or (not isinstance(points, torch.Tensor) and len(points) == 0):
+    if points is None:
+        return
+    if not isinstance(points, (torch.Tensor, list, tuple)):
+        raise ValueError(f"{name} must be a sequence of (x, y) points or None, got {type(points).__name__}")
+    if len(points) > MAX_CURVE_POINTS:
+        raise ValueError(f"{name} has {len(points)} points; a curve takes at most {MAX_CURVE_POINTS}")
+    if len(points) == 0:
         return
     x, y = curve_points(points, torch.empty((), dtype=torch.float64), name)
     if x[0] < 0.0 or x[-1] > 1.0 or (periodic and x[-1] >= 1.0):

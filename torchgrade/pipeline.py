@@ -14,8 +14,10 @@ each holds the arguments of its stage (``tonemap`` may also be just a mode name)
      "grade": {"aces": true, "contrast": 20, "saturation": 10},
      "tonemap": {"mode": "aces"}}
 
-Unknown stages and keys, unknown modes and out-of-range values raise ``ValueError`` naming the key
-(``"unknown key 'grade.brightness'"``, ``"grade.contrast must lie in [-100.0, 100.0], got 150"``).
+Unknown stages and keys, unknown modes, values of the wrong JSON type and out-of-range values raise
+``ValueError`` naming the key (``"unknown key 'grade.brightness'"``, ``"grade.contrast must lie in
+[-100.0, 100.0], got 150"``). A list where a control takes one number (or one colour, one matrix) is
+per-sample, and becomes the tensor :meth:`PostFX.to_config` wrote it from (:mod:`torchgrade.config`).
 
 :meth:`PostFX.to_lut` bakes grade and tone mapping into one :class:`~torchgrade.lut.LUT3D` while
 exposure, bloom and dither (which depend on neighbouring pixels, the whole frame or the pixel's position)
@@ -26,7 +28,6 @@ from __future__ import annotations
 
 import copy
 import inspect
-import json
 from pathlib import Path
 from typing import Optional
 
@@ -34,12 +35,13 @@ import torch
 from torch import nn
 
 from .bloom import Bloom
+from .config import config_value, load_config
 from .dither import Dither
 from .exposure import AutoExposure
 from .grade import ColorGrade
 from .lut import INTERPOLATIONS, LUT3D, bake_lut
 from .primary import PrimaryGrade
-from .tonemap import ToneMap
+from .tonemap import TONE_MAPPERS, ToneMap
 
 __all__ = ["PostFX", "STAGES", "SAFE_GLOBALS", "stage_keys", "build_stage", "is_identity_stage"]
 
@@ -82,10 +84,21 @@ def build_stage(stage: str, spec) -> Optional[nn.Module]:
     for key in spec:
         if key not in known:
             raise ValueError(f"unknown key '{stage}.{key}'; {stage} takes {', '.join(known)}")
+    table = _control_table(stage, spec)
     try:
+        spec = {key: config_value(key, value, table[key]) if key in table else value for key, value in spec.items()}
         return STAGES[stage](**spec)
     except (ValueError, TypeError) as error:
         raise ValueError(_qualified(stage, str(error), spec)) from None
+
+
+def _control_table(stage: str, spec: dict) -> dict:
+    """The controls ``spec`` sets: the stage class's table, with a tone mapper's curve parameters for its mode."""
+    table = dict(STAGES[stage].controls)
+    mode = spec.get("mode", table["mode"].default) if stage == "tonemap" else None
+    if isinstance(mode, str) and mode in TONE_MAPPERS:
+        table.update(TONE_MAPPERS[mode].controls)
+    return table
 
 
 def _qualified(stage: str, message: str, spec: dict) -> str:
@@ -137,9 +150,20 @@ class PostFX(nn.Module):
 
     @classmethod
     def from_config(cls, config) -> "PostFX":
-        """Build a look from a config dict or the path of a JSON file holding one."""
+        """Build a look from a config dict or the path of a JSON file holding one.
+
+        A file is read within bounds (see :func:`~torchgrade.config.load_config`); JSON lists where the
+        stage keeps per-sample tensors come back as tensors, so ``to_config`` -> JSON -> ``from_config``
+        rebuilds a per-sample look.
+
+        Examples:
+            >>> import json
+            >>> look = PostFX(grade=ColorGrade(contrast=torch.tensor([10.0, 20.0])))
+            >>> PostFX.from_config(json.loads(json.dumps(look.to_config()))).grade.contrast
+            tensor([10., 20.])
+        """
         if isinstance(config, (str, Path)):
-            config = json.loads(Path(config).read_text())
+            config = load_config(config)
         if not isinstance(config, dict):
             raise ValueError(f"a look config must be a dict, got {type(config).__name__}")
         for key in config:
