@@ -31,7 +31,7 @@ from .color import (
     srgb_to_linear,
     unity_to_aces,
 )
-from .core import HALF_MAX, Param, apply_matrix, color_param, matrix_param, scalar_param
+from .core import HALF_MAX, Param, apply_matrix, bounded_pow, color_param, matrix_param, scalar_param
 from .curves import evaluate_curve
 
 __all__ = [
@@ -286,7 +286,8 @@ def lift_gamma_gain(image: torch.Tensor, lift=IDENTITY_TRACKBALL, gamma=IDENTITY
     """Lift, gamma, gain (Unity ``LiftGammaGainHDR``): ``c = rgb · gain + lift``, ``sign(c) |c|^(1/gamma)``.
 
     The trackballs are prepared by :func:`lift_gamma_gain_coefficients`; the power is mirrored for
-    negative values (ACEScg can be negative).
+    negative values (ACEScg can be negative) and saturates at ±65504 (:func:`~torchgrade.core.bounded_pow`):
+    Unity's own minimum gamma is a power of 1000, which overflows float32 from 1.1 up.
 
     Examples:
         >>> lift_gamma_gain(torch.full((3, 1, 1), 0.5), gain=(1.0, 1.0, 1.0, 1.0)).flatten().tolist()  # offset 1: double
@@ -294,7 +295,7 @@ def lift_gamma_gain(image: torch.Tensor, lift=IDENTITY_TRACKBALL, gamma=IDENTITY
     """
     lift_t, inverse_gamma, gain_t = lift_gamma_gain_coefficients(lift, gamma, gain, image)
     c = image * gain_t + lift_t
-    return torch.sign(c) * safe_pow(c.abs(), inverse_gamma)
+    return torch.sign(c) * bounded_pow(c.abs(), inverse_gamma)
 
 
 def hue_shift(image: torch.Tensor, degrees: Param, hue_vs_hue=None) -> torch.Tensor:
