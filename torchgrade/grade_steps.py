@@ -298,6 +298,17 @@ def lift_gamma_gain(image: torch.Tensor, lift=IDENTITY_TRACKBALL, gamma=IDENTITY
     return torch.sign(c) * bounded_pow(c.abs(), inverse_gamma)
 
 
+# Hue divides by the chroma (max - min); below 1e-10 its square underflows float32 and the hue's gradient
+# overflows (ACEScg turns a grey 1e-38 into a tinted one). Such pixels are black at any exposure a display
+# shows, so the hue steps take them as black.
+HSV_BLACK = 1e-10
+
+
+def _hsv(image: torch.Tensor) -> torch.Tensor:
+    lit = image.amax(dim=CHANNEL, keepdim=True) > HSV_BLACK
+    return rgb_to_hsv(torch.where(lit, image, torch.zeros_like(image)))
+
+
 def hue_shift(image: torch.Tensor, degrees: Param, hue_vs_hue=None) -> torch.Tensor:
     """Hue shift in HSV, wrapping around the colour wheel (Unity ``ColorGradingHueShift``); RGB ≥ 0.
 
@@ -308,7 +319,7 @@ def hue_shift(image: torch.Tensor, degrees: Param, hue_vs_hue=None) -> torch.Ten
         >>> [round(v, 4) for v in hue_shift(red, 120.0).flatten().tolist()]
         [0.0, 1.0, 0.0]
     """
-    hue, sat, value = rgb_to_hsv(image).split(1, dim=-3)
+    hue, sat, value = _hsv(image).split(1, dim=-3)
     hue = torch.remainder(hue + scalar_param(degrees, image, "hue_shift") / 360.0, 1.0)
     if hue_vs_hue is not None:
         hue = torch.remainder(hue + evaluate_curve(hue_vs_hue, hue, periodic=True, name="hue_vs_hue") - 0.5, 1.0)
@@ -326,7 +337,7 @@ def saturation_curves(image: torch.Tensor, hue_vs_sat=None, sat_vs_sat=None, lum
         >>> saturation_curves(torch.rand(3, 2, 2), hue_vs_sat=flat).unique().tolist()
         [1.0]
     """
-    hue, sat, _ = rgb_to_hsv(image).split(1, dim=-3)
+    hue, sat, _ = _hsv(image).split(1, dim=-3)
     axes = {"hue_vs_sat": (hue_vs_sat, hue, True), "sat_vs_sat": (sat_vs_sat, sat, False)}
     if lum_vs_sat is not None:
         axes["lum_vs_sat"] = (lum_vs_sat, luminance(image, luminance_weights), False)
