@@ -63,8 +63,15 @@ MIN_LUMINANCE = 1e-3
 MAX_ADAPTED = HALF_MAX
 """Default upper bound of the adapted luminance: the non-finite policy's bound, so no limit in practice."""
 
-SMALLEST = 1e-30
-"""Lower bound of the controls that must be positive: a gain of ``0.18 / 1e-30`` stays finite in float32."""
+SMALLEST = 1e-6
+"""Lower bound of the luminances that must be positive: the largest gain, ``MAX_MIDDLE_GREY / 1e-6`` = 1e8, keeps
+Reinhard's operator and its gradients finite in float32 on 65504 (at 1e-30 the gain overflowed)."""
+
+MAX_MIDDLE_GREY = 100.0
+"""Upper bound of ``middle_grey``: an exposure target 550 times mid grey."""
+
+MIN_WHITE = 0.01
+"""Lower bound of ``max_luminance``: Reinhard divides by its square, and its cube enters the gradient."""
 
 METERING_MODES = ("mean", "log")
 OPERATORS = ("exposure", "reinhard")
@@ -325,8 +332,8 @@ class AutoExposure(Stage):
     """
 
     controls = {
-        "middle_grey": Control(0.18, (SMALLEST, HALF_MAX)),
-        "max_luminance": Control(16.0, (SMALLEST, HALF_MAX)),
+        "middle_grey": Control(0.18, (SMALLEST, MAX_MIDDLE_GREY)),
+        "max_luminance": Control(16.0, (MIN_WHITE, HALF_MAX)),
         "speed": Control(1.0, (0.0, HALF_MAX)),
         "metering": Control("log", METERING_MODES),
         "operator": Control("exposure", OPERATORS),
