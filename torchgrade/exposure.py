@@ -63,15 +63,9 @@ MIN_LUMINANCE = 1e-3
 MAX_ADAPTED = HALF_MAX
 """Default upper bound of the adapted luminance: the non-finite policy's bound, so no limit in practice."""
 
-SMALLEST = 1e-6
-"""Lower bound of the luminances that must be positive: the largest gain, ``MAX_MIDDLE_GREY / 1e-6`` = 1e8, keeps
-Reinhard's operator and its gradients finite in float32 on 65504 (at 1e-30 the gain overflowed)."""
-
-MAX_MIDDLE_GREY = 100.0
-"""Upper bound of ``middle_grey``: an exposure target 550 times mid grey."""
-
-MIN_WHITE = 0.01
-"""Lower bound of ``max_luminance``: Reinhard divides by its square, and its cube enters the gradient."""
+# Positive luminances stop at 1e-6 and middle grey at 100 (the largest gain is then 1e8), max_luminance at 0.01
+# (Reinhard divides by its square): Reinhard's operator and its gradients stay finite in float32 on 65504.
+SMALLEST, MAX_MIDDLE_GREY, MIN_WHITE = 1e-6, 100.0, 0.01
 
 METERING_MODES = ("mean", "log")
 OPERATORS = ("exposure", "reinhard")
@@ -303,11 +297,9 @@ class AutoExposure(Stage):
     sequence raises ``ValueError``; call :meth:`reset` between sequences. :meth:`frame` is one
     frame without state, for serving.
 
-    **Streams.** ``forward(image, dt, stream=key)`` keeps one adapted luminance per hashable
-    ``key`` (in :attr:`streams`; ``stream=None``, the default, is :attr:`adapted_luminance`), so one
-    layer can serve several cameras or clients, each from its own thread: threads never share a
-    key's state. Two threads on the same key (or both on the default) interleave their frames
-    into one adaptation; use a key per stream, or the stateless :meth:`frame`.
+    ``forward(image, dt, stream=key)`` keeps one state per hashable ``key`` in :attr:`streams` (``None``,
+    the default, is :attr:`adapted_luminance`): threads serving one stream each never mix; two threads
+    on one key interleave into one adaptation (use a key each, or :meth:`frame`).
 
     ``operator="exposure"`` (default) returns the scene-referred image scaled by
     ``middle_grey / adapted`` for the rest of the pipeline; ``operator="reinhard"`` returns the
@@ -379,10 +371,7 @@ class AutoExposure(Stage):
         return False
 
     def reset(self, stream: Optional[Hashable] = None) -> None:
-        """Forget an adapted luminance: ``stream``'s, or with no argument the default's and every stream's.
-
-        The next frame of a forgotten sequence adapts instantly.
-        """
+        """Forget ``stream``'s adapted luminance, or with no argument every one: the next frame adapts instantly."""
         if stream is None:
             self.adapted_luminance = self.adapted_luminance.new_empty(0)
             self.streams.clear()
