@@ -3,9 +3,10 @@ every control swept across its documented range, the error autocast would cause,
 damaged EXR and malformed .cube files are rejected cleanly.
 
 The modules and input families are those of ``tests/test_extremes.py`` (imported, so the report
-shows exactly what the test suite checks). Writes ``benchmarks/results/robustness.md``.
+shows exactly what the test suite checks). Writes ``benchmarks/results/robustness.md`` and
+``benchmarks/results/robustness_controls.md`` (the control sweep and autocast, alone with ``--controls``).
 
-    .venv/bin/python benchmarks/robustness.py
+    .venv/bin/python benchmarks/robustness.py [--controls]
 """
 
 from __future__ import annotations
@@ -180,18 +181,10 @@ def fuzzed_cube_verdicts() -> tuple[int, int, int]:
     return rejected, accepted, other
 
 
-def main() -> None:
-    table = extremes_table()
+def controls_report() -> list[str]:
     sweep = sweep_table()
     guarded, unguarded = autocast_codes()
-    damaged_rejected, damaged_total = damaged_exr_verdicts()
-    rejected, accepted, other = fuzzed_cube_verdicts()
-    lines = [
-        "Non-finite outputs per module and input family, for float32 / float16 / bfloat16 inputs, "
-        "then (after ·) non-finite float64 gradients for the finite pixels:",
-        "",
-        *table,
-        "",
+    return [
         f"Every number control swept across its documented range ({SWEEP_POINTS} values per control, edges included, the "
         "others at defaults; then all at their low and all at their high edges) on every combination of "
         f"{SWEEP_PIXELS} per channel, float32; gradients with respect to the image and the controls:",
@@ -201,6 +194,20 @@ def main() -> None:
         f"Autocast: ColorGrade(contrast=20, saturation=10, aces=True) + ToneMap(\"aces\") on Desk.exr under CPU bfloat16 "
         f"autocast, max error against float32: {guarded:.2f} 8-bit codes (without the stages' autocast guard: {unguarded:.1f}).",
         "",
+        "Command: `.venv/bin/python benchmarks/robustness.py --controls` (also part of the full run)",
+    ]
+
+
+def inputs_report() -> list[str]:
+    table = extremes_table()
+    damaged_rejected, damaged_total = damaged_exr_verdicts()
+    rejected, accepted, other = fuzzed_cube_verdicts()
+    return [
+        "Non-finite outputs per module and input family, for float32 / float16 / bfloat16 inputs, "
+        "then (after ·) non-finite float64 gradients for the finite pixels:",
+        "",
+        *table,
+        "",
         f"Damaged EXR files (`../shared/data/exr/damaged/`): {damaged_rejected} of {damaged_total} rejected with "
         "ValueError/OSError, none crashed or hung.",
         f"Mutated .cube files: {FUZZED_FILES} generated; {rejected} rejected with ValueError, {accepted} still valid "
@@ -208,10 +215,20 @@ def main() -> None:
         "",
         "Command: `.venv/bin/python benchmarks/robustness.py`",
     ]
-    out = ROOT / "benchmarks" / "results" / "robustness.md"
+
+
+def write(name: str, lines: list[str]) -> None:
+    out = ROOT / "benchmarks" / "results" / name
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
+
+
+def main() -> None:
+    """The full report (robustness.md and robustness_controls.md); ``--controls`` writes only the second (a minute)."""
+    write("robustness_controls.md", controls_report())
+    if "--controls" not in sys.argv[1:]:
+        write("robustness.md", inputs_report())
 
 
 if __name__ == "__main__":
