@@ -1,14 +1,17 @@
 """Robustness report: non-finite outputs and gradients of every module on the extreme input families,
-and how many damaged EXR and malformed .cube files are rejected cleanly.
+every control swept across its documented range, the error autocast would cause, and how many
+damaged EXR and malformed .cube files are rejected cleanly.
 
 The modules and input families are those of ``tests/test_extremes.py`` (imported, so the report
-shows exactly what the test suite checks). Writes ``benchmarks/results/robustness.md``.
+shows exactly what the test suite checks). Writes ``benchmarks/results/robustness.md`` and
+``benchmarks/results/robustness_controls.md`` (the control sweep and autocast, alone with ``--controls``).
 
-    .venv/bin/python benchmarks/robustness.py
+    .venv/bin/python benchmarks/robustness.py [--controls]
 """
 
 from __future__ import annotations
 
+import contextlib
 import random
 import subprocess
 import sys
@@ -23,6 +26,7 @@ sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
 import torchgrade as tg  # noqa: E402
 from benchmarks.common import EXR_DIR  # noqa: E402
+import torchgrade.stage  # noqa: E402
 from test_extremes import MODULES, _families  # noqa: E402
 
 DTYPES = {"float32": torch.float32, "float16": torch.float16, "bfloat16": torch.bfloat16}
@@ -48,6 +52,89 @@ def extremes_table() -> list[str]:
             cells.append(" / ".join(str(out) for out, _ in counts) + f" · {counts[0][1]}")
         rows.append(f"| {name} | " + " | ".join(cells) + " |")
     return rows
+
+
+# Extreme finite pixels, every combination of three per pixel: what a documented control must survive.
+SWEEP_PIXELS = (0.0, 1e-38, 0.18, 1.0, 60.0, 65504.0, -1.0, -65504.0)
+SWEEP_POINTS = 9
+SWEPT = {
+    "tonemap-hable": lambda **c: tg.ToneMap("hable", **c),
+    "tonemap-filmic": lambda **c: tg.ToneMap("filmic", **c),
+    "tonemap-unreal_filmic": lambda **c: tg.ToneMap("unreal_filmic", **c),
+    "tonemap-reinhard_extended": lambda **c: tg.ToneMap("reinhard_extended", **c),
+    "grade-linear": lambda **c: tg.ColorGrade(**c),
+    "grade-aces": lambda **c: tg.ColorGrade(aces=True, **c),
+    "primary-linear": lambda **c: tg.PrimaryGrade("linear", **c),
+    "primary-log": lambda **c: tg.PrimaryGrade("log", **c),
+    "bloom": lambda **c: tg.Bloom(**c),
+    "convolution-bloom": lambda **c: tg.ConvolutionBloom(torch.ones(1, 3, 3), **c),
+    "autoexposure": lambda **c: tg.AutoExposure(**c),
+    "dither": lambda **c: tg.Dither(**c),
+}
+
+
+def sweep_image() -> torch.Tensor:
+    grid = torch.cartesian_prod(*[torch.tensor(SWEEP_PIXELS)] * 3)
+    return grid.T.reshape(1, 3, 8, 64).contiguous()
+
+
+def swept_settings(make) -> list[dict]:
+    """Each number control at SWEEP_POINTS values across its range (others at defaults), then all at their low, then high, edges."""
+    table = {name: c for name, c in make().control_table().items() if c.kind == "number"}
+    shapes = {name: torch.as_tensor(c.default if c.default is not None else 0.0, dtype=torch.float32).shape for name, c in table.items()}
+    settings = [
+        {name: torch.full(shapes[name], float(v))}
+        for name, c in table.items()
+        for v in torch.linspace(c.range[0], c.range[1], SWEEP_POINTS, dtype=torch.float64)
+    ]
+    for edge in (0, 1):
+        settings.append({name: torch.full(shapes[name], float(c.range[edge])) for name, c in table.items()})
+    return settings
+
+
+def sweep_counts(make) -> tuple[int, int, int, int]:
+    """(settings run, settings refused by a rule between controls, non-finite outputs, non-finite gradients)."""
+    run = refused = outputs = gradients = 0
+    for setting in swept_settings(make):
+        controls = {name: value.clone().requires_grad_() for name, value in setting.items()}
+        try:
+            module = make(**controls)
+        except ValueError:
+            refused += 1
+            continue
+        image = sweep_image().requires_grad_()
+        out = module(image)
+        out.sum().backward()
+        run += 1
+        outputs += int((~torch.isfinite(out)).sum())
+        grads = [image.grad] + [c.grad for c in controls.values() if c.grad is not None]
+        gradients += sum(int((~torch.isfinite(g)).sum()) for g in grads)
+    return run, refused, outputs, gradients
+
+
+def sweep_table() -> list[str]:
+    rows = ["| module | settings run | refused (cross-control rule) | non-finite outputs | non-finite gradients |", "| --- | --- | --- | --- | --- |"]
+    for name, make in tqdm(SWEPT.items(), desc="control sweep"):
+        rows.append(f"| {name} | " + " | ".join(map(str, sweep_counts(make))) + " |")
+    return rows
+
+
+def autocast_codes() -> tuple[float, float]:
+    """Max 8-bit sRGB code error of ColorGrade(contrast=20, saturation=10, aces=True) + ToneMap("aces") on Desk
+    under CPU bfloat16 autocast, against float32: (stages as shipped, stages with the autocast guard removed)."""
+    image = tg.io.read_exr(EXR_DIR / "Desk.exr")[:3].unsqueeze(0)
+    look = torch.nn.Sequential(tg.ColorGrade(contrast=20, saturation=10, aces=True), tg.ToneMap("aces"))
+    codes = lambda display: tg.color.linear_to_srgb(display.double().clamp(0.0, 1.0)) * 255.0  # noqa: E731
+    reference = codes(look(image))
+    errors = []
+    for guard in (torchgrade.stage.full_precision, contextlib.nullcontext):
+        shipped, torchgrade.stage.full_precision = torchgrade.stage.full_precision, guard
+        try:
+            with torch.autocast("cpu", dtype=torch.bfloat16):
+                errors.append(float((codes(look(image)) - reference).abs().max()))
+        finally:
+            torchgrade.stage.full_precision = shipped
+    return errors[0], errors[1]
 
 
 def damaged_exr_verdicts() -> tuple[int, int]:
@@ -94,11 +181,28 @@ def fuzzed_cube_verdicts() -> tuple[int, int, int]:
     return rejected, accepted, other
 
 
-def main() -> None:
+def controls_report() -> list[str]:
+    sweep = sweep_table()
+    guarded, unguarded = autocast_codes()
+    return [
+        f"Every number control swept across its documented range ({SWEEP_POINTS} values per control, edges included, the "
+        "others at defaults; then all at their low and all at their high edges) on every combination of "
+        f"{SWEEP_PIXELS} per channel, float32; gradients with respect to the image and the controls:",
+        "",
+        *sweep,
+        "",
+        f"Autocast: ColorGrade(contrast=20, saturation=10, aces=True) + ToneMap(\"aces\") on Desk.exr under CPU bfloat16 "
+        f"autocast, max error against float32: {guarded:.2f} 8-bit codes (without the stages' autocast guard: {unguarded:.1f}).",
+        "",
+        "Command: `.venv/bin/python benchmarks/robustness.py --controls` (also part of the full run)",
+    ]
+
+
+def inputs_report() -> list[str]:
     table = extremes_table()
     damaged_rejected, damaged_total = damaged_exr_verdicts()
     rejected, accepted, other = fuzzed_cube_verdicts()
-    lines = [
+    return [
         "Non-finite outputs per module and input family, for float32 / float16 / bfloat16 inputs, "
         "then (after ·) non-finite float64 gradients for the finite pixels:",
         "",
@@ -111,10 +215,20 @@ def main() -> None:
         "",
         "Command: `.venv/bin/python benchmarks/robustness.py`",
     ]
-    out = ROOT / "benchmarks" / "results" / "robustness.md"
+
+
+def write(name: str, lines: list[str]) -> None:
+    out = ROOT / "benchmarks" / "results" / name
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
+
+
+def main() -> None:
+    """The full report (robustness.md and robustness_controls.md); ``--controls`` writes only the second (a minute)."""
+    write("robustness_controls.md", controls_report())
+    if "--controls" not in sys.argv[1:]:
+        write("robustness.md", inputs_report())
 
 
 if __name__ == "__main__":

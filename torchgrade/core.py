@@ -16,6 +16,8 @@ Every public module of torchgrade goes through these helpers, so the rules are s
 
 from __future__ import annotations
 
+import contextlib
+import math
 import numbers
 from typing import Union
 
@@ -38,6 +40,8 @@ __all__ = [
     "is_tracing",
     "working_dtype",
     "to_input_dtype",
+    "full_precision",
+    "bounded_pow",
 ]
 
 HALF_MAX = 65504.0
@@ -251,3 +255,48 @@ def to_input_dtype(result: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
     if result.dtype == image.dtype:
         return result
     return result.clamp(-HALF_MAX, HALF_MAX).to(image.dtype)
+
+
+_AUTOCAST_DEVICES = ("cpu", "cuda")
+
+
+@contextlib.contextmanager
+def full_precision():
+    """Turn off every active ``torch.autocast`` for the block: torchgrade's maths keeps float32 or better.
+
+    Autocast would run the colour matrices (``einsum``) and FFTs in bfloat16/float16 whatever the
+    input's dtype, 43 8-bit codes off on a real image; reduced precision is instead chosen by the
+    input's dtype (:func:`working_dtype`). Inactive autocast costs nothing: no context is entered.
+
+    Examples:
+        >>> with torch.autocast("cpu", dtype=torch.bfloat16), full_precision():
+        ...     (torch.ones(2, 2) @ torch.ones(2, 2)).dtype
+        torch.float32
+    """
+    with contextlib.ExitStack() as stack:
+        for device in _AUTOCAST_DEVICES:
+            if torch.is_autocast_enabled(device):
+                stack.enter_context(torch.autocast(device, enabled=False))
+        yield
+
+
+_LOG2_HALF_MAX = math.log2(HALF_MAX)
+
+
+def bounded_pow(x: torch.Tensor, exponent) -> torch.Tensor:
+    """``max(x, 0) ** exponent`` for ``exponent >= 0``, bounded to ``HALF_MAX``, with finite gradients everywhere.
+
+    A documented control may raise an HDR value to a large power (OpenColorIO's gamma 0.01 is a
+    power of 100, Unity's gamma trackball at its minimum a power of 1000): the result saturates at
+    the non-finite policy's bound instead of overflowing to Inf, where a gradient would be NaN.
+    Below the bound the value is ``x ** exponent`` exactly.
+
+    Examples:
+        >>> bounded_pow(torch.tensor([-1.0, 0.0, 4.0, 1e3]), 2.0).tolist()
+        [0.0, 0.0, 16.0, 65504.0]
+    """
+    exponent = torch.as_tensor(exponent, dtype=x.dtype, device=x.device)
+    limit = torch.exp2(_LOG2_HALF_MAX / exponent.detach())
+    inside = (x > 0) & (x < limit)
+    powered = torch.where(inside, x, torch.ones_like(x)) ** exponent
+    return torch.where(inside, powered, torch.where(x > 0, HALF_MAX, 0.0).to(x.dtype))

@@ -30,7 +30,7 @@ float32 and returned in their own dtype; the adapted luminance is float32 for th
 
 from __future__ import annotations
 
-from typing import Optional
+from typing import Hashable, Optional
 
 import torch
 import torch.nn.functional as F
@@ -63,8 +63,9 @@ MIN_LUMINANCE = 1e-3
 MAX_ADAPTED = HALF_MAX
 """Default upper bound of the adapted luminance: the non-finite policy's bound, so no limit in practice."""
 
-SMALLEST = 1e-30
-"""Lower bound of the controls that must be positive: a gain of ``0.18 / 1e-30`` stays finite in float32."""
+# Positive luminances stop at 1e-6 and middle grey at 100 (the largest gain is then 1e8), max_luminance at 0.01
+# (Reinhard divides by its square): Reinhard's operator and its gradients stay finite in float32 on 65504.
+SMALLEST, MAX_MIDDLE_GREY, MIN_WHITE = 1e-6, 100.0, 0.01
 
 METERING_MODES = ("mean", "log")
 OPERATORS = ("exposure", "reinhard")
@@ -296,6 +297,10 @@ class AutoExposure(Stage):
     sequence raises ``ValueError``; call :meth:`reset` between sequences. :meth:`frame` is one
     frame without state, for serving.
 
+    ``forward(image, dt, stream=key)`` keeps one state per hashable ``key`` in :attr:`streams` (``None``,
+    the default, is :attr:`adapted_luminance`): threads serving one stream each never mix; two threads
+    on one key interleave into one adaptation (use a key each, or :meth:`frame`).
+
     ``operator="exposure"`` (default) returns the scene-referred image scaled by
     ``middle_grey / adapted`` for the rest of the pipeline; ``operator="reinhard"`` returns the
     document's display-referred operator, which uses ``max_luminance``. The stored state is
@@ -309,6 +314,9 @@ class AutoExposure(Stage):
         >>> out = layer(torch.full((1, 3, 4, 4), 0.72))
         >>> round(out.mean().item(), 4), [round(v, 4) for v in layer.adapted_luminance.tolist()]
         (0.18, [0.72])
+        >>> _ = layer(torch.full((1, 3, 2, 2), 0.09), dt=0.1, stream="left")  # a new stream adapts instantly
+        >>> round(layer.streams["left"].item(), 4), [round(v, 4) for v in layer.adapted_luminance.tolist()]
+        (0.09, [0.72])
         >>> AutoExposure(middle_grey=0.0)
         Traceback (most recent call last):
         ...
@@ -316,8 +324,8 @@ class AutoExposure(Stage):
     """
 
     controls = {
-        "middle_grey": Control(0.18, (SMALLEST, HALF_MAX)),
-        "max_luminance": Control(16.0, (SMALLEST, HALF_MAX)),
+        "middle_grey": Control(0.18, (SMALLEST, MAX_MIDDLE_GREY)),
+        "max_luminance": Control(16.0, (MIN_WHITE, HALF_MAX)),
         "speed": Control(1.0, (0.0, HALF_MAX)),
         "metering": Control("log", METERING_MODES),
         "operator": Control("exposure", OPERATORS),
@@ -349,6 +357,7 @@ class AutoExposure(Stage):
             speed_to_light=speed_to_light, speed_to_dark=speed_to_dark, min_luminance=min_luminance, max_adapted=max_adapted,
         )
         self.register_buffer("adapted_luminance", torch.empty(0))
+        self.streams: dict = {}
 
     def check_control(self, name: str, value):
         return _checked_control(name, value)
@@ -361,20 +370,24 @@ class AutoExposure(Stage):
         """Never: the stage exposes every frame, whatever its controls."""
         return False
 
-    def reset(self) -> None:
-        """Forget the adapted luminance: the next frame adapts instantly."""
-        self.adapted_luminance = self.adapted_luminance.new_empty(0)
+    def reset(self, stream: Optional[Hashable] = None) -> None:
+        """Forget ``stream``'s adapted luminance, or with no argument every one: the next frame adapts instantly."""
+        if stream is None:
+            self.adapted_luminance = self.adapted_luminance.new_empty(0)
+            self.streams.clear()
+        else:
+            self.streams.pop(stream, None)
 
-    def _history(self, image: torch.Tensor, dt) -> Optional[torch.Tensor]:
+    def _history(self, state: torch.Tensor, image: torch.Tensor, dt) -> Optional[torch.Tensor]:
         """The state to adapt from, or ``None`` to adapt instantly."""
-        if dt is None or self.adapted_luminance.numel() == 0:
+        if dt is None or state.numel() == 0:
             return None
-        if self.adapted_luminance.shape != image.shape[:-3]:
+        if state.shape != image.shape[:-3]:
             raise ValueError(
-                f"batch changed mid-sequence: adapted_luminance has shape {tuple(self.adapted_luminance.shape)} but the "
+                f"batch changed mid-sequence: adapted_luminance has shape {tuple(state.shape)} but the "
                 f"image has shape {tuple(image.shape)}; call reset() before starting a new sequence"
             )
-        return self.adapted_luminance
+        return state
 
     def frame(self, image: torch.Tensor, adapted: Optional[torch.Tensor], dt: Param) -> tuple[torch.Tensor, torch.Tensor]:
         """One frame with these controls, stateless: ``(image, adapted, dt) -> (exposed, new adapted)``.
@@ -391,8 +404,13 @@ class AutoExposure(Stage):
         self.check_learnable()
         return auto_exposure(image, adapted, dt, **self.params())
 
-    def forward(self, image: torch.Tensor, dt: Optional[Param] = None) -> torch.Tensor:
+    def forward(self, image: torch.Tensor, dt: Optional[Param] = None, stream: Optional[Hashable] = None) -> torch.Tensor:
         check_image(image)
-        exposed, adapted = self.frame(image, self._history(image, dt), 0.0 if dt is None else dt)
-        self.adapted_luminance = adapted.detach()
+        # One dict read and one dict write per frame: atomic in CPython, so threads on distinct keys never mix.
+        state = self.adapted_luminance if stream is None else self.streams.get(stream, self.adapted_luminance.new_empty(0))
+        exposed, adapted = self.frame(image, self._history(state, image, dt), 0.0 if dt is None else dt)
+        if stream is None:
+            self.adapted_luminance = adapted.detach()
+        else:
+            self.streams[stream] = adapted.detach()
         return exposed

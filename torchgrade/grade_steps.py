@@ -31,7 +31,7 @@ from .color import (
     srgb_to_linear,
     unity_to_aces,
 )
-from .core import HALF_MAX, Param, apply_matrix, color_param, matrix_param, scalar_param
+from .core import HALF_MAX, Param, apply_matrix, bounded_pow, color_param, matrix_param, scalar_param
 from .curves import evaluate_curve
 
 __all__ = [
@@ -286,7 +286,8 @@ def lift_gamma_gain(image: torch.Tensor, lift=IDENTITY_TRACKBALL, gamma=IDENTITY
     """Lift, gamma, gain (Unity ``LiftGammaGainHDR``): ``c = rgb · gain + lift``, ``sign(c) |c|^(1/gamma)``.
 
     The trackballs are prepared by :func:`lift_gamma_gain_coefficients`; the power is mirrored for
-    negative values (ACEScg can be negative).
+    negative values (ACEScg can be negative) and saturates at ±65504 (:func:`~torchgrade.core.bounded_pow`):
+    Unity's own minimum gamma is a power of 1000, which overflows float32 from 1.1 up.
 
     Examples:
         >>> lift_gamma_gain(torch.full((3, 1, 1), 0.5), gain=(1.0, 1.0, 1.0, 1.0)).flatten().tolist()  # offset 1: double
@@ -294,7 +295,18 @@ def lift_gamma_gain(image: torch.Tensor, lift=IDENTITY_TRACKBALL, gamma=IDENTITY
     """
     lift_t, inverse_gamma, gain_t = lift_gamma_gain_coefficients(lift, gamma, gain, image)
     c = image * gain_t + lift_t
-    return torch.sign(c) * safe_pow(c.abs(), inverse_gamma)
+    return torch.sign(c) * bounded_pow(c.abs(), inverse_gamma)
+
+
+# Hue divides by the chroma (max - min); below 1e-10 its square underflows float32 and the hue's gradient
+# overflows (ACEScg turns a grey 1e-38 into a tinted one). Such pixels are black at any exposure a display
+# shows, so the hue steps take them as black.
+HSV_BLACK = 1e-10
+
+
+def _hsv(image: torch.Tensor) -> torch.Tensor:
+    lit = image.amax(dim=CHANNEL, keepdim=True) > HSV_BLACK
+    return rgb_to_hsv(torch.where(lit, image, torch.zeros_like(image)))
 
 
 def hue_shift(image: torch.Tensor, degrees: Param, hue_vs_hue=None) -> torch.Tensor:
@@ -307,7 +319,7 @@ def hue_shift(image: torch.Tensor, degrees: Param, hue_vs_hue=None) -> torch.Ten
         >>> [round(v, 4) for v in hue_shift(red, 120.0).flatten().tolist()]
         [0.0, 1.0, 0.0]
     """
-    hue, sat, value = rgb_to_hsv(image).split(1, dim=-3)
+    hue, sat, value = _hsv(image).split(1, dim=-3)
     hue = torch.remainder(hue + scalar_param(degrees, image, "hue_shift") / 360.0, 1.0)
     if hue_vs_hue is not None:
         hue = torch.remainder(hue + evaluate_curve(hue_vs_hue, hue, periodic=True, name="hue_vs_hue") - 0.5, 1.0)
@@ -325,7 +337,7 @@ def saturation_curves(image: torch.Tensor, hue_vs_sat=None, sat_vs_sat=None, lum
         >>> saturation_curves(torch.rand(3, 2, 2), hue_vs_sat=flat).unique().tolist()
         [1.0]
     """
-    hue, sat, _ = rgb_to_hsv(image).split(1, dim=-3)
+    hue, sat, _ = _hsv(image).split(1, dim=-3)
     axes = {"hue_vs_sat": (hue_vs_sat, hue, True), "sat_vs_sat": (sat_vs_sat, sat, False)}
     if lum_vs_sat is not None:
         axes["lum_vs_sat"] = (lum_vs_sat, luminance(image, luminance_weights), False)

@@ -22,8 +22,8 @@ import inspect
 
 import torch
 
-from .color import CHANNEL, safe_pow
-from .core import Param, check_choice, check_image, color_param, is_constant, sanitize, scalar_param, to_input_dtype, working_dtype
+from .color import CHANNEL
+from .core import Param, bounded_pow, check_choice, check_image, color_param, is_constant, sanitize, scalar_param, to_input_dtype, working_dtype
 from .stage import Control, Stage, controls_signature
 
 __all__ = [
@@ -81,8 +81,12 @@ def _changed(controls: dict, defaults: dict) -> set:
 
 
 def _mirrored_pow(x: torch.Tensor, exponent: torch.Tensor) -> torch.Tensor:
-    """``sign(x) · |x|^exponent`` with finite gradients at 0."""
-    return torch.sign(x) * safe_pow(x.abs(), exponent)
+    """``sign(x) · |x|^exponent`` with finite gradients at 0, saturating at ±65504 instead of overflowing.
+
+    OpenColorIO's own limits (contrast up to 10, gamma down to 0.01: a power of 100) overflow float32
+    on HDR values; saturating keeps every documented control value finite (``bounded_pow``).
+    """
+    return torch.sign(x) * bounded_pow(x.abs(), exponent)
 
 
 def offset_exposure(image: torch.Tensor, offset=(0.0, 0.0, 0.0), exposure=(0.0, 0.0, 0.0)) -> torch.Tensor:
@@ -181,10 +185,18 @@ def primary_grade(image: torch.Tensor, style: str = "linear", **controls) -> tor
     if "contrast" in changed:
         x = (linear_contrast if style == "linear" else log_contrast)(x, p["contrast"], p["pivot"])
     if "gamma" in changed:
+        _check_pivots(p["pivot_black"], p["pivot_white"])
         x = log_gamma(x, p["gamma"], p["pivot_black"], p["pivot_white"])
     if "saturation" in changed:
         x = primary_saturation(x, p["saturation"])
     return to_input_dtype(x, image)
+
+
+def _check_pivots(black: Param, white: Param) -> None:
+    """OpenColorIO's rule (``GradingPrimary::validate``): the gamma span needs pivot_black below pivot_white."""
+    black_t, white_t = torch.as_tensor(black).detach(), torch.as_tensor(white).detach()
+    if (black_t >= white_t).any():
+        raise ValueError(f"pivot_black must be below pivot_white, got {black_t.tolist()} and {white_t.tolist()}")
 
 
 class PrimaryGrade(Stage):
@@ -243,13 +255,16 @@ class PrimaryGrade(Stage):
             raise ValueError(f"a PrimaryGrade's style is set at construction; build a new one for {value!r}")
         return value
 
+    def check_together(self) -> None:
+        if self.style == "log":
+            _check_pivots(self.pivot_black, self.pivot_white)
+
     @property
     def is_identity(self) -> bool:
         """True when no control changes the image (then skipped by ``PostFX`` and not exported)."""
         return all(self.is_default(name) for name in self._control_names if name not in ("style", *PIVOTS))
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
-        self.check_learnable()
         return primary_grade(image, **self.params())
 
 

@@ -37,7 +37,7 @@ from typing import Any, ClassVar
 import torch
 from torch import nn
 
-from .core import check_choice, check_range, is_constant, is_tracing
+from .core import check_choice, check_range, full_precision, is_constant, is_tracing
 
 __all__ = ["Control", "Stage", "plain", "controls_signature"]
 
@@ -227,10 +227,20 @@ class Stage(nn.Module):
 
     # ------------------------------------------------------------------ checks at run time
 
+    def __call__(self, *args, **kwargs):
+        """Check the learnable controls, then run ``forward`` with autocast off (see :func:`~torchgrade.core.full_precision`).
+
+        Every stage goes through here, so the range policy and the precision policy hold for all of
+        them without each ``forward`` repeating them.
+        """
+        self.check_learnable()
+        with full_precision():
+            return super().__call__(*args, **kwargs)
+
     def check_learnable(self) -> None:
         """Raise ``ValueError`` naming a learnable control an optimiser moved outside its range (or to NaN).
 
-        Called by ``forward``; skipped while tracing or compiling (the graph carries no checks).
+        Called before every ``forward`` (:meth:`__call__`); skipped while tracing or compiling (the graph carries no checks).
         """
         if is_tracing():
             return

@@ -149,7 +149,6 @@ class ConvolutionBloom(Stage):
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
         check_image(image)
-        self.check_learnable()
         return _convolved(image, self.kernel, self.threshold, self.knee, self.intensity, fft_convolve)
 
     def export_form(self) -> nn.Module:

@@ -27,7 +27,6 @@ the mode's composite (:mod:`~torchgrade.bloom.composite`).
 
 from __future__ import annotations
 
-import math
 import numbers
 
 import torch
@@ -46,22 +45,28 @@ from .texture import as_texture, check_texture, resampled
 
 __all__ = ["CONTROLS", "UNITY_SETTINGS", "OPTION_DEFAULTS", "MAX_FRAME_SIDE", "check_settings", "bloom", "Bloom", "FixedDepthBloom"]
 
+# Finite bounds make every documented value safe on any finite frame: a threshold of 100 is linear
+# 62,500 (srgb_to_linear), just below the non-finite policy's 65,504, and gains up to 100 keep
+# 100 · 100 · 65,504 far from float32's overflow. 16 is Unity's k_MaxPyramidSize.
+MAX_THRESHOLD = 100.0
+MAX_GAIN = 100.0
+
 CONTROLS = {
     "mode": Control("additive", BLOOM_MODES),
-    "threshold": Control(1.0, (0.0, math.inf)),
+    "threshold": Control(1.0, (0.0, MAX_THRESHOLD)),
     "knee": Control(0.5, (0.0, 1.0)),
-    "intensity": Control(1.0, (0.0, math.inf)),
+    "intensity": Control(1.0, (0.0, MAX_GAIN)),
     "scatter": Control(0.7, (0.05, 0.95)),
-    "max_iterations": Control(16, (0, math.inf)),
-    "downscale_limit": Control(2, (1, math.inf)),
+    "max_iterations": Control(16, (0, 16)),
+    "downscale_limit": Control(2, (1, 16384)),  # MAX_FRAME_SIDE: no frame has a larger side
     "fade_fireflies": Control(True),
     "bicubic_upsampling": Control(False),
-    "tint": Control((1.0, 1.0, 1.0), (0.0, math.inf)),
-    "clamp": Control(HALF_MAX, (0.0, math.inf)),
+    "tint": Control((1.0, 1.0, 1.0), (0.0, MAX_GAIN)),
+    "clamp": Control(HALF_MAX, (0.0, HALF_MAX)),
     "anamorphic_ratio": Control(0.0, (-1.0, 1.0)),
     "karis_average": Control(False),
     "dirt": Control(None),
-    "dirt_intensity": Control(0.0, (0.0, math.inf)),
+    "dirt_intensity": Control(0.0, (0.0, MAX_GAIN)),
     "low_frequency_boost": Control(0.7, (0.0, 1.0)),
     "low_frequency_boost_curvature": Control(0.95, (0.0, 0.99)),
     "high_pass_frequency": Control(1.0, (0.01, 1.0)),
@@ -294,7 +299,6 @@ class Bloom(Stage):
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
         check_image(image)
-        self.check_learnable()
         return _bloomed(image, self.params())
 
     def export_form(self) -> nn.Module:

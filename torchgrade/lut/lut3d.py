@@ -35,7 +35,7 @@ import torch
 from torch import nn
 
 from ..color import linear_to_srgb, srgb_to_linear
-from ..core import check_choice, check_image, sanitize, to_input_dtype, working_dtype
+from ..core import check_choice, check_image, is_tracing, sanitize, to_input_dtype, working_dtype
 from ..stage import Control, Stage
 from .kernels import BACKENDS, KERNELS
 from .lattice import check_size, checked_domain, planar_table
@@ -221,6 +221,12 @@ class LUT3D(Stage):
             return _pair(value, name)
         return value
 
+    def check_learnable(self) -> None:
+        """Also check a learnable table, which an optimiser may move to NaN or Inf."""
+        super().check_learnable()
+        if isinstance(self.table, nn.Parameter) and not is_tracing():
+            _check_table(self.table)
+
     @property
     def is_identity(self) -> bool:
         """Never: a table is not checked for being the identity, so a LUT always runs."""
@@ -311,6 +317,8 @@ def _check_table(table) -> None:
     if table.dim() != 4 or table.shape != (size, size, size, 3):
         raise ValueError(f"LUT table must have shape (S, S, S, 3), got {tuple(table.shape)}")
     check_size(size)
+    if not bool(torch.isfinite(table.detach()).all()):
+        raise ValueError("LUT table must be finite: it has NaN or infinite entries")
 
 
 def _check_curve(curve: torch.Tensor) -> torch.Tensor:

@@ -1,0 +1,88 @@
+"""The maths runs in float32 (or the input's higher precision) whatever ``torch.autocast`` is active.
+
+Under autocast a float32 image must give the float32 result: autocast would otherwise run the
+colour matrices in bfloat16/float16 (43 8-bit codes off on Desk before the fix). The bounds are the
+README's for float16/bfloat16 *inputs* (1e-3 and 8e-3 in display values), which autocast must not
+exceed since it changes no input; low-precision inputs keep their dtype.
+"""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+import torchgrade as tg
+from torchgrade.lut import identity_table
+
+BFLOAT16_DISPLAY_BOUND = 8e-3
+FLOAT16_DISPLAY_BOUND = 1e-3
+
+
+def _codes(display: torch.Tensor) -> torch.Tensor:
+    """8-bit sRGB code values of display-referred linear values (the error unit the README reports)."""
+    return tg.color.linear_to_srgb(display.double().clamp(0.0, 1.0)) * 255.0
+
+
+@pytest.fixture(scope="module")
+def desk(exr_dir):
+    """A 96x96 crop of Desk (bright lamp and dark wood), as (1, 3, H, W) float32."""
+    image = tg.io.read_exr(exr_dir / "Desk.exr")[:3]
+    return image[:, 100:196, 150:246].unsqueeze(0).contiguous()
+
+
+def _look():
+    return torch.nn.Sequential(tg.ColorGrade(contrast=20, saturation=10, aces=True), tg.ToneMap("aces"))
+
+
+def test_grade_and_aces_under_cpu_bfloat16_autocast_match_float32(desk):
+    look = _look()
+    reference = look(desk)
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        out = look(desk)
+    assert out.dtype == torch.float32
+    assert (out - reference).abs().max() <= BFLOAT16_DISPLAY_BOUND
+    assert (_codes(out) - _codes(reference)).abs().max() < 0.5, "autocast changed an 8-bit code"
+
+
+def _modules():
+    return {
+        "tonemap": tg.ToneMap("aces"),
+        "grade": tg.ColorGrade(contrast=30, temperature=20, channel_mixer=((1.2, -0.1, -0.1), (0.0, 1.0, 0.0), (0.1, 0.0, 0.9))),
+        "primary": tg.PrimaryGrade("log", contrast=(1.3, 1.2, 1.1), gamma=(0.8, 0.9, 1.0)),
+        "bloom": tg.Bloom(threshold=0.8, intensity=0.5),
+        "convolution-bloom": tg.ConvolutionBloom(torch.rand(1, 7, 7), intensity=0.5),
+        "exposure": tg.AutoExposure(),
+        "dither": tg.Dither(),
+        "lut": tg.LUT3D(identity_table(9) ** 1.5),
+    }
+
+
+@pytest.mark.parametrize("name", list(_modules()))
+def test_every_stage_ignores_cpu_autocast(desk, name):
+    module = _modules()[name]
+    image = desk.clamp(0.0, 1.0) if name == "lut" else desk
+    reference = module(image)
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        out = module(image)
+    assert out.dtype == torch.float32
+    torch.testing.assert_close(out, reference, rtol=1e-6, atol=1e-6)
+
+
+def test_low_precision_input_under_autocast_keeps_its_dtype_within_the_readme_bound(desk):
+    look = _look()
+    quantised = desk.to(torch.bfloat16)
+    reference = look(quantised.float())
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        out = look(quantised)
+    assert out.dtype == torch.bfloat16
+    assert (out.float() - reference).abs().max() <= BFLOAT16_DISPLAY_BOUND
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="device-conditional: needs CUDA for CUDA autocast")
+def test_grade_and_aces_under_cuda_float16_autocast_match_float32(desk):
+    look, image = _look().cuda(), desk.cuda()
+    reference = look(image)
+    with torch.autocast("cuda", dtype=torch.float16):
+        out = look(image)
+    assert out.dtype == torch.float32
+    assert (out - reference).abs().max() <= FLOAT16_DISPLAY_BOUND
