@@ -42,6 +42,25 @@ def ref_hable(rgb, bias=2.0, w=11.2):
 
 # --- Unity's AcesTonemap, written pixel by pixel with the shader's branches (ACES.hlsl, Color.hlsl) ---
 SRGB_2_AP0 = np.array([[0.4397010, 0.3829780, 0.1773350], [0.0897923, 0.8134230, 0.0967616], [0.0175440, 0.1115440, 0.8707040]])
+
+
+def _rgb_to_xyz(primaries, white):
+    """SMPTE RP 177: the primaries' XYZ columns scaled so that RGB (1, 1, 1) is the white."""
+    xyz = lambda x, y: np.array([x / y, 1.0, (1 - x - y) / y])
+    columns = np.stack([xyz(*p) for p in primaries], axis=1)
+    return columns * np.linalg.solve(columns, xyz(*white))
+
+
+def _bradford(source_white, target_white):
+    cone = np.array([[0.8951, 0.2664, -0.1614], [-0.7502, 1.7135, 0.0367], [0.0389, -0.0685, 1.0296]])
+    xyz = lambda x, y: np.array([x / y, 1.0, (1 - x - y) / y])
+    return np.linalg.inv(cone) @ np.diag((cone @ xyz(*target_white)) / (cone @ xyz(*source_white))) @ cone
+
+
+ACES_WHITE, D65 = (0.32168, 0.33767), (0.3127, 0.3290)
+REC709_2_AP0_BRADFORD = (np.linalg.inv(_rgb_to_xyz(((0.7347, 0.2653), (0.0, 1.0), (0.0001, -0.077)), ACES_WHITE))
+                         @ _bradford(D65, ACES_WHITE) @ _rgb_to_xyz(((0.64, 0.33), (0.30, 0.60), (0.15, 0.06)), D65))
+"""Linear Rec.709 -> ACES2065-1 as OpenColorIO's configs build it (primaries, Bradford D65 -> ACES white)."""
 AP0_2_AP1 = np.array([[1.4514393161, -0.2365107469, -0.2149285693], [-0.0765537734, 1.1762296998, -0.0996759264], [0.0083161484, -0.0060324498, 0.9977163014]])
 AP1_2_XYZ = np.array([[0.6624541811, 0.1340042065, 0.1561876870], [0.2722287168, 0.6740817658, 0.0536895174], [-0.0055746495, 0.0040607335, 1.0103391003]])
 XYZ_2_AP1 = np.array([[1.6410233797, -0.3248032942, -0.2364246952], [-0.6636628587, 1.6153315917, 0.0167563477], [0.0117218943, -0.0082844420, 0.9883948585]])
@@ -119,9 +138,10 @@ def cubic_basis_shaper(x, w):
     return sum(monomials[i] * m[i][3 - j] for i in range(4)) * 1.5
 
 
-def rrt_glow_and_red(aces, hue_weight):
+def rrt_glow_and_red(aces, hue_weight, tiny=1e-4):
+    """Unity floors the saturation's terms at 1e-4 (half precision); the CTL's TINY is 1e-10."""
     ma, mi = aces.max(), aces.min()
-    sat = (max(ma, 1e-4) - max(mi, 1e-4)) / max(ma, 1e-2)
+    sat = (max(ma, tiny) - max(mi, tiny)) / max(ma, 1e-2)
     r, g, b = aces
     yc = (r + g + b + 1.75 * math.sqrt(max(b * (b - g) + g * (g - r) + r * (r - b), 0))) / 3
     x = (sat - 0.4) / 0.2
@@ -143,7 +163,8 @@ def sat_adjust(rgb, factor, weights=AP1_RGB2Y):
 
 
 def aces_reference_pixel(rgb):
-    aces = rrt_glow_and_red(SRGB_2_AP0 @ np.clip(rgb, 0, 60), lambda h: cubic_basis_shaper(h, 135.0))
+    # rrt.ctl takes every ACES value (negative and beyond 60 included) through glow and red modifier
+    aces = rrt_glow_and_red(REC709_2_AP0_BRADFORD @ rgb, lambda h: cubic_basis_shaper(h, 135.0), tiny=1e-10)
     pre = sat_adjust(np.clip(AP0_2_AP1 @ np.maximum(aces, 0), 0, 65504), 0.96)
     oces = np.linalg.inv(AP0_2_AP1) @ np.array([segmented_spline_fwd(v, RRT_PARAMS) for v in pre])
     post = np.array([segmented_spline_fwd(v, ODT_48NITS) for v in AP0_2_AP1 @ oces])

@@ -1,8 +1,10 @@
 """Tone mapping: scene-referred linear Rec.709 in, display-referred linear Rec.709 in [0, 1] out.
 
-Every curve clamps its input to ``[0, limit]`` first: negative (out-of-gamut) values map to black
-and, as in the source documents, values above 60 are treated as 60 (beyond it every curve here is
-within 1/255 of its asymptote, and half-precision evaluation stays finite). The output is clipped
+The engine curves clamp their input to ``[0, limit]`` first: negative (out-of-gamut) values map to
+black and, as in the source documents, values above 60 are treated as 60 (beyond it every curve here is
+within 1/255 of its asymptote, and half-precision evaluation stays finite). The ACES renderings
+(``aces_reference``, ``aces2``, ``aces2_hdr``) take every value as their reference implementations do:
+they handle out-of-gamut colours themselves. The output is clipped
 to [0, 1] unless a caller asks for the unclipped display values (``clip=False``); sRGB encoding is
 a separate step (:func:`torchgrade.color.linear_to_srgb`).
 
