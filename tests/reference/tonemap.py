@@ -1,8 +1,13 @@
 """Independent float64 references of every tone mapper, written pixel by pixel from their sources."""
 
 import math
+import warnings
 
 import numpy as np
+
+with warnings.catch_warnings():
+    warnings.simplefilter("ignore")
+    import colour
 
 from .pixels import LUM709, random_rgb
 
@@ -289,6 +294,38 @@ def ref_unreal_filmic(rgb, **controls):
     return np.array([unreal_filmic_pixel(p, **controls) for p in rgb])
 
 
+def ref_bt2390_pq(e1, min_nits, max_nits):
+    """ITU-R BT.2390-4 section 5.4.1 with L_B = 0 and L_W = 10000 cd/m^2, on PQ values."""
+    max_lum, min_lum = colour.models.eotf_inverse_ST2084(max_nits), colour.models.eotf_inverse_ST2084(min_nits)
+    ks = 1.5 * max_lum - 0.5
+    t = (np.minimum(e1, 1.0) - ks) / (1 - ks)
+    p = (2 * t**3 - 3 * t**2 + 1) * ks + (t**3 - 2 * t**2 + t) * (1 - ks) + (-2 * t**3 + 3 * t**2) * max_lum
+    e2 = np.where(e1 < ks, e1, p)
+    return e2 + min_lum * (1 - e2) ** 4
+
+
+def ref_unity_reinhard(nits, peak):
+    m = 10000.0 * peak / (10000.0 - peak)
+    return nits * m / (nits + m)
+
+
+def ref_neutral_hdr(rgb, paper_white=203.0, min_nits=0.005, peak=1000.0, hue_shift=0.0, method="bt2390"):
+    """Unity HDROutput.hlsl HDRMappingFromRec709 (Rec.2020 output, BT.2390 or Reinhard range reduction)."""
+    to_2020 = colour.matrix_RGB_to_RGB(colour.RGB_COLOURSPACES["ITU-R BT.709"], colour.RGB_COLOURSPACES["ITU-R BT.2020"])
+    nits = rgb @ to_2020.T * paper_white
+    pq, unpq = colour.models.eotf_inverse_ST2084, colour.models.eotf_ST2084
+    if method == "bt2390":
+        reduce_pq, reduce_nits = (lambda e: ref_bt2390_pq(e, min_nits, peak)), (lambda x: unpq(ref_bt2390_pq(pq(x), min_nits, peak)))
+    else:
+        reduce_pq, reduce_nits = (lambda e: pq(ref_unity_reinhard(unpq(e), peak))), (lambda x: ref_unity_reinhard(x, peak))
+    ictcp = colour.RGB_to_ICtCp(nits, method="ITU-R BT.2100-2 PQ")
+    reduced = reduce_pq(ictcp[:, 0])
+    saturation = np.minimum(1.0, reduced / np.maximum(ictcp[:, 0], 1e-6)) ** 2
+    keeping = colour.ICtCp_to_RGB(np.stack([reduced, ictcp[:, 1] * saturation, ictcp[:, 2] * saturation], 1), method="ITU-R BT.2100-2 PQ")
+    out = (1 - hue_shift) * keeping + hue_shift * reduce_nits(nits)
+    return np.clip(out / peak, 0, 1)
+
+
 REFERENCES = {
     "none": lambda rgb: np.clip(rgb, 0, 1),
     "reinhard": ref_reinhard,
@@ -305,6 +342,7 @@ REFERENCES = {
     "agx": ref_agx,
     "agx_godot": ref_agx_godot,
     "khronos_pbr_neutral": ref_khronos_pbr_neutral,
+    "neutral_hdr": ref_neutral_hdr,
 }
 
 

@@ -23,15 +23,17 @@ from .aces2_curves import aces2_hdr, aces2_sdr
 from .aces_fits import aces, aces_fitted, aces_hill, aces_narkowicz
 from .agx_curves import agx, agx_godot
 from .base import TONEMAP_INPUT_LIMIT, ToneMapper, no_tonemap
+from .hdr_range import bt2390_eetf, neutral_hdr
 from .filmic_curves import filmic, hable, neutral, unreal_filmic
 from .khronos_pbr import khronos_pbr_neutral
 from .layer import ToneMap
-from .registry import TONE_MAPPERS, TONEMAP_MODES, tone_mapper, tonemap
+from .registry import HDR_MODES, TONE_MAPPERS, TONEMAP_MODES, tone_mapper, tonemap
 from .reinhard_curves import reinhard, reinhard_extended, reinhard_luminance
 
 __all__ = [
     "TONEMAP_MODES",
     "TONE_MAPPERS",
+    "HDR_MODES",
     "TONEMAP_INPUT_LIMIT",
     "ToneMap",
     "ToneMapper",
@@ -52,6 +54,8 @@ __all__ = [
     "aces_reference",
     "aces2_sdr",
     "aces2_hdr",
+    "neutral_hdr",
+    "bt2390_eetf",
     "agx",
     "agx_godot",
     "khronos_pbr_neutral",
