@@ -312,7 +312,7 @@ def ref_unity_reinhard(nits, peak):
 def ref_neutral_hdr(rgb, paper_white=203.0, min_nits=0.005, peak=1000.0, hue_shift=0.0, method="bt2390"):
     """Unity HDROutput.hlsl HDRMappingFromRec709 (Rec.2020 output, BT.2390 or Reinhard range reduction)."""
     to_2020 = colour.matrix_RGB_to_RGB(colour.RGB_COLOURSPACES["ITU-R BT.709"], colour.RGB_COLOURSPACES["ITU-R BT.2020"])
-    nits = rgb @ to_2020.T * paper_white
+    nits = np.minimum(rgb @ to_2020.T * paper_white, 10000.0)  # the PQ range
     pq, unpq = colour.models.eotf_inverse_ST2084, colour.models.eotf_ST2084
     if method == "bt2390":
         reduce_pq, reduce_nits = (lambda e: ref_bt2390_pq(e, min_nits, peak)), (lambda x: unpq(ref_bt2390_pq(pq(x), min_nits, peak)))

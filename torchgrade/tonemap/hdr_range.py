@@ -94,8 +94,9 @@ def neutral_hdr(image: torch.Tensor, paper_white: Param = 203.0, min_luminance: 
 
     ``paper_white`` defaults to BT.2408's HDR reference white (203 cd/m²). Encode for a Rec.2100
     PQ display with ``torchgrade.color.linear_to_pq(x, reference=peak_luminance)`` or
-    :class:`torchgrade.display.Display`. Negative (out-of-gamut) input reaches the ICtCp path clamped
-    in LMS, as Unity's ``max(0, lms)``.
+    :class:`torchgrade.display.Display`. Input policy: each Rec.2020 channel is clamped at 10000
+    cd/m² (the end of PQ, which the EETF maps to the peak anyway); negative (out-of-gamut) values
+    reach the ICtCp path clamped in LMS, as Unity's ``max(0, lms)``.
 
     Examples:
         >>> grey = torch.full((1, 3, 1, 1), 1.0, dtype=torch.float64)
@@ -109,7 +110,7 @@ def neutral_hdr(image: torch.Tensor, paper_white: Param = 203.0, min_luminance: 
     x = image.double()
     white, low, peak, shift = (scalar_param(v, x, name) for v, name in ((paper_white, "paper_white"), (min_luminance, "min_luminance"),
                                                                         (peak_luminance, "peak_luminance"), (hue_shift, "hue_shift")))
-    nits = color.convert(x, "rec709_to_rec2020") * white
+    nits = (color.convert(x, "rec709_to_rec2020") * white).clamp(max=color.PQ_PEAK)  # PQ ends at 10000 cd/m²
     keeping = _hue_preserving(nits, range_reduction, low, peak)
     shifting = _reduce(nits, range_reduction, low, peak)
     return display(torch.lerp(keeping, shifting, shift) / peak, clip).to(image.dtype)
