@@ -72,6 +72,8 @@ class Aces2Output:
         return rgb.clamp(0.0, self.peak / REFERENCE_LUMINANCE)
 
 
+# torch.compile would trace through the cache and rebuild the tables in every call: run it eagerly.
+@torch.compiler.disable
 @functools.lru_cache(maxsize=8)
 def _output(peak: float, limiting: str) -> Aces2Output:
     return Aces2Output(peak, limiting)
