@@ -8,7 +8,8 @@ they handle out-of-gamut colours themselves. The output is clipped
 to [0, 1] unless a caller asks for the unclipped display values (``clip=False``); sRGB encoding is
 a separate step (:func:`torchgrade.color.linear_to_srgb`).
 
-One file per family (Reinhard, filmic, ACES fits, ACES 1.x reference, AgX, Khronos PBR Neutral),
+One file per family (Reinhard, filmic, ACES fits, ACES 1.x reference, ACES 2.0, AgX, Khronos PBR
+Neutral, Unity's HDR range reduction),
 the registry of modes in :mod:`~torchgrade.tonemap.registry`, the :class:`ToneMap` stage in
 :mod:`~torchgrade.tonemap.layer`.
 
