@@ -68,6 +68,13 @@ def write_png16(path, signal: torch.Tensor) -> None:
 
     PIL writes 16-bit PNGs for one channel only; this writes the PNG format itself (IHDR bit depth 16,
     colour type 2, every row with filter 0).
+
+    Examples:
+        >>> import pathlib, tempfile
+        >>> path = pathlib.Path(tempfile.mkdtemp()) / "pq.png"
+        >>> write_png16(path, torch.full((3, 2, 2), 0.5))
+        >>> path.read_bytes()[:8] == b"\\x89PNG\\r\\n\\x1a\\n", path.read_bytes()[24]  # signature, bit depth
+        (True, 16)
     """
     codes = (signal.clamp(0.0, 1.0) * 65535.0).round().to(torch.int32).permute(1, 2, 0).cpu().numpy().astype(">u2")
     height, width = codes.shape[:2]
