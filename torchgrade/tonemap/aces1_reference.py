@@ -108,7 +108,9 @@ def aces_reference(image: torch.Tensor, clip: bool = True) -> torch.Tensor:
     ODT's AP0 → AP1 cancel); ``Y_2_linCV`` (0.02..48 cd/m² → 0..1); dark → dim surround (γ 0.9811);
     desaturation 0.93; AP1 → XYZ → Bradford D60 → D65 → Rec.709; clip to [0, 1]. Encoding with
     :func:`torchgrade.color.linear_to_srgb` gives OpenColorIO's "ACES 1.0 - SDR Video" view of the
-    "sRGB - Display".
+    "sRGB - Display" within 0.25 8-bit codes on every sample-image pixel; the rest is OpenColorIO
+    recomputing the red modifier's saturation after the glow, where the CTL (and this) compute it
+    once before.
 
     Examples:
         >>> [round(v, 3) for v in aces_reference(torch.tensor([0.18, 1.0, 5.0]).expand(3, 1, 3))[0, 0].tolist()]
