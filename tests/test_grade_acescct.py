@@ -68,3 +68,14 @@ def test_config_round_trip_and_rules():
         tg.ColorGrade(log_space="acescct", contrast=10)
     with pytest.raises(ValueError, match="log_space"):
         tg.ColorGrade(aces=True, log_space="logc")
+
+
+def test_graph_input_export_form_keeps_acescct():
+    from torchgrade.onnx.graph import GRADE_INPUTS, export_graph
+
+    grade = tg.ColorGrade(aces=True, log_space="acescct", contrast=30.0)
+    graph = export_graph(grade, grade_inputs=True)
+    image = torch.rand(1, 3, 4, 4) * 4
+    assert graph.stages[0].log_space == "acescct"
+    controls = [torch.as_tensor(getattr(grade, name), dtype=torch.float32).unsqueeze(0) for name in GRADE_INPUTS]  # a batch of one
+    torch.testing.assert_close(graph.stages[0](image, *controls), grade(image))
