@@ -11,6 +11,7 @@ Examples:
 from . import color, core, curves, functional, io, onnx, scene
 from .augment import RandomPostFX
 from .bloom import Bloom, ConvolutionBloom
+from .display import Display
 from .dither import Dither
 from .exposure import AutoExposure
 from .grade import ColorGrade
@@ -33,6 +34,7 @@ __all__ = [
     "Bloom",
     "ConvolutionBloom",
     "Dither",
+    "Display",
     "AutoExposure",
     "ColorGrade",
     "LUT3D",

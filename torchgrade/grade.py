@@ -24,7 +24,8 @@ master/red/green/blue curves map ``[0, 1]`` to ``[0, 1]`` in FastTonemap space `
 A curve is shared by the whole batch (no per-sample curves); its ``y`` values can be learnt.
 
 With ``aces=True`` contrast is applied in ACEScc and the rest in ACEScg with AP1 luminance, as
-Unity does when ACES tone mapping is selected. Whatever the working space, the grade returns
+Unity does when ACES tone mapping is selected; ``log_space="acescct"`` grades contrast in ACEScct
+instead (ACEScc's log above 2^-7 in ACEScg, a straight toe below it, as colourists' ACEScct). Whatever the working space, the grade returns
 linear Rec.709, the one space every torchgrade stage takes and returns: ``ColorGrade(aces=True)``
 followed by ``ToneMap("aces")`` reproduces Unity's ACES path (the final ``max(0)`` happens in
 ACES2065-1 as in Unity), and no combination of stages can hand a curve the wrong primaries.
@@ -109,18 +110,18 @@ def _grade_inputs(params: dict) -> dict:
     """Every control of the grade: the given ones, the others at their defaults; identity curves as None."""
     unknown = set(params) - set(ColorGrade.controls)
     if unknown:
-        known = ", ".join(name for name in ColorGrade.controls if name != "aces")
+        known = ", ".join(name for name in ColorGrade.controls if name not in _SETTINGS)
         raise ValueError(f"unknown grading control(s) {sorted(unknown)}; known: {known}")
     inputs = {}
     for name, control in ColorGrade.controls.items():
         if isinstance(control, CurveControl):
             inputs[name] = None if curve_is_identity(params.get(name), control.flat) else params[name]
-        elif name != "aces":
+        elif name not in _SETTINGS:
             inputs[name] = params.get(name, control.default)
     return inputs
 
 
-def color_grade(image: torch.Tensor, aces: bool = False, **params) -> torch.Tensor:
+def color_grade(image: torch.Tensor, aces: bool = False, log_space: str = "acescc", **params) -> torch.Tensor:
     """The whole grade, in Unity's order; steps left at identity are not computed.
 
     An all-identity grade returns ``image`` itself. Otherwise the input passes the non-finite policy,
@@ -145,7 +146,7 @@ def color_grade(image: torch.Tensor, aces: bool = False, **params) -> torch.Tens
     if "white_balance" in steps:
         x = white_balance(x, p["temperature"], p["tint"])
     if "contrast" in steps:
-        x = contrast(x, p["contrast"], aces)
+        x = contrast(x, p["contrast"], aces, log_space)
     elif aces:
         x = unity_to_acescg(x)
     if "color_filter" in steps:
@@ -176,6 +177,10 @@ def color_grade(image: torch.Tensor, aces: bool = False, **params) -> torch.Tens
     return to_input_dtype(x, image)
 
 
+_SETTINGS = ("aces", "log_space")
+"""Controls that choose the working space, not grading steps."""
+
+
 def _check_zone(start: Param, end: Param, zone: str) -> None:
     start_t, end_t = torch.as_tensor(start).detach(), torch.as_tensor(end).detach()
     if (start_t >= end_t).any():
@@ -204,6 +209,7 @@ class ColorGrade(Stage):
     # Each control, its identity value and its allowed range, in Unity's order; then the curves.
     controls = {
         "aces": Control(False),
+        "log_space": Control("acescc", ("acescc", "acescct")),
         "post_exposure": Control(0.0, (-20.0, 20.0)),
         "temperature": Control(0.0, (-100.0, 100.0)),
         "tint": Control(0.0, (-100.0, 100.0)),
@@ -247,12 +253,14 @@ class ColorGrade(Stage):
         return value
 
     def check_together(self) -> None:
+        if self.log_space != "acescc" and not self.aces:
+            raise ValueError(f"log_space {self.log_space!r} grades contrast in ACES: it needs aces=True")
         _check_zone(self.shadows_start, self.shadows_end, "shadows")
         _check_zone(self.highlights_start, self.highlights_end, "highlights")
 
     def is_default(self, name: str) -> bool:
-        if name == "aces":
-            return not self.aces
+        if name in _SETTINGS:
+            return super().is_default(name)
         return is_identity_control(name, getattr(self, name))
 
     @property

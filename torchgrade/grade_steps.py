@@ -21,8 +21,10 @@ from .color import (
     aces_to_acescc,
     aces_to_acescg,
     acescc_to_aces,
+    acescct_to_linear,
     hsv_to_rgb,
     linear_to_lms,
+    linear_to_acescct,
     lms_to_linear,
     luminance,
     rgb_to_hsv,
@@ -30,6 +32,7 @@ from .color import (
     safe_sqrt,
     srgb_to_linear,
     unity_to_aces,
+    unity_to_acescg,
 )
 from .core import HALF_MAX, Param, apply_matrix, bounded_pow, color_param, matrix_param, scalar_param
 from .curves import evaluate_curve
@@ -117,11 +120,12 @@ def white_balance(image: torch.Tensor, temperature: Param = 0.0, tint: Param = 0
     return lms_to_linear(linear_to_lms(image) * gains)
 
 
-def contrast(image: torch.Tensor, amount: Param, aces: bool = False) -> torch.Tensor:
+def contrast(image: torch.Tensor, amount: Param, aces: bool = False, log_space: str = "acescc") -> torch.Tensor:
     """Contrast about mid grey in log space: ``(log(x) - 0.4135884) · (1 + amount/100) + 0.4135884``.
 
     Linear mode uses LogC and returns linear Rec.709; ``aces=True`` uses ACEScc and returns ACEScg
-    (Unity ``ColorGradingContrast``). In LogC, ``c log10(a x + b) + d``, the encode, the scaling and
+    (Unity ``ColorGradingContrast``); ``log_space="acescct"`` uses ACEScct (S-2016-001) on ACEScg, whose
+    linear toe below 2^-7 keeps shadows from the log's steep fall. In LogC, ``c log10(a x + b) + d``, the encode, the scaling and
     the decode fold into one power: ``((a x + b)^k · 10^((d - 0.4135884)(k - 1) / c) - b) / a``.
 
     Examples:
@@ -130,6 +134,9 @@ def contrast(image: torch.Tensor, amount: Param, aces: bool = False) -> torch.Te
         True
     """
     k = 1.0 + scalar_param(amount, image, "contrast") * 0.01
+    if aces and log_space == "acescct":
+        log = linear_to_acescct(unity_to_acescg(image))
+        return acescct_to_linear((log - ACESCC_MIDGRAY) * k + ACESCC_MIDGRAY)
     if aces:
         log = aces_to_acescc(unity_to_aces(image))
         return aces_to_acescg(acescc_to_aces((log - ACESCC_MIDGRAY) * k + ACESCC_MIDGRAY))

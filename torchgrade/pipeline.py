@@ -1,4 +1,4 @@
-"""``PostFX``: the whole look, ``AutoExposure -> Bloom -> ColorGrade -> PrimaryGrade -> ToneMap -> Dither``,
+"""``PostFX``: the whole look, ``AutoExposure -> Bloom -> ColorGrade -> PrimaryGrade -> ToneMap -> Dither -> Display``,
 built from arguments or a config.
 
 Each stage is given as a module, a dict of its constructor arguments, or ``None``. Only the stages a
@@ -7,7 +7,9 @@ all identity, a bloom of intensity 0 (or ``max_iterations`` 0) and a dither of a
 add no ONNX nodes. Tone mapping is never dropped when given (even ``"none"`` clips to [0, 1]).
 
 A config is a dict (or a JSON file) with the keys ``exposure``, ``bloom``, ``grade``, ``primary``,
-``tonemap`` and ``dither`` (the last two optional stages are off unless given);
+``tonemap``, ``dither`` and ``display`` (the last three optional stages are off unless given; without
+``display`` the look returns display-linear light, with it the display's signal, see
+:class:`~torchgrade.display.Display`);
 each holds the arguments of its stage (``tonemap`` may also be just a mode name)::
 
     {"bloom": {"intensity": 0.8, "threshold": 1.2},
@@ -36,6 +38,7 @@ from torch import nn
 
 from .bloom import Bloom
 from .config import config_value, load_config
+from .display import Display, display_settings
 from .dither import Dither
 from .exposure import AutoExposure
 from .grade import ColorGrade
@@ -45,7 +48,8 @@ from .tonemap import TONE_MAPPERS, ToneMap
 
 __all__ = ["PostFX", "STAGES", "SAFE_GLOBALS", "stage_keys", "build_stage", "is_identity_stage"]
 
-STAGES = {"exposure": AutoExposure, "bloom": Bloom, "grade": ColorGrade, "primary": PrimaryGrade, "tonemap": ToneMap, "dither": Dither}
+STAGES = {"exposure": AutoExposure, "bloom": Bloom, "grade": ColorGrade, "primary": PrimaryGrade, "tonemap": ToneMap, "dither": Dither,
+          "display": Display}
 """The configurable stages, in the order they run, and their classes."""
 
 
@@ -118,7 +122,7 @@ def is_identity_stage(module: nn.Module) -> bool:
 
 
 class PostFX(nn.Module):
-    """A look: ``PostFX(exposure=None, bloom=None, grade=None, tonemap=None, primary=None, dither=None)``;
+    """A look: ``PostFX(exposure=None, bloom=None, grade=None, tonemap=None, primary=None, dither=None, display=None)``;
     see the module docstring.
 
     ``lut`` (a :class:`~torchgrade.lut.LUT3D`, applied with ``interpolation``) replaces ``grade``,
@@ -135,15 +139,16 @@ class PostFX(nn.Module):
     """
 
     def __init__(self, exposure=None, bloom=None, grade=None, tonemap=None, lut: Optional[LUT3D] = None,
-                 interpolation: str = "tetrahedral", primary=None, dither=None):
+                 interpolation: str = "tetrahedral", primary=None, dither=None, display=None):
         super().__init__()
         if lut is not None and (grade is not None or primary is not None or tonemap is not None):
             raise ValueError("a look takes either lut or grade/primary/tonemap, not both")
         if interpolation not in INTERPOLATIONS:
             raise ValueError(f"interpolation must be one of {INTERPOLATIONS}, got {interpolation!r}")
-        given = {"exposure": exposure, "bloom": bloom, "grade": grade, "primary": primary, "tonemap": tonemap, "dither": dither}
+        given = {"exposure": exposure, "bloom": bloom, "grade": grade, "primary": primary, "tonemap": tonemap, "dither": dither,
+                 "display": display}
         for stage, spec in given.items():
-            module = build_stage(stage, spec)
+            module = build_stage(stage, display_settings(spec, self.tonemap) if stage == "display" else spec)
             setattr(self, stage, None if module is None or is_identity_stage(module) else module)
         self.lut = lut
         self.interpolation = interpolation
@@ -222,7 +227,7 @@ class PostFX(nn.Module):
 
     def stages(self) -> dict:
         """The built stages by name, in the order they run (``"lut"`` for a baked look)."""
-        names = ("exposure", "bloom", "grade", "primary", "tonemap", "lut", "dither")
+        names = ("exposure", "bloom", "grade", "primary", "tonemap", "lut", "dither", "display")
         return {name: getattr(self, name) for name in names if getattr(self, name) is not None}
 
     def forward(self, image: torch.Tensor, dt=None) -> torch.Tensor:
@@ -231,7 +236,7 @@ class PostFX(nn.Module):
         return self.finish(image)
 
     def finish(self, image: torch.Tensor) -> torch.Tensor:
-        """The stages after exposure: bloom, then grade, primary grade and tone mapping (or the baked LUT), then dither."""
+        """The stages after exposure: bloom, then grade, primary grade and tone mapping (or the baked LUT), then dither and display encoding."""
         if self.bloom is not None:
             image = self.bloom(image)
         if self.lut is not None:
@@ -239,7 +244,8 @@ class PostFX(nn.Module):
         for stage in (self.grade, self.primary, self.tonemap):
             if stage is not None:
                 image = stage(image)
-        return image if self.dither is None else self.dither(image)
+        image = image if self.dither is None else self.dither(image)
+        return image if self.display is None else self.display(image)
 
     def frame(self, image: torch.Tensor, adapted: torch.Tensor, dt) -> tuple:
         """The look without state, for serving: ``(image, adapted, dt) -> (output, new adapted)``.
@@ -285,6 +291,7 @@ class PostFX(nn.Module):
             exposure=copy.deepcopy(self.exposure),
             bloom=copy.deepcopy(self.bloom),
             dither=copy.deepcopy(self.dither),
+            display=copy.deepcopy(self.display),
             lut=lut,
             interpolation=interpolation or self.interpolation,
         )

@@ -1,8 +1,13 @@
 """Independent float64 references of every tone mapper, written pixel by pixel from their sources."""
 
 import math
+import warnings
 
 import numpy as np
+
+with warnings.catch_warnings():
+    warnings.simplefilter("ignore")
+    import colour
 
 from .pixels import LUM709, random_rgb
 
@@ -42,6 +47,25 @@ def ref_hable(rgb, bias=2.0, w=11.2):
 
 # --- Unity's AcesTonemap, written pixel by pixel with the shader's branches (ACES.hlsl, Color.hlsl) ---
 SRGB_2_AP0 = np.array([[0.4397010, 0.3829780, 0.1773350], [0.0897923, 0.8134230, 0.0967616], [0.0175440, 0.1115440, 0.8707040]])
+
+
+def _rgb_to_xyz(primaries, white):
+    """SMPTE RP 177: the primaries' XYZ columns scaled so that RGB (1, 1, 1) is the white."""
+    xyz = lambda x, y: np.array([x / y, 1.0, (1 - x - y) / y])
+    columns = np.stack([xyz(*p) for p in primaries], axis=1)
+    return columns * np.linalg.solve(columns, xyz(*white))
+
+
+def _bradford(source_white, target_white):
+    cone = np.array([[0.8951, 0.2664, -0.1614], [-0.7502, 1.7135, 0.0367], [0.0389, -0.0685, 1.0296]])
+    xyz = lambda x, y: np.array([x / y, 1.0, (1 - x - y) / y])
+    return np.linalg.inv(cone) @ np.diag((cone @ xyz(*target_white)) / (cone @ xyz(*source_white))) @ cone
+
+
+ACES_WHITE, D65 = (0.32168, 0.33767), (0.3127, 0.3290)
+REC709_2_AP0_BRADFORD = (np.linalg.inv(_rgb_to_xyz(((0.7347, 0.2653), (0.0, 1.0), (0.0001, -0.077)), ACES_WHITE))
+                         @ _bradford(D65, ACES_WHITE) @ _rgb_to_xyz(((0.64, 0.33), (0.30, 0.60), (0.15, 0.06)), D65))
+"""Linear Rec.709 -> ACES2065-1 as OpenColorIO's configs build it (primaries, Bradford D65 -> ACES white)."""
 AP0_2_AP1 = np.array([[1.4514393161, -0.2365107469, -0.2149285693], [-0.0765537734, 1.1762296998, -0.0996759264], [0.0083161484, -0.0060324498, 0.9977163014]])
 AP1_2_XYZ = np.array([[0.6624541811, 0.1340042065, 0.1561876870], [0.2722287168, 0.6740817658, 0.0536895174], [-0.0055746495, 0.0040607335, 1.0103391003]])
 XYZ_2_AP1 = np.array([[1.6410233797, -0.3248032942, -0.2364246952], [-0.6636628587, 1.6153315917, 0.0167563477], [0.0117218943, -0.0082844420, 0.9883948585]])
@@ -119,9 +143,10 @@ def cubic_basis_shaper(x, w):
     return sum(monomials[i] * m[i][3 - j] for i in range(4)) * 1.5
 
 
-def rrt_glow_and_red(aces, hue_weight):
+def rrt_glow_and_red(aces, hue_weight, tiny=1e-4):
+    """Unity floors the saturation's terms at 1e-4 (half precision); the CTL's TINY is 1e-10."""
     ma, mi = aces.max(), aces.min()
-    sat = (max(ma, 1e-4) - max(mi, 1e-4)) / max(ma, 1e-2)
+    sat = (max(ma, tiny) - max(mi, tiny)) / max(ma, 1e-2)
     r, g, b = aces
     yc = (r + g + b + 1.75 * math.sqrt(max(b * (b - g) + g * (g - r) + r * (r - b), 0))) / 3
     x = (sat - 0.4) / 0.2
@@ -143,7 +168,8 @@ def sat_adjust(rgb, factor, weights=AP1_RGB2Y):
 
 
 def aces_reference_pixel(rgb):
-    aces = rrt_glow_and_red(SRGB_2_AP0 @ np.clip(rgb, 0, 60), lambda h: cubic_basis_shaper(h, 135.0))
+    # rrt.ctl takes every ACES value (negative and beyond 60 included) through glow and red modifier
+    aces = rrt_glow_and_red(REC709_2_AP0_BRADFORD @ rgb, lambda h: cubic_basis_shaper(h, 135.0), tiny=1e-10)
     pre = sat_adjust(np.clip(AP0_2_AP1 @ np.maximum(aces, 0), 0, 65504), 0.96)
     oces = np.linalg.inv(AP0_2_AP1) @ np.array([segmented_spline_fwd(v, RRT_PARAMS) for v in pre])
     post = np.array([segmented_spline_fwd(v, ODT_48NITS) for v in AP0_2_AP1 @ oces])
@@ -268,6 +294,38 @@ def ref_unreal_filmic(rgb, **controls):
     return np.array([unreal_filmic_pixel(p, **controls) for p in rgb])
 
 
+def ref_bt2390_pq(e1, min_nits, max_nits):
+    """ITU-R BT.2390-4 section 5.4.1 with L_B = 0 and L_W = 10000 cd/m^2, on PQ values."""
+    max_lum, min_lum = colour.models.eotf_inverse_ST2084(max_nits), colour.models.eotf_inverse_ST2084(min_nits)
+    ks = 1.5 * max_lum - 0.5
+    t = (np.minimum(e1, 1.0) - ks) / (1 - ks)
+    p = (2 * t**3 - 3 * t**2 + 1) * ks + (t**3 - 2 * t**2 + t) * (1 - ks) + (-2 * t**3 + 3 * t**2) * max_lum
+    e2 = np.where(e1 < ks, e1, p)
+    return e2 + min_lum * (1 - e2) ** 4
+
+
+def ref_unity_reinhard(nits, peak):
+    m = 10000.0 * peak / (10000.0 - peak)
+    return nits * m / (nits + m)
+
+
+def ref_neutral_hdr(rgb, paper_white=203.0, min_nits=0.005, peak=1000.0, hue_shift=0.0, method="bt2390"):
+    """Unity HDROutput.hlsl HDRMappingFromRec709 (Rec.2020 output, BT.2390 or Reinhard range reduction)."""
+    to_2020 = colour.matrix_RGB_to_RGB(colour.RGB_COLOURSPACES["ITU-R BT.709"], colour.RGB_COLOURSPACES["ITU-R BT.2020"])
+    nits = np.minimum(rgb @ to_2020.T * paper_white, 10000.0)  # the PQ range
+    pq, unpq = colour.models.eotf_inverse_ST2084, colour.models.eotf_ST2084
+    if method == "bt2390":
+        reduce_pq, reduce_nits = (lambda e: ref_bt2390_pq(e, min_nits, peak)), (lambda x: unpq(ref_bt2390_pq(pq(x), min_nits, peak)))
+    else:
+        reduce_pq, reduce_nits = (lambda e: pq(ref_unity_reinhard(unpq(e), peak))), (lambda x: ref_unity_reinhard(x, peak))
+    ictcp = colour.RGB_to_ICtCp(nits, method="ITU-R BT.2100-2 PQ")
+    reduced = reduce_pq(ictcp[:, 0])
+    saturation = np.minimum(1.0, reduced / np.maximum(ictcp[:, 0], 1e-6)) ** 2
+    keeping = colour.ICtCp_to_RGB(np.stack([reduced, ictcp[:, 1] * saturation, ictcp[:, 2] * saturation], 1), method="ITU-R BT.2100-2 PQ")
+    out = (1 - hue_shift) * keeping + hue_shift * reduce_nits(nits)
+    return np.clip(out / peak, 0, 1)
+
+
 REFERENCES = {
     "none": lambda rgb: np.clip(rgb, 0, 1),
     "reinhard": ref_reinhard,
@@ -284,6 +342,7 @@ REFERENCES = {
     "agx": ref_agx,
     "agx_godot": ref_agx_godot,
     "khronos_pbr_neutral": ref_khronos_pbr_neutral,
+    "neutral_hdr": ref_neutral_hdr,
 }
 
 

@@ -23,7 +23,7 @@ from ..io import write_exr
 from ..io.atomic import atomic_write
 from ..pipeline import PostFX
 
-__all__ = ["GRADING_FLAGS", "write_png", "write_image", "stages_label", "grade_from_args", "given_grading_flags", "look_from_args",
+__all__ = ["GRADING_FLAGS", "display_codes", "write_png", "stages_label", "grade_from_args", "given_grading_flags", "look_from_args",
            "add_grading_flags"]
 
 GRADING_FLAGS = {
@@ -37,28 +37,29 @@ GRADING_FLAGS = {
 """The grading controls ``grade`` and ``bake`` take as flags (``--post-exposure`` ...), with their units."""
 
 
-def write_png(path, display_linear: torch.Tensor) -> None:
-    """Write a display-referred linear ``(3, H, W)`` image as an 8-bit sRGB PNG (atomically)."""
+def display_codes(image: torch.Tensor, maximum: int, encoded: bool = False) -> np.ndarray:
+    """Integer codes ``(H, W, 3)`` in ``[0, maximum]``: of a display signal as it is (``encoded``), else of
+    display-referred linear light, sRGB-encoded.
+
+    Examples:
+        >>> display_codes(torch.full((3, 1, 1), 0.5), 255, encoded=True).ravel().tolist()
+        [128.0, 128.0, 128.0]
+    """
+    signal = image.clamp(0.0, 1.0) if encoded else linear_to_srgb(image.clamp(0.0, 1.0))
+    return np.ascontiguousarray((signal * maximum).round().permute(1, 2, 0).cpu().numpy())
+
+
+def write_png(path, image: torch.Tensor, encoded: bool = False) -> None:
+    """Write a ``(3, H, W)`` image as an 8-bit PNG (atomically): sRGB-encoded light, or a display signal as it is."""
     from PIL import Image
 
-    codes = (linear_to_srgb(display_linear.clamp(0.0, 1.0)) * 255.0).round().to(torch.uint8)
-    pixels = np.ascontiguousarray(codes.permute(1, 2, 0).cpu().numpy())
+    pixels = display_codes(image, 255, encoded).astype(np.uint8)
     atomic_write(path, lambda temporary: Image.fromarray(pixels, "RGB").save(temporary, format="PNG"))
 
 
 def stages_label(look: nn.Module) -> str:
     """The stage classes of ``look`` in order, ``"A -> B"``, for the one line each subcommand prints."""
     return " -> ".join(type(stage).__name__ for stage in look.children())
-
-
-def write_image(path: Path, image: torch.Tensor) -> None:
-    """Write a display-referred ``(3, H, W)`` image to ``.png`` (8-bit sRGB) or ``.exr`` (linear)."""
-    if path.suffix.lower() == ".exr":
-        write_exr(path, image)
-    elif path.suffix.lower() == ".png":
-        write_png(path, image)
-    else:
-        raise ValueError(f"output must end in .png or .exr, got {path}")
 
 
 def grade_from_args(args: argparse.Namespace) -> nn.Sequential:

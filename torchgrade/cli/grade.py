@@ -22,6 +22,7 @@ import argparse
 import time
 from functools import partial
 
+from ..display import DISPLAY_PRESETS, Display, display_settings
 from ..io import read_cube, read_exr
 from ..pipeline import PostFX
 from .common import add_grading_flags, given_grading_flags, look_from_args, stages_label
@@ -55,6 +56,8 @@ def run_grade(args: argparse.Namespace) -> str:
     frames = shot_frames(args.inputs)
     outputs = output_paths(args.output, frames)
     look = look_to_grade(args)
+    if args.display:
+        look.display = Display(**display_settings(args.display, look.tonemap))
     if args.scene_referred and look.lut is not None:
         raise ValueError("--scene-referred stops before tone mapping, which --lut holds")
     if args.jobs < 1 or args.fps <= 0:
@@ -63,7 +66,7 @@ def run_grade(args: argparse.Namespace) -> str:
 
     def write(index, image):
         sizes[index] = tuple(image.shape[1:])
-        write_frame(outputs[index], image, depth)
+        write_frame(outputs[index], image, depth, encoded=look.display is not None)
 
     start = time.perf_counter()
     grade_shot(look, frames, _reader(args), write, 1.0 / args.fps, args.scene_referred, args.jobs, len(frames) > 1 and not args.quiet)
@@ -88,6 +91,9 @@ def _add_shot_flags(grade: argparse.ArgumentParser) -> None:
     grade.add_argument("--part", type=lambda text: int(text) if text.isdigit() else text,
                        help="part of a multi-part EXR, by index or name")
     grade.add_argument("--to-rec709", action="store_true", help="convert from the file's chromaticities to Rec.709")
+    grade.add_argument("--display", choices=tuple(DISPLAY_PRESETS),
+                       help="encode for this display (hdr_pq: Rec.2100 PQ at an HDR --tonemap's peak) and write its signal: "
+                       "16-bit .png or .tif, or .exr")
     grade.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
 
 

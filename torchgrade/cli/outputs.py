@@ -20,10 +20,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..color import linear_to_srgb
 from ..io import write_exr
 from ..io.atomic import atomic_write
-from .common import write_png
+from .common import display_codes, write_png
 
 __all__ = ["BIT_DEPTHS", "check_output", "write_frame"]
 
@@ -45,16 +44,10 @@ def check_output(path, bit_depth: str | None, scene_referred: bool) -> str:
     return depth
 
 
-def _codes(display_linear: torch.Tensor, maximum: int) -> np.ndarray:
-    """sRGB-encoded integer codes ``(H, W, 3)`` of a display-referred linear image."""
-    encoded = linear_to_srgb(display_linear.clamp(0.0, 1.0)) * maximum
-    return np.ascontiguousarray(encoded.round().permute(1, 2, 0).cpu().numpy())
-
-
-def _write_png16(path: Path, display_linear: torch.Tensor) -> None:
+def _write_png16(path: Path, image: torch.Tensor, encoded: bool) -> None:
     import png
 
-    codes = _codes(display_linear, 65535).astype(np.uint16)
+    codes = display_codes(image, 65535, encoded).astype(np.uint16)
     height, width = codes.shape[:2]
     writer = png.Writer(width, height, greyscale=False, bitdepth=16)
     rows = codes.reshape(height, width * 3)
@@ -66,26 +59,27 @@ def _save_with(temporary, write) -> None:
         write(file)
 
 
-def _write_tiff(path: Path, image: torch.Tensor, depth: str) -> None:
+def _write_tiff(path: Path, image: torch.Tensor, depth: str, encoded: bool) -> None:
     import tifffile
 
     if depth == "float":
         pixels = np.ascontiguousarray(image.detach().float().permute(1, 2, 0).cpu().numpy())
     else:
-        pixels = _codes(image, 65535).astype(np.uint16)
+        pixels = display_codes(image, 65535, encoded).astype(np.uint16)
     atomic_write(path, lambda temporary: tifffile.imwrite(temporary, pixels, photometric="rgb"))
 
 
-def write_frame(path, image: torch.Tensor, depth: str) -> None:
+def write_frame(path, image: torch.Tensor, depth: str, encoded: bool = False) -> None:
     """Write a ``(3, H, W)`` linear image to ``path`` in the format its extension and ``depth`` name.
 
-    Integer formats (PNG, 16-bit TIFF) are sRGB-encoded and clamped to [0, 1]; EXR and float TIFF stay linear.
+    Integer formats (PNG, 16-bit TIFF) hold sRGB-encoded light clamped to [0, 1], or with ``encoded`` a
+    display's signal (:class:`~torchgrade.display.Display`) as it is; EXR and float TIFF hold the values as they are.
     """
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix == ".exr":
         write_exr(path, image, half=depth == "half")
     elif suffix == ".png":
-        write_png(path, image) if depth == "8" else _write_png16(path, image)
+        write_png(path, image, encoded) if depth == "8" else _write_png16(path, image, encoded)
     else:
-        _write_tiff(path, image, depth)
+        _write_tiff(path, image, depth, encoded)

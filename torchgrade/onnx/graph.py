@@ -49,7 +49,7 @@ def frame_of(stage: nn.Module) -> Optional[Callable]:
 class GradeWithInputs(nn.Module):
     """``ColorGrade`` whose controls are graph inputs: ``forward(image, *controls)`` in :data:`GRADE_INPUTS` order.
 
-    Its curves (control points, not inputs) and the ``aces`` switch are baked into the graph.
+    Its curves (control points, not inputs) and the ``aces`` and ``log_space`` settings are baked into the graph.
 
     Examples:
         >>> import torch
@@ -58,13 +58,14 @@ class GradeWithInputs(nn.Module):
         torch.Size([1, 3, 2, 2])
     """
 
-    def __init__(self, aces: bool, curves: Optional[dict] = None):
+    def __init__(self, aces: bool, curves: Optional[dict] = None, log_space: str = "acescc"):
         super().__init__()
         self.aces = aces
         self.curves = curves or {}
+        self.log_space = log_space
 
     def forward(self, image: torch.Tensor, *controls: torch.Tensor) -> torch.Tensor:
-        return color_grade(image, aces=self.aces, **dict(zip(GRADE_INPUTS, controls)), **self.curves)
+        return color_grade(image, aces=self.aces, log_space=self.log_space, **dict(zip(GRADE_INPUTS, controls)), **self.curves)
 
 
 class ExportGraph(nn.Module):
@@ -136,7 +137,7 @@ def export_graph(module: nn.Module, lut_backend: str = "strip", grade_inputs: bo
     stages = []
     for stage in named:
         if grade_inputs and isinstance(stage, ColorGrade):
-            stages.append(GradeWithInputs(stage.aces, stage.curves()))
+            stages.append(GradeWithInputs(stage.aces, stage.curves(), stage.log_space))
         else:
             stages.append(_export_form(stage, options))
     if grade_inputs and not any(isinstance(s, GradeWithInputs) for s in stages):

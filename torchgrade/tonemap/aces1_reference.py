@@ -6,10 +6,10 @@ import math
 
 import torch
 
-from ..color import convert, unity_to_aces
+from ..color import convert
 from ..core import HALF_MAX
-from .aces_rrt import ODT_SAT_FACTOR, RRT_SAT_FACTOR, ap1_desaturate, ap1_dim_surround, ap1_to_rec709, cubic_basis_hue_weight, rrt_glow_and_red_modifier
-from .base import display, limited
+from .aces_rrt import ACES_TINY, ODT_SAT_FACTOR, RRT_SAT_FACTOR, ap1_desaturate, ap1_dim_surround, ap1_to_rec709, cubic_basis_hue_weight, rec709_to_aces, rrt_glow_and_red_modifier
+from .base import display
 
 __all__ = ["aces_reference"]
 
@@ -101,19 +101,22 @@ def aces_reference(image: torch.Tensor, clip: bool = True) -> torch.Tensor:
     """The full ACES 1.0.3 rendering: RRT + ODT "RGB monitor, 100 nits, dim" (aces-dev ``rrt.ctl``,
     ``ODT.Academy.RGBmonitor_100nits_dim.ctl``), display-linear Rec.709 (sRGB primaries, D65).
 
-    Linear Rec.709 → ACES2065-1; RRT glow and red modifier (the CTL's cubic B-spline hue weight);
-    AP1, clamped to [0, 65504]; desaturation 0.96; the RRT tone scale (``segmented_spline_c5``) and
-    the ODT tone scale (``segmented_spline_c9``, 48 nits) per channel (the RRT's AP1 → AP0 and the
+    Linear Rec.709 → ACES2065-1 (Bradford-adapted), unclamped: negative (out-of-gamut) and very bright values go through
+    the RRT glow and red modifier (the CTL's cubic B-spline hue weight, its ``TINY`` = 1e-10) as the
+    CTL's do; then, as ``rrt.ctl``, ACES clamped at 0 and AP1 clamped to [0, 65504]; desaturation
+    0.96; the RRT tone scale (``segmented_spline_c5``) and the ODT tone scale (``segmented_spline_c9``, 48 nits) per channel (the RRT's AP1 → AP0 and the
     ODT's AP0 → AP1 cancel); ``Y_2_linCV`` (0.02..48 cd/m² → 0..1); dark → dim surround (γ 0.9811);
     desaturation 0.93; AP1 → XYZ → Bradford D60 → D65 → Rec.709; clip to [0, 1]. Encoding with
     :func:`torchgrade.color.linear_to_srgb` gives OpenColorIO's "ACES 1.0 - SDR Video" view of the
-    "sRGB - Display".
+    "sRGB - Display" within 0.25 8-bit codes on every sample-image pixel; the rest is OpenColorIO
+    recomputing the red modifier's saturation after the glow, where the CTL (and this) compute it
+    once before.
 
     Examples:
         >>> [round(v, 3) for v in aces_reference(torch.tensor([0.18, 1.0, 5.0]).expand(3, 1, 3))[0, 0].tolist()]
         [0.104, 0.624, 0.926]
     """
-    aces = rrt_glow_and_red_modifier(unity_to_aces(limited(image)), cubic_basis_hue_weight)
+    aces = rrt_glow_and_red_modifier(rec709_to_aces(image), cubic_basis_hue_weight, ACES_TINY)
     acescg = ap1_desaturate(convert(aces.clamp_min(0.0), "ap0_to_ap1").clamp(0.0, HALF_MAX), RRT_SAT_FACTOR)
     luminance_cd = _ODT_TONESCALE_48_NITS(_RRT_TONESCALE(acescg))
     code_values = (luminance_cd - _CINEMA_BLACK) / (_CINEMA_WHITE - _CINEMA_BLACK)

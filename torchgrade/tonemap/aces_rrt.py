@@ -13,7 +13,8 @@ import math
 
 import torch
 
-from ..color import convert, matrix, safe_sqrt
+from ..color import AP0_CHROMATICITIES, convert, matrix, primaries_to_rec709_matrix, safe_sqrt
+from ..core import apply_matrix
 
 __all__ = [
     "RRT_SAT_FACTOR",
@@ -25,6 +26,10 @@ __all__ = [
     "ap1_desaturate",
     "ap1_dim_surround",
     "ap1_to_rec709",
+    "REC709_TO_AP0",
+    "rec709_to_aces",
+    "UNITY_TINY",
+    "ACES_TINY",
 ]
 
 _RRT_GLOW_GAIN, _RRT_GLOW_MID = 0.05, 0.08
@@ -37,11 +42,31 @@ DIM_SURROUND_GAMMA = 0.9811
 """The ODT's dark → dim surround compensation: ``Y → Y^0.9811``."""
 
 
-def _rgb_saturation(rgb: torch.Tensor) -> torch.Tensor:
-    """ACES ``rgb_2_saturation``: ``(max(ma, 1e-4) - max(mi, 1e-4)) / max(ma, 1e-2)``."""
+UNITY_TINY, ACES_TINY = 1e-4, 1e-10
+"""The floor of ``rgb_2_saturation``: Unity's half-precision ``TINYISH`` and the CTL's ``TINY``
+(``ACESlib.RRT_Common.ctl``); they part on dark pixels with a negative component."""
+
+
+REC709_TO_AP0 = torch.linalg.inv(primaries_to_rec709_matrix(AP0_CHROMATICITIES))
+"""Linear Rec.709 → ACES2065-1 from the primaries, Bradford D65 → ACES white, as OpenColorIO's configs.
+Unity's rounded matrix differs by ~1e-4, which very out-of-gamut colours amplify to codes."""
+
+
+def rec709_to_aces(image: torch.Tensor) -> torch.Tensor:
+    """Linear Rec.709 → ACES2065-1 with :data:`REC709_TO_AP0`.
+
+    Examples:
+        >>> [round(v, 6) for v in rec709_to_aces(torch.ones(3, 1, 1, dtype=torch.float64)).flatten().tolist()]
+        [1.0, 1.0, 1.0]
+    """
+    return apply_matrix(REC709_TO_AP0.to(dtype=image.dtype, device=image.device), image)
+
+
+def _rgb_saturation(rgb: torch.Tensor, tiny: float) -> torch.Tensor:
+    """ACES ``rgb_2_saturation``: ``(max(ma, tiny) - max(mi, tiny)) / max(ma, 1e-2)``."""
     high = rgb.amax(dim=-3, keepdim=True)
     low = rgb.amin(dim=-3, keepdim=True)
-    return (high.clamp_min(1e-4) - low.clamp_min(1e-4)) / high.clamp_min(1e-2)
+    return (high.clamp_min(tiny) - low.clamp_min(tiny)) / high.clamp_min(1e-2)
 
 
 def _rgb_yc(rgb: torch.Tensor) -> torch.Tensor:
@@ -105,19 +130,19 @@ def cubic_basis_hue_weight(centered_hue: torch.Tensor) -> torch.Tensor:
     return 1.5 * torch.where(u < 1.0, inner, outer)
 
 
-def rrt_glow_and_red_modifier(aces: torch.Tensor, hue_weight) -> torch.Tensor:
+def rrt_glow_and_red_modifier(aces: torch.Tensor, hue_weight, tiny: float = UNITY_TINY) -> torch.Tensor:
     """The ACES RRT's first two modules on ACES2065-1 (RRT 1.0.3, ``rrt.ctl``).
 
     Glow: ``aces · (1 + glow_fwd(yc, 0.05 · sigmoid_shaper((s - 0.4) / 0.2), 0.08))`` with ``s`` the
     saturation; red modifier: ``r += w(h) · s · (0.03 - r) · (1 - 0.82)`` with ``h`` the hue centred on
-    red (degrees) and ``hue_weight`` the function ``w``.
+    red (degrees) and ``hue_weight`` the function ``w``; ``tiny`` floors the saturation's terms.
 
     Examples:
         >>> grey = torch.full((3, 1, 1), 0.18)
         >>> torch.equal(rrt_glow_and_red_modifier(grey, smoothstep_hue_weight), grey)  # no saturation: no glow
         True
     """
-    saturation = _rgb_saturation(aces)
+    saturation = _rgb_saturation(aces, tiny)
     s = _sigmoid_shaper((saturation - 0.4) / 0.2)
     aces = aces * (1.0 + _glow(_rgb_yc(aces), _RRT_GLOW_GAIN * s, _RRT_GLOW_MID))
 

@@ -14,11 +14,12 @@ from .aces2_curves import ACES2_HDR_RANGES, aces2_hdr, aces2_sdr
 from .aces_fits import aces, aces_hill, aces_narkowicz
 from .agx_curves import agx, agx_godot
 from .base import WHITE_POINT_RANGE, ToneMapper, no_tonemap
+from .hdr_range import HDR_PRIMARIES, NEUTRAL_HDR_RANGES, neutral_hdr
 from .filmic_curves import FILMIC_RANGES, HABLE_RANGES, UNREAL_FILMIC_RANGES, filmic, hable, neutral, unreal_filmic
 from .khronos_pbr import khronos_pbr_neutral
 from .reinhard_curves import reinhard, reinhard_extended, reinhard_luminance
 
-__all__ = ["TONE_MAPPERS", "TONEMAP_MODES", "tone_mapper", "tonemap"]
+__all__ = ["TONE_MAPPERS", "TONEMAP_MODES", "HDR_MODES", "tone_mapper", "tonemap"]
 
 TONE_MAPPERS = {
     "none": ToneMapper.of(no_tonemap),
@@ -38,11 +39,17 @@ TONE_MAPPERS = {
     "khronos_pbr_neutral": ToneMapper.of(khronos_pbr_neutral),
     "aces2": ToneMapper.of(aces2_sdr),
     "aces2_hdr": ToneMapper.of(aces2_hdr, **ACES2_HDR_RANGES),
+    "neutral_hdr": ToneMapper.of(neutral_hdr, **NEUTRAL_HDR_RANGES),
 }
 """Every tone mapper by mode name: its curve and its controls (defaults are the curve's own)."""
 
 TONEMAP_MODES = tuple(TONE_MAPPERS)
 """Every ``ToneMap`` mode."""
+
+
+HDR_MODES = {"aces2_hdr": HDR_PRIMARIES, "neutral_hdr": HDR_PRIMARIES}
+"""The modes for HDR displays and the primaries of their output, display-linear with 1.0 = their
+``peak_luminance``; every other mode returns Rec.709 with 1.0 = SDR white."""
 
 
 def tone_mapper(mode: str) -> ToneMapper:

@@ -14,6 +14,7 @@ import torch
 
 from ... import color
 from ...core import apply_matrix, check_image, sanitize
+from ..aces_rrt import REC709_TO_AP0
 from .cam import REFERENCE_LUMINANCE, aab_to_jmh, jmh_params, jmh_to_rgb, rgb_to_aab, a_to_y, y_to_j
 from .gamut import FOCUS_DISTANCE, FOCUS_DISTANCE_SCALING, GamutParams, gamut_compress
 from .tables import hue_and_cusp_tables, reach_m_table, upper_hull_gamma
@@ -77,6 +78,8 @@ class Aces2Output:
         return rgb.clamp(0.0, self.peak / REFERENCE_LUMINANCE)
 
 
+# torch.compile would trace through the cache and rebuild the tables in every call: run it eagerly.
+@torch.compiler.disable
 @functools.lru_cache(maxsize=8)
 def _output(peak: float, limiting: str) -> Aces2Output:
     return Aces2Output(peak, limiting)
@@ -89,7 +92,6 @@ def _rgb_to_rgb(source, target) -> torch.Tensor:
 
 _AP0_TO_AP1 = _rgb_to_rgb(color.AP0_CHROMATICITIES, color.AP1_CHROMATICITIES)
 _AP1_TO_AP0 = torch.linalg.inv(_AP0_TO_AP1)
-_REC709_TO_AP0 = torch.linalg.inv(color.primaries_to_rec709_matrix(color.AP0_CHROMATICITIES))
 
 
 def _apply(m: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
@@ -163,7 +165,7 @@ def aces2_output(image: torch.Tensor, peak_luminance: float = 100.0, limiting_pr
 
 
 def _display_linear(x: torch.Tensor, peak: float, limiting: str, display: str, input_space: str) -> torch.Tensor:
-    aces = _apply(_REC709_TO_AP0, x) if input_space == "rec709" else x
+    aces = _apply(REC709_TO_AP0, x) if input_space == "rec709" else x
     output = _output(peak, limiting)
     ap1 = _apply(_AP0_TO_AP1, aces).clamp(0.0, output.tone.forward_limit)
     rgb = output.render(_apply(_AP1_TO_AP0, ap1))
