@@ -19,7 +19,7 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
-from ..color import linear_to_logc
+from ..color import linear_to_logc, linear_to_srgb, srgb_to_linear
 from ..grade import ColorGrade, color_grade
 from ..pipeline import PostFX
 from ..tonemap import tonemap, tone_mapper
@@ -42,13 +42,36 @@ TONEMAP_CANDIDATES = ("neutral", "aces", "aces_reference", "aces_hill", "aces_na
 ``unreal_filmic`` add many parameters that say the same, and are tried only when named)."""
 
 
+TRACKBALLS = ("lift", "gamma", "gain")
+
+# Unity's trackball identity (1, 1, 1, 0) sits on the edge of the range, where a sigmoid has no slope. Any grey
+# colour is the same identity (a trackball's colour counts only minus its luminance), so the fit starts at this
+# one, in the middle of the sigmoid, and the result is shifted back to Unity's form (see canonical_trackball).
+_START = {name: (0.5, 0.5, 0.5, 0.0) for name in TRACKBALLS}
+
+
+def canonical_trackball(value) -> list:
+    """The trackball ``(r, g, b, w)`` with the same effect whose brightest colour channel is 1, as Unity's wheels show it.
+
+    A trackball's colour acts as its sRGB decoding minus its luminance, so adding one amount to every decoded
+    channel changes nothing; this adds the amount that brings the largest to 1.
+
+    Examples:
+        >>> canonical_trackball([0.5, 0.5, 0.5, 0.1])
+        [1.0, 1.0, 1.0, 0.1]
+    """
+    decoded = srgb_to_linear(torch.as_tensor(value[:3], dtype=torch.float64))
+    shifted = linear_to_srgb(decoded + (1.0 - decoded.max()))
+    return [round(float(v), 5) for v in shifted] + [value[3]]
+
+
 class MatchedControls(nn.Module):
     """A grade (the controls ``names``, in range) followed by tone mapper ``mode`` (its curve parameters fitted), or no tone mapper."""
 
     def __init__(self, names, mode: Optional[str], aces: bool = False, fit_curve: bool = True):
         super().__init__()
         self.aces, self.mode = aces, mode
-        self.grade = BoundedControls(ColorGrade.controls, names)
+        self.grade = BoundedControls(ColorGrade.controls, names, _START)
         curve_table = tone_mapper(mode).controls if mode else {}
         self.curve = BoundedControls(curve_table, fittable_names(curve_table) if fit_curve else ())
 
@@ -59,6 +82,7 @@ class MatchedControls(nn.Module):
     def look(self) -> PostFX:
         """The fitted look as a :class:`~torchgrade.PostFX` of rounded plain values (what ``to_config`` shows)."""
         grade = {"aces": self.aces, **self.grade.plain_values()}
+        grade.update({name: canonical_trackball(grade[name]) for name in TRACKBALLS if name in grade})
         return PostFX(grade=grade, tonemap={"mode": self.mode, **self.curve.plain_values()} if self.mode else None)
 
 
@@ -126,6 +150,8 @@ def fit_controls(pairs: PixelPairs, names, modes, aces: bool, steps: int, lbfgs_
             fit.loss = fit.history[-1] if fit.history[-1] == fit.history[-1] else float("inf")
     best = min(fits.values(), key=lambda f: f.loss)
     best.history += optimise(best.model, loss_fn(best.model), steps, lbfgs_steps, lr, progress, f"match {best.model.mode or 'scene-referred'}")
+    if len(modes) == 1:
+        best.loss = best.history[-1]
     return best, {mode: fit.loss for mode, fit in fits.items()}
 
 
