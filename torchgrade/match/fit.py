@@ -119,9 +119,15 @@ def optimise(module: nn.Module, loss_fn, steps: int, lbfgs_steps: int, lr: float
     return history
 
 
-def pixel_loss(display: bool):
-    """Mean squared error in 8-bit sRGB codes (display targets) or in LogC codes ×255 (scene-referred targets)."""
+def pixel_loss(display: bool, robust: bool = False):
+    """Mean squared error in 8-bit sRGB codes (display targets) or in LogC codes ×255 (scene-referred targets).
+
+    ``robust``: squared within one code, linear beyond (Huber), so pixels no smooth correction can reach
+    (several sources shown as one clipped display colour, each with its own target) do not bend it elsewhere.
+    """
     encode = display_codes if display else (lambda x: 255.0 * linear_to_logc(x.clamp_min(0.0)))
+    if robust:
+        return lambda fitted, target: 2.0 * nn.functional.smooth_l1_loss(encode(fitted), encode(target), beta=1.0)
     return lambda fitted, target: (encode(fitted) - encode(target)).square().mean()
 
 
@@ -135,13 +141,16 @@ class ControlsFit:
 
 
 def fit_controls(pairs: PixelPairs, names, modes, aces: bool, steps: int, lbfgs_steps: int, screen_steps: int,
-                 lr: float, progress: bool) -> tuple:
-    """Screen every tone mapper in ``modes`` with ``screen_steps`` Adam steps, finish the best; ``(fit, {mode: loss})``."""
+                 lr: float, progress: bool, max_pixels: int) -> tuple:
+    """Screen every tone mapper in ``modes`` with ``screen_steps`` Adam steps, finish the best; ``(fit, {mode: loss})``.
+
+    Fits on the first ``max_pixels`` fitting pixels (they are shuffled).
+    """
     loss_of = pixel_loss(display=modes != (None,))
-    target = pairs.train_target
+    source, target = pairs.train_source[:, :, :max_pixels], pairs.train_target[:, :, :max_pixels]
 
     def loss_fn(model):
-        return lambda: loss_of(model(pairs.train_source), target)
+        return lambda: loss_of(model(source), target)
 
     fits = {mode: ControlsFit(MatchedControls(names, mode, aces)) for mode in modes}
     if len(modes) > 1:
@@ -159,7 +168,7 @@ def fit_residual(display: torch.Tensor, target: torch.Tensor, size: int, steps: 
                  progress: bool) -> tuple:
     """Fit a :class:`ResidualLUT` from the look's display output to the target; ``(residual, loss history)``."""
     residual = ResidualLUT(size)
-    loss_of = pixel_loss(display=True)
+    loss_of = pixel_loss(display=True, robust=True)
     scale = 255.0**2  # regularisers on the table's [0, 1] units, brought to the data term's squared codes
 
     def loss_fn():

@@ -94,7 +94,7 @@ def _modes(stages, tonemaps) -> tuple:
 def match_look(source, target, stages=STAGES, mask=None, *, controls=GRADE_CONTROLS, tonemaps=None, aces: bool = False,
                steps: int = 200, lbfgs_steps: int = 100, screen_steps: int = 60, lr: float = 0.05,
                residual: bool = False, residual_size: int = 17, residual_steps: int = 300, smooth: float = 0.05,
-               monotone: float = 1.0, max_pixels: int = 16384, holdout: float = 0.25, seed: int = 0,
+               monotone: float = 1.0, max_pixels: int = 8192, residual_pixels: int = 65536, holdout: float = 0.25, seed: int = 0,
                progress: bool = True) -> MatchResult:
     """Fit a look's controls to before/after pairs by gradient descent; see :class:`MatchResult`.
 
@@ -103,7 +103,7 @@ def match_look(source, target, stages=STAGES, mask=None, *, controls=GRADE_CONTR
     ``stages``, else scene-referred; ``mask``: which pixels count (one per pair). The ``controls`` of the
     grade (names in :class:`~torchgrade.ColorGrade`'s table) are fitted within their documented ranges
     (a sigmoid onto each range), ``steps`` of Adam then ``lbfgs_steps`` of L-BFGS on at most ``max_pixels``
-    pixels, in float64. ``tonemaps``: a mode, several, or ``None`` for :data:`TONEMAP_CANDIDATES`; with more
+    pixels, in float64 (the residual LUT, cheaper to evaluate, on up to ``residual_pixels``). ``tonemaps``: a mode, several, or ``None`` for :data:`TONEMAP_CANDIDATES`; with more
     than one each is fitted for ``screen_steps`` and the best finished. ``residual=True`` (display targets) then
     fits a ``residual_size``³ :class:`~torchgrade.match.ResidualLUT` with weights ``smooth`` and ``monotone``.
     Errors are measured on ``holdout`` of the pixels, never fitted.
@@ -113,8 +113,8 @@ def match_look(source, target, stages=STAGES, mask=None, *, controls=GRADE_CONTR
     if residual and modes == (None,):
         raise ValueError("residual=True needs a display-referred target: include 'tonemap' in stages")
     generator = torch.Generator().manual_seed(seed)
-    pixels = sample_pairs(source, target, mask, max_pixels, holdout, generator)
-    fit, candidates = fit_controls(pixels, names, modes, aces, steps, lbfgs_steps, screen_steps, lr, progress)
+    pixels = sample_pairs(source, target, mask, max(max_pixels, residual_pixels if residual else 0), holdout, generator)
+    fit, candidates = fit_controls(pixels, names, modes, aces, steps, lbfgs_steps, screen_steps, lr, progress, max_pixels)
     look = fit.model.look()
     display = modes != (None,)
     errors = {"controls": evaluate(look.per_pixel_stages() if look.stages() else nn.Identity(), pixels, display)}
