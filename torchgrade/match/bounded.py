@@ -75,7 +75,8 @@ class BoundedControls(nn.Module):
         for name, raw in self.raw.items():
             low, high, logarithmic = self.ranges[name]
             unit = torch.sigmoid(raw)
-            out[name] = (math.log(low) + unit * (math.log(high) - math.log(low))).exp() if logarithmic else low + unit * (high - low)
+            # exp(log(high)) can round a hair above high; the clamp keeps the promise at the very edge.
+            out[name] = (math.log(low) + unit * (math.log(high) - math.log(low))).exp().clamp(low, high) if logarithmic else low + unit * (high - low)
         return out
 
     def plain_values(self, digits: int = 5) -> dict:

@@ -21,12 +21,13 @@ from tqdm import tqdm
 
 from ..color import linear_to_logc, linear_to_srgb, srgb_to_linear
 from ..grade import ColorGrade, color_grade
+from ..lut import planar_table
 from ..pipeline import PostFX
 from ..tonemap import tonemap, tone_mapper
 from .bounded import BoundedControls, fittable_names
 from .metrics import display_codes, match_errors
 from .pixels import PixelPairs, sample_pairs
-from .residual import ResidualLUT, monotonicity, smoothness
+from .residual import ResidualLUT, lookup_matrix, monotonicity, smoothness
 
 __all__ = ["GRADE_CONTROLS", "TONEMAP_CANDIDATES", "MatchedControls", "optimise", "fit_controls", "fit_residual"]
 
@@ -119,15 +120,14 @@ def optimise(module: nn.Module, loss_fn, steps: int, lbfgs_steps: int, lr: float
     return history
 
 
-def pixel_loss(display: bool, robust: bool = False):
+def pixel_loss(display: bool):
     """Mean squared error in 8-bit sRGB codes (display targets) or in LogC codes ×255 (scene-referred targets).
 
-    ``robust``: squared within one code, linear beyond (Huber), so pixels no smooth correction can reach
-    (several sources shown as one clipped display colour, each with its own target) do not bend it elsewhere.
+    The residual LUT's fit uses Huber instead (squared within one code, linear beyond), so pixels no smooth
+    correction can reach (several sources shown as one clipped display colour, each with its own target) do
+    not bend it elsewhere.
     """
     encode = display_codes if display else (lambda x: 255.0 * linear_to_logc(x.clamp_min(0.0)))
-    if robust:
-        return lambda fitted, target: 2.0 * nn.functional.smooth_l1_loss(encode(fitted), encode(target), beta=1.0)
     return lambda fitted, target: (encode(fitted) - encode(target)).square().mean()
 
 
@@ -166,15 +166,21 @@ def fit_controls(pairs: PixelPairs, names, modes, aces: bool, steps: int, lbfgs_
 
 def fit_residual(display: torch.Tensor, target: torch.Tensor, size: int, steps: int, smooth: float, monotone: float,
                  progress: bool) -> tuple:
-    """Fit a :class:`ResidualLUT` from the look's display output to the target; ``(residual, loss history)``."""
+    """Fit a :class:`ResidualLUT` from the look's display output to the target; ``(residual, loss history)``.
+
+    The data term is Huber in 8-bit codes (see :func:`pixel_loss`); the lookup runs as :func:`lookup_matrix`.
+    """
     residual = ResidualLUT(size)
-    loss_of = pixel_loss(display=True, robust=True)
+    weights = lookup_matrix(display, size)
+    target_codes = display_codes(target).movedim(-3, 0).reshape(3, -1).T
     scale = 255.0**2  # regularisers on the table's [0, 1] units, brought to the data term's squared codes
 
     def loss_fn():
         table = residual.lut.table
-        fitted = residual(display)
-        return loss_of(fitted, target) + scale * (smooth * smoothness(table) + monotone * monotonicity(table))
+        # Entries are sRGB codes: decoding, clamping to the display and encoding again is a clamp.
+        codes = 255.0 * (weights @ planar_table(table).T).clamp(0.0, 1.0)
+        data = 2.0 * nn.functional.smooth_l1_loss(codes, target_codes, beta=1.0)
+        return data + scale * (smooth * smoothness(table) + monotone * monotonicity(table))
 
     history = optimise(residual, loss_fn, steps // 2, steps - steps // 2, 2e-3, progress, f"residual {size}³")
     return residual, history
