@@ -18,6 +18,16 @@ with warnings.catch_warnings():
 OCIO = pytest.importorskip("PyOpenColorIO")
 
 
+@pytest.fixture(autouse=True)
+def _one_thread():
+    """The fits here are a few thousand pixels: on a shared, loaded CPU one thread runs them several times faster
+    than two (measured 2.2 s against 14.7 s for the same residual fit), as no thread waits for the other."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
 def scene(exr_dir, name="GoldenGate.exr", step=16):
     """A real HDR picture, subsampled to a few thousand pixels, float64."""
     return tg.io.read_exr(exr_dir / name)[:3, ::step, ::step].double()
@@ -58,8 +68,8 @@ def test_known_look_is_matched_and_its_controls_recovered(exr_dir):
                  lift=(0.9, 1.0, 0.95, 0.03), gamma=(1.0, 1.0, 1.0, -0.1), gain=(1.0, 0.95, 0.9, 0.1),
                  split_shadows=(0.4, 0.5, 0.6), split_highlights=(0.6, 0.5, 0.4))
     target = tg.PostFX(grade=truth, tonemap="aces")(source[None])[0]
-    result = tg.match_look(source, target, controls=tuple(truth), tonemaps="aces", steps=30, lbfgs_steps=120,
-                           max_pixels=1024, progress=False)
+    result = tg.match_look(source, target, controls=tuple(truth), tonemaps="aces", steps=30, lbfgs_steps=300,
+                           max_pixels=2048, progress=False)
     assert result.errors["controls"]["p99.9"] <= 0.5, result.errors
     fitted = result.look.to_config()["grade"]
     # Contrast, saturation and hue shift each change the picture in a way no other control can; temperature
@@ -123,11 +133,12 @@ def test_opencolorio_look_is_matched_by_controls_and_a_residual_lut(exr_dir, tmp
     assert result.errors["residual"]["delta_e_2000"] < result.errors["controls"]["delta_e_2000"]
     table = result.residual.lut.table.detach()
     assert tg.match.monotonicity(table) < 1e-6
-    baked = result.write_cube(tmp_path / "look.cube", size=33)
+    written = result.write_cube(tmp_path / "look.cube", size=65)
     lut = tg.io.read_cube(tmp_path / "look.cube")
     with torch.no_grad():
         errors = match_errors(result.pixels.test_target.reshape(3, -1), lut(result.pixels.test_source).reshape(3, -1))
-    assert errors["p99.9"] == pytest.approx(baked["p99.9"], abs=0.05) and baked["p99.9"] <= 2.0, (baked, errors)
+    assert written == {"size": 65, **errors}
+    assert written["p99.9"] <= 1.0, written  # 65³ holds the whole look within a code
 
 
 def test_residual_lut_starts_as_identity_and_bad_inputs_raise():

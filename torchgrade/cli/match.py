@@ -104,7 +104,7 @@ def add_match(commands) -> None:
     match.add_argument("target", help="the same picture after the look: .png (sRGB) or .exr (display-referred linear)")
     match.add_argument("--output", "-o", required=True, help="look JSON to write (a PostFX config)")
     match.add_argument("--cube", help="also bake the fitted look (with its residual LUT) into this .cube")
-    match.add_argument("--cube-size", type=int, default=33, help="points per axis of the .cube (default 33)")
+    match.add_argument("--cube-size", type=int, default=65, help="points per axis of the .cube (default 65)")
     match.add_argument("--tonemap", action="append", choices=TONEMAP_MODES,
                        help="tone mapper to fit (repeat to try several; default: the usual SDR modes)")
     match.add_argument("--controls", type=_controls, default=GRADE_CONTROLS,

@@ -19,7 +19,7 @@ from typing import Optional
 import torch
 from torch import nn
 
-from ..io import write_cube
+from ..io import read_cube, write_cube
 from ..lut import LUT3D, bake_lut
 from ..pipeline import PostFX
 from ..tonemap import tone_mapper
@@ -60,23 +60,25 @@ class MatchResult:
     def __call__(self, image: torch.Tensor) -> torch.Tensor:
         return self.transform()(image)
 
-    def bake(self, size="auto", tolerance: float = 1.0) -> tuple:
-        """Bake the whole look (residual included) into a LogC :class:`~torchgrade.LUT3D` with sRGB entries;
-        ``(lut, errors on the held-out pixels)``. ``size="auto"`` picks the smallest size within ``tolerance``
-        codes (p99.9) on the fitting pixels, whose range the lattice covers."""
+    def bake(self, size="auto", tolerance: float = 1.0, output_encoding: str = "srgb") -> tuple:
+        """Bake the whole look (residual included) into a LogC :class:`~torchgrade.LUT3D`; ``(lut, errors on the
+        held-out pixels)``. ``size="auto"`` picks the smallest size within ``tolerance`` codes (p99.9) on the fitting
+        pixels, whose range the lattice covers. sRGB entries spread the interpolation error evenly over display codes."""
         transform = self.transform()
         with torch.no_grad():
             lut = bake_lut(transform, size=size, shaper="logc", scene=self.pixels.train_source, tolerance=tolerance,
-                           output_encoding="srgb")
+                           output_encoding=output_encoding)
         lut = LUT3D(lut.table.detach(), shaper=lut.shaper, domain=(lut.domain_min, lut.domain_max),
                     output_range=lut.output_range, output_encoding=lut.output_encoding)
         return lut, evaluate(lambda pixels: lut(pixels), self.pixels, display=True)
 
-    def write_cube(self, path, size="auto", tolerance: float = 1.0) -> dict:
-        """Bake (see :meth:`bake`) and write ``path`` as a ``.cube``; the baked LUT's held-out errors."""
-        lut, errors = self.bake(size, tolerance)
+    def write_cube(self, path, size=65, tolerance: float = 1.0) -> dict:
+        """Bake (see :meth:`bake`, with linear entries: a ``.cube`` holds linear values), write ``path`` and read it
+        back; the size and the held-out errors of the file as read."""
+        lut, _ = self.bake(size, tolerance, output_encoding="linear")
         write_cube(path, lut, title="torchgrade match")
-        return {"size": lut.size, **errors}
+        written = read_cube(path)
+        return {"size": written.size, **evaluate(lambda pixels: written(pixels), self.pixels, display=True)}
 
 
 def _modes(stages, tonemaps) -> tuple:
