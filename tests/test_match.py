@@ -20,8 +20,8 @@ OCIO = pytest.importorskip("PyOpenColorIO")
 
 @pytest.fixture(autouse=True)
 def _one_thread():
-    """The fits here are a few thousand pixels: on a shared, loaded CPU one thread runs them several times faster
-    than two (measured 2.2 s against 14.7 s for the same residual fit), as no thread waits for the other."""
+    """The fits here are a few thousand pixels, too few to share among threads: on a shared, loaded CPU a second
+    thread mostly waits for the first."""
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     yield

@@ -26,7 +26,7 @@ from ..pipeline import PostFX
 from ..tonemap import tonemap, tone_mapper
 from .bounded import BoundedControls, fittable_names
 from .metrics import display_codes, match_errors
-from .pixels import PixelPairs, sample_pairs
+from .pixels import PixelPairs
 from .residual import ResidualLUT, lookup_matrix, monotonicity, smoothness
 
 __all__ = ["GRADE_CONTROLS", "TONEMAP_CANDIDATES", "MatchedControls", "optimise", "fit_controls", "fit_residual"]
