@@ -83,7 +83,7 @@ def figure(source, target, result, path: Path) -> None:
         axis.set_title(title)
         axis.axis("off")
     axes[4].semilogy(result.history)
-    axes[4].set_xlabel("loss evaluation (screening, Adam, L-BFGS with its line-search probes, then residual)")
+    axes[4].set_xlabel("loss evaluation (screening, Adam, L-BFGS, then residual)")
     axes[4].set_ylabel("loss (squared 8-bit codes)")
     fig.tight_layout()
     fig.savefig(path, dpi=80)
