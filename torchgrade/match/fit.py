@@ -29,7 +29,8 @@ from .metrics import display_codes, match_errors
 from .pixels import PixelPairs
 from .residual import ResidualLUT, lookup_matrix, monotonicity, smoothness
 
-__all__ = ["GRADE_CONTROLS", "TONEMAP_CANDIDATES", "MatchedControls", "optimise", "fit_controls", "fit_residual"]
+__all__ = ["GRADE_CONTROLS", "TONEMAP_CANDIDATES", "TRACKBALLS", "canonical_trackball", "MatchedControls", "optimise",
+           "pixel_loss", "ControlsFit", "fit_controls", "fit_residual", "evaluate"]
 
 GRADE_CONTROLS = ("post_exposure", "temperature", "tint", "contrast", "split_shadows", "split_highlights",
                   "split_balance", "lift", "gamma", "gain", "hue_shift", "saturation")
@@ -69,12 +70,12 @@ def canonical_trackball(value) -> list:
 class MatchedControls(nn.Module):
     """A grade (the controls ``names``, in range) followed by tone mapper ``mode`` (its curve parameters fitted), or no tone mapper."""
 
-    def __init__(self, names, mode: Optional[str], aces: bool = False, fit_curve: bool = True):
+    def __init__(self, names, mode: Optional[str], aces: bool = False):
         super().__init__()
         self.aces, self.mode = aces, mode
         self.grade = BoundedControls(ColorGrade.controls, names, _START)
         curve_table = tone_mapper(mode).controls if mode else {}
-        self.curve = BoundedControls(curve_table, fittable_names(curve_table) if fit_curve else ())
+        self.curve = BoundedControls(curve_table, fittable_names(curve_table))
 
     def forward(self, pixels: torch.Tensor) -> torch.Tensor:
         graded = color_grade(pixels, aces=self.aces, **self.grade.values()) if self.grade.raw else pixels
