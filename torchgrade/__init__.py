@@ -16,6 +16,7 @@ from .dither import Dither
 from .exposure import AutoExposure
 from .grade import ColorGrade
 from .lut import LUT3D, bake_lut
+from .match import match_look
 from .pipeline import PostFX
 from .primary import PrimaryGrade
 from .tonemap import TONEMAP_MODES, ToneMap
@@ -39,6 +40,7 @@ __all__ = [
     "ColorGrade",
     "LUT3D",
     "bake_lut",
+    "match_look",
     "PostFX",
     "PrimaryGrade",
     "TONEMAP_MODES",

@@ -1,6 +1,6 @@
 """The ``torchgrade`` command: ``demo`` renders the built-in scene, ``grade`` grades an EXR file,
 ``bake`` writes a look's grade and tone mapping as a ``.cube`` 3D LUT, ``export`` writes a look as ONNX and
-verifies it on onnxruntime. One module per subcommand, each adding its own parser.
+verifies it on onnxruntime, ``match`` learns a look from a before/after pair. One module per subcommand, each adding its own parser.
 
 Examples:
     >>> main(["grade", "missing.exr", "-o", "out.png"])  # one line on stderr, status 2
@@ -17,10 +17,11 @@ from .bake import add_bake
 from .demo import add_demo
 from .export import add_export
 from .grade import add_grade
+from .match import add_match
 
 __all__ = ["main"]
 
-SUBCOMMANDS = (add_demo, add_grade, add_bake, add_export)
+SUBCOMMANDS = (add_demo, add_grade, add_bake, add_export, add_match)
 """Each subcommand's parser builder, in the order ``--help`` lists them."""
 
 

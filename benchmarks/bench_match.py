@@ -1,0 +1,123 @@
+"""Learning a look from one before/after pair: accuracy on held-out pixels, fitting time at 1 and 4 megapixels.
+
+The target is made by a tool torchgrade did not write: OpenColorIO 2.6's ``GradingPrimaryTransform`` (linear
+style: exposure, contrast, offset, saturation) followed by its built-in ACES 1.0 SDR view, on GoldenGate.exr
+(1262x860, 1.1 MP) and on the same picture upscaled 2x bilinearly (4.3 MP). ``tg.match_look`` fits the default
+controls, screens the default tone mapper candidates, then fits a 17³ residual LUT; the look is then written
+as a 65³ ``.cube`` and read back. Errors are on held-out pixels (8-bit sRGB codes, mean ΔE2000).
+
+Torch runs on ``--threads`` threads (default 1: on a shared 2-core machine one thread was several times faster
+than two for these small fits). Writes ``benchmarks/results/match.json``, ``match.md`` and ``match.png`` (before,
+target, matched by the controls, with the residual LUT; the loss curve).
+
+    .venv/bin/python benchmarks/bench_match.py [--threads N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import PyOpenColorIO as OCIO
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import torchgrade as tg  # noqa: E402
+
+RESULTS = Path(__file__).resolve().parent / "results"
+EXR = Path(__file__).resolve().parents[2] / "shared" / "data" / "exr" / "GoldenGate.exr"
+
+
+def ocio_look(image: torch.Tensor) -> torch.Tensor:
+    """OpenColorIO's primary grade then the ACES 1.0 SDR view, display-linear ``(3, H, W)`` float64."""
+    primary = OCIO.GradingPrimary(OCIO.GRADING_LIN)
+    primary.exposure = OCIO.GradingRGBM(0.1, 0.0, -0.1, 0.2)
+    primary.contrast = OCIO.GradingRGBM(1.0, 1.0, 1.0, 1.1)
+    primary.offset = OCIO.GradingRGBM(0.0, 0.0, 0.002, 0.0)
+    primary.saturation = 1.1
+    grade = OCIO.Config.CreateRaw().getProcessor(OCIO.GradingPrimaryTransform(primary, OCIO.GRADING_LIN, False))
+    config = OCIO.Config.CreateFromBuiltinConfig("studio-config-v2.2.0_aces-v1.3_ocio-v2.4")
+    view = config.getProcessor("Linear Rec.709 (sRGB)", "sRGB - Display", "ACES 1.0 - SDR Video", OCIO.TRANSFORM_DIR_FORWARD)
+    pixels = np.ascontiguousarray(image.permute(1, 2, 0).reshape(-1, 3).numpy(), dtype=np.float32)
+    grade.getDefaultCPUProcessor().applyRGB(pixels)
+    view.getDefaultCPUProcessor().applyRGB(pixels)
+    display = tg.color.srgb_to_linear(torch.from_numpy(np.clip(pixels, 0.0, 1.0)).double())
+    return display.reshape(image.shape[1], image.shape[2], 3).permute(2, 0, 1)
+
+
+def fit_once(source: torch.Tensor, target: torch.Tensor) -> tuple:
+    """One timed fit (controls, tone mapper screening, residual) and one timed 65³ ``.cube``; the row and the result."""
+    start = time.perf_counter()
+    result = tg.match_look(source, target, residual=True, progress=False)
+    fitted = time.perf_counter() - start
+    with tempfile.TemporaryDirectory() as folder:
+        start = time.perf_counter()
+        cube = result.write_cube(Path(folder) / "look.cube", size=65)
+        baked = time.perf_counter() - start
+    row = {"megapixels": source.shape[1] * source.shape[2] / 1e6, "fit_s": fitted, "cube_s": baked,
+           "look": result.look.to_config(), "candidates": result.candidates, **result.errors, "cube": cube}
+    return row, result
+
+
+def figure(source, target, result, path: Path) -> None:
+    """Before (neutral tone mapper), target, matched by the controls, with the residual; the loss curve."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    with torch.no_grad():
+        panels = {"before (neutral)": tg.ToneMap("neutral")(source[None])[0], "target (OpenColorIO)": target,
+                  "matched: controls": result.look.per_pixel_stages()(source[None])[0],
+                  "matched: controls + 17³ residual": result(source[None])[0]}
+    fig, axes = plt.subplots(1, 5, figsize=(22, 3.6), gridspec_kw={"width_ratios": [1, 1, 1, 1, 1.1]})
+    for axis, (title, image) in zip(axes, panels.items()):
+        axis.imshow(tg.color.linear_to_srgb(image.clamp(0, 1)).permute(1, 2, 0).float().numpy())
+        axis.set_title(title)
+        axis.axis("off")
+    axes[4].semilogy(result.history)
+    axes[4].set_xlabel("loss evaluation (screening, Adam, L-BFGS, then residual)")
+    axes[4].set_ylabel("loss (squared 8-bit codes)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+
+
+def markdown(rows: list, threads: int) -> str:
+    lines = [f"# Learning a look (bench_match.py, {platform.machine()}, torch {torch.__version__}, {threads} thread(s))", "",
+             "Target: OpenColorIO GradingPrimaryTransform + ACES 1.0 SDR view on GoldenGate. Errors on held-out pixels.", "",
+             "| MP | fit s | .cube s | controls p99.9 / max / ΔE | + residual p99.9 / max / ΔE | 65³ .cube p99.9 / max / ΔE | tone mapper |",
+             "| ---: | ---: | ---: | --- | --- | --- | --- |"]
+    for row in rows:
+        cells = [f"{row[k]['p99.9']:.2f} / {row[k]['max']:.1f} / {row[k]['delta_e_2000']:.3f}" for k in ("controls", "residual", "cube")]
+        lines.append(f"| {row['megapixels']:.1f} | {row['fit_s']:.1f} | {row['cube_s']:.1f} | {' | '.join(cells)} | {row['look']['tonemap']['mode']} |")
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--threads", type=int, default=1)
+    args = parser.parse_args()
+    torch.set_num_threads(args.threads)
+    source = tg.io.read_exr(EXR)[:3].double()
+    large = torch.nn.functional.interpolate(source[None], scale_factor=2, mode="bilinear", align_corners=False)[0]
+    rows = []
+    for picture in (source, large):
+        target = ocio_look(picture)
+        row, result = fit_once(picture, target)
+        rows.append(row)
+        print(json.dumps({k: row[k] for k in ("megapixels", "fit_s", "cube_s", "controls", "residual", "cube")}))
+        if picture is source:
+            figure(source[:, ::2, ::2], target[:, ::2, ::2], result, RESULTS / "match.png")
+    (RESULTS / "match.json").write_text(json.dumps({"threads": args.threads, "rows": rows}, indent=2) + "\n")
+    (RESULTS / "match.md").write_text(markdown(rows, args.threads))
+
+
+if __name__ == "__main__":
+    main()

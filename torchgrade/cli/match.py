@@ -1,0 +1,117 @@
+"""``torchgrade match``: learn a look from a before/after pair and write it as a look JSON (and a ``.cube``).
+
+Examples:
+    >>> import tempfile, pathlib, torch
+    >>> import torchgrade as tg
+    >>> from torchgrade.cli import main
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     before, after = pathlib.Path(folder) / "before.exr", pathlib.Path(folder) / "after.exr"
+    ...     scene = tg.scene.demo_scene(12, 16)[0]
+    ...     tg.io.write_exr(before, scene, half=False)
+    ...     tg.io.write_exr(after, tg.PostFX(grade={"contrast": 20}, tonemap="neutral")(scene[None])[0], half=False)
+    ...     main(["match", str(before), str(after), "-o", str(pathlib.Path(folder) / "look.json"),
+    ...           "--tonemap", "neutral", "--controls", "contrast", "--steps", "20"])  # doctest: +ELLIPSIS
+    match: neutral, 1 controls, ... s; held-out error ... codes p99.9 ... -> ...look.json
+    0
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ..color import srgb_to_linear
+from ..grade import ColorGrade
+from ..io import read_exr
+from ..io.atomic import atomic_write
+from ..match import GRADE_CONTROLS, match_look
+from ..tonemap import TONEMAP_MODES
+
+__all__ = ["run_match", "add_match", "read_target"]
+
+
+def read_target(path: Path) -> torch.Tensor:
+    """The target picture as ``(3, H, W)`` linear: an 8-bit PNG decoded from sRGB, or an EXR as stored."""
+    if path.suffix.lower() == ".exr":
+        return read_exr(path)[:3]
+    if path.suffix.lower() != ".png":
+        raise ValueError(f"target must be an .exr or .png file, got {path}")
+    if not path.is_file():
+        raise ValueError(f"target {path} does not exist")
+    from PIL import Image
+
+    with Image.open(path) as image:
+        codes = np.asarray(image.convert("RGB"), dtype=np.float64)
+    return srgb_to_linear(torch.from_numpy(codes / 255.0).permute(2, 0, 1).contiguous())
+
+
+def _controls(text: str) -> tuple:
+    names = tuple(name.strip() for name in text.split(",") if name.strip())
+    unknown = [name for name in names if name not in ColorGrade.controls]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(f"unknown grading control(s) {unknown}; known: {', '.join(ColorGrade.controls)}")
+    return names
+
+
+def _check_outputs(args: argparse.Namespace) -> None:
+    for path, suffix in ((Path(args.output), ".json"), (None if args.cube is None else Path(args.cube), ".cube")):
+        if path is None:
+            continue
+        if path.suffix.lower() != suffix:
+            raise ValueError(f"{path} must end in {suffix}")
+        if not path.parent.is_dir():
+            raise ValueError(f"output folder {path.parent} does not exist")
+    if args.scene_referred and (args.residual or args.cube):
+        raise ValueError("--residual and --cube need a display-referred target (leave out --scene-referred)")
+
+
+def _errors(errors: dict) -> str:
+    return f"{errors['p99.9']:.2f} codes p99.9 (max {errors['max']:.1f}), mean ΔE2000 {errors['delta_e_2000']:.3f}"
+
+
+def run_match(args: argparse.Namespace) -> str:
+    """Fit the look, write the JSON (and the ``.cube``); the line to print."""
+    _check_outputs(args)
+    source, target = read_exr(args.source)[:3], read_target(Path(args.target))
+    stages = ("grade",) if args.scene_referred else ("grade", "tonemap")
+    start = time.perf_counter()
+    result = match_look(source, target, stages, controls=args.controls, tonemaps=args.tonemap, steps=args.steps,
+                        lbfgs_steps=args.lbfgs_steps, residual=args.residual, max_pixels=args.max_pixels)
+    elapsed = time.perf_counter() - start
+    config = result.look.to_config()
+    text = json.dumps(config, indent=2) + "\n"
+    atomic_write(args.output, lambda temporary: Path(temporary).write_text(text))
+    mode = config.get("tonemap", {}).get("mode", "scene-referred")
+    line = f"match: {mode}, {len(args.controls)} controls, {elapsed:.1f} s; held-out error {_errors(result.errors['controls'])}"
+    if "residual" in result.errors:
+        line += f"; with the residual LUT {_errors(result.errors['residual'])}"
+    line += f" -> {args.output}"
+    if args.cube:
+        baked = result.write_cube(args.cube, size=args.cube_size)
+        line += f", {args.cube} ({baked['size']}³: {_errors(baked)})"
+    return line
+
+
+def add_match(commands) -> None:
+    """The ``match`` subcommand and its flags."""
+    match = commands.add_parser("match", help="learn a look's controls (and a residual LUT) from a before/after pair")
+    match.add_argument("source", help="scene-referred linear OpenEXR file (before)")
+    match.add_argument("target", help="the same picture after the look: .png (sRGB) or .exr (display-referred linear)")
+    match.add_argument("--output", "-o", required=True, help="look JSON to write (a PostFX config)")
+    match.add_argument("--cube", help="also bake the fitted look (with its residual LUT) into this .cube")
+    match.add_argument("--cube-size", type=int, default=65, help="points per axis of the .cube (default 65)")
+    match.add_argument("--tonemap", action="append", choices=TONEMAP_MODES,
+                       help="tone mapper to fit (repeat to try several; default: the usual SDR modes)")
+    match.add_argument("--controls", type=_controls, default=GRADE_CONTROLS,
+                       help=f"comma-separated grading controls to fit (default {','.join(GRADE_CONTROLS)})")
+    match.add_argument("--residual", action="store_true", help="fit a 17³ residual LUT on top of the controls")
+    match.add_argument("--scene-referred", action="store_true", help="the target is a graded EXR without tone mapping")
+    match.add_argument("--steps", type=int, default=200, help="Adam steps (default 200)")
+    match.add_argument("--lbfgs-steps", type=int, default=100, help="L-BFGS iterations after Adam (default 100)")
+    match.add_argument("--max-pixels", type=int, default=8192, help="pixels the controls are fitted on (default 8192)")
+    match.set_defaults(run=run_match)

@@ -1,0 +1,196 @@
+"""Fit a look's interpretable controls (and optionally a residual LUT) to before/after pairs.
+
+Examples:
+    >>> import torch
+    >>> import torchgrade as tg
+    >>> source = torch.rand(3, 16, 16) * 4
+    >>> target = tg.PostFX(grade={"contrast": 20}, tonemap="neutral")(source[None])[0]
+    >>> result = tg.match_look(source, target, controls=("contrast",), tonemaps="neutral", steps=60, progress=False)
+    >>> round(result.look.to_config()["grade"]["contrast"])
+    20
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Optional
+
+import torch
+from torch import nn
+from tqdm import tqdm
+
+from ..color import linear_to_logc, linear_to_srgb, srgb_to_linear
+from ..grade import ColorGrade, color_grade
+from ..lut import planar_table
+from ..pipeline import PostFX
+from ..tonemap import tonemap, tone_mapper
+from .bounded import BoundedControls, fittable_names
+from .metrics import display_codes, match_errors
+from .pixels import PixelPairs
+from .residual import ResidualLUT, lookup_matrix, monotonicity, smoothness
+
+__all__ = ["GRADE_CONTROLS", "TONEMAP_CANDIDATES", "TRACKBALLS", "canonical_trackball", "MatchedControls", "optimise",
+           "pixel_loss", "ControlsFit", "fit_controls", "fit_residual", "evaluate"]
+
+GRADE_CONTROLS = ("post_exposure", "temperature", "tint", "contrast", "split_shadows", "split_highlights",
+                  "split_balance", "lift", "gamma", "gain", "hue_shift", "saturation")
+"""The grading controls fitted by default: the global ones. Colour filter, channel mixer and shadows/midtones/highlights
+are left out because, with these, they only add directions that say the same (a gain colour and a colour filter
+both scale a channel); pass ``controls=`` to fit them."""
+
+TONEMAP_CANDIDATES = ("neutral", "aces", "aces_reference", "aces_hill", "aces_narkowicz", "reinhard",
+                      "reinhard_extended", "reinhard_luminance", "hable", "agx", "agx_godot", "khronos_pbr_neutral")
+"""The tone mappers tried by default for a display-referred target (SDR modes whose curves differ; ``filmic`` and
+``unreal_filmic`` add many parameters that say the same, and are tried only when named)."""
+
+
+TRACKBALLS = ("lift", "gamma", "gain")
+
+# Unity's trackball identity (1, 1, 1, 0) sits on the edge of the range, where a sigmoid has no slope. Any grey
+# colour is the same identity (a trackball's colour counts only minus its luminance), so the fit starts at this
+# one, in the middle of the sigmoid, and the result is shifted back to Unity's form (see canonical_trackball).
+_START = {name: (0.5, 0.5, 0.5, 0.0) for name in TRACKBALLS}
+
+
+def canonical_trackball(value) -> list:
+    """The trackball ``(r, g, b, w)`` with the same effect whose brightest colour channel is 1, as Unity's wheels show it.
+
+    A trackball's colour acts as its sRGB decoding minus its luminance, so adding one amount to every decoded
+    channel changes nothing; this adds the amount that brings the largest to 1.
+
+    Examples:
+        >>> canonical_trackball([0.5, 0.5, 0.5, 0.1])
+        [1.0, 1.0, 1.0, 0.1]
+    """
+    decoded = srgb_to_linear(torch.as_tensor(value[:3], dtype=torch.float64))
+    shifted = linear_to_srgb(decoded + (1.0 - decoded.max()))
+    return [round(float(v), 5) for v in shifted] + [value[3]]
+
+
+class MatchedControls(nn.Module):
+    """A grade (the controls ``names``, in range) followed by tone mapper ``mode`` (its curve parameters fitted), or no tone mapper."""
+
+    def __init__(self, names, mode: Optional[str], aces: bool = False):
+        super().__init__()
+        self.aces, self.mode = aces, mode
+        self.grade = BoundedControls(ColorGrade.controls, names, _START)
+        curve_table = tone_mapper(mode).controls if mode else {}
+        self.curve = BoundedControls(curve_table, fittable_names(curve_table))
+
+    def forward(self, pixels: torch.Tensor) -> torch.Tensor:
+        graded = color_grade(pixels, aces=self.aces, **self.grade.values()) if self.grade.raw else pixels
+        return tonemap(graded, self.mode, **self.curve.values()) if self.mode else graded
+
+    def look(self) -> PostFX:
+        """The fitted look as a :class:`~torchgrade.PostFX` of rounded plain values (what ``to_config`` shows)."""
+        grade = {"aces": self.aces, **self.grade.plain_values()}
+        grade.update({name: canonical_trackball(grade[name]) for name in TRACKBALLS if name in grade})
+        return PostFX(grade=grade, tonemap={"mode": self.mode, **self.curve.plain_values()} if self.mode else None)
+
+
+def optimise(module: nn.Module, loss_fn, steps: int, lbfgs_steps: int, lr: float, progress: bool, desc: str) -> list:
+    """Adam for ``steps``, then up to ``lbfgs_steps`` L-BFGS iterations (strong Wolfe line search).
+
+    Returns the loss at every evaluation, in order (one per Adam step; L-BFGS evaluates a few times per iteration).
+    """
+    parameters = [p for p in module.parameters() if p.requires_grad]
+    if not parameters:
+        with torch.no_grad():
+            return [float(loss_fn())]
+    history = []
+    with tqdm(total=steps + lbfgs_steps, desc=desc, disable=None if progress else True, leave=False) as bar:
+
+        def closure():
+            optimiser.zero_grad()
+            loss = loss_fn()
+            loss.backward()
+            history.append(loss.item())
+            bar.set_postfix(loss=f"{history[-1]:.4g}", refresh=False)
+            return loss
+
+        optimiser = torch.optim.Adam(parameters, lr=lr)
+        for _ in range(steps):
+            optimiser.step(closure)
+            bar.update()
+        if lbfgs_steps:
+            # One call runs every iteration: L-BFGS's curvature pairs are only kept within a call.
+            optimiser = torch.optim.LBFGS(parameters, lr=1.0, max_iter=lbfgs_steps, history_size=20,
+                                          tolerance_grad=1e-12, tolerance_change=1e-14, line_search_fn="strong_wolfe")
+            optimiser.step(closure)
+            bar.update(lbfgs_steps)
+    return history
+
+
+def pixel_loss(display: bool):
+    """Mean squared error in 8-bit sRGB codes (display targets) or in LogC codes ×255 (scene-referred targets).
+
+    The residual LUT's fit uses Huber instead (squared within one code, linear beyond), so pixels no smooth
+    correction can reach (several sources shown as one clipped display colour, each with its own target) do
+    not bend it elsewhere.
+    """
+    encode = display_codes if display else (lambda x: 255.0 * linear_to_logc(x.clamp_min(0.0)))
+    return lambda fitted, target: (encode(fitted) - encode(target)).square().mean()
+
+
+@dataclass
+class ControlsFit:
+    """One candidate's fitted controls, its loss history and final fitting loss."""
+
+    model: MatchedControls
+    history: list = field(default_factory=list)
+    loss: float = float("inf")
+
+
+def fit_controls(pairs: PixelPairs, names, modes, aces: bool, steps: int, lbfgs_steps: int, screen_steps: int,
+                 lr: float, progress: bool, max_pixels: int) -> tuple:
+    """Screen every tone mapper in ``modes`` with ``screen_steps`` Adam steps, finish the best; ``(fit, {mode: loss})``.
+
+    Fits on the first ``max_pixels`` fitting pixels (they are shuffled).
+    """
+    loss_of = pixel_loss(display=modes != (None,))
+    source, target = pairs.train_source[:, :, :max_pixels], pairs.train_target[:, :, :max_pixels]
+
+    def loss_fn(model):
+        return lambda: loss_of(model(source), target)
+
+    fits = {mode: ControlsFit(MatchedControls(names, mode, aces)) for mode in modes}
+    if len(modes) > 1:
+        for mode, fit in fits.items():
+            fit.history = optimise(fit.model, loss_fn(fit.model), screen_steps, 0, lr, progress, f"screen {mode}")
+            fit.loss = fit.history[-1] if fit.history[-1] == fit.history[-1] else float("inf")
+    best = min(fits.values(), key=lambda f: f.loss)
+    best.history += optimise(best.model, loss_fn(best.model), steps, lbfgs_steps, lr, progress, f"match {best.model.mode or 'scene-referred'}")
+    if len(modes) == 1:
+        best.loss = best.history[-1]
+    return best, {mode: fit.loss for mode, fit in fits.items()}
+
+
+def fit_residual(display: torch.Tensor, target: torch.Tensor, size: int, steps: int, smooth: float, monotone: float,
+                 progress: bool) -> tuple:
+    """Fit a :class:`ResidualLUT` from the look's display output to the target; ``(residual, loss history)``.
+
+    The data term is Huber in 8-bit codes (see :func:`pixel_loss`); the lookup runs as :func:`lookup_matrix`.
+    """
+    residual = ResidualLUT(size)
+    weights = lookup_matrix(display, size)
+    target_codes = display_codes(target).movedim(-3, 0).reshape(3, -1).T
+    scale = 255.0**2  # regularisers on the table's [0, 1] units, brought to the data term's squared codes
+
+    def loss_fn():
+        table = residual.lut.table
+        # Entries are sRGB codes: decoding, clamping to the display and encoding again is a clamp.
+        codes = 255.0 * (weights @ planar_table(table).T).clamp(0.0, 1.0)
+        data = 2.0 * nn.functional.smooth_l1_loss(codes, target_codes, beta=1.0)
+        return data + scale * (smooth * smoothness(table) + monotone * monotonicity(table))
+
+    history = optimise(residual, loss_fn, steps // 2, steps - steps // 2, 2e-3, progress, f"residual {size}³")
+    return residual, history
+
+
+def evaluate(transform, pairs: PixelPairs, display: bool) -> dict:
+    """:func:`~torchgrade.match.metrics.match_errors` on the held-out pixels (scene-referred ones viewed through ``neutral``)."""
+    with torch.no_grad():
+        fitted, target = transform(pairs.test_source), pairs.test_target
+        if not display:
+            fitted, target = tonemap(fitted, "neutral"), tonemap(target, "neutral")
+    return match_errors(target.reshape(3, -1), fitted.reshape(3, -1))

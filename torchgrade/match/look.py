@@ -1,0 +1,131 @@
+"""``match_look``: learn a look from before/after examples, and the :class:`MatchResult` it returns.
+
+Examples:
+    >>> import torch
+    >>> import torchgrade as tg
+    >>> source = torch.rand(3, 16, 16) * 4
+    >>> target = tg.PostFX(grade={"saturation": 30}, tonemap="aces")(source[None])[0]
+    >>> result = tg.match_look(source, target, controls=("saturation",), tonemaps=("aces", "neutral"),
+    ...                        steps=40, progress=False)
+    >>> result.look.to_config()["tonemap"], result.errors["controls"]["p99.9"] < 0.5
+    ({'mode': 'aces'}, True)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Optional
+
+import torch
+from torch import nn
+
+from ..io import read_cube, write_cube
+from ..lut import LUT3D, bake_lut
+from ..pipeline import PostFX
+from ..tonemap import tone_mapper
+from .fit import GRADE_CONTROLS, TONEMAP_CANDIDATES, evaluate, fit_controls, fit_residual
+from .pixels import PixelPairs, sample_pairs
+from .residual import ResidualLUT
+
+__all__ = ["match_look", "MatchResult", "STAGES"]
+
+STAGES = ("grade", "tonemap")
+"""The stages a look is matched with; both act per pixel (bloom and exposure depend on the frame)."""
+
+
+@dataclass
+class MatchResult:
+    """What :func:`match_look` found.
+
+    * ``look``: the fitted :class:`~torchgrade.PostFX`; ``look.to_config()`` is the readable recipe.
+    * ``residual``: the :class:`~torchgrade.match.ResidualLUT` fitted on top (``residual=True``), else ``None``.
+    * ``errors``: ``{"controls": ..., "residual": ...}``, each ``{"p99.9", "max"}`` in 8-bit sRGB codes and
+      ``"delta_e_2000"`` (mean), on held-out pixels.
+    * ``history``: the fitting loss after each optimiser step (screening, Adam, L-BFGS; then the residual's).
+    * ``candidates``: each tone mapper tried and its loss after screening.
+    """
+
+    look: PostFX
+    residual: Optional[ResidualLUT]
+    errors: dict
+    history: list
+    candidates: dict
+    pixels: PixelPairs = field(repr=False)
+
+    def transform(self) -> nn.Module:
+        """The per-pixel look as one module: grade, tone mapper, then the residual LUT (if any)."""
+        stages = list(self.look.per_pixel_stages()) if self.look.stages() else [nn.Identity()]
+        return nn.Sequential(*stages, *([self.residual] if self.residual is not None else []))
+
+    def __call__(self, image: torch.Tensor) -> torch.Tensor:
+        return self.transform()(image)
+
+    def bake(self, size="auto", tolerance: float = 1.0, output_encoding: str = "srgb") -> tuple:
+        """Bake the whole look (residual included) into a LogC :class:`~torchgrade.LUT3D`; ``(lut, errors on the
+        held-out pixels)``. ``size="auto"`` picks the smallest size within ``tolerance`` codes (p99.9) on the fitting
+        pixels, whose range the lattice covers. sRGB entries spread the interpolation error evenly over display codes."""
+        transform = self.transform()
+        with torch.no_grad():
+            lut = bake_lut(transform, size=size, shaper="logc", scene=self.pixels.train_source, tolerance=tolerance,
+                           output_encoding=output_encoding)
+        lut = LUT3D(lut.table.detach(), shaper=lut.shaper, domain=(lut.domain_min, lut.domain_max),
+                    output_range=lut.output_range, output_encoding=lut.output_encoding)
+        return lut, evaluate(lambda pixels: lut(pixels), self.pixels, display=True)
+
+    def write_cube(self, path, size=65, tolerance: float = 1.0) -> dict:
+        """Bake (see :meth:`bake`, with linear entries: a ``.cube`` holds linear values), write ``path`` and read it
+        back; the size and the held-out errors of the file as read."""
+        lut, _ = self.bake(size, tolerance, output_encoding="linear")
+        write_cube(path, lut, title="torchgrade match")
+        written = read_cube(path)
+        return {"size": written.size, **evaluate(lambda pixels: written(pixels), self.pixels, display=True)}
+
+
+def _modes(stages, tonemaps) -> tuple:
+    unknown = set(stages) - set(STAGES)
+    if unknown or not stages:
+        raise ValueError(f"stages must be some of {STAGES}, got {tuple(stages)}")
+    if "tonemap" not in stages:
+        return (None,)
+    modes = TONEMAP_CANDIDATES if tonemaps is None else ((tonemaps,) if isinstance(tonemaps, str) else tuple(tonemaps))
+    for mode in modes:
+        tone_mapper(mode)
+    return modes
+
+
+def match_look(source, target, stages=STAGES, mask=None, *, controls=GRADE_CONTROLS, tonemaps=None, aces: bool = False,
+               steps: int = 200, lbfgs_steps: int = 100, screen_steps: int = 60, lr: float = 0.05,
+               residual: bool = False, residual_size: int = 17, residual_steps: int = 300, smooth: float = 0.05,
+               monotone: float = 1.0, max_pixels: int = 8192, residual_pixels: int = 65536, holdout: float = 0.25, seed: int = 0,
+               progress: bool = True) -> MatchResult:
+    """Fit a look's controls to before/after pairs by gradient descent; see :class:`MatchResult`.
+
+    ``source``: scene-referred linear Rec.709 ``(3, H, W)`` or ``(B, 3, H, W)`` (or a list of them);
+    ``target``: the same pictures after the look, display-referred linear [0, 1] when ``"tonemap"`` is in
+    ``stages``, else scene-referred; ``mask``: which pixels count (one per pair). The ``controls`` of the
+    grade (names in :class:`~torchgrade.ColorGrade`'s table) are fitted within their documented ranges
+    (a sigmoid onto each range), ``steps`` of Adam then ``lbfgs_steps`` of L-BFGS on at most ``max_pixels``
+    pixels, in float64 (the residual LUT, cheaper to evaluate, on up to ``residual_pixels``). ``tonemaps``: a mode, several, or ``None`` for :data:`TONEMAP_CANDIDATES`; with more
+    than one each is fitted for ``screen_steps`` and the best finished. ``residual=True`` (display targets) then
+    fits a ``residual_size``³ :class:`~torchgrade.match.ResidualLUT` with weights ``smooth`` and ``monotone``.
+    Errors are measured on ``holdout`` of the pixels, never fitted.
+    """
+    modes = _modes(stages, tonemaps)
+    names = tuple(controls) if "grade" in stages else ()
+    if residual and modes == (None,):
+        raise ValueError("residual=True needs a display-referred target: include 'tonemap' in stages")
+    generator = torch.Generator().manual_seed(seed)
+    pixels = sample_pairs(source, target, mask, max(max_pixels, residual_pixels if residual else 0), holdout, generator)
+    fit, candidates = fit_controls(pixels, names, modes, aces, steps, lbfgs_steps, screen_steps, lr, progress, max_pixels)
+    look = fit.model.look()
+    display = modes != (None,)
+    errors = {"controls": evaluate(look.per_pixel_stages() if look.stages() else nn.Identity(), pixels, display)}
+    history, fitted_residual = list(fit.history), None
+    if residual:
+        with torch.no_grad():
+            shown = look.per_pixel_stages()(pixels.train_source)
+        fitted_residual, residual_history = fit_residual(shown, pixels.train_target, residual_size, residual_steps,
+                                                         smooth, monotone, progress)
+        history += residual_history
+        errors["residual"] = evaluate(nn.Sequential(*look.per_pixel_stages(), fitted_residual), pixels, display)
+    return MatchResult(look, fitted_residual, errors, history, candidates, pixels)
