@@ -62,7 +62,7 @@ CONTROLS = {
     "fade_fireflies": Control(True),
     "bicubic_upsampling": Control(False),
     "tint": Control((1.0, 1.0, 1.0), (0.0, MAX_GAIN)),
-    "clamp": Control(HALF_MAX, (0.0, HALF_MAX)),
+    "clamp": Control(HALF_MAX, (0.0, 1e6)),  # above 65504 it changes nothing: the source is already bounded there
     "anamorphic_ratio": Control(0.0, (-1.0, 1.0)),
     "karis_average": Control(False),
     "dirt": Control(None),
