@@ -38,6 +38,9 @@ def _hable_curve(x: torch.Tensor, a, b, c, d, e, f) -> torch.Tensor:
     return (x * (a * x + c * b) + d * e) / (x * (a * x + b) + d * f) - e / f
 
 
+_FLAT_CURVE = 1e-6
+"""Smallest ``t(white_point)`` :func:`filmic` divides by."""
+
 _NEUTRAL = dict(a=0.2, b=0.29, c=0.24, d=0.272, e=0.02, f=0.3)
 _NEUTRAL_WHITE_LEVEL = 5.3
 
@@ -76,7 +79,9 @@ def filmic(
     denominator (HDRP's and Unreal's "custom" filmic controls). The defaults are Uncharted 2's (A=0.15,
     B=0.50, C=0.10, D=0.20, E=0.02, F=0.30, W=11.2, bias 2), so ``filmic`` with defaults is :func:`hable`.
     Since ``t(x) = x (A (F - E) x + B (C F - E)) / (F (x (A x + B) + D F))``, the curve rises from 0 when
-    ``E ≤ F`` and ``E ≤ C F``.
+    ``E ≤ F`` and ``E ≤ C F``. The normaliser ``t(w)`` is kept at least 1e-6: parameters inside their
+    ranges can make the curve flat at ``w`` (``A = 0`` with ``C = E / F``, or ``A = B = 0``), and the
+    picture is then black instead of 0/0.
 
     Examples:
         >>> [round(v, 3) for v in filmic(torch.tensor([0.18, 1.0, 5.6]).expand(3, 1, 3))[0, 0].tolist()]
@@ -87,7 +92,7 @@ def filmic(
     k = [scalar_param(value, image, name) for value, name in zip(values, names)]
     bias = scalar_param(exposure_bias, image, "exposure_bias")
     w = scalar_param(white_point, image, "white_point")
-    return display(_hable_curve(limited(image) * bias, *k) / _hable_curve(w, *k), clip)
+    return display(_hable_curve(limited(image) * bias, *k) / _hable_curve(w, *k).clamp_min(_FLAT_CURVE), clip)
 
 
 def hable(image: torch.Tensor, exposure_bias: Param = 2.0, white_point: Param = 11.2, clip: bool = True) -> torch.Tensor:
