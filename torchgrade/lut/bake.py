@@ -27,7 +27,7 @@ from tqdm import tqdm
 
 from ..core import check_choice, check_image, sanitize
 from .lattice import MIN_SIZE, check_size, checked_domain, lattice
-from .fit import fit_shaper
+from .fit import fit_shaper, refine_shaper
 from .lut3d import LUT3D, OUTPUT_ENCODINGS, encode_output
 from .report import code_errors, diagnose, enforce, measure, measured_colours
 from .shapers import DEFAULT_DOMAINS, SHAPERS
@@ -119,29 +119,42 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper:
     if size == "auto" and not tolerance > 0:
         raise ValueError(f'bake_lut(size="auto") needs a tolerance above 0 (8-bit codes), got {tolerance}')
     hdr = shaper != "linear" or expects_hdr(transform)
-    bake = _baker(transform, domain, scene, chunk, output_encoding, progress, hdr)
-    lut = bake(shaper, check_size(size)) if size != "auto" else _smallest_within(lambda n: bake(shaper, n), transform, scene, tolerance)
     measured = measured_colours(transform, scene, hdr)
+    bake = _baker(transform, domain, scene, chunk, output_encoding, progress, measured, hdr)
+    lut = bake(shaper, check_size(size)) if size != "auto" else _smallest_within(lambda n: bake(shaper, n), transform, scene, tolerance)
     report = measure(lut, measured, report_tolerance)
     if not report.within:
-        report = diagnose(report, lut, measured, bake)
+        report = diagnose(report, lut, transform, measured, bake)
     enforce(report, strict)
     lut.error_report = report
     return lut
 
 
-def _baker(transform, domain, scene, chunk: int, output_encoding: str, progress: bool, hdr: bool) -> Callable:
-    """``bake(shaper, size) -> LUT3D`` for ``transform``: the lattice domain, fitted curve and clip handling of :func:`bake_lut`."""
-    display = is_display_referred(transform)
-    fitted = {}
+def _baker(transform, domain, scene, chunk: int, output_encoding: str, progress: bool, measured: tuple, hdr: bool) -> Callable:
+    """``bake(shaper, size) -> LUT3D`` for ``transform``: the lattice domain, fitted curve and clip handling of :func:`bake_lut`.
 
-    def bake(shaper: str, size: int) -> LUT3D:
-        curve, curve_range = None, (0.0, 1.0)
+    A fitted shaper is fitted once per size, on the ``measured`` colours (:func:`~torchgrade.lut.report.measured_colours`).
+    """
+    display = is_display_referred(transform)
+    image, reference = measured
+    fitted, baked = {}, {}
+
+    def cached(shaper: str, size: int) -> LUT3D:
+        if (shaper, size) not in baked:
+            baked[shaper, size] = bake(shaper, size)
+        return baked[shaper, size]
+
+    def bake(shaper: str, size: int, curve=None, curve_range=(0.0, 1.0)) -> LUT3D:
+        if SHAPERS[shaper].takes_curve and curve is None:
+            if size not in fitted:
+                with _final_clip_off(transform) if display else contextlib.nullcontext():
+                    start, curve_range = fit_shaper(transform, scene, hdr=hdr)
+                with torch.no_grad():
+                    fitted[size] = refine_shaper(
+                        start, curve_range, lambda c: bake(shaper, size, c, curve_range), image[0, :, 0],
+                        lambda lut: code_errors(reference, lut(image.float())).amax(dim=1).flatten()), curve_range
+            curve, curve_range = fitted[size]
         with _final_clip_off(transform) if display else contextlib.nullcontext():
-            if SHAPERS[shaper].takes_curve:
-                if not fitted:
-                    fitted["fit"] = fit_shaper(transform, scene, hdr=hdr)
-                curve, curve_range = fitted["fit"]
             lattice_domain = domain
             if lattice_domain is None:
                 lattice_domain = DEFAULT_DOMAINS[shaper] if scene is None or curve is not None else scene_domain(scene, shaper)
@@ -151,7 +164,7 @@ def _baker(transform, domain, scene, chunk: int, output_encoding: str, progress:
                      output_range=(0.0, 1.0) if display else None, output_encoding=output_encoding,
                      curve=curve, curve_range=curve_range)
 
-    return bake
+    return cached
 
 
 @contextlib.contextmanager

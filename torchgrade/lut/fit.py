@@ -5,8 +5,12 @@ so the max error is smallest when ``h`` shrinks as ``1 / sqrt|f''|``: the lattic
 channel follows ``sqrt|f''|`` (error equidistribution). :func:`fit_shaper` measures ``f''`` in what a
 viewer sees (8-bit sRGB display codes) along each input channel in LogC code space, from black to the
 half-float top, sweeping that channel of a set of base colours (validation colours, and the scene's
-pixels when given), and takes the largest bend over base colours and output channels. A floor keeps a
-share of the lattice everywhere, so colours the fit did not see are still covered.
+pixels when given), and takes the largest bend over output channels, averaged over base colours. A
+floor keeps a share of the lattice everywhere, so colours the fit did not see are still covered.
+
+A 3D table's error also comes from bends across channels (saturation, a ``max(0, ·)`` on an oblique
+surface), which one-channel sweeps do not see: :func:`refine_shaper` then bakes the table, measures
+it, and moves lattice planes toward the LogC bands where the error is largest, a few rounds.
 
 The result is the curve of a :class:`~torchgrade.lut.FittedShaper`.
 
@@ -27,7 +31,7 @@ from ..color import linear_to_logc, linear_to_srgb, logc_to_linear
 from ..core import HALF_MAX, check_image, sanitize
 from .validation import validation_colours
 
-__all__ = ["fit_shaper", "FIT_KNOTS", "FIT_BASES", "FIT_FLOOR"]
+__all__ = ["fit_shaper", "refine_shaper", "FIT_KNOTS", "FIT_BASES", "FIT_FLOOR", "FIT_ROUNDS", "FIT_BANDS"]
 
 FIT_KNOTS = 512
 """Points of a fitted shaper's curve (LogC-spaced from black to 65504)."""
@@ -37,6 +41,12 @@ FIT_BASES = 96
 
 FIT_FLOOR = 0.15
 """Share of the lattice spread evenly in LogC whatever the transform does (for colours the fit did not see)."""
+
+FIT_ROUNDS = 4
+"""Bake-and-measure rounds of :func:`refine_shaper`."""
+
+FIT_BANDS = 64
+"""LogC bands per channel over which :func:`refine_shaper` attributes the measured error."""
 
 
 def fit_shaper(transform: Callable[[torch.Tensor], torch.Tensor], scene: Optional[torch.Tensor] = None,
@@ -60,10 +70,58 @@ def fit_shaper(transform: Callable[[torch.Tensor], torch.Tensor], scene: Optiona
     bases = _base_colours(scene, hdr)
     with torch.no_grad():
         bend = torch.stack([_bend(transform, bases, sweep, channel) for channel in range(3)], dim=1)
-    density = bend.sqrt()
-    density = (1.0 - FIT_FLOOR) * density / density.sum(0).clamp_min(1e-12) + FIT_FLOOR / (knots - 1)
-    curve = torch.cat((torch.zeros(1, 3, dtype=torch.float64), density.cumsum(0)))
-    return curve / curve[-1], curve_range
+    return _curve(bend.sqrt()), curve_range
+
+
+def _curve(density: torch.Tensor) -> torch.Tensor:
+    """The shaper curve ``(knots, 3)`` of a lattice density per interval ``(knots - 1, 3)``, with the :data:`FIT_FLOOR` share even."""
+    density = (1.0 - FIT_FLOOR) * density / density.sum(0).clamp_min(1e-12) + FIT_FLOOR / density.shape[0]
+    curve = torch.cat((torch.zeros(1, 3, dtype=density.dtype), density.cumsum(0)))
+    return curve / curve[-1]
+
+
+def refine_shaper(curve: torch.Tensor, curve_range, bake: Callable, colours: torch.Tensor, errors_of: Callable,
+                  rounds: int = FIT_ROUNDS) -> torch.Tensor:
+    """Move a fitted curve's lattice planes toward the LogC bands where the baked LUT's error is largest.
+
+    ``bake(curve)`` bakes a LUT with the curve; ``errors_of(lut)`` gives its error per colour of
+    ``colours`` ``(3, N)`` (8-bit codes, worst channel). Each round scales the lattice density of
+    every band by the square root of its worst error over the median band's; the curve with the
+    lowest max error is returned.
+
+    Examples:
+        >>> import torch
+        >>> curve = torch.linspace(0.0, 1.0, 5).unsqueeze(1).repeat(1, 3)
+        >>> same = refine_shaper(curve, (0.0, 1.0), lambda c: c, torch.rand(3, 8), lambda c: torch.zeros(8), rounds=1)
+        >>> torch.equal(same, curve)
+        True
+    """
+    knots = curve.shape[0]
+    band = ((linear_to_logc(colours.clamp_min(0.0)) - curve_range[0]) / (curve_range[1] - curve_range[0])
+            * FIT_BANDS).long().clamp(0, FIT_BANDS - 1)
+    knot_band = (torch.arange(knots - 1, dtype=torch.float64) + 0.5) / (knots - 1) * FIT_BANDS
+    best, best_error = curve, float("inf")
+    for _ in range(rounds):
+        errors = errors_of(bake(curve))
+        score = float(errors.quantile(0.999))
+        if score < best_error:
+            best, best_error = curve, score
+        if best_error <= 0.0:
+            break
+        worst = torch.stack([_band_quantiles(errors, row) for row in band])
+        reference = worst[worst > 0].median() if bool((worst > 0).any()) else torch.tensor(1.0)
+        gain = (worst / reference).clamp(0.25, 4.0).sqrt().where(worst > 0, torch.ones(()))
+        density = (curve[1:] - curve[:-1]) * gain.t()[knot_band.long().clamp(max=FIT_BANDS - 1)]
+        curve = _curve(density)
+    return best
+
+
+def _band_quantiles(errors: torch.Tensor, band: torch.Tensor) -> torch.Tensor:
+    """99th percentile of ``errors`` per band index in ``band`` (0 for an empty band), ``(FIT_BANDS,)``."""
+    order = band.argsort(stable=True)
+    counts = torch.bincount(band, minlength=FIT_BANDS).tolist()
+    return torch.stack([part.quantile(0.99) if part.numel() else part.new_zeros(())
+                        for part in errors[order].split(counts)])
 
 
 def _base_colours(scene: Optional[torch.Tensor], hdr: bool) -> torch.Tensor:

@@ -114,34 +114,41 @@ def measure(lut, measured: tuple, tolerance: float) -> ErrorReport:
     return ErrorReport(_quantile(errors), float(errors.max()), image.shape[-1], tolerance)
 
 
-def _outside_lattice(lut, image: torch.Tensor) -> torch.Tensor:
-    """Which measured colours ``(1, 3, 1, N)`` have a channel outside a baked LUT's linear range: ``(N,)`` bools."""
+def _linear_bounds(lut) -> tuple:
+    """A baked LUT's lattice bounds as linear values, two ``(3,)`` float64 tensors."""
     shaper = SHAPERS[lut.shaper]
-    low, high = (shaper.decode(v.double().reshape(3, 1), lut.curve, lut.curve_range).flatten()
+    return tuple(shaper.decode(v.double().reshape(3, 1), lut.curve, lut.curve_range).flatten()
                  for v in (lut.domain_min, lut.domain_max))
-    pixels = image[0, :, 0]
-    return ((pixels < low.unsqueeze(1) - 1e-9) | (pixels > high.unsqueeze(1) * (1 + 1e-9))).any(0)
 
 
-CANDIDATES = (("fitted", 1), (None, 2), ("fitted", 2), ("fitted", 4))
+CANDIDATES = (("fitted", 1), (None, 2))
 """Bakes tried for advice, in order: ``(shaper, lattice scale)``; ``None`` keeps the shaper, scale ``k`` means ``k (S-1) + 1`` points."""
 
 
-def diagnose(report: ErrorReport, lut, measured: tuple, rebake: Callable[[str, int], object]) -> ErrorReport:
-    """``report`` with its cause and advice; ``rebake(shaper, size)`` bakes the same transform otherwise."""
+def diagnose(report: ErrorReport, lut, transform, measured: tuple, rebake: Callable[[str, int], object]) -> ErrorReport:
+    """``report`` with its causes and advice; ``rebake(shaper, size)`` bakes the same transform otherwise.
+
+    The lattice range's share is the error of the transform itself on colours clamped to the lattice
+    (what no table entry can undo); the interpolation's is told by how the error falls on a finer lattice.
+    """
     image, reference = measured
+    low, high = _linear_bounds(lut)
     with torch.no_grad():
-        errors = code_errors(reference, lut(image.float())).amax(dim=1).flatten()
-    outside = _outside_lattice(lut, image)
+        clamped = torch.maximum(torch.minimum(image, high.reshape(1, 3, 1, 1)), low.reshape(1, 3, 1, 1))
+        within_lattice = (image, transform(clamped).double())
+        range_error = _quantile(code_errors(reference, within_lattice[1]))
+    causes = []
+    if range_error > report.tolerance:
+        causes.append(f"lattice range: clamping per channel to the lattice (linear {float(high.min()):.4g} at the top) "
+                      f"shifts hues, p99.9 {range_error:.2f} codes by itself")
     finer_size = min(2 * (lut.size - 1) + 1, 256)
-    if bool(outside.any()) and _quantile(errors[~outside]) <= report.tolerance:
-        cause = f"lattice range: {int(outside.sum())} colours have a channel outside the lattice and clamp"
-    else:
-        finer = measure(rebake(lut.shaper, finer_size), measured, report.tolerance)
-        ratio = report.p99_9 / max(finer.p99_9, 1e-9)
+    interpolation = measure(lut, within_lattice, report.tolerance).p99_9
+    if finer_size > lut.size and interpolation > report.tolerance:
+        finer = measure(rebake(lut.shaper, finer_size), within_lattice, report.tolerance)
+        ratio = interpolation / max(finer.p99_9, 1e-9)
         kind = "a kink within a cell" if ratio < KINK_RATIO else "size"
-        cause = f"{kind} (p99.9 falls {ratio:.1f}x from {lut.size}³ to {finer_size}³)"
-    return ErrorReport(report.p99_9, report.max, report.colours, report.tolerance, cause,
+        causes.append(f"{kind} (interpolation alone: p99.9 {interpolation:.2f} codes, {ratio:.1f}x less at {finer_size}³)")
+    return ErrorReport(report.p99_9, report.max, report.colours, report.tolerance, "; ".join(causes) or None,
                        _advice(lut, measured, report.tolerance, rebake))
 
 
@@ -156,7 +163,7 @@ def _advice(lut, measured: tuple, tolerance: float, rebake) -> str:
         trial = measure(rebake(shaper, size), measured, tolerance)
         if trial.within:
             return f"size={size}, shaper={shaper!r} meets it (p99.9 {trial.p99_9:.2f}, max {trial.max:.2f})"
-    return f"no bake up to {tried[-1][1]}³ meets it: apply the transform directly"
+    return f"no bake up to {max(size for _, size in tried)}³ tried meets it: apply the transform directly"
 
 
 def enforce(report: ErrorReport, strict: bool) -> None:
