@@ -34,7 +34,8 @@ from ..core import sanitize
 from .shapers import SHAPERS
 from .validation import validation_colours
 
-__all__ = ["ErrorReport", "LUTAccuracyWarning", "code_errors", "measure", "diagnose", "SCENE_PIXELS", "KINK_RATIO"]
+__all__ = ["ErrorReport", "LUTAccuracyWarning", "code_errors", "measured_colours", "measure", "diagnose", "enforce",
+           "SCENE_PIXELS", "KINK_RATIO", "CANDIDATES", "ADVICE_MAX_SIZE"]
 
 SCENE_PIXELS = 65536
 """At most this many scene pixels (evenly strided) join the validation colours."""
@@ -121,8 +122,12 @@ def _linear_bounds(lut) -> tuple:
                  for v in (lut.domain_min, lut.domain_max))
 
 
-CANDIDATES = (("fitted", 1), (None, 2))
-"""Bakes tried for advice, in order: ``(shaper, lattice scale)``; ``None`` keeps the shaper, scale ``k`` means ``k (S-1) + 1`` points."""
+CANDIDATES = (("fitted", 1), (None, 2), (None, 4))
+"""Bakes tried for advice, in order: ``(shaper, lattice scale)``; ``None`` keeps the shaper, scale ``k`` means
+``k (S-1) + 1`` points, at most :data:`ADVICE_MAX_SIZE`."""
+
+ADVICE_MAX_SIZE = 65
+"""Largest lattice the advice bakes (a 129³ bake of a look takes seconds, and would on every warning)."""
 
 
 def diagnose(report: ErrorReport, lut, transform, measured: tuple, rebake: Callable[[str, int], object]) -> ErrorReport:
@@ -156,7 +161,7 @@ def _advice(lut, measured: tuple, tolerance: float, rebake) -> str:
     """The first of :data:`CANDIDATES` within ``tolerance``, as advice."""
     tried = []
     for shaper, scale in CANDIDATES:
-        shaper, size = shaper or lut.shaper, min(scale * (lut.size - 1) + 1, 256)
+        shaper, size = shaper or lut.shaper, min(scale * (lut.size - 1) + 1, max(ADVICE_MAX_SIZE, lut.size))
         if (shaper, size) in tried or (shaper, size) == (lut.shaper, lut.size):
             continue
         tried.append((shaper, size))

@@ -164,7 +164,7 @@ class FittedShaper(Shaper):
     def decode(self, codes, curve=None, curve_range=(0.0, 1.0)):
         low, high = curve_range
         steps = (curve.shape[0] - 1) / (high - low)
-        logc = [low + _inverse_ramp(row, column.to(codes)) / steps for row, column in zip(codes, curve.t())]
+        logc = [low + _inverse_ramp(row, column.to(codes).contiguous()) / steps for row, column in zip(codes, curve.t())]
         return logc_to_linear(torch.stack(logc))
 
     def linear_range(self, domain_min, domain_max, curve_range):
