@@ -118,6 +118,8 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper:
         raise ValueError('bake_lut(size="auto") needs scene=image to measure the error on')
     if size == "auto" and not tolerance > 0:
         raise ValueError(f'bake_lut(size="auto") needs a tolerance above 0 (8-bit codes), got {tolerance}')
+    if domain is not None:
+        domain = checked_domain(domain)  # before the transform runs on anything
     hdr = shaper != "linear" or expects_hdr(transform)
     measured = measured_colours(transform, scene, hdr)
     bake = _baker(transform, domain, scene, chunk, output_encoding, progress, measured, hdr)
