@@ -6,7 +6,7 @@ Examples:
     >>> with tempfile.TemporaryDirectory() as folder:
     ...     main(["bake", "-o", str(pathlib.Path(folder) / "look.cube"), "--size", "5", "--contrast", "20"])  # doctest: +ELLIPSIS
     bake: 5³ logc LUT of ColorGrade -> ToneMap, ... s -> ...look.cube
-    error: p99.9 ... 8-bit codes on ... validation colours ...
+    error: OVER TOLERANCE: p99.9 ... 8-bit codes on 17113 validation colours (tolerance 1 at p99.9); cause: lattice range: ...
     0
 """
 

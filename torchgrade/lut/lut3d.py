@@ -15,8 +15,7 @@ values instead of piling up in the shadows.
 **Speed.** The lookup is gather-based on a planar ``(3, size³)`` table that :meth:`LUT3D.rows`
 converts once and caches. Every step is per pixel, so ``LUT3D(..., compile=True)`` runs non-finite
 policy, shaper, index math, gathers, weights, decoding and clamp as one ``torch.compile``d pass
-with no temporary buffers; the eager default makes one pass per operation over runs of
-:data:`LOOKUP_CHUNK` pixels (:func:`chunked_lookup`), so its temporaries stay in cache.
+with no temporary buffers; the eager default makes one pass per operation.
 benchmarks/bench_lut.py measures both against OpenColorIO.
 
 Examples:
@@ -42,7 +41,7 @@ from .kernels import BACKENDS, KERNELS
 from .lattice import check_size, checked_domain, planar_table
 from .shapers import SHAPERS, lattice_unit
 
-__all__ = ["LUT3D", "LUTLookup", "OUTPUT_ENCODINGS", "LOOKUP_CHUNK", "apply_lut", "lookup", "chunked_lookup", "compiled_lookup",
+__all__ = ["LUT3D", "LUTLookup", "OUTPUT_ENCODINGS", "apply_lut", "lookup", "compiled_lookup",
            "decode_output", "encode_output", "table_output"]
 
 OUTPUT_ENCODINGS = ("linear", "srgb")
@@ -131,39 +130,6 @@ def lookup(image, rows, size: int, shaper, domain_min, domain_max, interpolation
     unit = lattice_unit(x.reshape(3, -1), shaper, domain_min, domain_max, curve, curve_range)
     y = table_output(KERNELS[interpolation](unit * (size - 1), rows, size), output_encoding, output_range)
     return to_input_dtype(y.reshape(x.shape).movedim(0, -3), image)
-
-
-LOOKUP_CHUNK = 16384
-"""Pixels per pass of the eager lookup: its ~30 temporary floats per pixel then stay in the CPU's cache
-(benchmarks/bench_lut.py measures the time and the temporary bytes per pixel)."""
-
-
-def chunked_lookup(image, rows, size: int, *settings, pixels: int = LOOKUP_CHUNK) -> torch.Tensor:
-    """:func:`lookup` (same arguments after ``size``) run over ``pixels``-sized runs of each image's pixels.
-
-    Every step is per pixel, so the result is the same; each run's temporaries stay in cache instead
-    of streaming frame-sized buffers through memory. While gradients flow to the image or the table
-    the whole image is one pass (autograd keeps every temporary anyway).
-
-    Examples:
-        >>> import torch
-        >>> from torchgrade.lut import identity_table, planar_table
-        >>> x = torch.rand(2, 3, 4, 5)
-        >>> args = (planar_table(identity_table(3)), 3, "linear", 0.0, 1.0, "tetrahedral", None, None, (0.0, 1.0), "linear")
-        >>> torch.equal(chunked_lookup(x, *args, pixels=7), lookup(x, *args))
-        True
-    """
-    height, width = image.shape[-2:]
-    grad = torch.is_grad_enabled() and (image.requires_grad or rows.requires_grad)
-    if grad or height * width <= pixels:
-        return lookup(image, rows, size, *settings)
-    planes = image.reshape(-1, 3, height * width)
-    result = torch.empty(planes.shape, dtype=image.dtype, device=image.device)
-    for frame, out in zip(planes, result):
-        for start in range(0, height * width, pixels):
-            piece = frame[:, start:start + pixels].unsqueeze(-1)  # (3, run, 1): an image of one column
-            out[:, start:start + pixels] = lookup(piece, rows, size, *settings).squeeze(-1)
-    return result.reshape(image.shape)
 
 
 _COMPILED = None
@@ -271,7 +237,7 @@ class LUT3D(Stage):
             except Exception as error:  # no C++ compiler, unsupported device, ...: the eager path always works
                 warnings.warn(f"LUT3D(compile=True) fell back to eager: torch.compile failed with {error!r}", RuntimeWarning)
                 self.compile = False
-        return chunked_lookup(*arguments)
+        return lookup(*arguments)
 
     def rows(self, dtype: torch.dtype) -> torch.Tensor:
         """The table as planar rows ``(3, S³)`` in ``dtype`` (:func:`~torchgrade.lut.planar_table`), what the kernels read.

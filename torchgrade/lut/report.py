@@ -84,7 +84,7 @@ def code_errors(reference: torch.Tensor, approximation: torch.Tensor) -> torch.T
 
     Examples:
         >>> import torch
-        >>> code_errors(torch.ones(2), torch.zeros(2)).tolist()
+        >>> [round(v, 6) for v in code_errors(torch.ones(2), torch.zeros(2)).tolist()]
         [255.0, 255.0]
     """
     codes = [255.0 * linear_to_srgb(t.detach().double().clamp(0.0, 1.0)) for t in (reference, approximation)]
