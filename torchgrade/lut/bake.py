@@ -118,12 +118,14 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper:
         raise ValueError('bake_lut(size="auto") needs scene=image to measure the error on')
     if size == "auto" and not tolerance > 0:
         raise ValueError(f'bake_lut(size="auto") needs a tolerance above 0 (8-bit codes), got {tolerance}')
+    if size != "auto":
+        size = check_size(size)  # before the transform runs on anything, as the domain
     if domain is not None:
-        domain = checked_domain(domain)  # before the transform runs on anything
+        domain = checked_domain(domain)
     hdr = shaper != "linear" or expects_hdr(transform)
     measured = measured_colours(transform, scene, hdr)
     bake = _baker(transform, domain, scene, chunk, output_encoding, progress, measured, hdr)
-    lut = bake(shaper, check_size(size)) if size != "auto" else _smallest_within(lambda n: bake(shaper, n), transform, scene, tolerance)
+    lut = bake(shaper, size) if size != "auto" else _smallest_within(lambda n: bake(shaper, n), transform, scene, tolerance)
     report = measure(lut, measured, report_tolerance)
     if not report.within:
         report = diagnose(report, lut, transform, measured, bake)
