@@ -11,9 +11,10 @@ fresh mapping; that slows allocation, so no timing is taken there) after resetti
 peak-RSS counter, each method warmed up (compiled) first (:mod:`benchmarks.common`).
 
 Accuracy: a strong look (``ColorGrade(contrast=30, saturation=20, temperature=20)`` then
-``ToneMap("aces")``) baked to 33³ LogC LUTs with each output encoding, and to 33³, 65³ and 129³ LUTs
-whose lattice follows the scene, applied to every 4th pixel of the sample EXRs, against direct
-float64 evaluation, in 8-bit sRGB code values (p99.9 and max). ``lut_floor.py`` asks what the best
+``ToneMap("aces")``, or with post-exposure 0.5 then ``ToneMap("neutral")``) baked to the LUTs of
+:data:`ACCURACY_LUTS` (LogC on the default or the scene's lattice, fitted shapers), applied to every
+4th pixel of the sample EXRs, against direct float64 evaluation, in 8-bit sRGB code values (p99.9
+and max), beside each bake's own error report. ``lut_floor.py`` asks what the best
 possible 33³ table would do on the same pixels.
 
 Run: ``.venv/bin/python benchmarks/bench_lut.py`` (writes benchmarks/results/lut.json and lut.md).
@@ -54,12 +55,15 @@ def look(image: torch.Tensor) -> torch.Tensor:
     return (y / (0.6 + y)) ** 1.2
 
 
-def strong_look(aces: bool = False) -> torch.nn.Module:
+def strong_look(aces: bool = False, tonemap: str = "aces") -> torch.nn.Module:
     """The strong look LUT accuracy is measured with: ``ColorGrade(contrast=30, saturation=20, temperature=20)``, ``ToneMap("aces")``.
 
     ``aces=True`` grades in ACEScc/ACEScg as Unity does when ACES tone mapping is selected (``ColorGrade(aces=True)``).
+    ``tonemap="neutral"`` adds post-exposure 0.5 and ends with Neutral instead.
     """
-    return torch.nn.Sequential(tg.ColorGrade(contrast=30.0, saturation=20.0, temperature=20.0, aces=aces), tg.ToneMap("aces"))
+    exposure = 0.5 if tonemap == "neutral" else 0.0
+    grade = tg.ColorGrade(contrast=30.0, saturation=20.0, temperature=20.0, post_exposure=exposure, aces=aces)
+    return torch.nn.Sequential(grade, tg.ToneMap(tonemap))
 
 
 def accuracy_image(name: str) -> torch.Tensor:
@@ -67,25 +71,32 @@ def accuracy_image(name: str) -> torch.Tensor:
     return sample_exr(name)[..., ::4, ::4]
 
 
-ACCURACY_LUTS = [(SIZE, "default", encoding) for encoding in OUTPUT_ENCODINGS] + [(size, "scene", "srgb") for size in (SIZE, 65, 129)]
-"""(size, lattice domain, output encoding) of the LogC LUTs in the accuracy table: the default domain
-(up to linear 58.86), or the scene's range (``bake_lut(scene=image)``)."""
+ACCURACY_LUTS = ([("aces", SIZE, "logc", "default", encoding) for encoding in OUTPUT_ENCODINGS]
+                 + [("aces", size, "logc", "scene", "srgb") for size in (SIZE, 65, 129)]
+                 + [("aces", SIZE, "fitted", domain, "srgb") for domain in ("default", "scene")]
+                 + [("neutral", SIZE, shaper, domain, "srgb") for shaper, domain in (("logc", "default"), ("logc", "scene"), ("fitted", "scene"))])
+"""(tone mapper, size, shaper, lattice, output encoding) of the LUTs in the accuracy table. LogC: the default
+domain (up to linear 58.86) or the scene's range (``bake_lut(scene=image)``); fitted: the shaper fitted to the
+look alone (default) or to the look and the scene, from black to 65504."""
 
 
 def accuracy() -> list:
-    """Errors of LogC LUTs (:data:`ACCURACY_LUTS`) of the strong look on the sample EXRs, in 8-bit sRGB code values."""
-    look = strong_look()
+    """Errors of the LUTs of :data:`ACCURACY_LUTS` on the sample EXRs, in 8-bit sRGB code values, with each bake's own report."""
+    looks = {tonemap: strong_look(tonemap=tonemap) for tonemap in ("aces", "neutral")}
     rows = []
     with torch.no_grad():
         for name in ACCURACY_IMAGES:
             image = accuracy_image(name)
-            direct = srgb_codes(look(image.double()))
-            for size, domain, encoding in ACCURACY_LUTS:
-                lut = tg.bake_lut(look, size=size, scene=image if domain == "scene" else None, output_encoding=encoding)
+            direct = {tonemap: srgb_codes(look(image.double())) for tonemap, look in looks.items()}
+            for tonemap, size, shaper, domain, encoding in ACCURACY_LUTS:
+                lut = tg.bake_lut(looks[tonemap], size=size, shaper=shaper, scene=image if domain == "scene" else None,
+                                  output_encoding=encoding, report_tolerance=float("inf"))  # the report's numbers, without its diagnosis
                 for interpolation in INTERPOLATIONS:
-                    error = (srgb_codes(lut(image, interpolation)) - direct).abs().flatten().numpy()
-                    rows.append({"image": name, "size": size, "domain": domain, "output_encoding": encoding, "interpolation": interpolation,
-                                 "p99_9": float(np.quantile(error, 0.999)), "max": float(error.max())})
+                    error = (srgb_codes(lut(image, interpolation)) - direct[tonemap]).abs().flatten().numpy()
+                    rows.append({"image": name, "tonemap": tonemap, "size": size, "shaper": shaper, "domain": domain,
+                                 "output_encoding": encoding, "interpolation": interpolation,
+                                 "p99_9": float(np.quantile(error, 0.999)), "max": float(error.max()),
+                                 "report_p99_9": lut.error_report.p99_9, "report_max": lut.error_report.max})
     return rows
 
 
@@ -168,7 +179,7 @@ def main() -> None:
     torch.manual_seed(0)
     image = torch.rand(1, 3, HEIGHT, WIDTH) * 1.1 - 0.05
     pixels, frame_bytes = HEIGHT * WIDTH, image.numel() * 4
-    lut = tg.bake_lut(look, size=SIZE, shaper="linear")
+    lut = tg.bake_lut(look, size=SIZE, shaper="linear", report_tolerance=float("inf"))
     lut.table = lut.table.float()
     with tempfile.TemporaryDirectory() as folder:
         methods = lookup_methods(image, lut, folder)
@@ -221,15 +232,19 @@ def markdown(report: dict) -> str:
     if report["accuracy"]:
         lines += [
             "",
-            "## Accuracy of LogC LUTs of a strong look (every 4th pixel, 8-bit sRGB code values vs direct float64)",
+            "## Accuracy of LUTs of a strong look (every 4th pixel, 8-bit sRGB code values vs direct float64)",
             "",
-            "Lattice domain: the default (up to linear 58.86), or the scene's range (`bake_lut(scene=image)`).",
+            "Look: contrast 30, saturation 20, temperature 20, then ACES, or post-exposure 0.5 and Neutral. LogC lattice: "
+            "the default (up to linear 58.86), or the scene's range (`bake_lut(scene=image)`); fitted: "
+            "`shaper=\"fitted\"`, fitted to the look (default) or to the look and the image (scene), black to 65504. "
+            "Report: the bake's own `error_report` (validation colours, plus the image's pixels for scene bakes).",
             "",
-            "| image | size | domain | output encoding | interpolation | p99.9 | max |",
-            "| --- | ---: | --- | --- | --- | ---: | ---: |",
+            "| image | look | size | shaper | lattice | output encoding | interpolation | p99.9 | max | report p99.9 | report max |",
+            "| --- | --- | ---: | --- | --- | --- | --- | ---: | ---: | ---: | ---: |",
         ]
         for a in report["accuracy"]:
-            lines.append(f"| {a['image']} | {a['size']}³ | {a['domain']} | {a['output_encoding']} | {a['interpolation']} | {a['p99_9']:.2f} | {a['max']:.1f} |")
+            lines.append(f"| {a['image']} | {a['tonemap']} | {a['size']}³ | {a['shaper']} | {a['domain']} | {a['output_encoding']} | "
+                         f"{a['interpolation']} | {a['p99_9']:.2f} | {a['max']:.1f} | {a['report_p99_9']:.2f} | {a['report_max']:.1f} |")
     lines += ["", f"Reproduce: `{report['command']}`", ""]
     return "\n".join(lines)
 

@@ -281,12 +281,15 @@ class PostFX(nn.Module):
         Exposure, bloom and dither stay live (copied, so the new look keeps its own adaptation state). The
         LUT's domain reaches LogC 1.0 (linear ≈ 58.9); a tone-mapped look clamps its output to
         [0, 1] after the lookup. Without a tone mapper, graded values above the domain are clipped.
-        ``output_encoding`` is passed to :func:`~torchgrade.bake_lut` and kept by the new LUT.
+        ``output_encoding`` is passed to :func:`~torchgrade.bake_lut` and kept by the new LUT, as is the
+        bake's error report (``look.to_lut().lut.error_report``; a bake over 1 code warns).
         """
         transform = self.per_pixel_stages()
         lut = bake_lut(transform, size=size, shaper="logc", output_encoding=output_encoding)
+        report = lut.error_report
         lut = LUT3D(lut.table.detach().float(), shaper=lut.shaper, domain=(lut.domain_min, lut.domain_max),
                     output_range=lut.output_range, output_encoding=lut.output_encoding)
+        lut.error_report = report  # measured on the float64 table these entries are rounded from
         return PostFX(
             exposure=copy.deepcopy(self.exposure),
             bloom=copy.deepcopy(self.bloom),

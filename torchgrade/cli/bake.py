@@ -6,6 +6,7 @@ Examples:
     >>> with tempfile.TemporaryDirectory() as folder:
     ...     main(["bake", "-o", str(pathlib.Path(folder) / "look.cube"), "--size", "5", "--contrast", "20"])  # doctest: +ELLIPSIS
     bake: 5³ logc LUT of ColorGrade -> ToneMap, ... s -> ...look.cube
+    error: OVER TOLERANCE: p99.9 ... 8-bit codes on 17113 validation colours (tolerance 1 at p99.9); cause: lattice range: ...
     0
 """
 
@@ -13,12 +14,13 @@ from __future__ import annotations
 
 import argparse
 import time
+import warnings
 from pathlib import Path
 
 import torch
 
 from ..io import read_exr, write_cube
-from ..lut import bake_lut, srgb_code_error
+from ..lut import LUTAccuracyWarning, bake_lut, srgb_code_error
 from .common import add_grading_flags, look_from_args, stages_label
 
 __all__ = ["run_bake", "add_bake"]
@@ -59,7 +61,10 @@ def run_bake(args: argparse.Namespace) -> str:
             scene = look.per_pixel_input(read_exr(args.scene)[:3].unsqueeze(0))
     tolerance = 0.5 if args.tolerance is None else args.tolerance
     start = time.perf_counter()
-    lut = bake_lut(transform, size=args.size, shaper=args.shaper, scene=scene, tolerance=tolerance, progress=True)
+    with warnings.catch_warnings():  # the report is printed below, with its cause and advice
+        warnings.simplefilter("ignore", LUTAccuracyWarning)
+        lut = bake_lut(transform, size=args.size, shaper=args.shaper, scene=scene, tolerance=tolerance, progress=True,
+                       report_tolerance=args.report_tolerance, strict=args.strict)
     elapsed = time.perf_counter() - start
     title = Path(args.output).stem.replace('"', "")
     write_cube(args.output, lut, title=title)
@@ -70,7 +75,8 @@ def run_bake(args: argparse.Namespace) -> str:
         line += f"; on {Path(args.scene).name}: {error:.2f} 8-bit codes at p99.9"
     if live:
         line += f"; left live, not in the LUT: {', '.join(live)}"
-    return line
+    verdict = "" if lut.error_report.within else "OVER TOLERANCE: "
+    return f"{line}\nerror: {verdict}{lut.error_report}"
 
 
 def add_bake(commands) -> None:
@@ -79,9 +85,13 @@ def add_bake(commands) -> None:
     bake.add_argument("--output", "-o", required=True, help=".cube file to write")
     bake.add_argument("--config", help="look JSON (PostFX config); without it, the grading flags below")
     bake.add_argument("--size", type=_lut_size, default=33, help="points per axis, 2..256, or auto (needs --scene; default 33)")
-    bake.add_argument("--shaper", choices=("auto", "linear", "logc"), default="auto", help="default auto: logc when the look tone maps")
+    bake.add_argument("--shaper", choices=("auto", "linear", "logc", "fitted"), default="auto",
+                      help="default auto: logc when the look tone maps; fitted: per-channel shaper fitted to the look (and --scene)")
     bake.add_argument("--scene", help="EXR the look will grade: the lattice covers its range after the look's exposure and bloom, "
                       "and the error is reported on it")
     bake.add_argument("--tolerance", type=float, help="with --size auto: 8-bit sRGB codes at p99.9 (default 0.5)")
+    bake.add_argument("--report-tolerance", type=float, default=1.0,
+                      help="8-bit sRGB codes at p99.9 on the validation colours above which the report names a cause and a fix (default 1)")
+    bake.add_argument("--strict", action="store_true", help="fail instead of writing a LUT over --report-tolerance")
     add_grading_flags(bake)
     bake.set_defaults(run=run_bake)

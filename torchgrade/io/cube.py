@@ -42,11 +42,12 @@ import warnings
 import numpy as np
 import torch
 
-from ..lut import LUT3D, MAX_SIZE, MIN_SIZE, SHAPERS, identity_table
+from ..lut import LUT3D, MAX_SIZE, MIN_SIZE, SHAPERS, ErrorReport, identity_table, lattice, validation_colours
+from ..lut.report import measure
 from .atomic import atomic_write
 from .lines import MAX_LINE_BYTES, line_blocks
 
-__all__ = ["read_cube", "write_cube", "cube_text", "shaper_samples", "SHAPER_SIZE", "MAX_SHAPER_SIZE"]
+__all__ = ["read_cube", "write_cube", "cube_text", "shaper_samples", "lattice_only", "SHAPER_SIZE", "MAX_SHAPER_SIZE"]
 
 SHAPER_SIZE = 65536
 """Points of the 1D shaper written for LogC LUTs (Resolve's largest 1D size)."""
@@ -59,10 +60,45 @@ _MAX_BYTES_PER_VALUE = 64
 # ---------------------------------------------------------------- writing
 
 
-def write_cube(path, lut: LUT3D, title: str = "torchgrade", shaper_size: int = SHAPER_SIZE) -> None:
-    """Write ``lut`` to ``path`` as a .cube file (atomically: a failed write leaves nothing behind)."""
+def write_cube(path, lut: LUT3D, title: str = "torchgrade", shaper_size: int = SHAPER_SIZE, shaper_section: bool = True,
+               top: float = 1.0):
+    """Write ``lut`` to ``path`` as a .cube file (atomically: a failed write leaves nothing behind).
+
+    ``shaper_section=False`` writes a 3D-only file (Adobe form, no 1D section: what ffmpeg's
+    ``lut3d`` and other 3D-only readers accept): a LUT with a shaper is resampled onto a linear
+    lattice over ``[0, top]`` (:func:`lattice_only`), and the :class:`~torchgrade.lut.ErrorReport` of
+    that resampling against ``lut`` is returned. Otherwise returns ``None``.
+    """
+    cost = None
+    if not shaper_section and not SHAPERS[lut.shaper].cube_domain_form:
+        lut, cost = lattice_only(lut, top)
     text = cube_text(lut, title, shaper_size)
     atomic_write(path, lambda temporary: _write_text(temporary, text))
+    return cost
+
+
+def lattice_only(lut: LUT3D, top: float = 1.0) -> tuple:
+    """``(linear-shaper LUT over [0, top], ErrorReport)``: ``lut`` sampled on an evenly spaced linear lattice of its size.
+
+    The report measures the resampled LUT against ``lut`` on the validation colours (HDR ones when
+    ``top`` exceeds 1): shadows lose the shaper's resolution and inputs above ``top`` clamp.
+
+    Examples:
+        >>> from torchgrade.lut import identity_table
+        >>> resampled, cost = lattice_only(LUT3D(identity_table(3), "logc"))
+        >>> resampled.shaper, cost.colours > 0
+        ('linear', True)
+    """
+    if not top > 0:
+        raise ValueError(f"3D-only lattice top must be above 0, got {top}")
+    points = (lattice(lut.size) * top).reshape(1, -1, 3).permute(0, 2, 1).unsqueeze(-1)  # (1, 3, S³, 1)
+    with torch.no_grad():
+        table = lut(points.float()).double().squeeze(-1)[0].t().reshape(lut.size, lut.size, lut.size, 3)
+    resampled = LUT3D(table.float(), "linear", domain=(0.0, top), output_range=lut.output_range)
+    colours = validation_colours(hdr=top > 1.0).reshape(1, 3, 1, -1)
+    with torch.no_grad():
+        cost = measure(resampled, (colours, lut(colours.float()).double()), 1.0)
+    return resampled, cost
 
 
 def cube_text(lut: LUT3D, title: str = "torchgrade", shaper_size: int = SHAPER_SIZE) -> str:

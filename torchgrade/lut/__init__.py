@@ -9,7 +9,10 @@ The package holds one family per file:
 * :mod:`~torchgrade.lut.lattice`: sizes, lattice coordinates, table layouts, domains;
 * :mod:`~torchgrade.lut.lut3d`: :class:`LUT3D` (a :class:`~torchgrade.stage.Stage`), its lookup
   and compile cache, and :class:`LUTLookup`, its ONNX export form;
-* :mod:`~torchgrade.lut.bake`: :func:`bake_lut`, automatic sizing and the error report.
+* :mod:`~torchgrade.lut.fit`: :func:`fit_shaper`, a per-channel shaper fitted to a transform;
+* :mod:`~torchgrade.lut.validation` and :mod:`~torchgrade.lut.report`: the colours every baked LUT
+  is measured on, and its :class:`ErrorReport`;
+* :mod:`~torchgrade.lut.bake`: :func:`bake_lut`, automatic sizing.
 
 Examples:
     >>> import torch
@@ -20,13 +23,16 @@ Examples:
 """
 
 from .bake import AUTO_SIZES, bake_lut, expects_hdr, is_display_referred, scene_domain, srgb_code_error
+from .fit import FIT_KNOTS, fit_shaper
 from .kernels import (BACKENDS, INTERPOLATIONS, KERNELS, LUT_BACKENDS, Kernel, strip_table, tetrahedral, trilinear,
                       trilinear_grid_sample, trilinear_strip, trilinear_strip_lookup)
 from .lattice import MAX_SIZE, MIN_SIZE, check_size, checked_domain, identity_table, lattice, planar_table
 from .lut3d import (LUT3D, OUTPUT_ENCODINGS, LUTLookup, apply_lut, compiled_lookup, decode_output, encode_output,
                     lookup, table_output)
-from .shapers import (DEFAULT_DOMAINS, LOGC_BLACK, SHAPERS, CurveShaper, LinearShaper, LogCShaper, Shaper, lattice_unit,
-                      sample_curve, shaper_decode, shaper_encode)
+from .report import ErrorReport, LUTAccuracyWarning, code_errors
+from .shapers import (DEFAULT_DOMAINS, LOGC_BLACK, SHAPERS, CurveShaper, FittedShaper, LinearShaper, LogCShaper, Shaper,
+                      lattice_unit, sample_curve, shaper_decode, shaper_encode)
+from .validation import validation_colours
 
 
 __all__ = [
@@ -37,5 +43,6 @@ __all__ = [
     "LUT3D", "OUTPUT_ENCODINGS", "LUTLookup", "apply_lut", "compiled_lookup", "decode_output", "encode_output",
     "lookup", "table_output",
     "DEFAULT_DOMAINS", "LOGC_BLACK", "SHAPERS", "CurveShaper", "LinearShaper", "LogCShaper", "Shaper", "lattice_unit",
-    "sample_curve", "shaper_decode", "shaper_encode",
+    "sample_curve", "shaper_decode", "shaper_encode", "FittedShaper",
+    "FIT_KNOTS", "fit_shaper", "ErrorReport", "LUTAccuracyWarning", "code_errors", "validation_colours",
 ]

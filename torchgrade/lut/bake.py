@@ -25,10 +25,11 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
-from ..color import linear_to_srgb
 from ..core import check_choice, check_image, sanitize
 from .lattice import MIN_SIZE, check_size, checked_domain, lattice
+from .fit import fit_shaper, refine_shaper
 from .lut3d import LUT3D, OUTPUT_ENCODINGS, encode_output
+from .report import code_errors, diagnose, enforce, measure, measured_colours
 from .shapers import DEFAULT_DOMAINS, SHAPERS
 
 __all__ = ["AUTO_SIZES", "bake_lut", "expects_hdr", "is_display_referred", "scene_domain", "srgb_code_error"]
@@ -70,7 +71,8 @@ def expects_hdr(transform) -> bool:
 
 def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper: str = "auto",
              scene: Optional[torch.Tensor] = None, tolerance: float = 0.5, chunk: int = 1 << 21,
-             output_encoding: str = "linear", progress: bool = False, domain: Optional[tuple] = None) -> LUT3D:
+             output_encoding: str = "linear", progress: bool = False, domain: Optional[tuple] = None,
+             report_tolerance: float = 1.0, strict: bool = False) -> LUT3D:
     """Bake a per-pixel ``transform`` on ``(N, 3, H, W)`` tensors into a :class:`~torchgrade.LUT3D`.
 
     The transform is evaluated once on the lattice, in float64 and in shaper space, and the float64
@@ -78,8 +80,10 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper:
     a time. The table stays connected to the transform's parameters, so a LUT can be fitted by
     gradient descent.
 
-    * ``shaper``: ``"linear"``, ``"logc"`` or ``"auto"`` (``"logc"`` when :func:`expects_hdr`);
-      the choice is stored as ``lut.shaper`` and shown in ``repr(lut)``.
+    * ``shaper``: ``"linear"``, ``"logc"``, ``"fitted"`` or ``"auto"`` (``"logc"`` when
+      :func:`expects_hdr`); the choice is stored as ``lut.shaper`` and shown in ``repr(lut)``.
+      ``"fitted"`` fits a per-channel shaper to the transform (and the scene, when given) from black
+      to 65504 (:func:`~torchgrade.lut.fit_shaper`); its lattice domain is [0, 1].
     * ``scene``: an image the LUT is for. The lattice domain then follows its dynamic range: the
       top is the scene's largest value (after the non-finite policy), the bottom stays at black.
     * ``domain``: ``(min, max)`` of the lattice in shaper code values (numbers or RGB triples, as
@@ -97,6 +101,10 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper:
       after the lookup, baked with the final tone mapper's clip off.
     * ``progress``: show a progress bar (tqdm, on stderr, when it is a terminal) while the lattice
       is evaluated; a 256³ bake of a grade and tone mapper takes seconds.
+    * The LUT's error on the validation colours (plus the scene's pixels) is measured and kept as
+      ``lut.error_report`` (:class:`~torchgrade.lut.ErrorReport`). Above ``report_tolerance``
+      8-bit codes at p99.9 the report names the cause and a bake that meets it, and the bake warns
+      (:class:`~torchgrade.lut.LUTAccuracyWarning`), or raises ``ValueError`` with ``strict=True``.
 
     Examples:
         >>> bake_lut(lambda image: image, size=5, shaper="logc").shaper
@@ -105,25 +113,62 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper:
     if shaper == "auto":
         shaper = "logc" if expects_hdr(transform) else "linear"
     check_choice("bake shaper", shaper, DEFAULT_DOMAINS)
-    if domain is None:
-        domain = DEFAULT_DOMAINS[shaper] if scene is None else scene_domain(scene, shaper)
-    domain = checked_domain(domain)  # the lattice is baked where the lookup will find it
     check_choice("output encoding", output_encoding, OUTPUT_ENCODINGS)
-    display = is_display_referred(transform)
-    output_range = (0.0, 1.0) if display else None
-
-    def bake(n: int) -> LUT3D:
-        with _final_clip_off(transform) if display else contextlib.nullcontext():
-            table = encode_output(_evaluate_on_lattice(transform, n, shaper, domain, chunk, progress), output_encoding)
-        return LUT3D(table, shaper=shaper, domain=domain, output_range=output_range, output_encoding=output_encoding)
-
-    if size != "auto":
-        return bake(check_size(size))
-    if scene is None:
+    if size == "auto" and scene is None:
         raise ValueError('bake_lut(size="auto") needs scene=image to measure the error on')
-    if not tolerance > 0:
+    if size == "auto" and not tolerance > 0:
         raise ValueError(f'bake_lut(size="auto") needs a tolerance above 0 (8-bit codes), got {tolerance}')
-    return _smallest_within(bake, transform, scene, tolerance)
+    if size != "auto":
+        size = check_size(size)  # before the transform runs on anything, as the domain
+    if domain is not None:
+        domain = checked_domain(domain)
+    hdr = shaper != "linear" or expects_hdr(transform)
+    measured = measured_colours(transform, scene, hdr)
+    bake = _baker(transform, domain, scene, chunk, output_encoding, progress, measured, hdr)
+    lut = bake(shaper, size) if size != "auto" else _smallest_within(lambda n: bake(shaper, n), transform, scene, tolerance)
+    report = measure(lut, measured, report_tolerance)
+    if not report.within:
+        report = diagnose(report, lut, transform, measured, bake)
+    enforce(report, strict)
+    lut.error_report = report
+    return lut
+
+
+def _baker(transform, domain, scene, chunk: int, output_encoding: str, progress: bool, measured: tuple, hdr: bool) -> Callable:
+    """``bake(shaper, size) -> LUT3D`` for ``transform``: the lattice domain, fitted curve and clip handling of :func:`bake_lut`.
+
+    A fitted shaper is fitted once per size, on the ``measured`` colours (:func:`~torchgrade.lut.report.measured_colours`).
+    """
+    display = is_display_referred(transform)
+    image, reference = measured
+    fitted, baked = {}, {}
+
+    def cached(shaper: str, size: int) -> LUT3D:
+        if (shaper, size) not in baked:
+            baked[shaper, size] = bake(shaper, size)
+        return baked[shaper, size]
+
+    def bake(shaper: str, size: int, curve=None, curve_range=(0.0, 1.0)) -> LUT3D:
+        if SHAPERS[shaper].takes_curve and curve is None:
+            if size not in fitted:
+                with _final_clip_off(transform) if display else contextlib.nullcontext():
+                    start, curve_range = fit_shaper(transform, scene, hdr=hdr)
+                with torch.no_grad():
+                    fitted[size] = refine_shaper(
+                        start, curve_range, lambda c: bake(shaper, size, c, curve_range), image[0, :, 0],
+                        lambda lut: code_errors(reference, lut(image.float())).amax(dim=1).flatten()), curve_range
+            curve, curve_range = fitted[size]
+        with _final_clip_off(transform) if display else contextlib.nullcontext():
+            lattice_domain = domain
+            if lattice_domain is None:
+                lattice_domain = DEFAULT_DOMAINS[shaper] if scene is None or curve is not None else scene_domain(scene, shaper)
+            lattice_domain = checked_domain(lattice_domain)  # the lattice is baked where the lookup will find it
+            values = _evaluate_on_lattice(transform, size, shaper, lattice_domain, chunk, progress, curve, curve_range)
+        return LUT3D(encode_output(values, output_encoding), shaper=shaper, domain=lattice_domain,
+                     output_range=(0.0, 1.0) if display else None, output_encoding=output_encoding,
+                     curve=curve, curve_range=curve_range)
+
+    return cached
 
 
 @contextlib.contextmanager
@@ -159,13 +204,15 @@ def scene_domain(scene: torch.Tensor, shaper: str) -> tuple:
     return DEFAULT_DOMAINS[shaper][0], float(SHAPERS[shaper].encode(top))
 
 
-def _evaluate_on_lattice(transform, size: int, shaper: str, domain, chunk: int, progress: bool = False) -> torch.Tensor:
+def _evaluate_on_lattice(transform, size: int, shaper: str, domain, chunk: int, progress: bool = False,
+                         curve: Optional[torch.Tensor] = None, curve_range=(0.0, 1.0)) -> torch.Tensor:
     """Evaluate ``transform`` at every lattice point, float64; returns the ``(S, S, S, 3)`` table.
 
     ``progress`` shows a bar over the blue slices of the lattice (on a terminal only).
     """
     low, high = (torch.as_tensor(v, dtype=torch.float64) for v in domain)
-    inputs = SHAPERS[shaper].decode(low + lattice(size) * (high - low))  # (b, g, r, 3)
+    codes = (low + lattice(size) * (high - low)).reshape(-1, 3).t()
+    inputs = SHAPERS[shaper].decode(codes, curve, curve_range).t().reshape(size, size, size, 3)  # (b, g, r, 3)
     slices_per_chunk = max(1, chunk // (size * size))
     outputs = []
     with tqdm(total=size, desc=f"baking {size}³", unit="slice", disable=None if progress else True, leave=False) as bar:
@@ -186,8 +233,7 @@ def srgb_code_error(reference: torch.Tensor, approximation: torch.Tensor, quanti
         >>> srgb_code_error(torch.ones(4), torch.ones(4))
         0.0
     """
-    codes = [255.0 * linear_to_srgb(t.detach().double().clamp(0.0, 1.0)) for t in (reference, approximation)]
-    error = (codes[0] - codes[1]).abs().flatten()
+    error = code_errors(reference, approximation).flatten()
     rank = max(1, math.ceil(quantile * error.numel()))
     return float(error.kthvalue(rank).values)
 

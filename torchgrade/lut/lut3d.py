@@ -199,8 +199,8 @@ class LUT3D(Stage):
         super().__init__()
         check_choice("shaper", shaper, SHAPERS)
         _check_table(table)
-        if (shaper == "curve") != (curve is not None):
-            raise ValueError("a 'curve' shaper needs curve=(n, 3) table, and only it takes one")
+        if SHAPERS[shaper].takes_curve != (curve is not None):
+            raise ValueError(f"the {shaper!r} shaper {'needs' if SHAPERS[shaper].takes_curve else 'takes no'} curve=(n, 3) table")
         self.size = table.shape[0]
         if learnable:
             self.table = nn.Parameter(table.detach().clone())
@@ -211,6 +211,7 @@ class LUT3D(Stage):
         self.register_buffer("domain_max", high)
         self.register_buffer("curve", None if curve is None else _check_curve(curve))
         self._rows_cache = (None, None, None)
+        self.error_report = None  # set by bake_lut: a torchgrade.lut.ErrorReport
         self.init_controls(shaper=shaper, output_range=output_range, curve_range=curve_range,
                            output_encoding=output_encoding, compile=bool(compile))
 

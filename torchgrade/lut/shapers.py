@@ -25,7 +25,7 @@ import torch
 
 from ..color import linear_to_logc, logc_to_linear
 
-__all__ = ["Shaper", "LinearShaper", "LogCShaper", "CurveShaper", "SHAPERS", "LOGC_BLACK", "DEFAULT_DOMAINS",
+__all__ = ["Shaper", "LinearShaper", "LogCShaper", "CurveShaper", "FittedShaper", "SHAPERS", "LOGC_BLACK", "DEFAULT_DOMAINS",
            "shaper_encode", "shaper_decode", "sample_curve", "lattice_unit"]
 
 LOGC_BLACK = float(linear_to_logc(torch.tensor(0.0, dtype=torch.float64)))
@@ -51,13 +51,15 @@ class Shaper:
     """Whether :func:`~torchgrade.bake_lut` can bake through it (it has :meth:`decode`)."""
     cube_domain_form = False
     """Whether a ``.cube`` file states it with the Adobe ``DOMAIN_MIN/MAX`` keywords alone (no 1D section)."""
+    takes_curve = False
+    """Whether it is defined by a per-channel table (``LUT3D(curve=..., curve_range=...)``)."""
 
     def encode(self, points: torch.Tensor, curve: Optional[torch.Tensor] = None, curve_range=(0.0, 1.0)) -> torch.Tensor:
         """Shaper code values of linear points."""
         raise NotImplementedError
 
-    def decode(self, codes: torch.Tensor) -> torch.Tensor:
-        """Linear values of code values (the inverse of :meth:`encode`)."""
+    def decode(self, codes: torch.Tensor, curve: Optional[torch.Tensor] = None, curve_range=(0.0, 1.0)) -> torch.Tensor:
+        """Linear values of code values (the inverse of :meth:`encode`); per-channel shapers take ``(3, P)`` codes."""
         raise NotImplementedError(f"the {self.name!r} shaper has no inverse")
 
     def linear_range(self, domain_min: torch.Tensor, domain_max: torch.Tensor, curve_range) -> tuple:
@@ -90,7 +92,7 @@ class LinearShaper(Shaper):
     def encode(self, points, curve=None, curve_range=(0.0, 1.0)):
         return points
 
-    def decode(self, codes):
+    def decode(self, codes, curve=None, curve_range=(0.0, 1.0)):
         return codes
 
 
@@ -113,7 +115,7 @@ class LogCShaper(Shaper):
     def encode(self, points, curve=None, curve_range=(0.0, 1.0)):
         return linear_to_logc(points)
 
-    def decode(self, codes):
+    def decode(self, codes, curve=None, curve_range=(0.0, 1.0)):
         return logc_to_linear(codes)
 
 
@@ -129,6 +131,7 @@ class CurveShaper(Shaper):
 
     name = "curve"
     bakeable = False
+    takes_curve = True
 
     def encode(self, points, curve=None, curve_range=(0.0, 1.0)):
         return sample_curve(points, curve, curve_range)
@@ -137,7 +140,46 @@ class CurveShaper(Shaper):
         return tuple(curve_range)
 
 
-SHAPERS = {shaper.name: shaper for shaper in (LinearShaper(), LogCShaper(), CurveShaper())}
+class FittedShaper(Shaper):
+    """LogC, then a per-channel monotone curve fitted to a transform (:func:`~torchgrade.lut.fit_shaper`).
+
+    ``curve`` ``(n, 3)`` holds the lattice coordinate in [0, 1] at ``n`` LogC code values evenly
+    over ``curve_range``; the lattice domain is [0, 1]. The fit puts lattice planes where the
+    transform bends, from black to the half-float top (65504), so no HDR highlight is clamped.
+
+    Examples:
+        >>> import torch
+        >>> ramp = torch.linspace(0.0, 1.0, 3).unsqueeze(1).expand(3, 3)
+        >>> codes = FittedShaper().encode(torch.full((3, 1), 0.18), ramp, (0.0, 1.0))
+        >>> torch.allclose(FittedShaper().decode(codes, ramp, (0.0, 1.0)), torch.full((3, 1), 0.18))
+        True
+    """
+
+    name = "fitted"
+    takes_curve = True
+
+    def encode(self, points, curve=None, curve_range=(0.0, 1.0)):
+        return sample_curve(linear_to_logc(points), curve, curve_range)
+
+    def decode(self, codes, curve=None, curve_range=(0.0, 1.0)):
+        low, high = curve_range
+        steps = (curve.shape[0] - 1) / (high - low)
+        logc = [low + _inverse_ramp(row, column.to(codes).contiguous()) / steps for row, column in zip(codes, curve.t())]
+        return logc_to_linear(torch.stack(logc))
+
+    def linear_range(self, domain_min, domain_max, curve_range):
+        return tuple(float(logc_to_linear(torch.tensor(v, dtype=torch.float64))) for v in curve_range)
+
+
+def _inverse_ramp(values: torch.Tensor, ramp: torch.Tensor) -> torch.Tensor:
+    """Fractional index at which the strictly increasing ``ramp`` reaches each of ``values`` (clamped to its ends)."""
+    values = values.clamp(float(ramp[0]), float(ramp[-1])).contiguous()
+    upper = torch.searchsorted(ramp, values, right=True).clamp(1, ramp.numel() - 1)
+    below, above = ramp[upper - 1], ramp[upper]
+    return upper - 1 + (values - below) / (above - below)
+
+
+SHAPERS = {shaper.name: shaper for shaper in (LinearShaper(), LogCShaper(), CurveShaper(), FittedShaper())}
 """The shapers by name, what ``LUT3D(shaper=...)`` takes."""
 
 DEFAULT_DOMAINS = {name: shaper.default_domain for name, shaper in SHAPERS.items() if shaper.bakeable}
@@ -159,7 +201,7 @@ def shaper_encode(points: torch.Tensor, shaper, curve: Optional[torch.Tensor] = 
     return _shaper(shaper).encode(points, curve, curve_range)
 
 
-def shaper_decode(codes: torch.Tensor, shaper) -> torch.Tensor:
+def shaper_decode(codes: torch.Tensor, shaper, curve: Optional[torch.Tensor] = None, curve_range=(0.0, 1.0)) -> torch.Tensor:
     """Linear values of shaper code values: the inverse of :func:`shaper_encode`.
 
     Examples:
@@ -167,7 +209,7 @@ def shaper_decode(codes: torch.Tensor, shaper) -> torch.Tensor:
         >>> round(float(shaper_decode(torch.tensor(LOGC_BLACK), "logc")), 6)
         0.0
     """
-    return _shaper(shaper).decode(codes)
+    return _shaper(shaper).decode(codes, curve, curve_range)
 
 
 def sample_curve(points: torch.Tensor, curve: torch.Tensor, curve_range) -> torch.Tensor:

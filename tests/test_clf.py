@@ -1,0 +1,92 @@
+"""CLF (Academy/ASC Common LUT Format) files, applied by OpenColorIO, and 3D-only .cube files for 3D-only readers.
+
+ffmpeg is not used: it is not installed where the tests run; OpenColorIO and colour-science read the files."""
+
+import itertools
+import warnings
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+import torch
+
+OCIO = pytest.importorskip("PyOpenColorIO")
+colour = pytest.importorskip("colour")
+
+import torchgrade as tg  # noqa: E402
+from torchgrade.color.transfer import LOGC_A, LOGC_B, LOGC_C, LOGC_D  # noqa: E402
+from torchgrade.io import write_clf, write_cube  # noqa: E402
+from torchgrade.lut import LUTAccuracyWarning, code_errors, validation_colours  # noqa: E402
+
+_names = itertools.count()
+OCIO_INTERPOLATION = {"tetrahedral": OCIO.INTERP_TETRAHEDRAL, "trilinear": OCIO.INTERP_LINEAR}
+
+
+@pytest.fixture(scope="module")
+def looks():
+    look = torch.nn.Sequential(tg.ColorGrade(contrast=20.0, saturation=10.0, temperature=10.0), tg.ToneMap("aces"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", LUTAccuracyWarning)
+        return {shaper: tg.bake_lut(look, size=9, shaper=shaper) for shaper in ("linear", "logc", "fitted")}
+
+
+def ocio_apply(path, image: torch.Tensor, interpolation: str) -> torch.Tensor:
+    transform = OCIO.FileTransform(src=str(path), interpolation=OCIO_INTERPOLATION[interpolation])
+    processor = OCIO.Config.CreateRaw().getProcessor(transform).getDefaultCPUProcessor()
+    pixels = np.ascontiguousarray(image[0].permute(1, 2, 0).numpy().astype(np.float32))
+    processor.applyRGB(pixels)
+    return torch.from_numpy(pixels).permute(2, 0, 1).unsqueeze(0)
+
+
+def hdr_image() -> torch.Tensor:
+    image = torch.exp(torch.randn(1, 3, 24, 24) * 3.0 - 1.0)
+    image[0, :, 0, :5] = torch.tensor([0.0, 1e-4, 58.86, 1000.0, 65504.0])
+    return image
+
+
+@pytest.mark.parametrize("shaper", ["linear", "logc", "fitted"])
+@pytest.mark.parametrize("interpolation", ["tetrahedral", "trilinear"])
+def test_opencolorio_applies_the_clf_as_the_lut_does(tmp_path, looks, shaper, interpolation):
+    lut = looks[shaper]
+    path = tmp_path / f"look{next(_names)}.clf"
+    write_clf(path, lut, interpolation=interpolation)
+    image = hdr_image()
+    with torch.no_grad():
+        torch.testing.assert_close(ocio_apply(path, image, interpolation), lut(image, interpolation), atol=1e-4, rtol=0)
+
+
+def test_the_logc_shaper_is_an_exact_log_node_and_the_lattice_a_range(tmp_path, looks):
+    path = tmp_path / "logc.clf"
+    write_clf(path, looks["logc"])
+    root = ET.parse(path).getroot()
+    assert [node.tag for node in root if node.tag != "Description"] == ["Log", "Range", "LUT3D", "Range"]
+    params = root.find("Log/LogParams").attrib
+    assert root.find("Log").get("style") == "linToLog" and params["base"] == "10"
+    assert [float(params[k]) for k in ("linSideSlope", "linSideOffset", "logSideSlope", "logSideOffset")] == [LOGC_A, LOGC_B, LOGC_C, LOGC_D]
+    assert float(root.find("Range/maxInValue").text) == pytest.approx(1.0)
+
+
+def test_a_failed_clf_write_leaves_nothing(tmp_path, looks):
+    path = tmp_path / "bad.clf"
+    with pytest.raises(ValueError, match="interpolation"):
+        write_clf(path, looks["logc"], interpolation="cubic")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_3d_only_cube_is_read_by_colour_and_opencolorio_and_reports_its_cost(tmp_path, looks):
+    lut = looks["logc"]
+    path = tmp_path / "flat.cube"
+    cost = write_cube(path, lut, shaper_section=False)
+    text = path.read_text()
+    assert "LUT_1D_SIZE" not in text and "LUT_3D_SIZE 9" in text
+    read = colour.io.read_LUT_IridasCube(str(path))
+    assert isinstance(read, colour.LUT3D) and read.table.shape == (9, 9, 9, 3)
+    image = torch.rand(1, 3, 16, 16)
+    ours = torch.from_numpy(read.apply(image[0].permute(1, 2, 0).double().numpy())).permute(2, 0, 1).unsqueeze(0)
+    torch.testing.assert_close(ocio_apply(path, image, "trilinear").double(), ours, atol=1e-5, rtol=0)
+    colours = validation_colours(hdr=False).reshape(1, 3, 1, -1)
+    flat = ocio_apply(path, colours.float(), "tetrahedral")
+    with torch.no_grad():
+        errors = code_errors(lut(colours.float()), flat).flatten()
+    assert cost.max == pytest.approx(float(errors.max()), abs=0.05)  # what the resampling costs, as a reader applies it
+    assert write_cube(tmp_path / "lin.cube", looks["linear"], shaper_section=False) is None  # nothing to resample

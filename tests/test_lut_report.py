@@ -1,0 +1,172 @@
+"""Every baked LUT reports its own error: the validation colours, the report's numbers, its causes and advice,
+the fitted shaper, and the report through PostFX.to_lut and the bake command."""
+
+import warnings
+
+import numpy as np
+import pytest
+import torch
+
+import torchgrade as tg
+from torchgrade.lut import SHAPERS, LUTAccuracyWarning, bake_lut, fit_shaper, lattice, validation_colours
+
+
+def srgb_codes(values: np.ndarray) -> np.ndarray:
+    """IEC 61966-2-1 sRGB encoding of [0, 1]-clipped values, in 8-bit codes (numpy float64, not the library's)."""
+    v = np.clip(values, 0.0, 1.0)
+    return 255.0 * np.where(v <= 0.0031308, 12.92 * v, 1.055 * v ** (1 / 2.4) - 0.055)
+
+
+def curve(image: torch.Tensor) -> torch.Tensor:
+    """A smooth curve with channel cross-talk, away from black (where display codes bend like a power law)."""
+    r, g, b = image.clamp(0.0, 1.0).unbind(-3)
+    return torch.stack((0.2 + 0.5 * r * r + 0.1 * b, 0.3 + 0.4 * g * b, 0.25 + 0.5 * b * (2.0 - b)), dim=-3)
+
+
+def quiet_bake(*args, **kwargs):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", LUTAccuracyWarning)
+        return bake_lut(*args, **kwargs)
+
+
+def test_validation_colours_cover_the_gamut_out_of_gamut_values_and_the_half_float_range():
+    colours = validation_colours()
+    assert colours.dtype == torch.float64 and colours.shape[0] == 3
+    assert torch.equal(colours, validation_colours())  # deterministic
+    assert float(colours.max()) == 65504.0 and bool((colours < 0).any(0).float().mean() > 0.05)
+    luminance = colours.mean(0)
+    assert float((luminance > 58.86).float().mean()) > 0.02  # above the LogC lattice's top
+    assert 0.05 < float(luminance.median()) < 0.5  # footage-like: most colours around mid grey
+    ldr = validation_colours(hdr=False)
+    assert float(ldr.max()) == 1.0
+
+
+def test_report_numbers_are_the_error_on_the_validation_colours():
+    lut = bake_lut(curve, size=9, shaper="linear", report_tolerance=1e9)
+    colours = validation_colours(hdr=False)
+    image = colours.reshape(1, 3, 1, -1)
+    direct = curve(image).numpy()
+    with torch.no_grad():
+        looked_up = lut(image.float()).double().numpy()
+    errors = np.abs(srgb_codes(direct) - srgb_codes(looked_up))
+    report = lut.error_report
+    assert report.colours == colours.shape[1]
+    assert report.max == pytest.approx(errors.max(), abs=1e-9)
+    assert report.p99_9 == pytest.approx(np.quantile(errors, 0.999, method="higher"), abs=1e-9)
+    assert report.cause is None and report.advice is None  # within its (huge) tolerance: no diagnosis
+
+
+def test_a_small_lattice_warns_names_size_and_its_advice_meets_the_tolerance():
+    with pytest.warns(LUTAccuracyWarning, match="size"):
+        lut = bake_lut(curve, size=3, shaper="linear")
+    report = lut.error_report
+    assert not report.within and "size" in report.cause
+    size = int(report.advice.split("size=")[1].split(",")[0])
+    shaper = report.advice.split("shaper='")[1].split("'")[0]
+    advised = quiet_bake(curve, size=size, shaper=shaper)
+    assert advised.error_report.within
+
+
+def test_strict_raises_instead_of_warning():
+    with pytest.raises(ValueError, match="misses its transform"):
+        bake_lut(curve, size=3, shaper="linear", strict=True)
+
+
+def test_a_kink_oblique_to_the_lattice_is_named():
+    def kink(image):
+        r, g, b = image.clamp(0.0, 1.0).unbind(-3)
+        return torch.stack(((r - 0.6 * g).clamp_min(0.0), g, b), dim=-3)  # r = g would be a tetrahedron face
+
+    lut = quiet_bake(kink, size=9, shaper="linear")
+    assert "kink within a cell" in lut.error_report.cause
+
+
+def test_the_default_logc_lattice_reports_its_range_on_hdr_highlights():
+    look = torch.nn.Sequential(tg.ColorGrade(contrast=30.0, saturation=20.0, temperature=20.0), tg.ToneMap("aces"))
+    lut = quiet_bake(look, size=17)
+    assert "lattice range" in lut.error_report.cause and "58.86" in lut.error_report.cause
+
+
+def test_fitted_shaper_is_monotone_and_its_decode_inverts_its_encode():
+    curve_table, curve_range = fit_shaper(curve, knots=64)
+    assert bool((curve_table[1:] > curve_table[:-1]).all())
+    shaper = SHAPERS["fitted"]
+    linear = torch.tensor([[0.0, 0.01, 0.18, 1.0, 58.86, 1000.0, 65504.0]] * 3, dtype=torch.float64)
+    codes = shaper.encode(linear, curve_table, curve_range)
+    torch.testing.assert_close(shaper.decode(codes, curve_table, curve_range), linear, rtol=1e-9, atol=1e-12)
+
+
+def test_fitted_lut_reproduces_the_transform_on_its_lattice_up_to_the_half_float_top():
+    look = torch.nn.Sequential(tg.ColorGrade(contrast=20.0, saturation=10.0), tg.ToneMap("aces"))
+    lut = quiet_bake(look, size=9, shaper="fitted")
+    assert lut.shaper == "fitted" and lut.curve is not None
+    inputs = SHAPERS["fitted"].decode(lattice(9).reshape(-1, 3).t(), lut.curve, lut.curve_range)
+    assert float(inputs.max()) == pytest.approx(65504.0, rel=1e-9)  # no highlight is clamped
+    image = inputs.reshape(1, 3, 1, -1)
+    with torch.no_grad():
+        torch.testing.assert_close(lut(image, "tetrahedral"), look(image), atol=1e-6, rtol=0)
+
+
+def test_to_lut_carries_the_report(recwarn):
+    look = tg.PostFX(grade={"contrast": 10.0}, tonemap="aces")
+    baked = look.to_lut(9)
+    assert baked.lut.error_report is not None and baked.lut.error_report.colours > 10000
+
+
+def test_bake_command_prints_the_report(tmp_path, capsys):
+    from torchgrade.cli import main
+
+    assert main(["bake", "-o", str(tmp_path / "look.cube"), "--size", "9", "--contrast", "10"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert lines[-1].startswith("error: ") and "p99.9" in lines[-1] and "validation colours" in lines[-1]
+    assert main(["bake", "-o", str(tmp_path / "strict.cube"), "--size", "3", "--contrast", "10", "--strict"]) == 2
+    assert "misses its transform" in capsys.readouterr().err and not (tmp_path / "strict.cube").exists()
+
+
+# ---------------------------------------------------------------- the bar on real images
+
+STRONG_LOOK = dict(contrast=30.0, saturation=20.0, temperature=20.0)
+
+
+FLOOR_MAX = {"Desk": 7.49, "CandleGlass": 0.50, "GoldenGate": 0.81}
+"""Lower bounds on the max error any 33³ table on the default LogC lattice reaches on every 4th pixel of each image
+with the strong look (either interpolation): benchmarks/results/lut_floor.md, linear programming (HiGHS)."""
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="not met: a 33³ table with a shaper fitted to the look and the scene (sRGB entries, tetrahedral) still misses "
+    "by 17.6 / 5.0 / 6.9 codes at most (p99.9 4.0 / 2.1 / 2.4) on Desk / CandleGlass / GoldenGate "
+    "(benchmarks/results/lut.md), above the LogC floors 7.5 / 0.5 / 0.8; the fit moves lattice planes per channel, "
+    "and the largest errors sit on bends across channels (saturation, max(0, .)) that a per-channel shaper cannot align with",
+)
+@pytest.mark.parametrize("name", ["Desk", "CandleGlass", "GoldenGate"])
+def test_33_fitted_lut_beats_any_logc_lattice_on_real_exrs(exr_dir, name):
+    """Every 4th pixel of each image; errors in 8-bit sRGB code values vs float64 direct evaluation."""
+    from torchgrade.io import read_exr
+
+    look = torch.nn.Sequential(tg.ColorGrade(**STRONG_LOOK), tg.ToneMap("aces"))
+    image = read_exr(exr_dir / f"{name}.exr")[:3, ::4, ::4].unsqueeze(0)
+    lut = bake_lut(look, size=33, shaper="fitted", scene=image, output_encoding="srgb", report_tolerance=float("inf"))
+    with torch.no_grad():
+        error = np.abs(srgb_codes(lut(image, "tetrahedral").double().numpy()) - srgb_codes(look(image.double()).numpy()))
+    assert error.max() < FLOOR_MAX[name], (name, float(error.max()))
+
+
+def test_a_neutral_strong_look_is_within_tolerance_or_the_bake_says_it_cannot_be(exr_dir):
+    """Neutral after a strong grade bends inside lattice cells; the report must say so rather than pass silently."""
+    from torchgrade.io import read_exr
+
+    look = torch.nn.Sequential(tg.ColorGrade(post_exposure=0.5, **STRONG_LOOK), tg.ToneMap("neutral"))
+    image = read_exr(exr_dir / "CandleGlass.exr")[:3, ::8, ::8].unsqueeze(0)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        lut = bake_lut(look, size=33, scene=image)
+    report = lut.error_report
+    with torch.no_grad():
+        error = np.abs(srgb_codes(lut(image).double().numpy()) - srgb_codes(look(image.double()).numpy()))
+    if report.within:
+        assert np.quantile(error, 0.999) <= report.tolerance
+    else:
+        assert any(issubclass(w.category, LUTAccuracyWarning) for w in caught)
+        assert report.cause and report.advice

@@ -1,0 +1,181 @@
+"""A baked LUT's error report: how far its lookup is from the transform, why, and what would meet the tolerance.
+
+:func:`~torchgrade.bake_lut` measures every LUT it bakes on the validation colours
+(:mod:`~torchgrade.lut.validation`, plus the scene's pixels when given) against the transform
+evaluated directly in float64, in what a viewer sees: 8-bit sRGB display codes, p99.9 and max over
+every channel value. Above the tolerance it names the cause it found:
+
+* **lattice range**: the error comes from colours outside the lattice (clamped per channel, which
+  changes their hue): within the range the LUT is within tolerance;
+* **a kink within a cell**: doubling the lattice does not shrink the error fourfold, as it would
+  for a smooth transform: the transform bends sharply between lattice points;
+* **size**: the error falls as a smooth transform's does; a larger lattice meets it;
+
+and the first bake of :data:`CANDIDATES` that meets the tolerance, or says that none does.
+
+Examples:
+    >>> import torchgrade as tg
+    >>> lut = tg.bake_lut(lambda image: image.clamp(0, 1) * 0.5, size=5)
+    >>> lut.error_report.within
+    True
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+import torch
+
+from ..color import linear_to_srgb
+from ..core import sanitize
+from .shapers import SHAPERS
+from .validation import validation_colours
+
+__all__ = ["ErrorReport", "LUTAccuracyWarning", "code_errors", "measured_colours", "measure", "diagnose", "enforce",
+           "SCENE_PIXELS", "KINK_RATIO", "CANDIDATES", "ADVICE_MAX_SIZE"]
+
+SCENE_PIXELS = 65536
+"""At most this many scene pixels (evenly strided) join the validation colours."""
+
+KINK_RATIO = 2.5
+"""Error ratio from ``S³`` to ``(2S-1)³`` below which the cause is a kink (a smooth transform gives about 4)."""
+
+
+class LUTAccuracyWarning(UserWarning):
+    """A baked LUT misses its transform by more than the tolerance (see :class:`ErrorReport`)."""
+
+
+@dataclass(frozen=True)
+class ErrorReport:
+    """A LUT's error against its transform, 8-bit sRGB display codes, on ``colours`` validation colours.
+
+    Examples:
+        >>> print(ErrorReport(0.4, 2.0, 100, 1.0))
+        p99.9 0.40, max 2.00 8-bit codes on 100 validation colours (tolerance 1 at p99.9)
+    """
+
+    p99_9: float
+    max: float
+    colours: int
+    tolerance: float
+    cause: Optional[str] = None
+    advice: Optional[str] = None
+
+    @property
+    def within(self) -> bool:
+        """Whether the p99.9 error is within the tolerance."""
+        return self.p99_9 <= self.tolerance
+
+    def __str__(self) -> str:
+        text = (f"p99.9 {self.p99_9:.2f}, max {self.max:.2f} 8-bit codes on {self.colours} validation colours "
+                f"(tolerance {self.tolerance:g} at p99.9)")
+        if self.cause:
+            text += f"; cause: {self.cause}"
+        if self.advice:
+            text += f"; {self.advice}"
+        return text
+
+
+def code_errors(reference: torch.Tensor, approximation: torch.Tensor) -> torch.Tensor:
+    """``255 |srgb(clamp(a, 0, 1)) - srgb(clamp(b, 0, 1))|`` per value, float64, same shape.
+
+    Examples:
+        >>> import torch
+        >>> [round(v, 6) for v in code_errors(torch.ones(2), torch.zeros(2)).tolist()]
+        [255.0, 255.0]
+    """
+    codes = [255.0 * linear_to_srgb(t.detach().double().clamp(0.0, 1.0)) for t in (reference, approximation)]
+    return (codes[0] - codes[1]).abs()
+
+
+def _quantile(errors: torch.Tensor, quantile: float = 0.999) -> float:
+    flat = errors.flatten()
+    return float(flat.kthvalue(max(1, math.ceil(quantile * flat.numel()))).values) if flat.numel() else 0.0
+
+
+def measured_colours(transform, scene: Optional[torch.Tensor], hdr: bool) -> tuple:
+    """``(colours (1, 3, 1, N) float64, reference output)``: the validation colours (and scene pixels), and the transform on them."""
+    colours = validation_colours(hdr)
+    if scene is not None:
+        pixels = sanitize(scene.detach().double()).movedim(-3, 0).reshape(3, -1)
+        colours = torch.cat((colours, pixels[:, :: max(1, pixels.shape[1] // SCENE_PIXELS)]), dim=1)
+    image = colours.reshape(1, 3, 1, -1)
+    with torch.no_grad():
+        return image, transform(image).double()
+
+
+def measure(lut, measured: tuple, tolerance: float) -> ErrorReport:
+    """The :class:`ErrorReport` of ``lut`` on ``measured`` (:func:`measured_colours`), without a diagnosis."""
+    image, reference = measured
+    with torch.no_grad():
+        errors = code_errors(reference, lut(image.float()))
+    return ErrorReport(_quantile(errors), float(errors.max()), image.shape[-1], tolerance)
+
+
+def _linear_bounds(lut) -> tuple:
+    """A baked LUT's lattice bounds as linear values, two ``(3,)`` float64 tensors."""
+    shaper = SHAPERS[lut.shaper]
+    return tuple(shaper.decode(v.double().reshape(3, 1), lut.curve, lut.curve_range).flatten()
+                 for v in (lut.domain_min, lut.domain_max))
+
+
+CANDIDATES = (("fitted", 1), (None, 2), (None, 4))
+"""Bakes tried for advice, in order: ``(shaper, lattice scale)``; ``None`` keeps the shaper, scale ``k`` means
+``k (S-1) + 1`` points, at most :data:`ADVICE_MAX_SIZE`."""
+
+ADVICE_MAX_SIZE = 65
+"""Largest lattice the advice bakes (a 129³ bake of a look takes seconds, and would on every warning)."""
+
+
+def diagnose(report: ErrorReport, lut, transform, measured: tuple, rebake: Callable[[str, int], object]) -> ErrorReport:
+    """``report`` with its causes and advice; ``rebake(shaper, size)`` bakes the same transform otherwise.
+
+    The lattice range's share is the error of the transform itself on colours clamped to the lattice
+    (what no table entry can undo); the interpolation's is told by how the error falls on a finer lattice.
+    """
+    image, reference = measured
+    low, high = _linear_bounds(lut)
+    with torch.no_grad():
+        clamped = torch.maximum(torch.minimum(image, high.reshape(1, 3, 1, 1)), low.reshape(1, 3, 1, 1))
+        within_lattice = (image, transform(clamped).double())
+        range_error = _quantile(code_errors(reference, within_lattice[1]))
+    causes = []
+    if range_error > report.tolerance:
+        causes.append(f"lattice range: clamping per channel to the lattice (linear {float(high.min()):.4g} at the top) "
+                      f"shifts hues, p99.9 {range_error:.2f} codes by itself")
+    finer_size = min(2 * (lut.size - 1) + 1, 256)
+    interpolation = measure(lut, within_lattice, report.tolerance).p99_9
+    if finer_size > lut.size and interpolation > report.tolerance:
+        finer = measure(rebake(lut.shaper, finer_size), within_lattice, report.tolerance)
+        ratio = interpolation / max(finer.p99_9, 1e-9)
+        kind = "a kink within a cell" if ratio < KINK_RATIO else "size"
+        causes.append(f"{kind} (interpolation alone: p99.9 {interpolation:.2f} codes, {ratio:.1f}x less at {finer_size}³)")
+    return ErrorReport(report.p99_9, report.max, report.colours, report.tolerance, "; ".join(causes) or None,
+                       _advice(lut, measured, report.tolerance, rebake))
+
+
+def _advice(lut, measured: tuple, tolerance: float, rebake) -> str:
+    """The first of :data:`CANDIDATES` within ``tolerance``, as advice."""
+    tried = []
+    for shaper, scale in CANDIDATES:
+        shaper, size = shaper or lut.shaper, min(scale * (lut.size - 1) + 1, max(ADVICE_MAX_SIZE, lut.size))
+        if (shaper, size) in tried or (shaper, size) == (lut.shaper, lut.size):
+            continue
+        tried.append((shaper, size))
+        trial = measure(rebake(shaper, size), measured, tolerance)
+        if trial.within:
+            return f"size={size}, shaper={shaper!r} meets it (p99.9 {trial.p99_9:.2f}, max {trial.max:.2f})"
+    return f"no bake up to {max(size for _, size in tried)}³ tried meets it: apply the transform directly"
+
+
+def enforce(report: ErrorReport, strict: bool) -> None:
+    """Warn (:class:`LUTAccuracyWarning`) or, with ``strict``, raise ``ValueError`` when ``report`` is over its tolerance."""
+    if report.within:
+        return
+    message = f"the baked LUT misses its transform: {report}"
+    if strict:
+        raise ValueError(message)
+    warnings.warn(message, LUTAccuracyWarning, stacklevel=3)
