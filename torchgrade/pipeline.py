@@ -42,7 +42,7 @@ from .display import Display, display_settings
 from .dither import Dither
 from .exposure import AutoExposure
 from .grade import ColorGrade
-from .lut import INTERPOLATIONS, LUT3D, bake_lut
+from .lut import INTERPOLATIONS, LUT3D, ErrorReport, bake_lut
 from .primary import PrimaryGrade
 from .tonemap import TONE_MAPPERS, ToneMap
 
@@ -303,7 +303,7 @@ class PostFX(nn.Module):
         return f"interpolation={self.interpolation!r}" if self.lut is not None else ""
 
 
-SAFE_GLOBALS = (PostFX, LUT3D, *STAGES.values())
+SAFE_GLOBALS = (PostFX, LUT3D, ErrorReport, *STAGES.values())
 """The classes a saved look is made of. Registered with ``torch.serialization.add_safe_globals`` when
 torchgrade is imported, so ``torch.load(path, weights_only=True)`` reads back a ``torch.save(look)``."""
 
