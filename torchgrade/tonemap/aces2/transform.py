@@ -78,11 +78,21 @@ class Aces2Output:
         return rgb.clamp(0.0, self.peak / REFERENCE_LUMINANCE)
 
 
-# torch.compile would trace through the cache and rebuild the tables in every call: run it eagerly.
-@torch.compiler.disable
 @functools.lru_cache(maxsize=8)
-def _output(peak: float, limiting: str) -> Aces2Output:
+def _built_output(peak: float, limiting: str) -> Aces2Output:
     return Aces2Output(peak, limiting)
+
+
+# The tables are constants of any graph: torch.compile would rebuild them in every call and an ONNX
+# trace would record their search, so they are built with both switched off.
+@torch.compiler.disable
+def _output(peak: float, limiting: str) -> Aces2Output:
+    tracing = torch._C._get_tracing_state()
+    torch._C._set_tracing_state(None)
+    try:
+        return _built_output(peak, limiting)
+    finally:
+        torch._C._set_tracing_state(tracing)
 
 
 def _rgb_to_rgb(source, target) -> torch.Tensor:
