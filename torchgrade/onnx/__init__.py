@@ -37,8 +37,8 @@ PyTorch at every resolution up to that size.
 a sequence) and ``"dt"`` (seconds, a scalar), and returns ``"output"`` and ``"adapted"``
 (named ``"adapted_out"``) for the next frame.
 
-**Verification.** :func:`verify` runs a file on onnxruntime and returns the max abs difference
-from PyTorch; :func:`latency_ms` times it (:mod:`~torchgrade.onnx.verify`).
+**Verification.** :func:`verify` runs a file on onnxruntime or OpenVINO (:data:`RUNTIMES`) and
+returns the max abs difference from PyTorch; :func:`latency_ms` times it (:mod:`~torchgrade.onnx.verify`).
 
 **Grading controls as inputs.** With ``grade_inputs=True`` every :class:`~torchgrade.ColorGrade`
 control becomes a graph input named as the control, per sample: scalars ``(batch,)``
@@ -65,7 +65,7 @@ from .graph import (GRADE_INPUTS, ExportGraph, GradeWithInputs, default_example,
                     grade_feeds, grade_of, has_state, input_names, output_names)
 from .look import export_look, graph_inputs
 from .symbolics import SYMBOLICS, symbolics
-from .verify import Inputs, feeds, latency_ms, node_count, reference, session, verify
+from .verify import RUNTIMES, Inputs, OpenVINOSession, feeds, latency_ms, node_count, reference, session, verify
 from ..lut import LUT_BACKENDS, LUTLookup, strip_table, trilinear_strip
 
 __all__ = [
@@ -73,6 +73,6 @@ __all__ = [
     "GRADE_INPUTS", "ExportGraph", "GradeWithInputs", "default_example", "example_inputs", "export_graph", "frame_of",
     "grade_feeds", "grade_of", "has_state", "input_names", "output_names",
     "export_look", "graph_inputs", "SYMBOLICS", "symbolics",
-    "Inputs", "feeds", "latency_ms", "node_count", "reference", "session", "verify",
+    "RUNTIMES", "Inputs", "OpenVINOSession", "feeds", "latency_ms", "node_count", "reference", "session", "verify",
     "LUT_BACKENDS", "LUTLookup", "strip_table", "trilinear_strip",
 ]

@@ -1,4 +1,8 @@
-"""Running exported files on onnxruntime: verification against PyTorch, node count and latency.
+"""Running exported files on onnxruntime and OpenVINO: verification against PyTorch, node count and latency.
+
+Both runtimes are tested on every exported model (``tests/test_openvino.py``). OpenVINO's CPU plugin
+computes in bfloat16 by default where the processor has it (``precision=None`` here); pass
+``precision="f32"`` (OpenVINO's ``{"INFERENCE_PRECISION_HINT": "f32"}``) to match PyTorch's float32.
 
 Examples:
     >>> import tempfile, torch, torchgrade as tg
@@ -13,7 +17,7 @@ from __future__ import annotations
 
 import statistics
 import time
-from typing import Optional, Sequence, Union
+from typing import NamedTuple, Optional, Sequence, Union
 
 import numpy as np
 import onnx as onnx_lib  # the onnx package (absolute import), not this package
@@ -22,18 +26,62 @@ from torch import nn
 
 from .graph import frame_of, grade_feeds, grade_of, has_state
 
-__all__ = ["Inputs", "session", "feeds", "reference", "verify", "node_count", "latency_ms"]
+__all__ = ["RUNTIMES", "Inputs", "session", "feeds", "reference", "verify", "node_count", "latency_ms"]
+
+RUNTIMES = ("onnxruntime", "openvino")
+"""Inference runtimes :func:`session` opens a file on (both on the CPU)."""
 
 Inputs = Union[torch.Tensor, Sequence[torch.Tensor]]
 
 
-def session(path):
-    """An onnxruntime session on the CPU provider.
+class _Port(NamedTuple):
+    name: str
+
+
+class OpenVINOSession:
+    """An OpenVINO compiled model behind onnxruntime's ``get_inputs()`` / ``run(None, feeds)`` calls.
+
+    Inputs that have a default in the file (an initializer) are listed by neither runtime's
+    ``get_inputs()``: feeding them is optional.
 
     Examples:
-        >>> callable(session)
-        True
+        >>> import tempfile, torch, torchgrade as tg
+        >>> with tempfile.TemporaryDirectory() as folder:
+        ...     path = tg.onnx.export(tg.ToneMap("reinhard"), folder + "/tone.onnx")
+        ...     [port.name for port in OpenVINOSession(path, "f32").get_inputs()]
+        ['image']
     """
+
+    def __init__(self, path, precision: Optional[str] = None):
+        import openvino
+
+        config = {} if precision is None else {"INFERENCE_PRECISION_HINT": precision}
+        defaults = {init.name for init in onnx_lib.load(str(path), load_external_data=False).graph.initializer}
+        self.model = openvino.Core().compile_model(str(path), "CPU", config)
+        self.names = [port.get_any_name() for port in self.model.inputs]
+        self.required = [name for name in self.names if name not in defaults]
+
+    def get_inputs(self) -> list:
+        return [_Port(name) for name in self.required]
+
+    def run(self, names, feeds: dict) -> list:
+        results = self.model(feeds)
+        return [results[port] for port in self.model.outputs]
+
+
+def session(path, runtime: str = "onnxruntime", precision: Optional[str] = None):
+    """A session on ``runtime``'s CPU back end (see :data:`RUNTIMES`); ``precision`` is OpenVINO's hint.
+
+    Examples:
+        >>> session("never.onnx", "tensorrt")
+        Traceback (most recent call last):
+        ...
+        ValueError: runtime must be one of ('onnxruntime', 'openvino'), got 'tensorrt'
+    """
+    if runtime not in RUNTIMES:
+        raise ValueError(f"runtime must be one of {RUNTIMES}, got {runtime!r}")
+    if runtime == "openvino":
+        return OpenVINOSession(path, precision)
     import onnxruntime
 
     return onnxruntime.InferenceSession(str(path), providers=["CPUExecutionProvider"])
@@ -71,13 +119,13 @@ def reference(module: nn.Module, inputs: Inputs) -> tuple:
         return (module(inputs[0]),)
 
 
-def verify(module: nn.Module, path, inputs: Inputs) -> float:
-    """Run the ONNX file on onnxruntime (CPU) and return the max abs difference from PyTorch.
+def verify(module: nn.Module, path, inputs: Inputs, runtime: str = "onnxruntime", precision: Optional[str] = None) -> float:
+    """Run the ONNX file on ``runtime`` (CPU) and return the max abs difference from PyTorch.
 
     ``inputs`` is the image, or ``(image, adapted, dt)`` for a model with exposure; grading
-    controls of a ``grade_inputs`` model default to ``module``'s grade. See the module example.
+    controls of a ``grade_inputs`` model take their defaults. See the module example.
     """
-    runner = session(path)
+    runner = session(path, runtime, precision)
     outputs = runner.run(None, feeds(runner, module, inputs))
     expected = reference(module, inputs)
     return max(float(np.max(np.abs(out - exp.float().numpy()))) for out, exp in zip(outputs, expected))
