@@ -60,19 +60,20 @@ Examples:
     True
 """
 
-from .exporter import DEFAULT_OPSET, VOLUME_OPSET, export
-from .graph import (GRADE_INPUTS, ExportGraph, GradeWithInputs, default_example, example_inputs, export_graph, frame_of,
-                    grade_feeds, grade_of, has_state, input_names, output_names)
+from .describe import INPUT_DOCS, describe, look_config
+from .exporter import DEFAULT_OPSET, IO_DTYPES, VOLUME_OPSET, export, fold_constants
+from .graph import (GRADE_INPUTS, OUTPUTS, ExportGraph, GradeWithInputs, default_example, example_inputs, export_graph, frame_of,
+                    grade_feeds, grade_of, has_state, input_names, output_names, encode_output)
 from .look import export_look, graph_inputs
 from .symbolics import SYMBOLICS, symbolics
-from .verify import RUNTIMES, Inputs, OpenVINOSession, feeds, latency_ms, node_count, reference, session, verify
+from .verify import RUNTIMES, Inputs, OpenVINOSession, feeds, latency_ms, metadata, node_count, reference, session, verify
 from ..lut import LUT_BACKENDS, LUTLookup, strip_table, trilinear_strip
 
 __all__ = [
-    "DEFAULT_OPSET", "VOLUME_OPSET", "export",
-    "GRADE_INPUTS", "ExportGraph", "GradeWithInputs", "default_example", "example_inputs", "export_graph", "frame_of",
+    "INPUT_DOCS", "describe", "look_config", "DEFAULT_OPSET", "IO_DTYPES", "VOLUME_OPSET", "export", "fold_constants",
+    "GRADE_INPUTS", "OUTPUTS", "encode_output", "ExportGraph", "GradeWithInputs", "default_example", "example_inputs", "export_graph", "frame_of",
     "grade_feeds", "grade_of", "has_state", "input_names", "output_names",
     "export_look", "graph_inputs", "SYMBOLICS", "symbolics",
-    "RUNTIMES", "Inputs", "OpenVINOSession", "feeds", "latency_ms", "node_count", "reference", "session", "verify",
+    "RUNTIMES", "Inputs", "OpenVINOSession", "feeds", "metadata", "latency_ms", "node_count", "reference", "session", "verify",
     "LUT_BACKENDS", "LUTLookup", "strip_table", "trilinear_strip",
 ]

@@ -24,9 +24,10 @@ import onnx as onnx_lib  # the onnx package (absolute import), not this package
 import torch
 from torch import nn
 
-from .graph import frame_of, grade_feeds, grade_of, has_state
+from .graph import encode_output, frame_of, grade_feeds, grade_of, has_state
 
-__all__ = ["RUNTIMES", "Inputs", "session", "feeds", "reference", "verify", "node_count", "latency_ms"]
+__all__ = ["RUNTIMES", "Inputs", "OpenVINOSession", "session", "feeds", "reference", "verify", "metadata", "node_count",
+           "latency_ms"]
 
 RUNTIMES = ("onnxruntime", "openvino")
 """Inference runtimes :func:`session` opens a file on (both on the CPU)."""
@@ -36,6 +37,7 @@ Inputs = Union[torch.Tensor, Sequence[torch.Tensor]]
 
 class _Port(NamedTuple):
     name: str
+    type: str
 
 
 class OpenVINOSession:
@@ -58,11 +60,12 @@ class OpenVINOSession:
         config = {} if precision is None else {"INFERENCE_PRECISION_HINT": precision}
         defaults = {init.name for init in onnx_lib.load(str(path), load_external_data=False).graph.initializer}
         self.model = openvino.Core().compile_model(str(path), "CPU", config)
-        self.names = [port.get_any_name() for port in self.model.inputs]
-        self.required = [name for name in self.names if name not in defaults]
+        # OpenVINO reads an input that has an initializer as a constant: a default there cannot be overridden.
+        self.ports = [port for port in self.model.inputs if port.get_any_name() not in defaults]
 
     def get_inputs(self) -> list:
-        return [_Port(name) for name in self.required]
+        types = {"f16": "tensor(float16)", "f32": "tensor(float)"}
+        return [_Port(port.get_any_name(), types.get(port.get_element_type().get_type_name(), "")) for port in self.ports]
 
     def run(self, names, feeds: dict) -> list:
         results = self.model(feeds)
@@ -84,7 +87,9 @@ def session(path, runtime: str = "onnxruntime", precision: Optional[str] = None)
         return OpenVINOSession(path, precision)
     import onnxruntime
 
-    return onnxruntime.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    options = onnxruntime.SessionOptions()
+    options.log_severity_level = 3  # inputs with defaults are optional by design: no warning per control
+    return onnxruntime.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
 
 
 def feeds(runner, module: Optional[nn.Module], inputs: Inputs) -> dict:
@@ -95,13 +100,17 @@ def feeds(runner, module: Optional[nn.Module], inputs: Inputs) -> dict:
         True
     """
     inputs = (inputs,) if isinstance(inputs, torch.Tensor) else tuple(inputs)
-    names = [i.name for i in runner.get_inputs()]
+    ports = runner.get_inputs()
+    names = [i.name for i in ports]
     given = dict(zip(names, inputs))
     missing = [name for name in names if name not in given]
     if missing:
         controls = grade_feeds(grade_of(module), inputs[0].shape[0])
         given.update({name: controls[name] for name in missing})
-    return {name: value.detach().float().numpy() for name, value in given.items()}
+    named = {name: value.detach().float().numpy() for name, value in given.items()}
+    if ports[0].type == "tensor(float16)":
+        named["image"] = named["image"].astype(np.float16)
+    return named
 
 
 def reference(module: nn.Module, inputs: Inputs) -> tuple:
@@ -123,12 +132,24 @@ def verify(module: nn.Module, path, inputs: Inputs, runtime: str = "onnxruntime"
     """Run the ONNX file on ``runtime`` (CPU) and return the max abs difference from PyTorch.
 
     ``inputs`` is the image, or ``(image, adapted, dt)`` for a model with exposure; grading
-    controls of a ``grade_inputs`` model take their defaults. See the module example.
+    controls of a ``grade_inputs`` model take their defaults. PyTorch's output is encoded as the file's
+    ``torchgrade.output`` says (an ``srgb8`` model's error is in 8-bit codes). See the module example.
     """
     runner = session(path, runtime, precision)
     outputs = runner.run(None, feeds(runner, module, inputs))
-    expected = reference(module, inputs)
-    return max(float(np.max(np.abs(out - exp.float().numpy()))) for out, exp in zip(outputs, expected))
+    image, *state = reference(module, inputs)
+    expected = (encode_output(image, metadata(path).get("torchgrade.output", "linear")), *state)
+    return max(float(np.max(np.abs(out.astype(np.float64) - exp.double().numpy()))) for out, exp in zip(outputs, expected))
+
+
+def metadata(path) -> dict:
+    """An ONNX file's ``metadata_props`` as a dict (see :mod:`~torchgrade.onnx.describe`).
+
+    Examples:
+        >>> callable(metadata)
+        True
+    """
+    return {prop.key: prop.value for prop in onnx_lib.load(str(path), load_external_data=False).metadata_props}
 
 
 def node_count(path) -> int:
