@@ -162,8 +162,9 @@ def node_count(path) -> int:
     return len(onnx_lib.load(str(path), load_external_data=False).graph.node)
 
 
-def latency_ms(path, inputs: Inputs, module: Optional[nn.Module] = None, repeats: int = 5) -> float:
-    """Median wall time (ms) of ``repeats`` onnxruntime runs on ``inputs``, after one warm-up run.
+def latency_ms(path, inputs: Inputs, module: Optional[nn.Module] = None, repeats: int = 5, runtime: str = "onnxruntime",
+               precision: Optional[str] = None) -> float:
+    """Median wall time (ms) of ``repeats`` runs on ``runtime`` on ``inputs``, after one warm-up run.
 
     The one timing loop of the package: the CLI and ``python -m export`` report this number.
 
@@ -171,7 +172,7 @@ def latency_ms(path, inputs: Inputs, module: Optional[nn.Module] = None, repeats
         >>> callable(latency_ms)
         True
     """
-    runner = session(path)
+    runner = session(path, runtime, precision)
     named = feeds(runner, module, inputs)
     runner.run(None, named)
     times = []
