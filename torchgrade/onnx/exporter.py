@@ -62,7 +62,7 @@ def fold_constants(path) -> None:
 
 def export(module: nn.Module, path, *, example: Optional[torch.Tensor] = None, opset: Optional[int] = None,
            lut_backend: str = "strip", grade_inputs: bool = False, output: str = "linear",
-           io_dtype: torch.dtype = torch.float32) -> Path:
+           io_dtype: torch.dtype = torch.float32, fold: bool = True) -> Path:
     """Export a torchgrade module or :class:`~torchgrade.PostFX` look to ``path``; returns the path.
 
     Args:
@@ -78,6 +78,7 @@ def export(module: nn.Module, path, *, example: Optional[torch.Tensor] = None, o
             (the look's values are their defaults) and clamped to their ranges.
         output: the output encoding, one of :data:`~torchgrade.onnx.OUTPUTS` (``"linear"``, ``"srgb"``, ``"srgb8"``).
         io_dtype: the image input's and float output's dtype (:data:`IO_DTYPES`).
+        fold: fold constants (:func:`fold_constants`); ``False`` keeps the exporter's graph as traced.
 
     Examples:
         >>> import torchgrade as tg
@@ -103,7 +104,8 @@ def export(module: nn.Module, path, *, example: Optional[torch.Tensor] = None, o
             graph, inputs, str(path), dynamo=False, opset_version=opset,
             input_names=names, output_names=output_names(graph), dynamic_axes=_dynamic_axes(names),
         )
-    fold_constants(path)
+    if fold:
+        fold_constants(path)
     onnx_lib.save(describe(onnx_lib.load(str(path)), module, output, io_dtype), str(path))
     onnx_lib.checker.check_model(str(path))
     return path
