@@ -37,6 +37,10 @@ PyTorch at every resolution up to that size.
 a sequence) and ``"dt"`` (seconds, a scalar), and returns ``"output"`` and ``"adapted"``
 (named ``"adapted_out"``) for the next frame.
 
+**Outputs and metadata.** ``output`` picks display-linear float, sRGB-encoded float or 8-bit sRGB
+(:data:`OUTPUTS`); ``io_dtype=torch.float16`` takes and returns float16. Constants are folded at
+export (:func:`fold_constants`), and every file describes itself (:mod:`~torchgrade.onnx.describe`).
+
 **Verification.** :func:`verify` runs a file on onnxruntime or OpenVINO (:data:`RUNTIMES`) and
 returns the max abs difference from PyTorch; :func:`latency_ms` times it (:mod:`~torchgrade.onnx.verify`).
 
@@ -48,7 +52,8 @@ control becomes a graph input named as the control, per sample: scalars ``(batch
 ``split_highlights``, ``shadows``, ``midtones``, ``highlights``), trackballs ``(batch, 4)``
 (``lift``, ``gamma``, ``gain``) and ``channel_mixer`` ``(batch, 3, 3)``, in Unity's units. Every
 grading step is then in the graph, so one model serves any look (and a different look per
-sample); :func:`grade_feeds` gives a grade's values.
+sample); :func:`grade_feeds` gives a grade's values. Each input is optional (the look's value is
+its default, :mod:`~torchgrade.onnx.describe`) and clamped in the graph to its range.
 Only the ``aces`` switch and the curves (a variable number of control points) stay baked.
 
 Examples:
