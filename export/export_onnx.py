@@ -1,10 +1,11 @@
 """Export a look to ONNX, verify it with onnxruntime on real EXRs, and report error, size and speed.
 
     python export/export_onnx.py --config export/looks/cinematic.json --out look.onnx
-    python -m export --config export/looks/cinematic.json --out look.onnx --lut 33
+    python -m export --config export/looks/cinematic.json --out look.onnx --lut 33 --output srgb8
 
-Prints, for the exported file: the max abs error against PyTorch on each EXR (display-referred,
-outputs in [0, 1] for a tone-mapped look), the node count and the median onnxruntime latency.
+Prints, for the exported file: the node count, the max abs error against PyTorch on each EXR on
+onnxruntime and OpenVINO (float32 and its default precision; display-referred, outputs in [0, 1] for a
+tone-mapped look, 8-bit codes with ``--output srgb8``) and the median latency on each.
 The work is :func:`torchgrade.onnx.export_look`, which ``torchgrade export`` runs too.
 """
 
@@ -27,7 +28,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--lut", type=int, metavar="SIZE", help="bake grade + tone mapping into a SIZE³ LUT first")
     parser.add_argument("--interpolation", choices=tg.lut.INTERPOLATIONS, default="tetrahedral")
     parser.add_argument("--lut-backend", choices=tg.onnx.LUT_BACKENDS, default="strip")
-    parser.add_argument("--grade-inputs", action="store_true", help="grading controls as graph inputs")
+    parser.add_argument("--grade-inputs", action="store_true", help="grading controls as optional graph inputs")
+    parser.add_argument("--output", choices=tg.onnx.OUTPUTS, default="linear", help="output encoding")
     parser.add_argument("--exr-dir", type=Path, default=DEFAULT_EXR_DIR)
     parser.add_argument("--images", nargs="+", default=DEFAULT_IMAGES, help="EXR files (in --exr-dir) to verify on")
     return parser.parse_args(argv)
@@ -39,7 +41,7 @@ def main(argv=None) -> int:
     if args.lut:
         look = look.to_lut(args.lut, args.interpolation)
     images = {name: tg.io.read_exr(args.exr_dir / name)[:3].unsqueeze(0) for name in args.images}
-    print("\n".join(tg.onnx.export_look(look, args.out, images, args.lut_backend, args.grade_inputs)))
+    print("\n".join(tg.onnx.export_look(look, args.out, images, args.lut_backend, args.grade_inputs, args.output)))
     return 0
 
 

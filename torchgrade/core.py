@@ -203,10 +203,16 @@ def check_choice(name: str, value, choices) -> None:
         raise ValueError(f"{name} must be one of {', '.join(map(repr, choices))}, got {value!r}")
 
 
+def _flat(value) -> list:
+    """A number or nested sequence of numbers as a flat list of floats."""
+    return [float(item) for part in value for item in _flat(part)] if isinstance(value, (list, tuple)) else [float(value)]
+
+
 def is_constant(value, constant) -> bool:
     """True when ``value`` is a plain (non-learnable) value equal to ``constant`` everywhere.
 
-    Learnable parameters (``requires_grad``) are never constant: they may move during training.
+    Learnable parameters (``requires_grad``) are never constant: they may move during training; nor are
+    tensors while ``torch.compile`` traces.
 
     Examples:
         >>> is_constant((0.5, 0.5, 0.5), 0.5), is_constant(torch.nn.Parameter(torch.tensor(0.5)), 0.5)
@@ -214,6 +220,13 @@ def is_constant(value, constant) -> bool:
     """
     if isinstance(value, torch.Tensor) and value.requires_grad:
         return False
+    if torch.compiler.is_compiling():
+        # Plain values are compared in Python: a tensor made here is traced, and reading its value back is
+        # a graph break (an error with fullgraph=True). A tensor's value is not read: its step is kept.
+        if isinstance(value, torch.Tensor):
+            return False
+        values, target = _flat(value), _flat(constant)
+        return values == target or (len(target) == 1 and all(v == target[0] for v in values))
     try:
         value = torch.as_tensor(value, dtype=torch.float64, device="cpu")
         return bool((value == torch.as_tensor(constant, dtype=torch.float64)).all())

@@ -111,11 +111,13 @@ def _area_weights(size_in, size_out: int, like: torch.Tensor) -> torch.Tensor:
     overlap of an input pixel with that span divided by the span, so every row sums to 1 and the
     mean of the output equals the mean of the input exactly, whether it shrinks or enlarges.
     """
-    edges = torch.arange(size_out + 1, dtype=like.dtype, device=like.device) * size_in / size_out
-    pixels = torch.arange(size_in, dtype=like.dtype, device=like.device)
-    right = torch.minimum(pixels + 1, edges[1:, None])
+    # Positions counted in 1/size_out pixels are integers: in floating point an exported graph run at
+    # reduced precision (OpenVINO's bfloat16 default) rounds positions above 256 by whole pixels.
+    edges = torch.arange(size_out + 1, device=like.device) * size_in
+    pixels = torch.arange(size_in, device=like.device) * size_out
+    right = torch.minimum(pixels + size_out, edges[1:, None])
     left = torch.maximum(pixels, edges[:-1, None])
-    return (right - left).clamp_min(0) * size_out / size_in
+    return (right - left).clamp_min(0).to(like.dtype) / size_in
 
 
 def area_resize(image: torch.Tensor, size: int) -> torch.Tensor:

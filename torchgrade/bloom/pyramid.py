@@ -114,10 +114,13 @@ def block_counts(height: int, width: int, like: torch.Tensor) -> torch.Tensor:
     """
 
     def per_axis(side):
-        start = 2 * torch.arange(-(-side // 2), device=like.device, dtype=like.dtype)
-        return (side - start).clamp(max=2.0)
+        # Integer arithmetic, cast once: an exported graph run at reduced precision (OpenVINO's bf16
+        # default) cannot represent sizes above 256 exactly, and a float count of 0 divides by zero.
+        start = 2 * torch.arange(-(-side // 2), device=like.device)
+        return (side - start).clamp(max=2)
 
-    return (per_axis(height)[:, None] * per_axis(width)[None, :]).expand(1, 1, -1, -1)
+    counts = per_axis(height)[:, None] * per_axis(width)[None, :]
+    return counts.to(like.dtype).expand(1, 1, -1, -1)
 
 
 def mirror_pad(light: torch.Tensor, radius: int) -> torch.Tensor:

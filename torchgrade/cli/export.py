@@ -1,4 +1,5 @@
-"""``torchgrade export``: write a look as ONNX; print its node count, its error against PyTorch and its latency.
+"""``torchgrade export``: write a look as ONNX; print its node count, its error against PyTorch and its latency
+on onnxruntime and on OpenVINO (float32 and its default precision).
 
 Examples:
     >>> import json, tempfile, pathlib
@@ -8,9 +9,9 @@ Examples:
     ...     _ = config.write_text(json.dumps({"tonemap": "aces"}))
     ...     code = main(["export", "--config", str(config), "-o", str(pathlib.Path(folder) / "look.onnx"),
     ...                  "--width", "32", "--height", "18"])  # doctest: +ELLIPSIS
-    /.../look.onnx: stages tonemap, ... nodes
-      demo scene (18, 32): max abs error vs PyTorch ...
-      onnxruntime latency on demo scene: ... ms (median of 5)
+    /.../look.onnx: stages tonemap, output linear, ... nodes
+      demo scene (18, 32): max abs error vs PyTorch: openvino default ..., openvino f32 ..., onnxruntime ...
+      latency on demo scene: openvino default ... ms, openvino f32 ... ms, onnxruntime ... ms (median of 5)
     >>> code
     0
 """
@@ -22,7 +23,7 @@ from pathlib import Path
 
 from ..io import read_exr
 from ..lut import INTERPOLATIONS, LUT_BACKENDS
-from ..onnx import export_look
+from ..onnx import OUTPUTS, export_look
 from ..pipeline import PostFX
 from ..scene import demo_scene
 
@@ -41,7 +42,7 @@ def run_export(args: argparse.Namespace) -> str:
         images = {Path(path).name: read_exr(path)[:3].unsqueeze(0) for path in args.scene}
     else:
         images = {"demo scene": demo_scene(args.height, args.width)}
-    return "\n".join(export_look(look, output, images, args.lut_backend, args.grade_inputs))
+    return "\n".join(export_look(look, output, images, args.lut_backend, args.grade_inputs, args.output))
 
 
 def add_export(commands) -> None:
@@ -52,7 +53,8 @@ def add_export(commands) -> None:
     export.add_argument("--lut", type=int, metavar="SIZE", help="bake grade and tone mapping into a SIZE³ LUT first")
     export.add_argument("--interpolation", choices=INTERPOLATIONS, default="tetrahedral", help="the LUT's (with --lut)")
     export.add_argument("--lut-backend", choices=LUT_BACKENDS, default="strip", help="the LUT's graph form (default strip, opset 17)")
-    export.add_argument("--grade-inputs", action="store_true", help="grading controls as graph inputs")
+    export.add_argument("--grade-inputs", action="store_true", help="grading controls as optional graph inputs")
+    export.add_argument("--output", choices=OUTPUTS, default="linear", help="output encoding (default display-linear float)")
     export.add_argument("--scene", nargs="+", help="EXR files to verify on (default: the built-in scene)")
     export.add_argument("--width", type=int, default=320, help="built-in scene width")
     export.add_argument("--height", type=int, default=180, help="built-in scene height")

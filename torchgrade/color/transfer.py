@@ -116,7 +116,7 @@ def acescc_to_aces(image: torch.Tensor) -> torch.Tensor:
         >>> round(float(acescc_to_aces(torch.tensor(0.4135884))), 4)
         0.18
     """
-    top = (torch.log2(torch.tensor(_HALF_MAX, dtype=torch.float64)).item() + 9.72) / 17.52
+    top = (math.log2(_HALF_MAX) + 9.72) / 17.52  # a Python float: torch.compile traces no tensor read-back
     x = image.clamp(max=top)
     value = torch.exp2(x * 17.52 - 9.72)
     return torch.where(x < _ACESCC_LOW_KNEE, (value - 2.0**-16) * 2.0, value)

@@ -37,8 +37,12 @@ PyTorch at every resolution up to that size.
 a sequence) and ``"dt"`` (seconds, a scalar), and returns ``"output"`` and ``"adapted"``
 (named ``"adapted_out"``) for the next frame.
 
-**Verification.** :func:`verify` runs a file on onnxruntime and returns the max abs difference
-from PyTorch; :func:`latency_ms` times it (:mod:`~torchgrade.onnx.verify`).
+**Outputs and metadata.** ``output`` picks display-linear float, sRGB-encoded float or 8-bit sRGB
+(:data:`OUTPUTS`); ``io_dtype=torch.float16`` takes and returns float16. Constants are folded at
+export (:func:`fold_constants`), and every file describes itself (:mod:`~torchgrade.onnx.describe`).
+
+**Verification.** :func:`verify` runs a file on onnxruntime or OpenVINO (:data:`RUNTIMES`) and
+returns the max abs difference from PyTorch; :func:`latency_ms` times it (:mod:`~torchgrade.onnx.verify`).
 
 **Grading controls as inputs.** With ``grade_inputs=True`` every :class:`~torchgrade.ColorGrade`
 control becomes a graph input named as the control, per sample: scalars ``(batch,)``
@@ -48,7 +52,8 @@ control becomes a graph input named as the control, per sample: scalars ``(batch
 ``split_highlights``, ``shadows``, ``midtones``, ``highlights``), trackballs ``(batch, 4)``
 (``lift``, ``gamma``, ``gain``) and ``channel_mixer`` ``(batch, 3, 3)``, in Unity's units. Every
 grading step is then in the graph, so one model serves any look (and a different look per
-sample); :func:`grade_feeds` gives a grade's values.
+sample); :func:`grade_feeds` gives a grade's values. Each input is optional (the look's value is
+its default, :mod:`~torchgrade.onnx.describe`) and clamped in the graph to its range.
 Only the ``aces`` switch and the curves (a variable number of control points) stay baked.
 
 Examples:
@@ -60,19 +65,20 @@ Examples:
     True
 """
 
-from .exporter import DEFAULT_OPSET, VOLUME_OPSET, export
-from .graph import (GRADE_INPUTS, ExportGraph, GradeWithInputs, default_example, example_inputs, export_graph, frame_of,
-                    grade_feeds, grade_of, has_state, input_names, output_names)
+from .describe import INPUT_DOCS, describe, look_config
+from .exporter import DEFAULT_OPSET, IO_DTYPES, VOLUME_OPSET, export, fold_constants
+from .graph import (GRADE_INPUTS, OUTPUTS, ExportGraph, GradeWithInputs, default_example, example_inputs, export_graph, frame_of,
+                    grade_feeds, grade_of, has_state, input_names, output_names, encode_output)
 from .look import export_look, graph_inputs
 from .symbolics import SYMBOLICS, symbolics
-from .verify import Inputs, feeds, latency_ms, node_count, reference, session, verify
+from .verify import RUNTIMES, Inputs, OpenVINOSession, feeds, latency_ms, metadata, node_count, reference, session, verify
 from ..lut import LUT_BACKENDS, LUTLookup, strip_table, trilinear_strip
 
 __all__ = [
-    "DEFAULT_OPSET", "VOLUME_OPSET", "export",
-    "GRADE_INPUTS", "ExportGraph", "GradeWithInputs", "default_example", "example_inputs", "export_graph", "frame_of",
+    "INPUT_DOCS", "describe", "look_config", "DEFAULT_OPSET", "IO_DTYPES", "VOLUME_OPSET", "export", "fold_constants",
+    "GRADE_INPUTS", "OUTPUTS", "encode_output", "ExportGraph", "GradeWithInputs", "default_example", "example_inputs", "export_graph", "frame_of",
     "grade_feeds", "grade_of", "has_state", "input_names", "output_names",
     "export_look", "graph_inputs", "SYMBOLICS", "symbolics",
-    "Inputs", "feeds", "latency_ms", "node_count", "reference", "session", "verify",
+    "RUNTIMES", "Inputs", "OpenVINOSession", "feeds", "metadata", "latency_ms", "node_count", "reference", "session", "verify",
     "LUT_BACKENDS", "LUTLookup", "strip_table", "trilinear_strip",
 ]

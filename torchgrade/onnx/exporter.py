@@ -19,10 +19,14 @@ import torch
 from torch import nn
 
 from ..lut import BACKENDS
-from .graph import default_example, example_inputs, export_graph, input_names, output_names
+from .describe import describe
+from .graph import GRADE_INPUTS, default_example, example_inputs, export_graph, input_names, output_names
 from .symbolics import symbolics
 
-__all__ = ["DEFAULT_OPSET", "VOLUME_OPSET", "export"]
+__all__ = ["DEFAULT_OPSET", "VOLUME_OPSET", "IO_DTYPES", "fold_constants", "export"]
+
+IO_DTYPES = (torch.float32, torch.float16)
+"""Dtypes of the image input and float output (the graph computes in float32 either way)."""
 
 DEFAULT_OPSET = 17
 """Opset of every export unless a 5-D GridSample LUT asks for :data:`VOLUME_OPSET`."""
@@ -32,12 +36,33 @@ VOLUME_OPSET = BACKENDS["volume"]
 
 def _dynamic_axes(names: Sequence[str]) -> dict:
     axes = {"image": {0: "batch", 2: "height", 3: "width"}, "output": {0: "batch", 2: "height", 3: "width"}}
-    axes.update({name: {0: "batch"} for name in names if name not in axes and name != "dt"})
+    axes.update({name: {0: "batch"} for name in names if name not in axes and name not in GRADE_INPUTS and name != "dt"})
+    # A control of its own size (batch or 1): one fed per sample while another keeps its (1, ...) default.
+    axes.update({name: {0: f"{name}_batch"} for name in names if name in GRADE_INPUTS})
     return axes
 
 
+def fold_constants(path) -> None:
+    """Rewrite ``path`` with onnxruntime's basic graph optimisations: constant folding and redundant-node
+    elimination, standard ONNX operators only (so OpenVINO and TensorRT read the result). The exporter
+    leaves the shape arithmetic of a dynamic-size graph as thousands of ``Constant`` nodes: the
+    cinematic look goes from 5515 nodes to 2247.
+
+    Examples:
+        >>> callable(fold_constants)
+        True
+    """
+    import onnxruntime
+
+    options = onnxruntime.SessionOptions()
+    options.graph_optimization_level = onnxruntime.GraphOptimizationLevel.ORT_ENABLE_BASIC
+    options.optimized_model_filepath = str(path)
+    onnxruntime.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+
+
 def export(module: nn.Module, path, *, example: Optional[torch.Tensor] = None, opset: Optional[int] = None,
-           lut_backend: str = "strip", grade_inputs: bool = False) -> Path:
+           lut_backend: str = "strip", grade_inputs: bool = False, output: str = "linear",
+           io_dtype: torch.dtype = torch.float32, fold: bool = True) -> Path:
     """Export a torchgrade module or :class:`~torchgrade.PostFX` look to ``path``; returns the path.
 
     Args:
@@ -49,7 +74,11 @@ def export(module: nn.Module, path, *, example: Optional[torch.Tensor] = None, o
             ``lut_backend="volume"``; each backend needs at least its opset in
             :data:`~torchgrade.lut.BACKENDS`.
         lut_backend: ``"strip"``, ``"gather"`` or ``"volume"`` (see :data:`~torchgrade.lut.BACKENDS`).
-        grade_inputs: expose the grading controls as graph inputs (see :mod:`torchgrade.onnx`).
+        grade_inputs: expose the grading controls as graph inputs (see :mod:`torchgrade.onnx`), optional
+            (the look's values are their defaults) and clamped to their ranges.
+        output: the output encoding, one of :data:`~torchgrade.onnx.OUTPUTS` (``"linear"``, ``"srgb"``, ``"srgb8"``).
+        io_dtype: the image input's and float output's dtype (:data:`IO_DTYPES`).
+        fold: fold constants (:func:`fold_constants`); ``False`` keeps the exporter's graph as traced.
 
     Examples:
         >>> import torchgrade as tg
@@ -62,9 +91,11 @@ def export(module: nn.Module, path, *, example: Optional[torch.Tensor] = None, o
     opset = opset or max(DEFAULT_OPSET, minimum)
     if opset < minimum:
         raise ValueError(f"lut_backend={lut_backend!r} needs opset >= {minimum}, got {opset}")
-    graph = export_graph(module, lut_backend, grade_inputs)
+    if io_dtype not in IO_DTYPES:
+        raise ValueError(f"io_dtype must be one of {IO_DTYPES}, got {io_dtype}")
+    graph = export_graph(module, lut_backend, grade_inputs, output)
     example = default_example(graph) if example is None else example
-    inputs = example_inputs(graph, module, example.float())
+    inputs = example_inputs(graph, module, example.to(io_dtype))
     names = input_names(graph)
     path = Path(path)
     with symbolics(opset), warnings.catch_warnings():
@@ -73,5 +104,8 @@ def export(module: nn.Module, path, *, example: Optional[torch.Tensor] = None, o
             graph, inputs, str(path), dynamo=False, opset_version=opset,
             input_names=names, output_names=output_names(graph), dynamic_axes=_dynamic_axes(names),
         )
+    if fold:
+        fold_constants(path)
+    onnx_lib.save(describe(onnx_lib.load(str(path)), module, output, io_dtype), str(path))
     onnx_lib.checker.check_model(str(path))
     return path

@@ -22,14 +22,38 @@ from typing import Callable, Optional, Sequence
 import torch
 from torch import nn
 
+from ..color.transfer import linear_to_srgb
 from ..grade import ColorGrade, color_grade
 from ..lut import BACKENDS
 
-__all__ = ["GRADE_INPUTS", "GradeWithInputs", "ExportGraph", "export_graph", "grade_feeds", "grade_of", "frame_of", "has_state",
+__all__ = ["GRADE_INPUTS", "OUTPUTS", "encode_output", "GradeWithInputs", "ExportGraph", "export_graph", "grade_feeds", "grade_of", "frame_of", "has_state",
            "input_names", "output_names", "example_inputs", "default_example"]
 
 GRADE_INPUTS = tuple(name for name, control in ColorGrade.controls.items() if control.kind == "number")
 """The :class:`~torchgrade.ColorGrade` controls a ``grade_inputs`` graph takes as inputs, in input order."""
+
+
+OUTPUTS = {
+    "linear": "display-linear float (scene-linear for a look without a tone mapper), Rec.709 primaries, not clamped",
+    "srgb": "sRGB-encoded float in [0, 1] (IEC 61966-2-1), Rec.709 primaries, clamped to [0, 1] before encoding",
+    "srgb8": "8-bit sRGB code values (uint8, 0-255), Rec.709 primaries, clamped to [0, 1] before encoding and rounded",
+}
+"""Output encodings of an exported graph, and what each holds (written into the file's output doc string)."""
+
+
+def encode_output(image: torch.Tensor, output: str = "linear") -> torch.Tensor:
+    """A look's linear output in one of the :data:`OUTPUTS` encodings.
+
+    Examples:
+        >>> encode_output(torch.tensor([0.0, 0.18, 1.0, 4.0]), "srgb8").tolist()
+        [0, 118, 255, 255]
+    """
+    if output not in OUTPUTS:
+        raise ValueError(f"output must be one of {tuple(OUTPUTS)}, got {output!r}")
+    if output == "linear":
+        return image
+    encoded = linear_to_srgb(image.clamp(0.0, 1.0))
+    return torch.round(encoded * 255.0).to(torch.uint8) if output == "srgb8" else encoded
 
 
 def frame_of(stage: nn.Module) -> Optional[Callable]:
@@ -49,7 +73,9 @@ def frame_of(stage: nn.Module) -> Optional[Callable]:
 class GradeWithInputs(nn.Module):
     """``ColorGrade`` whose controls are graph inputs: ``forward(image, *controls)`` in :data:`GRADE_INPUTS` order.
 
-    Its curves (control points, not inputs) and the ``aces`` and ``log_space`` settings are baked into the graph.
+    Its curves (control points, not inputs) and the ``aces`` and ``log_space`` settings are baked into the
+    graph. Each control is clamped to its range in :attr:`ColorGrade.controls <torchgrade.ColorGrade.controls>`:
+    a graph cannot raise, and a served look should stay one that ``ColorGrade`` accepts (contrast 500 becomes 100).
 
     Examples:
         >>> import torch
@@ -65,24 +91,38 @@ class GradeWithInputs(nn.Module):
         self.log_space = log_space
 
     def forward(self, image: torch.Tensor, *controls: torch.Tensor) -> torch.Tensor:
-        return color_grade(image, aces=self.aces, log_space=self.log_space, **dict(zip(GRADE_INPUTS, controls)), **self.curves)
+        clamped = {name: value.clamp(*ColorGrade.controls[name].range) for name, value in zip(GRADE_INPUTS, controls)}
+        return color_grade(image, aces=self.aces, log_space=self.log_space, **clamped, **self.curves)
 
 
 class ExportGraph(nn.Module):
     """The stages of a look as one graph: ``(image[, adapted, dt][, *controls]) -> output[, adapted]``.
 
+    ``output`` picks the output encoding (:data:`OUTPUTS`); the image comes in and a float output goes out
+    in the dtype of the traced image (float16 I/O halves the bytes a server moves), computed in float32.
+
     Examples:
         >>> import torchgrade as tg
-        >>> len(ExportGraph([tg.ToneMap()]).stages)
-        1
+        >>> graph = ExportGraph([tg.ToneMap()], output="srgb8")
+        >>> graph(torch.ones(1, 3, 2, 2, dtype=torch.float16)).dtype
+        torch.uint8
     """
 
-    def __init__(self, stages: Sequence[nn.Module], exposure: Optional[nn.Module] = None):
+    def __init__(self, stages: Sequence[nn.Module], exposure: Optional[nn.Module] = None, output: str = "linear"):
         super().__init__()
         self.stages = nn.ModuleList(stages)
         self.exposure = exposure
+        self.output = output
 
     def forward(self, image: torch.Tensor, *extra: torch.Tensor):
+        io_dtype = image.dtype
+        image, *state = self._graded(image.float(), *extra)
+        encoded = encode_output(image, self.output)
+        if encoded.is_floating_point():
+            encoded = encoded.to(io_dtype)
+        return (encoded, *state) if state else encoded
+
+    def _graded(self, image: torch.Tensor, *extra: torch.Tensor) -> tuple:
         if self.exposure is not None:
             adapted, dt, *controls = extra
             image, adapted = frame_of(self.exposure)(image, adapted, dt)
@@ -90,7 +130,7 @@ class ExportGraph(nn.Module):
             controls = list(extra)
         for stage in self.stages:
             image = stage(image, *controls) if isinstance(stage, GradeWithInputs) else stage(image)
-        return (image, adapted) if self.exposure is not None else image
+        return (image, adapted) if self.exposure is not None else (image,)
 
 
 def _look_stages(module: nn.Module) -> tuple:
@@ -122,7 +162,8 @@ def _export_form(stage: nn.Module, options: dict) -> nn.Module:
     return form(**{name: value for name, value in options.items() if name in accepted})
 
 
-def export_graph(module: nn.Module, lut_backend: str = "strip", grade_inputs: bool = False) -> ExportGraph:
+def export_graph(module: nn.Module, lut_backend: str = "strip", grade_inputs: bool = False,
+                 output: str = "linear") -> ExportGraph:
     """The export-ready form of ``module`` (see the module docstring for how each stage is asked).
 
     Examples:
@@ -142,7 +183,8 @@ def export_graph(module: nn.Module, lut_backend: str = "strip", grade_inputs: bo
             stages.append(_export_form(stage, options))
     if grade_inputs and not any(isinstance(s, GradeWithInputs) for s in stages):
         raise ValueError("grade_inputs=True needs a ColorGrade stage (a look's grade, or a ColorGrade)")
-    return ExportGraph(stages, exposure).eval()
+    encode_output(torch.zeros(0), output)  # rejects an unknown encoding before the trace
+    return ExportGraph(stages, exposure, output).eval()
 
 
 def grade_of(module: nn.Module) -> Optional[ColorGrade]:

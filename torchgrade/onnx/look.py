@@ -20,7 +20,10 @@ from .exporter import export
 from .graph import has_state
 from .verify import latency_ms, node_count, verify
 
-__all__ = ["graph_inputs", "export_look"]
+__all__ = ["RUNS", "graph_inputs", "export_look"]
+
+RUNS = {"openvino default": ("openvino", None), "openvino f32": ("openvino", "f32"), "onnxruntime": ("onnxruntime", None)}
+"""The runtimes and precisions :func:`export_look` reports: ``{label: (runtime, OpenVINO precision hint)}``."""
 
 
 def graph_inputs(look: PostFX, image: torch.Tensor):
@@ -37,19 +40,22 @@ def graph_inputs(look: PostFX, image: torch.Tensor):
 
 
 def export_look(look: PostFX, path, images: Mapping[str, torch.Tensor], lut_backend: str = "strip",
-                grade_inputs: bool = False) -> list:
-    """Export ``look`` to ``path`` and report it: one line with its stages and node count, one line per
-    image of ``images`` (``{name: (1, 3, H, W)}``) with the max abs error against PyTorch, one line
-    with the median onnxruntime latency on the first image.
+                grade_inputs: bool = False, output: str = "linear") -> list:
+    """Export ``look`` to ``path`` and report it: one line with its stages, output encoding and node count,
+    one line per image of ``images`` (``{name: (1, 3, H, W)}``) with the max abs error against PyTorch on
+    each runtime of :data:`~torchgrade.onnx.RUNTIMES` (OpenVINO at float32 and at its default precision;
+    in 8-bit codes for ``output="srgb8"``), one line with the median latency of each runtime on the first image.
 
     See the module example.
     """
-    export(look, path, lut_backend=lut_backend, grade_inputs=grade_inputs)
-    lines = [f"{path}: stages {' -> '.join(look.stages())}, {node_count(path)} nodes"]
+    export(look, path, lut_backend=lut_backend, grade_inputs=grade_inputs, output=output)
+    lines = [f"{path}: stages {' -> '.join(look.stages())}, output {output}, {node_count(path)} nodes"]
     for name, image in images.items():
-        error = verify(look, path, graph_inputs(look, image))
-        lines.append(f"  {name} {tuple(image.shape[-2:])}: max abs error vs PyTorch {error:.2e}")
+        errors = [f"{label} {verify(look, path, graph_inputs(look, image), runtime, precision):.2e}"
+                  for label, (runtime, precision) in RUNS.items()]
+        lines.append(f"  {name} {tuple(image.shape[-2:])}: max abs error vs PyTorch: {', '.join(errors)}")
     name, image = next(iter(images.items()))
-    latency = latency_ms(path, graph_inputs(look, image), look)
-    lines.append(f"  onnxruntime latency on {name}: {latency:.1f} ms (median of 5)")
+    latencies = [f"{label} {latency_ms(path, graph_inputs(look, image), look, runtime=runtime, precision=precision):.1f} ms"
+                 for label, (runtime, precision) in RUNS.items()]
+    lines.append(f"  latency on {name}: {', '.join(latencies)} (median of 5)")
     return lines

@@ -1,4 +1,8 @@
-"""Running exported files on onnxruntime: verification against PyTorch, node count and latency.
+"""Running exported files on onnxruntime and OpenVINO: verification against PyTorch, node count and latency.
+
+Both runtimes are tested on every exported model (``tests/test_openvino.py``). OpenVINO's CPU plugin
+computes in bfloat16 by default where the processor has it (``precision=None`` here); pass
+``precision="f32"`` (OpenVINO's ``{"INFERENCE_PRECISION_HINT": "f32"}``) to match PyTorch's float32.
 
 Examples:
     >>> import tempfile, torch, torchgrade as tg
@@ -13,30 +17,79 @@ from __future__ import annotations
 
 import statistics
 import time
-from typing import Optional, Sequence, Union
+from typing import NamedTuple, Optional, Sequence, Union
 
 import numpy as np
 import onnx as onnx_lib  # the onnx package (absolute import), not this package
 import torch
 from torch import nn
 
-from .graph import frame_of, grade_feeds, grade_of, has_state
+from .graph import encode_output, frame_of, grade_feeds, grade_of, has_state
 
-__all__ = ["Inputs", "session", "feeds", "reference", "verify", "node_count", "latency_ms"]
+__all__ = ["RUNTIMES", "Inputs", "OpenVINOSession", "session", "feeds", "reference", "verify", "metadata", "node_count",
+           "latency_ms"]
+
+RUNTIMES = ("onnxruntime", "openvino")
+"""Inference runtimes :func:`session` opens a file on (both on the CPU)."""
 
 Inputs = Union[torch.Tensor, Sequence[torch.Tensor]]
 
 
-def session(path):
-    """An onnxruntime session on the CPU provider.
+class _Port(NamedTuple):
+    name: str
+    type: str
+
+
+class OpenVINOSession:
+    """An OpenVINO compiled model behind onnxruntime's ``get_inputs()`` / ``run(None, feeds)`` calls.
+
+    Inputs that have a default in the file (an initializer) are listed by neither runtime's
+    ``get_inputs()``: feeding them is optional.
 
     Examples:
-        >>> callable(session)
-        True
+        >>> import tempfile, torch, torchgrade as tg
+        >>> with tempfile.TemporaryDirectory() as folder:
+        ...     path = tg.onnx.export(tg.ToneMap("reinhard"), folder + "/tone.onnx")
+        ...     [port.name for port in OpenVINOSession(path, "f32").get_inputs()]
+        ['image']
     """
+
+    def __init__(self, path, precision: Optional[str] = None):
+        import openvino
+
+        config = {} if precision is None else {"INFERENCE_PRECISION_HINT": precision}
+        defaults = {init.name for init in onnx_lib.load(str(path), load_external_data=False).graph.initializer}
+        self.model = openvino.Core().compile_model(str(path), "CPU", config)
+        # OpenVINO reads an input that has an initializer as a constant: a default there cannot be overridden.
+        self.ports = [port for port in self.model.inputs if port.get_any_name() not in defaults]
+
+    def get_inputs(self) -> list:
+        types = {"f16": "tensor(float16)", "f32": "tensor(float)"}
+        return [_Port(port.get_any_name(), types.get(port.get_element_type().get_type_name(), "")) for port in self.ports]
+
+    def run(self, names, feeds: dict) -> list:
+        results = self.model(feeds)
+        return [results[port] for port in self.model.outputs]
+
+
+def session(path, runtime: str = "onnxruntime", precision: Optional[str] = None):
+    """A session on ``runtime``'s CPU back end (see :data:`RUNTIMES`); ``precision`` is OpenVINO's hint.
+
+    Examples:
+        >>> session("never.onnx", "tensorrt")
+        Traceback (most recent call last):
+        ...
+        ValueError: runtime must be one of ('onnxruntime', 'openvino'), got 'tensorrt'
+    """
+    if runtime not in RUNTIMES:
+        raise ValueError(f"runtime must be one of {RUNTIMES}, got {runtime!r}")
+    if runtime == "openvino":
+        return OpenVINOSession(path, precision)
     import onnxruntime
 
-    return onnxruntime.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    options = onnxruntime.SessionOptions()
+    options.log_severity_level = 3  # inputs with defaults are optional by design: no warning per control
+    return onnxruntime.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
 
 
 def feeds(runner, module: Optional[nn.Module], inputs: Inputs) -> dict:
@@ -47,13 +100,17 @@ def feeds(runner, module: Optional[nn.Module], inputs: Inputs) -> dict:
         True
     """
     inputs = (inputs,) if isinstance(inputs, torch.Tensor) else tuple(inputs)
-    names = [i.name for i in runner.get_inputs()]
+    ports = runner.get_inputs()
+    names = [i.name for i in ports]
     given = dict(zip(names, inputs))
     missing = [name for name in names if name not in given]
     if missing:
         controls = grade_feeds(grade_of(module), inputs[0].shape[0])
         given.update({name: controls[name] for name in missing})
-    return {name: value.detach().float().numpy() for name, value in given.items()}
+    named = {name: value.detach().float().numpy() for name, value in given.items()}
+    if ports[0].type == "tensor(float16)":
+        named["image"] = named["image"].astype(np.float16)
+    return named
 
 
 def reference(module: nn.Module, inputs: Inputs) -> tuple:
@@ -71,16 +128,28 @@ def reference(module: nn.Module, inputs: Inputs) -> tuple:
         return (module(inputs[0]),)
 
 
-def verify(module: nn.Module, path, inputs: Inputs) -> float:
-    """Run the ONNX file on onnxruntime (CPU) and return the max abs difference from PyTorch.
+def verify(module: nn.Module, path, inputs: Inputs, runtime: str = "onnxruntime", precision: Optional[str] = None) -> float:
+    """Run the ONNX file on ``runtime`` (CPU) and return the max abs difference from PyTorch.
 
     ``inputs`` is the image, or ``(image, adapted, dt)`` for a model with exposure; grading
-    controls of a ``grade_inputs`` model default to ``module``'s grade. See the module example.
+    controls of a ``grade_inputs`` model take their defaults. PyTorch's output is encoded as the file's
+    ``torchgrade.output`` says (an ``srgb8`` model's error is in 8-bit codes). See the module example.
     """
-    runner = session(path)
+    runner = session(path, runtime, precision)
     outputs = runner.run(None, feeds(runner, module, inputs))
-    expected = reference(module, inputs)
-    return max(float(np.max(np.abs(out - exp.float().numpy()))) for out, exp in zip(outputs, expected))
+    image, *state = reference(module, inputs)
+    expected = (encode_output(image, metadata(path).get("torchgrade.output", "linear")), *state)
+    return max(float(np.max(np.abs(out.astype(np.float64) - exp.double().numpy()))) for out, exp in zip(outputs, expected))
+
+
+def metadata(path) -> dict:
+    """An ONNX file's ``metadata_props`` as a dict (see :mod:`~torchgrade.onnx.describe`).
+
+    Examples:
+        >>> callable(metadata)
+        True
+    """
+    return {prop.key: prop.value for prop in onnx_lib.load(str(path), load_external_data=False).metadata_props}
 
 
 def node_count(path) -> int:
@@ -93,8 +162,9 @@ def node_count(path) -> int:
     return len(onnx_lib.load(str(path), load_external_data=False).graph.node)
 
 
-def latency_ms(path, inputs: Inputs, module: Optional[nn.Module] = None, repeats: int = 5) -> float:
-    """Median wall time (ms) of ``repeats`` onnxruntime runs on ``inputs``, after one warm-up run.
+def latency_ms(path, inputs: Inputs, module: Optional[nn.Module] = None, repeats: int = 5, runtime: str = "onnxruntime",
+               precision: Optional[str] = None) -> float:
+    """Median wall time (ms) of ``repeats`` runs on ``runtime`` on ``inputs``, after one warm-up run.
 
     The one timing loop of the package: the CLI and ``python -m export`` report this number.
 
@@ -102,7 +172,7 @@ def latency_ms(path, inputs: Inputs, module: Optional[nn.Module] = None, repeats
         >>> callable(latency_ms)
         True
     """
-    runner = session(path)
+    runner = session(path, runtime, precision)
     named = feeds(runner, module, inputs)
     runner.run(None, named)
     times = []
