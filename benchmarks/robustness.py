@@ -1,12 +1,13 @@
-"""Robustness report: non-finite outputs and gradients of every module on the extreme input families,
-every control swept across its documented range, the error autocast would cause, and how many
-damaged EXR and malformed .cube files are rejected cleanly.
+"""Robustness report: non-finite outputs and gradients of every stage on the extreme input families,
+every control swept across its documented range, the error autocast would cause, how many damaged
+EXR and malformed .cube files are rejected cleanly, and what reading a 256³ .cube costs.
 
-The modules and input families are those of ``tests/test_extremes.py`` (imported, so the report
-shows exactly what the test suite checks). Writes ``benchmarks/results/robustness.md`` and
+The stages are :data:`torchgrade.catalog.STAGE_KINDS` and the inputs
+:func:`torchgrade.scene.extreme_inputs`, the listing ``tests/test_extremes.py`` and
+``tests/test_control_ranges.py`` check too. Writes ``benchmarks/results/robustness.md`` and
 ``benchmarks/results/robustness_controls.md`` (the control sweep and autocast, alone with ``--controls``).
 
-    .venv/bin/python benchmarks/robustness.py [--controls]
+    PYTHONPATH=. .venv/bin/python benchmarks/robustness.py [--controls]
 """
 
 from __future__ import annotations
@@ -22,12 +23,14 @@ import torch
 from tqdm import tqdm
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
+sys.path.insert(0, str(ROOT))
 
 import torchgrade as tg  # noqa: E402
-from benchmarks.common import EXR_DIR  # noqa: E402
 import torchgrade.stage  # noqa: E402
-from test_extremes import MODULES, _families  # noqa: E402
+from benchmarks.bench_cube_read import timed_read  # noqa: E402
+from benchmarks.common import EXR_DIR  # noqa: E402
+from torchgrade.catalog import STAGE_KINDS  # noqa: E402
+from torchgrade.scene import extreme_inputs  # noqa: E402
 
 DTYPES = {"float32": torch.float32, "float16": torch.float16, "bfloat16": torch.bfloat16}
 FUZZED_FILES = 5000
@@ -42,13 +45,13 @@ def non_finite_counts(make, image: torch.Tensor, dtype: torch.dtype) -> tuple[in
 
 
 def extremes_table() -> list[str]:
-    families = _families(EXR_DIR)
-    header = "| module | " + " | ".join(families) + " |"
+    families = extreme_inputs(EXR_DIR)
+    header = "| stage | " + " | ".join(families) + " |"
     rows = [header, "|" + " --- |" * (len(families) + 1)]
-    for name, make, _ in tqdm(MODULES, desc="modules"):
+    for name, kind in tqdm(STAGE_KINDS.items(), desc="stages"):
         cells = []
         for image in families.values():
-            counts = [non_finite_counts(make, image, dtype) for dtype in DTYPES.values()]
+            counts = [non_finite_counts(kind.example, image, dtype) for dtype in DTYPES.values()]
             cells.append(" / ".join(str(out) for out, _ in counts) + f" · {counts[0][1]}")
         rows.append(f"| {name} | " + " | ".join(cells) + " |")
     return rows
@@ -57,20 +60,17 @@ def extremes_table() -> list[str]:
 # Extreme finite pixels, every combination of three per pixel: what a documented control must survive.
 SWEEP_PIXELS = (0.0, 1e-38, 0.18, 1.0, 60.0, 65504.0, -1.0, -65504.0)
 SWEEP_POINTS = 9
-SWEPT = {
-    "tonemap-hable": lambda **c: tg.ToneMap("hable", **c),
-    "tonemap-filmic": lambda **c: tg.ToneMap("filmic", **c),
-    "tonemap-unreal_filmic": lambda **c: tg.ToneMap("unreal_filmic", **c),
-    "tonemap-reinhard_extended": lambda **c: tg.ToneMap("reinhard_extended", **c),
-    "grade-linear": lambda **c: tg.ColorGrade(**c),
-    "grade-aces": lambda **c: tg.ColorGrade(aces=True, **c),
-    "primary-linear": lambda **c: tg.PrimaryGrade("linear", **c),
-    "primary-log": lambda **c: tg.PrimaryGrade("log", **c),
-    "bloom": lambda **c: tg.Bloom(**c),
-    "convolution-bloom": lambda **c: tg.ConvolutionBloom(torch.ones(1, 3, 3), **c),
-    "autoexposure": lambda **c: tg.AutoExposure(**c),
-    "dither": lambda **c: tg.Dither(**c),
-}
+PLAIN_NUMBERS = ("peak_luminance",)  # ACES 2.0 caches its tables per peak: a plain number, not a tensor
+
+
+def number_controls(module) -> dict:
+    """The stage's number controls (``{name: Control}``); none for a module that is not a stage."""
+    table = module.control_table() if isinstance(module, torchgrade.stage.Stage) else {}
+    return {name: c for name, c in table.items() if c.kind == "number"}
+
+
+SWEPT = {name: kind.build for name, kind in STAGE_KINDS.items() if number_controls(kind.build())}
+"""The stages with number controls (ACES 2.0's ``peak_luminance`` included: it takes plain numbers)."""
 
 
 def sweep_image() -> torch.Tensor:
@@ -80,7 +80,7 @@ def sweep_image() -> torch.Tensor:
 
 def swept_settings(make) -> list[dict]:
     """Each number control at SWEEP_POINTS values across its range (others at defaults), then all at their low, then high, edges."""
-    table = {name: c for name, c in make().control_table().items() if c.kind == "number"}
+    table = number_controls(make())
     shapes = {name: torch.as_tensor(c.default if c.default is not None else 0.0, dtype=torch.float32).shape for name, c in table.items()}
     settings = [
         {name: torch.full(shapes[name], float(v))}
@@ -96,7 +96,7 @@ def sweep_counts(make) -> tuple[int, int, int, int]:
     """(settings run, settings refused by a rule between controls, non-finite outputs, non-finite gradients)."""
     run = refused = outputs = gradients = 0
     for setting in swept_settings(make):
-        controls = {name: value.clone().requires_grad_() for name, value in setting.items()}
+        controls = {name: float(value) if name in PLAIN_NUMBERS else value.clone().requires_grad_() for name, value in setting.items()}
         try:
             module = make(**controls)
         except ValueError:

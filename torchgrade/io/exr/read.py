@@ -104,7 +104,7 @@ def _convert(image: torch.Tensor, matrix: torch.Tensor) -> None:
         strip.copy_(torch.einsum("ij,jhw->ihw", matrix, strip))
 
 
-def read_exr(path, to_rec709: bool = False, *, adaptation: str = "bradford", layer: str | None = None,
+def read_exr(path, to_rec709: bool = False, *, adaptation: str = "auto", layer: str | None = None,
              view: str | None = None, part: int | str | None = None, window: str = "data",
              max_pixels: int = MAX_PIXELS, max_bytes: int = MAX_BYTES) -> torch.Tensor:
     """Read one layer of an OpenEXR file as a float32 tensor ``(C, H, W)``.
@@ -119,7 +119,8 @@ def read_exr(path, to_rec709: bool = False, *, adaptation: str = "bradford", lay
     Args:
         to_rec709: convert RGB from the file's ``chromaticities`` to linear Rec.709 (files without
             the attribute are Rec.709 already); ``adaptation`` says how the white is moved to D65:
-            ``"bradford"`` (ACES convention) or ``"none"`` (see ``ADAPTATIONS``).
+            ``"bradford"`` (ACES convention), ``"none"``, or ``"auto"``: none for CIE XYZ primaries,
+            Bradford for any other (see ``ADAPTATIONS``).
         layer: a layer name (``"diffuse"``); a colour layer reads as above, any other as all its
             channels in name order. view: a view of a multi-view file or part (``"left"``).
         part: a part index or name; by default the first part holding the layer in the view.
