@@ -181,6 +181,14 @@ def fuzzed_cube_verdicts() -> tuple[int, int, int]:
     return rejected, accepted, other
 
 
+def cube_256_read() -> dict:
+    """Wall and CPU seconds and peak MiB of reading a 256³ .cube file (the largest LUT torchgrade bakes), in a fresh process."""
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "256.cube"
+        tg.io.write_cube(path, tg.LUT3D(torch.rand(256, 256, 256, 3, generator=torch.Generator().manual_seed(0))))
+        return timed_read(path)
+
+
 def controls_report() -> list[str]:
     sweep = sweep_table()
     guarded, unguarded = autocast_codes()
@@ -194,7 +202,7 @@ def controls_report() -> list[str]:
         f"Autocast: ColorGrade(contrast=20, saturation=10, aces=True) + ToneMap(\"aces\") on Desk.exr under CPU bfloat16 "
         f"autocast, max error against float32: {guarded:.2f} 8-bit codes (without the stages' autocast guard: {unguarded:.1f}).",
         "",
-        "Command: `.venv/bin/python benchmarks/robustness.py --controls` (also part of the full run)",
+        "Command: `PYTHONPATH=. .venv/bin/python benchmarks/robustness.py --controls` (also part of the full run)",
     ]
 
 
@@ -202,6 +210,7 @@ def inputs_report() -> list[str]:
     table = extremes_table()
     damaged_rejected, damaged_total = damaged_exr_verdicts()
     rejected, accepted, other = fuzzed_cube_verdicts()
+    cube = cube_256_read()
     return [
         "Non-finite outputs per module and input family, for float32 / float16 / bfloat16 inputs, "
         "then (after ·) non-finite float64 gradients for the finite pixels:",
@@ -212,8 +221,10 @@ def inputs_report() -> list[str]:
         "ValueError/OSError, none crashed or hung.",
         f"Mutated .cube files: {FUZZED_FILES} generated; {rejected} rejected with ValueError, {accepted} still valid "
         f"(accepted, finite table), {other} failed any other way.",
+        f"A 256³ .cube file ({cube['file_mib']} MiB, a 192 MiB float32 table) reads in {cube['cpu_seconds']} s of CPU "
+        f"({cube['seconds']} s wall) with a peak of {cube['peak_mib']} MiB (fresh process, `benchmarks/bench_cube_read.py`'s reader).",
         "",
-        "Command: `.venv/bin/python benchmarks/robustness.py`",
+        "Command: `PYTHONPATH=. .venv/bin/python benchmarks/robustness.py`",
     ]
 
 

@@ -202,3 +202,21 @@ def test_display_window_places_the_data_window(exr_dir, name):
     inside = data[:, y0:min(y1, 299) + 1, x0:min(x1, 399) + 1]
     expected[:, :inside.shape[1], :inside.shape[2]] = inside
     torch.testing.assert_close(framed, expected, atol=0, rtol=0)
+
+
+@pytest.mark.parametrize("display", [(-3, -2, 20, 14), (2, 3, 9, 6)])
+def test_luminance_chroma_in_a_display_window_is_the_data_window_placed(tmp_path, display):
+    # around the data window (the result written in place) and inside it (reconstructed, then cropped)
+    rng = np.random.default_rng(1)
+    y, chroma = rng.random((12, 16)) * 4 + 0.01, rng.random((2, 12, 16)) - 0.5
+    channels = {"Y": y.astype(np.float16), **{n: OpenEXR.Channel(c.astype(np.float16), 2, 2) for n, c in zip(("RY", "BY"), chroma)}}
+    header = {"type": OpenEXR.scanlineimage, "dataWindow": window(0, 0, 15, 11), "displayWindow": window(*display)}
+    path = tmp_path / "yc.exr"
+    OpenEXR.File(header, channels).write(str(path))
+    data, framed = tg.io.read_exr(path), tg.io.read_exr(path, window="display")
+    x0, y0, x1, y1 = display
+    expected = torch.zeros(3, y1 - y0 + 1, x1 - x0 + 1)
+    inside = data[:, max(y0, 0):min(y1, 11) + 1, max(x0, 0):min(x1, 15) + 1]
+    expected[:, max(-y0, 0):max(-y0, 0) + inside.shape[1], max(-x0, 0):max(-x0, 0) + inside.shape[2]] = inside
+    assert data.shape == (3, 12, 16) and (data[0] - data[2]).abs().max() > 0.1  # in colour
+    torch.testing.assert_close(framed, expected, atol=0, rtol=0)

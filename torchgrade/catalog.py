@@ -18,6 +18,8 @@ Examples:
 
 from __future__ import annotations
 
+import copy
+import functools
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Callable
@@ -75,9 +77,15 @@ class Lookup(nn.Module):
         return self.lut(image, interpolation=self.interpolation)
 
 
+@functools.lru_cache(maxsize=1)
+def _strong_lut() -> LUT3D:
+    # baking measures the LUT's error (seconds): once, then copies
+    return bake_lut(nn.Sequential(ColorGrade(aces=True, **STRONG_GRADE), ToneMap("aces")), size=9)
+
+
 def _lookup(interpolation: str) -> Lookup:
     """A 9³ LUT of the strong grade in ACES followed by the ACES tone mapper."""
-    return Lookup(bake_lut(nn.Sequential(ColorGrade(aces=True, **STRONG_GRADE), ToneMap("aces")), size=9), interpolation)
+    return Lookup(copy.deepcopy(_strong_lut()), interpolation)
 
 
 def _kinds() -> dict[str, StageKind]:
