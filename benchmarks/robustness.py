@@ -107,7 +107,7 @@ def sweep_counts(make) -> tuple[int, int, int, int]:
         out.sum().backward()
         run += 1
         outputs += int((~torch.isfinite(out)).sum())
-        grads = [image.grad] + [c.grad for c in controls.values() if c.grad is not None]
+        grads = [image.grad] + [c.grad for c in controls.values() if isinstance(c, torch.Tensor) and c.grad is not None]
         gradients += sum(int((~torch.isfinite(g)).sum()) for g in grads)
     return run, refused, outputs, gradients
 
