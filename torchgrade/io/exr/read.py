@@ -164,7 +164,9 @@ def read_exr(path, to_rec709: bool = False, *, adaptation: str = "auto", layer: 
     count = (3 + ("A" in channels)) if colour else len(channels)
     check_budget(path, parts, chosen, window, count, max_pixels, max_bytes)
     matrix = to_rec709_matrix(chosen.chromaticities, adaptation) if to_rec709 and colour and chosen.chromaticities else None
-    pixels = decode(path, parts)[chosen.index]
+    decoded = decode(path, parts)[chosen.index]
+    pixels = {name: decoded.pop(name) for name in channels.values()}  # the part's other channels go now
+    del decoded
     image, target, crop = _canvas(chosen, window, count)
     _fill(path, chosen, channels, pixels, target, crop)
     if matrix is not None:
