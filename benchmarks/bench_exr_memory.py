@@ -82,7 +82,11 @@ def main() -> None:
     table = ["| file | returned shape | returned MiB | peak MiB | peak / returned | CPU s |",
              "| --- | --- | --- | --- | --- | --- |", *rows]
     (RESULTS / "exr_memory.md").write_text("Peak memory of `tg.io.read_exr(path)` (default arguments), one fresh process per read:\n\n"
-                                           + "\n".join(table) + "\n\nCommand: `PYTHONPATH=. .venv/bin/python benchmarks/bench_exr_memory.py`\n")
+                                           + "\n".join(table) + "\n\nCPU s is the reading process's CPU time. On a machine shared with other jobs it swings by "
+                                           "10x from run to run: luminance/chroma runs many strip-sized operations, and torch's "
+                                           "threads wait on each other when the cores are busy (4096² luminance/chroma: 2.3 s wall "
+                                           "with OMP_NUM_THREADS=1, 29.5 s with 2, at a load of 4.5 on 2 cores). Read the memory columns.\n\n"
+                                           "Command: `PYTHONPATH=. .venv/bin/python benchmarks/bench_exr_memory.py`\n")
     print("\n".join(table))
 
 
