@@ -1,12 +1,13 @@
-"""Robustness report: non-finite outputs and gradients of every module on the extreme input families,
-every control swept across its documented range, the error autocast would cause, and how many
-damaged EXR and malformed .cube files are rejected cleanly.
+"""Robustness report: non-finite outputs and gradients of every stage on the extreme input families,
+every control swept across its documented range, the error autocast would cause, how many damaged
+EXR and malformed .cube files are rejected cleanly, and what reading a 256³ .cube costs.
 
-The modules and input families are those of ``tests/test_extremes.py`` (imported, so the report
-shows exactly what the test suite checks). Writes ``benchmarks/results/robustness.md`` and
+The stages are :data:`torchgrade.catalog.STAGE_KINDS` and the inputs
+:func:`torchgrade.scene.extreme_inputs`, the listing ``tests/test_extremes.py`` and
+``tests/test_control_ranges.py`` check too. Writes ``benchmarks/results/robustness.md`` and
 ``benchmarks/results/robustness_controls.md`` (the control sweep and autocast, alone with ``--controls``).
 
-    .venv/bin/python benchmarks/robustness.py [--controls]
+    PYTHONPATH=. .venv/bin/python benchmarks/robustness.py [--controls]
 """
 
 from __future__ import annotations
@@ -22,12 +23,14 @@ import torch
 from tqdm import tqdm
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
+sys.path.insert(0, str(ROOT))
 
 import torchgrade as tg  # noqa: E402
-from benchmarks.common import EXR_DIR  # noqa: E402
 import torchgrade.stage  # noqa: E402
-from test_extremes import MODULES, _families  # noqa: E402
+from benchmarks.bench_cube_read import timed_read  # noqa: E402
+from benchmarks.common import EXR_DIR  # noqa: E402
+from torchgrade.catalog import STAGE_KINDS  # noqa: E402
+from torchgrade.scene import extreme_inputs  # noqa: E402
 
 DTYPES = {"float32": torch.float32, "float16": torch.float16, "bfloat16": torch.bfloat16}
 FUZZED_FILES = 5000
@@ -42,13 +45,13 @@ def non_finite_counts(make, image: torch.Tensor, dtype: torch.dtype) -> tuple[in
 
 
 def extremes_table() -> list[str]:
-    families = _families(EXR_DIR)
-    header = "| module | " + " | ".join(families) + " |"
+    families = extreme_inputs(EXR_DIR)
+    header = "| stage | " + " | ".join(families) + " |"
     rows = [header, "|" + " --- |" * (len(families) + 1)]
-    for name, make, _ in tqdm(MODULES, desc="modules"):
+    for name, kind in tqdm(STAGE_KINDS.items(), desc="stages"):
         cells = []
         for image in families.values():
-            counts = [non_finite_counts(make, image, dtype) for dtype in DTYPES.values()]
+            counts = [non_finite_counts(kind.example, image, dtype) for dtype in DTYPES.values()]
             cells.append(" / ".join(str(out) for out, _ in counts) + f" · {counts[0][1]}")
         rows.append(f"| {name} | " + " | ".join(cells) + " |")
     return rows
@@ -57,20 +60,17 @@ def extremes_table() -> list[str]:
 # Extreme finite pixels, every combination of three per pixel: what a documented control must survive.
 SWEEP_PIXELS = (0.0, 1e-38, 0.18, 1.0, 60.0, 65504.0, -1.0, -65504.0)
 SWEEP_POINTS = 9
-SWEPT = {
-    "tonemap-hable": lambda **c: tg.ToneMap("hable", **c),
-    "tonemap-filmic": lambda **c: tg.ToneMap("filmic", **c),
-    "tonemap-unreal_filmic": lambda **c: tg.ToneMap("unreal_filmic", **c),
-    "tonemap-reinhard_extended": lambda **c: tg.ToneMap("reinhard_extended", **c),
-    "grade-linear": lambda **c: tg.ColorGrade(**c),
-    "grade-aces": lambda **c: tg.ColorGrade(aces=True, **c),
-    "primary-linear": lambda **c: tg.PrimaryGrade("linear", **c),
-    "primary-log": lambda **c: tg.PrimaryGrade("log", **c),
-    "bloom": lambda **c: tg.Bloom(**c),
-    "convolution-bloom": lambda **c: tg.ConvolutionBloom(torch.ones(1, 3, 3), **c),
-    "autoexposure": lambda **c: tg.AutoExposure(**c),
-    "dither": lambda **c: tg.Dither(**c),
-}
+PLAIN_NUMBERS = ("peak_luminance",)  # ACES 2.0 caches its tables per peak: a plain number, not a tensor
+
+
+def number_controls(module) -> dict:
+    """The stage's number controls (``{name: Control}``); none for a module that is not a stage."""
+    table = module.control_table() if isinstance(module, torchgrade.stage.Stage) else {}
+    return {name: c for name, c in table.items() if c.kind == "number"}
+
+
+SWEPT = {name: kind.build for name, kind in STAGE_KINDS.items() if number_controls(kind.build())}
+"""The stages with number controls (ACES 2.0's ``peak_luminance`` included: it takes plain numbers)."""
 
 
 def sweep_image() -> torch.Tensor:
@@ -80,7 +80,7 @@ def sweep_image() -> torch.Tensor:
 
 def swept_settings(make) -> list[dict]:
     """Each number control at SWEEP_POINTS values across its range (others at defaults), then all at their low, then high, edges."""
-    table = {name: c for name, c in make().control_table().items() if c.kind == "number"}
+    table = number_controls(make())
     shapes = {name: torch.as_tensor(c.default if c.default is not None else 0.0, dtype=torch.float32).shape for name, c in table.items()}
     settings = [
         {name: torch.full(shapes[name], float(v))}
@@ -96,7 +96,7 @@ def sweep_counts(make) -> tuple[int, int, int, int]:
     """(settings run, settings refused by a rule between controls, non-finite outputs, non-finite gradients)."""
     run = refused = outputs = gradients = 0
     for setting in swept_settings(make):
-        controls = {name: value.clone().requires_grad_() for name, value in setting.items()}
+        controls = {name: float(value) if name in PLAIN_NUMBERS else value.clone().requires_grad_() for name, value in setting.items()}
         try:
             module = make(**controls)
         except ValueError:
@@ -107,7 +107,7 @@ def sweep_counts(make) -> tuple[int, int, int, int]:
         out.sum().backward()
         run += 1
         outputs += int((~torch.isfinite(out)).sum())
-        grads = [image.grad] + [c.grad for c in controls.values() if c.grad is not None]
+        grads = [image.grad] + [c.grad for c in controls.values() if isinstance(c, torch.Tensor) and c.grad is not None]
         gradients += sum(int((~torch.isfinite(g)).sum()) for g in grads)
     return run, refused, outputs, gradients
 
@@ -181,6 +181,14 @@ def fuzzed_cube_verdicts() -> tuple[int, int, int]:
     return rejected, accepted, other
 
 
+def cube_256_read() -> dict:
+    """Wall and CPU seconds and peak MiB of reading a 256³ .cube file (the largest LUT torchgrade bakes), in a fresh process."""
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "256.cube"
+        tg.io.write_cube(path, tg.LUT3D(torch.rand(256, 256, 256, 3, generator=torch.Generator().manual_seed(0))))
+        return timed_read(path)
+
+
 def controls_report() -> list[str]:
     sweep = sweep_table()
     guarded, unguarded = autocast_codes()
@@ -194,7 +202,7 @@ def controls_report() -> list[str]:
         f"Autocast: ColorGrade(contrast=20, saturation=10, aces=True) + ToneMap(\"aces\") on Desk.exr under CPU bfloat16 "
         f"autocast, max error against float32: {guarded:.2f} 8-bit codes (without the stages' autocast guard: {unguarded:.1f}).",
         "",
-        "Command: `.venv/bin/python benchmarks/robustness.py --controls` (also part of the full run)",
+        "Command: `PYTHONPATH=. .venv/bin/python benchmarks/robustness.py --controls` (also part of the full run)",
     ]
 
 
@@ -202,6 +210,7 @@ def inputs_report() -> list[str]:
     table = extremes_table()
     damaged_rejected, damaged_total = damaged_exr_verdicts()
     rejected, accepted, other = fuzzed_cube_verdicts()
+    cube = cube_256_read()
     return [
         "Non-finite outputs per module and input family, for float32 / float16 / bfloat16 inputs, "
         "then (after ·) non-finite float64 gradients for the finite pixels:",
@@ -212,8 +221,10 @@ def inputs_report() -> list[str]:
         "ValueError/OSError, none crashed or hung.",
         f"Mutated .cube files: {FUZZED_FILES} generated; {rejected} rejected with ValueError, {accepted} still valid "
         f"(accepted, finite table), {other} failed any other way.",
+        f"A 256³ .cube file ({cube['file_mib']} MiB, a 192 MiB float32 table) reads in {cube['cpu_seconds']} s of CPU "
+        f"({cube['seconds']} s wall) with a peak of {cube['peak_mib']} MiB (fresh process, `benchmarks/bench_cube_read.py`'s reader).",
         "",
-        "Command: `.venv/bin/python benchmarks/robustness.py`",
+        "Command: `PYTHONPATH=. .venv/bin/python benchmarks/robustness.py`",
     ]
 
 

@@ -52,6 +52,44 @@ def test_grade_command_reports_bad_arguments_without_a_traceback(exr_dir, tmp_pa
     assert not list(tmp_path.iterdir())
 
 
+def graded_scene(tmp_path, *arguments) -> torch.Tensor:
+    """What ``torchgrade grade`` hands the look: an identity grade's frame, written before tone mapping in float."""
+    out = tmp_path / "frame.exr"
+    assert main(["grade", *map(str, arguments), "-o", str(out), "--tonemap", "none", "--scene-referred", "--bit-depth", "float", "-q"]) == 0
+    return tg.io.read_exr(out)
+
+
+def test_grade_converts_an_ap0_file_to_rec709_as_opencolorio_does(exr_dir, tmp_path):
+    import PyOpenColorIO as ocio
+
+    stored = tg.io.read_exr(exr_dir / "Carrots.exr")[:3]  # ACES AP0 chromaticities
+    pixels = np.ascontiguousarray(stored.permute(1, 2, 0).numpy())
+    config = ocio.Config.CreateFromBuiltinConfig("cg-config-latest")
+    config.getProcessor("ACES2065-1", "Linear Rec.709 (sRGB)").getDefaultCPUProcessor().applyRGB(pixels)
+    expected = torch.from_numpy(pixels).permute(2, 0, 1)
+    torch.testing.assert_close(graded_scene(tmp_path, exr_dir / "Carrots.exr"), expected, atol=1e-5, rtol=1e-4)
+    assert (stored - expected).abs().max() > 0.05  # the conversion is not a no-op on this file
+    torch.testing.assert_close(graded_scene(tmp_path, exr_dir / "Carrots.exr", "--no-to-rec709"), stored, atol=0, rtol=0)
+
+
+@pytest.mark.parametrize("adaptation, low, high", [(None, 0.0, 1.4), ("none", 0.0, 1.4), ("bradford", 30.0, 60.0)])
+def test_grade_converts_an_xyz_file_to_its_rec709_twin(exr_dir, tmp_path, adaptation, low, high):
+    # OpenEXR's README: the Chromaticities images look the same. They do when XYZ is taken as it is
+    # (the default "auto" for XYZ primaries); a Bradford adaptation from XYZ's E white is 54 codes off.
+    flags = [] if adaptation is None else ["--adaptation", adaptation]
+    codes = lambda linear: tg.color.linear_to_srgb(linear.clamp(0, 1)) * 255  # noqa: E731
+    graded = graded_scene(tmp_path, exr_dir / "formats" / "XYZ.exr", *flags)
+    error = (codes(graded) - codes(tg.io.read_exr(exr_dir / "formats" / "Rec709.exr"))).abs().max()
+    assert low <= error <= high, error
+
+
+def test_grade_help_names_the_chromaticities_default(capsys):
+    with pytest.raises(SystemExit):
+        main(["grade", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "--to-rec709, --no-to-rec709" in text and "Rec.709, the primaries the look works in (default)" in text
+
+
 def test_bake_writes_the_cube_of_the_graded_look(tmp_path, capsys):
     out = tmp_path / "look.cube"
     assert main(["bake", "-o", str(out), "--size", "17", "--contrast", "20", "--saturation", "10", "--tonemap", "neutral"]) == 0

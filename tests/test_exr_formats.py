@@ -72,13 +72,14 @@ def test_luminance_weights_are_the_y_row_of_rgb_to_xyz():
     np.testing.assert_allclose(luminance_weights(pairs).numpy(), expected / expected.sum(), atol=1e-6)
 
 
-@pytest.mark.parametrize("adaptation, bound", [("none", 1.4), ("bradford", 60.0)])
+@pytest.mark.parametrize("adaptation, bound", [("auto", 1.4), ("none", 1.4), ("bradford", 60.0)])
 def test_xyz_file_converts_to_its_rec709_twin_without_adaptation(exr_dir, adaptation, bound):
     # OpenEXR's README says the Chromaticities images look the same: true without adaptation
-    # (1.37 codes measured); a Bradford adaptation from the XYZ file's E white is 54 codes off.
+    # (1.37 codes measured), which "auto" picks for XYZ primaries; a Bradford adaptation from the
+    # XYZ file's E white is 54 codes off.
     converted = tg.io.read_exr(exr_dir / "formats" / "XYZ.exr", to_rec709=True, adaptation=adaptation)
     error = srgb_codes(converted, tg.io.read_exr(exr_dir / "formats" / "Rec709.exr")).max()
-    assert torch.isfinite(converted).all() and error <= bound and (adaptation == "none" or error > 30)
+    assert torch.isfinite(converted).all() and error <= bound and (adaptation != "bradford" or error > 30)
 
 
 def test_ap0_file_matches_opencolorio_aces2065_1_to_linear_rec709(exr_dir):
@@ -88,8 +89,9 @@ def test_ap0_file_matches_opencolorio_aces2065_1_to_linear_rec709(exr_dir):
     pixels = np.ascontiguousarray(raw_rgb.permute(1, 2, 0).numpy())
     config = ocio.Config.CreateFromBuiltinConfig("cg-config-latest")
     config.getProcessor("ACES2065-1", "Linear Rec.709 (sRGB)").getDefaultCPUProcessor().applyRGB(pixels)
-    converted = tg.io.read_exr(exr_dir / "Carrots.exr", to_rec709=True)[:3]
-    torch.testing.assert_close(converted, torch.from_numpy(pixels).permute(2, 0, 1), atol=1e-5, rtol=1e-4)
+    for adaptation in ("auto", "bradford"):  # "auto" adapts every RGB space, AP0 included (the ACES convention)
+        converted = tg.io.read_exr(exr_dir / "Carrots.exr", to_rec709=True, adaptation=adaptation)[:3]
+        torch.testing.assert_close(converted, torch.from_numpy(pixels).permute(2, 0, 1), atol=1e-5, rtol=1e-4)
 
 
 def test_unknown_adaptation_is_a_clear_error(exr_dir):
@@ -199,4 +201,22 @@ def test_display_window_places_the_data_window(exr_dir, name):
     expected = torch.zeros_like(framed)
     inside = data[:, y0:min(y1, 299) + 1, x0:min(x1, 399) + 1]
     expected[:, :inside.shape[1], :inside.shape[2]] = inside
+    torch.testing.assert_close(framed, expected, atol=0, rtol=0)
+
+
+@pytest.mark.parametrize("display", [(-3, -2, 20, 14), (2, 3, 9, 6)])
+def test_luminance_chroma_in_a_display_window_is_the_data_window_placed(tmp_path, display):
+    # around the data window (the result written in place) and inside it (reconstructed, then cropped)
+    rng = np.random.default_rng(1)
+    y, chroma = rng.random((12, 16)) * 4 + 0.01, rng.random((2, 12, 16)) - 0.5
+    channels = {"Y": y.astype(np.float16), **{n: OpenEXR.Channel(c.astype(np.float16), 2, 2) for n, c in zip(("RY", "BY"), chroma)}}
+    header = {"type": OpenEXR.scanlineimage, "dataWindow": window(0, 0, 15, 11), "displayWindow": window(*display)}
+    path = tmp_path / "yc.exr"
+    OpenEXR.File(header, channels).write(str(path))
+    data, framed = tg.io.read_exr(path), tg.io.read_exr(path, window="display")
+    x0, y0, x1, y1 = display
+    expected = torch.zeros(3, y1 - y0 + 1, x1 - x0 + 1)
+    inside = data[:, max(y0, 0):min(y1, 11) + 1, max(x0, 0):min(x1, 15) + 1]
+    expected[:, max(-y0, 0):max(-y0, 0) + inside.shape[1], max(-x0, 0):max(-x0, 0) + inside.shape[2]] = inside
+    assert data.shape == (3, 12, 16) and (data[0] - data[2]).abs().max() > 0.1  # in colour
     torch.testing.assert_close(framed, expected, atol=0, rtol=0)

@@ -82,14 +82,31 @@ print((status("VmHWM") - before) * 1024 / (image.numel() * 4))
 """
 
 
+def write_luminance_chroma(path, size: int) -> None:
+    """A ``size``² file of Y and 2×2-subsampled RY, BY, written by the OpenEXR bindings themselves."""
+    import numpy as np
+    import OpenEXR
+
+    rng = np.random.default_rng(0)
+    y, chroma = rng.random((size, size)) * 4 + 0.01, rng.random((2, size, size)) - 0.5
+    # the bindings take subsampled channels at full size and keep the samples at even coordinates
+    channels = {"Y": y.astype(np.float16), **{name: OpenEXR.Channel(c.astype(np.float16), 2, 2) for name, c in zip(("RY", "BY"), chroma)}}
+    OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}, channels).write(str(path))
+
+
 @pytest.mark.skipif(not os.path.exists("/proc/self/clear_refs"), reason="needs Linux's peak-memory reset")
-@pytest.mark.parametrize("half", [True, False])
-def test_peak_memory_of_a_read_is_at_most_one_and_a_half_times_the_tensor(tmp_path, half):
+@pytest.mark.parametrize("layout", ["half", "float", "luminance-chroma"])
+def test_peak_memory_of_a_read_is_at_most_one_and_a_half_times_the_tensor(tmp_path, layout):
     path = tmp_path / "big.exr"
-    tg.io.write_exr(path, torch.rand(3, 2048, 2048), half=half)
+    if layout == "luminance-chroma":
+        write_luminance_chroma(path, 2048)
+    else:
+        tg.io.write_exr(path, torch.rand(3, 2048, 2048), half=layout == "half")
     result = subprocess.run([sys.executable, "-c", PEAK, str(path)], capture_output=True, text=True, timeout=300)
     ratio = float(result.stdout.split()[-1])
-    assert ratio < 1.6, ratio  # at most the decoded samples (0.5× half, 1× float, freed plane by plane) + the tensor
+    # at most the decoded samples (0.5× half, 1× float, freed plane by plane; luminance/chroma 0.25×,
+    # reconstructed strip by strip into the tensor) + the tensor; measured 1.2, 1.4 and 1.5
+    assert ratio < 1.6, ratio
 
 
 def test_new_files_follow_the_umask_and_rewrites_keep_the_mode(tmp_path):

@@ -8,7 +8,7 @@ Examples:
     torch.Size([1, 3, 8, 8])
 """
 
-from . import color, core, curves, functional, io, onnx, scene
+from . import catalog, color, core, curves, functional, io, onnx, scene
 from .augment import RandomPostFX
 from .bloom import Bloom, ConvolutionBloom
 from .display import Display
@@ -24,6 +24,7 @@ from .tonemap import TONEMAP_MODES, ToneMap
 __version__ = "0.1.0"
 
 __all__ = [
+    "catalog",
     "color",
     "core",
     "curves",

@@ -19,9 +19,9 @@ from pathlib import Path
 
 import torch
 
-from ..io import read_exr, write_cube
+from ..io import write_cube
 from ..lut import LUTAccuracyWarning, bake_lut, srgb_code_error
-from .common import add_grading_flags, look_from_args, stages_label
+from .common import add_grading_flags, look_from_args, read_rec709, stages_label
 
 __all__ = ["run_bake", "add_bake"]
 
@@ -58,7 +58,7 @@ def run_bake(args: argparse.Namespace) -> str:
     scene = None
     if args.scene is not None:
         with torch.no_grad():
-            scene = look.per_pixel_input(read_exr(args.scene)[:3].unsqueeze(0))
+            scene = look.per_pixel_input(read_rec709(args.scene).unsqueeze(0))
     tolerance = 0.5 if args.tolerance is None else args.tolerance
     start = time.perf_counter()
     with warnings.catch_warnings():  # the report is printed below, with its cause and advice

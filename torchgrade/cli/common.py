@@ -19,11 +19,11 @@ from torch import nn
 
 from .. import TONEMAP_MODES, ColorGrade, ToneMap
 from ..color import linear_to_srgb
-from ..io import write_exr
+from ..io import read_exr, write_exr
 from ..io.atomic import atomic_write
 from ..pipeline import PostFX
 
-__all__ = ["GRADING_FLAGS", "display_codes", "write_png", "stages_label", "grade_from_args", "given_grading_flags", "look_from_args",
+__all__ = ["GRADING_FLAGS", "read_rec709", "display_codes", "write_png", "stages_label", "grade_from_args", "given_grading_flags", "look_from_args",
            "add_grading_flags"]
 
 GRADING_FLAGS = {
@@ -35,6 +35,16 @@ GRADING_FLAGS = {
     "saturation": "-100..100",
 }
 """The grading controls ``grade`` and ``bake`` take as flags (``--post-exposure`` ...), with their units."""
+
+
+def read_rec709(path, to_rec709: bool = True, adaptation: str = "auto", **options) -> torch.Tensor:
+    """The ``(3, H, W)`` RGB of an EXR in linear Rec.709, the primaries every look works in.
+
+    A file whose ``chromaticities`` name other primaries (ACES AP0, XYZ) is converted, as
+    :func:`torchgrade.io.read_exr` does with ``to_rec709=True`` (``adaptation="auto"``: Bradford for RGB
+    spaces, none for XYZ); ``to_rec709=False`` keeps the file's RGB as it is. ``options`` go to ``read_exr``.
+    """
+    return read_exr(path, to_rec709=to_rec709, adaptation=adaptation, **options)[:3]
 
 
 def display_codes(image: torch.Tensor, maximum: int, encoded: bool = False) -> np.ndarray:

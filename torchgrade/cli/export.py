@@ -21,11 +21,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..io import read_exr
 from ..lut import INTERPOLATIONS, LUT_BACKENDS
 from ..onnx import OUTPUTS, export_look
 from ..pipeline import PostFX
 from ..scene import demo_scene
+from .common import read_rec709
 
 __all__ = ["run_export", "add_export"]
 
@@ -39,7 +39,7 @@ def run_export(args: argparse.Namespace) -> str:
     if args.lut is not None:
         look = look.to_lut(args.lut, args.interpolation)
     if args.scene:
-        images = {Path(path).name: read_exr(path)[:3].unsqueeze(0) for path in args.scene}
+        images = {Path(path).name: read_rec709(path).unsqueeze(0) for path in args.scene}
     else:
         images = {"demo scene": demo_scene(args.height, args.width)}
     return "\n".join(export_look(look, output, images, args.lut_backend, args.grade_inputs, args.output))

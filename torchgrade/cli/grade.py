@@ -23,9 +23,10 @@ import time
 from functools import partial
 
 from ..display import DISPLAY_PRESETS, Display, display_settings
-from ..io import read_cube, read_exr
+from ..io import read_cube
+from ..io.exr import ADAPTATIONS
 from ..pipeline import PostFX
-from .common import add_grading_flags, given_grading_flags, look_from_args, stages_label
+from .common import add_grading_flags, given_grading_flags, look_from_args, read_rec709, stages_label
 from .outputs import BIT_DEPTHS, check_output, write_frame
 from .shot import grade_shot, output_paths, shot_frames
 
@@ -45,9 +46,10 @@ def look_to_grade(args: argparse.Namespace) -> PostFX:
 
 
 def _reader(args: argparse.Namespace):
-    """Read a frame's RGB as asked, over its display window so every frame of a shot keeps its frame."""
-    read = partial(read_exr, to_rec709=args.to_rec709, layer=args.layer, view=args.view, part=args.part, window="display")
-    return lambda path: read(path)[:3]
+    """Read a frame's RGB as asked, in Rec.709 unless told not to, over its display window so every frame of a
+    shot keeps its frame."""
+    return partial(read_rec709, to_rec709=args.to_rec709, adaptation=args.adaptation, layer=args.layer, view=args.view,
+                   part=args.part, window="display")
 
 
 def run_grade(args: argparse.Namespace) -> str:
@@ -90,7 +92,12 @@ def _add_shot_flags(grade: argparse.ArgumentParser) -> None:
     grade.add_argument("--view", help="view of a multi-view EXR")
     grade.add_argument("--part", type=lambda text: int(text) if text.isdigit() else text,
                        help="part of a multi-part EXR, by index or name")
-    grade.add_argument("--to-rec709", action="store_true", help="convert from the file's chromaticities to Rec.709")
+    grade.add_argument("--to-rec709", action=argparse.BooleanOptionalAction, default=True,
+                       help="convert each frame from the primaries its chromaticities attribute names (ACES AP0, XYZ...) to "
+                       "linear Rec.709, the primaries the look works in (default); --no-to-rec709 grades the stored RGB as it is")
+    grade.add_argument("--adaptation", choices=ADAPTATIONS, default="auto",
+                       help="how --to-rec709 takes the file's white to D65: bradford (the ACES convention), none, or auto "
+                       "(default: none for XYZ primaries, whose white is only X = Y = Z; bradford for RGB spaces)")
     grade.add_argument("--display", choices=tuple(DISPLAY_PRESETS),
                        help="encode for this display (hdr_pq: Rec.2100 PQ at an HDR --tonemap's peak) and write its signal: "
                        "16-bit .png or .tif, or .exr")

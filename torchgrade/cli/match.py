@@ -27,18 +27,18 @@ import torch
 
 from ..color import srgb_to_linear
 from ..grade import ColorGrade
-from ..io import read_exr
 from ..io.atomic import atomic_write
 from ..match import GRADE_CONTROLS, match_look
 from ..tonemap import TONEMAP_MODES
+from .common import read_rec709
 
 __all__ = ["run_match", "add_match", "read_target"]
 
 
 def read_target(path: Path) -> torch.Tensor:
-    """The target picture as ``(3, H, W)`` linear: an 8-bit PNG decoded from sRGB, or an EXR as stored."""
+    """The target picture as ``(3, H, W)`` linear: an 8-bit PNG decoded from sRGB, or an EXR in Rec.709."""
     if path.suffix.lower() == ".exr":
-        return read_exr(path)[:3]
+        return read_rec709(path)
     if path.suffix.lower() != ".png":
         raise ValueError(f"target must be an .exr or .png file, got {path}")
     if not path.is_file():
@@ -77,7 +77,7 @@ def _errors(errors: dict) -> str:
 def run_match(args: argparse.Namespace) -> str:
     """Fit the look, write the JSON (and the ``.cube``); the line to print."""
     _check_outputs(args)
-    source, target = read_exr(args.source)[:3], read_target(Path(args.target))
+    source, target = read_rec709(args.source), read_target(Path(args.target))
     stages = ("grade",) if args.scene_referred else ("grade", "tonemap")
     start = time.perf_counter()
     result = match_look(source, target, stages, controls=args.controls, tonemaps=args.tonemap, steps=args.steps,

@@ -62,39 +62,54 @@ def _check_sizes(path, part: ExrPart, channels: dict[str, str], pixels: dict) ->
             raise ValueError(f"{path}: channel {name} decoded as {getattr(pixels[name], 'shape', None)}, not {expected}")
 
 
-def _planes(path, part: ExrPart, channels: dict[str, str], pixels: dict) -> list:
-    """The layer's planes, colour first: RGB(A) as OpenEXR's RGBA interface gives it, or every channel."""
-    _check_sizes(path, part, channels, pixels)
-    letters = set(channels)
-    alpha = [pixels.pop(channels["A"])] if "A" in letters else []
-    if letters & {"R", "G", "B"}:
-        zeros = np.zeros(part.size(), dtype=np.float16)
-        return [pixels.pop(channels[c]) if c in letters else zeros for c in "RGB"] + alpha
-    if "Y" in letters and not letters & {"RY", "BY"}:
-        return [pixels.pop(channels["Y"])] * 3 + alpha
-    if "Y" in letters:
-        weights = luminance_weights(part.chromaticities or REC709_CHROMATICITIES)
-        ry, by = (pixels.pop(channels[c]) if c in letters else None for c in ("RY", "BY"))
-        ry, by = (ry if ry is not None else np.zeros_like(by)), (by if by is not None else np.zeros_like(ry))
-        return list(yca_to_rgb(pixels.pop(channels["Y"]), ry, by, weights)) + alpha
-    return [pixels.pop(channels[c]) for c in sorted(letters)]
-
-
-def _place(planes: list, part: ExrPart, window: str) -> torch.Tensor:
-    """Copy the planes into one float32 tensor over the chosen window, dropping each plane as it goes."""
+def _canvas(part: ExrPart, window: str, count: int) -> tuple[torch.Tensor, torch.Tensor, tuple[slice, slice]]:
+    """The float32 output over the window (0 outside the data window), the view of it the data window's
+    pixels land in, and which rows and columns of the data window land there."""
     height, width = part.size(window)
-    image = torch.zeros(len(planes), height, width) if window == "display" else torch.empty(len(planes), height, width)
+    image = torch.zeros(count, height, width) if window == "display" else torch.empty(count, height, width)
     dx0, dy0, dx1, dy1 = part.data_window
     wx0, wy0 = (dx0, dy0) if window == "data" else part.display_window[:2]
     x0, y0 = max(dx0, wx0), max(dy0, wy0)
-    x1, y1 = min(dx1, wx0 + width - 1), min(dy1, wy0 + height - 1)
-    for index in range(len(planes)):
-        plane, planes[index] = planes[index], None
-        if x1 >= x0 and y1 >= y0:
-            source = torch.as_tensor(plane[y0 - dy0:y1 - dy0 + 1, x0 - dx0:x1 - dx0 + 1])
-            image[index, y0 - wy0:y1 - wy0 + 1, x0 - wx0:x1 - wx0 + 1].copy_(source)
-        del plane
-    return image
+    x1, y1 = max(min(dx1, wx0 + width - 1), x0 - 1), max(min(dy1, wy0 + height - 1), y0 - 1)
+    target = image[:, y0 - wy0:y1 - wy0 + 1, x0 - wx0:x1 - wx0 + 1]
+    return image, target, (slice(y0 - dy0, y1 - dy0 + 1), slice(x0 - dx0, x1 - dx0 + 1))
+
+
+def _luminance_chroma(part: ExrPart, channels: dict[str, str], pixels: dict, target: torch.Tensor, crop) -> None:
+    """RGB from Y, RY, BY into ``target``: directly when the whole data window lands there, else through a copy."""
+    weights = luminance_weights(part.chromaticities or REC709_CHROMATICITIES)
+    chroma = [pixels.pop(channels[c]) if c in channels else None for c in ("RY", "BY")]
+    shape = next(c.shape for c in chroma if c is not None)
+    chroma = [c if c is not None else np.zeros(shape, np.float16) for c in chroma]
+    y = pixels.pop(channels["Y"])
+    if target.shape[1:] == y.shape:
+        yca_to_rgb(y, chroma.pop(0), chroma.pop(0), weights, out=target)
+    else:
+        target.copy_(yca_to_rgb(y, chroma.pop(0), chroma.pop(0), weights)[:, crop[0], crop[1]])
+
+
+def _fill(path, part: ExrPart, channels: dict[str, str], pixels: dict, target: torch.Tensor, crop) -> None:
+    """Copy the layer into ``target``, colour first: RGB(A) as OpenEXR's RGBA interface gives it, or every channel.
+
+    Each decoded plane is dropped once copied, so the decoded samples and the output overlap little.
+    """
+    _check_sizes(path, part, channels, pixels)
+    letters = set(channels)
+    if "Y" in letters and letters & {"RY", "BY"} and not letters & {"R", "G", "B"}:
+        _luminance_chroma(part, channels, pixels, target[:3], crop)
+        names, first = ["A"] if "A" in letters else [], 3
+    elif letters & {"R", "G", "B", "Y"}:
+        grey = "Y" if not letters & {"R", "G", "B"} else None
+        names, first = [grey or c for c in "RGB"] + (["A"] if "A" in letters else []), 0
+    else:
+        names, first = sorted(letters), 0
+    for index, letter in enumerate(names, start=first):
+        if letter not in letters:
+            target[index].zero_()
+            continue
+        target[index].copy_(torch.as_tensor(pixels[channels[letter]][crop[0], crop[1]]))
+        if letter not in names[index - first + 1:]:
+            del pixels[channels[letter]]
 
 
 def _convert(image: torch.Tensor, matrix: torch.Tensor) -> None:
@@ -104,7 +119,7 @@ def _convert(image: torch.Tensor, matrix: torch.Tensor) -> None:
         strip.copy_(torch.einsum("ij,jhw->ihw", matrix, strip))
 
 
-def read_exr(path, to_rec709: bool = False, *, adaptation: str = "bradford", layer: str | None = None,
+def read_exr(path, to_rec709: bool = False, *, adaptation: str = "auto", layer: str | None = None,
              view: str | None = None, part: int | str | None = None, window: str = "data",
              max_pixels: int = MAX_PIXELS, max_bytes: int = MAX_BYTES) -> torch.Tensor:
     """Read one layer of an OpenEXR file as a float32 tensor ``(C, H, W)``.
@@ -119,7 +134,8 @@ def read_exr(path, to_rec709: bool = False, *, adaptation: str = "bradford", lay
     Args:
         to_rec709: convert RGB from the file's ``chromaticities`` to linear Rec.709 (files without
             the attribute are Rec.709 already); ``adaptation`` says how the white is moved to D65:
-            ``"bradford"`` (ACES convention) or ``"none"`` (see ``ADAPTATIONS``).
+            ``"bradford"`` (ACES convention), ``"none"``, or ``"auto"``: none for CIE XYZ primaries,
+            Bradford for any other (see ``ADAPTATIONS``).
         layer: a layer name (``"diffuse"``); a colour layer reads as above, any other as all its
             channels in name order. view: a view of a multi-view file or part (``"left"``).
         part: a part index or name; by default the first part holding the layer in the view.
@@ -148,8 +164,11 @@ def read_exr(path, to_rec709: bool = False, *, adaptation: str = "bradford", lay
     count = (3 + ("A" in channels)) if colour else len(channels)
     check_budget(path, parts, chosen, window, count, max_pixels, max_bytes)
     matrix = to_rec709_matrix(chosen.chromaticities, adaptation) if to_rec709 and colour and chosen.chromaticities else None
-    pixels = decode(path, parts)[chosen.index]
-    image = _place(_planes(path, chosen, channels, pixels), chosen, window)
+    decoded = decode(path, parts)[chosen.index]
+    pixels = {name: decoded.pop(name) for name in channels.values()}  # the part's other channels go now
+    del decoded
+    image, target, crop = _canvas(chosen, window, count)
+    _fill(path, chosen, channels, pixels, target, crop)
     if matrix is not None:
         _convert(image, matrix)
     return image

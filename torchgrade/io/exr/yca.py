@@ -35,24 +35,48 @@ def _half(values: torch.Tensor) -> torch.Tensor:
     return values.half().float()
 
 
-def _upsample(samples: torch.Tensor, length: int, before: int = 0) -> torch.Tensor:
-    """Fill in the odd positions 0..length-1 (and ``before`` = 1: position -1) along dim 0, in half.
+def _window(samples: torch.Tensor, low: int, high: int) -> torch.Tensor:
+    """Samples ``low``..``high - 1`` along dim 0, the end samples repeating past either end (as OpenEXR pads its line buffers)."""
+    return samples[torch.arange(low, high).clamp(0, len(samples) - 1)]
 
-    Samples past either end repeat the end sample, as OpenEXR pads its line buffers.
+
+def _filtered(window: torch.Tensor, low: int, first: int, count: int) -> torch.Tensor:
+    """The ``count`` odd positions from the one between samples ``first - 1`` and ``first``, filtered in float32.
+
+    ``window`` holds the samples from ``low`` on. Summed in place, one tap at a time (no temporaries),
+    in OpenEXR's order: farthest below first.
     """
-    taps = len(_TAPS)
-    padded = torch.cat((samples[:1].expand(taps, *samples.shape[1:]), samples, samples[-1:].expand(taps, *samples.shape[1:])))
-    count = length // 2 + before
-    odd = torch.zeros((count,) + samples.shape[1:])
-    start = taps - before  # padded index of the sample just below the first odd position
+    odd = torch.zeros((count,) + window.shape[1:])
+    at = first - 1 - low  # window index of the sample just below the first odd position
     weights = _TAPS.tolist()
-    # in place, one tap at a time (no temporaries), summed in OpenEXR's order: farthest below first
     for offset, weight in [(-d, w) for d, w in reversed(list(enumerate(weights)))] + [(1 + d, w) for d, w in enumerate(weights)]:
-        odd.add_(padded[start + offset:start + offset + count], alpha=weight)
-    result = samples.new_empty((length + before,) + samples.shape[1:], dtype=torch.float16)
-    result[before::2] = samples[: (length + 1) // 2]
-    result[1 - before::2] = odd
+        odd.add_(window[at + offset:at + offset + count], alpha=weight)
+    return odd
+
+
+def _upsample(samples: torch.Tensor, length: int) -> torch.Tensor:
+    """Fill in the odd positions 0..length-1 along dim 0, in half."""
+    taps = len(_TAPS)
+    result = samples.new_empty((length,) + samples.shape[1:], dtype=torch.float16)
+    result[0::2] = samples[: (length + 1) // 2]
+    result[1::2] = _filtered(_window(samples, -taps, len(samples) + taps), -taps, 1, length // 2)
     return result
+
+
+def _chroma_rows(chroma: torch.Tensor, width: int, first: int, stop: int) -> torch.Tensor:
+    """Full-resolution chroma ``(rows, width, 2)`` of rows ``first``..``stop - 1`` (row -1 included), in half.
+
+    Only the sample lines these rows need are filtered along the line; then even rows are those lines
+    (row ``2 j`` is line ``j``) and odd rows ``2 k - 1`` are filtered down the columns from the lines around.
+    """
+    low = first // 2 - len(_TAPS) - 1
+    lines = _upsample(_window(chroma, low, stop // 2 + len(_TAPS) + 1).transpose(0, 1), width).transpose(0, 1)
+    rows = torch.empty((stop - first, width, 2), dtype=torch.float16)
+    odd_first = first + (first % 2 == 0)  # odd rows: -1, 1, 3, ...
+    even_first = first + (first % 2 != 0)
+    rows[odd_first - first::2] = _filtered(lines, low, (odd_first + 1) // 2, len(range(odd_first, stop, 2)))
+    rows[even_first - first::2] = lines[even_first // 2 - low:][:len(range(even_first, stop, 2))]
+    return rows
 
 
 def _to_rgb(y: torch.Tensor, ry: torch.Tensor, by: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
@@ -82,25 +106,13 @@ def _fix_saturation(rgb: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
     return torch.where(own > ceiling, _half(pulled), centre)
 
 
-def _extended_rows(height: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """Which Y row and which reconstructed chroma row make each of the rows -1..height.
-
-    As OpenEXR's line buffers: the row above the top repeats row 0's luminance with chroma
-    filtered at row -1; the row below the bottom is row height-2 (the last row that carries chroma
-    when the height is even).
-    """
-    below = max(height - 2, 0)
-    luma = torch.cat((torch.tensor([0]), torch.arange(height), torch.tensor([below])))
-    chroma = torch.cat((torch.arange(height + 1), torch.tensor([below + 1])))
-    return luma, chroma
-
-
-def yca_to_rgb(y, ry, by, weights: torch.Tensor, lines_per_strip: int = 32) -> torch.Tensor:
+def yca_to_rgb(y, ry, by, weights: torch.Tensor, out: torch.Tensor | None = None, lines_per_strip: int = 32) -> torch.Tensor:
     """RGB ``(3, H, W)`` from full-resolution Y and 2×2-subsampled RY, BY ``(H/2, W/2)``.
 
-    ``weights`` are the file's luminance weights (:func:`luminance_weights`). The result is float16:
-    every value is a half, as OpenEXR's. Chroma is reconstructed in half, then RGB computed
-    ``lines_per_strip`` lines at a time, so the temporaries stay a fraction of the image.
+    ``weights`` are the file's luminance weights (:func:`luminance_weights`). Every value is a half, as
+    OpenEXR's: the result is float16, or written into ``out`` (any float dtype). Chroma is
+    reconstructed and turned into RGB ``lines_per_strip`` lines at a time, so no temporary holds more
+    than a strip: the memory is the samples and the result.
 
     Examples:
         >>> rgb = yca_to_rgb(torch.ones(4, 4), torch.zeros(2, 2), torch.full((2, 2), 0.5), torch.tensor((0.2126, 0.7152, 0.0722)))
@@ -109,14 +121,20 @@ def yca_to_rgb(y, ry, by, weights: torch.Tensor, lines_per_strip: int = 32) -> t
     """
     y = torch.as_tensor(y).half()
     height, width = y.shape
-    chroma = torch.stack((torch.as_tensor(ry).float(), torch.as_tensor(by).float()), dim=-1)
-    chroma = _upsample(_upsample(chroma.transpose(0, 1), width).transpose(0, 1), height, before=1)
-    luma_rows, chroma_rows = _extended_rows(height)
-    image = torch.empty(3, height, width, dtype=torch.float16)
+    chroma = torch.stack((torch.as_tensor(ry).half(), torch.as_tensor(by).half()), dim=-1)
+    del ry, by  # the caller's arrays go as soon as the caller lets them go
+    image = torch.empty(3, height, width, dtype=torch.float16) if out is None else out
     for top in range(0, height, lines_per_strip):
         bottom = min(top + lines_per_strip, height)
-        strip = slice(top, bottom + 2)  # extended rows top-1 .. bottom
-        part = chroma[chroma_rows[strip]].float()
-        rgb = _to_rgb(y[luma_rows[strip]].float(), part[..., 0], part[..., 1], weights)
+        # rows top-1 .. bottom, as OpenEXR's line buffers: the row above the top repeats row 0's
+        # luminance with the chroma of row -1; the row below the bottom is row height-2 (the last
+        # row that carries chroma when the height is even)
+        luma_rows = torch.arange(top - 1, bottom + 1).clamp(min=0)
+        chroma_rows = torch.arange(top - 1, bottom + 1)
+        if bottom == height:
+            luma_rows[-1] = chroma_rows[-1] = max(height - 2, 0)
+        first = int(chroma_rows.min())
+        part = _chroma_rows(chroma, width, first, int(chroma_rows.max()) + 1)[chroma_rows - first].float()
+        rgb = _to_rgb(y[luma_rows].float(), part[..., 0], part[..., 1], weights)
         image[:, top:bottom] = _fix_saturation(rgb, weights)
     return image

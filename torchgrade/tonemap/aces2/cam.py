@@ -134,9 +134,13 @@ def rgb_to_aab(rgb: torch.Tensor, p: JMhParams, dim: int = -3) -> torch.Tensor:
 
 
 def _safe_hypot_atan2(a: torch.Tensor, b: torch.Tensor):
-    """``sqrt(a²+b²)`` and ``atan2(b, a)`` with finite gradients at the origin (hue 0 there)."""
+    """``sqrt(a²+b²)`` and ``atan2(b, a)`` with finite gradients at the origin (hue 0 there).
+
+    Below the smallest normal ``a²+b²`` counts as the origin: atan2's gradient divides by ``a²+b²``,
+    which a denormal turns into 0/0 (a grey pixel of 1e-38 in float32 did).
+    """
     r2 = a * a + b * b
-    zero = r2 <= 0
+    zero = r2 <= torch.finfo(r2.dtype).tiny
     m = torch.sqrt(torch.where(zero, 1.0, r2))
     hue = torch.atan2(torch.where(zero, 0.0, b), torch.where(zero, 1.0, a))
     return torch.where(zero, 0.0, m), hue

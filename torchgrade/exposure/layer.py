@@ -1,0 +1,132 @@
+"""``AutoExposure``: eye adaptation as a stage that keeps the adapted luminance per sample and per stream."""
+
+from __future__ import annotations
+
+from typing import Hashable, Optional
+
+import torch
+
+from ..core import Param, check_image
+from ..stage import Stage
+from .adaptation import CONTROLS, MAX_ADAPTED, MIN_LUMINANCE, check_bounds, checked_control, auto_exposure
+
+__all__ = ["AutoExposure"]
+
+
+class AutoExposure(Stage):
+    """Eye adaptation for stills and video, keeping the adapted luminance per sample.
+
+    ``forward(image, dt=None)``: with ``dt`` in seconds since the previous frame, the state
+    ``adapted_luminance`` (shape ``image.shape[:-3]``) moves towards the frame's metered luminance
+    (see :func:`auto_exposure`); with ``dt=None`` (stills, training batches) or on the first
+    frame after construction or :meth:`reset`, it adapts instantly. Changing the batch size in a
+    sequence raises ``ValueError``; call :meth:`reset` between sequences. :meth:`frame` is one
+    frame without state, for serving.
+
+    ``forward(image, dt, stream=key)`` keeps one state per hashable ``key`` in :attr:`streams` (``None``,
+    the default, is :attr:`adapted_luminance`): threads serving one stream each never mix; two threads
+    on one key interleave into one adaptation (use a key each, or :meth:`frame`).
+
+    ``operator="exposure"`` (default) returns the scene-referred image scaled by
+    ``middle_grey / adapted`` for the rest of the pipeline; ``operator="reinhard"`` returns the
+    document's display-referred operator, which uses ``max_luminance``. The stored state is
+    detached (gradients flow within a frame, not across frames); use :func:`auto_exposure` to
+    backpropagate through time. An ``nn.Parameter`` control is registered as a module parameter.
+    ``to_config()`` returns every constructor argument as plain values (per-sample tensors as
+    lists, which the constructor accepts): ``AutoExposure(**module.to_config())``.
+
+    Examples:
+        >>> layer = AutoExposure(metering="mean")
+        >>> out = layer(torch.full((1, 3, 4, 4), 0.72))
+        >>> round(out.mean().item(), 4), [round(v, 4) for v in layer.adapted_luminance.tolist()]
+        (0.18, [0.72])
+        >>> _ = layer(torch.full((1, 3, 2, 2), 0.09), dt=0.1, stream="left")  # a new stream adapts instantly
+        >>> round(layer.streams["left"].item(), 4), [round(v, 4) for v in layer.adapted_luminance.tolist()]
+        (0.09, [0.72])
+        >>> AutoExposure(middle_grey=0.0)
+        Traceback (most recent call last):
+        ...
+        ValueError: middle_grey must be a number > 0, got 0.0
+    """
+
+    controls = CONTROLS
+    always_in_config = tuple(controls)
+
+    adapted_luminance: torch.Tensor
+
+    def __init__(
+        self,
+        middle_grey: Param = 0.18,
+        max_luminance: Param = 16.0,
+        speed: Param = 1.0,
+        metering: str = "log",
+        *,
+        operator: str = "exposure",
+        speed_to_light: Optional[Param] = None,
+        speed_to_dark: Optional[Param] = None,
+        min_luminance: Param = MIN_LUMINANCE,
+        max_adapted: Param = MAX_ADAPTED,
+    ) -> None:
+        super().__init__()
+        self.init_controls(
+            middle_grey=middle_grey, max_luminance=max_luminance, speed=speed, metering=metering, operator=operator,
+            speed_to_light=speed_to_light, speed_to_dark=speed_to_dark, min_luminance=min_luminance, max_adapted=max_adapted,
+        )
+        self.register_buffer("adapted_luminance", torch.empty(0))
+        self.streams: dict = {}
+
+    def check_control(self, name: str, value):
+        return checked_control(name, value)
+
+    def check_together(self) -> None:
+        check_bounds(self.min_luminance, self.max_adapted)
+
+    @property
+    def is_identity(self) -> bool:
+        """Never: the stage exposes every frame, whatever its controls."""
+        return False
+
+    def reset(self, stream: Optional[Hashable] = None) -> None:
+        """Forget ``stream``'s adapted luminance, or with no argument every one: the next frame adapts instantly."""
+        if stream is None:
+            self.adapted_luminance = self.adapted_luminance.new_empty(0)
+            self.streams.clear()
+        else:
+            self.streams.pop(stream, None)
+
+    def _history(self, state: torch.Tensor, image: torch.Tensor, dt) -> Optional[torch.Tensor]:
+        """The state to adapt from, or ``None`` to adapt instantly."""
+        if dt is None or state.numel() == 0:
+            return None
+        if state.shape != image.shape[:-3]:
+            raise ValueError(
+                f"batch changed mid-sequence: adapted_luminance has shape {tuple(state.shape)} but the "
+                f"image has shape {tuple(image.shape)}; call reset() before starting a new sequence"
+            )
+        return state
+
+    def frame(self, image: torch.Tensor, adapted: Optional[torch.Tensor], dt: Param) -> tuple[torch.Tensor, torch.Tensor]:
+        """One frame with these controls, stateless: ``(image, adapted, dt) -> (exposed, new adapted)``.
+
+        ``adapted`` has one value per image (``image.shape[:-3]``); ``None`` or ``<= 0`` starts a
+        sequence (the frame adapts instantly). The stored :attr:`adapted_luminance` is left alone.
+
+        Examples:
+            >>> layer = AutoExposure(metering="mean")
+            >>> exposed, adapted = layer.frame(torch.full((2, 3, 4, 4), 0.36), torch.zeros(2), 0.0)
+            >>> [round(v, 4) for v in adapted.tolist()], layer.adapted_luminance.numel()
+            ([0.36, 0.36], 0)
+        """
+        self.check_learnable()
+        return auto_exposure(image, adapted, dt, **self.params())
+
+    def forward(self, image: torch.Tensor, dt: Optional[Param] = None, stream: Optional[Hashable] = None) -> torch.Tensor:
+        check_image(image)
+        # One dict read and one dict write per frame: atomic in CPython, so threads on distinct keys never mix.
+        state = self.adapted_luminance if stream is None else self.streams.get(stream, self.adapted_luminance.new_empty(0))
+        exposed, adapted = self.frame(image, self._history(state, image, dt), 0.0 if dt is None else dt)
+        if stream is None:
+            self.adapted_luminance = adapted.detach()
+        else:
+            self.streams[stream] = adapted.detach()
+        return exposed
