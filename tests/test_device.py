@@ -37,6 +37,8 @@ from torchgrade.display import DISPLAY_ENCODINGS
 from torchgrade.exposure import METERING_MODES, OPERATORS
 from torchgrade.lut import INTERPOLATIONS, LUT_BACKENDS, identity_table
 from torchgrade.lut.shapers import SHAPERS
+from torchgrade.match import ResidualLUT
+from torchgrade.match.fit import MatchedControls
 from torchgrade.primary import STYLES
 from torchgrade.stage import Stage
 from torchgrade.tonemap import TONE_MAPPERS
@@ -78,17 +80,6 @@ class _Adapting(nn.Module):
         return self.exposure(image, dt=1.0 / 30.0)
 
 
-class _Lookup(nn.Module):
-    """``LUT3D(...)(image, interpolation)`` as a module of its own."""
-
-    def __init__(self, lut: tg.LUT3D, interpolation: str):
-        super().__init__()
-        self.lut, self.interpolation = lut, interpolation
-
-    def forward(self, image):
-        return self.lut(image, interpolation=self.interpolation)
-
-
 def _lut(shaper: str = "linear") -> tg.LUT3D:
     curve = torch.linspace(0.0, 1.0, 17).unsqueeze(1).expand(17, 3) ** 0.5 if SHAPERS[shaper].takes_curve else None
     return tg.LUT3D(identity_table(9) ** 1.5, shaper=shaper, curve=curve)
@@ -102,9 +93,9 @@ def _cases() -> dict:
     cases.update({f"bloom-{mode}": lambda mode=mode: tg.Bloom(mode=mode, threshold=0.8, intensity=0.5, tint=(1.0, 0.9, 0.8))
                   for mode in BLOOM_MODES})
     cases.update({f"lut-{shaper}": lambda shaper=shaper: _lut(shaper) for shaper in SHAPERS})
+    # the "gather" backend is the eager lookup itself: LUT3D(...)(image, interpolation)
     cases.update({f"lut-{interpolation}-{backend}": lambda i=interpolation, b=backend: _lut().export_form(i, b)
                   for interpolation in INTERPOLATIONS for backend in LUT_BACKENDS})
-    cases.update({f"lut-{interpolation}": lambda i=interpolation: _Lookup(_lut(), i) for interpolation in INTERPOLATIONS})
     cases.update({f"display-{encoding}": lambda e=encoding: tg.Display(e, "rec2020", peak_luminance=1000.0) for encoding in DISPLAY_ENCODINGS})
     cases.update({f"primary-{style}": lambda s=style: tg.PrimaryGrade(s, **PRIMARY[s]) for style in STYLES})
     cases.update({f"exposure-{metering}-{operator}": lambda m=metering, o=operator: tg.AutoExposure(metering=m, operator=o)
@@ -128,6 +119,8 @@ def _cases() -> dict:
                                     primary={"style": "log", **PRIMARY["log"]}, tonemap="aces", dither={}, display={"encoding": "srgb"}),
         "random-postfx": lambda: tg.RandomPostFX(contrast=30, saturation=20, split_shadows=0.2, bloom_intensity=(0.2, 0.6), tonemap="aces"),
         "random-postfx-tonemaps": lambda: tg.RandomPostFX(contrast=30, tonemap=("aces", "neutral", "agx")),
+        "match-controls": lambda: MatchedControls(("post_exposure", "contrast", "color_filter", "lift"), "filmic"),
+        "match-residual": lambda: ResidualLUT(9, torch.float32),
     })
     return cases
 
@@ -142,6 +135,7 @@ READS_DATA = {
     "lut-learnable": "checks that a learnable table is finite before the lookup",
     "bloom-per-sample": "the same shortcut as bloom-additive",
     "exposure-adapting": "checks per-sample controls against their ranges",
+    "match-residual": "the same check as lut-learnable",
 }
 """The cases that read a value back in eager mode, and what they read."""
 
