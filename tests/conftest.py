@@ -1,9 +1,41 @@
+import os
 from pathlib import Path
 
 import pytest
 import torch
 
 EXR_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "exr"
+
+
+def chosen_device() -> torch.device:
+    """The device named by ``TG_TEST_DEVICE`` (``cpu`` when unset); naming CUDA on a machine without it is an error."""
+    name = os.environ.get("TG_TEST_DEVICE") or "cpu"
+    try:
+        device = torch.device(name)
+    except RuntimeError:
+        raise pytest.UsageError(f"TG_TEST_DEVICE must be cpu, cuda or cuda:N, got {name!r}") from None
+    if device.type not in ("cpu", "cuda"):
+        raise pytest.UsageError(f"TG_TEST_DEVICE must be cpu, cuda or cuda:N, got {name!r}")
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise pytest.UsageError(f"TG_TEST_DEVICE={name} but CUDA is not available (torch {torch.__version__}, "
+                                f"built with CUDA {torch.version.cuda}); unset it to test on the CPU")
+    if device.type == "cuda" and (device.index or 0) >= torch.cuda.device_count():
+        raise pytest.UsageError(f"TG_TEST_DEVICE={name} but this machine has {torch.cuda.device_count()} CUDA device(s)")
+    return device
+
+
+def pytest_configure(config):
+    chosen_device()  # a wrong TG_TEST_DEVICE stops the run before any test
+
+
+def pytest_report_header(config):
+    return f"torchgrade test device: {chosen_device()} (TG_TEST_DEVICE)"
+
+
+@pytest.fixture(scope="session")
+def device() -> torch.device:
+    """The device the module tests run on: ``TG_TEST_DEVICE`` (``cpu`` by default, ``cuda`` to test on a GPU)."""
+    return chosen_device()
 
 
 @pytest.fixture(scope="session")

@@ -39,9 +39,9 @@ def _ocio(source: str, display: str, view: str, rgb: np.ndarray) -> np.ndarray:
     return out
 
 
-def _ours(rgb: np.ndarray, dtype=torch.float32, **kwargs) -> np.ndarray:
-    image = torch.from_numpy(np.ascontiguousarray(rgb.T)).to(dtype)[None, :, :, None]
-    return aces2_output(image, **kwargs)[0, :, :, 0].T.double().numpy()
+def _ours(rgb: np.ndarray, dtype=torch.float32, device=None, **kwargs) -> np.ndarray:
+    image = torch.from_numpy(np.ascontiguousarray(rgb.T)).to(device, dtype)[None, :, :, None]
+    return aces2_output(image, **kwargs)[0, :, :, 0].T.double().cpu().numpy()
 
 
 @functools.lru_cache(maxsize=None)
@@ -83,12 +83,12 @@ def test_matches_opencolorio_views_on_sample_images(exr_dir, name, target):
 
 
 @pytest.mark.parametrize("mode, target", [("aces2", "sdr_rec709"), ("aces2_hdr", "hdr1000_p3")])
-def test_tonemap_modes_are_the_opencolorio_views(exr_dir, mode, target):
+def test_tonemap_modes_are_the_opencolorio_views(exr_dir, mode, target, device):
     display, view, _, codes = TARGETS[target]
     pixels = _sample(exr_dir, "Desk")
     ref = _display(_ocio("Linear Rec.709 (sRGB)", display, view, pixels))
     image = torch.from_numpy(np.ascontiguousarray(pixels.T))[None, :, :, None]
-    linear = tg.ToneMap(mode)(image)[0, :, :, 0].T.double()
+    linear = tg.ToneMap(mode).to(device)(image.to(device))[0, :, :, 0].T.double().cpu()
     encoded = linear ** (1.0 / 2.4) if codes == 255 else tg.color.linear_to_pq(linear, reference=1000.0)
     distance = np.abs(encoded.numpy() - ref) * codes
     assert distance.max() <= 2.0 and np.percentile(distance, 99.9) <= 0.5
@@ -102,11 +102,11 @@ def _random_aces(n: int, seed: int) -> np.ndarray:
 
 
 @pytest.mark.parametrize("target", sorted(TARGETS))
-def test_matches_opencolorio_on_aces_input_out_of_gamut(target):
+def test_matches_opencolorio_on_aces_input_out_of_gamut(target, device):
     display, view, kwargs, codes = TARGETS[target]
     aces = _random_aces(4000, 1)
     ref = _display(_ocio("ACES2065-1", display, view, aces))
-    d = np.abs(_ours(aces, input_space="aces", encoding="bt1886" if codes == 255 else "pq", **kwargs) - ref) * codes
+    d = np.abs(_ours(aces, device=device, input_space="aces", encoding="bt1886" if codes == 255 else "pq", **kwargs) - ref) * codes
     assert np.percentile(d, 99.9) <= 0.5 and d.max() <= 2.0
 
 
@@ -159,12 +159,12 @@ def test_gradcheck_on_hdr_colours_out_of_gamut_included():
 
 
 @pytest.mark.parametrize("dtype", (torch.float32, torch.float64))
-def test_extremes_give_finite_outputs_and_gradients(dtype):
+def test_extremes_give_finite_outputs_and_gradients(dtype, device):
     tiny = torch.finfo(dtype).tiny
     values = [0.0, tiny, tiny / 4, 1e-30, 0.18, 60.0, 65504.0, 1e30, -1e30, -0.5,
               float("nan"), float("inf"), -float("inf")]
     n = len(values)
-    grid = torch.tensor(values, dtype=dtype)
+    grid = torch.tensor(values, dtype=dtype, device=device)
     image = torch.stack((grid, grid.roll(1), grid.roll(5)))[None, :, :, None].clone().requires_grad_()
     for kwargs in (dict(encoding="bt1886"), dict(peak_luminance=1000.0, limiting_primaries="rec2020", encoding="pq")):
         out = aces2_output(image, **kwargs)
@@ -173,11 +173,11 @@ def test_extremes_give_finite_outputs_and_gradients(dtype):
         assert torch.isfinite(grad).all()
 
 
-def test_non_finite_pixels_do_not_spread():
-    image = torch.rand(1, 3, 4, 4) * 4
+def test_non_finite_pixels_do_not_spread(device):
+    image = torch.rand(1, 3, 4, 4, device=device) * 4
     bad = image.clone()
     bad[0, :, 1, 2] = torch.tensor([float("nan"), float("inf"), -float("inf")])
-    keep = torch.ones(4, 4, dtype=torch.bool)
+    keep = torch.ones(4, 4, dtype=torch.bool, device=device)
     keep[1, 2] = False
     assert torch.equal(aces2_output(image)[..., keep], aces2_output(bad)[..., keep])
 

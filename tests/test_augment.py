@@ -25,12 +25,12 @@ MODES = ("neutral", "aces", "reinhard", "none")
 FULL = dict(GRADE_RANGES, **BLOOM_RANGES, bloom_mode="scattering", tonemap=MODES)
 
 
-def hdr_batch(batch=6, size=32, dtype=torch.float64, seed=1):
+def hdr_batch(batch=6, size=32, dtype=torch.float64, seed=1, device=None):
     """Scene-referred images: a smooth ramp up to ~8 with a few bright glints that bloom."""
     generator = torch.Generator().manual_seed(seed)
     images = torch.rand(batch, 3, size, size, generator=generator, dtype=dtype) ** 3 * 8.0
     images[:, :, size // 3, size // 2] = 50.0
-    return images
+    return images.to(device)
 
 
 def seeded(seed):
@@ -62,9 +62,9 @@ def assert_matches_per_sample(layer, images, out):
         torch.testing.assert_close(out[i : i + 1], reference_sample(images, params, i, layer), atol=1e-9, rtol=1e-9)
 
 
-def test_full_set_matches_per_sample_layers():
+def test_full_set_matches_per_sample_layers(device):
     layer = tg.RandomPostFX(**FULL)
-    images = hdr_batch(batch=8)
+    images = hdr_batch(batch=8, device=device)
     out = layer(images, generator=seeded(0))
     assert set(layer.last_params["tonemap"].tolist()) == {0, 1, 2, 3}, "the seed should draw every mode"
     assert_matches_per_sample(layer, images, out)
@@ -76,9 +76,9 @@ def test_aces_grade_matches_per_sample_layers():
     assert_matches_per_sample(layer, images, layer(images, generator=seeded(6)))
 
 
-def test_skipped_samples_are_the_input_and_applied_ones_graded():
+def test_skipped_samples_are_the_input_and_applied_ones_graded(device):
     layer = tg.RandomPostFX(contrast=(20.0, 40.0), tonemap="reinhard", p=0.5)
-    images = hdr_batch(batch=12)
+    images = hdr_batch(batch=12, device=device)
     out = layer(images, generator=seeded(3))
     applied = layer.last_params["batch_prob"]
     assert 0 < applied.sum() < 12, "the seed should skip some samples and apply others"
@@ -129,9 +129,9 @@ def test_global_generator_is_used_without_a_generator():
     assert torch.equal(layer(images), first)
 
 
-def test_replay_on_another_tensor():
+def test_replay_on_another_tensor(device):
     layer = tg.RandomPostFX(**FULL, p=0.7)
-    images, labels = hdr_batch(seed=1), hdr_batch(seed=2)
+    images, labels = hdr_batch(seed=1, device=device), hdr_batch(seed=2, device=device)
     layer(images, generator=seeded(9))
     params = layer.last_params
     replayed = layer(labels, params=params)

@@ -57,12 +57,17 @@ def _modules():
     }
 
 
+NEEDS_CUDA = pytest.mark.skipif(not torch.cuda.is_available(), reason="device-conditional: needs CUDA for CUDA autocast")
+AUTOCASTS = [("cpu", torch.bfloat16), pytest.param("cuda", torch.float16, marks=NEEDS_CUDA)]
+
+
+@pytest.mark.parametrize("device, dtype", AUTOCASTS)
 @pytest.mark.parametrize("name", list(_modules()))
-def test_every_stage_ignores_cpu_autocast(desk, name):
-    module = _modules()[name]
-    image = desk.clamp(0.0, 1.0) if name == "lut" else desk
+def test_every_stage_ignores_autocast(desk, name, device, dtype):
+    module = _modules()[name].to(device)
+    image = (desk.clamp(0.0, 1.0) if name == "lut" else desk).to(device)
     reference = module(image)
-    with torch.autocast("cpu", dtype=torch.bfloat16):
+    with torch.autocast(device, dtype=dtype):
         out = module(image)
     assert out.dtype == torch.float32
     torch.testing.assert_close(out, reference, rtol=1e-6, atol=1e-6)
@@ -78,7 +83,7 @@ def test_low_precision_input_under_autocast_keeps_its_dtype_within_the_readme_bo
     assert (out.float() - reference).abs().max() <= BFLOAT16_DISPLAY_BOUND
 
 
-@pytest.mark.skipif(not torch.cuda.is_available(), reason="device-conditional: needs CUDA for CUDA autocast")
+@NEEDS_CUDA
 def test_grade_and_aces_under_cuda_float16_autocast_match_float32(desk):
     look, image = _look().cuda(), desk.cuda()
     reference = look(image)

@@ -29,9 +29,9 @@ def unity_threshold(brightness: float, threshold_gamma: float, knee: float) -> f
     return brightness * contribution / max(brightness, 0.00001)
 
 
-def bordered_image(height=37, width=29) -> torch.Tensor:
+def bordered_image(height=37, width=29, device=None) -> torch.Tensor:
     """Dim noise with very bright corners, edge rows and edge columns: the worst case for border leaks."""
-    image = torch.rand(1, 3, height, width) * 0.2
+    image = torch.rand(1, 3, height, width, device=device) * 0.2
     image[..., 0, :] = 50.0
     image[..., :, -1] = 80.0
     image[..., [0, 0, -1, -1], [0, -1, 0, -1]] = 1000.0
@@ -49,8 +49,8 @@ def read_rgb(exr_dir, name: str) -> torch.Tensor:
 @pytest.mark.parametrize("fade_fireflies", [True, False])
 @pytest.mark.parametrize("bicubic", [False, True])
 @pytest.mark.parametrize("kind", ["random", "bordered"])
-def test_scattering_conserves_light_synthetic(kind, bicubic, fade_fireflies):
-    image = torch.rand(2, 3, 45, 31) * 20.0 if kind == "random" else bordered_image()
+def test_scattering_conserves_light_synthetic(kind, bicubic, fade_fireflies, device):
+    image = torch.rand(2, 3, 45, 31, device=device) * 20.0 if kind == "random" else bordered_image(device=device)
     out = bloom(
         image, mode="scattering", threshold=0.0, intensity=1.0, scatter=0.9,
         fade_fireflies=fade_fireflies, bicubic_upsampling=bicubic, downscale_limit=1,
@@ -67,9 +67,9 @@ def test_scattering_conserves_light_on_real_images(exr_dir, name):
         assert relative_light_error(out, image) < 1e-3, (name, threshold)
 
 
-def test_scattering_conserves_light_per_sample_to_rounding():
-    image = torch.rand(3, 3, 24, 40, dtype=torch.float64) * torch.tensor([1.0, 10.0, 1000.0]).view(3, 1, 1, 1)
-    out = bloom(image, mode="scattering", threshold=torch.tensor([0.0, 0.5, 1.0]), knee=0.3, scatter=0.3)
+def test_scattering_conserves_light_per_sample_to_rounding(device):
+    image = torch.rand(3, 3, 24, 40, dtype=torch.float64, device=device) * torch.tensor([1.0, 10.0, 1000.0], device=device).view(3, 1, 1, 1)
+    out = bloom(image, mode="scattering", threshold=torch.tensor([0.0, 0.5, 1.0]), knee=0.3, scatter=0.3)  # a CPU control moves to the image
     torch.testing.assert_close(out.sum(dim=(1, 2, 3)), image.sum(dim=(1, 2, 3)), rtol=1e-12, atol=0)
 
 
@@ -106,8 +106,8 @@ def test_additive_below_the_knee_is_an_exact_identity():
     assert torch.equal(out, image)
 
 
-def test_additive_adds_exactly_the_thresholded_light_per_level():
-    image = torch.full((1, 3, 32, 32), 0.3)  # below the knee: contributes nothing
+def test_additive_adds_exactly_the_thresholded_light_per_level(device):
+    image = torch.full((1, 3, 32, 32), 0.3, device=device)  # below the knee: contributes nothing
     image[..., 8:12, 8:12] = 5.0  # four whole 2x2 blocks; threshold 1 keeps 5 - 1 = 4 per channel
     out = bloom(image, mode="additive", threshold=1.0, knee=0.5, intensity=0.7, fade_fireflies=False)
     levels = 3  # 32 -> prefilter 16 -> levels of 8, 4, 2 (1 is below downscale_limit 2)
@@ -324,8 +324,8 @@ def test_learnable_zero_intensity_is_computed_and_differentiable():
 
 
 @pytest.mark.parametrize("size", [(1, 1), (2, 2), (7, 5), (3, 9), (5, 64), (33, 17), (67, 45)])
-def test_sizes_including_odd_and_tiny(size):
-    image = torch.rand(1, 3, *size) * 10
+def test_sizes_including_odd_and_tiny(size, device):
+    image = torch.rand(1, 3, *size, device=device) * 10
     for mode in ("additive", "scattering"):
         out = bloom(image, mode=mode, threshold=0.5)
         assert out.shape == image.shape and torch.isfinite(out).all()
@@ -360,8 +360,8 @@ def test_half_precision_is_computed_in_float32(dtype):
     torch.testing.assert_close(out.float(), reference.clamp(max=65504.0).to(dtype).float())
 
 
-def test_non_finite_pixels_follow_the_sanitize_policy(exr_dir):
-    image = read_rgb(exr_dir, "BrightRingsNanInf.exr")
+def test_non_finite_pixels_follow_the_sanitize_policy(exr_dir, device):
+    image = read_rgb(exr_dir, "BrightRingsNanInf.exr").to(device)
     assert torch.isnan(image).any() and torch.isinf(image).any()
     cleaned = torch.nan_to_num(image, nan=0.0, posinf=65504.0, neginf=-65504.0)
     for mode in ("additive", "scattering"):
@@ -369,13 +369,13 @@ def test_non_finite_pixels_follow_the_sanitize_policy(exr_dir):
         assert torch.isfinite(out).all()
         assert torch.equal(out, bloom(cleaned, mode=mode, threshold=1.0))
     # one NaN pixel in a smooth frame counts as a black pixel: only a trace of it reaches other pixels
-    frame = torch.full((1, 3, 40, 40), 2.0)
+    frame = torch.full((1, 3, 40, 40), 2.0, device=device)
     broken, black = frame.clone(), frame.clone()
     broken[..., 20, 20] = float("nan")
     black[..., 20, 20] = 0.0
     out = bloom(broken)
     assert torch.equal(out, bloom(black))
-    elsewhere = torch.ones(40, 40, dtype=torch.bool)
+    elsewhere = torch.ones(40, 40, dtype=torch.bool, device=device)
     elsewhere[20, 20] = False
     assert ((out - bloom(frame))[..., elsewhere].abs() < 0.05).all()
 

@@ -65,9 +65,9 @@ def test_primaries_matrices_match_colour_science(name, space):
 @pytest.mark.parametrize("fn", [color.linear_to_pq, color.pq_to_linear, color.hlg_oetf, color.hlg_inverse_oetf,
                                 color.linear_to_acescct, color.acescct_to_linear])
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
-def test_encodings_have_finite_values_and_gradients_at_extremes(fn, dtype):
+def test_encodings_have_finite_values_and_gradients_at_extremes(fn, dtype, device):
     tiny = torch.finfo(dtype).tiny
-    x = torch.tensor([-1.0, -tiny, 0.0, tiny / 4, tiny, 1e-8, 0.5, 1.0, 60.0, 65504.0], dtype=dtype, requires_grad=True)
+    x = torch.tensor([-1.0, -tiny, 0.0, tiny / 4, tiny, 1e-8, 0.5, 1.0, 60.0, 65504.0], dtype=dtype, device=device, requires_grad=True)
     y = fn(x)
     (grad,) = torch.autograd.grad(y.sum(), x)
     assert torch.isfinite(y).all() and torch.isfinite(grad).all()

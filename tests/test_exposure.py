@@ -19,12 +19,12 @@ DELTA = 1e-4  # Reinhard's δ of the log-average
 
 def lum(image: torch.Tensor) -> torch.Tensor:
     """Rec.709 luminance in float64, shape (..., H, W)."""
-    return torch.einsum("...chw,c->...hw", image.double(), REC709)
+    return torch.einsum("...chw,c->...hw", image.double(), REC709.to(image.device))
 
 
-def uniform(luminances, size=(8, 8), dtype=torch.float64) -> torch.Tensor:
+def uniform(luminances, size=(8, 8), dtype=torch.float64, device=None) -> torch.Tensor:
     """Grey frames (B, 3, H, W) whose luminance is each value of ``luminances``."""
-    values = torch.as_tensor(luminances, dtype=dtype) / REC709.sum().to(dtype)
+    values = torch.as_tensor(luminances, dtype=dtype, device=device) / REC709.sum().to(dtype)
     return values.reshape(-1, 1, 1, 1).expand(-1, 3, *size).clone()
 
 
@@ -37,8 +37,8 @@ def expected_log_average(image: torch.Tensor) -> torch.Tensor:
 
 
 @pytest.mark.parametrize("size", [(1, 1), (7, 5), (64, 64), (200, 130)])
-def test_metering_matches_the_direct_averages_at_any_size(size):
-    image = torch.rand(2, 3, *size, dtype=torch.float64) * 4
+def test_metering_matches_the_direct_averages_at_any_size(size, device):
+    image = torch.rand(2, 3, *size, dtype=torch.float64, device=device) * 4
     torch.testing.assert_close(meter_luminance(image, "mean"), lum(image).mean((-2, -1)), rtol=1e-12, atol=0)
     torch.testing.assert_close(meter_luminance(image, "log"), expected_log_average(image), rtol=1e-12, atol=0)
 
@@ -52,8 +52,8 @@ def test_log_metering_barely_moves_for_one_huge_pixel():
     assert mean_spike / meter_luminance(grey, "mean") > 10  # the arithmetic mean is dragged far away
 
 
-def test_metering_ignores_non_finite_pixels_by_policy():
-    image = torch.rand(1, 3, 16, 16) + 0.1
+def test_metering_ignores_non_finite_pixels_by_policy(device):
+    image = torch.rand(1, 3, 16, 16, device=device) + 0.1
     bad = image.clone()
     bad[0, :, 3, 4] = float("nan")
     replaced = image.clone()
@@ -86,12 +86,12 @@ def test_first_frame_adapts_instantly_and_reset_forgets():
 
 
 @pytest.mark.parametrize("metering", ["mean", "log"])
-def test_state_follows_the_closed_form_exponential(metering):
+def test_state_follows_the_closed_form_exponential(metering, device):
     speed, dt, steps, start, target = 2.0, 0.05, 10, 0.5, 4.0
-    module = tg.AutoExposure(speed=speed, metering=metering)
-    module(uniform([start]))
+    module = tg.AutoExposure(speed=speed, metering=metering).to(device)
+    module(uniform([start], device=device))
     for _ in range(steps):
-        module(uniform([target]), dt=dt)
+        module(uniform([target], device=device), dt=dt)
     expected = target + (start - target) * math.exp(-speed * dt * steps)
     assert module.adapted_luminance.item() == pytest.approx(expected, rel=1e-9)
 
@@ -116,22 +116,22 @@ def test_adapt_luminance_formula():
 
 
 @pytest.mark.parametrize("metering", ["mean", "log"])
-def test_uniform_scene_settles_on_middle_grey(metering):
+def test_uniform_scene_settles_on_middle_grey(metering, device):
     module = tg.AutoExposure(middle_grey=0.18, metering=metering)
-    module(uniform([0.02]))
-    scene = uniform([7.0])
+    module(uniform([0.02], device=device))
+    scene = uniform([7.0], device=device)
     out = module(scene, dt=60.0)
-    torch.testing.assert_close(lum(out), torch.full((1, 8, 8), 0.18, dtype=torch.float64), rtol=1e-9, atol=0)
+    torch.testing.assert_close(lum(out), torch.full((1, 8, 8), 0.18, dtype=torch.float64, device=device), rtol=1e-9, atol=0)
 
 
-def test_per_sample_state_and_parameters_in_a_batch():
+def test_per_sample_state_and_parameters_in_a_batch(device):
     start, target = [0.2, 1.0, 5.0], [3.0, 0.1, 5.0]
-    speed = torch.tensor([0.5, 1.0, 2.0], dtype=torch.float64)
-    middle_grey = torch.tensor([0.1, 0.18, 0.3], dtype=torch.float64)
+    speed = torch.tensor([0.5, 1.0, 2.0], dtype=torch.float64, device=device)
+    middle_grey = torch.tensor([0.1, 0.18, 0.3], dtype=torch.float64, device=device)
     module = tg.AutoExposure(middle_grey=middle_grey, speed=speed, metering="mean")
-    module(uniform(start))
-    out = module(uniform(target), dt=0.4)
-    start, target = torch.tensor(start, dtype=torch.float64), torch.tensor(target, dtype=torch.float64)
+    module(uniform(start, device=device))
+    out = module(uniform(target, device=device), dt=0.4)
+    start, target = (torch.tensor(v, dtype=torch.float64, device=device) for v in (start, target))
     expected = target + (start - target) * torch.exp(-0.4 * speed)
     torch.testing.assert_close(module.adapted_luminance, expected, rtol=1e-12, atol=0)
     expected_lum = target * middle_grey / expected

@@ -34,9 +34,9 @@ LOOKS = {
 
 @pytest.mark.parametrize("aces", [False, True], ids=["linear", "aces"])
 @pytest.mark.parametrize("look", sorted(LOOKS))
-def test_matches_unity_color_grade_reference(look, aces):
+def test_matches_unity_color_grade_reference(look, aces, device):
     rgb = sample_pixels()
-    ours = rows(tg.ColorGrade(aces=aces, **LOOKS[look])(pixels(rgb)))
+    ours = rows(tg.ColorGrade(aces=aces, **LOOKS[look])(pixels(rgb, device=device)))
     np.testing.assert_allclose(ours, unity_grade(rgb, aces, **LOOKS[look]), rtol=1e-9, atol=1e-9)
 
 
@@ -91,13 +91,13 @@ def test_contrast_increases_spread_in_log_space():
     assert more[0] < 0.02 and more[-1] > 2.0 and np.all(np.diff(more) > 0)
 
 
-def test_per_sample_controls_equal_separate_runs():
-    image = torch.rand(3, 3, 5, 4, dtype=torch.float64) * 4
+def test_per_sample_controls_equal_separate_runs(device):
+    image = torch.rand(3, 3, 5, 4, dtype=torch.float64, device=device) * 4
     contrast = torch.tensor([-20.0, 0.0, 40.0], dtype=torch.float64)
     tint = torch.tensor([[1.0, 0.9, 0.8], [1.0, 1.0, 1.0], [0.7, 0.8, 1.0]], dtype=torch.float64)
     mixer = torch.eye(3, dtype=torch.float64).repeat(3, 1, 1)
     mixer[2, 0, 1] = 0.3
-    batched = tg.ColorGrade(contrast=contrast, color_filter=tint, channel_mixer=mixer)(image)
+    batched = tg.ColorGrade(contrast=contrast, color_filter=tint, channel_mixer=mixer).to(device)(image)
     for i in range(3):
         single = tg.ColorGrade(contrast=contrast[i].item(), color_filter=tint[i].tolist(), channel_mixer=mixer[i].tolist())
         torch.testing.assert_close(batched[i : i + 1], single(image[i : i + 1]))
@@ -108,11 +108,11 @@ def test_per_sample_batch_mismatch_is_a_clear_error():
         tg.ColorGrade(contrast=torch.tensor([10.0, 20.0]))(torch.rand(3, 3, 4, 4))
 
 
-def test_learnable_controls_are_parameters_with_gradients():
+def test_learnable_controls_are_parameters_with_gradients(device):
     grade = tg.ColorGrade(contrast=torch.nn.Parameter(torch.tensor(10.0)), color_filter=torch.nn.Parameter(torch.tensor([0.9, 1.0, 1.0])))
     assert {name for name, _ in grade.named_parameters()} == {"contrast", "color_filter"}
     assert not grade.is_identity
-    grade(torch.rand(2, 3, 4, 4) * 2).sum().backward()
+    grade.to(device)(torch.rand(2, 3, 4, 4, device=device) * 2).sum().backward()
     assert torch.isfinite(grade.contrast.grad) and torch.isfinite(grade.color_filter.grad).all()
 
 
@@ -138,23 +138,23 @@ def test_gradcheck_image_and_parameters(name):
     assert torch.autograd.gradcheck(op, (image,) + params)
 
 
-def extremes_image(dtype=torch.float32):
+def extremes_image(dtype=torch.float32, device=None):
     values = EXTREMES + [1e-45, 1e-38, 59.9, 1e3, 3e38, -1.0, -1e30]
     grid = [[a, b, c] for a in values for b in (0.0, 0.18, 65504.0) for c in (0.0, 1e30)]
-    return pixels(grid, dtype)
+    return pixels(grid, dtype, device)
 
 
 @pytest.mark.parametrize("aces", [False, True], ids=["linear", "aces"])
-def test_extremes_give_finite_outputs_and_gradients(aces):
-    image = extremes_image().requires_grad_()
+def test_extremes_give_finite_outputs_and_gradients(aces, device):
+    image = extremes_image(device=device).requires_grad_()
     out = tg.ColorGrade(aces=aces, **LOOKS["everything"])(image)
     assert torch.isfinite(out).all() and (out >= 0).all() if not aces else torch.isfinite(out).all()
     out.sum().backward()
     assert torch.isfinite(image.grad).all()
 
 
-def test_nan_and_inf_pixels_do_not_spread():
-    image = torch.rand(1, 3, 4, 4) * 4
+def test_nan_and_inf_pixels_do_not_spread(device):
+    image = torch.rand(1, 3, 4, 4, device=device) * 4
     image[0, :, 2, 3] = torch.tensor([float("nan"), float("inf"), -float("inf")])
     out = tg.ColorGrade(**LOOKS["everything"])(image)
     assert torch.isfinite(out).all()

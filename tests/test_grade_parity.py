@@ -394,11 +394,11 @@ def test_dither_noise_is_triangular_within_one_code():
     assert float((histogram - triangle).abs().max()) < 0.01
 
 
-def test_dither_adds_the_tile_in_srgb_and_is_seeded():
-    image = torch.rand(2, 3, 70, 90, dtype=torch.float64) * 0.9 + 0.05
-    out = tg.Dither(amplitude=1 / 255, seed=3, size=16)(image)
-    pattern = F.dither_pattern(16, torch.Generator().manual_seed(3), torch.float64)
-    rows_, cols = torch.arange(70) % 16, torch.arange(90) % 16
+def test_dither_adds_the_tile_in_srgb_and_is_seeded(device):
+    image = torch.rand(2, 3, 70, 90, dtype=torch.float64, device=device) * 0.9 + 0.05
+    out = tg.Dither(amplitude=1 / 255, seed=3, size=16).to(device)(image)
+    pattern = F.dither_pattern(16, torch.Generator().manual_seed(3), torch.float64).to(device)
+    rows_, cols = torch.arange(70, device=device) % 16, torch.arange(90, device=device) % 16
     expected = tg.color.srgb_to_linear(tg.color.linear_to_srgb(image) + pattern[rows_][:, cols] / 255)
     torch.testing.assert_close(out, expected)
     torch.testing.assert_close(out, tg.Dither(seed=3, size=16)(image), rtol=0, atol=0)

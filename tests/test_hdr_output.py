@@ -28,9 +28,9 @@ REFERENCE_NAMES = {"range_reduction": "method", "peak_luminance": "peak", "min_l
 
 
 @pytest.mark.parametrize("settings", SETTINGS)
-def test_neutral_hdr_matches_unity_formulas(settings):
+def test_neutral_hdr_matches_unity_formulas(settings, device):
     rgb = hdr_samples()
-    ours = rows(tonemap(pixels(rgb), "neutral_hdr", **settings))
+    ours = rows(tonemap(pixels(rgb, device=device), "neutral_hdr", **settings))
     expected = ref_neutral_hdr(rgb, **{REFERENCE_NAMES.get(k, k): v for k, v in settings.items()})
     np.testing.assert_allclose(ours, expected, atol=1e-9)
 
@@ -68,18 +68,18 @@ def test_neutral_hdr_gradients_are_finite_at_extremes():
 NITS = np.concatenate([[0.0], np.geomspace(1e-3, 1.0, 200)])
 
 
-def test_pq_and_primaries_match_colour_science():
+def test_pq_and_primaries_match_colour_science(device):
     rgb = np.stack([NITS, NITS[::-1], np.sqrt(NITS)], 1)
-    ours = rows(encode_display(pixels(rgb), "pq", "rec2020", 1000.0))
+    ours = rows(tg.Display("pq", "rec2020", 1000.0).to(device)(pixels(rgb, device=device)))
     to_2020 = colour.matrix_RGB_to_RGB(colour.RGB_COLOURSPACES["ITU-R BT.709"], colour.RGB_COLOURSPACES["ITU-R BT.2020"])
     expected = colour.models.eotf_inverse_ST2084(np.clip(rgb @ to_2020.T, 0, 1) * 1000.0)
     np.testing.assert_allclose(ours, expected, atol=1e-9)
 
 
 @pytest.mark.parametrize("peak", [400.0, 1000.0, 2000.0])
-def test_hlg_matches_colour_science(peak):
+def test_hlg_matches_colour_science(peak, device):
     rgb = np.stack([NITS, NITS[::-1], np.sqrt(NITS)], 1)
-    ours = rows(encode_display(pixels(rgb), "hlg", "rec2020", peak, input_primaries="rec2020"))
+    ours = rows(encode_display(pixels(rgb, device=device), "hlg", "rec2020", peak, input_primaries="rec2020"))
     # Saturated peak colours need scene light above 1 (a signal above 1); the display range ends at 1.
     expected = np.clip(colour.models.eotf_inverse_BT2100_HLG(rgb * peak, L_B=0.0, L_W=peak), 0.0, 1.0)
     np.testing.assert_allclose(ours, expected, atol=1e-6)

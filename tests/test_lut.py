@@ -76,23 +76,23 @@ REFERENCES = {"trilinear": reference_trilinear, "tetrahedral": reference_tetrahe
 
 
 @pytest.mark.parametrize("interpolation", ["trilinear", "tetrahedral"])
-def test_matches_independent_float64_reference(interpolation):
+def test_matches_independent_float64_reference(interpolation, device):
     size = 6
     table = random_table(size)
     image = torch.rand(1, 3, 12, 20, dtype=torch.float64) * 1.2 - 0.1  # some pixels outside the domain
-    out = LUT3D(table.clone(), shaper="linear").double()(image, interpolation)
+    out = LUT3D(table.clone(), shaper="linear").to(device, torch.float64)(image.to(device), interpolation)
     clamped = image.clamp(0, 1) * (size - 1)
     points = clamped[0].permute(1, 2, 0).reshape(-1, 3).numpy()
     expected = np.stack([REFERENCES[interpolation](table.numpy(), p) for p in points])
-    got = out[0].permute(1, 2, 0).reshape(-1, 3).numpy()
+    got = out[0].permute(1, 2, 0).reshape(-1, 3).cpu().numpy()
     np.testing.assert_allclose(got, expected, atol=1e-12)
 
 
 @pytest.mark.parametrize("interpolation", ["trilinear", "tetrahedral"])
 @pytest.mark.parametrize("size", [2, 5, 17])
-def test_identity_lut_is_exact_on_lattice_points(interpolation, size):
-    points = lattice(size, torch.float32).reshape(1, -1, 1, 3).permute(0, 3, 1, 2)
-    out = LUT3D(identity_table(size), shaper="linear")(points, interpolation)
+def test_identity_lut_is_exact_on_lattice_points(interpolation, size, device):
+    points = lattice(size, torch.float32).reshape(1, -1, 1, 3).permute(0, 3, 1, 2).to(device)
+    out = LUT3D(identity_table(size), shaper="linear").to(device)(points, interpolation)
     assert torch.equal(out, points)
 
 
@@ -272,10 +272,10 @@ def test_gradients_with_respect_to_image_and_table(interpolation):
     assert f(image, table).sum().requires_grad
 
 
-def test_learnable_lut_holds_a_parameter_and_fits():
-    lut = LUT3D(identity_table(5), learnable=True)
+def test_learnable_lut_holds_a_parameter_and_fits(device):
+    lut = LUT3D(identity_table(5), learnable=True).to(device)
     assert isinstance(lut.table, torch.nn.Parameter)
-    image = torch.rand(1, 3, 16, 16)
+    image = torch.rand(1, 3, 16, 16, device=device)
     target = mix(image)
     optimizer = torch.optim.Adam(lut.parameters(), lr=0.05)
     start = (lut(image) - target).abs().mean().item()
@@ -356,19 +356,19 @@ def test_auto_shaper_follows_tone_mapping():
     assert bake_lut(declared, size=3).shaper == "logc"
 
 
-def test_non_finite_pixels_follow_the_library_policy():
-    lut = bake_lut(mix, size=9, shaper="logc")
-    image = torch.rand(1, 3, 4, 4) * 4
+def test_non_finite_pixels_follow_the_library_policy(device):
+    lut = bake_lut(mix, size=9, shaper="logc").to(device)
+    image = torch.rand(1, 3, 4, 4, device=device) * 4
     bad = image.clone()
     bad[0, :, 1, 1] = float("nan")
     bad[0, :, 2, 2] = float("inf")
     out = lut(bad)
     assert torch.isfinite(out).all()
-    mask = torch.ones(4, 4, dtype=torch.bool)
+    mask = torch.ones(4, 4, dtype=torch.bool, device=device)
     mask[1, 1] = mask[2, 2] = False
     assert torch.equal(out[0][:, mask], lut(image)[0][:, mask])
-    assert torch.equal(out[0, :, 1, 1], lut(torch.zeros(1, 3, 1, 1))[0, :, 0, 0])
-    assert torch.equal(out[0, :, 2, 2], lut(torch.full((1, 3, 1, 1), 65504.0))[0, :, 0, 0])
+    assert torch.equal(out[0, :, 1, 1], lut(torch.zeros(1, 3, 1, 1, device=device))[0, :, 0, 0])
+    assert torch.equal(out[0, :, 2, 2], lut(torch.full((1, 3, 1, 1), 65504.0, device=device))[0, :, 0, 0])
 
 
 def test_dtype_and_batch_shape_follow_the_input():

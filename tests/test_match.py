@@ -95,11 +95,11 @@ def test_tone_mapper_is_chosen_and_identifiable_controls_recovered_closely(exr_d
     assert result.errors["controls"]["p99.9"] <= 0.1
 
 
-def test_scene_referred_target_from_two_pairs_with_masks(exr_dir):
-    source = scene(exr_dir)
+def test_scene_referred_target_from_two_pairs_with_masks(exr_dir, device):
+    source = scene(exr_dir).to(device)
     target = tg.ColorGrade(contrast=-20.0, saturation=30.0)(source[None])[0]
-    mask = torch.rand(source.shape[1:]) < 0.5
-    target[:, ~mask] = 0.0  # outside the mask the "target" is unrelated to the look
+    mask = torch.rand(source.shape[1:]) < 0.5  # on the CPU, whatever the images' device
+    target[:, ~mask.to(device)] = 0.0  # outside the mask the "target" is unrelated to the look
     half = source.shape[2] // 2
     sources, targets = [source[..., :half], source[..., half:]], [target[..., :half], target[..., half:]]
     result = tg.match_look(sources, targets, stages=("grade",), mask=[mask[:, :half], mask[:, half:]],

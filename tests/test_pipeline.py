@@ -17,15 +17,15 @@ STRONG_LOOK = {
 MILD_LOOK = {"grade": {"post_exposure": 0.3, "temperature": 10, "contrast": 15}, "tonemap": "neutral"}
 
 
-def hdr(shape=(2, 3, 24, 32)) -> torch.Tensor:
-    return torch.rand(shape) ** 3 * 20.0
+def hdr(shape=(2, 3, 24, 32), device=None) -> torch.Tensor:
+    return torch.rand(shape, device=device) ** 3 * 20.0
 
 
-def test_stages_run_in_order_exposure_bloom_grade_tonemap():
+def test_stages_run_in_order_exposure_bloom_grade_tonemap(device):
     exposure, bloom = tg.AutoExposure(), tg.Bloom(intensity=0.7, max_iterations=3)
     grade, tonemap = tg.ColorGrade(contrast=20, saturation=-10), tg.ToneMap("aces")
-    look = tg.PostFX(exposure=exposure, bloom=bloom, grade=grade, tonemap=tonemap)
-    x = hdr()
+    look = tg.PostFX(exposure=exposure, bloom=bloom, grade=grade, tonemap=tonemap).to(device)
+    x = hdr(device=device)
     expected = tonemap(grade(bloom(tg.AutoExposure()(x))))
     assert list(look.stages()) == ["exposure", "bloom", "grade", "tonemap"]
     torch.testing.assert_close(look(x), expected)
@@ -92,11 +92,11 @@ def test_lut_excludes_grade_and_tonemap():
         tg.PostFX(grade={"contrast": 10}, lut=lut)
 
 
-def test_frame_is_the_stateless_form_of_forward():
-    look = tg.PostFX(exposure={"speed": 2.0}, grade={"contrast": 10}, tonemap="neutral")
-    first, second = hdr(), hdr() * 3.0
+def test_frame_is_the_stateless_form_of_forward(device):
+    look = tg.PostFX(exposure={"speed": 2.0}, grade={"contrast": 10}, tonemap="neutral").to(device)
+    first, second = hdr(device=device), hdr(device=device) * 3.0
     out_first, out_second = look(first, dt=0.1), look(second, dt=0.1)
-    start = torch.zeros(2)
+    start = torch.zeros(2, device=device)
     frame_first, adapted = look.frame(first, start, 0.1)
     frame_second, _ = look.frame(second, adapted, 0.1)
     torch.testing.assert_close(frame_first, out_first)

@@ -20,9 +20,9 @@ def test_every_mode_has_a_reference():
 
 
 @pytest.mark.parametrize("mode", sorted(REFERENCES))
-def test_matches_independent_float64_formula(mode):
+def test_matches_independent_float64_formula(mode, device):
     rgb = hdr_samples()
-    ours = rows(tonemap(pixels(rgb), mode))
+    ours = rows(tonemap(pixels(rgb, device=device), mode))
     np.testing.assert_allclose(ours, REFERENCES[mode](rgb), atol=1e-9)
 
 
@@ -65,18 +65,18 @@ def test_gradcheck_with_respect_to_parameters():
     assert torch.autograd.gradcheck(lambda w, b: tonemap(image, "hable", white_point=w, exposure_bias=b), (white, bias))
 
 
-def test_per_sample_white_point_equals_separate_runs():
-    image = torch.rand(3, 3, 4, 5, dtype=torch.float64) * 10
-    white = torch.tensor([2.0, 4.0, 8.0], dtype=torch.float64)
+def test_per_sample_white_point_equals_separate_runs(device):
+    image = torch.rand(3, 3, 4, 5, dtype=torch.float64, device=device) * 10
+    white = torch.tensor([2.0, 4.0, 8.0], dtype=torch.float64, device=device)
     batched = tg.ToneMap("reinhard_extended", white_point=white)(image)
     for i in range(3):
         torch.testing.assert_close(batched[i : i + 1], tonemap(image[i : i + 1], "reinhard_extended", white_point=white[i].item()))
 
 
-def test_learnable_white_point_is_a_parameter_and_gets_a_gradient():
-    layer = tg.ToneMap("reinhard_extended", white_point=torch.nn.Parameter(torch.tensor(6.0)))
+def test_learnable_white_point_is_a_parameter_and_gets_a_gradient(device):
+    layer = tg.ToneMap("reinhard_extended", white_point=torch.nn.Parameter(torch.tensor(6.0))).to(device)
     assert [name for name, _ in layer.named_parameters()] == ["white_point"]
-    layer(torch.rand(1, 3, 4, 4) * 5).sum().backward()
+    layer(torch.rand(1, 3, 4, 4, device=device) * 5).sum().backward()
     assert layer.white_point.grad is not None and torch.isfinite(layer.white_point.grad)
 
 
@@ -84,9 +84,9 @@ EXTREME_VALUES = [0.0, 1e-45, 1e-8, 0.18, 59.9, 60.0, 65504.0, 1e30, 3e38, -1.0,
 
 
 @pytest.mark.parametrize("mode", tg.TONEMAP_MODES)
-def test_extremes_give_finite_display_values_and_gradients(mode):
+def test_extremes_give_finite_display_values_and_gradients(mode, device):
     grid = [[a, b, c] for a in EXTREME_VALUES for b in (0.0, 0.18, 1e30) for c in (0.0, 65504.0)]
-    image = pixels(grid, torch.float32).requires_grad_()
+    image = pixels(grid, torch.float32, device).requires_grad_()
     out = tonemap(image, mode)
     assert torch.isfinite(out).all() and out.min() >= 0 and out.max() <= 1
     out.sum().backward()
@@ -94,14 +94,14 @@ def test_extremes_give_finite_display_values_and_gradients(mode):
 
 
 @pytest.mark.parametrize("mode", tg.TONEMAP_MODES)
-def test_nan_and_inf_pixels_do_not_spread(mode):
-    image = torch.rand(1, 3, 4, 4) * 4
+def test_nan_and_inf_pixels_do_not_spread(mode, device):
+    image = torch.rand(1, 3, 4, 4, device=device) * 4
     image[0, :, 1, 1] = torch.tensor([float("nan"), float("inf"), -float("inf")])
     clean = image.clone()
     clean[0, :, 1, 1] = 0.5
     out, expected = tonemap(image, mode), tonemap(clean, mode)
     assert torch.isfinite(out).all()
-    mask = torch.ones(4, 4, dtype=torch.bool)
+    mask = torch.ones(4, 4, dtype=torch.bool, device=device)
     mask[1, 1] = False
     torch.testing.assert_close(out[..., mask], expected[..., mask])
 

@@ -312,4 +312,4 @@ def bounded_pow(x: torch.Tensor, exponent) -> torch.Tensor:
     limit = torch.exp2(_LOG2_HALF_MAX / exponent.detach())
     inside = (x > 0) & (x < limit)
     powered = torch.where(inside, x, torch.ones_like(x)) ** exponent
-    return torch.where(inside, powered, torch.where(x > 0, HALF_MAX, 0.0).to(x.dtype))
+    return torch.where(inside, powered, (x > 0).to(x.dtype) * HALF_MAX)

@@ -110,8 +110,13 @@ class Dither(Stage):
         self.draw_pattern()
 
     def draw_pattern(self) -> None:
-        """Draw the noise tile from ``seed`` (a buffer, so it follows ``.to()``; not saved: the seed rebuilds it)."""
-        self.register_buffer("pattern", dither_pattern(self.size, torch.Generator().manual_seed(self.seed)), persistent=False)
+        """Draw the noise tile from ``seed`` (a buffer, so it follows ``.to()``; not saved: the seed rebuilds it).
+
+        A tile redrawn after ``.to()`` takes the device and dtype of the one it replaces.
+        """
+        pattern = dither_pattern(self.size, torch.Generator().manual_seed(self.seed))
+        previous = self._buffers.get("pattern")
+        self.register_buffer("pattern", pattern if previous is None else pattern.to(previous), persistent=False)
 
     def set_param(self, name: str, value) -> None:
         super().set_param(name, value)

@@ -194,7 +194,7 @@ def primary_grade(image: torch.Tensor, style: str = "linear", **controls) -> tor
 
 def _check_pivots(black: Param, white: Param) -> None:
     """OpenColorIO's rule (``GradingPrimary::validate``): the gamma span needs pivot_black below pivot_white."""
-    black_t, white_t = torch.as_tensor(black).detach(), torch.as_tensor(white).detach()
+    black_t, white_t = (torch.as_tensor(v, dtype=torch.float64).detach() for v in (black, white))
     if (black_t >= white_t).any():
         raise ValueError(f"pivot_black must be below pivot_white, got {black_t.tolist()} and {white_t.tolist()}")
 

@@ -153,7 +153,7 @@ def fit_controls(pairs: PixelPairs, names, modes, aces: bool, steps: int, lbfgs_
     def loss_fn(model):
         return lambda: loss_of(model(source), target)
 
-    fits = {mode: ControlsFit(MatchedControls(names, mode, aces)) for mode in modes}
+    fits = {mode: ControlsFit(MatchedControls(names, mode, aces).to(source.device)) for mode in modes}
     if len(modes) > 1:
         for mode, fit in fits.items():
             fit.history = optimise(fit.model, loss_fn(fit.model), screen_steps, 0, lr, progress, f"screen {mode}")
@@ -171,7 +171,7 @@ def fit_residual(display: torch.Tensor, target: torch.Tensor, size: int, steps: 
 
     The data term is Huber in 8-bit codes (see :func:`pixel_loss`); the lookup runs as :func:`lookup_matrix`.
     """
-    residual = ResidualLUT(size)
+    residual = ResidualLUT(size).to(display.device)
     weights = lookup_matrix(display, size)
     target_codes = display_codes(target).movedim(-3, 0).reshape(3, -1).T
     scale = 255.0**2  # regularisers on the table's [0, 1] units, brought to the data term's squared codes

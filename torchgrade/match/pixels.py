@@ -45,7 +45,7 @@ def _columns(source: torch.Tensor, target: torch.Tensor, mask, index: int) -> tu
     source, target = (t[..., :3, :, :].double().movedim(-3, 0).reshape(3, -1) for t in (source, target))
     keep = torch.isfinite(target).all(dim=0)
     if mask is not None:
-        mask = torch.as_tensor(mask)
+        mask = torch.as_tensor(mask, device=keep.device)
         if mask.numel() != keep.numel():
             raise ValueError(f"mask {index} has {mask.numel()} values for {keep.numel()} pixels")
         keep &= mask.reshape(-1).bool()

@@ -108,7 +108,7 @@ def lookup_matrix(display_linear: torch.Tensor, size: int) -> torch.Tensor:
     base = base.long()
     columns = torch.cat([base, base + stride_max, base + diagonal - stride_min, base + diagonal])
     weights = torch.cat([1.0 - f_max, f_max - f_mid, f_mid - f_min, f_min])
-    rows = torch.arange(base.numel()).repeat(4)
+    rows = torch.arange(base.numel(), device=base.device).repeat(4)
     # COO, not CSR: the product's backward with a CSR matrix measured 15 times slower on CPU (torch 2.x).
     matrix = torch.sparse_coo_tensor(torch.stack([rows, columns]), weights, (base.numel(), size**3), check_invariants=False)
     return matrix.coalesce()

@@ -13,7 +13,7 @@ import functools
 import torch
 
 from ... import color
-from ...core import apply_matrix, check_image, sanitize
+from ...core import apply_matrix, check_image, full_precision, sanitize
 from ..aces_rrt import REC709_TO_AP0
 from .cam import REFERENCE_LUMINANCE, aab_to_jmh, jmh_params, jmh_to_rgb, rgb_to_aab, a_to_y, y_to_j
 from .gamut import FOCUS_DISTANCE, FOCUS_DISTANCE_SCALING, GamutParams, gamut_compress
@@ -165,7 +165,7 @@ def aces2_output(image: torch.Tensor, peak_luminance: float = 100.0, limiting_pr
     if image.dtype in (torch.float16, torch.bfloat16):
         raise TypeError(f"aces2_output needs float32 or float64 input (its CAM overflows {image.dtype})")
     # The CAM's powers and the table lookups need float32 or better, whatever autocast is active.
-    with torch.autocast(device_type=image.device.type, enabled=False):
+    with full_precision():
         linear = _display_linear(sanitize(image), peak, limiting_primaries, display_primaries, input_space)
         if encoding == "bt1886":
             return color.safe_pow(linear, 1.0 / 2.4)

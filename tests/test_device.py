@@ -1,0 +1,272 @@
+"""Devices: every public module computes on its input's device, in its input's precision, and moves whole.
+
+Three checks, over one catalogue of cases built from the library's registries (every tone mapper,
+bloom composite, LUT interpolation, export backend and shaper, display encoding, primary style,
+metering and operator), so a module or mode added there is checked here without a new line:
+
+* **Wrong-device audit** (any machine): module and image are moved to PyTorch's ``meta`` device, which
+  has shapes but no data, and the forward and backward pass run under :class:`DeviceCheck`. A tensor
+  created without ``device=`` (``torch.tensor``, ``torch.arange``, a constant matrix) or a table kept
+  as a plain attribute stays on the CPU, and the first operation that meets it with the image raises,
+  as it would on CUDA. ``meta`` alone lets ``einsum`` and ``matmul`` mix devices; the check does not.
+  The cases in :data:`READS_DATA` read a value back in eager mode (a range check, a shortcut), which
+  ``meta`` cannot answer: they are audited with those reads skipped, as ``torch.compile`` and ONNX
+  export skip them.
+* **Precision**: moved with ``.to(torch.float64)`` on a float64 image, every floating tensor an operation
+  reads or writes is float64 (no constant rounded through float32).
+* **CPU against CUDA** (needs CUDA): the same module and batch on both give the same output and image
+  gradient, within :data:`RTOL` / :data:`ATOL`.
+
+Run the whole suite on a GPU with ``TG_TEST_DEVICE=cuda`` (see ``tests/conftest.py``).
+"""
+
+from __future__ import annotations
+
+import sys
+
+import pytest
+import torch
+from torch import nn
+from torch.utils._python_dispatch import TorchDispatchMode
+from torch.utils._pytree import tree_leaves
+
+import torchgrade as tg
+from torchgrade import core
+from torchgrade.bloom.composite import BLOOM_MODES
+from torchgrade.display import DISPLAY_ENCODINGS
+from torchgrade.exposure import METERING_MODES, OPERATORS
+from torchgrade.lut import INTERPOLATIONS, LUT_BACKENDS, identity_table
+from torchgrade.lut.shapers import SHAPERS
+from torchgrade.match import ResidualLUT
+from torchgrade.match.fit import MatchedControls
+from torchgrade.primary import STYLES
+from torchgrade.stage import Stage
+from torchgrade.tonemap import TONE_MAPPERS
+
+RTOL = 1e-4
+"""CUDA's float32 kernels round differently from the CPU's (fused multiply-adds, other reduction orders in
+the bloom pyramid and the metering, another libm for pow/exp/log): 1e-4 relative, 1e-5 absolute, far below
+one 8-bit code (4e-3 near white). TF32 is switched off for the comparison: it is the caller's choice."""
+ATOL = 1e-5
+
+GRADE = dict(post_exposure=0.5, temperature=20, tint=-10, contrast=30, color_filter=(1.0, 0.9, 0.8), split_shadows=(0.3, 0.4, 0.7),
+             split_highlights=(0.8, 0.6, 0.4), split_balance=15, channel_mixer=((1.1, -0.1, 0.0), (0.05, 0.9, 0.05), (0.0, 0.2, 0.8)),
+             shadows=(0.9, 0.95, 1.1), midtones=(1.05, 1.0, 0.95), highlights=(1.1, 1.0, 0.9), hue_shift=25, saturation=30)
+PRIMARY = {"linear": dict(offset=(0.01, 0.0, -0.01), exposure=(0.3, 0.2, 0.1), contrast=(1.2, 1.1, 1.0), saturation=1.2),
+           "log": dict(brightness=(0.05, 0.0, -0.05), contrast=(1.3, 1.2, 1.1), gamma=(0.8, 0.9, 1.0), saturation=1.1)}
+assert set(PRIMARY) == set(STYLES), "a primary style without controls here"
+
+
+PLAIN_NUMBERS = {("aces2_hdr", "peak_luminance")}
+"""Tone mapper controls that take a number only (tables are built per value)."""
+
+
+def _per_sample_controls(mode: str) -> dict:
+    """Every number control of tone mapper ``mode`` as a (2,) tensor: its default and a value towards its low end."""
+    controls = TONE_MAPPERS[mode].controls
+    return {name: torch.tensor([c.default, 0.9 * c.default + 0.1 * c.range[0]]) for name, c in controls.items()
+            if c.kind == "number" and (mode, name) not in PLAIN_NUMBERS}
+
+
+class _Adapting(nn.Module):
+    """Two frames of a video through :class:`~torchgrade.AutoExposure`: the second adapts from the first's state."""
+
+    def __init__(self, exposure: tg.AutoExposure):
+        super().__init__()
+        self.exposure = exposure
+
+    def forward(self, image):
+        self.exposure(image * 4.0, dt=1.0 / 30.0)
+        return self.exposure(image, dt=1.0 / 30.0)
+
+
+def _lut(shaper: str = "linear") -> tg.LUT3D:
+    curve = torch.linspace(0.0, 1.0, 17).unsqueeze(1).expand(17, 3) ** 0.5 if SHAPERS[shaper].takes_curve else None
+    return tg.LUT3D(identity_table(9) ** 1.5, shaper=shaper, curve=curve)
+
+
+def _cases() -> dict:
+    """Every case by name: a factory of a module whose ``forward(image)`` runs it."""
+    cases = {f"tonemap-{mode}": lambda mode=mode: tg.ToneMap(mode) for mode in tg.TONEMAP_MODES}
+    cases.update({f"tonemap-{mode}-per-sample": lambda mode=mode: tg.ToneMap(mode, **_per_sample_controls(mode))
+                  for mode in tg.TONEMAP_MODES if _per_sample_controls(mode)})
+    cases.update({f"bloom-{mode}": lambda mode=mode: tg.Bloom(mode=mode, threshold=0.8, intensity=0.5, tint=(1.0, 0.9, 0.8))
+                  for mode in BLOOM_MODES})
+    cases.update({f"lut-{shaper}": lambda shaper=shaper: _lut(shaper) for shaper in SHAPERS})
+    # the "gather" backend is the eager lookup itself: LUT3D(...)(image, interpolation)
+    cases.update({f"lut-{interpolation}-{backend}": lambda i=interpolation, b=backend: _lut().export_form(i, b)
+                  for interpolation in INTERPOLATIONS for backend in LUT_BACKENDS})
+    cases.update({f"display-{encoding}": lambda e=encoding: tg.Display(e, "rec2020", peak_luminance=1000.0) for encoding in DISPLAY_ENCODINGS})
+    cases.update({f"primary-{style}": lambda s=style: tg.PrimaryGrade(s, **PRIMARY[s]) for style in STYLES})
+    cases.update({f"exposure-{metering}-{operator}": lambda m=metering, o=operator: tg.AutoExposure(metering=m, operator=o)
+                  for metering in METERING_MODES for operator in OPERATORS})
+    cases.update({
+        "grade": lambda: tg.ColorGrade(**GRADE),
+        "grade-aces": lambda: tg.ColorGrade(aces=True, **GRADE),
+        "grade-learnable": lambda: tg.ColorGrade(contrast=nn.Parameter(torch.tensor(20.0)), saturation=10),
+        "grade-per-sample": lambda: tg.ColorGrade(contrast=torch.tensor([10.0, 30.0]), color_filter=torch.tensor([[1.0, 0.9, 0.8], [0.8, 0.9, 1.0]]),
+                                                  channel_mixer=torch.eye(3).expand(2, 3, 3) * 0.9, aces=True),
+        "bloom-per-sample": lambda: tg.Bloom(intensity=torch.tensor([0.3, 0.6]), tint=torch.tensor([[1.0, 0.9, 0.8], [0.8, 0.9, 1.0]]),
+                                             dirt=torch.rand(3, 8, 8), dirt_intensity=0.5, karis_average=True),
+        "bloom-anamorphic": lambda: tg.Bloom(intensity=0.5, anamorphic_ratio=0.3),
+        "exposure-adapting": lambda: _Adapting(tg.AutoExposure(middle_grey=torch.tensor([0.18, 0.12]), speed_to_light=2.0, speed_to_dark=1.0)),
+        "lut-learnable": lambda: tg.LUT3D(identity_table(9), learnable=True),
+        "bloom-export": lambda: tg.Bloom(threshold=0.8, intensity=0.5).export_form(),
+        "convolution-bloom": lambda: tg.ConvolutionBloom(torch.rand(3, 7, 7), threshold=0.8, intensity=0.5),
+        "convolution-bloom-export": lambda: tg.ConvolutionBloom(torch.rand(3, 7, 7), intensity=0.5).export_form(),
+        "dither": lambda: tg.Dither(amplitude=2.0 / 255.0),
+        "postfx": lambda: tg.PostFX(exposure={}, bloom={"mode": "scattering", "intensity": 0.5}, grade={"aces": True, **GRADE},
+                                    primary={"style": "log", **PRIMARY["log"]}, tonemap="aces", dither={}, display={"encoding": "srgb"}),
+        "random-postfx": lambda: tg.RandomPostFX(contrast=30, saturation=20, split_shadows=0.2, bloom_intensity=(0.2, 0.6), tonemap="aces"),
+        "random-postfx-tonemaps": lambda: tg.RandomPostFX(contrast=30, tonemap=("aces", "neutral", "agx")),
+        "match-controls": lambda: MatchedControls(("post_exposure", "contrast", "color_filter", "lift"), "filmic"),
+        "match-residual": lambda: ResidualLUT(9, torch.float32),
+    })
+    return cases
+
+
+CASES = _cases()
+
+READS_DATA = {
+    "bloom-additive": "skips the pyramid when no pixel passes the threshold (reads light.any())",
+    "bloom-export": "the same shortcut as bloom-additive",
+    "grade-learnable": "checks a learnable control's range before the forward pass",
+    "random-postfx": "checks the drawn bloom controls against their ranges",
+    "lut-learnable": "checks that a learnable table is finite before the lookup",
+    "bloom-per-sample": "the same shortcut as bloom-additive",
+    "exposure-adapting": "checks per-sample controls against their ranges",
+    "match-residual": "the same check as lut-learnable",
+}
+"""The cases that read a value back in eager mode, and what they read."""
+
+META_CANNOT_RUN = {
+    "random-postfx-tonemaps": "splits the batch by each sample's drawn tone mapper: shapes that depend on values",
+    "bloom-anamorphic": "kornia's gaussian_blur2d checks the values of the stretched blur's sigma tensor",
+}
+"""The cases only the CUDA comparison checks, and why."""
+
+NOT_FLOAT64 = {"random-postfx": "draws its controls as float32 uniforms (kornia's convention); the grade they drive runs in float64"}
+
+
+def test_every_public_module_has_a_case():
+    public = {obj for obj in vars(tg).values() if isinstance(obj, type) and issubclass(obj, nn.Module) and obj.__name__ in tg.__all__}
+    covered = {type(module) for make in CASES.values() for module in make().modules()}
+    assert public - covered == set()
+    assert {cls for cls in public if issubclass(cls, Stage)} and tg.RandomPostFX in public
+
+
+class DeviceCheck(TorchDispatchMode):
+    """Raise at the first operation whose tensors lie on two devices (CUDA's rule: a 0-d CPU tensor is a
+    scalar and may join any device) and, with ``dtype``, at the first floating tensor of another dtype."""
+
+    TRANSFERS = (torch.ops.aten._to_copy.default, torch.ops.aten.copy_.default)
+
+    def __init__(self, dtype: torch.dtype | None = None):
+        super().__init__()
+        self.dtype = dtype
+
+    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+        kwargs = kwargs or {}
+        out = func(*args, **kwargs)
+        tensors = [t for t in tree_leaves((args, kwargs)) if isinstance(t, torch.Tensor)]
+        devices = {str(t.device) for t in tensors if t.dim() > 0 or t.device.type != "cpu"}
+        if len(devices) > 1 and func not in self.TRANSFERS:
+            raise AssertionError(f"{func} mixes devices {sorted(devices)}")
+        if self.dtype is not None:
+            for t in tensors + [t for t in tree_leaves(out) if isinstance(t, torch.Tensor)]:
+                if t.is_floating_point() and t.dtype != self.dtype:
+                    raise AssertionError(f"{func} meets a {t.dtype} tensor of shape {tuple(t.shape)} in a {self.dtype} run")
+        return out
+
+
+@pytest.fixture
+def skip_data_reads(monkeypatch):
+    """Skip every eager-only read of a value, as under ``torch.compile`` or ONNX export (:func:`torchgrade.core.is_tracing`)."""
+    eager = core.is_tracing
+    for module in list(sys.modules.values()):
+        if module.__name__.startswith("torchgrade") and getattr(module, "is_tracing", None) is eager:
+            monkeypatch.setattr(module, "is_tracing", lambda: True)
+
+
+def _on_meta(name: str, request) -> nn.Module:
+    """Case ``name``'s module, its eager value reads skipped when :data:`READS_DATA` lists it (meta has no values)."""
+    if name in READS_DATA:
+        request.getfixturevalue("skip_data_reads")
+    return CASES[name]()
+
+
+def _audit(name: str, dtype: torch.dtype, request) -> None:
+    module = _on_meta(name, request).to("meta", dtype)
+    image = torch.empty(2, 3, 40, 56, device="meta", dtype=dtype, requires_grad=True)
+    with DeviceCheck(dtype if dtype == torch.float64 else None):
+        out = module(image)
+        out.sum().backward()
+    assert (out.device.type, out.dtype, image.grad.device.type) == ("meta", dtype, "meta")
+
+
+@pytest.mark.parametrize("name", [name for name in CASES if name not in META_CANNOT_RUN])
+def test_nothing_is_created_on_a_fixed_device(name, request):
+    _audit(name, torch.float32, request)
+
+
+@pytest.mark.parametrize("name", [name for name in CASES if name not in NOT_FLOAT64 and name not in META_CANNOT_RUN])
+def test_a_module_moved_to_float64_computes_in_float64(name, request):
+    _audit(name, torch.float64, request)
+
+
+def _held_tensors(module: nn.Module):
+    """Every tensor a module and its children hold: parameters, buffers and plain attributes (caches, states)."""
+    for child in module.modules():
+        yield from (t for t in tree_leaves(list(vars(child).values())) if isinstance(t, torch.Tensor))
+
+
+@pytest.mark.parametrize("name", [name for name in CASES if name not in META_CANNOT_RUN])
+def test_moving_a_module_moves_every_table_it_holds(name, request):
+    module = _on_meta(name, request)
+    module(torch.rand(2, 3, 16, 16) * 4)  # fills caches and states on the CPU
+    module.to("meta", torch.float64)
+    module(torch.empty(2, 3, 16, 16, device="meta", dtype=torch.float64))
+    for stage in (m for m in module.modules() if isinstance(m, Stage)):  # a control set after the move
+        for control, value in stage.params().items():
+            if not isinstance(value, torch.Tensor):
+                setattr(stage, control, value)
+    assert all(t.device.type == "meta" for t in _held_tensors(module))
+    if name not in NOT_FLOAT64:
+        assert all(t.dtype == torch.float64 for t in _held_tensors(module) if t.is_floating_point())
+
+
+def test_the_audit_catches_a_constant_left_on_the_cpu():
+    class Tinted(nn.Module):
+        def forward(self, image):
+            return torch.einsum("ij,bjhw->bihw", torch.eye(3), image)  # meta alone lets this einsum through
+
+    with pytest.raises(AssertionError, match="mixes devices"), DeviceCheck():
+        Tinted()(torch.empty(1, 3, 2, 2, device="meta"))
+
+
+@pytest.fixture(scope="module")
+def hdr_batch(exr_dir) -> torch.Tensor:
+    """Crops of Desk (a lamp over dark wood) and CandleGlass (a flame), as a (2, 3, 40, 56) float32 batch."""
+    crops = [tg.io.read_exr(exr_dir / name)[:3, y:y + 40, x:x + 56] for name, y, x in (("Desk.exr", 100, 150), ("CandleGlass.exr", 300, 200))]
+    return torch.stack(crops).contiguous()
+
+
+def _run(name: str, image: torch.Tensor) -> tuple:
+    """Case ``name`` built afresh on ``image``'s device and run on it: its output and the image's gradient."""
+    torch.manual_seed(0)  # the same textures, kernels and draws on every device
+    module = CASES[name]().to(image.device)
+    image = image.clone().requires_grad_()
+    out = module(image)
+    out.sum().backward()
+    return out.detach(), image.grad
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="device-conditional: needs CUDA to compare with the CPU")
+@pytest.mark.parametrize("name", CASES)
+def test_cuda_agrees_with_the_cpu(name, hdr_batch, monkeypatch):
+    monkeypatch.setattr(torch.backends.cuda.matmul, "allow_tf32", False)
+    monkeypatch.setattr(torch.backends.cudnn, "allow_tf32", False)
+    on_cpu, on_cuda = _run(name, hdr_batch), _run(name, hdr_batch.cuda())
+    for got, want in zip(on_cuda, on_cpu):
+        assert got.device.type == "cuda"
+        torch.testing.assert_close(got.cpu(), want, rtol=RTOL, atol=ATOL)
