@@ -36,11 +36,13 @@ RESULTS = ROOT / "benchmarks" / "results"
 HEIGHT, WIDTH, REPEATS = 1080, 1920, 5
 COMMAND = ".venv/bin/python benchmarks/bench_onnx.py"
 RUNTIMES = {
-    "cpu": {"onnxruntime": ("onnxruntime", None), "openvino_f32": ("openvino", "f32"), "openvino_default": ("openvino", None)},
+    "cpu": {"onnxruntime": ("onnxruntime", None), "onnxruntime_no_spin": ("onnxruntime", None),
+            "openvino_f32": ("openvino", "f32"), "openvino_default": ("openvino", None)},
     "cuda": {"onnxruntime": ("onnxruntime", None)},
 }
 """The runtime columns of each device: ``{label: (runtime, OpenVINO precision hint)}``."""
-COLUMNS = {"onnxruntime": "onnxruntime ms", "openvino_f32": "OpenVINO f32 ms", "openvino_default": "OpenVINO default ms"}
+COLUMNS = {"onnxruntime": "onnxruntime ms", "onnxruntime_no_spin": "onnxruntime, no spinning ms",
+           "openvino_f32": "OpenVINO f32 ms", "openvino_default": "OpenVINO default ms"}
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -82,7 +84,8 @@ def measure(name: str, look: tg.PostFX, image: torch.Tensor, folder: Path, devic
     inputs = tg.onnx.graph_inputs(look, image)
     calls = {}
     for label, (runtime, precision) in RUNTIMES[device].items():
-        runner = tg.onnx.session(path, runtime, precision, device if runtime == "onnxruntime" else "cpu")
+        on = device if runtime == "onnxruntime" else "cpu"
+        runner = tg.onnx.session(path, runtime, precision, on, spin=not label.endswith("_no_spin"))
         calls[label] = lambda runner=runner, feeds=tg.onnx.feeds(runner, look, inputs): runner.run(None, feeds)
     on_device = tg.onnx.graph_inputs(look, image.to(device))
     calls["pytorch"] = eager(look.to(device), on_device)

@@ -21,9 +21,10 @@ CUDA_ORT = "CUDAExecutionProvider" in onnxruntime.get_available_providers()
 def test_a_cpu_row_times_every_runtime_and_counts_nodes(tmp_path):
     look = tg.PostFX(grade={"contrast": 10}, tonemap="aces").eval()
     row = bench_onnx.measure("tiny", look, torch.rand(1, 3, 8, 12) * 4, tmp_path)
-    assert set(row) == {"nodes_traced", "nodes", "onnxruntime_ms", "openvino_f32_ms", "openvino_default_ms", "pytorch_ms"}
+    labels = ("onnxruntime", "onnxruntime_no_spin", "openvino_f32", "openvino_default", "pytorch")
+    assert set(row) == {"nodes_traced", "nodes", *(f"{label}_ms" for label in labels)}
     assert row["nodes"] == tg.onnx.node_count(tmp_path / "tiny.onnx") <= row["nodes_traced"]
-    assert all(row[f"{label}_ms"] > 0 for label in ("onnxruntime", "openvino_f32", "openvino_default", "pytorch"))
+    assert all(row[f"{label}_ms"] > 0 for label in labels)
 
 
 def test_each_device_writes_its_own_results_and_columns():
@@ -60,3 +61,10 @@ def test_a_cuda_row_times_onnxruntime_cuda_and_pytorch_cuda(tmp_path):
     look = tg.PostFX(grade={"contrast": 10}, tonemap="aces").eval()
     row = bench_onnx.measure("tiny", look, torch.rand(1, 3, 8, 12) * 4, tmp_path, "cuda")
     assert row["onnxruntime_ms"] > 0 and row["pytorch_ms"] > 0 and "openvino_f32_ms" not in row
+
+
+def test_onnxruntime_sessions_spin_unless_asked_not_to(tmp_path):
+    path = tg.onnx.export(tg.ToneMap("reinhard"), tmp_path / "tone.onnx")
+    entries = [tg.onnx.session(path, spin=spin).get_session_options().get_session_config_entry("session.intra_op.allow_spinning")
+               for spin in (True, False)]
+    assert entries == ["1", "0"]
