@@ -151,6 +151,37 @@ def test_export_writes_a_verified_onnx_file_and_reports_it(tmp_path, capsys):
     assert lines[2].endswith("ms (median of 5)")
 
 
+def test_export_of_a_baked_look_reports_the_lut_error_and_both_runtimes(tmp_path, capsys):
+    config = tmp_path / "look.json"
+    config.write_text('{"grade": {"contrast": 15, "saturation": 10}, "tonemap": "neutral"}')
+    out = tmp_path / "look.onnx"
+    assert main(["export", "--config", str(config), "--out", str(out), "--lut", "9", "--output", "srgb8",
+                 "--width", "24", "--height", "16"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    look = tg.PostFX.from_config(str(config)).to_lut(9)
+    assert lines[0].endswith(f"{tg.onnx.node_count(out)} nodes") and "output srgb8" in lines[0]
+    assert lines[1] == f"  baked LUT vs the look it replaces: {look.lut.error_report}"
+    errors = dict(part.rsplit(" ", 1) for part in lines[2].split("PyTorch: ")[1].split(", "))
+    assert sorted(errors) == ["onnxruntime", "openvino default", "openvino f32"]
+    assert float(errors["onnxruntime"]) <= 1 and float(errors["openvino f32"]) <= 1  # 8-bit codes
+    assert "onnxruntime" in lines[3] and "openvino f32" in lines[3]
+
+
+def test_python_m_export_runs_the_same_report(exr_dir, tmp_path):
+    config = tmp_path / "look.json"
+    config.write_text('{"grade": {"contrast": 15}, "tonemap": "aces"}')
+    out = tmp_path / "look.onnx"
+    root = Path(__file__).resolve().parents[1]
+    result = subprocess.run([sys.executable, "-m", "export", "--config", str(config), "--out", str(out),
+                             "--exr-dir", str(exr_dir), "--images", "GrayRampsHorizontal.exr"],
+                            cwd=root, capture_output=True, text=True, check=True)
+    lines = result.stdout.strip().splitlines()
+    assert lines[0].endswith(f"{tg.onnx.node_count(out)} nodes")
+    errors = dict(part.rsplit(" ", 1) for part in lines[1].split("PyTorch: ")[1].split(", "))
+    assert float(errors["onnxruntime"]) < 1e-4 and float(errors["openvino f32"]) < 1e-4
+    assert lines[2].startswith("  latency on GrayRampsHorizontal.exr") and lines[2].endswith("ms (median of 5)")
+
+
 def test_export_reports_a_bad_output_without_a_traceback(tmp_path, capsys):
     config = tmp_path / "look.json"
     config.write_text('{"tonemap": "neutral"}')

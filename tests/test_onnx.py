@@ -166,3 +166,24 @@ def test_bad_options_raise(tmp_path):
         export(tg.PostFX(lut=LUT), tmp_path / "x.onnx", lut_backend="volume", opset=17)
     with pytest.raises(ValueError, match="needs a ColorGrade"):
         export(tg.ToneMap(), tmp_path / "x.onnx", grade_inputs=True)
+
+
+class _NonFinite(torch.nn.Module):
+    """The non-finite policy, and ``nan_to_num`` with replacements of its own for the infinities."""
+
+    def forward(self, image):
+        return tg.core.sanitize(image) + torch.nan_to_num(image, nan=1.0, posinf=5.0, neginf=-7.0)
+
+
+def test_nan_to_num_exports_without_float64_and_matches_pytorch(tmp_path):
+    path = export(_NonFinite(), tmp_path / "non_finite.onnx", example=torch.rand(1, 3, 4, 4))
+    row = torch.tensor([float("nan"), float("inf"), -float("inf"), 1.0, 7e4, -3e38])
+    image = row.reshape(1, 1, 1, 6).expand(2, 3, 5, 6).contiguous()
+    runner = session(path)
+    output = runner.run(None, {"image": image.numpy()})[0]
+    # sanitize: 0, 65504, -65504, 1, 65504, -65504; nan_to_num: 1, 5, -7, 1, 7e4, -3e38
+    expected = torch.tensor([1.0, 65509.0, -65511.0, 2.0, 65504.0 + 7e4, -65504.0 - 3e38])
+    assert np.array_equal(output[0, 0, 0], expected.numpy())
+    assert np.array_equal(output, _NonFinite()(image).numpy())
+    casts = [node for node in onnx.load(str(path)).graph.node if node.op_type == "Cast"]
+    assert all(attribute.i != onnx.TensorProto.DOUBLE for node in casts for attribute in node.attribute)

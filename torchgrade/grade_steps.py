@@ -313,7 +313,7 @@ HSV_BLACK = 1e-10
 
 def _hsv(image: torch.Tensor) -> torch.Tensor:
     lit = image.amax(dim=CHANNEL, keepdim=True) > HSV_BLACK
-    return rgb_to_hsv(torch.where(lit, image, torch.zeros_like(image)))
+    return rgb_to_hsv(torch.where(lit, image, 0.0))
 
 
 def hue_shift(image: torch.Tensor, degrees: Param, hue_vs_hue=None) -> torch.Tensor:

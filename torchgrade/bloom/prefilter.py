@@ -98,7 +98,7 @@ def karis_mean(image: torch.Tensor, means: torch.Tensor) -> torch.Tensor:
 
 def _source_share(source: torch.Tensor, means: torch.Tensor) -> torch.Tensor:
     """``source / mean`` per channel (1 where they are equal): the share of a block's light its source holds."""
-    return torch.where(source == means, torch.ones_like(means), source / torch.where(means == 0, torch.ones_like(means), means))
+    return torch.where(source == means, 1.0, source / torch.where(means == 0, 1.0, means))
 
 
 def prefilter(image: torch.Tensor, threshold, knee, fade_fireflies: bool, karis_average: bool = False, clamp=None):

@@ -24,7 +24,7 @@ def safe_pow(x: torch.Tensor, exponent) -> torch.Tensor:
         [0.0, 0.0, 2.0]
     """
     positive = x > 0
-    return torch.where(positive, torch.where(positive, x, torch.ones_like(x)) ** exponent, torch.zeros_like(x))
+    return torch.where(positive, torch.where(positive, x, 1.0) ** exponent, 0.0)
 
 
 def safe_sqrt(x: torch.Tensor) -> torch.Tensor:

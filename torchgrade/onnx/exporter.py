@@ -46,7 +46,7 @@ def fold_constants(path) -> None:
     """Rewrite ``path`` with onnxruntime's basic graph optimisations: constant folding and redundant-node
     elimination, standard ONNX operators only (so OpenVINO and TensorRT read the result). The exporter
     leaves the shape arithmetic of a dynamic-size graph as thousands of ``Constant`` nodes: the
-    cinematic look goes from 5515 nodes to 2247.
+    cinematic look goes from 5691 nodes to 2271.
 
     Examples:
         >>> callable(fold_constants)

@@ -42,6 +42,8 @@ def graph_inputs(look: PostFX, image: torch.Tensor):
 def export_look(look: PostFX, path, images: Mapping[str, torch.Tensor], lut_backend: str = "strip",
                 grade_inputs: bool = False, output: str = "linear") -> list:
     """Export ``look`` to ``path`` and report it: one line with its stages, output encoding and node count,
+    for a look baked by :meth:`~torchgrade.PostFX.to_lut` one line with the LUT's error report
+    (:class:`~torchgrade.lut.ErrorReport`),
     one line per image of ``images`` (``{name: (1, 3, H, W)}``) with the max abs error against PyTorch on
     each runtime of :data:`~torchgrade.onnx.RUNTIMES` (OpenVINO at float32 and at its default precision;
     in 8-bit codes for ``output="srgb8"``), one line with the median latency of each runtime on the first image.
@@ -50,6 +52,9 @@ def export_look(look: PostFX, path, images: Mapping[str, torch.Tensor], lut_back
     """
     export(look, path, lut_backend=lut_backend, grade_inputs=grade_inputs, output=output)
     lines = [f"{path}: stages {' -> '.join(look.stages())}, output {output}, {node_count(path)} nodes"]
+    report = getattr(getattr(look, "lut", None), "error_report", None)
+    if report is not None:
+        lines.append(f"  baked LUT vs the look it replaces: {report}")
     for name, image in images.items():
         errors = [f"{label} {verify(look, path, graph_inputs(look, image), runtime, precision):.2e}"
                   for label, (runtime, precision) in RUNS.items()]

@@ -2,12 +2,12 @@
 
 :func:`symbolics` registers them for the duration of one export: ``exp2``, ``expm1``, ``rad2deg``,
 ``frac``, Python's ``//`` on sizes (the stock symbolic truncates), ``movedim`` with negative
-dimensions, and ``avg_pool2d`` with ``divisor_override`` (bloom's 2x2 sums, which the stock
-symbolic silently exports as means).
+dimensions, ``nan_to_num`` (the stock symbolic casts the frame to float64 to find infinities), and
+``avg_pool2d`` with ``divisor_override`` (bloom's 2x2 sums, which the stock symbolic silently exports as means).
 
 Examples:
-    >>> sorted(SYMBOLICS)[:2]
-    ['aten::avg_pool2d', 'aten::exp2']
+    >>> sorted(SYMBOLICS)[:3]
+    ['aten::avg_pool2d', 'aten::exp2', 'aten::expm1']
 """
 
 from __future__ import annotations
@@ -68,6 +68,30 @@ def _movedim(g, x, source, destination):
     return g.op("Transpose", x, perm_i=perm)
 
 
+_SCALAR_DTYPES = {"Float": torch.float32, "Double": torch.float64, "Half": torch.float16, "BFloat16": torch.bfloat16}
+
+
+def _nan_to_num(g, x, nan, posinf, neginf):
+    """``nan_to_num`` as ``Where(IsNaN(x), nan, Clip(x, lowest, highest))`` when the infinities take the dtype's
+    range (PyTorch's default): three nodes where the stock symbolic writes eleven, two of them float64 casts of the
+    frame. Other replacements of infinities are chosen with ``IsInf``."""
+    from torch.onnx import symbolic_helper
+
+    dtype = _SCALAR_DTYPES[x.type().scalarType()]
+
+    def value(given, default: float):
+        number = default if symbolic_helper._is_none(given) else symbolic_helper._get_const(given, "f", "nan_to_num")
+        return g.op("Constant", value_t=torch.tensor(number, dtype=dtype))
+
+    finfo = torch.finfo(dtype)
+    if symbolic_helper._is_none(posinf) and symbolic_helper._is_none(neginf):
+        finite = g.op("Clip", x, value(neginf, finfo.min), value(posinf, finfo.max))
+    else:
+        finite = g.op("Where", g.op("IsInf", x, detect_negative_i=0), value(posinf, finfo.max), x)
+        finite = g.op("Where", g.op("IsInf", x, detect_positive_i=0), value(neginf, finfo.min), finite)
+    return g.op("Where", g.op("IsNaN", x), value(nan, 0.0), finite)
+
+
 def _avg_pool2d(g, x, kernel_size, stride, padding, ceil_mode, count_include_pad, divisor_override):
     """``avg_pool2d``; with ``divisor_override`` (non-overlapping windows, no padding) a zero-padded sum.
 
@@ -112,6 +136,7 @@ SYMBOLICS = {
     "aten::floor_divide": _floor_divide,
     "aten::floordiv": _floor_divide,
     "aten::avg_pool2d": _avg_pool2d,
+    "aten::nan_to_num": _nan_to_num,
 }
 
 

@@ -26,7 +26,7 @@ from torch import nn
 
 from .graph import encode_output, frame_of, grade_feeds, grade_of, has_state
 
-__all__ = ["RUNTIMES", "Inputs", "OpenVINOSession", "session", "feeds", "reference", "verify", "metadata", "node_count",
+__all__ = ["RUNTIMES", "DEVICES", "Inputs", "OpenVINOSession", "session", "feeds", "reference", "verify", "metadata", "node_count",
            "latency_ms"]
 
 RUNTIMES = ("onnxruntime", "openvino")
@@ -72,8 +72,18 @@ class OpenVINOSession:
         return [results[port] for port in self.model.outputs]
 
 
-def session(path, runtime: str = "onnxruntime", precision: Optional[str] = None):
-    """A session on ``runtime``'s CPU back end (see :data:`RUNTIMES`); ``precision`` is OpenVINO's hint.
+DEVICES = {"cpu": "CPUExecutionProvider", "cuda": "CUDAExecutionProvider"}
+"""Devices :func:`session` runs onnxruntime on, and the execution provider of each (OpenVINO: CPU only)."""
+
+
+def session(path, runtime: str = "onnxruntime", precision: Optional[str] = None, device: str = "cpu", spin: bool = True):
+    """A session on ``runtime`` (see :data:`RUNTIMES`) on ``device`` (see :data:`DEVICES`); ``precision``
+    is OpenVINO's hint. A device whose provider this onnxruntime lacks is an error, not a quiet fall-back to the CPU.
+
+    ``spin=False`` stops onnxruntime's worker threads spinning between tasks
+    (``session.intra_op.allow_spinning``): where other processes share the cores, spinning threads wait on
+    each other's time slices (the whole look ran 1.5 to 1.6 times faster without spinning on a loaded
+    2-core machine, ``benchmarks/results/onnx.md``); on cores of its own spinning saves the wake-up.
 
     Examples:
         >>> session("never.onnx", "tensorrt")
@@ -83,13 +93,18 @@ def session(path, runtime: str = "onnxruntime", precision: Optional[str] = None)
     """
     if runtime not in RUNTIMES:
         raise ValueError(f"runtime must be one of {RUNTIMES}, got {runtime!r}")
+    if device not in DEVICES or (runtime == "openvino" and device != "cpu"):
+        raise ValueError(f"{runtime} runs here on {'cpu' if runtime == 'openvino' else tuple(DEVICES)}, got device {device!r}")
     if runtime == "openvino":
         return OpenVINOSession(path, precision)
     import onnxruntime
 
+    if DEVICES[device] not in onnxruntime.get_available_providers():
+        raise ValueError(f"this onnxruntime has no {DEVICES[device]} (it has {', '.join(onnxruntime.get_available_providers())})")
     options = onnxruntime.SessionOptions()
     options.log_severity_level = 3  # inputs with defaults are optional by design: no warning per control
-    return onnxruntime.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+    options.add_session_config_entry("session.intra_op.allow_spinning", "1" if spin else "0")
+    return onnxruntime.InferenceSession(str(path), options, providers=[DEVICES[device]])
 
 
 def feeds(runner, module: Optional[nn.Module], inputs: Inputs) -> dict:
@@ -107,7 +122,7 @@ def feeds(runner, module: Optional[nn.Module], inputs: Inputs) -> dict:
     if missing:
         controls = grade_feeds(grade_of(module), inputs[0].shape[0])
         given.update({name: controls[name] for name in missing})
-    named = {name: value.detach().float().numpy() for name, value in given.items()}
+    named = {name: value.detach().float().cpu().numpy() for name, value in given.items()}
     if ports[0].type == "tensor(float16)":
         named["image"] = named["image"].astype(np.float16)
     return named

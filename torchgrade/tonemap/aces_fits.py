@@ -27,7 +27,7 @@ def _dark_to_dim_surround(rgb: torch.Tensor) -> torch.Tensor:
     total = (big_x + big_y + big_z).clamp_min(1e-4)
     x, y = big_x / total, big_y / total
     new_y = big_y.clamp(0.0, 65504.0)
-    new_y = torch.where(new_y > 0, torch.where(new_y > 0, new_y, torch.ones_like(new_y)) ** DIM_SURROUND_GAMMA, new_y)
+    new_y = torch.where(new_y > 0, torch.where(new_y > 0, new_y, 1.0) ** DIM_SURROUND_GAMMA, new_y)
     m = new_y / y.clamp_min(1e-4)
     xyz = torch.cat((x * m, new_y, (1.0 - x - y) * m), dim=-3)
     return convert(xyz, "xyz_to_ap1")

@@ -82,8 +82,8 @@ def _rgb_hue_degrees(rgb: torch.Tensor) -> torch.Tensor:
     y = 3.0**0.5 * (g - b)
     x = 2.0 * r - g - b
     neutral_pixel = (x == 0) & (y == 0)
-    hue = torch.atan2(y, torch.where(neutral_pixel, torch.ones_like(x), x)) * (180.0 / math.pi)  # rad2deg has no ONNX export
-    hue = torch.where(neutral_pixel, torch.zeros_like(hue), hue)
+    hue = torch.atan2(y, torch.where(neutral_pixel, 1.0, x)) * (180.0 / math.pi)  # rad2deg has no ONNX export
+    hue = torch.where(neutral_pixel, 0.0, hue)
     return torch.where(hue < 0, hue + 360.0, hue)
 
 
@@ -96,7 +96,7 @@ def _sigmoid_shaper(x: torch.Tensor) -> torch.Tensor:
 def _glow(yc: torch.Tensor, gain: torch.Tensor, mid: float) -> torch.Tensor:
     """ACES ``glow_fwd``: full gain below 2/3·mid, none above 2·mid, ``gain (mid / yc - 1/2)`` between."""
     between = gain * (mid / yc.clamp_min(2.0 / 3.0 * mid) - 0.5)
-    return torch.where(yc <= 2.0 / 3.0 * mid, gain, torch.where(yc >= 2.0 * mid, torch.zeros_like(gain), between))
+    return torch.where(yc <= 2.0 / 3.0 * mid, gain, torch.where(yc >= 2.0 * mid, 0.0, between))
 
 
 def _smoothstep(edge0, edge1, x: torch.Tensor) -> torch.Tensor:

@@ -27,7 +27,7 @@ def khronos_pbr_neutral(image: torch.Tensor, clip: bool = True) -> torch.Tensor:
     """
     c = limited(image)
     low = c.amin(dim=-3, keepdim=True)
-    c = c - torch.where(low < 0.08, low - 6.25 * low * low, torch.full_like(low, _KHRONOS_F90))
+    c = c - torch.where(low < 0.08, low - 6.25 * low * low, _KHRONOS_F90)
     peak = c.amax(dim=-3, keepdim=True)
     compressing = peak.clamp_min(_KHRONOS_START_COMPRESSION)
     d = 1.0 - _KHRONOS_START_COMPRESSION
