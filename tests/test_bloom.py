@@ -279,6 +279,7 @@ def test_default_module_matches_the_contract():
         ({"scatter": torch.tensor([0.5, 0.01])}, "scatter"),
         ({"max_iterations": -1}, "max_iterations"),
         ({"max_iterations": 2.5}, "max_iterations"),
+        ({"max_iterations": 17}, "max_iterations"),
         ({"downscale_limit": 0}, "downscale_limit"),
     ],
 )

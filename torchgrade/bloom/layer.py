@@ -34,7 +34,7 @@ from torch import nn
 
 from ..color import srgb_to_linear
 from ..core import (
-    HALF_MAX, Param, check_choice, check_image, check_range, color_param, is_constant, is_tracing, sanitize,
+    HALF_MAX, Param, check_image, color_param, is_constant, is_tracing, sanitize,
     scalar_param, to_input_dtype, working_dtype,
 )
 from ..stage import Control, Stage
@@ -90,13 +90,8 @@ def check_settings(settings: dict) -> None:
         ValueError: scatter must lie in [0.05, 0.95], got 0.99
     """
     for name, value in settings.items():
-        control = CONTROLS[name]
-        if control.kind == "number":
-            check_range(value, name, *control.range)
-        elif control.kind == "choice":
-            check_choice(name, value, control.range)
-        elif control.kind == "int" and (isinstance(value, bool) or not isinstance(value, int) or not control.range[0] <= value):
-            raise ValueError(f"{name} must be an integer in [{control.range[0]}, {control.range[1]}], got {value!r}")
+        if CONTROLS[name].kind != "bool":  # the functional takes any truthy flag, as it always has
+            CONTROLS[name].check(name, value)
     check_texture(settings.get("dirt"), "dirt")
 
 
