@@ -292,11 +292,30 @@ class Stage(nn.Module):
         }
 
     @classmethod
+    def config_table(cls, config: dict) -> dict:
+        """The controls a ``config`` of this stage can set: :attr:`controls` unless a setting adds others (a tone mapper's mode)."""
+        return cls.controls
+
+    @classmethod
     def from_config(cls, config: dict) -> "Stage":
-        """Build the stage from a dict of its constructor arguments (what :meth:`to_config` returns)."""
+        """Build the stage from a dict of its constructor arguments (what :meth:`to_config` returns).
+
+        A JSON list where the stage keeps a per-sample tensor comes back as that tensor
+        (:func:`~torchgrade.config.config_value`), so ``to_config`` -> JSON -> ``from_config`` rebuilds it.
+
+        Examples:
+            >>> import json
+            >>> import torchgrade as tg
+            >>> grade = tg.ColorGrade(contrast=torch.tensor([10.0, 20.0]))
+            >>> tg.ColorGrade.from_config(json.loads(json.dumps(grade.to_config()))).contrast
+            tensor([10., 20.])
+        """
+        from .config import config_value  # config reads Control from this module
+
         if not isinstance(config, dict):
             raise ValueError(f"a {cls.__name__} config must be a dict, got {type(config).__name__}")
-        return cls(**config)
+        table = cls.config_table(config)
+        return cls(**{key: config_value(key, value, table[key]) if key in table else value for key, value in config.items()})
 
     def export_form(self) -> nn.Module:
         """The module an ONNX export traces for this stage; the stage itself unless it needs another form."""
