@@ -23,33 +23,15 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-import PyOpenColorIO as OCIO
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import torchgrade as tg  # noqa: E402
+from benchmarks.common import EXR_DIR, ocio_look  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
-EXR = Path(__file__).resolve().parents[2] / "shared" / "data" / "exr" / "GoldenGate.exr"
-
-
-def ocio_look(image: torch.Tensor) -> torch.Tensor:
-    """OpenColorIO's primary grade then the ACES 1.0 SDR view, display-linear ``(3, H, W)`` float64."""
-    primary = OCIO.GradingPrimary(OCIO.GRADING_LIN)
-    primary.exposure = OCIO.GradingRGBM(0.1, 0.0, -0.1, 0.2)
-    primary.contrast = OCIO.GradingRGBM(1.0, 1.0, 1.0, 1.1)
-    primary.offset = OCIO.GradingRGBM(0.0, 0.0, 0.002, 0.0)
-    primary.saturation = 1.1
-    grade = OCIO.Config.CreateRaw().getProcessor(OCIO.GradingPrimaryTransform(primary, OCIO.GRADING_LIN, False))
-    config = OCIO.Config.CreateFromBuiltinConfig("studio-config-v2.2.0_aces-v1.3_ocio-v2.4")
-    view = config.getProcessor("Linear Rec.709 (sRGB)", "sRGB - Display", "ACES 1.0 - SDR Video", OCIO.TRANSFORM_DIR_FORWARD)
-    pixels = np.ascontiguousarray(image.permute(1, 2, 0).reshape(-1, 3).numpy(), dtype=np.float32)
-    grade.getDefaultCPUProcessor().applyRGB(pixels)
-    view.getDefaultCPUProcessor().applyRGB(pixels)
-    display = tg.color.srgb_to_linear(torch.from_numpy(np.clip(pixels, 0.0, 1.0)).double())
-    return display.reshape(image.shape[1], image.shape[2], 3).permute(2, 0, 1)
+EXR = EXR_DIR / "GoldenGate.exr"
 
 
 def fit_once(source: torch.Tensor, target: torch.Tensor) -> tuple:

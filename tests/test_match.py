@@ -1,7 +1,9 @@
 """match_look: targets made by known looks (controls recovered) and by OpenColorIO (matched with a residual LUT)."""
 
 import json
+import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,7 +17,10 @@ with warnings.catch_warnings():
     warnings.simplefilter("ignore")
     import colour
 
-OCIO = pytest.importorskip("PyOpenColorIO")
+pytest.importorskip("PyOpenColorIO")
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from benchmarks.common import ocio_look  # noqa: E402  (the look bench_match.py learns)
 
 
 @pytest.fixture(autouse=True)
@@ -108,25 +113,9 @@ def test_scene_referred_target_from_two_pairs_with_masks(exr_dir):
     assert result.errors["controls"]["p99.9"] <= 0.1
 
 
-def ocio_look(rgb: np.ndarray) -> np.ndarray:
-    """OpenColorIO's GradingPrimaryTransform (linear style) then its built-in ACES 1.0 SDR view, as display-linear."""
-    primary = OCIO.GradingPrimary(OCIO.GRADING_LIN)
-    primary.exposure = OCIO.GradingRGBM(0.1, 0.0, -0.1, 0.2)
-    primary.contrast = OCIO.GradingRGBM(1.0, 1.0, 1.0, 1.1)
-    primary.offset = OCIO.GradingRGBM(0.0, 0.0, 0.002, 0.0)
-    primary.saturation = 1.1
-    grade = OCIO.Config.CreateRaw().getProcessor(OCIO.GradingPrimaryTransform(primary, OCIO.GRADING_LIN, False))
-    config = OCIO.Config.CreateFromBuiltinConfig("studio-config-v2.2.0_aces-v1.3_ocio-v2.4")
-    view = config.getProcessor("Linear Rec.709 (sRGB)", "sRGB - Display", "ACES 1.0 - SDR Video", OCIO.TRANSFORM_DIR_FORWARD)
-    out = np.ascontiguousarray(rgb, dtype=np.float32)
-    grade.getDefaultCPUProcessor().applyRGB(out)
-    view.getDefaultCPUProcessor().applyRGB(out)
-    return tg.color.srgb_to_linear(torch.from_numpy(np.clip(out, 0.0, 1.0)).double()).numpy()
-
-
 def test_opencolorio_look_is_matched_by_controls_and_a_residual_lut(exr_dir, tmp_path):
     source = scene(exr_dir, step=8)
-    target = torch.from_numpy(ocio_look(source.reshape(3, -1).T.numpy()).T).reshape(source.shape)
+    target = ocio_look(source)
     result = tg.match_look(source, target, controls=("post_exposure", "color_filter", "contrast", "saturation"),
                            tonemaps="aces_reference", steps=0, lbfgs_steps=60, max_pixels=2048, residual=True,
                            residual_steps=100, progress=False)
