@@ -41,10 +41,11 @@ def fit_once(source: torch.Tensor, target: torch.Tensor) -> tuple:
     fitted = time.perf_counter() - start
     with tempfile.TemporaryDirectory() as folder:
         start = time.perf_counter()
-        cube = result.write_cube(Path(folder) / "look.cube", size=65)
+        cube = result.write_lut(Path(folder) / "look.cube", size=65)
         baked = time.perf_counter() - start
     row = {"megapixels": source.shape[1] * source.shape[2] / 1e6, "fit_s": fitted, "cube_s": baked,
-           "look": result.look.to_config(), "candidates": result.candidates, **result.errors, "cube": cube}
+           "look": result.look.to_config(), "candidates": result.candidates, **result.errors,
+           "cube": {**cube, "report": str(cube["report"])}}
     return row, result
 
 

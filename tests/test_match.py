@@ -11,6 +11,7 @@ import torch
 
 import torchgrade as tg
 from torchgrade.cli import main
+from torchgrade.lut import ErrorReport, LUTAccuracyWarning
 from torchgrade.match import BoundedControls, ResidualLUT, delta_e_2000, linear_to_lab, match_errors
 
 with warnings.catch_warnings():
@@ -20,7 +21,7 @@ with warnings.catch_warnings():
 pytest.importorskip("PyOpenColorIO")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import ocio_look  # noqa: E402  (the look bench_match.py learns)
+from benchmarks.common import ocio_apply, ocio_look, ocio_processor  # noqa: E402  (the look bench_match.py learns)
 
 
 @pytest.fixture(autouse=True)
@@ -49,6 +50,30 @@ def test_delta_e_2000_and_lab_match_colour_science():
     lab1[:20, 1:], lab2[10:30, 1:] = 0.0, 0.0  # neutral colours, where the hue is undefined
     ours = delta_e_2000(torch.from_numpy(lab1.T), torch.from_numpy(lab2.T)).numpy()
     np.testing.assert_allclose(ours, colour.delta_E(lab1, lab2, method="CIE 2000"), atol=1e-9)
+
+
+def test_match_errors_are_codes_and_mean_delta_e_as_colour_science_computes_them():
+    rng = np.random.default_rng(2)
+    reference = rng.uniform(-0.05, 1.05, (3, 4000))  # display-linear, a little outside the display on both sides
+    fitted = reference + rng.normal(0.0, 0.01, reference.shape)
+    shown = [np.clip(x, 0.0, 1.0).T for x in (reference, fitted)]
+    codes = np.abs(255.0 * (colour.cctf_encoding(shown[0], "sRGB") - colour.cctf_encoding(shown[1], "sRGB"))).ravel()
+    white = colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"]
+    lab = [colour.XYZ_to_Lab(colour.RGB_to_XYZ(x, "ITU-R BT.709", apply_cctf_decoding=False), white) for x in shown]
+    errors = match_errors(torch.from_numpy(reference), torch.from_numpy(fitted))
+    assert errors["max"] == pytest.approx(codes.max(), abs=1e-9)
+    assert errors["p99.9"] == pytest.approx(np.quantile(codes, 0.999, method="inverted_cdf"), abs=1e-9)
+    assert errors["delta_e_2000"] == pytest.approx(colour.delta_E(lab[0], lab[1], method="CIE 2000").mean(), abs=1e-6)
+
+
+def test_held_out_pixels_are_never_fitted():
+    source = torch.arange(3 * 40 * 50, dtype=torch.float64).reshape(3, 40, 50)  # every pixel distinct
+    mask = torch.rand(40, 50, generator=torch.Generator().manual_seed(3)) < 0.7
+    pairs = tg.match.sample_pairs(source, source * 2.0, mask, max_pixels=100000, holdout=0.25)
+    train, test = (set(map(tuple, p.reshape(3, -1).T.tolist())) for p in (pairs.train_source, pairs.test_source))
+    inside = set(map(tuple, source[:, mask].T.tolist()))
+    assert not train & test and train | test == inside
+    assert len(test) == round(0.25 * len(inside))
 
 
 def test_bounded_controls_never_leave_their_ranges():
@@ -84,6 +109,39 @@ def test_known_look_is_matched_and_its_controls_recovered(exr_dir):
     assert fitted["hue_shift"] == pytest.approx(10.0, abs=0.5)
     assert fitted["temperature"] == pytest.approx(15.0, abs=5.0)
     assert result.history[-1] < result.history[0] / 100
+
+
+KNOWN_LOOKS = {
+    "lift/gamma/gain": ({"lift": (0.9, 1.0, 0.95, 0.03), "gamma": (1.0, 0.9, 1.0, -0.1), "gain": (1.0, 0.95, 0.9, 0.1)}, "aces"),
+    "split toning": ({"split_shadows": (0.4, 0.5, 0.6), "split_highlights": (0.6, 0.5, 0.4), "split_balance": 20.0}, "aces"),
+    "hue shift and tint": ({"hue_shift": -25.0, "tint": 15.0, "saturation": 10.0}, "neutral"),
+    "reinhard_extended's white point": ({"contrast": 10.0}, {"mode": "reinhard_extended", "white_point": 6.0}),
+    "hable's white point and exposure bias": ({"contrast": 10.0}, {"mode": "hable", "white_point": 8.0, "exposure_bias": 1.5}),
+}
+"""Looks whose controls, fitted alone, are identifiable: no other fitted control has the same effect."""
+
+# Stated tolerances, in each control's units: 0.05 of a -100..100 slider, 0.05 degree, 0.002 of a colour or
+# trackball component (a fiftieth of a code at 8 bits), 0.5 % of a tone mapper's curve parameter.
+TOLERANCES = {"split_balance": 0.05, "hue_shift": 0.05, "tint": 0.05, "saturation": 0.05, "contrast": 0.05}
+
+
+@pytest.mark.parametrize("name", KNOWN_LOOKS)
+def test_each_known_look_is_matched_and_its_controls_recovered(exr_dir, name):
+    grade, tonemap = KNOWN_LOOKS[name]
+    source = scene(exr_dir)
+    target = tg.PostFX(grade=grade, tonemap=tonemap)(source[None])[0]
+    mode = tonemap if isinstance(tonemap, str) else tonemap["mode"]
+    result = tg.match_look(source, target, controls=tuple(grade), tonemaps=mode, steps=30, lbfgs_steps=200,
+                           max_pixels=2048, progress=False)
+    assert result.errors["controls"]["p99.9"] <= 0.5, result.errors
+    config = result.look.to_config()
+    for control, value in grade.items():
+        expected = np.atleast_1d(value)
+        tolerance = TOLERANCES.get(control, 0.002)
+        np.testing.assert_allclose(np.atleast_1d(config["grade"][control]), expected, rtol=0, atol=tolerance, err_msg=control)
+    curve = {} if isinstance(tonemap, str) else {k: v for k, v in tonemap.items() if k != "mode"}
+    for parameter, value in curve.items():
+        assert config["tonemap"][parameter] == pytest.approx(value, rel=0.005), (parameter, config)
 
 
 def test_tone_mapper_is_chosen_and_identifiable_controls_recovered_closely(exr_dir):
@@ -124,12 +182,23 @@ def test_opencolorio_look_is_matched_by_controls_and_a_residual_lut(exr_dir, tmp
     assert result.errors["residual"]["delta_e_2000"] < result.errors["controls"]["delta_e_2000"]
     table = result.residual.lut.table.detach()
     assert tg.match.monotonicity(table) < 1e-6
-    written = result.write_cube(tmp_path / "look.cube", size=65)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", LUTAccuracyWarning)  # the report is checked below
+        written = {suffix: result.write_lut(tmp_path / f"look{suffix}", size=65) for suffix in (".cube", ".clf")}
+    held_out = result.pixels.test_target.reshape(3, -1)
     lut = tg.io.read_cube(tmp_path / "look.cube")
     with torch.no_grad():
-        errors = match_errors(result.pixels.test_target.reshape(3, -1), lut(result.pixels.test_source).reshape(3, -1))
-    assert written == {"size": 65, **errors}
-    assert written["p99.9"] <= 1.0, written  # 65³ holds the whole look within a code
+        by_cube = match_errors(held_out, lut(result.pixels.test_source).reshape(3, -1))
+    # OpenColorIO applies the CLF: an independent reading of the file the look wrote
+    by_clf = ocio_apply(ocio_processor(tmp_path / "look.clf", "tetrahedral"), result.pixels.test_source)
+    by_clf = match_errors(held_out, by_clf.reshape(3, -1).double())
+    for suffix, measured in ((".cube", by_cube), (".clf", by_clf)):
+        report = written[suffix].pop("report")
+        assert isinstance(report, ErrorReport) and report.colours > 0
+        assert written[suffix] == pytest.approx({"size": 65, **measured}, abs=0.01), suffix
+        assert measured["p99.9"] <= 1.0, (suffix, measured)  # 65³ holds the whole look within a code
+    with pytest.raises(ValueError, match=r"\.cube or \.clf"):
+        result.write_lut(tmp_path / "look.3dl")
 
 
 def test_residual_lut_starts_as_identity_and_bad_inputs_raise():
@@ -160,13 +229,16 @@ def test_cli_match_writes_a_readable_look_and_a_cube(tmp_path, capsys):
     config = json.loads((tmp_path / "look.json").read_text())
     assert config["tonemap"] == {"mode": "neutral"} and config["grade"]["contrast"] == pytest.approx(20.0, abs=2.0)
     assert tg.io.read_cube(tmp_path / "look.cube").size == 9
-    assert "match: neutral, 2 controls" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "match: neutral, 2 controls" in out and "look.cube (9³: " in out
+    assert out.splitlines()[-1].startswith("error: ") and "validation colours" in out  # the bake's error report
 
 
 @pytest.mark.parametrize("argv, message", [
     (["missing.exr", "after.png", "-o", "look.json"], "missing.exr"),
     (["before.exr", "after.jpg", "-o", "look.json"], "must be an .exr or .png"),
     (["before.exr", "after.png", "-o", "look.txt"], "must end in .json"),
+    (["before.exr", "after.png", "-o", "look.json", "--cube", "look.3dl"], "must end in .cube or .clf"),
     (["before.exr", "after.png", "-o", "look.json", "--scene-referred", "--residual"], "need a display-referred target"),
 ])
 def test_cli_match_bad_inputs_print_one_line(tmp_path, capsys, monkeypatch, argv, message):

@@ -21,7 +21,7 @@ import torch
 
 from ..io import read_exr, write_cube
 from ..lut import LUTAccuracyWarning, bake_lut, srgb_code_error
-from .common import add_grading_flags, look_from_args, stages_label
+from .common import add_grading_flags, look_from_args, report_line, stages_label
 
 __all__ = ["run_bake", "add_bake"]
 
@@ -75,8 +75,7 @@ def run_bake(args: argparse.Namespace) -> str:
         line += f"; on {Path(args.scene).name}: {error:.2f} 8-bit codes at p99.9"
     if live:
         line += f"; left live, not in the LUT: {', '.join(live)}"
-    verdict = "" if lut.error_report.within else "OVER TOLERANCE: "
-    return f"{line}\nerror: {verdict}{lut.error_report}"
+    return f"{line}\n{report_line(lut.error_report)}"
 
 
 def add_bake(commands) -> None:

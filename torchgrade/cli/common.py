@@ -23,7 +23,7 @@ from ..io import write_exr
 from ..io.atomic import atomic_write
 from ..pipeline import PostFX
 
-__all__ = ["GRADING_FLAGS", "display_codes", "write_png", "stages_label", "grade_from_args", "given_grading_flags", "look_from_args",
+__all__ = ["GRADING_FLAGS", "display_codes", "write_png", "report_line", "stages_label", "grade_from_args", "given_grading_flags", "look_from_args",
            "add_grading_flags"]
 
 GRADING_FLAGS = {
@@ -55,6 +55,18 @@ def write_png(path, image: torch.Tensor, encoded: bool = False) -> None:
 
     pixels = display_codes(image, 255, encoded).astype(np.uint8)
     atomic_write(path, lambda temporary: Image.fromarray(pixels, "RGB").save(temporary, format="PNG"))
+
+
+def report_line(report) -> str:
+    """A baked LUT's :class:`~torchgrade.lut.ErrorReport` as the CLI prints it, flagged when over its tolerance.
+
+    Examples:
+        >>> from torchgrade.lut import ErrorReport
+        >>> report_line(ErrorReport(1.5, 4.0, 100, 1.0))
+        'error: OVER TOLERANCE: p99.9 1.50, max 4.00 8-bit codes on 100 validation colours (tolerance 1 at p99.9)'
+    """
+    verdict = "" if report.within else "OVER TOLERANCE: "
+    return f"error: {verdict}{report}"
 
 
 def stages_label(look: nn.Module) -> str:

@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -29,8 +30,10 @@ from ..color import srgb_to_linear
 from ..grade import ColorGrade
 from ..io import read_exr
 from ..io.atomic import atomic_write
-from ..match import GRADE_CONTROLS, match_look
+from ..lut import LUTAccuracyWarning
+from ..match import GRADE_CONTROLS, LUT_FILES, match_look
 from ..tonemap import TONEMAP_MODES
+from .common import report_line
 
 __all__ = ["run_match", "add_match", "read_target"]
 
@@ -59,11 +62,11 @@ def _controls(text: str) -> tuple:
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
-    for path, suffix in ((Path(args.output), ".json"), (None if args.cube is None else Path(args.cube), ".cube")):
+    for path, suffixes in ((Path(args.output), (".json",)), (None if args.cube is None else Path(args.cube), LUT_FILES)):
         if path is None:
             continue
-        if path.suffix.lower() != suffix:
-            raise ValueError(f"{path} must end in {suffix}")
+        if path.suffix.lower() not in suffixes:
+            raise ValueError(f"{path} must end in {' or '.join(suffixes)}")
         if not path.parent.is_dir():
             raise ValueError(f"output folder {path.parent} does not exist")
     if args.scene_referred and (args.residual or args.cube):
@@ -92,8 +95,10 @@ def run_match(args: argparse.Namespace) -> str:
         line += f"; with the residual LUT {_errors(result.errors['residual'])}"
     line += f" -> {args.output}"
     if args.cube:
-        baked = result.write_cube(args.cube, size=args.cube_size)
-        line += f", {args.cube} ({baked['size']}³: {_errors(baked)})"
+        with warnings.catch_warnings():  # the report is printed below, with its cause and advice
+            warnings.simplefilter("ignore", LUTAccuracyWarning)
+            baked = result.write_lut(args.cube, size=args.cube_size)
+        line += f", {args.cube} ({baked['size']}³: {_errors(baked)})\n{report_line(baked['report'])}"
     return line
 
 
@@ -103,7 +108,7 @@ def add_match(commands) -> None:
     match.add_argument("source", help="scene-referred linear OpenEXR file (before)")
     match.add_argument("target", help="the same picture after the look: .png (sRGB) or .exr (display-referred linear)")
     match.add_argument("--output", "-o", required=True, help="look JSON to write (a PostFX config)")
-    match.add_argument("--cube", help="also bake the fitted look (with its residual LUT) into this .cube")
+    match.add_argument("--cube", help="also bake the fitted look (with its residual LUT) into this .cube (or .clf) file")
     match.add_argument("--cube-size", type=int, default=65, help="points per axis of the .cube (default 65)")
     match.add_argument("--tonemap", action="append", choices=TONEMAP_MODES,
                        help="tone mapper to fit (repeat to try several; default: the usual SDR modes)")
