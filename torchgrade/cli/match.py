@@ -39,7 +39,16 @@ __all__ = ["run_match", "add_match", "read_target"]
 
 
 def read_target(path: Path) -> torch.Tensor:
-    """The target picture as ``(3, H, W)`` linear: an 8-bit PNG decoded from sRGB, or an EXR as stored."""
+    """The target picture as ``(3, H, W)`` linear: an 8-bit PNG decoded from sRGB, or an EXR as stored.
+
+    Examples:
+        >>> import tempfile
+        >>> from .common import write_png
+        >>> with tempfile.TemporaryDirectory() as folder:
+        ...     write_png(Path(folder) / "after.png", torch.full((3, 2, 2), 0.18))
+        ...     round(read_target(Path(folder) / "after.png").mean().item(), 3)   # code 118, decoded
+        0.181
+    """
     if path.suffix.lower() == ".exr":
         return read_exr(path)[:3]
     if path.suffix.lower() != ".png":
@@ -54,6 +63,12 @@ def read_target(path: Path) -> torch.Tensor:
 
 
 def _controls(text: str) -> tuple:
+    """``--controls``: comma-separated names of :class:`~torchgrade.ColorGrade` controls.
+
+    Examples:
+        >>> _controls("contrast, saturation")
+        ('contrast', 'saturation')
+    """
     names = tuple(name.strip() for name in text.split(",") if name.strip())
     unknown = [name for name in names if name not in ColorGrade.controls]
     if unknown or not names:
@@ -78,7 +93,7 @@ def _errors(errors: dict) -> str:
 
 
 def run_match(args: argparse.Namespace) -> str:
-    """Fit the look, write the JSON (and the ``.cube``); the line to print."""
+    """Fit the look, write the JSON (and the ``.cube`` or ``.clf``); the line to print (the module shows a run)."""
     _check_outputs(args)
     source, target = read_exr(args.source)[:3], read_target(Path(args.target))
     stages = ("grade",) if args.scene_referred else ("grade", "tonemap")
@@ -103,7 +118,15 @@ def run_match(args: argparse.Namespace) -> str:
 
 
 def add_match(commands) -> None:
-    """The ``match`` subcommand and its flags."""
+    """The ``match`` subcommand and its flags.
+
+    Examples:
+        >>> parser = argparse.ArgumentParser()
+        >>> add_match(parser.add_subparsers())
+        >>> args = parser.parse_args(["match", "before.exr", "after.png", "-o", "look.json", "--tonemap", "agx"])
+        >>> args.tonemap, args.steps, args.lbfgs_steps, len(args.controls)
+        (['agx'], 200, 100, 12)
+    """
     match = commands.add_parser("match", help="learn a look's controls (and a residual LUT) from a before/after pair")
     match.add_argument("source", help="scene-referred linear OpenEXR file (before)")
     match.add_argument("target", help="the same picture after the look: .png (sRGB) or .exr (display-referred linear)")
