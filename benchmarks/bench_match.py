@@ -50,24 +50,38 @@ def fit_once(source: torch.Tensor, target: torch.Tensor) -> tuple:
 
 
 def figure(source, target, result, path: Path) -> None:
-    """Before (neutral tone mapper), target, matched by the controls, with the residual; the loss curve."""
+    """Before (neutral tone mapper), target, matched by the controls, with the residual; below, the loss at every
+    evaluation with each phase shaded (screening, Adam, L-BFGS, the residual's Adam and L-BFGS)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     with torch.no_grad():
-        panels = {"before (neutral)": tg.ToneMap("neutral")(source[None])[0], "target (OpenColorIO)": target,
+        panels = {"before (neutral tone mapper)": tg.ToneMap("neutral")(source[None])[0], "target (OpenColorIO)": target,
                   "matched: controls": result.look.per_pixel_stages()(source[None])[0],
-                  "matched: controls + 17³ residual": result(source[None])[0]}
-    fig, axes = plt.subplots(1, 5, figsize=(22, 3.6), gridspec_kw={"width_ratios": [1, 1, 1, 1, 1.1]})
-    for axis, (title, image) in zip(axes, panels.items()):
+                  "matched: controls + 17³ residual LUT": result(source[None])[0]}
+    fig = plt.figure(figsize=(16, 7.5))
+    grid = fig.add_gridspec(2, 4, height_ratios=[1.0, 1.0])
+    for column, (title, image) in enumerate(panels.items()):
+        axis = fig.add_subplot(grid[0, column])
         axis.imshow(tg.color.linear_to_srgb(image.clamp(0, 1)).permute(1, 2, 0).float().numpy())
-        axis.set_title(title)
+        axis.set_title(title, fontsize=11)
         axis.axis("off")
-    axes[4].semilogy(result.history)
-    axes[4].set_xlabel("loss evaluation (screening, Adam, L-BFGS, then residual)")
-    axes[4].set_ylabel("loss (squared 8-bit codes)")
+    loss = fig.add_subplot(grid[1, :])
+    start = 0
+    shades = plt.get_cmap("Pastel1").colors
+    for index, (phase, count) in enumerate(result.phases):
+        loss.axvspan(start - 0.5, start + count - 0.5, color=shades[index % len(shades)], alpha=0.6, lw=0,
+                     label=f"{phase} ({count})")
+        start += count
+    loss.semilogy(result.history, color="black", lw=1.0)
+    loss.set_xlim(-0.5, len(result.history) - 0.5)
+    loss.set_xlabel("loss evaluation (an Adam step evaluates once, an L-BFGS iteration a few times)", fontsize=10)
+    loss.set_ylabel("loss (squared 8-bit codes)", fontsize=10)
+    loss.set_title("fitting loss; the residual phases add the LUT's regularisers to a Huber data term", fontsize=11)
+    loss.grid(alpha=0.3, which="both", axis="y")
+    loss.legend(title="phase (evaluations)", fontsize=9, loc="upper right", ncol=len(result.phases))
     fig.tight_layout()
     fig.savefig(path, dpi=80)
 

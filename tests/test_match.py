@@ -158,6 +158,47 @@ def test_tone_mapper_is_chosen_and_identifiable_controls_recovered_closely(exr_d
     assert result.errors["controls"]["p99.9"] <= 0.1
 
 
+class RecordedBar:
+    """Stands in for tqdm: records each bar's description, total, updates and latest loss."""
+
+    bars = []
+
+    def __init__(self, total, desc, disable, leave):
+        self.total, self.desc, self.disable, self.done, self.postfix = total, desc, disable, 0, None
+        RecordedBar.bars.append(self)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def update(self, n=1):
+        self.done += n
+
+    def set_postfix(self, loss, refresh):
+        self.postfix = loss
+
+
+def test_progress_bars_and_loss_history_by_phase(monkeypatch):
+    monkeypatch.setattr(tg.match.fit, "tqdm", RecordedBar)
+    RecordedBar.bars = []
+    source = torch.rand(3, 24, 24, dtype=torch.float64, generator=torch.Generator().manual_seed(4)) * 4
+    target = tg.PostFX(grade={"contrast": 20}, tonemap="neutral")(source[None])[0]
+    result = tg.match_look(source, target, controls=("contrast",), tonemaps=("neutral", "aces"), screen_steps=5, steps=7,
+                           lbfgs_steps=4, residual=True, residual_size=5, residual_steps=6)
+    assert [(bar.desc, bar.total, bar.done, bar.disable) for bar in RecordedBar.bars] == [
+        ("screen neutral", 5, 5, None), ("screen aces", 5, 5, None), ("match neutral", 11, 11, None), ("residual 5³", 6, 6, None)]
+    assert all(float(bar.postfix) > 0 for bar in RecordedBar.bars)  # the latest loss is shown
+    phases = dict(result.phases)
+    assert list(phases) == ["screening", "Adam", "L-BFGS", "residual Adam", "residual L-BFGS"]
+    assert phases["screening"] == 5 and phases["Adam"] == 7 and phases["residual Adam"] == 3
+    assert sum(phases.values()) == len(result.history) and result.candidates["neutral"] == result.history[4]
+    RecordedBar.bars = []
+    tg.match_look(source, target, controls=("contrast",), tonemaps="neutral", steps=2, lbfgs_steps=0, progress=False)
+    assert [bar.disable for bar in RecordedBar.bars] == [True]
+
+
 def test_scene_referred_target_from_two_pairs_with_masks(exr_dir):
     source = scene(exr_dir)
     target = tg.ColorGrade(contrast=-20.0, saturation=30.0)(source[None])[0]

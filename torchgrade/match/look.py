@@ -45,7 +45,9 @@ class MatchResult:
     * ``residual``: the :class:`~torchgrade.match.ResidualLUT` fitted on top (``residual=True``), else ``None``.
     * ``errors``: ``{"controls": ..., "residual": ...}``, each ``{"p99.9", "max"}`` in 8-bit sRGB codes and
       ``"delta_e_2000"`` (mean), on held-out pixels.
-    * ``history``: the fitting loss after each optimiser step (screening, Adam, L-BFGS; then the residual's).
+    * ``history``: the fitting loss at every evaluation (screening, Adam, L-BFGS; then the residual's).
+    * ``phases``: ``[(phase, evaluations)]`` in order, how ``history`` divides: ``"screening"``, ``"Adam"``,
+      ``"L-BFGS"``, ``"residual Adam"``, ``"residual L-BFGS"`` (those that ran).
     * ``candidates``: each tone mapper tried and its loss after screening.
     """
 
@@ -55,6 +57,7 @@ class MatchResult:
     history: list
     candidates: dict
     pixels: PixelPairs = field(repr=False)
+    phases: list = field(default_factory=list)
 
     def transform(self) -> nn.Module:
         """The per-pixel look as one module: grade, tone mapper, then the residual LUT (if any)."""
@@ -125,7 +128,8 @@ def match_look(source, target, stages=STAGES, mask=None, *, controls=GRADE_CONTR
     pixels, in float64 (the residual LUT, cheaper to evaluate, on up to ``residual_pixels``). ``tonemaps``: a mode, several, or ``None`` for :data:`TONEMAP_CANDIDATES`; with more
     than one each is fitted for ``screen_steps`` and the best finished. ``residual=True`` (display targets) then
     fits a ``residual_size``³ :class:`~torchgrade.match.ResidualLUT` with weights ``smooth`` and ``monotone``.
-    Errors are measured on ``holdout`` of the pixels, never fitted.
+    Errors are measured on ``holdout`` of the pixels, never fitted. ``progress`` shows a tqdm bar per phase
+    with the latest loss (on stderr, when it is a terminal).
     """
     modes = _modes(stages, tonemaps)
     names = tuple(controls) if "grade" in stages else ()
@@ -137,12 +141,14 @@ def match_look(source, target, stages=STAGES, mask=None, *, controls=GRADE_CONTR
     look = fit.model.look()
     display = modes != (None,)
     errors = {"controls": evaluate(look.per_pixel_stages() if look.stages() else nn.Identity(), pixels, display)}
-    history, fitted_residual = list(fit.history), None
+    phases, fitted_residual = dict(fit.phases), None
     if residual:
         with torch.no_grad():
             shown = look.per_pixel_stages()(pixels.train_source)
-        fitted_residual, residual_history = fit_residual(shown, pixels.train_target, residual_size, residual_steps,
-                                                         smooth, monotone, progress)
-        history += residual_history
+        fitted_residual, residual_phases = fit_residual(shown, pixels.train_target, residual_size, residual_steps,
+                                                        smooth, monotone, progress)
+        phases.update({f"residual {name}": losses for name, losses in residual_phases.items()})
         errors["residual"] = evaluate(nn.Sequential(*look.per_pixel_stages(), fitted_residual), pixels, display)
-    return MatchResult(look, fitted_residual, errors, history, candidates, pixels)
+    history = [loss for losses in phases.values() for loss in losses]
+    counts = [(name, len(losses)) for name, losses in phases.items() if losses]
+    return MatchResult(look, fitted_residual, errors, history, candidates, pixels, counts)
