@@ -12,7 +12,7 @@ import torch
 import torchgrade as tg
 from torchgrade.cli import main
 from torchgrade.lut import ErrorReport, LUTAccuracyWarning
-from torchgrade.match import BoundedControls, ResidualLUT, delta_e_2000, linear_to_lab, match_errors
+from torchgrade.match import BoundedControls, ResidualLUT, fittable_names, delta_e_2000, linear_to_lab, match_errors
 
 with warnings.catch_warnings():
     warnings.simplefilter("ignore")
@@ -76,20 +76,25 @@ def test_held_out_pixels_are_never_fitted():
     assert len(test) == round(0.25 * len(inside))
 
 
-def test_bounded_controls_never_leave_their_ranges():
-    bounded = BoundedControls(tg.ColorGrade.controls, ("contrast", "lift", "post_exposure"))
-    hable = BoundedControls(tg.ToneMap("hable").control_table(), ("white_point",))
-    for raw in (-1e4, 1e4, float("nan")):
-        for module in (bounded, hable):
+@pytest.mark.parametrize("mode", tg.match.TONEMAP_CANDIDATES)
+def test_bounded_controls_never_leave_their_ranges(mode):
+    """Every control fitted by default, and every curve parameter of every candidate, pushed as far as the optimiser
+    can push it: inside its range, accepted by the stages themselves, with a finite picture."""
+    curve_table = tg.tonemap.TONE_MAPPERS[mode].controls
+    grade = BoundedControls(tg.ColorGrade.controls, tg.match.GRADE_CONTROLS)
+    curve = BoundedControls(curve_table, fittable_names(curve_table))
+    image = torch.tensor([0.0, 1e-4, 0.18, 1.0, 60.0, 65504.0]).reshape(1, 1, 1, 6).expand(1, 3, 1, 6)
+    for raw in (-1e4, -3.0, 0.0, 3.0, 1e4):
+        for module in (grade, curve):
             with torch.no_grad():
                 for parameter in module.raw.values():
                     parameter.fill_(raw)
             for name, value in module.values().items():
                 low, high, _ = module.ranges[name]
-                if raw == raw:
-                    assert torch.all((value >= low) & (value <= high)), (name, value)
-    values = bounded.values()
-    assert set(values) == {"contrast", "lift", "post_exposure"} and values["lift"].shape == (4,)
+                assert torch.all((value >= low) & (value <= high)), (name, raw, value)
+        look = tg.PostFX(grade=grade.plain_values(digits=12), tonemap={"mode": mode, **curve.plain_values(digits=12)})
+        assert torch.isfinite(look(image)).all(), raw
+    assert grade.values()["lift"].shape == (4,) and grade.values()["split_shadows"].shape == (3,)
 
 
 def test_known_look_is_matched_and_its_controls_recovered(exr_dir):
