@@ -12,6 +12,7 @@ Examples:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Optional
 
@@ -29,7 +30,7 @@ from .metrics import display_codes, match_errors
 from .pixels import PixelPairs
 from .residual import ResidualLUT, lookup_matrix, monotonicity, smoothness
 
-__all__ = ["GRADE_CONTROLS", "TONEMAP_CANDIDATES", "TRACKBALLS", "canonical_trackball", "MatchedControls", "optimise",
+__all__ = ["GRADE_CONTROLS", "TONEMAP_CANDIDATES", "TRACKBALLS", "canonical_trackball", "MatchedControls", "optimise", "every_loss",
            "pixel_loss", "ControlsFit", "fit_controls", "fit_residual", "evaluate"]
 
 GRADE_CONTROLS = ("post_exposure", "temperature", "tint", "contrast", "split_shadows", "split_highlights",
@@ -123,6 +124,16 @@ def optimise(module: nn.Module, loss_fn, steps: int, lbfgs_steps: int, lr: float
     return {"Adam": history[:steps], "L-BFGS": history[steps:]}
 
 
+def every_loss(phases: dict) -> list:
+    """The losses of ``{phase: [losses]}`` as one list, in the phases' order.
+
+    Examples:
+        >>> every_loss({"Adam": [4.0, 2.0], "L-BFGS": [1.0]})
+        [4.0, 2.0, 1.0]
+    """
+    return [loss for losses in phases.values() for loss in losses]
+
+
 def pixel_loss(display: bool):
     """Mean squared error in 8-bit sRGB codes (display targets) or in LogC codes ×255 (scene-referred targets).
 
@@ -158,14 +169,14 @@ def fit_controls(pairs: PixelPairs, names, modes, aces: bool, steps: int, lbfgs_
     fits = {mode: ControlsFit(MatchedControls(names, mode, aces)) for mode in modes}
     if len(modes) > 1:
         for mode, fit in fits.items():
-            screening = optimise(fit.model, loss_fn(fit.model), screen_steps, 0, lr, progress, f"screen {mode}")
-            fit.phases["screening"] = [loss for losses in screening.values() for loss in losses]
-            fit.loss = fit.phases["screening"][-1] if fit.phases["screening"][-1] == fit.phases["screening"][-1] else float("inf")
+            screening = every_loss(optimise(fit.model, loss_fn(fit.model), screen_steps, 0, lr, progress, f"screen {mode}"))
+            fit.phases["screening"] = screening
+            fit.loss = float("inf") if math.isnan(screening[-1]) else screening[-1]
     best = min(fits.values(), key=lambda f: f.loss)
     best.phases.update(optimise(best.model, loss_fn(best.model), steps, lbfgs_steps, lr, progress,
                                 f"match {best.model.mode or 'scene-referred'}"))
     if len(modes) == 1:
-        best.loss = [loss for losses in best.phases.values() for loss in losses][-1]
+        best.loss = every_loss(best.phases)[-1]
     return best, {mode: fit.loss for mode, fit in fits.items()}
 
 

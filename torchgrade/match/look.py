@@ -24,7 +24,7 @@ from ..io import read_cube, write_clf, write_cube
 from ..lut import LUT3D, bake_lut
 from ..pipeline import PostFX
 from ..tonemap import tone_mapper
-from .fit import GRADE_CONTROLS, TONEMAP_CANDIDATES, evaluate, fit_controls, fit_residual
+from .fit import GRADE_CONTROLS, TONEMAP_CANDIDATES, every_loss, evaluate, fit_controls, fit_residual
 from .pixels import PixelPairs, sample_pairs
 from .residual import ResidualLUT
 
@@ -149,6 +149,6 @@ def match_look(source, target, stages=STAGES, mask=None, *, controls=GRADE_CONTR
                                                         smooth, monotone, progress)
         phases.update({f"residual {name}": losses for name, losses in residual_phases.items()})
         errors["residual"] = evaluate(nn.Sequential(*look.per_pixel_stages(), fitted_residual), pixels, display)
-    history = [loss for losses in phases.values() for loss in losses]
+    history = every_loss(phases)
     counts = [(name, len(losses)) for name, losses in phases.items() if losses]
     return MatchResult(look, fitted_residual, errors, history, candidates, pixels, counts)
