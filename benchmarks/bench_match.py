@@ -23,33 +23,15 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-import PyOpenColorIO as OCIO
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import torchgrade as tg  # noqa: E402
+from benchmarks.common import EXR_DIR, ocio_look  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
-EXR = Path(__file__).resolve().parents[2] / "shared" / "data" / "exr" / "GoldenGate.exr"
-
-
-def ocio_look(image: torch.Tensor) -> torch.Tensor:
-    """OpenColorIO's primary grade then the ACES 1.0 SDR view, display-linear ``(3, H, W)`` float64."""
-    primary = OCIO.GradingPrimary(OCIO.GRADING_LIN)
-    primary.exposure = OCIO.GradingRGBM(0.1, 0.0, -0.1, 0.2)
-    primary.contrast = OCIO.GradingRGBM(1.0, 1.0, 1.0, 1.1)
-    primary.offset = OCIO.GradingRGBM(0.0, 0.0, 0.002, 0.0)
-    primary.saturation = 1.1
-    grade = OCIO.Config.CreateRaw().getProcessor(OCIO.GradingPrimaryTransform(primary, OCIO.GRADING_LIN, False))
-    config = OCIO.Config.CreateFromBuiltinConfig("studio-config-v2.2.0_aces-v1.3_ocio-v2.4")
-    view = config.getProcessor("Linear Rec.709 (sRGB)", "sRGB - Display", "ACES 1.0 - SDR Video", OCIO.TRANSFORM_DIR_FORWARD)
-    pixels = np.ascontiguousarray(image.permute(1, 2, 0).reshape(-1, 3).numpy(), dtype=np.float32)
-    grade.getDefaultCPUProcessor().applyRGB(pixels)
-    view.getDefaultCPUProcessor().applyRGB(pixels)
-    display = tg.color.srgb_to_linear(torch.from_numpy(np.clip(pixels, 0.0, 1.0)).double())
-    return display.reshape(image.shape[1], image.shape[2], 3).permute(2, 0, 1)
+EXR = EXR_DIR / "GoldenGate.exr"
 
 
 def fit_once(source: torch.Tensor, target: torch.Tensor) -> tuple:
@@ -59,32 +41,47 @@ def fit_once(source: torch.Tensor, target: torch.Tensor) -> tuple:
     fitted = time.perf_counter() - start
     with tempfile.TemporaryDirectory() as folder:
         start = time.perf_counter()
-        cube = result.write_cube(Path(folder) / "look.cube", size=65)
+        cube = result.write_lut(Path(folder) / "look.cube", size=65)
         baked = time.perf_counter() - start
     row = {"megapixels": source.shape[1] * source.shape[2] / 1e6, "fit_s": fitted, "cube_s": baked,
-           "look": result.look.to_config(), "candidates": result.candidates, **result.errors, "cube": cube}
+           "look": result.look.to_config(), "candidates": result.candidates, **result.errors,
+           "cube": {**cube, "report": str(cube["report"])}}
     return row, result
 
 
 def figure(source, target, result, path: Path) -> None:
-    """Before (neutral tone mapper), target, matched by the controls, with the residual; the loss curve."""
+    """Before (neutral tone mapper), target, matched by the controls, with the residual; below, the loss at every
+    evaluation with each phase shaded (screening, Adam, L-BFGS, the residual's Adam and L-BFGS)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     with torch.no_grad():
-        panels = {"before (neutral)": tg.ToneMap("neutral")(source[None])[0], "target (OpenColorIO)": target,
+        panels = {"before (neutral tone mapper)": tg.ToneMap("neutral")(source[None])[0], "target (OpenColorIO)": target,
                   "matched: controls": result.look.per_pixel_stages()(source[None])[0],
-                  "matched: controls + 17³ residual": result(source[None])[0]}
-    fig, axes = plt.subplots(1, 5, figsize=(22, 3.6), gridspec_kw={"width_ratios": [1, 1, 1, 1, 1.1]})
-    for axis, (title, image) in zip(axes, panels.items()):
+                  "matched: controls + 17³ residual LUT": result(source[None])[0]}
+    fig = plt.figure(figsize=(16, 7.5))
+    grid = fig.add_gridspec(2, 4, height_ratios=[1.0, 1.0])
+    for column, (title, image) in enumerate(panels.items()):
+        axis = fig.add_subplot(grid[0, column])
         axis.imshow(tg.color.linear_to_srgb(image.clamp(0, 1)).permute(1, 2, 0).float().numpy())
-        axis.set_title(title)
+        axis.set_title(title, fontsize=11)
         axis.axis("off")
-    axes[4].semilogy(result.history)
-    axes[4].set_xlabel("loss evaluation (screening, Adam, L-BFGS, then residual)")
-    axes[4].set_ylabel("loss (squared 8-bit codes)")
+    loss = fig.add_subplot(grid[1, :])
+    start = 0
+    shades = plt.get_cmap("Pastel1").colors
+    for index, (phase, count) in enumerate(result.phases):
+        loss.axvspan(start - 0.5, start + count - 0.5, color=shades[index % len(shades)], alpha=0.6, lw=0,
+                     label=f"{phase} ({count})")
+        start += count
+    loss.semilogy(result.history, color="black", lw=1.0)
+    loss.set_xlim(-0.5, len(result.history) - 0.5)
+    loss.set_xlabel("loss evaluation (an Adam step evaluates once, an L-BFGS iteration a few times)", fontsize=10)
+    loss.set_ylabel("loss (squared 8-bit codes)", fontsize=10)
+    loss.set_title("fitting loss; the residual phases add the LUT's regularisers to a Huber data term", fontsize=11)
+    loss.grid(alpha=0.3, which="both", axis="y")
+    loss.legend(title="phase (evaluations)", fontsize=9, loc="upper right", ncol=len(result.phases))
     fig.tight_layout()
     fig.savefig(path, dpi=80)
 

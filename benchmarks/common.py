@@ -170,6 +170,28 @@ def ocio_apply(processor, image: torch.Tensor) -> torch.Tensor:
     return torch.from_numpy(buffer).permute(2, 0, 1).unsqueeze(0)
 
 
+def ocio_look(image: torch.Tensor) -> torch.Tensor:
+    """A look made by OpenColorIO alone, for ``tg.match_look`` to learn: its ``GradingPrimaryTransform`` (linear style:
+    exposure +0.2 with a per-channel tilt of ±0.1, contrast 1.1, an offset of 0.002 in blue, saturation 1.1) then its
+    built-in ACES 1.0 SDR view (studio config 2.2.0), on a scene-linear Rec.709 ``(3, H, W)`` image.
+
+    Returns the display-linear ``(3, H, W)`` float64 picture (the view's sRGB output clipped to [0, 1] and decoded).
+    """
+    import PyOpenColorIO as OCIO
+
+    primary = OCIO.GradingPrimary(OCIO.GRADING_LIN)
+    primary.exposure = OCIO.GradingRGBM(0.1, 0.0, -0.1, 0.2)
+    primary.contrast = OCIO.GradingRGBM(1.0, 1.0, 1.0, 1.1)
+    primary.offset = OCIO.GradingRGBM(0.0, 0.0, 0.002, 0.0)
+    primary.saturation = 1.1
+    grade = OCIO.Config.CreateRaw().getProcessor(OCIO.GradingPrimaryTransform(primary, OCIO.GRADING_LIN, False))
+    config = OCIO.Config.CreateFromBuiltinConfig("studio-config-v2.2.0_aces-v1.3_ocio-v2.4")
+    view = config.getProcessor("Linear Rec.709 (sRGB)", "sRGB - Display", "ACES 1.0 - SDR Video", OCIO.TRANSFORM_DIR_FORWARD)
+    graded = ocio_apply(grade.getDefaultCPUProcessor(), image[None])
+    shown = ocio_apply(view.getDefaultCPUProcessor(), graded)[0]
+    return tg.color.srgb_to_linear(shown.clamp(0.0, 1.0).double())
+
+
 def ocio_in_place(processor, image: torch.Tensor) -> tuple:
     """``(run, reset)`` for the timer: ``processor`` applied in place to a packed copy of ``image``, which
     ``reset`` restores (untimed), so every run sees the same input."""

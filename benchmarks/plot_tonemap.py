@@ -46,22 +46,30 @@ def greys(stops: np.ndarray) -> torch.Tensor:
 
 
 def plot_curves(path: Path) -> None:
+    """Fifteen SDR curves need fifteen looks: each mode its own colour (tab20) and a line style per family, the
+    legend beside the axes rather than over the curves' toes."""
     stops = np.linspace(-10, 12, 400)
-    figure, (sdr, hdr) = plt.subplots(1, 2, figsize=(13, 5))
-    for mode in tg.TONEMAP_MODES:
-        if mode in HDR_MODES or mode == "none":
-            continue
+    figure, (sdr, hdr) = plt.subplots(1, 2, figsize=(15, 5.5), gridspec_kw={"width_ratios": [1.25, 1]})
+    sdr_modes = [mode for mode in tg.TONEMAP_MODES if mode not in HDR_MODES and mode != "none"]
+    colours, styles = plt.get_cmap("tab20").colors, ("-", "--", "-.", ":")
+    for index, mode in enumerate(sdr_modes):
         out = tg.color.linear_to_srgb(tonemap(greys(stops), mode))[0, 1, 0].numpy()
-        sdr.plot(stops, out, label=mode, lw=2.2 if mode in ("aces_reference", "aces2") else 1.0)
-    sdr.set(xlabel="scene exposure (stops above 0.18)", ylabel="sRGB-encoded display value", title="SDR modes, grey ramp")
-    sdr.legend(fontsize=7, ncol=2)
+        sdr.plot(stops, out, label=mode, color=colours[index % len(colours)], ls=styles[index % len(styles)],
+                 lw=2.4 if mode in ("aces_reference", "aces2") else 1.4)
+    sdr.set(xlabel="scene exposure (stops above 0.18)", ylabel="sRGB-encoded display value (0..1)", title="SDR modes, grey ramp")
+    sdr.set_xlim(stops[0], stops[-1])
+    sdr.grid(alpha=0.3)
+    sdr.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), title="mode", title_fontsize=9)
+    floor = 1e-3
     for mode, settings in HDR_MODES.items():
         nits = tonemap(greys(stops), mode, **settings)[0, 1, 0].numpy() * settings["peak_luminance"]
-        hdr.semilogy(stops, np.maximum(nits, 1e-3), label=f"{mode}, 1000 cd/m²")
+        hdr.semilogy(stops, np.maximum(nits, floor), label=f"{mode}, 1000 cd/m² peak")
     sdr_nits = tonemap(greys(stops), "aces2")[0, 1, 0].numpy() * 100.0
-    hdr.semilogy(stops, np.maximum(sdr_nits, 1e-3), "--", label="aces2 (SDR, 100 cd/m²)")
-    hdr.set(xlabel="scene exposure (stops above 0.18)", ylabel="display luminance (cd/m²)", title="HDR modes, grey ramp")
-    hdr.legend(fontsize=8)
+    hdr.semilogy(stops, np.maximum(sdr_nits, floor), "--", label="aces2 (SDR, 100 cd/m² peak)")
+    hdr.set(xlabel="scene exposure (stops above 0.18)", ylabel="display luminance (cd/m², log scale)",
+            title=f"HDR modes, grey ramp (below {floor:g} cd/m² drawn at {floor:g})")
+    hdr.grid(alpha=0.3, which="both")
+    hdr.legend(fontsize=8, loc="upper left")
     figure.tight_layout()
     figure.savefig(path, dpi=110)
 

@@ -1,5 +1,6 @@
 """Bloom: light conservation, thresholding, firefly fading, upsampling, gradients, parameters, sizes."""
 
+import inspect
 import math
 
 import pytest
@@ -279,6 +280,7 @@ def test_default_module_matches_the_contract():
         ({"scatter": torch.tensor([0.5, 0.01])}, "scatter"),
         ({"max_iterations": -1}, "max_iterations"),
         ({"max_iterations": 2.5}, "max_iterations"),
+        ({"max_iterations": 17}, "max_iterations"),
         ({"downscale_limit": 0}, "downscale_limit"),
     ],
 )
@@ -287,6 +289,20 @@ def test_invalid_parameters_raise_naming_the_parameter(arguments, name):
         tg.Bloom(**arguments)
     with pytest.raises(ValueError, match=name):
         bloom(torch.rand(1, 3, 8, 8), **arguments)
+
+
+def test_functional_and_stage_take_exactly_the_control_table():
+    names = list(tg.bloom.CONTROLS)
+    assert list(inspect.signature(tg.Bloom).parameters) == names
+    assert list(inspect.signature(bloom).parameters) == ["image", *names, "fixed_depth"]
+    with pytest.raises(TypeError, match="treshold"):
+        bloom(torch.rand(1, 3, 8, 8), treshold=1.0)
+    with pytest.raises(ValueError, match="treshold"):
+        tg.Bloom(treshold=1.0)
+    # a truthy flag is the same flag in both, as it was before either checked it
+    image = torch.rand(1, 3, 16, 16) * 4
+    assert torch.equal(bloom(image, fade_fireflies=0), bloom(image, fade_fireflies=False))
+    assert tg.Bloom(karis_average=1).karis_average is True
 
 
 def test_bad_images_raise():

@@ -37,14 +37,14 @@ import torch
 from torch import nn
 
 from .bloom import Bloom
-from .config import config_value, load_config
+from .config import load_config
 from .display import Display, display_settings
 from .dither import Dither
 from .exposure import AutoExposure
 from .grade import ColorGrade
 from .lut import INTERPOLATIONS, LUT3D, ErrorReport, bake_lut
 from .primary import PrimaryGrade
-from .tonemap import TONE_MAPPERS, ToneMap
+from .tonemap import ToneMap
 
 __all__ = ["PostFX", "STAGES", "SAFE_GLOBALS", "stage_keys", "build_stage", "is_identity_stage"]
 
@@ -88,21 +88,10 @@ def build_stage(stage: str, spec) -> Optional[nn.Module]:
     for key in spec:
         if key not in known:
             raise ValueError(f"unknown key '{stage}.{key}'; {stage} takes {', '.join(known)}")
-    table = _control_table(stage, spec)
     try:
-        spec = {key: config_value(key, value, table[key]) if key in table else value for key, value in spec.items()}
-        return STAGES[stage](**spec)
+        return STAGES[stage].from_config(spec)
     except (ValueError, TypeError) as error:
         raise ValueError(_qualified(stage, str(error), spec)) from None
-
-
-def _control_table(stage: str, spec: dict) -> dict:
-    """The controls ``spec`` sets: the stage class's table, with a tone mapper's curve parameters for its mode."""
-    table = dict(STAGES[stage].controls)
-    mode = spec.get("mode", table["mode"].default) if stage == "tonemap" else None
-    if isinstance(mode, str) and mode in TONE_MAPPERS:
-        table.update(TONE_MAPPERS[mode].controls)
-    return table
 
 
 def _qualified(stage: str, message: str, spec: dict) -> str:

@@ -75,6 +75,34 @@ class Control:
         if self.kind not in KINDS:
             raise ValueError(f"kind must be one of {KINDS}, got {self.kind!r}")
 
+    def check(self, name: str, value):
+        """``value`` checked against this control's kind and range (an ``"int"`` returned as ``int``), or ``ValueError`` naming ``name``.
+
+        A ``"value"`` control is returned unchecked: its stage checks it (:meth:`Stage.check_control`).
+
+        Examples:
+            >>> Control(16, (0, 16)).check("max_iterations", 17)
+            Traceback (most recent call last):
+            ...
+            ValueError: max_iterations must be an integer in [0, 16], got 17
+            >>> Control(0.0, (-100.0, 100.0)).check("contrast", [10.0, 20.0])
+            [10.0, 20.0]
+        """
+        if self.kind == "number":
+            # A number control that defaults to None ("not set", as a speed that falls back on another) keeps None.
+            if not (value is None and self.default is None):
+                _check_number(value, name, self.range)
+        elif self.kind == "int":
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not self.range[0] <= value <= self.range[1]:
+                raise ValueError(f"{name} must be an integer in [{self.range[0]}, {self.range[1]}], got {value!r}")
+            value = int(value)
+        elif self.kind == "bool":
+            if not isinstance(value, bool):
+                raise ValueError(f"{name} must be True or False, got {value!r}")
+        elif self.kind == "choice":
+            check_choice(name, value, self.range)
+        return value
+
 
 def _inferred_kind(default, allowed) -> str:
     if isinstance(default, bool):
@@ -169,22 +197,7 @@ class Stage(nn.Module):
         self.check_together()
 
     def _checked(self, name: str, value):
-        control = self.control_table()[name]
-        value = self.check_control(name, value)
-        if control.kind == "number":
-            # A number control that defaults to None ("not set", as a speed that falls back on another) keeps None.
-            if not (value is None and control.default is None):
-                _check_number(value, name, control.range)
-        elif control.kind == "int":
-            if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not control.range[0] <= value <= control.range[1]:
-                raise ValueError(f"{name} must be an integer in [{control.range[0]}, {control.range[1]}], got {value!r}")
-            value = int(value)
-        elif control.kind == "bool":
-            if not isinstance(value, bool):
-                raise ValueError(f"{name} must be True or False, got {value!r}")
-        elif control.kind == "choice":
-            check_choice(name, value, control.range)
-        return value
+        return self.control_table()[name].check(name, self.check_control(name, value))
 
     def check_control(self, name: str, value):
         """Check (and return, possibly normalised) a control before its kind's check; the base accepts anything.
@@ -248,7 +261,7 @@ class Stage(nn.Module):
         for name, value in self._parameters.items():
             control = table.get(name)
             if control is not None and control.kind == "number" and value is not None:
-                _check_number(value, name, control.range)
+                control.check(name, value)
 
     # ------------------------------------------------------------------ identity and configs
 
@@ -279,11 +292,30 @@ class Stage(nn.Module):
         }
 
     @classmethod
+    def config_table(cls, config: dict) -> dict:
+        """The controls a ``config`` of this stage can set: :attr:`controls` unless a setting adds others (a tone mapper's mode)."""
+        return cls.controls
+
+    @classmethod
     def from_config(cls, config: dict) -> "Stage":
-        """Build the stage from a dict of its constructor arguments (what :meth:`to_config` returns)."""
+        """Build the stage from a dict of its constructor arguments (what :meth:`to_config` returns).
+
+        A JSON list where the stage keeps a per-sample tensor comes back as that tensor
+        (:func:`~torchgrade.config.config_value`), so ``to_config`` -> JSON -> ``from_config`` rebuilds it.
+
+        Examples:
+            >>> import json
+            >>> import torchgrade as tg
+            >>> grade = tg.ColorGrade(contrast=torch.tensor([10.0, 20.0]))
+            >>> tg.ColorGrade.from_config(json.loads(json.dumps(grade.to_config()))).contrast
+            tensor([10., 20.])
+        """
+        from .config import config_value  # config reads Control from this module
+
         if not isinstance(config, dict):
             raise ValueError(f"a {cls.__name__} config must be a dict, got {type(config).__name__}")
-        return cls(**config)
+        table = cls.config_table(config)
+        return cls(**{key: config_value(key, value, table[key]) if key in table else value for key, value in config.items()})
 
     def export_form(self) -> nn.Module:
         """The module an ONNX export traces for this stage; the stage itself unless it needs another form."""

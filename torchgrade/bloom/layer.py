@@ -27,6 +27,7 @@ the mode's composite (:mod:`~torchgrade.bloom.composite`).
 
 from __future__ import annotations
 
+import inspect
 import numbers
 
 import torch
@@ -34,16 +35,16 @@ from torch import nn
 
 from ..color import srgb_to_linear
 from ..core import (
-    HALF_MAX, Param, check_choice, check_image, check_range, color_param, is_constant, is_tracing, sanitize,
+    HALF_MAX, check_image, color_param, is_constant, is_tracing, sanitize,
     scalar_param, to_input_dtype, working_dtype,
 )
-from ..stage import Control, Stage
+from ..stage import Control, Stage, controls_signature
 from .composite import BLOOM_MODES, COMPOSITES
 from .prefilter import prefilter
 from .pyramid import active_levels, anamorphic_sigma, glow_pyramid, pyramid_depth, upsample
 from .texture import as_texture, check_texture, resampled
 
-__all__ = ["CONTROLS", "UNITY_SETTINGS", "OPTION_DEFAULTS", "MAX_FRAME_SIDE", "check_settings", "bloom", "Bloom", "FixedDepthBloom"]
+__all__ = ["CONTROLS", "UNITY_SETTINGS", "OPTION_DEFAULTS", "MAX_FRAME_SIDE", "check_settings", "bloom_settings", "bloom", "Bloom", "FixedDepthBloom"]
 
 # Finite bounds make every documented value safe on any finite frame: a threshold of 100 is linear
 # 62,500 (srgb_to_linear), just below the non-finite policy's 65,504, and gains up to 100 keep
@@ -90,39 +91,28 @@ def check_settings(settings: dict) -> None:
         ValueError: scatter must lie in [0.05, 0.95], got 0.99
     """
     for name, value in settings.items():
-        control = CONTROLS[name]
-        if control.kind == "number":
-            check_range(value, name, *control.range)
-        elif control.kind == "choice":
-            check_choice(name, value, control.range)
-        elif control.kind == "int" and (isinstance(value, bool) or not isinstance(value, int) or not control.range[0] <= value):
-            raise ValueError(f"{name} must be an integer in [{control.range[0]}, {control.range[1]}], got {value!r}")
+        CONTROLS[name].check(name, value)
     check_texture(settings.get("dirt"), "dirt")
 
 
-def bloom(
-    image: torch.Tensor,
-    mode: str = "additive",
-    threshold: Param = 1.0,
-    knee: Param = 0.5,
-    intensity: Param = 1.0,
-    scatter: Param = 0.7,
-    max_iterations: int = 16,
-    downscale_limit: int = 2,
-    fade_fireflies: bool = True,
-    bicubic_upsampling: bool = False,
-    tint=(1.0, 1.0, 1.0),
-    clamp: Param = HALF_MAX,
-    anamorphic_ratio: Param = 0.0,
-    karis_average: bool = False,
-    dirt: torch.Tensor = None,
-    dirt_intensity: Param = 0.0,
-    low_frequency_boost: Param = 0.7,
-    low_frequency_boost_curvature: Param = 0.95,
-    high_pass_frequency: Param = 1.0,
-    *,
-    fixed_depth: int = None,
-) -> torch.Tensor:
+def bloom_settings(given: dict) -> dict:
+    """Every setting of :data:`CONTROLS`, in its order: ``given`` (flags as bools) or the default.
+
+    Raises ``TypeError`` for a name that is not a bloom setting, as a misspelt keyword would.
+
+    Examples:
+        >>> settings = bloom_settings({"intensity": 0.5, "karis_average": 1})
+        >>> settings["intensity"], settings["karis_average"], settings["scatter"]
+        (0.5, True, 0.7)
+    """
+    unknown = sorted(set(given) - set(CONTROLS))
+    if unknown:
+        raise TypeError(f"unknown bloom setting(s) {unknown}; known: {', '.join(CONTROLS)}")
+    settings = {name: given.get(name, control.default) for name, control in CONTROLS.items()}
+    return {name: bool(value) if CONTROLS[name].kind == "bool" else value for name, value in settings.items()}
+
+
+def bloom(image: torch.Tensor, *, fixed_depth: int = None, **settings) -> torch.Tensor:
     """Bloom an HDR image ``(..., 3, H, W)``; see :mod:`torchgrade.bloom` for the passes and guarantees.
 
     Args:
@@ -165,18 +155,16 @@ def bloom(
         >>> round(float(out.sum() / image.sum()), 4), bool(out[..., 8, 0].gt(0).all())
         (1.0, True)
     """
-    settings = {
-        "mode": mode, "threshold": threshold, "knee": knee, "intensity": intensity, "scatter": scatter,
-        "max_iterations": max_iterations, "downscale_limit": downscale_limit, "fade_fireflies": fade_fireflies,
-        "bicubic_upsampling": bicubic_upsampling, "tint": tint, "clamp": clamp, "anamorphic_ratio": anamorphic_ratio,
-        "karis_average": karis_average, "dirt": dirt, "dirt_intensity": dirt_intensity,
-        "low_frequency_boost": low_frequency_boost, "low_frequency_boost_curvature": low_frequency_boost_curvature,
-        "high_pass_frequency": high_pass_frequency,
-    }
     check_image(image)
+    settings = bloom_settings(settings)
     if not is_tracing():
         check_settings(settings)
     return _bloomed(image, settings, fixed_depth)
+
+
+bloom.__signature__ = controls_signature(
+    {**CONTROLS, "fixed_depth": Control(None)}, leading=(inspect.Parameter("image", inspect.Parameter.POSITIONAL_OR_KEYWORD),)
+)
 
 
 def _bloomed(image: torch.Tensor, settings: dict, fixed_depth=None) -> torch.Tensor:
@@ -249,36 +237,9 @@ class Bloom(Stage):
     controls = CONTROLS
     always_in_config = UNITY_SETTINGS
 
-    def __init__(
-        self,
-        mode: str = "additive",
-        threshold: Param = 1.0,
-        knee: Param = 0.5,
-        intensity: Param = 1.0,
-        scatter: Param = 0.7,
-        max_iterations: int = 16,
-        downscale_limit: int = 2,
-        fade_fireflies: bool = True,
-        bicubic_upsampling: bool = False,
-        tint=(1.0, 1.0, 1.0),
-        clamp: Param = HALF_MAX,
-        anamorphic_ratio: Param = 0.0,
-        karis_average: bool = False,
-        dirt=None,
-        dirt_intensity: Param = 0.0,
-        low_frequency_boost: Param = 0.7,
-        low_frequency_boost_curvature: Param = 0.95,
-        high_pass_frequency: Param = 1.0,
-    ) -> None:
+    def __init__(self, **controls) -> None:
         super().__init__()
-        self.init_controls(
-            mode=mode, threshold=threshold, knee=knee, intensity=intensity, scatter=scatter,
-            max_iterations=max_iterations, downscale_limit=downscale_limit, fade_fireflies=bool(fade_fireflies),
-            bicubic_upsampling=bool(bicubic_upsampling), tint=tint, clamp=clamp, anamorphic_ratio=anamorphic_ratio,
-            karis_average=bool(karis_average), dirt=dirt, dirt_intensity=dirt_intensity,
-            low_frequency_boost=low_frequency_boost, low_frequency_boost_curvature=low_frequency_boost_curvature,
-            high_pass_frequency=high_pass_frequency,
-        )
+        self.init_controls(**controls)
 
     def check_control(self, name: str, value):
         """Numbers kept as floats and colours as float tuples (so configs read as given); ``dirt`` checked as a texture."""
@@ -286,7 +247,10 @@ class Bloom(Stage):
             value = as_texture(value)
             check_texture(value, "dirt")
             return value
-        return _as_floats(value) if self.control_table()[name].kind == "number" else value
+        kind = self.control_table()[name].kind
+        if kind == "bool":
+            return bool(value)
+        return _as_floats(value) if kind == "number" else value
 
     def is_default(self, name: str) -> bool:
         # a tensor (a per-sample value, a buffer) is written even at its default: a config lists every tensor it was given
@@ -304,6 +268,9 @@ class Bloom(Stage):
     def export_form(self) -> nn.Module:
         """The fixed-depth form (:class:`FixedDepthBloom`) that one ONNX graph serves every frame size with."""
         return FixedDepthBloom(self)
+
+
+Bloom.__signature__ = controls_signature(CONTROLS)
 
 
 def _as_floats(value):

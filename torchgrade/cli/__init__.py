@@ -35,7 +35,12 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the command line ``argv``; a bad input prints one line on stderr and returns 2, never a traceback."""
+    """Run the command line ``argv``; a bad input prints one line on stderr and returns 2, never a traceback.
+
+    Examples:
+        >>> main(["bake", "-o", "look.txt"])  # stderr: torchgrade bake: error: output must end in .cube, got look.txt
+        2
+    """
     args = _parser().parse_args(argv)
     try:
         print(args.run(args))

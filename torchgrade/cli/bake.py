@@ -21,13 +21,18 @@ import torch
 
 from ..io import write_cube
 from ..lut import LUTAccuracyWarning, bake_lut, srgb_code_error
-from .common import add_grading_flags, look_from_args, read_rec709, stages_label
+from .common import add_grading_flags, look_from_args, read_rec709, report_line, stages_label
 
 __all__ = ["run_bake", "add_bake"]
 
 
 def _lut_size(text: str):
-    """``--size``: an integer, or ``auto`` (the smallest size within ``--tolerance`` on ``--scene``)."""
+    """``--size``: an integer, or ``auto`` (the smallest size within ``--tolerance`` on ``--scene``).
+
+    Examples:
+        >>> _lut_size("33"), _lut_size("auto")
+        (33, 'auto')
+    """
     if text == "auto":
         return text
     try:
@@ -37,7 +42,14 @@ def _lut_size(text: str):
 
 
 def _check_bake_arguments(args: argparse.Namespace) -> None:
-    """Refuse, before any baking, what would fail or be ignored afterwards."""
+    """Refuse, before any baking, what would fail or be ignored afterwards.
+
+    Examples:
+        >>> _check_bake_arguments(argparse.Namespace(output="look.cube", size="auto", scene=None, tolerance=None))
+        Traceback (most recent call last):
+        ...
+        ValueError: --size auto needs --scene, the image to measure the error on
+    """
     output = Path(args.output)
     if output.suffix.lower() != ".cube":
         raise ValueError(f"output must end in .cube, got {output}")
@@ -75,12 +87,19 @@ def run_bake(args: argparse.Namespace) -> str:
         line += f"; on {Path(args.scene).name}: {error:.2f} 8-bit codes at p99.9"
     if live:
         line += f"; left live, not in the LUT: {', '.join(live)}"
-    verdict = "" if lut.error_report.within else "OVER TOLERANCE: "
-    return f"{line}\nerror: {verdict}{lut.error_report}"
+    return f"{line}\n{report_line(lut.error_report)}"
 
 
 def add_bake(commands) -> None:
-    """The ``bake`` subcommand and its flags."""
+    """The ``bake`` subcommand and its flags.
+
+    Examples:
+        >>> parser = argparse.ArgumentParser()
+        >>> add_bake(parser.add_subparsers())
+        >>> args = parser.parse_args(["bake", "-o", "look.cube", "--size", "auto", "--contrast", "20"])
+        >>> args.size, args.contrast, args.shaper
+        ('auto', 20.0, 'auto')
+    """
     bake = commands.add_parser("bake", help="bake grade and tone mapping into a .cube 3D LUT")
     bake.add_argument("--output", "-o", required=True, help=".cube file to write")
     bake.add_argument("--config", help="look JSON (PostFX config); without it, the grading flags below")

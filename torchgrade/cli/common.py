@@ -23,7 +23,7 @@ from ..io import read_exr, write_exr
 from ..io.atomic import atomic_write
 from ..pipeline import PostFX
 
-__all__ = ["GRADING_FLAGS", "read_rec709", "display_codes", "write_png", "stages_label", "grade_from_args", "given_grading_flags", "look_from_args",
+__all__ = ["GRADING_FLAGS", "read_rec709", "display_codes", "write_png", "report_line", "stages_label", "grade_from_args", "given_grading_flags", "look_from_args",
            "add_grading_flags"]
 
 GRADING_FLAGS = {
@@ -60,11 +60,33 @@ def display_codes(image: torch.Tensor, maximum: int, encoded: bool = False) -> n
 
 
 def write_png(path, image: torch.Tensor, encoded: bool = False) -> None:
-    """Write a ``(3, H, W)`` image as an 8-bit PNG (atomically): sRGB-encoded light, or a display signal as it is."""
+    """Write a ``(3, H, W)`` image as an 8-bit PNG (atomically): sRGB-encoded light, or a display signal as it is.
+
+    Examples:
+        >>> import tempfile
+        >>> from PIL import Image
+        >>> with tempfile.TemporaryDirectory() as folder:
+        ...     write_png(Path(folder) / "grey.png", torch.full((3, 2, 4), 0.18))
+        ...     with Image.open(Path(folder) / "grey.png") as png:
+        ...         png.size, png.getpixel((0, 0))   # linear 0.18 is sRGB code 118
+        ((4, 2), (118, 118, 118))
+    """
     from PIL import Image
 
     pixels = display_codes(image, 255, encoded).astype(np.uint8)
     atomic_write(path, lambda temporary: Image.fromarray(pixels, "RGB").save(temporary, format="PNG"))
+
+
+def report_line(report) -> str:
+    """A baked LUT's :class:`~torchgrade.lut.ErrorReport` as the CLI prints it, flagged when over its tolerance.
+
+    Examples:
+        >>> from torchgrade.lut import ErrorReport
+        >>> report_line(ErrorReport(1.5, 4.0, 100, 1.0))
+        'error: OVER TOLERANCE: p99.9 1.50, max 4.00 8-bit codes on 100 validation colours (tolerance 1 at p99.9)'
+    """
+    verdict = "" if report.within else "OVER TOLERANCE: "
+    return f"error: {verdict}{report}"
 
 
 def stages_label(look: nn.Module) -> str:
@@ -73,19 +95,41 @@ def stages_label(look: nn.Module) -> str:
 
 
 def grade_from_args(args: argparse.Namespace) -> nn.Sequential:
-    """``ColorGrade`` (in ACES when tone mapping with ``aces``) and ``ToneMap`` from the grading flags."""
+    """``ColorGrade`` (in ACES when tone mapping with ``aces``) and ``ToneMap`` from the grading flags.
+
+    Examples:
+        >>> args = argparse.Namespace(tonemap="neutral", post_exposure=None, temperature=None, tint=None,
+        ...                           contrast=20.0, hue_shift=None, saturation=None)
+        >>> grade, tonemap = grade_from_args(args)
+        >>> grade.to_config(), tonemap.mode
+        ({'contrast': 20.0}, 'neutral')
+    """
     controls = {name: getattr(args, name) for name in GRADING_FLAGS if getattr(args, name) is not None}
     tonemap = args.tonemap or "aces"
     return nn.Sequential(ColorGrade(aces=tonemap == "aces", **controls), ToneMap(tonemap))
 
 
 def given_grading_flags(args: argparse.Namespace) -> list:
-    """The grading flags set on the command line, as the user typed them (``--contrast``)."""
+    """The grading flags set on the command line, as the user typed them (``--contrast``).
+
+    Examples:
+        >>> args = argparse.Namespace(tonemap=None, post_exposure=0.5, temperature=None, tint=None,
+        ...                           contrast=None, hue_shift=None, saturation=None)
+        >>> given_grading_flags(args)
+        ['--post-exposure']
+    """
     return ["--" + name.replace("_", "-") for name in (*GRADING_FLAGS, "tonemap") if getattr(args, name) is not None]
 
 
 def look_from_args(args: argparse.Namespace) -> PostFX:
-    """The look a subcommand applies: from ``--config``, or from the grading flags."""
+    """The look a subcommand applies: from ``--config``, or from the grading flags.
+
+    Examples:
+        >>> args = argparse.Namespace(config=None, tonemap=None, post_exposure=None, temperature=None, tint=None,
+        ...                           contrast=None, hue_shift=None, saturation=10.0)
+        >>> look_from_args(args).to_config()
+        {'grade': {'aces': True, 'saturation': 10.0}, 'tonemap': {'mode': 'aces'}}
+    """
     if args.config is None:
         grade, tonemap = grade_from_args(args)
         return PostFX(grade=grade, tonemap=tonemap)
@@ -96,7 +140,14 @@ def look_from_args(args: argparse.Namespace) -> PostFX:
 
 
 def add_grading_flags(parser: argparse.ArgumentParser) -> None:
-    """``--tonemap`` and one flag per :data:`GRADING_FLAGS` control."""
+    """``--tonemap`` and one flag per :data:`GRADING_FLAGS` control.
+
+    Examples:
+        >>> parser = argparse.ArgumentParser()
+        >>> add_grading_flags(parser)
+        >>> parser.parse_args(["--hue-shift", "-30", "--tonemap", "agx"]).hue_shift
+        -30.0
+    """
     parser.add_argument("--tonemap", choices=TONEMAP_MODES, help="default aces")
     for name, unit in GRADING_FLAGS.items():
         parser.add_argument("--" + name.replace("_", "-"), type=float, help=unit)

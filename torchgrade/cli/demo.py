@@ -40,7 +40,15 @@ DEFAULT_LOOK = {
 
 
 def run_demo(args: argparse.Namespace) -> str:
-    """Render the scene, write the PNG (and the scene as EXR with ``--exr``); the line to print."""
+    """Render the scene, write the PNG (and the scene as EXR with ``--exr``); the line to print.
+
+    Examples:
+        >>> import tempfile, pathlib
+        >>> with tempfile.TemporaryDirectory() as folder:
+        ...     args = argparse.Namespace(output=str(pathlib.Path(folder) / "demo.png"), exr=None, width=32, height=18)
+        ...     run_demo(args)  # doctest: +ELLIPSIS
+        'demo: 32x18, Bloom -> ColorGrade -> ToneMap, ... ms -> ...demo.png'
+    """
     look = PostFX.from_config(DEFAULT_LOOK)
     start = time.perf_counter()
     scene = demo_scene(args.height, args.width)
@@ -54,7 +62,15 @@ def run_demo(args: argparse.Namespace) -> str:
 
 
 def add_demo(commands) -> None:
-    """The ``demo`` subcommand and its flags."""
+    """The ``demo`` subcommand and its flags.
+
+    Examples:
+        >>> parser = argparse.ArgumentParser()
+        >>> add_demo(parser.add_subparsers())
+        >>> args = parser.parse_args(["demo"])
+        >>> args.output, args.width, args.height
+        ('demo.png', 640, 360)
+    """
     demo = commands.add_parser("demo", help="render the built-in HDR scene with the default look")
     demo.add_argument("--output", "-o", default="demo.png", help="sRGB PNG to write (default demo.png)")
     demo.add_argument("--exr", help="also write the scene-referred linear scene to this EXR")

@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -28,15 +29,25 @@ import torch
 from ..color import srgb_to_linear
 from ..grade import ColorGrade
 from ..io.atomic import atomic_write
-from ..match import GRADE_CONTROLS, match_look
+from ..lut import LUTAccuracyWarning
+from ..match import GRADE_CONTROLS, LUT_FILES, match_look
 from ..tonemap import TONEMAP_MODES
-from .common import read_rec709
+from .common import read_rec709, report_line
 
 __all__ = ["run_match", "add_match", "read_target"]
 
 
 def read_target(path: Path) -> torch.Tensor:
-    """The target picture as ``(3, H, W)`` linear: an 8-bit PNG decoded from sRGB, or an EXR in Rec.709."""
+    """The target picture as ``(3, H, W)`` linear: an 8-bit PNG decoded from sRGB, or an EXR in Rec.709.
+
+    Examples:
+        >>> import tempfile
+        >>> from .common import write_png
+        >>> with tempfile.TemporaryDirectory() as folder:
+        ...     write_png(Path(folder) / "after.png", torch.full((3, 2, 2), 0.18))
+        ...     round(read_target(Path(folder) / "after.png").mean().item(), 3)   # code 118, decoded
+        0.181
+    """
     if path.suffix.lower() == ".exr":
         return read_rec709(path)
     if path.suffix.lower() != ".png":
@@ -51,6 +62,12 @@ def read_target(path: Path) -> torch.Tensor:
 
 
 def _controls(text: str) -> tuple:
+    """``--controls``: comma-separated names of :class:`~torchgrade.ColorGrade` controls.
+
+    Examples:
+        >>> _controls("contrast, saturation")
+        ('contrast', 'saturation')
+    """
     names = tuple(name.strip() for name in text.split(",") if name.strip())
     unknown = [name for name in names if name not in ColorGrade.controls]
     if unknown or not names:
@@ -59,11 +76,11 @@ def _controls(text: str) -> tuple:
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
-    for path, suffix in ((Path(args.output), ".json"), (None if args.cube is None else Path(args.cube), ".cube")):
+    for path, suffixes in ((Path(args.output), (".json",)), (None if args.cube is None else Path(args.cube), LUT_FILES)):
         if path is None:
             continue
-        if path.suffix.lower() != suffix:
-            raise ValueError(f"{path} must end in {suffix}")
+        if path.suffix.lower() not in suffixes:
+            raise ValueError(f"{path} must end in {' or '.join(suffixes)}")
         if not path.parent.is_dir():
             raise ValueError(f"output folder {path.parent} does not exist")
     if args.scene_referred and (args.residual or args.cube):
@@ -75,7 +92,7 @@ def _errors(errors: dict) -> str:
 
 
 def run_match(args: argparse.Namespace) -> str:
-    """Fit the look, write the JSON (and the ``.cube``); the line to print."""
+    """Fit the look, write the JSON (and the ``.cube`` or ``.clf``); the line to print (the module shows a run)."""
     _check_outputs(args)
     source, target = read_rec709(args.source), read_target(Path(args.target))
     stages = ("grade",) if args.scene_referred else ("grade", "tonemap")
@@ -92,18 +109,28 @@ def run_match(args: argparse.Namespace) -> str:
         line += f"; with the residual LUT {_errors(result.errors['residual'])}"
     line += f" -> {args.output}"
     if args.cube:
-        baked = result.write_cube(args.cube, size=args.cube_size)
-        line += f", {args.cube} ({baked['size']}³: {_errors(baked)})"
+        with warnings.catch_warnings():  # the report is printed below, with its cause and advice
+            warnings.simplefilter("ignore", LUTAccuracyWarning)
+            baked = result.write_lut(args.cube, size=args.cube_size)
+        line += f", {args.cube} ({baked['size']}³: {_errors(baked)})\n{report_line(baked['report'])}"
     return line
 
 
 def add_match(commands) -> None:
-    """The ``match`` subcommand and its flags."""
+    """The ``match`` subcommand and its flags.
+
+    Examples:
+        >>> parser = argparse.ArgumentParser()
+        >>> add_match(parser.add_subparsers())
+        >>> args = parser.parse_args(["match", "before.exr", "after.png", "-o", "look.json", "--tonemap", "agx"])
+        >>> args.tonemap, args.steps, args.lbfgs_steps, len(args.controls)
+        (['agx'], 200, 100, 12)
+    """
     match = commands.add_parser("match", help="learn a look's controls (and a residual LUT) from a before/after pair")
     match.add_argument("source", help="scene-referred linear OpenEXR file (before)")
     match.add_argument("target", help="the same picture after the look: .png (sRGB) or .exr (display-referred linear)")
     match.add_argument("--output", "-o", required=True, help="look JSON to write (a PostFX config)")
-    match.add_argument("--cube", help="also bake the fitted look (with its residual LUT) into this .cube")
+    match.add_argument("--cube", help="also bake the fitted look (with its residual LUT) into this .cube (or .clf) file")
     match.add_argument("--cube-size", type=int, default=65, help="points per axis of the .cube (default 65)")
     match.add_argument("--tonemap", action="append", choices=TONEMAP_MODES,
                        help="tone mapper to fit (repeat to try several; default: the usual SDR modes)")

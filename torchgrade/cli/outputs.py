@@ -31,7 +31,12 @@ BIT_DEPTHS = {".png": ("8", "16"), ".tif": ("16", "float"), ".tiff": ("16", "flo
 
 
 def check_output(path, bit_depth: str | None, scene_referred: bool) -> str:
-    """The bit depth ``path`` will be written with; ``ValueError`` for an extension, depth or space it cannot hold."""
+    """The bit depth ``path`` will be written with; ``ValueError`` for an extension, depth or space it cannot hold.
+
+    Examples:
+        >>> check_output("graded.exr", None, scene_referred=True), check_output("graded.png", "16", scene_referred=False)
+        ('half', '16')
+    """
     suffix = Path(path).suffix.lower()
     if suffix not in BIT_DEPTHS:
         raise ValueError(f"output must end in .png or .exr, or .tif/.tiff, got {path}")
@@ -74,6 +79,14 @@ def write_frame(path, image: torch.Tensor, depth: str, encoded: bool = False) ->
 
     Integer formats (PNG, 16-bit TIFF) hold sRGB-encoded light clamped to [0, 1], or with ``encoded`` a
     display's signal (:class:`~torchgrade.display.Display`) as it is; EXR and float TIFF hold the values as they are.
+
+    Examples:
+        >>> import tempfile
+        >>> from torchgrade.io import read_exr
+        >>> with tempfile.TemporaryDirectory() as folder:
+        ...     write_frame(Path(folder) / "hdr.exr", torch.full((3, 2, 2), 40.0), "float")
+        ...     read_exr(Path(folder) / "hdr.exr").max().item()   # scene-referred values kept as they are
+        40.0
     """
     path = Path(path)
     suffix = path.suffix.lower()

@@ -33,7 +33,12 @@ PRINTF_FRAME = re.compile(r"%(0?\d*)d")
 
 
 def _frame_key(path: Path) -> tuple:
-    """Frame order: the name without its trailing digits, then the number (so 9 before 10)."""
+    """Frame order: the name without its trailing digits, then the number (so 9 before 10).
+
+    Examples:
+        >>> [p.name for p in sorted([Path("a.10.exr"), Path("a.9.exr"), Path("a.exr")], key=_frame_key)]
+        ['a.exr', 'a.9.exr', 'a.10.exr']
+    """
     match = re.search(r"(\d+)$", path.stem)
     return (path.stem[: match.start()] if match else path.stem, int(match.group(1)) if match else -1, path.name)
 
@@ -73,6 +78,12 @@ def shot_frames(inputs) -> list:
     """The EXR files ``inputs`` name, each folder, glob or ``%04d`` pattern in frame order, in the order given.
 
     Raises ``FileNotFoundError`` naming an input that names no file (a folder without EXR files says so).
+
+    Examples:
+        >>> shot_frames(["/nonexistent/plate.%04d.exr"])
+        Traceback (most recent call last):
+        ...
+        FileNotFoundError: no frames match /nonexistent/plate.%04d.exr
     """
     return [frame for text in inputs for frame in _expand(text)]
 
@@ -89,7 +100,12 @@ def frame_number(path: Path, index: int) -> int:
 
 
 def output_paths(output: str, frames: list) -> list:
-    """Where each frame is written: ``output`` for a single frame, else ``output``'s ``%04d`` filled with its number."""
+    """Where each frame is written: ``output`` for a single frame, else ``output``'s ``%04d`` filled with its number.
+
+    Examples:
+        >>> output_paths("graded.%03d.png", [Path("plate.0007.exr"), Path("plate.0008.exr")])
+        [PosixPath('graded.007.png'), PosixPath('graded.008.png')]
+    """
     if not PRINTF_FRAME.search(Path(output).name):
         if len(frames) > 1:
             raise ValueError(f"{len(frames)} frames need an output pattern with a frame number, such as out.%04d.png; got {output}")
@@ -131,6 +147,13 @@ def grade_shot(look: PostFX, frames: list, read, write, dt: float, scene_referre
 
     Eye adaptation runs in frame order, one frame after the other; a look without it may grade ``jobs``
     frames at a time.
+
+    Examples:
+        >>> frames, written = ["f1", "f2"], {}
+        >>> grade_shot(PostFX(tonemap="aces"), frames, lambda name: torch.full((3, 1, 1), 0.18),
+        ...            lambda index, image: written.update({frames[index]: image}), dt=1 / 24, progress=False)
+        >>> sorted(written), tuple(written["f2"].shape)
+        (['f1', 'f2'], (3, 1, 1))
     """
     if jobs > 1 and look.exposure is not None:
         raise ValueError("--jobs needs a look without eye adaptation: exposure carries from each frame to the next")

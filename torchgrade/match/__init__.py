@@ -15,13 +15,13 @@ Examples:
 
 from .bounded import BoundedControls, fittable_names
 from .fit import GRADE_CONTROLS, TONEMAP_CANDIDATES, MatchedControls
-from .look import STAGES, MatchResult, match_look
+from .look import LUT_FILES, STAGES, MatchResult, match_look
 from .metrics import delta_e_2000, linear_to_lab, match_errors
 from .pixels import PixelPairs, sample_pairs
 from .residual import ResidualLUT, monotonicity, smoothness
 
 __all__ = [
-    "BoundedControls", "fittable_names", "GRADE_CONTROLS", "TONEMAP_CANDIDATES", "MatchedControls", "STAGES",
+    "BoundedControls", "fittable_names", "GRADE_CONTROLS", "TONEMAP_CANDIDATES", "MatchedControls", "STAGES", "LUT_FILES",
     "MatchResult", "match_look", "delta_e_2000", "linear_to_lab", "match_errors", "PixelPairs", "sample_pairs",
     "ResidualLUT", "monotonicity", "smoothness",
 ]

@@ -12,6 +12,7 @@ Examples:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Optional
 
@@ -29,7 +30,7 @@ from .metrics import display_codes, match_errors
 from .pixels import PixelPairs
 from .residual import ResidualLUT, lookup_matrix, monotonicity, smoothness
 
-__all__ = ["GRADE_CONTROLS", "TONEMAP_CANDIDATES", "TRACKBALLS", "canonical_trackball", "MatchedControls", "optimise",
+__all__ = ["GRADE_CONTROLS", "TONEMAP_CANDIDATES", "TRACKBALLS", "canonical_trackball", "MatchedControls", "optimise", "every_loss",
            "pixel_loss", "ControlsFit", "fit_controls", "fit_residual", "evaluate"]
 
 GRADE_CONTROLS = ("post_exposure", "temperature", "tint", "contrast", "split_shadows", "split_highlights",
@@ -88,15 +89,17 @@ class MatchedControls(nn.Module):
         return PostFX(grade=grade, tonemap={"mode": self.mode, **self.curve.plain_values()} if self.mode else None)
 
 
-def optimise(module: nn.Module, loss_fn, steps: int, lbfgs_steps: int, lr: float, progress: bool, desc: str) -> list:
+def optimise(module: nn.Module, loss_fn, steps: int, lbfgs_steps: int, lr: float, progress: bool, desc: str) -> dict:
     """Adam for ``steps``, then up to ``lbfgs_steps`` L-BFGS iterations (strong Wolfe line search).
 
-    Returns the loss at every evaluation, in order (one per Adam step; L-BFGS evaluates a few times per iteration).
+    Returns the loss at every evaluation, in order, by optimiser: ``{"Adam": [one per step], "L-BFGS": [...]}``
+    (L-BFGS evaluates a few times per iteration); a module with nothing to fit gives ``{"fixed": [its loss]}``.
+    ``progress`` shows a tqdm bar (on stderr, when it is a terminal) with the latest loss.
     """
     parameters = [p for p in module.parameters() if p.requires_grad]
     if not parameters:
         with torch.no_grad():
-            return [float(loss_fn())]
+            return {"fixed": [float(loss_fn())]}
     history = []
     with tqdm(total=steps + lbfgs_steps, desc=desc, disable=None if progress else True, leave=False) as bar:
 
@@ -118,7 +121,17 @@ def optimise(module: nn.Module, loss_fn, steps: int, lbfgs_steps: int, lr: float
                                           tolerance_grad=1e-12, tolerance_change=1e-14, line_search_fn="strong_wolfe")
             optimiser.step(closure)
             bar.update(lbfgs_steps)
-    return history
+    return {"Adam": history[:steps], "L-BFGS": history[steps:]}
+
+
+def every_loss(phases: dict) -> list:
+    """The losses of ``{phase: [losses]}`` as one list, in the phases' order.
+
+    Examples:
+        >>> every_loss({"Adam": [4.0, 2.0], "L-BFGS": [1.0]})
+        [4.0, 2.0, 1.0]
+    """
+    return [loss for losses in phases.values() for loss in losses]
 
 
 def pixel_loss(display: bool):
@@ -134,10 +147,10 @@ def pixel_loss(display: bool):
 
 @dataclass
 class ControlsFit:
-    """One candidate's fitted controls, its loss history and final fitting loss."""
+    """One candidate's fitted controls, its losses by phase (``{"screening": [...], "Adam": [...], ...}``) and final fitting loss."""
 
     model: MatchedControls
-    history: list = field(default_factory=list)
+    phases: dict = field(default_factory=dict)
     loss: float = float("inf")
 
 
@@ -156,18 +169,20 @@ def fit_controls(pairs: PixelPairs, names, modes, aces: bool, steps: int, lbfgs_
     fits = {mode: ControlsFit(MatchedControls(names, mode, aces).to(source.device)) for mode in modes}
     if len(modes) > 1:
         for mode, fit in fits.items():
-            fit.history = optimise(fit.model, loss_fn(fit.model), screen_steps, 0, lr, progress, f"screen {mode}")
-            fit.loss = fit.history[-1] if fit.history[-1] == fit.history[-1] else float("inf")
+            screening = every_loss(optimise(fit.model, loss_fn(fit.model), screen_steps, 0, lr, progress, f"screen {mode}"))
+            fit.phases["screening"] = screening
+            fit.loss = float("inf") if math.isnan(screening[-1]) else screening[-1]
     best = min(fits.values(), key=lambda f: f.loss)
-    best.history += optimise(best.model, loss_fn(best.model), steps, lbfgs_steps, lr, progress, f"match {best.model.mode or 'scene-referred'}")
+    best.phases.update(optimise(best.model, loss_fn(best.model), steps, lbfgs_steps, lr, progress,
+                                f"match {best.model.mode or 'scene-referred'}"))
     if len(modes) == 1:
-        best.loss = best.history[-1]
+        best.loss = every_loss(best.phases)[-1]
     return best, {mode: fit.loss for mode, fit in fits.items()}
 
 
 def fit_residual(display: torch.Tensor, target: torch.Tensor, size: int, steps: int, smooth: float, monotone: float,
                  progress: bool) -> tuple:
-    """Fit a :class:`ResidualLUT` from the look's display output to the target; ``(residual, loss history)``.
+    """Fit a :class:`ResidualLUT` from the look's display output to the target; ``(residual, losses by optimiser)``.
 
     The data term is Huber in 8-bit codes (see :func:`pixel_loss`); the lookup runs as :func:`lookup_matrix`.
     """

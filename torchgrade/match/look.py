@@ -14,23 +14,27 @@ Examples:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Optional
 
 import torch
 from torch import nn
 
-from ..io import read_cube, write_cube
+from ..io import read_cube, write_clf, write_cube
 from ..lut import LUT3D, bake_lut
 from ..pipeline import PostFX
 from ..tonemap import tone_mapper
-from .fit import GRADE_CONTROLS, TONEMAP_CANDIDATES, evaluate, fit_controls, fit_residual
+from .fit import GRADE_CONTROLS, TONEMAP_CANDIDATES, every_loss, evaluate, fit_controls, fit_residual
 from .pixels import PixelPairs, sample_pairs
 from .residual import ResidualLUT
 
-__all__ = ["match_look", "MatchResult", "STAGES"]
+__all__ = ["match_look", "MatchResult", "STAGES", "LUT_FILES"]
 
 STAGES = ("grade", "tonemap")
 """The stages a look is matched with; both act per pixel (bloom and exposure depend on the frame)."""
+
+LUT_FILES = (".cube", ".clf")
+"""The files :meth:`MatchResult.write_lut` writes, by suffix."""
 
 
 @dataclass
@@ -41,7 +45,9 @@ class MatchResult:
     * ``residual``: the :class:`~torchgrade.match.ResidualLUT` fitted on top (``residual=True``), else ``None``.
     * ``errors``: ``{"controls": ..., "residual": ...}``, each ``{"p99.9", "max"}`` in 8-bit sRGB codes and
       ``"delta_e_2000"`` (mean), on held-out pixels.
-    * ``history``: the fitting loss after each optimiser step (screening, Adam, L-BFGS; then the residual's).
+    * ``history``: the fitting loss at every evaluation (screening, Adam, L-BFGS; then the residual's).
+    * ``phases``: ``[(phase, evaluations)]`` in order, how ``history`` divides: ``"screening"``, ``"Adam"``,
+      ``"L-BFGS"``, ``"residual Adam"``, ``"residual L-BFGS"`` (those that ran).
     * ``candidates``: each tone mapper tried and its loss after screening.
     """
 
@@ -51,6 +57,7 @@ class MatchResult:
     history: list
     candidates: dict
     pixels: PixelPairs = field(repr=False)
+    phases: list = field(default_factory=list)
 
     def transform(self) -> nn.Module:
         """The per-pixel look as one module: grade, tone mapper, then the residual LUT (if any)."""
@@ -63,22 +70,35 @@ class MatchResult:
     def bake(self, size="auto", tolerance: float = 1.0, output_encoding: str = "srgb") -> tuple:
         """Bake the whole look (residual included) into a LogC :class:`~torchgrade.LUT3D`; ``(lut, errors on the
         held-out pixels)``. ``size="auto"`` picks the smallest size within ``tolerance`` codes (p99.9) on the fitting
-        pixels, whose range the lattice covers. sRGB entries spread the interpolation error evenly over display codes."""
+        pixels, whose range the lattice covers. sRGB entries spread the interpolation error evenly over display codes.
+        The LUT keeps its bake's :class:`~torchgrade.lut.ErrorReport` (``lut.error_report``)."""
         transform = self.transform()
         with torch.no_grad():
-            lut = bake_lut(transform, size=size, shaper="logc", scene=self.pixels.train_source, tolerance=tolerance,
-                           output_encoding=output_encoding)
-        lut = LUT3D(lut.table.detach(), shaper=lut.shaper, domain=(lut.domain_min, lut.domain_max),
-                    output_range=lut.output_range, output_encoding=lut.output_encoding)
+            baked = bake_lut(transform, size=size, shaper="logc", scene=self.pixels.train_source, tolerance=tolerance,
+                             output_encoding=output_encoding)
+        lut = LUT3D(baked.table.detach(), shaper=baked.shaper, domain=(baked.domain_min, baked.domain_max),
+                    output_range=baked.output_range, output_encoding=baked.output_encoding)
+        lut.error_report = baked.error_report
         return lut, evaluate(lambda pixels: lut(pixels), self.pixels, display=True)
 
-    def write_cube(self, path, size=65, tolerance: float = 1.0) -> dict:
-        """Bake (see :meth:`bake`, with linear entries: a ``.cube`` holds linear values), write ``path`` and read it
-        back; the size and the held-out errors of the file as read."""
-        lut, _ = self.bake(size, tolerance, output_encoding="linear")
-        write_cube(path, lut, title="torchgrade match")
-        written = read_cube(path)
-        return {"size": written.size, **evaluate(lambda pixels: written(pixels), self.pixels, display=True)}
+    def write_lut(self, path, size=65, tolerance: float = 1.0) -> dict:
+        """Bake (see :meth:`bake`, with linear entries, as files hold them) and write ``path``, a ``.cube`` or a ``.clf``.
+
+        Returns ``{"size", "p99.9", "max", "delta_e_2000", "report"}``: the held-out errors of the ``.cube`` as read
+        back, or of the LUT a CLF states exactly (shaper included, as OpenColorIO applies it), and the bake's
+        :class:`~torchgrade.lut.ErrorReport` (validation colours and fitting pixels against the look itself).
+        """
+        suffix = Path(path).suffix.lower()
+        if suffix not in LUT_FILES:
+            raise ValueError(f"a look's LUT is written as {' or '.join(LUT_FILES)}, got {path}")
+        lut, errors = self.bake(size, tolerance, output_encoding="linear")
+        if suffix == ".clf":
+            write_clf(path, lut, title="torchgrade match")
+        else:
+            write_cube(path, lut, title="torchgrade match")
+            written = read_cube(path)
+            errors = evaluate(lambda pixels: written(pixels), self.pixels, display=True)
+        return {"size": lut.size, **errors, "report": lut.error_report}
 
 
 def _modes(stages, tonemaps) -> tuple:
@@ -108,7 +128,8 @@ def match_look(source, target, stages=STAGES, mask=None, *, controls=GRADE_CONTR
     pixels, in float64 (the residual LUT, cheaper to evaluate, on up to ``residual_pixels``). ``tonemaps``: a mode, several, or ``None`` for :data:`TONEMAP_CANDIDATES`; with more
     than one each is fitted for ``screen_steps`` and the best finished. ``residual=True`` (display targets) then
     fits a ``residual_size``³ :class:`~torchgrade.match.ResidualLUT` with weights ``smooth`` and ``monotone``.
-    Errors are measured on ``holdout`` of the pixels, never fitted.
+    Errors are measured on ``holdout`` of the pixels, never fitted. ``progress`` shows a tqdm bar per phase
+    with the latest loss (on stderr, when it is a terminal).
     """
     modes = _modes(stages, tonemaps)
     names = tuple(controls) if "grade" in stages else ()
@@ -120,12 +141,14 @@ def match_look(source, target, stages=STAGES, mask=None, *, controls=GRADE_CONTR
     look = fit.model.look()
     display = modes != (None,)
     errors = {"controls": evaluate(look.per_pixel_stages() if look.stages() else nn.Identity(), pixels, display)}
-    history, fitted_residual = list(fit.history), None
+    phases, fitted_residual = dict(fit.phases), None
     if residual:
         with torch.no_grad():
             shown = look.per_pixel_stages()(pixels.train_source)
-        fitted_residual, residual_history = fit_residual(shown, pixels.train_target, residual_size, residual_steps,
-                                                         smooth, monotone, progress)
-        history += residual_history
+        fitted_residual, residual_phases = fit_residual(shown, pixels.train_target, residual_size, residual_steps,
+                                                        smooth, monotone, progress)
+        phases.update({f"residual {name}": losses for name, losses in residual_phases.items()})
         errors["residual"] = evaluate(nn.Sequential(*look.per_pixel_stages(), fitted_residual), pixels, display)
-    return MatchResult(look, fitted_residual, errors, history, candidates, pixels)
+    history = every_loss(phases)
+    counts = [(name, len(losses)) for name, losses in phases.items() if losses]
+    return MatchResult(look, fitted_residual, errors, history, candidates, pixels, counts)

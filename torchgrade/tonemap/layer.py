@@ -67,6 +67,12 @@ class ToneMap(Stage):
     def control_table(self) -> dict:
         return {**type(self).controls, **TONE_MAPPERS[self.mode].controls}
 
+    @classmethod
+    def config_table(cls, config: dict) -> dict:
+        """The controls of every mode, and the curve parameters of the config's mode (when it names a known one)."""
+        mode = config.get("mode", cls.controls["mode"].default)
+        return {**cls.controls, **(TONE_MAPPERS[mode].controls if isinstance(mode, str) and mode in TONE_MAPPERS else {})}
+
     def set_param(self, name: str, value) -> None:
         if name == "mode" and value != self.mode:
             self._use_mode(value, self.clip, {})
