@@ -166,7 +166,8 @@ def chunked_lookup(image, rows, size: int, *settings, pixels: int = LOOKUP_CHUNK
     """:func:`lookup` (same arguments after ``size``) over ``pixels``-sized runs of each CPU image's pixels, one thread.
 
     Every step is per pixel, so the result is the same as one pass. While gradients flow to the image
-    or the table, or off the CPU, the whole image is one pass (autograd keeps every temporary anyway).
+    or the table (autograd keeps every temporary anyway), off the CPU, and while tracing (an export
+    records one pass), the whole image is one pass.
 
     Examples:
         >>> import torch
@@ -178,7 +179,7 @@ def chunked_lookup(image, rows, size: int, *settings, pixels: int = LOOKUP_CHUNK
     """
     height, width = image.shape[-2:]
     grad = torch.is_grad_enabled() and (image.requires_grad or rows.requires_grad)
-    if grad or image.device.type != "cpu":
+    if grad or image.device.type != "cpu" or is_tracing():
         return lookup(image, rows, size, *settings)
     planes = image.reshape(-1, 3, height * width)
     result = torch.empty(planes.shape, dtype=image.dtype)
