@@ -68,12 +68,13 @@ def tetrahedron(coords: torch.Tensor, size: int):
     along ``c``) and ``c111``, with weights ``1 - f_a, f_a - f_b, f_b - f_c, f_c``. The order is one
     code ``4 [f_r >= f_g] + 2 [f_g >= f_b] + [f_r >= f_b]`` that picks the steps from an 8-entry table.
 
-    Returns ``(indices, weights)``: 4 int32 ``(P,)`` indices into a flattened ``S³`` table and 4 ``(P,)`` weights.
+    Returns ``(indices, fractions)``: 4 int32 ``(P,)`` indices into a flattened ``S³`` table and the
+    sorted fractions ``(f_a, f_b, f_c)``, each ``(P,)``.
 
     Examples:
-        >>> indices, weights = tetrahedron(torch.tensor([[0.5], [0.25], [0.0]]), 2)
-        >>> [int(i) for i in indices], [float(w) for w in weights]
-        ([0, 1, 3, 7], [0.5, 0.25, 0.25, 0.0])
+        >>> indices, fractions = tetrahedron(torch.tensor([[0.5], [0.25], [0.0]]), 2)
+        >>> [int(i) for i in indices], [float(f) for f in fractions]
+        ([0, 1, 3, 7], [0.5, 0.25, 0.0])
     """
     base, (fr, fg, fb) = _cell(coords, size)
     f_max = torch.maximum(torch.maximum(fr, fg), fb)
@@ -82,27 +83,26 @@ def tetrahedron(coords: torch.Tensor, size: int):
     code = (fr >= fg).to(torch.int32) * 4 + (fg >= fb).to(torch.int32) * 2 + (fr >= fb).to(torch.int32)
     steps = _tetrahedron_steps(size, coords.device)
     indices = (base, base + steps[0].index_select(0, code), base + steps[1].index_select(0, code), base + (1 + size + size * size))
-    return indices, (1.0 - f_max, f_max - f_mid, f_mid - f_min, f_min)
+    return indices, (f_max, f_mid, f_min)
 
 
 def tetrahedral(coords: torch.Tensor, table: torch.Tensor, size: int) -> torch.Tensor:
     """Tetrahedral interpolation of a planar table ``(3, S³)`` at lattice coordinates ``(3, P)`` -> ``(3, P)``.
 
-    ``y = sum_k w_k table[:, i_k]`` over the 4 vertices and weights of :func:`tetrahedron`: exact on
-    lattice points and continuous across cells; on ties the ambiguous vertex gets weight 0. One
-    gather of the three table rows per vertex (``index_select``, an ONNX ``Gather``), so
-    ``torch.compile`` fuses it into a single pass over the pixels.
+    ``y = c000 + f_a (v1 - c000) + f_b (v2 - v1) + f_c (c111 - v2)`` over the vertices and sorted
+    fractions of :func:`tetrahedron` (the weights ``1 - f_a, f_a - f_b, f_b - f_c, f_c`` in difference
+    form, so a constant table gives its constant exactly): exact on lattice points and continuous
+    across cells; on ties the ambiguous vertex gets weight 0. One gather of the three table rows per
+    vertex (``index_select``, an ONNX ``Gather``), so ``torch.compile`` fuses it into a single pass.
 
     Examples:
         >>> rows = torch.arange(8.0).expand(3, 8)
         >>> tetrahedral(torch.tensor([[1.0], [0.0], [1.0]]), rows, 2).flatten().tolist()
         [5.0, 5.0, 5.0]
     """
-    indices, weights = tetrahedron(coords, size)
-    y = table.index_select(1, indices[0]) * weights[0]
-    for index, weight in zip(indices[1:], weights[1:]):
-        y = y + table.index_select(1, index) * weight
-    return y
+    indices, (f_max, f_mid, f_min) = tetrahedron(coords, size)
+    c000, v1, v2, c111 = (table.index_select(1, index) for index in indices)
+    return c000 + f_max * (v1 - c000) + f_mid * (v2 - v1) + f_min * (c111 - v2)
 
 
 def trilinear(coords: torch.Tensor, table: torch.Tensor, size: int) -> torch.Tensor:
