@@ -101,15 +101,19 @@ def tetrahedral(coords: torch.Tensor, table: torch.Tensor, size: int) -> torch.T
         [5.0, 5.0, 5.0]
     """
     indices, (f_max, f_mid, f_min) = tetrahedron(coords, size)
-    c000, v1, v2, c111 = (table.index_select(1, index) for index in indices)
-    return c000 + f_max * (v1 - c000) + f_mid * (v2 - v1) + f_min * (c111 - v2)
+
+    def channel(row: torch.Tensor) -> torch.Tensor:
+        c000, v1, v2, c111 = (row.index_select(0, index) for index in indices)
+        return c000 + f_max * (v1 - c000) + f_mid * (v2 - v1) + f_min * (c111 - v2)
+
+    return torch.stack([channel(row) for row in table.unbind(0)])
 
 
 def trilinear(coords: torch.Tensor, table: torch.Tensor, size: int) -> torch.Tensor:
     """Trilinear interpolation of a planar table ``(3, S³)`` at lattice coordinates ``(3, P)`` -> ``(3, P)``.
 
     ``y = lerp_b(lerp_g(lerp_r(c000, c100), lerp_r(c010, c110)), lerp_g(...))`` over the 8 corners,
-    one gather of the three table rows per corner as in :func:`tetrahedral`.
+    one 1-D gather per corner and table row as in :func:`tetrahedral`.
 
     Examples:
         >>> rows = torch.arange(8.0).expand(3, 8)
@@ -118,16 +122,19 @@ def trilinear(coords: torch.Tensor, table: torch.Tensor, size: int) -> torch.Ten
     """
     base, (fr, fg, fb) = _cell(coords, size)
 
-    def lerp_r(index):
-        low = table.index_select(1, index)
-        return low + fr * (table.index_select(1, index + 1) - low)
+    def channel(row: torch.Tensor) -> torch.Tensor:
+        def lerp_r(index):
+            low = row.index_select(0, index)
+            return low + fr * (row.index_select(0, index + 1) - low)
 
-    def lerp_g(index):
-        low = lerp_r(index)
-        return low + fg * (lerp_r(index + size) - low)
+        def lerp_g(index):
+            low = lerp_r(index)
+            return low + fg * (lerp_r(index + size) - low)
 
-    low = lerp_g(base)
-    return low + fb * (lerp_g(base + size * size) - low)
+        low = lerp_g(base)
+        return low + fb * (lerp_g(base + size * size) - low)
+
+    return torch.stack([channel(row) for row in table.unbind(0)])
 
 
 def trilinear_grid_sample(unit: torch.Tensor, table: torch.Tensor) -> torch.Tensor:
