@@ -137,8 +137,8 @@ def lookup(image, rows, size: int, shaper, domain_min, domain_max, interpolation
 
 
 LOOKUP_CHUNK = 32768
-"""Pixels per pass of the eager lookup: its temporaries (about 40 floats per pixel) then stay in a
-4 MiB L2 cache (benchmarks/bench_lut.py measures the time and the temporary bytes per pixel)."""
+"""Pixels per pass of the eager lookup: its temporaries (about 40 floats per pixel, 5 MiB a run) then
+stay in cache (benchmarks/bench_lut.py measures the time and the temporary bytes per pixel)."""
 
 
 @contextlib.contextmanager
