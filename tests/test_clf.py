@@ -1,8 +1,9 @@
-"""CLF (Academy/ASC Common LUT Format) files, applied by OpenColorIO, and 3D-only .cube files for 3D-only readers.
-
-ffmpeg is not used: it is not installed where the tests run; OpenColorIO and colour-science read the files."""
+"""CLF (Academy/ASC Common LUT Format) files, applied by OpenColorIO, and 3D-only .cube files for 3D-only readers:
+colour-science, OpenColorIO and ffmpeg's ``lut3d`` filter (the binary of the ``imageio-ffmpeg`` wheel, or one on PATH)."""
 
 import itertools
+import shutil
+import subprocess
 import warnings
 import xml.etree.ElementTree as ET
 
@@ -16,7 +17,7 @@ colour = pytest.importorskip("colour")
 import torchgrade as tg  # noqa: E402
 from torchgrade.color.transfer import LOGC_A, LOGC_B, LOGC_C, LOGC_D  # noqa: E402
 from torchgrade.io import write_clf, write_cube  # noqa: E402
-from torchgrade.lut import LUTAccuracyWarning, code_errors, validation_colours  # noqa: E402
+from torchgrade.lut import LUT3D, LUTAccuracyWarning, code_errors, identity_table, validation_colours  # noqa: E402
 
 _names = itertools.count()
 OCIO_INTERPOLATION = {"tetrahedral": OCIO.INTERP_TETRAHEDRAL, "trilinear": OCIO.INTERP_LINEAR}
@@ -90,3 +91,37 @@ def test_3d_only_cube_is_read_by_colour_and_opencolorio_and_reports_its_cost(tmp
         errors = code_errors(lut(colours.float()), flat).flatten()
     assert cost.max == pytest.approx(float(errors.max()), abs=0.05)  # what the resampling costs, as a reader applies it
     assert write_cube(tmp_path / "lin.cube", looks["linear"], shaper_section=False) is None  # nothing to resample
+
+
+def ffmpeg_binary():
+    """ffmpeg from the ``imageio-ffmpeg`` wheel (the test extra), else from PATH, else None."""
+    try:
+        import imageio_ffmpeg
+
+        return imageio_ffmpeg.get_ffmpeg_exe()
+    except (ImportError, RuntimeError):
+        return shutil.which("ffmpeg")
+
+
+@pytest.mark.parametrize("interpolation", ["trilinear", "tetrahedral"])
+def test_3d_only_cube_applied_by_ffmpeg_lut3d_matches_the_lookup(tmp_path, interpolation):
+    """A float image through ``ffmpeg -vf lut3d`` (planar float32, ``gbrpf32le``: planes G, B, R) equals LUT3D's lookup."""
+    binary = ffmpeg_binary()
+    if binary is None:
+        pytest.skip("no ffmpeg binary: install the test extra (imageio-ffmpeg)")
+    generator = torch.Generator().manual_seed(3)
+    size, height, width = 9, 8, 16
+    table = identity_table(size, torch.float64) ** 1.5 * 0.8 + 0.1 * torch.rand(size, size, size, 3, generator=generator, dtype=torch.float64)
+    lut = LUT3D(table)
+    cube = tmp_path / "flat.cube"
+    assert write_cube(cube, lut, shaper_section=False) is None
+    image = torch.rand(1, 3, height, width, generator=generator, dtype=torch.float64)
+    image[0, :, 0, :3] = torch.tensor([[0.0, 1.0, 0.5]] * 3)  # lattice corners and a lattice plane
+    source, result = tmp_path / "in.raw", tmp_path / "out.raw"
+    image[0][[1, 2, 0]].float().numpy().tofile(source)
+    raw = ["-f", "rawvideo", "-pix_fmt", "gbrpf32le"]
+    subprocess.run([binary, "-v", "error", "-y", *raw, "-s", f"{width}x{height}", "-i", str(source),
+                    "-vf", f"lut3d=file={cube}:interp={interpolation}", *raw, str(result)], check=True, capture_output=True)
+    applied = torch.from_numpy(np.fromfile(result, dtype=np.float32).reshape(3, height, width)[[2, 0, 1]].copy())
+    with torch.no_grad():
+        torch.testing.assert_close(applied.double(), lut(image, interpolation)[0], atol=1e-6, rtol=0)

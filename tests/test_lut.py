@@ -12,9 +12,11 @@ from torchgrade.lut import (
     LUT3D,
     apply_lut,
     bake_lut,
+    chunked_lookup,
     expects_hdr,
     identity_table,
     lattice,
+    lookup,
     planar_table,
     tetrahedral,
     trilinear,
@@ -86,6 +88,25 @@ def test_matches_independent_float64_reference(interpolation, device):
     expected = np.stack([REFERENCES[interpolation](table.numpy(), p) for p in points])
     got = out[0].permute(1, 2, 0).reshape(-1, 3).cpu().numpy()
     np.testing.assert_allclose(got, expected, atol=1e-12)
+
+
+@pytest.mark.parametrize("interpolation", ["trilinear", "tetrahedral"])
+def test_chunked_eager_lookup_equals_one_pass_and_the_float64_reference(interpolation):
+    """Runs of 1000 pixels (a frame of 2 x 3000, so runs cross rows and the last run is short) give the
+    one-pass float32 result bit for bit, and the float64 per-pixel reference to 1e-6."""
+    size = 17
+    table = random_table(size)
+    image = torch.rand(2, 3, 40, 75, dtype=torch.float64) * 1.2 - 0.1
+    settings = (size, "linear", 0.0, 1.0, interpolation, None, None, (0.0, 1.0), "linear")
+    rows = planar_table(table.float())
+    with torch.no_grad():
+        chunked = chunked_lookup(image.float(), rows, *settings, pixels=1000)
+        assert torch.equal(chunked, lookup(image.float(), rows, *settings))
+        assert torch.equal(LUT3D(table.float())(image.float(), interpolation), chunked_lookup(image.float(), rows, *settings))
+    points = (image.clamp(0, 1) * (size - 1)).permute(0, 2, 3, 1).reshape(-1, 3).numpy()
+    expected = np.stack([REFERENCES[interpolation](table.numpy(), p) for p in points])
+    got = chunked.double().permute(0, 2, 3, 1).reshape(-1, 3).numpy()
+    np.testing.assert_allclose(got, expected, atol=1e-6)
 
 
 @pytest.mark.parametrize("interpolation", ["trilinear", "tetrahedral"])

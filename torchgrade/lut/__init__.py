@@ -28,7 +28,7 @@ from .kernels import (BACKENDS, INTERPOLATIONS, KERNELS, LUT_BACKENDS, Kernel, s
                       trilinear_grid_sample, trilinear_strip, trilinear_strip_lookup)
 from .lattice import MAX_SIZE, MIN_SIZE, check_size, checked_domain, identity_table, lattice, planar_table
 from .lut3d import (LUT3D, OUTPUT_ENCODINGS, LUTLookup, apply_lut, compiled_lookup, decode_output, encode_output,
-                    lookup, table_output)
+                    chunked_lookup, lookup, table_output)
 from .report import ErrorReport, LUTAccuracyWarning, code_errors
 from .shapers import (DEFAULT_DOMAINS, LOGC_BLACK, SHAPERS, CurveShaper, FittedShaper, LinearShaper, LogCShaper, Shaper,
                       lattice_unit, sample_curve, shaper_decode, shaper_encode)
@@ -41,7 +41,7 @@ __all__ = [
     "trilinear_grid_sample", "trilinear_strip", "trilinear_strip_lookup",
     "MAX_SIZE", "MIN_SIZE", "check_size", "checked_domain", "identity_table", "lattice", "planar_table",
     "LUT3D", "OUTPUT_ENCODINGS", "LUTLookup", "apply_lut", "compiled_lookup", "decode_output", "encode_output",
-    "lookup", "table_output",
+    "lookup", "chunked_lookup", "table_output",
     "DEFAULT_DOMAINS", "LOGC_BLACK", "SHAPERS", "CurveShaper", "LinearShaper", "LogCShaper", "Shaper", "lattice_unit",
     "sample_curve", "shaper_decode", "shaper_encode", "FittedShaper",
     "FIT_KNOTS", "fit_shaper", "ErrorReport", "LUTAccuracyWarning", "code_errors", "validation_colours",

@@ -27,7 +27,7 @@ from typing import Callable, Optional
 import torch
 import torch.nn.functional as F
 
-__all__ = ["Kernel", "KERNELS", "INTERPOLATIONS", "BACKENDS", "LUT_BACKENDS", "tetrahedral", "trilinear",
+__all__ = ["Kernel", "KERNELS", "INTERPOLATIONS", "BACKENDS", "LUT_BACKENDS", "tetrahedron", "tetrahedral", "trilinear",
            "trilinear_grid_sample", "strip_table", "trilinear_strip", "trilinear_strip_lookup"]
 
 
@@ -42,38 +42,68 @@ def _cell(coords: torch.Tensor, size: int):
     return base, fraction.unbind(0)
 
 
+def _tetrahedron_steps(size: int, device) -> torch.Tensor:
+    """``(2, 8)`` int32: by order code (:func:`tetrahedron`), the step from ``c000`` to ``v1`` and to ``v2``.
+
+    ``v1`` is one step along the axis of the largest fraction (red on ties with green or blue, green on
+    ties with blue); ``v2`` is ``c111`` less one step along the smallest one's (red before green before blue).
+    """
+    plane = size * size
+    diagonal = 1 + size + plane
+    steps = []
+    for code in range(8):
+        r_ge_g, g_ge_b, r_ge_b = code & 4, code & 2, code & 1
+        largest = 1 if r_ge_g and r_ge_b else size if not r_ge_g and g_ge_b else plane
+        smallest = 1 if not r_ge_g and not r_ge_b else size if r_ge_g and not g_ge_b else plane
+        steps.append((largest, diagonal - smallest))
+    return torch.tensor(steps, dtype=torch.int32, device=device).t()
+
+
+def tetrahedron(coords: torch.Tensor, size: int):
+    """The tetrahedron of the lattice holding each point ``(3, P)`` in [0, S-1]: 4 flat vertex indices and weights.
+
+    The cube cell is split along its main diagonal into 6 tetrahedra, picked by the order of the
+    fractions ``f_a >= f_b >= f_c`` (Kasson, Nin and Plouffe 1995; the scheme OpenColorIO uses). The
+    vertices are ``c000``, ``v1`` (a step from ``c000`` along ``a``), ``v2`` (``c111`` less a step
+    along ``c``) and ``c111``, with weights ``1 - f_a, f_a - f_b, f_b - f_c, f_c``. The order is one
+    code ``4 [f_r >= f_g] + 2 [f_g >= f_b] + [f_r >= f_b]`` that picks the steps from an 8-entry table.
+
+    Returns ``(indices, fractions)``: 4 int32 ``(P,)`` indices into a flattened ``S³`` table and the
+    sorted fractions ``(f_a, f_b, f_c)``, each ``(P,)``.
+
+    Examples:
+        >>> indices, fractions = tetrahedron(torch.tensor([[0.5], [0.25], [0.0]]), 2)
+        >>> [int(i) for i in indices], [float(f) for f in fractions]
+        ([0, 1, 3, 7], [0.5, 0.25, 0.0])
+    """
+    base, (fr, fg, fb) = _cell(coords, size)
+    f_max = torch.maximum(torch.maximum(fr, fg), fb)
+    f_min = torch.minimum(torch.minimum(fr, fg), fb)
+    f_mid = fr + fg + fb - f_max - f_min
+    code = (fr >= fg).to(torch.int32) * 4 + (fg >= fb).to(torch.int32) * 2 + (fr >= fb).to(torch.int32)
+    steps = _tetrahedron_steps(size, coords.device)
+    indices = (base, base + steps[0].index_select(0, code), base + steps[1].index_select(0, code), base + (1 + size + size * size))
+    return indices, (f_max, f_mid, f_min)
+
+
 def tetrahedral(coords: torch.Tensor, table: torch.Tensor, size: int) -> torch.Tensor:
     """Tetrahedral interpolation of a planar table ``(3, S³)`` at lattice coordinates ``(3, P)`` -> ``(3, P)``.
 
-    The cube cell is split along its main diagonal into 6 tetrahedra, picked by the order of the
-    fractions ``f_a >= f_b >= f_c`` (Kasson, Nin and Plouffe 1995; the scheme OpenColorIO uses)::
-
-        y = c000 + f_a (v1 - c000) + f_b (v2 - v1) + f_c (c111 - v2)
-
-    where ``v1`` steps from ``c000`` along the largest fraction's axis and ``v2 = c111`` minus a step
-    along the smallest one's. Exact on lattice points and continuous across cells; on ties the
-    ambiguous vertex gets weight 0. Every step is per pixel and per table row (one 1-D gather per
-    vertex and channel), so ``torch.compile`` fuses it into a single pass over the pixels.
+    ``y = c000 + f_a (v1 - c000) + f_b (v2 - v1) + f_c (c111 - v2)`` over the vertices and sorted
+    fractions of :func:`tetrahedron` (the weights ``1 - f_a, f_a - f_b, f_b - f_c, f_c`` in difference
+    form, so a constant table gives its constant exactly): exact on lattice points and continuous
+    across cells; on ties the ambiguous vertex gets weight 0. One gather of the three table rows per
+    vertex (``index_select``, an ONNX ``Gather``), so ``torch.compile`` fuses it into a single pass.
 
     Examples:
         >>> rows = torch.arange(8.0).expand(3, 8)
         >>> tetrahedral(torch.tensor([[1.0], [0.0], [1.0]]), rows, 2).flatten().tolist()
         [5.0, 5.0, 5.0]
     """
-    base, (fr, fg, fb) = _cell(coords, size)
-    f_max = torch.maximum(torch.maximum(fr, fg), fb)
-    f_min = torch.minimum(torch.minimum(fr, fg), fb)
-    f_mid = fr + fg + fb - f_max - f_min
-    plane = size * size
-    stride_max = torch.where(fr >= fg, torch.where(fr >= fb, 1, plane), torch.where(fg >= fb, size, plane))
-    stride_min = torch.where(fr < fg, torch.where(fr < fb, 1, plane), torch.where(fg < fb, size, plane))
-    diagonal = 1 + size + plane
-    v1_index = base + stride_max
-    v2_index = base + (diagonal - stride_min)
-    c111_index = base + diagonal
+    indices, (f_max, f_mid, f_min) = tetrahedron(coords, size)
 
     def channel(row: torch.Tensor) -> torch.Tensor:
-        c000, v1, v2, c111 = row[base], row[v1_index], row[v2_index], row[c111_index]
+        c000, v1, v2, c111 = (row.index_select(0, index) for index in indices)
         return c000 + f_max * (v1 - c000) + f_mid * (v2 - v1) + f_min * (c111 - v2)
 
     return torch.stack([channel(row) for row in table.unbind(0)])
@@ -83,7 +113,7 @@ def trilinear(coords: torch.Tensor, table: torch.Tensor, size: int) -> torch.Ten
     """Trilinear interpolation of a planar table ``(3, S³)`` at lattice coordinates ``(3, P)`` -> ``(3, P)``.
 
     ``y = lerp_b(lerp_g(lerp_r(c000, c100), lerp_r(c010, c110)), lerp_g(...))`` over the 8 corners,
-    per table row as in :func:`tetrahedral`.
+    one 1-D gather per corner and table row as in :func:`tetrahedral`.
 
     Examples:
         >>> rows = torch.arange(8.0).expand(3, 8)
@@ -94,8 +124,8 @@ def trilinear(coords: torch.Tensor, table: torch.Tensor, size: int) -> torch.Ten
 
     def channel(row: torch.Tensor) -> torch.Tensor:
         def lerp_r(index):
-            low = row[index]
-            return low + fr * (row[index + 1] - low)
+            low = row.index_select(0, index)
+            return low + fr * (row.index_select(0, index + 1) - low)
 
         def lerp_g(index):
             low = lerp_r(index)

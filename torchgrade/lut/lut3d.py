@@ -15,8 +15,11 @@ values instead of piling up in the shadows.
 **Speed.** The lookup is gather-based on a planar ``(3, size³)`` table that :meth:`LUT3D.rows`
 converts once and caches. Every step is per pixel, so ``LUT3D(..., compile=True)`` runs non-finite
 policy, shaper, index math, gathers, weights, decoding and clamp as one ``torch.compile``d pass
-with no temporary buffers; the eager default makes one pass per operation.
-benchmarks/bench_lut.py measures both against OpenColorIO.
+with no temporary buffers. The eager default (:func:`chunked_lookup`) makes one pass per operation
+over runs of :data:`LOOKUP_CHUNK` pixels on one CPU thread, as OpenColorIO's CPU processor does: the
+temporaries stay in cache, and no operation waits at a thread barrier (on a loaded machine each
+barrier can wait for a descheduled thread; benchmarks/results/lut.md measured 131× OpenColorIO
+with two threads). benchmarks/bench_lut.py measures both against OpenColorIO.
 
 Examples:
     >>> import torch
@@ -28,6 +31,7 @@ Examples:
 
 from __future__ import annotations
 
+import contextlib
 import warnings
 from typing import Callable, Optional
 
@@ -41,7 +45,7 @@ from .kernels import BACKENDS, KERNELS
 from .lattice import check_size, checked_domain, planar_table
 from .shapers import SHAPERS, lattice_unit
 
-__all__ = ["LUT3D", "LUTLookup", "OUTPUT_ENCODINGS", "apply_lut", "lookup", "compiled_lookup",
+__all__ = ["LUT3D", "LUTLookup", "OUTPUT_ENCODINGS", "LOOKUP_CHUNK", "apply_lut", "lookup", "chunked_lookup", "one_thread", "compiled_lookup",
            "decode_output", "encode_output", "table_output"]
 
 OUTPUT_ENCODINGS = ("linear", "srgb")
@@ -108,7 +112,7 @@ def apply_lut(image: torch.Tensor, table: torch.Tensor, shaper: str = "linear", 
     """
     _check_arguments(image, shaper, interpolation, output_encoding)
     rows = planar_table(table.to(working_dtype(image).dtype))
-    return lookup(image, rows, table.shape[0], shaper, domain_min, domain_max, interpolation, output_range, curve, curve_range, output_encoding)
+    return chunked_lookup(image, rows, table.shape[0], shaper, domain_min, domain_max, interpolation, output_range, curve, curve_range, output_encoding)
 
 
 def lookup(image, rows, size: int, shaper, domain_min, domain_max, interpolation, output_range, curve, curve_range, output_encoding) -> torch.Tensor:
@@ -130,6 +134,61 @@ def lookup(image, rows, size: int, shaper, domain_min, domain_max, interpolation
     unit = lattice_unit(x.reshape(3, -1), shaper, domain_min, domain_max, curve, curve_range)
     y = table_output(KERNELS[interpolation](unit * (size - 1), rows, size), output_encoding, output_range)
     return to_input_dtype(y.reshape(x.shape).movedim(0, -3), image)
+
+
+LOOKUP_CHUNK = 32768
+"""Pixels per pass of the eager lookup: its temporaries (about 40 floats per pixel, 5 MiB a run) then
+stay in cache (benchmarks/bench_lut.py measures the time and the temporary bytes per pixel)."""
+
+
+@contextlib.contextmanager
+def one_thread():
+    """Run the block with one intra-op CPU thread, then restore the count (thread-local under OpenMP and MKL).
+
+    Examples:
+        >>> import torch
+        >>> before = torch.get_num_threads()
+        >>> with one_thread():
+        ...     torch.get_num_threads()
+        1
+        >>> torch.get_num_threads() == before
+        True
+    """
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)
+
+
+def chunked_lookup(image, rows, size: int, *settings, pixels: int = LOOKUP_CHUNK) -> torch.Tensor:
+    """:func:`lookup` (same arguments after ``size``) over ``pixels``-sized runs of each CPU image's pixels, one thread.
+
+    Every step is per pixel, so the result is the same as one pass. While gradients flow to the image
+    or the table (autograd keeps every temporary anyway), off the CPU, and while tracing (an export
+    records one pass), the whole image is one pass.
+
+    Examples:
+        >>> import torch
+        >>> from torchgrade.lut import identity_table, planar_table
+        >>> x = torch.rand(2, 3, 4, 5)
+        >>> args = (planar_table(torch.rand(3, 3, 3, 3)), 3, "linear", 0.0, 1.0, "tetrahedral", None, None, (0.0, 1.0), "linear")
+        >>> torch.equal(chunked_lookup(x, *args, pixels=7), lookup(x, *args))
+        True
+    """
+    height, width = image.shape[-2:]
+    grad = torch.is_grad_enabled() and (image.requires_grad or rows.requires_grad)
+    if grad or image.device.type != "cpu" or is_tracing():
+        return lookup(image, rows, size, *settings)
+    planes = image.reshape(-1, 3, height * width)
+    result = torch.empty(planes.shape, dtype=image.dtype)
+    with one_thread():
+        for frame, out in zip(planes, result):
+            for start in range(0, height * width, pixels):
+                run = frame[:, start:start + pixels].unsqueeze(-1)  # (3, run, 1): an image of one column
+                out[:, start:start + pixels] = lookup(run, rows, size, *settings).squeeze(-1)
+    return result.reshape(image.shape)
 
 
 _COMPILED = None
@@ -243,7 +302,7 @@ class LUT3D(Stage):
             except Exception as error:  # no C++ compiler, unsupported device, ...: the eager path always works
                 warnings.warn(f"LUT3D(compile=True) fell back to eager: torch.compile failed with {error!r}", RuntimeWarning)
                 self.compile = False
-        return lookup(*arguments)
+        return chunked_lookup(*arguments)
 
     def rows(self, dtype: torch.dtype) -> torch.Tensor:
         """The table as planar rows ``(3, S³)`` in ``dtype`` (:func:`~torchgrade.lut.planar_table`), what the kernels read.

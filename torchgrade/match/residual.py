@@ -24,7 +24,7 @@ from torch import nn
 
 from ..color import linear_to_srgb
 from ..lut import LUT3D, identity_table
-from ..lut.kernels import _cell
+from ..lut.kernels import tetrahedron
 
 __all__ = ["ResidualLUT", "smoothness", "monotonicity", "lookup_matrix"]
 
@@ -86,7 +86,7 @@ def lookup_matrix(display_linear: torch.Tensor, size: int) -> torch.Tensor:
     While the residual is fitted its input (the look's output) does not change, so the lookup is a fixed
     linear map of the planar table (:func:`~torchgrade.lut.planar_table`): one sparse product per step
     instead of the gathers, whose backward scatters (several times slower on CPU). Same cells, tie rules and
-    vertices as :func:`~torchgrade.lut.tetrahedral`.
+    vertices as :func:`~torchgrade.lut.tetrahedral` (:func:`~torchgrade.lut.kernels.tetrahedron`).
 
     Examples:
         >>> display = torch.rand(1, 3, 6, 1, dtype=torch.float64)
@@ -97,18 +97,11 @@ def lookup_matrix(display_linear: torch.Tensor, size: int) -> torch.Tensor:
         True
     """
     coords = linear_to_srgb(display_linear.clamp(0.0, 1.0)).movedim(-3, 0).reshape(3, -1) * (size - 1)
-    base, (fr, fg, fb) = _cell(coords, size)
-    f_max = torch.maximum(torch.maximum(fr, fg), fb)
-    f_min = torch.minimum(torch.minimum(fr, fg), fb)
-    f_mid = fr + fg + fb - f_max - f_min
-    plane = size * size
-    stride_max = torch.where(fr >= fg, torch.where(fr >= fb, 1, plane), torch.where(fg >= fb, size, plane))
-    stride_min = torch.where(fr < fg, torch.where(fr < fb, 1, plane), torch.where(fg < fb, size, plane))
-    diagonal = 1 + size + plane
-    base = base.long()
-    columns = torch.cat([base, base + stride_max, base + diagonal - stride_min, base + diagonal])
+    indices, (f_max, f_mid, f_min) = tetrahedron(coords, size)
+    columns = torch.cat(indices).long()
     weights = torch.cat([1.0 - f_max, f_max - f_mid, f_mid - f_min, f_min])
-    rows = torch.arange(base.numel(), device=base.device).repeat(4)
+    pixels = coords.shape[1]
+    rows = torch.arange(pixels, device=coords.device).repeat(4)
     # COO, not CSR: the product's backward with a CSR matrix measured 15 times slower on CPU (torch 2.x).
-    matrix = torch.sparse_coo_tensor(torch.stack([rows, columns]), weights, (base.numel(), size**3), check_invariants=False)
+    matrix = torch.sparse_coo_tensor(torch.stack([rows, columns]), weights, (pixels, size**3), check_invariants=False)
     return matrix.coalesce()
