@@ -1,7 +1,9 @@
 """RandomPostFX: the batched random layer against the library's deterministic layers applied one sample
 at a time with the sampled parameters, plus reproducibility, replay, p, same_on_batch and bounds."""
 
+import contextlib
 import pickle
+import signal
 
 import pytest
 import torch
@@ -239,6 +241,20 @@ class SameImageDataset(torch.utils.data.Dataset):
         return self.layer(self.image)
 
 
+@contextlib.contextmanager
+def default_sigchld():
+    """Give back the SIGCHLD handler that a DataLoader with workers installs for the rest of the process.
+
+    With PyTorch's handler left in place, a later ``subprocess.run`` in the same test process was killed
+    by SIGSEGV (si_code SI_KERNEL) while waiting for its child, after the suite's earlier tests.
+    """
+    previous = signal.getsignal(signal.SIGCHLD)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGCHLD, previous)
+
+
 def test_pickles_and_runs_in_dataloader_workers():
     layer = tg.RandomPostFX(contrast=(-40.0, 40.0), saturation=(-40.0, 40.0), tonemap=("neutral", "reinhard"), keepdim=True)
     images = hdr_batch(size=8)
@@ -246,7 +262,8 @@ def test_pickles_and_runs_in_dataloader_workers():
     assert torch.equal(copy(images, generator=seeded(1)), layer(images, generator=seeded(1)))
 
     dataset = SameImageDataset(layer)
-    out = torch.cat(list(torch.utils.data.DataLoader(dataset, batch_size=4, num_workers=2)))
+    with default_sigchld():
+        out = torch.cat(list(torch.utils.data.DataLoader(dataset, batch_size=4, num_workers=2)))
     assert out.shape == (8, 3, 8, 8) and torch.isfinite(out).all()
     assert out.max() <= 1.0 < dataset.image.max(), "every sample should be tone mapped"
     assert not torch.equal(out[0:4], out[4:8]), "the two workers (one batch each) should draw different parameters"
