@@ -126,3 +126,30 @@ def test_ap0_file_converts_to_rec709_like_colour_science(exr_dir):
 def test_rec709_file_is_unchanged_by_conversion(exr_dir):
     original = tg.io.read_exr(exr_dir / "WideColorGamut.exr")
     torch.testing.assert_close(tg.io.read_exr(exr_dir / "WideColorGamut.exr", to_rec709=True), original, atol=2e-5, rtol=2e-5)
+
+
+DECODE_ONE_CHANNEL = """
+import sys, pathlib
+from torchgrade.io import exr_info
+from torchgrade.io.exr.decode import decode, selective
+for path in sorted(pathlib.Path(sys.argv[1]).iterdir()):
+    try:
+        parts = exr_info(path)
+    except ValueError:
+        continue
+    names = sorted(parts[0].channels)[:1]
+    if selective(parts, parts[0], names):
+        try:
+            decode(path, parts, parts[0], names)
+            print("VERDICT accepted", path.name)
+        except ValueError:
+            print("VERDICT rejected", path.name)
+"""
+
+
+def test_damaged_files_are_rejected_when_one_channel_of_several_is_decoded(exr_dir):
+    # decode reads a subset of the channels through another binding than the whole file: it must reject damage too
+    result = subprocess.run([sys.executable, "-c", DECODE_ONE_CHANNEL, str(exr_dir / "damaged")], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr[-2000:]
+    verdicts = [line for line in result.stdout.splitlines() if line.startswith("VERDICT ")]
+    assert len(verdicts) >= 5 and all(line.startswith("VERDICT rejected") for line in verdicts), verdicts

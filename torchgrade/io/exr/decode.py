@@ -1,11 +1,16 @@
 """Decoding an untrusted OpenEXR file: budget checked from the headers first, library errors fatal.
 
-The bindings decode every channel of every part at once, and report some damage (a corrupt chunk
+The bindings' ``OpenEXR.File`` decodes every channel of every part at once. Only their deprecated
+``OpenEXR.InputFile`` decodes chosen channels, and only of the first part at full resolution (its
+``channels`` sizes subsampled channels wrongly), so it reads exactly those layers of the first part
+that leave other channels or parts out, and ``File`` reads everything else (see ``selective``).
+The budget counts what the chosen path decodes. ``File`` reports some damage (a corrupt chunk
 table, a chunk that fails to decompress) only by printing to the process's standard error and
-leaving the damaged part out or partly filled. So the budget counts everything the bindings will
-decode, and whatever the library prints while decoding (to stdout or stderr) turns into a
-``ValueError``. The redirection is process-wide: output other threads write meanwhile is
-swallowed with it, and reads in several threads decode one at a time.
+leaving the damaged part out or partly filled, so whatever the library prints while decoding (to
+stdout or stderr) turns into a ``ValueError``; ``InputFile`` raises. The redirection is
+process-wide: output other threads write meanwhile is swallowed with it, and reads in several
+threads decode one at a time. A selective read decodes one part only: damage elsewhere in the file
+goes unseen.
 """
 
 from __future__ import annotations
@@ -16,11 +21,12 @@ import sys
 import tempfile
 import threading
 
+import numpy as np
 import OpenEXR
 
 from .layout import ExrPart
 
-__all__ = ["MAX_BYTES", "MAX_PIXELS", "check_budget", "decode"]
+__all__ = ["MAX_BYTES", "MAX_PIXELS", "check_budget", "decode", "selective"]
 
 MAX_PIXELS = 1 << 28
 """Largest window (268 megapixels) read_exr accepts by default."""
@@ -29,10 +35,31 @@ MAX_BYTES = 1 << 31
 """Default bound (2 GiB) on the memory a read may take: every sample the bindings decode (2 bytes
 half, 4 float), plus the float32 tensor returned."""
 
+_DTYPES = {0: np.uint32, 1: np.float16, 2: np.float32}
+"""numpy type of OpenEXR's UINT, HALF and FLOAT pixel types."""
 
-def check_budget(path, parts: list[ExrPart], chosen: ExrPart, window: str, output_channels: int, max_pixels: int,
+
+def selective(parts: list[ExrPart], chosen: ExrPart, names) -> bool:
+    """Whether ``decode`` reads only the channels ``names`` of ``chosen``: in the first part, full
+    resolution, and fewer than the file holds.
+
+    Examples:
+        >>> import pathlib, tempfile, torch, torchgrade as tg
+        >>> from torchgrade.io import exr_info
+        >>> path = pathlib.Path(tempfile.mkdtemp()) / "rgb.exr"
+        >>> tg.io.write_exr(path, torch.zeros(3, 2, 4))
+        >>> parts = exr_info(path)
+        >>> selective(parts, parts[0], ["R", "G", "B"]), selective(parts, parts[0], ["R"])
+        (False, True)
+    """
+    full = all(chosen.channels[name] == (1, 1) for name in names)
+    return chosen.index == 0 and full and (len(parts) > 1 or set(names) != set(chosen.channels))
+
+
+def check_budget(path, parts: list[ExrPart], chosen: ExrPart, names, window: str, output_channels: int, max_pixels: int,
                  max_bytes: int) -> None:
-    """Raise ``ValueError`` naming the numbers when decoding ``parts`` and returning ``chosen`` would pass either bound.
+    """Raise ``ValueError`` naming the numbers when decoding channels ``names`` of ``chosen`` (as
+    ``decode`` does) and returning ``output_channels`` would pass either bound.
 
     Examples:
         >>> import pathlib, tempfile, torch, torchgrade as tg
@@ -40,7 +67,7 @@ def check_budget(path, parts: list[ExrPart], chosen: ExrPart, window: str, outpu
         >>> path = pathlib.Path(tempfile.mkdtemp()) / "rgb.exr"
         >>> tg.io.write_exr(path, torch.zeros(3, 64, 64))
         >>> parts = exr_info(path)
-        >>> check_budget(path, parts, parts[0], "data", 3, max_pixels=1 << 20, max_bytes=1000)
+        >>> check_budget(path, parts, parts[0], ["R", "G", "B"], "data", 3, max_pixels=1 << 20, max_bytes=1000)
         Traceback (most recent call last):
         ValueError: ...rgb.exr: reading needs about 73728 bytes (24576 decoded + 49152 returned), above the budget of 1000 bytes (max_bytes)
     """
@@ -52,7 +79,10 @@ def check_budget(path, parts: list[ExrPart], chosen: ExrPart, window: str, outpu
         if height <= 0 or width <= 0 or height * width > max_pixels:
             raise ValueError(f"{path}: part {part.index} data window {width}x{height} is empty or above the "
                              f"budget of {max_pixels} pixels (max_pixels)")
-    decoded = sum(_decoded_bytes(part) for part in parts)
+    if selective(parts, chosen, names):
+        decoded = _decoded_bytes(chosen, names)
+    else:
+        decoded = sum(_decoded_bytes(part, part.channels) for part in parts)
     height, width = chosen.size(window)
     if height <= 0 or width <= 0 or height * width > max_pixels:
         raise ValueError(f"{path}: {window} window {width}x{height} is empty or above the budget of {max_pixels} pixels (max_pixels)")
@@ -62,9 +92,10 @@ def check_budget(path, parts: list[ExrPart], chosen: ExrPart, window: str, outpu
                          f"above the budget of {max_bytes} bytes (max_bytes)")
 
 
-def _decoded_bytes(part: ExrPart) -> int:
+def _decoded_bytes(part: ExrPart, names) -> int:
     height, width = part.size()
-    return sum(part.sample_bytes[name] * -(-height // ys) * -(-width // xs) for name, (xs, ys) in part.channels.items())
+    samplings = {name: part.channels[name] for name in names}
+    return sum(part.sample_bytes[name] * -(-height // ys) * -(-width // xs) for name, (xs, ys) in samplings.items())
 
 
 _REDIRECTING = threading.Lock()
@@ -92,30 +123,48 @@ def _captured_output():
             messages.extend(sink.read().decode("utf-8", "replace").splitlines())
 
 
-def decode(path, parts: list[ExrPart]):
-    """Every part's channels as ``{name: numpy array}`` dicts, one per part, or ``ValueError``.
+def _decode_all(path) -> list[dict]:
+    opened = OpenEXR.File(str(path), separate_channels=True)
+    return [{name: channel.pixels for name, channel in part.channels.items()} for part in opened.parts]
 
-    The library's own complaints (printed while decoding) and any part or channel missing from the
-    result reject the file; a ``MemoryError`` becomes a ``ValueError`` too.
+
+def _decode_selected(path, chosen: ExrPart, names) -> dict:
+    opened = OpenEXR.InputFile(str(path))
+    try:
+        types = opened.header()["channels"]
+        data = opened.channels(names)
+    finally:
+        opened.close()
+    shape = chosen.size()
+    return {name: np.frombuffer(samples, _DTYPES[types[name].type.v]).reshape(shape) for name, samples in zip(names, data)}
+
+
+def decode(path, parts: list[ExrPart], chosen: ExrPart, names: list[str]) -> dict:
+    """Channels ``names`` of part ``chosen`` as ``{name: numpy array}`` (read-only where ``selective``), or ``ValueError``.
+
+    The library's own complaints (printed while decoding) and any part or channel missing from what
+    it decoded reject the file; a ``MemoryError`` becomes a ``ValueError`` too.
 
     Examples:
         >>> import pathlib, tempfile, torch, torchgrade as tg
         >>> from torchgrade.io import exr_info
         >>> path = pathlib.Path(tempfile.mkdtemp()) / "rgb.exr"
         >>> tg.io.write_exr(path, torch.zeros(3, 2, 4))
-        >>> {name: array.shape for name, array in decode(path, exr_info(path))[0].items()}
-        {'B': (2, 4), 'G': (2, 4), 'R': (2, 4)}
+        >>> parts = exr_info(path)
+        >>> {name: array.shape for name, array in decode(path, parts, parts[0], ["R", "G"]).items()}
+        {'R': (2, 4), 'G': (2, 4)}
     """
+    only = selective(parts, chosen, names)
     try:
         with _captured_output() as messages:
-            opened = OpenEXR.File(str(path), separate_channels=True)
-            decoded = [{name: channel.pixels for name, channel in part.channels.items()} for part in opened.parts]
+            decoded = [_decode_selected(path, chosen, names)] if only else _decode_all(path)
     except MemoryError:
         raise ValueError(f"{path}: not enough memory to decode the pixels (use a smaller max_bytes)") from None
     except Exception as error:
         raise ValueError(f"{path}: cannot decode OpenEXR pixels ({error})") from None
     if messages:
         raise ValueError(f"{path}: damaged OpenEXR file ({messages[0].replace(str(path) + ': ', '')})")
-    if len(decoded) != len(parts) or any(set(d) != set(p.channels) for d, p in zip(decoded, parts)):
+    if not only and (len(decoded) != len(parts) or any(set(d) != set(p.channels) for d, p in zip(decoded, parts))):
         raise ValueError(f"{path}: damaged OpenEXR file (the library returned fewer parts or channels than the header lists)")
-    return decoded
+    pixels = decoded[0 if only else chosen.index]
+    return {name: pixels[name] for name in names}

@@ -19,6 +19,8 @@ __all__ = ["read_exr"]
 WINDOWS = ("data", "display")
 _STRIP_LINES = 256
 """Rows converted at a time by the colour matrix: bounds its temporary to a strip of the image."""
+_COLOUR = ("R", "G", "B", "A", "Y", "RY", "BY")
+"""The channels a colour layer is read from; its others (``Z``) are neither returned nor decoded."""
 
 
 def _wanted(part: ExrPart, view, layer: str) -> dict[str, str]:
@@ -107,7 +109,7 @@ def _fill(path, part: ExrPart, channels: dict[str, str], pixels: dict, target: t
         if letter not in letters:
             target[index].zero_()
             continue
-        target[index].copy_(torch.as_tensor(pixels[channels[letter]][crop[0], crop[1]]))
+        target[index].numpy()[...] = pixels[channels[letter]][crop[0], crop[1]]  # the arrays may be read-only
         if letter not in names[index - first + 1:]:
             del pixels[channels[letter]]
 
@@ -161,12 +163,12 @@ def read_exr(path, to_rec709: bool = False, *, adaptation: str = "auto", layer: 
     parts = exr_info(path)
     chosen, channels = _choose(path, parts, part, view, layer)
     colour = channels.keys() & {"R", "G", "B", "Y"}
+    if colour:
+        channels = {letter: name for letter, name in channels.items() if letter in _COLOUR}
     count = (3 + ("A" in channels)) if colour else len(channels)
-    check_budget(path, parts, chosen, window, count, max_pixels, max_bytes)
+    check_budget(path, parts, chosen, list(channels.values()), window, count, max_pixels, max_bytes)
     matrix = to_rec709_matrix(chosen.chromaticities, adaptation) if to_rec709 and colour and chosen.chromaticities else None
-    decoded = decode(path, parts)[chosen.index]
-    pixels = {name: decoded.pop(name) for name in channels.values()}  # the part's other channels go now
-    del decoded
+    pixels = decode(path, parts, chosen, list(channels.values()))
     image, target, crop = _canvas(chosen, window, count)
     _fill(path, chosen, channels, pixels, target, crop)
     if matrix is not None:
