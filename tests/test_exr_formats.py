@@ -220,3 +220,45 @@ def test_luminance_chroma_in_a_display_window_is_the_data_window_placed(tmp_path
     expected[:, max(-y0, 0):max(-y0, 0) + inside.shape[1], max(-x0, 0):max(-x0, 0) + inside.shape[2]] = inside
     assert data.shape == (3, 12, 16) and (data[0] - data[2]).abs().max() > 0.1  # in colour
     torch.testing.assert_close(framed, expected, atol=0, rtol=0)
+
+
+def write_tiled_layers(path):
+    """Tiled 16×16, data window offset and inside a larger display window: half RGB, float Z, a
+    ``diffuse`` layer, and an ``obj`` layer mixing uint and half samples."""
+    rng = np.random.default_rng(3)
+    half = lambda: (rng.standard_normal((37, 29)) * 100).astype(np.float16)  # noqa: E731
+    channels = {"R": half(), "G": half(), "B": half(), "Z": rng.random((37, 29), np.float32),
+                "diffuse.R": half(), "diffuse.G": half(), "diffuse.B": half(),
+                "obj.id": rng.integers(0, 2**32, (37, 29), dtype=np.uint32), "obj.w": half()}
+    tiles = OpenEXR.TileDescription()
+    tiles.xSize = tiles.ySize = 16
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.tiledimage, "tiles": tiles,
+              "dataWindow": window(-3, 5, 25, 41), "displayWindow": window(0, 0, 30, 50)}
+    OpenEXR.File(header, channels).write(str(path))
+
+
+def test_reads_in_strips_equal_whole_reads_bit_for_bit(exr_dir, tmp_path, monkeypatch):
+    from torchgrade.io.exr import decode, read
+
+    write_tiled_layers(tmp_path / "tiled.exr")
+    paths = sorted(exr_dir.glob("*.exr")) + sorted((exr_dir / "formats").glob("*.exr")) + [tmp_path / "tiled.exr"]
+    strips = []
+    monkeypatch.setattr(read, "decode_strips", lambda *args: strips.append(args[0]) or decode.decode_strips(*args))
+    monkeypatch.setattr(decode, "STRIP_BYTES", 1)  # one row per strip
+    for path in paths:
+        parts = tg.io.exr_info(path)
+        if parts[0].deep:
+            continue
+        for view, layer in sorted(parts[0].layers, key=str):
+            for window in ("data", "display"):
+                before = len(strips)
+                striped = tg.io.read_exr(path, layer=layer, view=view, part=0, window=window)
+                if len(strips) == before:
+                    continue
+                with monkeypatch.context() as whole:
+                    whole.setattr(read, "selective", lambda *args: False)
+                    expected = tg.io.read_exr(path, layer=layer, view=view, part=0, window=window)
+                assert torch.equal(striped.view(torch.int32), expected.view(torch.int32)), (path.name, view, layer, window)
+    assert {path.name for path in strips} >= {"Adjuster.exr", "beachball_multipart.0001.exr", "beachball_singlepart.0001.exr",
+                                              "tiled.exr"}
+    assert len(strips) >= 20

@@ -133,9 +133,10 @@ def test_peak_memory_of_a_read_is_at_most_one_and_a_half_times_the_tensor(tmp_pa
     result = subprocess.run([sys.executable, "-c", PEAK, str(path)], capture_output=True, text=True, timeout=300)
     ratio = float(result.stdout.split()[-1])
     # at most the decoded samples (0.5× half, 1× float, freed plane by plane; luminance/chroma 0.25×,
-    # reconstructed strip by strip into the tensor; only the layer returned of a layered file) + the
-    # tensor; measured 1.2, 1.4, 1.5, and 1.2 for both five-layer files (2.6 decoding every layer)
-    assert ratio < 1.6, ratio
+    # reconstructed strip by strip into the tensor; only the layer returned of a layered file, a strip of
+    # rows at a time) + the tensor; measured 1.2, 1.4, 1.5, and 1.09 and 1.04 for the five-layer files
+    # (1.2 decoding the layer whole, 2.6 decoding every layer)
+    assert ratio < (1.15 if layout in ("layered", "multi-part") else 1.6), ratio
 
 
 def test_new_files_follow_the_umask_and_rewrites_keep_the_mode(tmp_path):

@@ -3,14 +3,15 @@
 The bindings' ``OpenEXR.File`` decodes every channel of every part at once. Only their deprecated
 ``OpenEXR.InputFile`` decodes chosen channels, and only of the first part at full resolution (its
 ``channels`` sizes subsampled channels wrongly), so it reads exactly those layers of the first part
-that leave other channels or parts out, and ``File`` reads everything else (see ``selective``).
-The budget counts what the chosen path decodes. ``File`` reports some damage (a corrupt chunk
-table, a chunk that fails to decompress) only by printing to the process's standard error and
-leaving the damaged part out or partly filled, so whatever the library prints while decoding (to
-stdout or stderr) turns into a ``ValueError``; ``InputFile`` raises. The redirection is
-process-wide: output other threads write meanwhile is swallowed with it, and reads in several
-threads decode one at a time. A selective read decodes one part only: damage elsewhere in the file
-goes unseen.
+that leave other channels or parts out, a strip of rows at a time straight into the tensor
+(``decode_strips``), and ``File`` reads everything else (``decode``; see ``selective``). The budget
+counts what the chosen path decodes (for a selective read the whole layer, though it holds a strip
+at a time). ``File`` reports some damage (a corrupt chunk table, a chunk that fails to decompress)
+only by printing to the process's standard error and leaving the damaged part out or partly filled,
+so whatever the library prints while decoding (to stdout or stderr) turns into a ``ValueError``;
+``InputFile`` raises. The redirection is process-wide: output other threads write meanwhile is
+swallowed with it, and reads in several threads decode one at a time. A selective read decodes one
+part only: damage elsewhere in the file goes unseen.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ import OpenEXR
 
 from .layout import ExrPart
 
-__all__ = ["MAX_BYTES", "MAX_PIXELS", "check_budget", "decode", "selective"]
+__all__ = ["MAX_BYTES", "MAX_PIXELS", "STRIP_BYTES", "check_budget", "decode", "decode_strips", "selective"]
 
 MAX_PIXELS = 1 << 28
 """Largest window (268 megapixels) read_exr accepts by default."""
@@ -34,6 +35,9 @@ MAX_PIXELS = 1 << 28
 MAX_BYTES = 1 << 31
 """Default bound (2 GiB) on the memory a read may take: every sample the bindings decode (2 bytes
 half, 4 float), plus the float32 tensor returned."""
+
+STRIP_BYTES = 1 << 18
+"""Decoded samples a selective read holds at a time (256 KiB): it decodes that many rows per strip."""
 
 _DTYPES = {0: np.uint32, 1: np.float16, 2: np.float32}
 """numpy type of OpenEXR's UINT, HALF and FLOAT pixel types."""
@@ -123,24 +127,22 @@ def _captured_output():
             messages.extend(sink.read().decode("utf-8", "replace").splitlines())
 
 
-def _decode_all(path) -> list[dict]:
-    opened = OpenEXR.File(str(path), separate_channels=True)
-    return [{name: channel.pixels for name, channel in part.channels.items()} for part in opened.parts]
-
-
-def _decode_selected(path, chosen: ExrPart, names) -> dict:
-    opened = OpenEXR.InputFile(str(path))
+@contextlib.contextmanager
+def _decoding(path):
+    """Turn what the library raises or prints meanwhile into ``ValueError``."""
     try:
-        types = opened.header()["channels"]
-        data = opened.channels(names)
-    finally:
-        opened.close()
-    shape = chosen.size()
-    return {name: np.frombuffer(samples, _DTYPES[types[name].type.v]).reshape(shape) for name, samples in zip(names, data)}
+        with _captured_output() as messages:
+            yield
+    except MemoryError:
+        raise ValueError(f"{path}: not enough memory to decode the pixels (use a smaller max_bytes)") from None
+    except Exception as error:
+        raise ValueError(f"{path}: cannot decode OpenEXR pixels ({error})") from None
+    if messages:
+        raise ValueError(f"{path}: damaged OpenEXR file ({messages[0].replace(str(path) + ': ', '')})")
 
 
 def decode(path, parts: list[ExrPart], chosen: ExrPart, names: list[str]) -> dict:
-    """Channels ``names`` of part ``chosen`` as ``{name: numpy array}`` (read-only where ``selective``), or ``ValueError``.
+    """Channels ``names`` of part ``chosen`` as ``{name: numpy array}``, decoding every part, or ``ValueError``.
 
     The library's own complaints (printed while decoding) and any part or channel missing from what
     it decoded reject the file; a ``MemoryError`` becomes a ``ValueError`` too.
@@ -154,17 +156,55 @@ def decode(path, parts: list[ExrPart], chosen: ExrPart, names: list[str]) -> dic
         >>> {name: array.shape for name, array in decode(path, parts, parts[0], ["R", "G"]).items()}
         {'R': (2, 4), 'G': (2, 4)}
     """
-    only = selective(parts, chosen, names)
-    try:
-        with _captured_output() as messages:
-            decoded = [_decode_selected(path, chosen, names)] if only else _decode_all(path)
-    except MemoryError:
-        raise ValueError(f"{path}: not enough memory to decode the pixels (use a smaller max_bytes)") from None
-    except Exception as error:
-        raise ValueError(f"{path}: cannot decode OpenEXR pixels ({error})") from None
-    if messages:
-        raise ValueError(f"{path}: damaged OpenEXR file ({messages[0].replace(str(path) + ': ', '')})")
-    if not only and (len(decoded) != len(parts) or any(set(d) != set(p.channels) for d, p in zip(decoded, parts))):
+    with _decoding(path):
+        opened = OpenEXR.File(str(path), separate_channels=True)
+        decoded = [{name: channel.pixels for name, channel in part.channels.items()} for part in opened.parts]
+    if len(decoded) != len(parts) or any(set(d) != set(p.channels) for d, p in zip(decoded, parts)):
         raise ValueError(f"{path}: damaged OpenEXR file (the library returned fewer parts or channels than the header lists)")
-    pixels = decoded[0 if only else chosen.index]
-    return {name: pixels[name] for name in names}
+    return {name: decoded[chosen.index][name] for name in names}
+
+
+def decode_strips(path, chosen: ExrPart, sources: list, target, crop: tuple[slice, slice]) -> None:
+    """Decode channel ``sources[i]`` of the first part (``None``: zeros) into ``target[i]``, ``STRIP_BYTES``
+    of samples at a time, or raise ``ValueError`` as ``decode`` does.
+
+    Every row of the data window is decoded (so damage anywhere in the layer rejects the file); rows
+    ``crop[0]`` and columns ``crop[1]`` of it land in the tensor ``target``.
+
+    Examples:
+        >>> import pathlib, tempfile, torch, torchgrade as tg
+        >>> from torchgrade.io import exr_info
+        >>> path = pathlib.Path(tempfile.mkdtemp()) / "rgb.exr"
+        >>> tg.io.write_exr(path, torch.arange(24.0).reshape(3, 2, 4))
+        >>> target = torch.empty(2, 2, 4)
+        >>> decode_strips(path, exr_info(path)[0], ["B", None], target, (slice(0, 2), slice(0, 4)))
+        >>> target[:, 1]
+        tensor([[20., 21., 22., 23.],
+                [ 0.,  0.,  0.,  0.]])
+    """
+    names = sorted({name for name in sources if name is not None})
+    height, width = chosen.size()
+    rows = max(1, STRIP_BYTES // (width * sum(chosen.sample_bytes[name] for name in names)))
+    out, top = target.numpy(), chosen.data_window[1]
+    for index, name in enumerate(sources):
+        if name is None:
+            out[index] = 0
+    with _decoding(path):
+        opened = OpenEXR.InputFile(str(path))
+        try:
+            types = opened.header()["channels"]
+            by_type = {}
+            for name in names:
+                by_type.setdefault(types[name].type.v, []).append(name)
+            for first in range(0, height, rows):
+                last = min(first + rows, height)
+                strip = {}
+                for kind, group in by_type.items():  # scanlines: data-window y, both ends included
+                    samples = opened.channels(group, types[group[0]].type, top + first, top + last - 1)
+                    strip.update({n: np.frombuffer(s, _DTYPES[kind]).reshape(last - first, width) for n, s in zip(group, samples)})
+                low, high = max(crop[0].start, first), min(crop[0].stop, last)
+                for index, name in enumerate(sources):
+                    if name is not None and low < high:
+                        out[index, low - crop[0].start:high - crop[0].start] = strip[name][low - first:high - first, crop[1]]
+        finally:
+            opened.close()

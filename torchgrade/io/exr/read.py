@@ -10,7 +10,7 @@ import torch
 from ...color import REC709_CHROMATICITIES
 from ...core import check_choice
 from .chromaticities import ADAPTATIONS, to_rec709_matrix
-from .decode import MAX_BYTES, MAX_PIXELS, check_budget, decode
+from .decode import MAX_BYTES, MAX_PIXELS, check_budget, decode, decode_strips, selective
 from .layout import ExrPart, exr_info
 from .yca import luminance_weights, yca_to_rgb
 
@@ -52,14 +52,20 @@ def _choose(path, parts: list[ExrPart], part, view, layer) -> tuple[ExrPart, dic
                      f"(layers by part, as view:layer: {held}; choose with layer=, view=, part=)")
 
 
-def _check_sizes(path, part: ExrPart, channels: dict[str, str], pixels: dict) -> None:
-    """Every channel full size, but RY and BY at 2×2 subsampling, and decoded at that size."""
-    height, width = part.size()
+def _check_sampling(path, part: ExrPart, channels: dict[str, str]) -> None:
+    """Every channel full size, but RY and BY at 2×2 subsampling."""
     for letter, name in channels.items():
         sampling = (2, 2) if letter in ("RY", "BY") and {"Y"} <= channels.keys() else (1, 1)
         if part.channels[name] != sampling:
             raise ValueError(f"{path}: channel {name} has sampling {part.channels[name]}; read_exr reads {sampling}")
-        expected = (-(-height // sampling[1]), -(-width // sampling[0]))
+
+
+def _check_shapes(path, part: ExrPart, channels: dict[str, str], pixels: dict) -> None:
+    """Every channel decoded at the size its sampling gives."""
+    height, width = part.size()
+    for name in channels.values():
+        xs, ys = part.channels[name]
+        expected = (-(-height // ys), -(-width // xs))
         if getattr(pixels[name], "shape", None) != expected:
             raise ValueError(f"{path}: channel {name} decoded as {getattr(pixels[name], 'shape', None)}, not {expected}")
 
@@ -90,23 +96,30 @@ def _luminance_chroma(part: ExrPart, channels: dict[str, str], pixels: dict, tar
         target.copy_(yca_to_rgb(y, chroma.pop(0), chroma.pop(0), weights)[:, crop[0], crop[1]])
 
 
+def _order(channels: dict[str, str]) -> tuple[bool, list[str], int]:
+    """Whether the layer is luminance/chroma (RGB rebuilt into the first three channels), and the
+    letters the tensor's channels from ``first`` on hold: RGB(A) as OpenEXR's RGBA interface gives
+    it (a letter the layer lacks is zeros), or every channel."""
+    letters = set(channels)
+    if "Y" in letters and letters & {"RY", "BY"} and not letters & {"R", "G", "B"}:
+        return True, ["A"] if "A" in letters else [], 3
+    if letters & {"R", "G", "B", "Y"}:
+        grey = "Y" if not letters & {"R", "G", "B"} else None
+        return False, [grey or c for c in "RGB"] + (["A"] if "A" in letters else []), 0
+    return False, sorted(letters), 0
+
+
 def _fill(path, part: ExrPart, channels: dict[str, str], pixels: dict, target: torch.Tensor, crop) -> None:
-    """Copy the layer into ``target``, colour first: RGB(A) as OpenEXR's RGBA interface gives it, or every channel.
+    """Copy the decoded layer into ``target`` in ``_order``.
 
     Each decoded plane is dropped once copied, so the decoded samples and the output overlap little.
     """
-    _check_sizes(path, part, channels, pixels)
-    letters = set(channels)
-    if "Y" in letters and letters & {"RY", "BY"} and not letters & {"R", "G", "B"}:
+    _check_shapes(path, part, channels, pixels)
+    luminance_chroma, names, first = _order(channels)
+    if luminance_chroma:
         _luminance_chroma(part, channels, pixels, target[:3], crop)
-        names, first = ["A"] if "A" in letters else [], 3
-    elif letters & {"R", "G", "B", "Y"}:
-        grey = "Y" if not letters & {"R", "G", "B"} else None
-        names, first = [grey or c for c in "RGB"] + (["A"] if "A" in letters else []), 0
-    else:
-        names, first = sorted(letters), 0
     for index, letter in enumerate(names, start=first):
-        if letter not in letters:
+        if letter not in channels:
             target[index].zero_()
             continue
         target[index].numpy()[...] = pixels[channels[letter]][crop[0], crop[1]]  # the arrays may be read-only
@@ -168,9 +181,13 @@ def read_exr(path, to_rec709: bool = False, *, adaptation: str = "auto", layer: 
     count = (3 + ("A" in channels)) if colour else len(channels)
     check_budget(path, parts, chosen, list(channels.values()), window, count, max_pixels, max_bytes)
     matrix = to_rec709_matrix(chosen.chromaticities, adaptation) if to_rec709 and colour and chosen.chromaticities else None
-    pixels = decode(path, parts, chosen, list(channels.values()))
+    _check_sampling(path, chosen, channels)
     image, target, crop = _canvas(chosen, window, count)
-    _fill(path, chosen, channels, pixels, target, crop)
+    luminance_chroma, letters, _ = _order(channels)
+    if selective(parts, chosen, list(channels.values())) and not luminance_chroma:
+        decode_strips(path, chosen, [channels.get(letter) for letter in letters], target, crop)
+    else:
+        _fill(path, chosen, channels, decode(path, parts, chosen, list(channels.values())), target, crop)
     if matrix is not None:
         _convert(image, matrix)
     return image
