@@ -270,3 +270,17 @@ def test_cuda_agrees_with_the_cpu(name, hdr_batch, monkeypatch):
     for got, want in zip(on_cuda, on_cpu):
         assert got.device.type == "cuda"
         torch.testing.assert_close(got.cpu(), want, rtol=RTOL, atol=ATOL)
+
+
+@pytest.mark.parametrize("evaluate", [lambda look, tmp: tg.bake_lut(look, size=5),
+                                      lambda look, tmp: look.to_lut(size=5),
+                                      lambda look, tmp: tg.onnx.export(look, tmp / "look.onnx")],
+                         ids=["bake_lut", "to_lut", "onnx.export"])
+def test_baking_and_export_of_a_look_off_the_cpu_raise_naming_the_device(tmp_path, evaluate):
+    """Baking and export evaluate on the CPU; a look whose tensors are elsewhere (here on ``meta``) is
+    refused before any work (a look of plain-number controls holds no tensor and goes anywhere)."""
+    grade = tg.ColorGrade(contrast=nn.Parameter(torch.tensor(20.0)), lift=torch.tensor([1.0, 1.0, 0.9, 0.02]))
+    look = tg.PostFX(grade=grade, tonemap="aces").to("meta")
+    with pytest.raises(ValueError, match=r"on the CPU, but the look holds tensors on meta: pass look\.cpu\(\)"):
+        evaluate(look, tmp_path)
+    assert not (tmp_path / "look.onnx").exists()

@@ -29,6 +29,7 @@ __all__ = [
     "Param",
     "HALF_MAX",
     "check_image",
+    "check_on_cpu",
     "sanitize",
     "scalar_param",
     "color_param",
@@ -210,6 +211,25 @@ def check_choice(name: str, value, choices) -> None:
 def _flat(value) -> list:
     """A number or nested sequence of numbers as a flat list of floats."""
     return [float(item) for part in value for item in _flat(part)] if isinstance(value, (list, tuple)) else [float(value)]
+
+
+def check_on_cpu(transform, what: str) -> None:
+    """Raise ``ValueError`` naming the devices when ``transform`` (an ``nn.Module``) holds tensors off the CPU.
+
+    Baking and ONNX export evaluate on the CPU; a look trained on a GPU is moved with ``look.cpu()``.
+
+    Examples:
+        >>> module = torch.nn.Module()
+        >>> module.register_buffer("table", torch.zeros(2, device="meta"))
+        >>> check_on_cpu(module, "bake_lut")
+        Traceback (most recent call last):
+        ValueError: bake_lut evaluates on the CPU, but the look holds tensors on meta: pass look.cpu()
+    """
+    if not isinstance(transform, torch.nn.Module):
+        return
+    devices = sorted({str(t.device) for t in (*transform.parameters(), *transform.buffers()) if t.device.type != "cpu"})
+    if devices:
+        raise ValueError(f"{what} evaluates on the CPU, but the look holds tensors on {', '.join(devices)}: pass look.cpu()")
 
 
 def is_constant(value, constant) -> bool:

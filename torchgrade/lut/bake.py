@@ -25,7 +25,7 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
-from ..core import check_choice, check_image, sanitize
+from ..core import check_choice, check_image, check_on_cpu, sanitize
 from .lattice import MIN_SIZE, check_size, checked_domain, lattice
 from .fit import fit_shaper, refine_shaper
 from .lut3d import LUT3D, OUTPUT_ENCODINGS, encode_output
@@ -110,6 +110,7 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper:
         >>> bake_lut(lambda image: image, size=5, shaper="logc").shaper
         'logc'
     """
+    check_on_cpu(transform, "bake_lut")
     if shaper == "auto":
         shaper = "logc" if expects_hdr(transform) else "linear"
     check_choice("bake shaper", shaper, DEFAULT_DOMAINS)

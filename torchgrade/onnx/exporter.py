@@ -18,6 +18,7 @@ import onnx as onnx_lib  # the onnx package (absolute import), not this package
 import torch
 from torch import nn
 
+from ..core import check_on_cpu
 from ..lut import BACKENDS
 from .describe import describe
 from .graph import GRADE_INPUTS, default_example, example_inputs, export_graph, input_names, output_names
@@ -87,6 +88,7 @@ def export(module: nn.Module, path, *, example: Optional[torch.Tensor] = None, o
         ...
         ValueError: lut_backend='volume' needs opset >= 20, got 17
     """
+    check_on_cpu(module, "tg.onnx.export")
     minimum = BACKENDS.get(lut_backend, 0)
     opset = opset or max(DEFAULT_OPSET, minimum)
     if opset < minimum:
