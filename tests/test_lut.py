@@ -457,3 +457,19 @@ def test_33_logc_tone_mapper_lut_p999_on_real_exrs(exr_dir, strong_look, name):
         for interpolation in ("tetrahedral", "trilinear"):
             error = (srgb_codes(lut(graded.float(), interpolation)) - direct).abs()
             assert p999(error) <= 1.0, (name, interpolation, p999(error))
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+@pytest.mark.parametrize("dtype", [torch.float16, torch.float32, torch.float64])
+def test_a_table_with_one_non_finite_entry_is_refused(bad, dtype):
+    table = identity_table(3, dtype)
+    table[2, 0, 1, 1] = bad
+    with pytest.raises(ValueError, match="LUT table must be finite"):
+        LUT3D(table)
+
+
+@pytest.mark.parametrize("extreme", [0.0, 5e-324, 65504.0, -65504.0, 1e30])
+def test_a_table_of_extreme_finite_entries_is_accepted(extreme):
+    dtype = torch.float16 if abs(extreme) == 65504.0 else torch.float64
+    table = torch.full((3, 3, 3, 3), extreme, dtype=dtype)
+    assert torch.equal(LUT3D(table).table, table)
