@@ -104,6 +104,18 @@ def test_bake_writes_the_cube_of_the_graded_look(tmp_path, capsys):
         torch.testing.assert_close(written(image).clamp(0, 1), expected(image).float(), atol=2e-3, rtol=0)  # the display's clip
 
 
+def test_bake_with_fitted_entries_writes_another_table_and_reports_its_smaller_error(tmp_path, capsys):
+    flags = ["--size", "9", "--contrast", "30", "--saturation", "20", "--tonemap", "aces"]
+    reports = {}
+    for entries in ("sampled", "fitted"):
+        assert main(["bake", "-o", str(tmp_path / f"{entries}.cube"), "--entries", entries, *flags]) == 0
+        reports[entries] = capsys.readouterr().out
+    tables = [tg.io.read_cube(tmp_path / f"{entries}.cube").table for entries in reports]
+    assert (tables[0] - tables[1]).abs().max() > 1e-3
+    p999 = {entries: float(text.split("p99.9 ")[1].split(",")[0]) for entries, text in reports.items()}
+    assert p999["fitted"] < 0.8 * p999["sampled"], reports
+
+
 def test_bake_from_a_config_covers_the_scene_as_the_lut_receives_it(exr_dir, tmp_path, capsys):
     """With exposure and bloom left live, the lattice covers the scene after them, and the error is measured there."""
     out = tmp_path / "cinematic.cube"

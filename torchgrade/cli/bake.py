@@ -20,7 +20,7 @@ from pathlib import Path
 import torch
 
 from ..io import write_cube
-from ..lut import LUTAccuracyWarning, bake_lut, srgb_code_error
+from ..lut import ENTRY_CHOICES, LUTAccuracyWarning, bake_lut, srgb_code_error
 from .common import add_grading_flags, look_from_args, read_rec709, report_line, stages_label
 
 __all__ = ["run_bake", "add_bake"]
@@ -76,7 +76,7 @@ def run_bake(args: argparse.Namespace) -> str:
     with warnings.catch_warnings():  # the report is printed below, with its cause and advice
         warnings.simplefilter("ignore", LUTAccuracyWarning)
         lut = bake_lut(transform, size=args.size, shaper=args.shaper, scene=scene, tolerance=tolerance, progress=True,
-                       report_tolerance=args.report_tolerance, strict=args.strict)
+                       report_tolerance=args.report_tolerance, strict=args.strict, entries=args.entries)
     elapsed = time.perf_counter() - start
     title = Path(args.output).stem.replace('"', "")
     write_cube(args.output, lut, title=title)
@@ -112,5 +112,7 @@ def add_bake(commands) -> None:
     bake.add_argument("--report-tolerance", type=float, default=1.0,
                       help="8-bit sRGB codes at p99.9 on the validation colours above which the report names a cause and a fix (default 1)")
     bake.add_argument("--strict", action="store_true", help="fail instead of writing a LUT over --report-tolerance")
+    bake.add_argument("--entries", choices=ENTRY_CHOICES, default="sampled",
+                      help="fitted: refine the table for the smallest largest error on validation colours and --scene (seconds)")
     add_grading_flags(bake)
     bake.set_defaults(run=run_bake)

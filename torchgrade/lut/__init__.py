@@ -23,6 +23,7 @@ Examples:
 """
 
 from .bake import AUTO_SIZES, bake_lut, expects_hdr, is_display_referred, scene_domain, srgb_code_error
+from .entries import ANCHOR_WEIGHT, ENTRY_CHOICES, SCENE_WEIGHT, display_miss, fit_entries, fitting_colours
 from .fit import FIT_KNOTS, fit_shaper
 from .kernels import (BACKENDS, INTERPOLATIONS, KERNELS, LUT_BACKENDS, Kernel, strip_table, tetrahedral, trilinear,
                       trilinear_grid_sample, trilinear_strip, trilinear_strip_lookup)
@@ -44,5 +45,6 @@ __all__ = [
     "lookup", "chunked_lookup", "table_output",
     "DEFAULT_DOMAINS", "LOGC_BLACK", "SHAPERS", "CurveShaper", "LinearShaper", "LogCShaper", "Shaper", "lattice_unit",
     "sample_curve", "shaper_decode", "shaper_encode", "FittedShaper",
+    "ENTRY_CHOICES", "fit_entries", "fitting_colours", "display_miss", "ANCHOR_WEIGHT", "SCENE_WEIGHT",
     "FIT_KNOTS", "fit_shaper", "ErrorReport", "LUTAccuracyWarning", "code_errors", "validation_colours",
 ]
