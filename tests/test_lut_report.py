@@ -113,6 +113,13 @@ def test_to_lut_carries_the_report(recwarn):
     assert baked.lut.error_report is not None and baked.lut.error_report.colours > 10000
 
 
+def test_to_lut_with_fitted_entries_reports_the_fitted_tables_smaller_error(recwarn):
+    look = tg.PostFX(grade={"contrast": 30.0, "saturation": 20.0}, tonemap="aces")
+    sampled, fitted = (look.to_lut(9, entries=entries).lut for entries in ("sampled", "fitted"))
+    assert fitted.error_report.p99_9 < 0.8 * sampled.error_report.p99_9
+    assert (fitted.table - sampled.table).abs().max() > 1e-3
+
+
 def test_bake_command_prints_the_report(tmp_path, capsys):
     from torchgrade.cli import main
 

@@ -264,17 +264,19 @@ class PostFX(nn.Module):
             raise ValueError("nothing to bake: the look has neither a grade nor a tone mapper")
         return transform
 
-    def to_lut(self, size: int = 33, interpolation: Optional[str] = None, output_encoding: str = "linear") -> "PostFX":
+    def to_lut(self, size: int = 33, interpolation: Optional[str] = None, output_encoding: str = "linear",
+               entries: str = "sampled") -> "PostFX":
         """An equivalent look with grade, primary grade and tone mapping baked into a ``size``³ LogC-shaped LUT.
 
         Exposure, bloom and dither stay live (copied, so the new look keeps its own adaptation state). The
         LUT's domain reaches LogC 1.0 (linear ≈ 58.9); a tone-mapped look clamps its output to
         [0, 1] after the lookup. Without a tone mapper, graded values above the domain are clipped.
-        ``output_encoding`` is passed to :func:`~torchgrade.bake_lut` and kept by the new LUT, as is the
+        ``output_encoding`` and ``entries`` (``"fitted"``: :func:`~torchgrade.lut.fit_entries`) are passed to
+        :func:`~torchgrade.bake_lut`; the new LUT keeps the encoding and the
         bake's error report (``look.to_lut().lut.error_report``; a bake over 1 code warns).
         """
         transform = self.per_pixel_stages()
-        lut = bake_lut(transform, size=size, shaper="logc", output_encoding=output_encoding)
+        lut = bake_lut(transform, size=size, shaper="logc", output_encoding=output_encoding, entries=entries)
         report = lut.error_report
         lut = LUT3D(lut.table.detach().float(), shaper=lut.shaper, domain=(lut.domain_min, lut.domain_max),
                     output_range=lut.output_range, output_encoding=lut.output_encoding)
