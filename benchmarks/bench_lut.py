@@ -12,7 +12,8 @@ peak-RSS counter, each method warmed up (compiled) first (:mod:`benchmarks.commo
 
 Accuracy: a strong look (``ColorGrade(contrast=30, saturation=20, temperature=20)`` then
 ``ToneMap("aces")``, or with post-exposure 0.5 then ``ToneMap("neutral")``) baked to the LUTs of
-:data:`ACCURACY_LUTS` (LogC on the default or the scene's lattice, fitted shapers), applied to every
+:data:`ACCURACY_LUTS` (``bake_lut``'s default ``logc_hdr``, LogC on its default, full or the scene's lattice,
+fitted shapers), applied to every
 4th pixel of the sample EXRs, against direct float64 evaluation, in 8-bit sRGB code values (p99.9
 and max), beside each bake's own error report. ``lut_floor.py`` asks what the best
 possible 33³ table would do on the same pixels.
@@ -71,12 +72,14 @@ def accuracy_image(name: str) -> torch.Tensor:
     return sample_exr(name)[..., ::4, ::4]
 
 
-ACCURACY_LUTS = ([("aces", SIZE, "logc", "default", encoding) for encoding in OUTPUT_ENCODINGS]
+ACCURACY_LUTS = ([("aces", SIZE, shaper, "default", encoding) for shaper in ("logc_hdr", "logc") for encoding in OUTPUT_ENCODINGS]
                  + [("aces", SIZE, "logc", "full", "srgb")]
                  + [("aces", size, "logc", "scene", "srgb") for size in (SIZE, 65, 129)]
                  + [("aces", SIZE, "fitted", domain, "srgb") for domain in ("default", "scene")]
-                 + [("neutral", SIZE, shaper, domain, "srgb") for shaper, domain in (("logc", "default"), ("logc", "scene"), ("fitted", "scene"))])
-"""(tone mapper, size, shaper, lattice, output encoding) of the LUTs in the accuracy table. LogC: the default
+                 + [("neutral", SIZE, shaper, domain, "srgb") for shaper, domain in
+                    (("logc_hdr", "default"), ("logc", "default"), ("logc", "scene"), ("fitted", "scene"))])
+"""(tone mapper, size, shaper, lattice, output encoding) of the LUTs in the accuracy table. ``logc_hdr``: the
+default bake (LogC to 58.86 on 27 of 32 intervals, a tail to 65504 on the last 5). LogC: the default
 domain (up to linear 58.86), the full range (up to the sanitize bound 65504, ``domain=FULL_LOGC``) or the scene's
 range (``bake_lut(scene=image)``); fitted: the shaper fitted to the
 look alone (default) or to the look and the scene, from black to 65504."""
@@ -86,7 +89,7 @@ FULL_LOGC = (tg.lut.LOGC_BLACK, float(tg.color.linear_to_logc(torch.tensor(65504
 """A LogC lattice from black to 65504 (LogC ≈ 1.744): no channel is clamped, at 1.8 times the default's spacing."""
 
 LATTICE_TOP = 58.86
-"""Linear top of the default LogC lattice: the accuracy table also reports the max error on pixels with a channel above it."""
+"""Linear top of the ``"logc"`` lattice (where ``"logc_hdr"``'s tail starts): the accuracy table also reports the max error on pixels with a channel above it."""
 
 
 def lattice_domain(domain: str, image: torch.Tensor):
@@ -252,12 +255,13 @@ def markdown(report: dict) -> str:
             "",
             "## Accuracy of LUTs of a strong look (every 4th pixel, 8-bit sRGB code values vs direct float64)",
             "",
-            "Look: contrast 30, saturation 20, temperature 20, then ACES, or post-exposure 0.5 and Neutral. LogC lattice: "
-            "the default (up to linear 58.86), the full range (black to 65504, `domain=(LOGC_BLACK, 1.744)`), or the scene's "
+            "Look: contrast 30, saturation 20, temperature 20, then ACES, or post-exposure 0.5 and Neutral. logc_hdr: "
+            "`bake_lut`'s default (LogC to 58.86 on 27 of 32 intervals, then 4 intervals to LogC 1.3 ≈ 997 and 1 to 65504). "
+            "LogC lattice: the default (up to linear 58.86), the full range (black to 65504, `domain=(LOGC_BLACK, 1.744)`), or the scene's "
             "range (`bake_lut(scene=image)`); fitted: "
             "`shaper=\"fitted\"`, fitted to the look (default) or to the look and the image (scene), black to 65504. "
             "Report: the bake's own `error_report` (validation colours, plus the image's pixels for scene bakes). "
-            "Max > 58.86: the max error on pixels with a channel above the default lattice's top (Desk 1583 of them, "
+            "Max > 58.86: the max error on pixels with a channel above the LogC lattice's top (Desk 1583 of them, "
             "CandleGlass 27, GoldenGate 2).",
             "",
             "| image | look | size | shaper | lattice | output encoding | interpolation | p99.9 | max | max > 58.86 | report p99.9 | report max |",

@@ -53,6 +53,24 @@ def test_round_trip_keeps_the_table_bit_exact(tmp_path, shaper):
     torch.testing.assert_close(back(image), lut(image), atol=tolerance, rtol=0)
 
 
+@pytest.mark.parametrize("interpolation", ["tetrahedral", "trilinear"])
+def test_the_logc_hdr_tail_does_not_fit_a_cube_section_so_the_file_clamps_at_58_86(tmp_path, interpolation):
+    """A 1D section samples evenly in linear values: the file holds LogC up to 58.86 (its 65536 points 0.0009 apart)
+    and clamps each channel above it, as a "logc" LUT's file does; OpenColorIO and read_cube agree on it."""
+    from torchgrade.lut import LOGC_TOP
+
+    lut = bake_lut(look, size=17, shaper="logc_hdr")
+    path = unique_cube(tmp_path)
+    write_cube(path, lut)
+    lines = open(path).read().splitlines()
+    assert float(lines[2].split()[2]) == pytest.approx(58.8566, abs=1e-4)  # LUT_1D_INPUT_RANGE low high
+    image = hdr_image() * 10.0
+    assert bool((image > LOGC_TOP).any())
+    back = read_cube(path)
+    torch.testing.assert_close(back(image, interpolation), lut(image.clamp(max=LOGC_TOP), interpolation), atol=1e-4, rtol=0)
+    torch.testing.assert_close(ocio_apply(path, image, interpolation), back(image, interpolation), atol=1e-5, rtol=0)
+
+
 def test_srgb_encoded_lut_is_written_with_linear_entries(tmp_path):
     from torchgrade.tonemap import ToneMap
 

@@ -18,6 +18,7 @@ from torchgrade.lut import (
     lattice,
     lookup,
     planar_table,
+    shaper_decode,
     tetrahedral,
     trilinear,
     trilinear_grid_sample,
@@ -231,7 +232,8 @@ def test_display_lut_is_baked_without_the_final_clip_and_clamps_after_the_lookup
     out = lut(image)
     assert out.min() >= 0.0 and out.max() <= 1.0
     low, high = lut.domain_min.double(), lut.domain_max.double()
-    points = logc_to_linear(low + lattice(9) * (high - low)).reshape(1, -1, 1, 3).permute(0, 3, 1, 2)
+    assert lut.shaper == "logc_hdr"
+    points = shaper_decode(low + lattice(9) * (high - low), lut.shaper).reshape(1, -1, 1, 3).permute(0, 3, 1, 2)
     expected = look(points)
     assert (expected == 1.0).any()  # some lattice points are clipped ...
     torch.testing.assert_close(lut.double()(points), expected, atol=1e-6, rtol=0)  # ... and exact after the lookup
@@ -367,14 +369,14 @@ def test_auto_shaper_follows_tone_mapping():
     ldr = ColorGrade(contrast=10.0)
     assert expects_hdr(hdr) and not expects_hdr(ldr)
     lut = bake_lut(hdr, size=3)
-    assert lut.shaper == "logc" and "logc" in repr(lut) and lut.output_range == (0.0, 1.0)
+    assert lut.shaper == "logc_hdr" and "logc_hdr" in repr(lut) and lut.output_range == (0.0, 1.0)
     assert bake_lut(ldr, size=3).shaper == "linear"
 
     def declared(image):
         return image
 
     declared.expects_hdr = True
-    assert bake_lut(declared, size=3).shaper == "logc"
+    assert bake_lut(declared, size=3).shaper == "logc_hdr"
 
 
 def test_non_finite_pixels_follow_the_library_policy(device):
@@ -444,13 +446,14 @@ def test_33_logc_tone_mapper_lut_p999_on_real_exrs(exr_dir, strong_look, name):
     """The tone mapper alone as a 33³ sRGB-encoded LUT, fed the graded images: within 1 code value at p99.9.
 
     The whole look's bar (max within 4 as well) is the xfail test below; this pins the part that is met
-    (with linear entries it is not: p99.9 up to 1.2).
+    (with linear entries it is not: p99.9 up to 1.2), on the ``"logc"`` lattice (the default ``"logc_hdr"`` one,
+    with 27 intervals to 58.86 instead of 32, measured 1.22 on GoldenGate, trilinear).
     """
     from torchgrade.io import read_exr
 
     grade, tone = strong_look
     image = read_exr(exr_dir / f"{name}.exr")[:3, ::4, ::4].unsqueeze(0)
-    lut = bake_lut(tone, size=33, output_encoding="srgb")
+    lut = bake_lut(tone, size=33, shaper="logc", output_encoding="srgb")
     with torch.no_grad():
         graded = grade(image.double())
         direct = srgb_codes(tone(graded))

@@ -266,17 +266,18 @@ class PostFX(nn.Module):
 
     def to_lut(self, size: int = 33, interpolation: Optional[str] = None, output_encoding: str = "linear",
                entries: str = "sampled") -> "PostFX":
-        """An equivalent look with grade, primary grade and tone mapping baked into a ``size``³ LogC-shaped LUT.
+        """An equivalent look with grade, primary grade and tone mapping baked into a ``size``³ ``"logc_hdr"`` LUT.
 
         Exposure, bloom and dither stay live (copied, so the new look keeps its own adaptation state). The
-        LUT's domain reaches LogC 1.0 (linear ≈ 58.9); a tone-mapped look clamps its output to
-        [0, 1] after the lookup. Without a tone mapper, graded values above the domain are clipped.
+        LUT's lattice is LogC up to linear 58.86, then a compressed tail up to 65504
+        (:class:`~torchgrade.lut.LogCHDRShaper`), so no channel is clamped; a tone-mapped look clamps its
+        output to [0, 1] after the lookup.
         ``output_encoding`` and ``entries`` (``"fitted"``: :func:`~torchgrade.lut.fit_entries`) are passed to
         :func:`~torchgrade.bake_lut`; the new LUT keeps the encoding and the
         bake's error report (``look.to_lut().lut.error_report``; a bake over 1 code warns).
         """
         transform = self.per_pixel_stages()
-        lut = bake_lut(transform, size=size, shaper="logc", output_encoding=output_encoding, entries=entries)
+        lut = bake_lut(transform, size=size, shaper="logc_hdr", output_encoding=output_encoding, entries=entries)
         report = lut.error_report
         lut = LUT3D(lut.table.detach().float(), shaper=lut.shaper, domain=(lut.domain_min, lut.domain_max),
                     output_range=lut.output_range, output_encoding=lut.output_encoding)

@@ -20,7 +20,7 @@ from pathlib import Path
 import torch
 
 from ..io import write_cube
-from ..lut import ENTRY_CHOICES, LUTAccuracyWarning, bake_lut, srgb_code_error
+from ..lut import ENTRY_CHOICES, LUTAccuracyWarning, bake_lut, expects_hdr, srgb_code_error
 from .common import add_grading_flags, look_from_args, read_rec709, report_line, stages_label
 
 __all__ = ["run_bake", "add_bake"]
@@ -61,6 +61,19 @@ def _check_bake_arguments(args: argparse.Namespace) -> None:
         raise ValueError(f"--tolerance goes with --size auto and must be above 0, got {args.tolerance}")
 
 
+def _cube_shaper(shaper: str, transform) -> str:
+    """``--shaper``: ``auto`` is ``logc`` for a look taking HDR input, as a ``.cube`` 1D section stops at 58.86 anyway.
+
+    (``bake_lut``'s ``logc_hdr`` default spends 5 of 32 intervals on a tail to 65504 that a ``.cube`` file cannot hold.)
+
+    Examples:
+        >>> from torchgrade import ToneMap
+        >>> _cube_shaper("auto", ToneMap("aces")), _cube_shaper("auto", lambda image: image), _cube_shaper("fitted", None)
+        ('logc', 'auto', 'fitted')
+    """
+    return "logc" if shaper == "auto" and expects_hdr(transform) else shaper
+
+
 def run_bake(args: argparse.Namespace) -> str:
     """Check the arguments, bake, write the ``.cube``; the line to print (with the error on ``--scene``)."""
     _check_bake_arguments(args)
@@ -75,7 +88,7 @@ def run_bake(args: argparse.Namespace) -> str:
     start = time.perf_counter()
     with warnings.catch_warnings():  # the report is printed below, with its cause and advice
         warnings.simplefilter("ignore", LUTAccuracyWarning)
-        lut = bake_lut(transform, size=args.size, shaper=args.shaper, scene=scene, tolerance=tolerance, progress=True,
+        lut = bake_lut(transform, size=args.size, shaper=_cube_shaper(args.shaper, transform), scene=scene, tolerance=tolerance, progress=True,
                        report_tolerance=args.report_tolerance, strict=args.strict, entries=args.entries)
     elapsed = time.perf_counter() - start
     title = Path(args.output).stem.replace('"', "")
@@ -105,7 +118,7 @@ def add_bake(commands) -> None:
     bake.add_argument("--config", help="look JSON (PostFX config); without it, the grading flags below")
     bake.add_argument("--size", type=_lut_size, default=33, help="points per axis, 2..256, or auto (needs --scene; default 33)")
     bake.add_argument("--shaper", choices=("auto", "linear", "logc", "fitted"), default="auto",
-                      help="default auto: logc when the look tone maps; fitted: per-channel shaper fitted to the look (and --scene)")
+                      help="default auto: logc (LogC to 58.86, what a .cube 1D section holds) when the look tone maps; fitted: per-channel shaper fitted to the look (and --scene)")
     bake.add_argument("--scene", help="EXR the look will grade: the lattice covers its range after the look's exposure and bloom, "
                       "and the error is reported on it")
     bake.add_argument("--tolerance", type=float, help="with --size auto: 8-bit sRGB codes at p99.9 (default 0.5)")

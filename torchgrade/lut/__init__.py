@@ -3,7 +3,8 @@
 The package holds one family per file:
 
 * :mod:`~torchgrade.lut.shapers`: the 1D shapers before the lattice (:data:`SHAPERS`), each with
-  its encoding, default domain and ``.cube`` form;
+  its encoding, default domain and ``.cube`` form (the default for HDR looks, ``"logc_hdr"``, is LogC
+  to linear 58.86 and a tail to 65504 on the last lattice planes);
 * :mod:`~torchgrade.lut.kernels`: the interpolations (:data:`KERNELS`), each with its gather form
   and its ``GridSample`` graph forms by export backend;
 * :mod:`~torchgrade.lut.lattice`: sizes, lattice coordinates, table layouts, domains;
@@ -31,8 +32,8 @@ from .lattice import MAX_SIZE, MIN_SIZE, check_size, checked_domain, identity_ta
 from .lut3d import (LUT3D, OUTPUT_ENCODINGS, LUTLookup, apply_lut, compiled_lookup, decode_output, encode_output,
                     chunked_lookup, lookup, table_output)
 from .report import ErrorReport, LUTAccuracyWarning, code_errors
-from .shapers import (DEFAULT_DOMAINS, LOGC_BLACK, SHAPERS, CurveShaper, FittedShaper, LinearShaper, LogCShaper, Shaper,
-                      lattice_unit, sample_curve, shaper_decode, shaper_encode)
+from .shapers import (DEFAULT_DOMAINS, LOGC_BLACK, LOGC_HALF_MAX, LOGC_TOP, SHAPERS, CurveShaper, FittedShaper, LinearShaper,
+                      LogCHDRShaper, LogCShaper, Shaper, lattice_unit, sample_curve, shaper_decode, shaper_encode)
 from .validation import validation_colours
 
 
@@ -43,7 +44,8 @@ __all__ = [
     "MAX_SIZE", "MIN_SIZE", "check_size", "checked_domain", "identity_table", "lattice", "planar_table",
     "LUT3D", "OUTPUT_ENCODINGS", "LUTLookup", "apply_lut", "compiled_lookup", "decode_output", "encode_output",
     "lookup", "chunked_lookup", "table_output",
-    "DEFAULT_DOMAINS", "LOGC_BLACK", "SHAPERS", "CurveShaper", "LinearShaper", "LogCShaper", "Shaper", "lattice_unit",
+    "DEFAULT_DOMAINS", "LOGC_BLACK", "LOGC_HALF_MAX", "LOGC_TOP", "SHAPERS", "CurveShaper", "LinearShaper", "LogCShaper",
+    "LogCHDRShaper", "Shaper", "lattice_unit",
     "sample_curve", "shaper_decode", "shaper_encode", "FittedShaper",
     "ENTRY_CHOICES", "fit_entries", "fitting_colours", "display_miss", "ANCHOR_WEIGHT", "SCENE_WEIGHT",
     "FIT_KNOTS", "fit_shaper", "ErrorReport", "LUTAccuracyWarning", "code_errors", "validation_colours",

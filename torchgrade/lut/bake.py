@@ -81,8 +81,9 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper:
     a time. The table stays connected to the transform's parameters, so a LUT can be fitted by
     gradient descent.
 
-    * ``shaper``: ``"linear"``, ``"logc"``, ``"fitted"`` or ``"auto"`` (``"logc"`` when
-      :func:`expects_hdr`); the choice is stored as ``lut.shaper`` and shown in ``repr(lut)``.
+    * ``shaper``: ``"linear"``, ``"logc"`` (black to linear 58.86), ``"logc_hdr"`` (LogC to 58.86, then a
+      compressed tail to 65504: :class:`~torchgrade.lut.LogCHDRShaper`), ``"fitted"`` or ``"auto"``
+      (``"logc_hdr"`` when :func:`expects_hdr`); the choice is stored as ``lut.shaper`` and shown in ``repr(lut)``.
       ``"fitted"`` fits a per-channel shaper to the transform (and the scene, when given) from black
       to 65504 (:func:`~torchgrade.lut.fit_shaper`); its lattice domain is [0, 1].
     * ``scene``: an image the LUT is for. The lattice domain then follows its dynamic range: the
@@ -117,7 +118,7 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper:
     """
     check_on_cpu(transform, "bake_lut")
     if shaper == "auto":
-        shaper = "logc" if expects_hdr(transform) else "linear"
+        shaper = "logc_hdr" if expects_hdr(transform) else "linear"
     check_choice("bake shaper", shaper, DEFAULT_DOMAINS)
     check_choice("output encoding", output_encoding, OUTPUT_ENCODINGS)
     check_choice("entries", entries, ENTRY_CHOICES)

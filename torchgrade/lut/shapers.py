@@ -24,12 +24,19 @@ from typing import Optional
 import torch
 
 from ..color import linear_to_logc, logc_to_linear
+from ..core import HALF_MAX
 
-__all__ = ["Shaper", "LinearShaper", "LogCShaper", "CurveShaper", "FittedShaper", "SHAPERS", "LOGC_BLACK", "DEFAULT_DOMAINS",
-           "shaper_encode", "shaper_decode", "sample_curve", "lattice_unit"]
+__all__ = ["Shaper", "LinearShaper", "LogCShaper", "LogCHDRShaper", "CurveShaper", "FittedShaper", "SHAPERS", "LOGC_BLACK",
+           "LOGC_TOP", "LOGC_HALF_MAX", "DEFAULT_DOMAINS", "shaper_encode", "shaper_decode", "sample_curve", "lattice_unit"]
 
 LOGC_BLACK = float(linear_to_logc(torch.tensor(0.0, dtype=torch.float64)))
 """LogC code value of linear 0 (≈ 0.064 with Unity's constants): the bottom of the LogC lattice."""
+
+LOGC_TOP = float(logc_to_linear(torch.tensor(1.0, dtype=torch.float64)))
+"""Linear value of LogC code 1 (≈ 58.86): the top of the ``"logc"`` lattice, where ``"logc_hdr"``'s tail starts."""
+
+LOGC_HALF_MAX = float(linear_to_logc(torch.tensor(HALF_MAX, dtype=torch.float64)))
+"""LogC code value of the sanitize bound 65504 (≈ 1.744)."""
 
 
 class Shaper:
@@ -66,13 +73,17 @@ class Shaper:
         """``(low, high)``: the linear input range the lattice covers, over all channels."""
         return float(self.decode(domain_min.double()).min()), float(self.decode(domain_max.double()).max())
 
+    def cube_range(self, lut) -> tuple:
+        """``(low, high)``: the linear range a ``.cube`` 1D section of ``lut`` samples (:meth:`linear_range`)."""
+        return self.linear_range(lut.domain_min, lut.domain_max, lut.curve_range)
+
     def cube_section(self, lut, count: int) -> tuple:
         """The Resolve ``.cube`` 1D section of ``lut``: ``(low, high, (count, 3) lattice coordinates)``.
 
-        Samples are evenly spaced over :meth:`linear_range`; each holds :func:`lattice_unit` of its
+        Samples are evenly spaced over :meth:`cube_range`; each holds :func:`lattice_unit` of its
         value, the coordinate the 3D table is read at, so a reader applies the shaper itself.
         """
-        low, high = self.linear_range(lut.domain_min, lut.domain_max, lut.curve_range)
+        low, high = self.cube_range(lut)
         linear = torch.linspace(low, high, count, dtype=torch.float64).expand(3, count)
         unit = lattice_unit(linear, self, lut.domain_min.double(), lut.domain_max.double(), lut.curve, lut.curve_range)
         return low, high, unit.t()
@@ -117,6 +128,77 @@ class LogCShaper(Shaper):
 
     def decode(self, codes, curve=None, curve_range=(0.0, 1.0)):
         return logc_to_linear(codes)
+
+
+class LogCHDRShaper(Shaper):
+    """LogC up to code 1 (linear 58.86), then LogC compressed piecewise linearly up to 65504: no highlight clamps.
+
+    ``code = min(c, 1) + sum_i r_i clamp(c - c_i, 0, c_(i+1) - c_i)`` with ``c = LogC(x)`` and the knots
+    ``c_i`` of :attr:`TAIL` (1, 1.3, 1.744: linear 58.86, ≈ 997, 65504). Above 58.86 LogC is ``log10(a x)``
+    to within 2e-4 stops, so each tail segment spaces the lattice evenly in stops. On the default domain
+    a 33³ lattice keeps 27 of its 32 intervals for black to 58.86 and gives 4 to the next 4.1 stops
+    (where lamps and speculars lie) and 1 to the last 6 stops; every knot lies on a lattice plane at
+    every size ``2^n + 1`` from 33 up, so each cell lies within one segment (``benchmarks/results/lut.md``
+    measures this trade).
+
+    Examples:
+        >>> import torch
+        >>> shaper = LogCHDRShaper()
+        >>> [round(float(shaper.decode(torch.tensor(v, dtype=torch.float64))), 2) for v in (1.0, shaper.default_domain[1])]
+        [58.86, 65504.0]
+    """
+
+    name = "logc_hdr"
+    TAIL = ((1.0, 0), (1.3, 4), (LOGC_HALF_MAX, 5))
+    """``(LogC code, lattice intervals of 32 above code 1)`` at each knot of the tail, on the default domain."""
+
+    def __init__(self):
+        step = (1.0 - LOGC_BLACK) / (32 - self.TAIL[-1][1])
+        self.knots = tuple(logc for logc, _ in self.TAIL)
+        """The knots ``c_i`` in LogC code values."""
+        self.codes = tuple(1.0 + step * intervals for _, intervals in self.TAIL)
+        """The shaper's code value at each knot."""
+        self.default_domain = (LOGC_BLACK, self.codes[-1])
+
+    def encode(self, points, curve=None, curve_range=(0.0, 1.0)):
+        logc = linear_to_logc(points)
+        return logc.clamp(max=1.0) + self._segments(logc, self.knots, self.codes)
+
+    def decode(self, codes, curve=None, curve_range=(0.0, 1.0)):
+        return logc_to_linear(codes.clamp(max=1.0) + self._segments(codes, self.codes, self.knots))
+
+    @staticmethod
+    def _segments(values: torch.Tensor, start: tuple, end: tuple) -> torch.Tensor:
+        """``sum_i (end_(i+1) - end_i) / (start_(i+1) - start_i) clamp(v - start_i, 0, start_(i+1) - start_i)``: the tail's part
+        of ``v`` (the last segment unbounded, so the shaper keeps its slope at 65504)."""
+        total = torch.zeros_like(values)
+        last = len(start) - 2
+        for i, (low, high, out_low, out_high) in enumerate(zip(start, start[1:], end, end[1:])):
+            total = total + (values - low).clamp(0.0, None if i == last else high - low) * ((out_high - out_low) / (high - low))
+        return total
+
+    def logc_table(self, low: float, spacing: float = 0.1) -> tuple:
+        """``((low, high), (n, 3) codes)``: the shaper after LogC as a table over LogC codes ``low + k spacing``.
+
+        The knots lie on the table's points when ``spacing`` divides ``1 - low`` and 0.3, so linear
+        interpolation in it is exact: the form CLF's ``LUT1D`` carries it in (:mod:`torchgrade.io.clf`).
+
+        Examples:
+            >>> (low, high), table = LogCHDRShaper().logc_table(0.0)
+            >>> (low, round(high, 6), table.shape)
+            (0.0, 1.8, torch.Size([19, 3]))
+        """
+        count = round((self.knots[-1] - low) / spacing + 0.5) + 1
+        logc = low + spacing * torch.arange(count, dtype=torch.float64)
+        codes = logc.clamp(max=1.0) + self._segments(logc, self.knots, self.codes)
+        return (low, float(logc[-1])), codes.unsqueeze(1).expand(count, 3)
+
+    def cube_range(self, lut) -> tuple:
+        """Black (or the lattice bottom) to 58.86: a ``.cube`` 1D section spaced evenly in linear values up to 65504 would
+        give everything below linear 1 one segment, so the file holds the LogC part and clamps above it, as a ``"logc"``
+        LUT's does (CLF holds the tail exactly)."""
+        low, high = self.linear_range(lut.domain_min, lut.domain_max, lut.curve_range)
+        return low, min(high, LOGC_TOP)
 
 
 class CurveShaper(Shaper):
@@ -179,7 +261,7 @@ def _inverse_ramp(values: torch.Tensor, ramp: torch.Tensor) -> torch.Tensor:
     return upper - 1 + (values - below) / (above - below)
 
 
-SHAPERS = {shaper.name: shaper for shaper in (LinearShaper(), LogCShaper(), CurveShaper(), FittedShaper())}
+SHAPERS = {shaper.name: shaper for shaper in (LinearShaper(), LogCShaper(), LogCHDRShaper(), CurveShaper(), FittedShaper())}
 """The shapers by name, what ``LUT3D(shaper=...)`` takes."""
 
 DEFAULT_DOMAINS = {name: shaper.default_domain for name, shaper in SHAPERS.items() if shaper.bakeable}
