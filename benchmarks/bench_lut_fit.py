@@ -34,7 +34,7 @@ from torchgrade.lut import SCENE_WEIGHT, bake_lut, fit_entries, lattice_unit  # 
 
 RESULTS = ROOT / "benchmarks" / "results"
 COMMAND = ".venv/bin/python benchmarks/bench_lut_fit.py"
-LATTICES = {"default": {}, "LogC": {"shaper": "logc"}, "fitted to the look": {"shaper": "fitted"},
+LATTICES = {"LogC to 65504 (default)": {"shaper": "logc_hdr"}, "LogC to 58.86": {"shaper": "logc"}, "fitted to the look": {"shaper": "fitted"},
             "fitted to the look and scene": {"shaper": "fitted", "scene": True}}
 """``bake_lut`` arguments of each lattice (``scene: True`` passes the seen pixels)."""
 SCENE_WEIGHTS = (1.0, SCENE_WEIGHT, 16.0, 1e6)
