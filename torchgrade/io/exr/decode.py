@@ -2,16 +2,19 @@
 
 The bindings' ``OpenEXR.File`` decodes every channel of every part at once. Only their deprecated
 ``OpenEXR.InputFile`` decodes chosen channels, and only of the first part at full resolution (its
-``channels`` sizes subsampled channels wrongly), so it reads exactly those layers of the first part
-that leave other channels or parts out, a strip of rows at a time straight into the tensor
-(``decode_strips``), and ``File`` reads everything else (``decode``; see ``selective``). The budget
-counts what the chosen path decodes (for a selective read the whole layer, though it holds a strip
-at a time). ``File`` reports some damage (a corrupt chunk table, a chunk that fails to decompress)
-only by printing to the process's standard error and leaving the damaged part out or partly filled,
-so whatever the library prints while decoding (to stdout or stderr) turns into a ``ValueError``;
-``InputFile`` raises. The redirection is process-wide: output other threads write meanwhile is
-swallowed with it, and reads in several threads decode one at a time. A selective read decodes one
-part only: damage elsewhere in the file goes unseen.
+``channels`` sizes subsampled channels wrongly). So a part other than a single-part file's one is
+first copied out, still compressed, into a single-part file in a temporary folder
+(:mod:`torchgrade.io.exr.single_part`; ``InputFile`` reads the first part in place). Full-resolution
+channels that leave other channels or parts out are then decoded through ``InputFile``, a strip of
+rows at a time straight into the tensor (``decode_strips``); everything else through ``File``, every
+channel of that one part (``decode``; see ``selective``). The budget counts what the chosen path
+decodes (for a strip read the whole layer, though it holds a strip at a time). ``File`` reports some
+damage (a corrupt chunk table, a chunk that fails to decompress) only by printing to the process's
+standard error and leaving the damaged part out or partly filled, so whatever the library prints
+while decoding (to stdout or stderr) turns into a ``ValueError``; ``InputFile`` raises. The
+redirection is process-wide: output other threads write meanwhile is swallowed with it, and reads in
+several threads decode one at a time. A read decodes one part only: damage elsewhere in the file
+goes unseen.
 """
 
 from __future__ import annotations
@@ -21,11 +24,13 @@ import os
 import sys
 import tempfile
 import threading
+from pathlib import Path
 
 import numpy as np
 import OpenEXR
 
 from .layout import ExrPart
+from .single_part import write_single_part
 
 __all__ = ["MAX_BYTES", "MAX_PIXELS", "STRIP_BYTES", "check_budget", "decode", "decode_strips", "selective"]
 
@@ -44,8 +49,8 @@ _DTYPES = {0: np.uint32, 1: np.float16, 2: np.float32}
 
 
 def selective(parts: list[ExrPart], chosen: ExrPart, names) -> bool:
-    """Whether ``decode`` reads only the channels ``names`` of ``chosen``: in the first part, full
-    resolution, and fewer than the file holds.
+    """Whether ``decode_strips`` reads the channels ``names`` of ``chosen``: full resolution, and fewer
+    than the file holds (``decode`` reads every channel of the part).
 
     Examples:
         >>> import pathlib, tempfile, torch, torchgrade as tg
@@ -57,13 +62,13 @@ def selective(parts: list[ExrPart], chosen: ExrPart, names) -> bool:
         (False, True)
     """
     full = all(chosen.channels[name] == (1, 1) for name in names)
-    return chosen.index == 0 and full and (len(parts) > 1 or set(names) != set(chosen.channels))
+    return full and (len(parts) > 1 or set(names) != set(chosen.channels))
 
 
 def check_budget(path, parts: list[ExrPart], chosen: ExrPart, names, window: str, output_channels: int, max_pixels: int,
                  max_bytes: int) -> None:
     """Raise ``ValueError`` naming the numbers when decoding channels ``names`` of ``chosen`` (as
-    ``decode`` does) and returning ``output_channels`` would pass either bound.
+    ``decode_strips`` or ``decode`` do) and returning ``output_channels`` would pass either bound.
 
     Examples:
         >>> import pathlib, tempfile, torch, torchgrade as tg
@@ -83,10 +88,7 @@ def check_budget(path, parts: list[ExrPart], chosen: ExrPart, names, window: str
         if height <= 0 or width <= 0 or height * width > max_pixels:
             raise ValueError(f"{path}: part {part.index} data window {width}x{height} is empty or above the "
                              f"budget of {max_pixels} pixels (max_pixels)")
-    if selective(parts, chosen, names):
-        decoded = _decoded_bytes(chosen, names)
-    else:
-        decoded = sum(_decoded_bytes(part, part.channels) for part in parts)
+    decoded = _decoded_bytes(chosen, names if selective(parts, chosen, names) else chosen.channels)
     height, width = chosen.size(window)
     if height <= 0 or width <= 0 or height * width > max_pixels:
         raise ValueError(f"{path}: {window} window {width}x{height} is empty or above the budget of {max_pixels} pixels (max_pixels)")
@@ -128,24 +130,42 @@ def _captured_output():
 
 
 @contextlib.contextmanager
-def _decoding(path):
-    """Turn what the library raises or prints meanwhile into ``ValueError``."""
+def _decoding(path, source):
+    """Turn what the library raises or prints meanwhile, decoding ``source`` (``path`` or a copy of
+    one of its parts), into ``ValueError`` naming ``path``."""
+    named = lambda text: str(text).replace(f"{source}: ", "").replace(str(source), str(path))  # noqa: E731
     try:
         with _captured_output() as messages:
             yield
     except MemoryError:
         raise ValueError(f"{path}: not enough memory to decode the pixels (use a smaller max_bytes)") from None
     except Exception as error:
-        raise ValueError(f"{path}: cannot decode OpenEXR pixels ({error})") from None
+        raise ValueError(f"{path}: cannot decode OpenEXR pixels ({named(error)})") from None
     if messages:
-        raise ValueError(f"{path}: damaged OpenEXR file ({messages[0].replace(str(path) + ': ', '')})")
+        raise ValueError(f"{path}: damaged OpenEXR file ({named(messages[0])})")
+
+
+@contextlib.contextmanager
+def _part_file(path, chosen: ExrPart, alone: bool):
+    """The file to decode part ``chosen`` of ``path`` from: ``path`` itself when ``alone`` (the part
+    is the file's only one, or the first, which ``InputFile`` reaches), else a single-part copy of the
+    part in a temporary folder, removed afterwards."""
+    if alone:
+        yield Path(path)
+        return
+    with tempfile.TemporaryDirectory(prefix="torchgrade-exr-") as folder:
+        copy = Path(folder) / "part.exr"
+        with open(copy, "wb") as target:
+            write_single_part(path, chosen, target)
+        yield copy
 
 
 def decode(path, parts: list[ExrPart], chosen: ExrPart, names: list[str]) -> dict:
-    """Channels ``names`` of part ``chosen`` as ``{name: numpy array}``, decoding every part, or ``ValueError``.
+    """Channels ``names`` of part ``chosen`` as ``{name: numpy array}``, decoding every channel of
+    that part (of a single-part copy of it in a multi-part file), or ``ValueError``.
 
-    The library's own complaints (printed while decoding) and any part or channel missing from what
-    it decoded reject the file; a ``MemoryError`` becomes a ``ValueError`` too.
+    The library's own complaints (printed while decoding) and any channel missing from what it
+    decoded reject the file; a ``MemoryError`` becomes a ``ValueError`` too.
 
     Examples:
         >>> import pathlib, tempfile, torch, torchgrade as tg
@@ -156,16 +176,16 @@ def decode(path, parts: list[ExrPart], chosen: ExrPart, names: list[str]) -> dic
         >>> {name: array.shape for name, array in decode(path, parts, parts[0], ["R", "G"]).items()}
         {'R': (2, 4), 'G': (2, 4)}
     """
-    with _decoding(path):
-        opened = OpenEXR.File(str(path), separate_channels=True)
+    with _part_file(path, chosen, alone=len(parts) == 1) as source, _decoding(path, source):
+        opened = OpenEXR.File(str(source), separate_channels=True)
         decoded = [{name: channel.pixels for name, channel in part.channels.items()} for part in opened.parts]
-    if len(decoded) != len(parts) or any(set(d) != set(p.channels) for d, p in zip(decoded, parts)):
-        raise ValueError(f"{path}: damaged OpenEXR file (the library returned fewer parts or channels than the header lists)")
-    return {name: decoded[chosen.index][name] for name in names}
+    if len(decoded) != 1 or set(decoded[0]) != set(chosen.channels):
+        raise ValueError(f"{path}: damaged OpenEXR file (the library returned other parts or channels than the header lists)")
+    return {name: decoded[0][name] for name in names}
 
 
 def decode_strips(path, chosen: ExrPart, sources: list, target, crop: tuple[slice, slice]) -> None:
-    """Decode channel ``sources[i]`` of the first part (``None``: zeros) into ``target[i]``, ``STRIP_BYTES``
+    """Decode channel ``sources[i]`` of part ``chosen`` (``None``: zeros) into ``target[i]``, ``STRIP_BYTES``
     of samples at a time, or raise ``ValueError`` as ``decode`` does.
 
     Every row of the data window is decoded (so damage anywhere in the layer rejects the file); rows
@@ -189,8 +209,8 @@ def decode_strips(path, chosen: ExrPart, sources: list, target, crop: tuple[slic
     for index, name in enumerate(sources):
         if name is None:
             out[index] = 0
-    with _decoding(path):
-        opened = OpenEXR.InputFile(str(path))
+    with _part_file(path, chosen, alone=chosen.index == 0) as source, _decoding(path, source):
+        opened = OpenEXR.InputFile(str(source))
         try:
             types = opened.header()["channels"]
             by_type = {}

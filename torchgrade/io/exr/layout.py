@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import OpenEXR
 
-from .sample_types import sample_bytes
+from .header_bytes import sample_bytes
 
 __all__ = ["ExrPart", "exr_info", "split_channel_name"]
 
