@@ -33,10 +33,12 @@ ACES2065-1 as in Unity), and no combination of stages can hand a curve the wrong
 
 from __future__ import annotations
 
+import functools
+
 import torch
 
-from .color import acescg_to_aces, aces_to_unity, unity_to_acescg
-from .core import HALF_MAX, Param, check_image, is_constant, sanitize, to_input_dtype, working_dtype
+from .color import acescg_to_aces, aces_to_unity, matrix, srgb_to_linear
+from .core import HALF_MAX, Param, apply_matrix, check_image, color_param, is_constant, sanitize, scalar_param, to_input_dtype, working_dtype
 from .curves import CurveControl, check_curve, curve_is_identity, stored_curve
 from .grade_steps import (
     IDENTITY_MATRIX,
@@ -44,11 +46,13 @@ from .grade_steps import (
     channel_mixer,
     color_filter,
     contrast,
+    contrast_space,
     fast_tonemap,
     fast_tonemap_inverse,
     hue_shift,
     lift_gamma_gain,
     lift_gamma_gain_coefficients,
+    log_contrast,
     post_exposure,
     saturation,
     saturation_curves,
@@ -58,9 +62,10 @@ from .grade_steps import (
     split_toning,
     white_balance,
     white_balance_coefficients,
+    white_balance_matrix,
     yrgb_curves,
 )
-from .stage import Control, Stage, controls_signature
+from .stage import Control, Stage, controls_signature, in_strips
 
 from . import grade_steps
 
@@ -141,19 +146,26 @@ def color_grade(image: torch.Tensor, aces: bool = False, log_space: str = "acesc
         return image
     weights = "ap1" if aces else "rec709"
     x = sanitize(working_dtype(image))
+    # The linear steps between two non-linear ones are folded into one matrix (``linear``), so each
+    # pixel sees one 3x3: post exposure, white balance and the way into contrast's primaries; the way
+    # out of them and the colour filter.
+    linear = None
     if "post_exposure" in steps:
-        x = post_exposure(x, p["post_exposure"])
+        linear = _diagonal(torch.exp2(scalar_param(p["post_exposure"], x, "post_exposure")))
     if "white_balance" in steps:
-        x = white_balance(x, p["temperature"], p["tint"])
+        linear = _then(linear, white_balance_matrix(x, p["temperature"], p["tint"]))
     if "contrast" in steps:
-        x = contrast(x, p["contrast"], aces, log_space)
+        encoding, into, out_of = contrast_space(aces, log_space)
+        x = _applied(linear if into is None else _then(linear, matrix(into, x)), x)
+        x = log_contrast(x, p["contrast"], encoding)
+        linear = None if out_of is None else matrix(out_of, x)
     elif aces:
-        x = unity_to_acescg(x)
+        linear = _then(linear, matrix("srgb_to_ap1", x))
     if "color_filter" in steps:
-        x = color_filter(x, p["color_filter"])
+        linear = _then(linear, _diagonal(srgb_to_linear(color_param(p["color_filter"], x, "color_filter"))))
     # Bounding to the non-finite policy's range after each group of gains keeps the whole documented
     # range finite: post exposure 20, contrast 100 and a filter of 100 reach 1e26, and the next squares overflow.
-    x = x.clamp(0.0, HALF_MAX)
+    x = _applied(linear, x).clamp(0.0, HALF_MAX)
     if "split_toning" in steps:
         x = split_toning(x, p["split_shadows"], p["split_highlights"], p["split_balance"], weights)
     if "channel_mixer" in steps:
@@ -179,6 +191,21 @@ def color_grade(image: torch.Tensor, aces: bool = False, log_space: str = "acesc
 
 _SETTINGS = ("aces", "log_space")
 """Controls that choose the working space, not grading steps."""
+
+
+def _diagonal(gains: torch.Tensor) -> torch.Tensor:
+    """Per-channel gains ``(..., 3, 1, 1)``, or one gain (0-d or ``(B, 1, 1, 1)``), as a diagonal ``(..., 3, 3)`` matrix."""
+    return (gains[..., 0] if gains.dim() else gains) * torch.eye(3, dtype=gains.dtype, device=gains.device)
+
+
+def _then(first, second: torch.Tensor) -> torch.Tensor:
+    """The matrix applying ``first`` (None: nothing yet), then ``second``: ``second · first``."""
+    return second if first is None else second @ first
+
+
+def _applied(linear, image: torch.Tensor) -> torch.Tensor:
+    """``image`` through the folded matrix ``linear`` (None: unchanged)."""
+    return image if linear is None else apply_matrix(linear, image)
 
 
 def _check_zone(start: Param, end: Param, zone: str) -> None:
@@ -274,7 +301,9 @@ class ColorGrade(Stage):
         return {name: getattr(self, name) for name in curves if not self.is_default(name)}
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
-        return color_grade(image, **self.params())
+        params = self.params()
+        grade = functools.partial(color_grade, **params)
+        return grade(image) if self.is_identity else in_strips(grade, image, params.values())
 
 
 ColorGrade.__signature__ = controls_signature(ColorGrade.controls)

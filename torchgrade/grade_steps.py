@@ -19,20 +19,17 @@ from .color import (
     LOGC_C,
     LOGC_D,
     aces_to_acescc,
-    aces_to_acescg,
     acescc_to_aces,
     acescct_to_linear,
+    convert,
     hsv_to_rgb,
-    linear_to_lms,
     linear_to_acescct,
-    lms_to_linear,
     luminance,
+    matrix,
     rgb_to_hsv,
     safe_pow,
     safe_sqrt,
     srgb_to_linear,
-    unity_to_aces,
-    unity_to_acescg,
 )
 from .core import HALF_MAX, Param, apply_matrix, bounded_pow, color_param, matrix_param, scalar_param
 from .curves import evaluate_curve
@@ -42,7 +39,10 @@ __all__ = [
     "IDENTITY_TRACKBALL",
     "post_exposure",
     "white_balance_coefficients",
+    "white_balance_matrix",
     "white_balance",
+    "contrast_space",
+    "log_contrast",
     "contrast",
     "color_filter",
     "soft_light",
@@ -108,41 +108,84 @@ def white_balance_coefficients(temperature: torch.Tensor, tint: torch.Tensor) ->
     return d65 / lms
 
 
+def white_balance_matrix(image: torch.Tensor, temperature: Param = 0.0, tint: Param = 0.0) -> torch.Tensor:
+    """White balance as one matrix on linear Rec.709: ``LMSToLinear · diag(gains) · LinearToLMS`` with the
+    gains of :func:`white_balance_coefficients`; ``(3, 3)``, or ``(B, 3, 3)`` for per-sample controls.
+
+    Examples:
+        >>> m = white_balance_matrix(torch.zeros(1, 3, 1, 1), temperature=0.0)
+        >>> bool(torch.allclose(m, torch.eye(3), atol=1e-4))
+        True
+    """
+    gains = white_balance_coefficients(scalar_param(temperature, image, "temperature"), scalar_param(tint, image, "tint"))
+    return matrix("lms_to_linear", image) @ (gains[..., 0] * matrix("linear_to_lms", image))
+
+
 def white_balance(image: torch.Tensor, temperature: Param = 0.0, tint: Param = 0.0) -> torch.Tensor:
-    """White balance: scale in LMS by :func:`white_balance_coefficients` (Unity ``ColorGradeWhiteBalance``).
+    """White balance: scale in LMS by :func:`white_balance_coefficients` (Unity ``ColorGradeWhiteBalance``),
+    applied as :func:`white_balance_matrix`.
 
     Examples:
         >>> warm = white_balance(torch.full((3, 1, 1), 0.5), temperature=50.0).flatten()
         >>> bool(warm[0] > warm[2])
         True
     """
-    gains = white_balance_coefficients(scalar_param(temperature, image, "temperature"), scalar_param(tint, image, "tint"))
-    return lms_to_linear(linear_to_lms(image) * gains)
+    return apply_matrix(white_balance_matrix(image, temperature, tint), image)
+
+
+def contrast_space(aces: bool = False, log_space: str = "acescc") -> tuple:
+    """``(encoding, into, out of)``: the log encoding contrast is graded in, the matrix (a :data:`~torchgrade.color.MATRICES`
+    name) from linear Rec.709 into its primaries and the one from them to the grade's working space (None: none).
+
+    Examples:
+        >>> contrast_space(), contrast_space(True), contrast_space(True, "acescct")
+        (('logc', None, None), ('acescc', 'srgb_to_ap0', 'ap0_to_ap1'), ('acescct', 'srgb_to_ap1', None))
+    """
+    if not aces:
+        return "logc", None, None
+    if log_space == "acescct":
+        return "acescct", "srgb_to_ap1", None
+    return "acescc", "srgb_to_ap0", "ap0_to_ap1"
+
+
+def log_contrast(image: torch.Tensor, amount: Param, encoding: str = "logc") -> torch.Tensor:
+    """Contrast about mid grey in ``encoding`` (``"logc"``, ``"acescc"`` or ``"acescct"``) on linear values in
+    that encoding's primaries: ``(log(x) - 0.4135884) · (1 + amount/100) + 0.4135884``, decoded back.
+
+    In LogC, ``c log10(a x + b) + d``, the encode, the scaling and the decode fold into one power:
+    ``((a x + b)^k · 10^((d - 0.4135884)(k - 1) / c) - b) / a``.
+
+    Examples:
+        >>> # in a pure log encoding x -> 0.18 (x / 0.18)^k: grey is the pivot, 1.0 goes to 0.18 (1 / 0.18)^1.5
+        >>> [round(v, 3) for v in log_contrast(torch.tensor([0.18, 1.0]), 50.0, "acescc").tolist()]
+        [0.18, 2.357]
+    """
+    k = 1.0 + scalar_param(amount, image, "contrast") * 0.01
+    if encoding == "acescct":
+        return acescct_to_linear((linear_to_acescct(image) - ACESCC_MIDGRAY) * k + ACESCC_MIDGRAY)
+    if encoding == "acescc":
+        return acescc_to_aces((aces_to_acescc(image) - ACESCC_MIDGRAY) * k + ACESCC_MIDGRAY)
+    base = (LOGC_A * image + LOGC_B).clamp_min(torch.finfo(image.dtype).tiny)
+    gain = torch.pow(10.0, (LOGC_D - ACESCC_MIDGRAY) * (k - 1.0) / LOGC_C)
+    return (base**k * gain - LOGC_B) / LOGC_A
 
 
 def contrast(image: torch.Tensor, amount: Param, aces: bool = False, log_space: str = "acescc") -> torch.Tensor:
-    """Contrast about mid grey in log space: ``(log(x) - 0.4135884) · (1 + amount/100) + 0.4135884``.
+    """Contrast about mid grey in log space (:func:`log_contrast` in the encoding of :func:`contrast_space`).
 
     Linear mode uses LogC and returns linear Rec.709; ``aces=True`` uses ACEScc and returns ACEScg
     (Unity ``ColorGradingContrast``); ``log_space="acescct"`` uses ACEScct (S-2016-001) on ACEScg, whose
-    linear toe below 2^-7 keeps shadows from the log's steep fall. In LogC, ``c log10(a x + b) + d``, the encode, the scaling and
-    the decode fold into one power: ``((a x + b)^k · 10^((d - 0.4135884)(k - 1) / c) - b) / a``.
+    linear toe below 2^-7 keeps shadows from the log's steep fall.
 
     Examples:
         >>> out = contrast(torch.tensor([0.05, 1.0, 1.0]).reshape(3, 1, 1), 50.0).flatten()
         >>> bool(out[0] < 0.05 and out[1] > 1.0)  # shadows darker, highlights brighter
         True
     """
-    k = 1.0 + scalar_param(amount, image, "contrast") * 0.01
-    if aces and log_space == "acescct":
-        log = linear_to_acescct(unity_to_acescg(image))
-        return acescct_to_linear((log - ACESCC_MIDGRAY) * k + ACESCC_MIDGRAY)
-    if aces:
-        log = aces_to_acescc(unity_to_aces(image))
-        return aces_to_acescg(acescc_to_aces((log - ACESCC_MIDGRAY) * k + ACESCC_MIDGRAY))
-    base = (LOGC_A * image + LOGC_B).clamp_min(torch.finfo(image.dtype).tiny)
-    gain = torch.pow(10.0, (LOGC_D - ACESCC_MIDGRAY) * (k - 1.0) / LOGC_C)
-    return (base**k * gain - LOGC_B) / LOGC_A
+    encoding, into, out_of = contrast_space(aces, log_space)
+    x = image if into is None else convert(image, into)
+    x = log_contrast(x, amount, encoding)
+    return x if out_of is None else convert(x, out_of)
 
 
 def color_filter(image: torch.Tensor, color) -> torch.Tensor:

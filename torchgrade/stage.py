@@ -39,9 +39,42 @@ from torch import nn
 
 from .core import check_choice, check_range, full_precision, is_constant, is_tracing
 
-__all__ = ["Control", "Stage", "plain", "controls_signature"]
+__all__ = ["Control", "Stage", "plain", "controls_signature", "STRIP_PIXELS", "in_strips"]
 
 KINDS = ("number", "int", "bool", "choice", "value")
+
+
+STRIP_PIXELS = 1 << 17
+"""Pixels per strip of :func:`in_strips` (batch included). On a 2-core Xeon (2 MiB L2 a core), grade + tone map
+of ``export/looks/cinematic.json`` at 1920x1080 took 516 ms whole, 418 / 312 / 296 / 308 / 317 ms in strips of
+2^15 / 2^16 / 2^17 / 2^18 / 2^19 pixels (medians of 5, alternating, load average 1.8), with identical output."""
+
+
+def in_strips(transform, image: torch.Tensor, controls=()) -> torch.Tensor:
+    """``transform(image)`` for a per-pixel ``transform``, run on strips of rows of about :data:`STRIP_PIXELS` pixels.
+
+    An eager per-pixel stage is dozens of whole-tensor kernels, each reading and writing the frame from
+    memory; on strips the intermediates stay in cache and each result is copied into the output while
+    hot. The frame is processed whole (the same values) when it is not larger than a strip, while
+    tracing, compiling or exporting (the graph takes any size), and when autograd records the call
+    (``image`` or a tensor of ``controls`` requires grad), which would keep every strip's intermediates.
+
+    Examples:
+        >>> image = torch.rand(1, 3, 300, 1000)
+        >>> torch.equal(in_strips(torch.sqrt, image), torch.sqrt(image))
+        True
+    """
+    recorded = torch.is_grad_enabled() and any(isinstance(t, torch.Tensor) and t.requires_grad for t in (image, *controls))
+    if image.dim() < 3 or image.numel() <= 3 * STRIP_PIXELS or recorded or is_tracing():
+        return transform(image)
+    rows = max(1, STRIP_PIXELS * image.shape[-2] * image.shape[-3] // image.numel())
+    output = None
+    for start in range(0, image.shape[-2], rows):
+        strip = transform(image[..., start : start + rows, :])
+        if output is None:
+            output = strip.new_empty(strip.shape[:-2] + (image.shape[-2], strip.shape[-1]))
+        output[..., start : start + rows, :] = strip
+    return output
 
 
 @dataclass(frozen=True)

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import torch
 
-from ..color import convert, luminance, unity_to_aces
-from .aces_rrt import DIM_SURROUND_GAMMA, ODT_SAT_FACTOR, RRT_SAT_FACTOR, ap1_to_rec709, rrt_glow_and_red_modifier, smoothstep_hue_weight
+from ..color import AP1_LUMINANCE, MATRICES, convert, unity_to_aces
+from ..core import apply_matrix
+from .aces_rrt import AP1_TO_REC709, DIM_SURROUND_GAMMA, ODT_SAT_FACTOR, RRT_SAT_FACTOR, rrt_glow_and_red_modifier, smoothstep_hue_weight
 from .base import apply_rows, display, limited
 
 __all__ = ["aces_fitted", "aces", "aces_hill", "aces_narkowicz"]
@@ -14,23 +15,27 @@ _ACES_FIT = dict(a=2.785085, b=0.107772, c=2.936045, d=0.887122, e=0.806889)
 """Luminance fit of RRT 1.0.3 + ODT RGBmonitor_100nits_dim (Unity AcesTonemap; RMSE 0.0013)."""
 
 
-def _lerp_to_luminance(rgb: torch.Tensor, factor: float) -> torch.Tensor:
-    """``lerp(Y, rgb, factor)`` with AP1 luminance (Unity's RRT/ODT desaturation)."""
-    y = luminance(rgb, "ap1")
-    return y + factor * (rgb - y)
+def _lerp_to_luminance(factor: float) -> torch.Tensor:
+    """``lerp(Y, rgb, factor) = factor rgb + (1 - factor) Y`` with Unity's AP1 luminance, as a float64 matrix
+    (Unity's RRT/ODT desaturation)."""
+    weights = torch.tensor(AP1_LUMINANCE, dtype=torch.float64)
+    return factor * torch.eye(3, dtype=torch.float64) + (1.0 - factor) * weights.expand(3, 3)
 
 
-def _dark_to_dim_surround(rgb: torch.Tensor) -> torch.Tensor:
-    """Unity's ``darkSurround_to_dimSurround``: ``Y → Y^0.9811`` in xyY, chromaticity kept, with 1e-4 floors."""
-    xyz = convert(rgb, "ap1_to_xyz")
+_RRT_DESATURATE = _lerp_to_luminance(RRT_SAT_FACTOR)
+_ODT_TAIL = AP1_TO_REC709 @ _lerp_to_luminance(ODT_SAT_FACTOR) @ MATRICES["xyz_to_ap1"]
+"""After the dim surround: XYZ → AP1, the ODT's desaturation and AP1 → Rec.709, folded into one matrix."""
+
+
+def _dark_to_dim_surround(xyz: torch.Tensor) -> torch.Tensor:
+    """Unity's ``darkSurround_to_dimSurround`` on the XYZ of AP1: ``Y → Y^0.9811`` in xyY, chromaticity kept, with 1e-4 floors."""
     big_x, big_y, big_z = xyz.split(1, dim=-3)
     total = (big_x + big_y + big_z).clamp_min(1e-4)
     x, y = big_x / total, big_y / total
     new_y = big_y.clamp(0.0, 65504.0)
     new_y = torch.where(new_y > 0, torch.where(new_y > 0, new_y, 1.0) ** DIM_SURROUND_GAMMA, new_y)
     m = new_y / y.clamp_min(1e-4)
-    xyz = torch.cat((x * m, new_y, (1.0 - x - y) * m), dim=-3)
-    return convert(xyz, "xyz_to_ap1")
+    return torch.cat((x * m, new_y, (1.0 - x - y) * m), dim=-3)
 
 
 def aces_fitted(aces: torch.Tensor) -> torch.Tensor:
@@ -43,10 +48,10 @@ def aces_fitted(aces: torch.Tensor) -> torch.Tensor:
         0.0
     """
     aces = rrt_glow_and_red_modifier(aces, smoothstep_hue_weight)
-    acescg = _lerp_to_luminance(convert(aces, "ap0_to_ap1").clamp_min(0.0), RRT_SAT_FACTOR)
+    acescg = apply_matrix(_RRT_DESATURATE.to(aces), convert(aces, "ap0_to_ap1").clamp_min(0.0))
     k = _ACES_FIT
     fitted = acescg * (k["a"] * acescg + k["b"]) / (acescg * (k["c"] * acescg + k["d"]) + k["e"])
-    return ap1_to_rec709(_lerp_to_luminance(_dark_to_dim_surround(fitted), ODT_SAT_FACTOR))
+    return apply_matrix(_ODT_TAIL.to(fitted), _dark_to_dim_surround(convert(fitted, "ap1_to_xyz")))
 
 
 def aces(image: torch.Tensor, clip: bool = True) -> torch.Tensor:

@@ -13,7 +13,7 @@ import math
 
 import torch
 
-from ..color import AP0_CHROMATICITIES, convert, matrix, primaries_to_rec709_matrix, safe_sqrt
+from ..color import AP0_CHROMATICITIES, MATRICES, matrix, primaries_to_rec709_matrix, safe_sqrt
 from ..core import apply_matrix
 
 __all__ = [
@@ -25,6 +25,7 @@ __all__ = [
     "rrt_glow_and_red_modifier",
     "ap1_desaturate",
     "ap1_dim_surround",
+    "AP1_TO_REC709",
     "ap1_to_rec709",
     "REC709_TO_AP0",
     "rec709_to_aces",
@@ -183,11 +184,15 @@ def ap1_dim_surround(rgb: torch.Tensor) -> torch.Tensor:
     return rgb * _ap1_y(rgb).clamp_min(1e-10) ** (DIM_SURROUND_GAMMA - 1.0)
 
 
+AP1_TO_REC709 = MATRICES["xyz_to_rec709"] @ MATRICES["d60_to_d65"] @ MATRICES["ap1_to_xyz"]
+"""The ODTs' last step, AP1 → XYZ → Bradford D60 → D65 → linear Rec.709, as one float64 matrix."""
+
+
 def ap1_to_rec709(rgb: torch.Tensor) -> torch.Tensor:
-    """The ODTs' last step: AP1 → XYZ → Bradford D60 → D65 → linear Rec.709.
+    """The ODTs' last step: :data:`AP1_TO_REC709`, one matrix per pixel.
 
     Examples:
         >>> ap1_to_rec709(torch.zeros(3, 1, 1)).flatten().tolist()
         [0.0, 0.0, 0.0]
     """
-    return convert(convert(convert(rgb, "ap1_to_xyz"), "d60_to_d65"), "xyz_to_rec709")
+    return apply_matrix(AP1_TO_REC709.to(dtype=rgb.dtype, device=rgb.device), rgb)

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import functools
 import inspect
 
 import torch
 
 from ..core import Param
-from ..stage import Control, Stage, controls_signature
+from ..stage import Control, Stage, controls_signature, in_strips
 from .registry import TONE_MAPPERS, TONEMAP_MODES, tone_mapper, tonemap
 
 __all__ = ["ToneMap"]
@@ -96,7 +97,8 @@ class ToneMap(Stage):
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
         self.check_learnable()
-        return tonemap(image, **self.params())
+        params = self.params()
+        return in_strips(functools.partial(tonemap, **params), image, params.values())
 
 
 def _signature() -> inspect.Signature:

@@ -1,0 +1,59 @@
+"""Per-pixel stages run in strips of rows (``torchgrade.stage.in_strips``): the whole frame's values to float32
+rounding, and the whole frame whenever autograd records the call."""
+
+import pytest
+import torch
+
+import torchgrade as tg
+from torchgrade import stage
+
+HDR = "../shared/data/exr/Desk.exr"
+
+STAGES = {
+    "grade": lambda: tg.ColorGrade(aces=True, post_exposure=0.3, temperature=8, contrast=15, saturation=10,
+                                   split_shadows=(0.45, 0.5, 0.56), split_highlights=(0.56, 0.5, 0.45)),
+    "grade_linear": lambda: tg.ColorGrade(temperature=-30, tint=12, contrast=25, color_filter=(1.0, 0.9, 0.8)),
+    "primary": lambda: tg.PrimaryGrade(saturation=1.2),
+    "tonemap": lambda: tg.ToneMap("aces"),
+}
+
+
+@pytest.fixture(scope="module")
+def desk():
+    return tg.io.read_exr(HDR)[:3].unsqueeze(0)
+
+
+@pytest.mark.parametrize("name", STAGES)
+def test_strips_give_the_whole_frames_values(name, desk, monkeypatch):
+    layer = STAGES[name]()
+    with torch.no_grad():
+        whole = layer(desk)
+        monkeypatch.setattr(stage, "STRIP_PIXELS", 997)  # strips of a few rows, the last one shorter
+        strips = layer(desk)
+    torch.testing.assert_close(strips, whole, rtol=1e-5, atol=1e-6)  # a matrix product may block a strip differently
+
+
+def test_strips_are_skipped_when_autograd_records(desk, monkeypatch):
+    monkeypatch.setattr(stage, "STRIP_PIXELS", 997)
+    calls = []
+    image = desk[..., :64, :64].clone().requires_grad_()
+    out = stage.in_strips(lambda x: calls.append(x.shape) or x * 2.0, image)
+    assert calls == [image.shape] and out.requires_grad
+    learnable = torch.nn.Parameter(torch.tensor(2.0))
+    stage.in_strips(lambda x: calls.append(x.shape) or x * learnable, desk[..., :64, :64], (learnable,))
+    assert calls[-1] == image.shape
+    with torch.no_grad():
+        stage.in_strips(lambda x: calls.append(x.shape) or x, desk[..., :64, :64], (learnable,))
+    assert len(calls) > 3
+
+
+def test_gradients_of_the_folded_grade_match_finite_differences():
+    torch.manual_seed(0)
+    image = (torch.rand(1, 3, 3, 4, dtype=torch.float64) * 2.0 + 0.05).requires_grad_()
+    params = {name: torch.tensor(value, dtype=torch.float64, requires_grad=True)
+              for name, value in (("post_exposure", 0.3), ("temperature", 8.0), ("tint", -5.0), ("contrast", 15.0))}
+    color = torch.tensor((1.0, 0.9, 0.8), dtype=torch.float64, requires_grad=True)
+    for aces in (False, True):
+        def graded(x, *values):
+            return tg.functional.color_grade(x, aces=aces, color_filter=values[-1], **dict(zip(params, values[:-1])))
+        assert torch.autograd.gradcheck(graded, (image, *params.values(), color))
