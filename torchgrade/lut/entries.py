@@ -26,7 +26,7 @@ Examples:
     >>> from torchgrade.lut import bake_lut
     >>> from torchgrade import ColorGrade, ToneMap
     >>> look = torch.nn.Sequential(ColorGrade(contrast=30.0, saturation=20.0), ToneMap("aces"))
-    >>> sampled, fitted = (bake_lut(look, size=9, report_tolerance=float("inf"), entries=entries)
+    >>> sampled, fitted = (bake_lut(look, size=9, shaper="logc", report_tolerance=float("inf"), entries=entries)
     ...                    for entries in ("sampled", "fitted"))
     >>> fitted.error_report.p99_9 < 0.7 * sampled.error_report.p99_9  # on colours the fit did not see
     True
