@@ -210,6 +210,9 @@ def main() -> None:
         return
     child = subprocess.run([sys.executable, __file__, "--memory"], capture_output=True, text=True, check=True)
     memory = json.loads(child.stdout.strip().splitlines()[-1])
+    load = os.getloadavg()[0]
+    speed = speed_rows(methods, compile_s, memory, pixels)
+    load = (load, os.getloadavg()[0])  # 1-minute load average before and after the timed rounds
     report = {
         "command": COMMAND,
         "frame": f"{WIDTH}x{HEIGHT} float32, 1 frame",
@@ -222,7 +225,8 @@ def main() -> None:
         "opencolorio": OCIO.__version__,
         "platform": platform.platform(),
         "note": "shared machine: other processes may have been running during the measurement",
-        "results": speed_rows(methods, compile_s, memory, pixels),
+        "load_average": load,
+        "results": speed,
         "accuracy": accuracy() if EXR_DIR.is_dir() else [],
     }
     out = ROOT / "benchmarks" / "results"
@@ -238,7 +242,8 @@ def markdown(report: dict) -> str:
         f"# Applying a {report['lut']} LUT to {report['frame']} on CPU",
         "",
         f"Median of {report['runs']} round-robin rounds, {report['threads']} threads, torch {report['torch']}, "
-        f"OpenColorIO {report['opencolorio']}. {report['note'].capitalize()}.",
+        f"OpenColorIO {report['opencolorio']}. {report['note'].capitalize()} (1-minute load average "
+        f"{report['load_average'][0]:.2f} before the timing, {report['load_average'][1]:.2f} after, on {report['cpu_count']} CPUs).",
         "",
         "| method | ms | ms/MP | × OCIO tetrahedral | × copy | temporary bytes/pixel |",
         "| --- | ---: | ---: | ---: | ---: | ---: |",

@@ -94,7 +94,9 @@ def test_matches_independent_float64_reference(interpolation, device):
 @pytest.mark.parametrize("interpolation", ["trilinear", "tetrahedral"])
 def test_chunked_eager_lookup_equals_one_pass_and_the_float64_reference(interpolation):
     """Runs of 1000 pixels (a frame of 2 x 3000, so runs cross rows and the last run is short) give the
-    one-pass float32 result bit for bit, and the float64 per-pixel reference to 1e-6."""
+    result of any other run length bit for bit, the one-pass float32 result bit for bit (trilinear) or to
+    float rounding (tetrahedral's eager form sums the same terms in another order), and the float64
+    per-pixel reference to 1e-6."""
     size = 17
     table = random_table(size)
     image = torch.rand(2, 3, 40, 75, dtype=torch.float64) * 1.2 - 0.1
@@ -102,7 +104,13 @@ def test_chunked_eager_lookup_equals_one_pass_and_the_float64_reference(interpol
     rows = planar_table(table.float())
     with torch.no_grad():
         chunked = chunked_lookup(image.float(), rows, *settings, pixels=1000)
-        assert torch.equal(chunked, lookup(image.float(), rows, *settings))
+        for pixels in (7, 4096, 6000):
+            assert torch.equal(chunked, chunked_lookup(image.float(), rows, *settings, pixels=pixels))
+        one_pass = lookup(image.float(), rows, *settings)
+        if interpolation == "trilinear":
+            assert torch.equal(chunked, one_pass)
+        else:
+            torch.testing.assert_close(chunked, one_pass, atol=4 * 2.0 ** -24, rtol=0)
         assert torch.equal(LUT3D(table.float())(image.float(), interpolation), chunked_lookup(image.float(), rows, *settings))
     points = (image.clamp(0, 1) * (size - 1)).permute(0, 2, 3, 1).reshape(-1, 3).numpy()
     expected = np.stack([REFERENCES[interpolation](table.numpy(), p) for p in points])

@@ -2,10 +2,13 @@
 
 Every interpolation has a **gather form**, ``kernel(coords (3, P), rows (3, S³), size) -> (3, P)``:
 integer lattice indices and one 1-D gather per vertex and channel on the planar table
-(:func:`~torchgrade.lut.planar_table`). That is what :class:`~torchgrade.LUT3D` runs, and what an
-ONNX export writes as ``Gather`` nodes. An interpolation may also have **grid forms**, one per
-export backend, ``form(unit (N, 3, H, W) in [0, 1], table (S, S, S, 3)) -> (N, 3, H, W)`` built on
-``grid_sample``, for runtimes that prefer ``GridSample`` (see :data:`BACKENDS`).
+(:func:`~torchgrade.lut.planar_table`). That is what :class:`~torchgrade.LUT3D` runs under autograd,
+``torch.compile`` and tracing, and what an ONNX export writes as ``Gather`` nodes. An interpolation
+may also have an **eager form** (:class:`EagerForm`), the same interpolation for the eager no-grad
+CPU lookup: tables derived once per LUT, in-place operations on buffers allocated once per lookup.
+And it may have **grid forms**, one per export backend, ``form(unit (N, 3, H, W) in [0, 1], table
+(S, S, S, 3)) -> (N, 3, H, W)`` built on ``grid_sample``, for runtimes that prefer ``GridSample`` (see
+:data:`BACKENDS`).
 
 A new interpolation is one function here plus one :class:`Kernel` line in :data:`KERNELS`; a new
 graph form of an existing one is one function plus one entry in its ``grids``.
@@ -27,8 +30,9 @@ from typing import Callable, Optional
 import torch
 import torch.nn.functional as F
 
-__all__ = ["Kernel", "KERNELS", "INTERPOLATIONS", "BACKENDS", "LUT_BACKENDS", "tetrahedron", "tetrahedral", "trilinear",
-           "trilinear_grid_sample", "strip_table", "trilinear_strip", "trilinear_strip_lookup"]
+__all__ = ["Kernel", "EagerForm", "KERNELS", "INTERPOLATIONS", "BACKENDS", "LUT_BACKENDS", "tetrahedron", "tetrahedral",
+           "tetrahedral_tables", "TetrahedralRuns", "trilinear", "trilinear_grid_sample", "strip_table", "trilinear_strip",
+           "trilinear_strip_lookup"]
 
 
 def _cell(coords: torch.Tensor, size: int):
@@ -107,6 +111,112 @@ def tetrahedral(coords: torch.Tensor, table: torch.Tensor, size: int) -> torch.T
         return c000 + f_max * (v1 - c000) + f_mid * (v2 - v1) + f_min * (c111 - v2)
 
     return torch.stack([channel(row) for row in table.unbind(0)])
+
+
+def tetrahedral_tables(rows: torch.Tensor, size: int) -> torch.Tensor:
+    """What :class:`TetrahedralRuns` gathers from, derived once per table from the planar rows ``(3, S³)``.
+
+    ``(3, 4 S³ + S + 1)``: channel ``c`` holds the values ``v``, then the steps ``v[i + 1] - v[i]``
+    (red), ``v[i + S] - v[i]`` (green) and ``v[i + S²] - v[i]`` (blue) by flat index ``i``, 0 where the
+    step leaves the lattice (read only with weight 0), then ``S + 1`` zeros (the same).
+
+    Examples:
+        >>> from torchgrade.lut import identity_table, planar_table
+        >>> tables = tetrahedral_tables(planar_table(identity_table(2)), 2)
+        >>> tables.shape, tables[0, :8].tolist(), tables[0, 8:16].tolist()
+        (torch.Size([3, 35]), [0.0, 1.0, 0.0, 1.0, 0.0, 1.0, 0.0, 1.0], [1.0, 0.0, 1.0, 0.0, 1.0, 0.0, 1.0, 0.0])
+    """
+    cells = size ** 3
+    tables = rows.new_zeros(3, 4 * cells + size + 1)
+    steps = tables[:, :4 * cells].view(3, 4, cells)
+    steps[:, 0] = rows
+    for axis, step in enumerate((1, size, size * size), start=1):
+        torch.sub(rows[:, step:], rows[:, :-step], out=steps[:, axis, :-step])
+        steps[:, axis].view(3, size, size, size).select(4 - axis, size - 1).zero_()  # [c, b, g, r]: the axis' last plane
+    return tables
+
+
+class TetrahedralRuns:
+    """:func:`tetrahedral` at runs of up to ``n`` lattice coordinates, into given outputs, without autograd.
+
+    Built once per lookup with :func:`tetrahedral_tables`' ``tables``; holds its buffers and their
+    views (``16 n`` entries of ``tables``' dtype and ``4 n`` int32), so a run is 12 tensor operations.
+    Write a run's coordinates ``(3, m)``, ``m <= n``, into :meth:`coords`, then call ``runs(out)``.
+
+    The tetrahedron and vertex differences of :func:`tetrahedral`, without sorting the fractions:
+    the walk c000 -> v1 -> v2 -> c111 steps once along each axis, largest fraction first, so
+    ``y = v[c000] + f_r Δr[p_r] + f_g Δg[p_g] + f_b Δb[p_b]`` where ``p_k`` is c000 plus the steps of
+    the axes ranked above ``k``. Two comparison operations rank the axes, one matrix product of the
+    ranks and the corner gives the 4 flat indices (exact in floating point: below 2²⁴), converted
+    once to int32; then a gather of ``4 m`` entries per channel and 3 multiply-adds. These are the
+    terms of :func:`tetrahedral`, summed in r, g, b order instead of by size: the two agree to float
+    rounding. The corner is not clamped to ``S - 2``: at the lattice's top face the fraction is 0,
+    and the step tables' zeros and padding keep the indices inside the tables.
+
+    Examples:
+        >>> from torchgrade.lut import identity_table, planar_table
+        >>> runs = TetrahedralRuns(tetrahedral_tables(planar_table(identity_table(3)), 3), 3, 4)
+        >>> runs.coords(1).copy_(torch.tensor([[1.5], [0.25], [2.0]]))[0].tolist()
+        [1.5]
+        >>> out = torch.empty(3, 1)
+        >>> runs(out).flatten().tolist()
+        [0.75, 0.125, 1.0]
+    """
+
+    floats = 16
+    """Buffer entries per pixel of a run, besides 4 int32 indices."""
+
+    def __init__(self, tables: torch.Tensor, size: int, n: int):
+        cells, plane = size ** 3, size * size
+        self.tables, self.views, self.ones = tables, {}, 0
+        self.work = tables.new_empty(self.floats * n)
+        self.index = torch.empty(4 * n, dtype=torch.int32, device=tables.device)
+        # Row k of the product is the flat index of gather k: the values at c000, then each axis'
+        # steps at c000 plus the steps of the axes ranked above it (a larger fraction; red before
+        # green before blue on ties, the order tetrahedron() picks vertices in).
+        self.matrix = torch.tensor([[1, size, plane, 0, 0, 0, 0],
+                                    [1, size, plane, -size, 0, -plane, cells + size + plane],
+                                    [1, size, plane, 1, -plane, 0, 2 * cells + plane],
+                                    [1, size, plane, 0, size, 1, 3 * cells]], dtype=tables.dtype, device=tables.device)
+
+    def _views(self, m: int):
+        if m not in self.views:
+            work = self.work
+            # work, by multiples of m: fractions [0, 3); coordinates [6, 9); the product's terms
+            # [9, 16): corner r, g, b, the three ranks, 1; its result [3, 7); the gathered entries
+            # [3, 15), written once the coordinates, terms and result are read.
+            fraction = work[:3 * m].view(3, m)
+            terms = work[9 * m:16 * m].view(7, m)
+            gathered = work[3 * m:15 * m].view(3, 4, m)  # channel, values or step along r, g, b, pixel
+            self.views[m] = (work[6 * m:9 * m].view(3, m), fraction, fraction.unbind(0), fraction[:2], fraction[1:], terms,
+                             terms[:3], terms[3:5], terms[5], work[3 * m:7 * m].view(4, m), self.index[:4 * m],
+                             gathered.view(3, 4 * m).unbind(0), gathered.unbind(1))
+        return self.views[m]
+
+    def coords(self, m: int) -> torch.Tensor:
+        """The ``(3, m)`` buffer the next run's lattice coordinates go in."""
+        return self._views(m)[0]
+
+    def __call__(self, out: torch.Tensor) -> torch.Tensor:
+        """Interpolate at the coordinates written into :meth:`coords`, into ``out`` ``(3, m)``; returns ``out``."""
+        m = out.shape[-1]
+        (coords, fraction, (f_r, f_g, f_b), first, second, terms, corner, ranks, rank, flat, index, rows,
+         (values, red, green, blue)) = self._views(m)
+        if m != self.ones:  # the row of ones is kept between runs of one length (runs of another overwrite it)
+            terms[6].fill_(1.0)
+            self.ones = m
+        torch.floor(coords, out=corner)
+        torch.sub(coords, corner, out=fraction)
+        torch.ge(first, second, out=ranks)  # [f_r >= f_g], [f_g >= f_b]
+        torch.ge(f_r, f_b, out=rank)  # [f_r >= f_b]
+        torch.mm(self.matrix, terms, out=flat)
+        index.copy_(flat.view(-1))
+        for table, row in zip(self.tables, rows):
+            torch.index_select(table, 0, index, out=row)
+        torch.addcmul(values, red, f_r, out=out)
+        out.addcmul_(green, f_g)
+        out.addcmul_(blue, f_b)
+        return out
 
 
 def trilinear(coords: torch.Tensor, table: torch.Tensor, size: int) -> torch.Tensor:
@@ -211,8 +321,25 @@ def trilinear_strip_lookup(unit: torch.Tensor, table: torch.Tensor) -> torch.Ten
 
 
 @dataclass(frozen=True)
+class EagerForm:
+    """An interpolation for the eager no-grad CPU lookup, for lattices up to ``max_size``: ``tables(rows, size)``
+    once per table, ``runs(tables, size, n)`` once per lookup (a :class:`TetrahedralRuns`-like object
+    holding its buffers for runs of up to ``n`` pixels).
+
+    Examples:
+        >>> KERNELS["tetrahedral"].eager.max_size
+        65
+    """
+
+    tables: Callable[[torch.Tensor, int], torch.Tensor]
+    runs: Callable
+    max_size: int
+
+
+@dataclass(frozen=True)
 class Kernel:
-    """One interpolation: its ``gather`` form (called by ``kernel(coords, rows, size)``) and its ``grids`` by backend.
+    """One interpolation: its ``gather`` form (called by ``kernel(coords, rows, size)``), its ``grids`` by
+    backend and its ``eager`` form (or ``None``: the eager lookup runs the gather form).
 
     Examples:
         >>> KERNELS["tetrahedral"].graph_form("strip") is None
@@ -221,6 +348,7 @@ class Kernel:
 
     gather: Callable[[torch.Tensor, torch.Tensor, int], torch.Tensor]
     grids: dict = field(default_factory=dict)
+    eager: Optional[EagerForm] = None
 
     def __call__(self, coords: torch.Tensor, rows: torch.Tensor, size: int) -> torch.Tensor:
         return self.gather(coords, rows, size)
@@ -232,7 +360,8 @@ class Kernel:
 
 KERNELS = {
     "trilinear": Kernel(trilinear, {"strip": trilinear_strip_lookup, "volume": trilinear_grid_sample}),
-    "tetrahedral": Kernel(tetrahedral),
+    # Up to 65³: the tables are 4 times the planar table (13 MiB at 65³; 4 S³ < 2²⁴ keeps the index product exact).
+    "tetrahedral": Kernel(tetrahedral, eager=EagerForm(tetrahedral_tables, TetrahedralRuns, max_size=65)),
 }
 """The interpolations by name, what ``LUT3D(...)(image, interpolation)`` takes."""
 

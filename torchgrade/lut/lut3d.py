@@ -19,7 +19,10 @@ with no temporary buffers. The eager default (:func:`chunked_lookup`) makes one 
 over runs of :data:`LOOKUP_CHUNK` pixels on one CPU thread, as OpenColorIO's CPU processor does: the
 temporaries stay in cache, and no operation waits at a thread barrier (on a loaded machine each
 barrier can wait for a descheduled thread; benchmarks/results/lut.md measured 131× OpenColorIO
-with two threads). benchmarks/bench_lut.py measures both against OpenColorIO.
+with two threads). Without autograd, tetrahedral runs its eager form
+(:class:`~torchgrade.lut.kernels.TetrahedralRuns`): 15 in-place operations a run into buffers
+allocated once per call, gathering from value-and-step tables derived once per LUT; 12 one-float
+gathers a pixel are about half its time. benchmarks/bench_lut.py measures both against OpenColorIO.
 
 Examples:
     >>> import torch
@@ -39,11 +42,11 @@ import torch
 from torch import nn
 
 from ..color import linear_to_srgb, srgb_to_linear
-from ..core import check_choice, check_image, is_tracing, sanitize, to_input_dtype, working_dtype
+from ..core import HALF_MAX, check_choice, check_image, is_tracing, sanitize, to_input_dtype, working_dtype
 from ..stage import Control, Stage
 from .kernels import BACKENDS, KERNELS
 from .lattice import check_size, checked_domain, planar_table
-from .shapers import SHAPERS, lattice_unit
+from .shapers import SHAPERS, lattice_unit, shaper_encode
 
 __all__ = ["LUT3D", "LUTLookup", "OUTPUT_ENCODINGS", "LOOKUP_CHUNK", "apply_lut", "lookup", "chunked_lookup", "one_thread", "compiled_lookup",
            "decode_output", "encode_output", "table_output"]
@@ -137,8 +140,10 @@ def lookup(image, rows, size: int, shaper, domain_min, domain_max, interpolation
 
 
 LOOKUP_CHUNK = 32768
-"""Pixels per pass of the eager lookup: its temporaries (about 40 floats per pixel, 5 MiB a run) then
-stay in cache (benchmarks/bench_lut.py measures the time and the temporary bytes per pixel)."""
+"""Pixels per pass of the eager lookup. Tetrahedral's eager form holds 20 values a pixel (2.5 MiB a run);
+smaller runs pay the fixed cost of each operation more often (about 45 µs a run of 15: 8K-pixel runs
+took 1.3 times as long a 1080p frame, 4K 1.55 times), larger ones leave the cache (64K: even, 128K:
+1.08 times). benchmarks/bench_lut.py measures the time and the temporary bytes per pixel."""
 
 
 @contextlib.contextmanager
@@ -162,33 +167,98 @@ def one_thread():
         torch.set_num_threads(threads)
 
 
-def chunked_lookup(image, rows, size: int, *settings, pixels: int = LOOKUP_CHUNK) -> torch.Tensor:
+def chunked_lookup(image, rows, size: int, *settings, pixels: int = LOOKUP_CHUNK, tables=None) -> torch.Tensor:
     """:func:`lookup` (same arguments after ``size``) over ``pixels``-sized runs of each CPU image's pixels, one thread.
 
-    Every step is per pixel, so the result is the same as one pass. While gradients flow to the image
+    Every step is per pixel, so the runs give the one-pass result. Where the interpolation has an
+    eager form (:class:`~torchgrade.lut.EagerForm`: tetrahedral up to 65³) the runs go through it,
+    into buffers allocated once per call, from its ``tables`` (derived from ``rows`` when not given;
+    :class:`LUT3D` caches them): the same values to float rounding. While gradients flow to the image
     or the table (autograd keeps every temporary anyway), off the CPU, and while tracing (an export
-    records one pass), the whole image is one pass.
+    records one pass), the whole image is one pass of :func:`lookup`.
 
     Examples:
         >>> import torch
         >>> from torchgrade.lut import identity_table, planar_table
         >>> x = torch.rand(2, 3, 4, 5)
-        >>> args = (planar_table(torch.rand(3, 3, 3, 3)), 3, "linear", 0.0, 1.0, "tetrahedral", None, None, (0.0, 1.0), "linear")
+        >>> args = (planar_table(torch.rand(3, 3, 3, 3)), 3, "linear", 0.0, 1.0, "trilinear", None, None, (0.0, 1.0), "linear")
         >>> torch.equal(chunked_lookup(x, *args, pixels=7), lookup(x, *args))
         True
     """
     height, width = image.shape[-2:]
-    grad = torch.is_grad_enabled() and (image.requires_grad or rows.requires_grad)
-    if grad or image.device.type != "cpu" or is_tracing():
+    if not _in_runs(image, rows):
         return lookup(image, rows, size, *settings)
     planes = image.reshape(-1, 3, height * width)
     result = torch.empty(planes.shape, dtype=image.dtype)
+    eager = KERNELS[settings[3]].eager
     with one_thread():
-        for frame, out in zip(planes, result):
-            for start in range(0, height * width, pixels):
-                run = frame[:, start:start + pixels].unsqueeze(-1)  # (3, run, 1): an image of one column
-                out[:, start:start + pixels] = lookup(run, rows, size, *settings).squeeze(-1)
+        if eager is None or size > eager.max_size:
+            for frame, out in zip(planes, result):
+                for start in range(0, height * width, pixels):
+                    run = frame[:, start:start + pixels].unsqueeze(-1)  # (3, run, 1): an image of one column
+                    out[:, start:start + pixels] = lookup(run, rows, size, *settings).squeeze(-1)
+        else:
+            _eager_lookup(planes, result, rows, size, settings, pixels, eager, tables)
     return result.reshape(image.shape)
+
+
+def _in_runs(image: torch.Tensor, rows: torch.Tensor) -> bool:
+    """Whether :func:`chunked_lookup` splits the image into runs: on the CPU, untraced, no gradient flowing."""
+    grad = torch.is_grad_enabled() and (image.requires_grad or rows.requires_grad)
+    return not grad and image.device.type == "cpu" and not is_tracing()
+
+
+def _eager_lookup(planes, result, rows, size, settings, pixels, eager, tables) -> None:
+    """:func:`chunked_lookup` through an eager form: ``planes`` ``(N, 3, P)`` into ``result``, runs of ``pixels``."""
+    shaper, domain_min, domain_max, _, output_range, curve, curve_range, output_encoding = settings
+    run = max(1, min(pixels, planes.shape[-1]))
+    runs = eager.runs(eager.tables(rows, size) if tables is None else tables, size, run)
+    direct = output_encoding == "linear" and output_range is None and result.dtype == rows.dtype
+    values = None if direct else torch.empty(3 * run, dtype=rows.dtype)
+    lattice = _LatticeCoordinates(rows.dtype, size, shaper, domain_min, domain_max, curve, curve_range)
+    for frame, out in zip(planes, result):
+        for start in range(0, frame.shape[-1], run):
+            x = frame[:, start:start + run]
+            n = x.shape[-1]
+            lattice(x, runs.coords(n))
+            if direct:
+                runs(out[:, start:start + n])
+            else:
+                y = runs(values[:3 * n].view(3, n))
+                out[:, start:start + n] = to_input_dtype(table_output(y, output_encoding, output_range), out)
+
+
+class _LatticeCoordinates:
+    """``lattice_unit(sanitize(x)) * (size - 1)`` of ``(3, n)`` runs written into a buffer: the operations of
+    :func:`lookup`, bit for bit, less those that are exact identities for the LUT's domain."""
+
+    def __init__(self, dtype, size, shaper, domain_min, domain_max, curve, curve_range):
+        def column(value):  # as lattice_unit forms it
+            return torch.as_tensor(value, dtype=dtype).reshape(-1, 1).expand(3, 1)
+
+        self.low, high = column(domain_min), column(domain_max)
+        self.span = high - self.low
+        self.size, self.dtype, self.shaper, self.curve, self.curve_range = size, dtype, shaper, curve, curve_range
+        self.shift = bool((self.low != 0).any())  # x - 0 and x / 1 are exact: skipped
+        self.scale = bool((self.span != 1).any())
+        # A linear shaper's domain inside ±HALF_MAX clamps whatever sanitize's clamp to ±HALF_MAX would,
+        # to the same ends; nan_to_num then does the rest of sanitize (NaN -> 0, ±Inf -> ±HALF_MAX).
+        bounded = bool((self.low >= -HALF_MAX).all()) and bool((high <= HALF_MAX).all())
+        self.unclamped = shaper == "linear" and bounded
+
+    def __call__(self, x: torch.Tensor, buffer: torch.Tensor) -> torch.Tensor:
+        if x.dtype != self.dtype:
+            x = buffer.copy_(x)
+        if self.unclamped:
+            codes = torch.nan_to_num(x, nan=0.0, posinf=HALF_MAX, neginf=-HALF_MAX, out=buffer)
+        else:
+            torch.clamp(x, -HALF_MAX, HALF_MAX, out=buffer).nan_to_num_(nan=0.0)
+            codes = shaper_encode(buffer, self.shaper, self.curve, self.curve_range)
+        if self.shift or codes is not buffer:
+            codes = torch.sub(codes, self.low, out=buffer)
+        if self.scale:
+            codes.div_(self.span)
+        return codes.clamp_(0.0, 1.0).mul_(self.size - 1)
 
 
 _COMPILED = None
@@ -233,9 +303,9 @@ class LUT3D(Stage):
         output_encoding: ``"linear"`` (entries are linear outputs) or ``"srgb"`` (entries are
             sRGB-encoded and decoded after the lookup; :meth:`linear_table` gives linear entries).
         learnable: hold the table as an ``nn.Parameter`` (fit a LUT by gradient descent).
-        compile: run the lookup through ``torch.compile``: one fused pass over the pixels, several
-            times faster than eager, but the first call per interpolation and dtype compiles
-            (seconds; see benchmarks/results/lut.md).
+        compile: run the lookup through ``torch.compile``: one fused pass over the pixels, faster
+            than eager, but the first call per interpolation and dtype compiles (seconds; see
+            benchmarks/results/lut.md).
 
     Examples:
         >>> from torchgrade.lut import identity_table
@@ -270,6 +340,7 @@ class LUT3D(Stage):
         self.register_buffer("domain_max", high)
         self.register_buffer("curve", None if curve is None else _check_curve(curve))
         self._rows_cache = (None, None, None)
+        self._tables_cache = (None, None, None)  # (rows, interpolation, the eager form's tables)
         self.error_report = None  # set by bake_lut: a torchgrade.lut.ErrorReport
         self.init_controls(shaper=shaper, output_range=output_range, curve_range=curve_range,
                            output_encoding=output_encoding, compile=bool(compile))
@@ -302,7 +373,7 @@ class LUT3D(Stage):
             except Exception as error:  # no C++ compiler, unsupported device, ...: the eager path always works
                 warnings.warn(f"LUT3D(compile=True) fell back to eager: torch.compile failed with {error!r}", RuntimeWarning)
                 self.compile = False
-        return chunked_lookup(*arguments)
+        return chunked_lookup(*arguments, tables=self._eager_tables(image, arguments[1], interpolation))
 
     def rows(self, dtype: torch.dtype) -> torch.Tensor:
         """The table as planar rows ``(3, S³)`` in ``dtype`` (:func:`~torchgrade.lut.planar_table`), what the kernels read.
@@ -319,6 +390,18 @@ class LUT3D(Stage):
             rows = planar_table(table.detach().to(dtype))
             self._rows_cache = (table, key, rows)  # holding the table keeps its address from being reused
         return rows
+
+    def _eager_tables(self, image: torch.Tensor, rows: torch.Tensor, interpolation: str):
+        """The eager form's tables of ``rows`` (:meth:`rows`), cached with them; ``None`` where the lookup of ``image`` will not use them."""
+        eager = KERNELS[interpolation].eager
+        if eager is None or self.size > eager.max_size or not _in_runs(image, rows):
+            return None
+        cached_rows, cached_interpolation, tables = self._tables_cache
+        if cached_rows is not rows or cached_interpolation != interpolation:
+            with torch.no_grad():
+                tables = eager.tables(rows, self.size)
+            self._tables_cache = (rows, interpolation, tables)
+        return tables
 
     def linear_table(self) -> torch.Tensor:
         """The table with linear output values (decoded by ``output_encoding``), as a ``.cube`` file holds it."""
