@@ -391,6 +391,11 @@ class LUT3D(Stage):
             self._rows_cache = (table, key, rows)  # holding the table keeps its address from being reused
         return rows
 
+    def _apply(self, fn, *args, **kwargs):
+        """Moves and casts drop the eager form's cached tables: they are derived from the table where it was."""
+        self._tables_cache = (None, None, None)
+        return super()._apply(fn, *args, **kwargs)
+
     def _eager_tables(self, image: torch.Tensor, rows: torch.Tensor, interpolation: str):
         """The eager form's tables of ``rows`` (:meth:`rows`), cached with them; ``None`` where the lookup of ``image`` will not use them."""
         eager = KERNELS[interpolation].eager
