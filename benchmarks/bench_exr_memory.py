@@ -4,7 +4,10 @@ luminance/chroma (Y full, RY and BY 2×2-subsampled, half).
 
 Each read runs in a fresh Python process: the kernel's peak-resident counter (``VmHWM``) is reset
 after the imports, and the peak it reaches during the read, minus the resident memory before it,
-is divided by the returned tensor's bytes. Writes ``results/exr_memory.json`` and ``results/exr_memory.md``.
+is divided by the returned tensor's bytes. Each file is read twice so: as the first read of the
+process, and after a warm-up read of two 16×16 files (RGB half and luminance/chroma), which pages in
+the library code and starts torch's threads, the fixed costs of a process's first read. Writes
+``results/exr_memory.json`` and ``results/exr_memory.md``.
 
 Run: ``PYTHONPATH=. .venv/bin/python benchmarks/bench_exr_memory.py`` (Linux)
 """
@@ -39,6 +42,8 @@ _READ = """
 import json, sys, time
 import torchgrade as tg
 from benchmarks.common import status_kib
+for warm_up in sys.argv[4:]:
+    tg.io.read_exr(warm_up)
 with open("/proc/self/clear_refs", "w") as clear:
     clear.write("5")  # resets the peak (VmHWM) to the resident size now
 before, code = status_kib("VmRSS"), status_kib("RssFile")
@@ -51,11 +56,12 @@ print(shape, size, (status_kib("VmHWM") - before) / 1024, cpu,
 """
 
 
-def peak_of_read(path: Path, options: dict, step: str = "read") -> dict:
+def peak_of_read(path: Path, options: dict, step: str = "read", warm_ups: tuple = ()) -> dict:
     """Shape, returned MiB, peak MiB above the resident memory before the read, their ratio, and the
     MiB of library code and data files paged in meanwhile (``RssFile``: part of the peak, paid once
-    a process). ``step="open"`` measures ``exr_info`` alone: the headers every read starts with."""
-    line = subprocess.run([sys.executable, "-c", _READ, str(path), json.dumps(options), step], capture_output=True, text=True,
+    a process). ``step="open"`` measures ``exr_info`` alone: the headers every read starts with.
+    ``warm_ups``: files read first in the same process, outside the measurement."""
+    line = subprocess.run([sys.executable, "-c", _READ, str(path), json.dumps(options), step, *map(str, warm_ups)], capture_output=True, text=True,
                           check=True, cwd=ROOT, env={"PYTHONPATH": str(ROOT)}).stdout.strip().splitlines()[-1]
     shape, returned, peak, cpu, code = line.split("\t")
     return {"shape": shape, "returned_mib": round(float(returned), 1), "peak_mib": round(float(peak), 1),
@@ -63,43 +69,47 @@ def peak_of_read(path: Path, options: dict, step: str = "read") -> dict:
             "cpu_seconds": round(float(cpu), 2)}
 
 
-def write_large(folder: Path) -> dict[str, Path]:
-    """4096² RGB half, RGB float and luminance/chroma files of smooth noise (ZIP compressed)."""
+def write_files(folder: Path, size: int) -> dict[str, Path]:
+    """``size``² RGB half, RGB float and luminance/chroma files of smooth noise (ZIP compressed)."""
     rng = np.random.default_rng(0)
-    rgb = (rng.random((3, SIZE // 64, SIZE // 64)) * 4).repeat(64, axis=1).repeat(64, axis=2) + rng.random((3, SIZE, SIZE)) * 0.1
+    block = max(1, size // 64)
+    rgb = (rng.random((3, size // block, size // block)) * 4).repeat(block, axis=1).repeat(block, axis=2) + rng.random((3, size, size)) * 0.1
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    paths = {name: folder / f"{name}.exr" for name in ("rgb_half_4096", "rgb_float_4096", "yc_4096")}
-    for name, dtype in (("rgb_half_4096", np.float16), ("rgb_float_4096", np.float32)):
+    paths = {name: folder / f"{name}.exr" for name in (f"rgb_half_{size}", f"rgb_float_{size}", f"yc_{size}")}
+    for name, dtype in ((f"rgb_half_{size}", np.float16), (f"rgb_float_{size}", np.float32)):
         OpenEXR.File(header, {c: rgb[i].astype(dtype) for i, c in enumerate("RGB")}).write(str(paths[name]))
     y = 0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2]
     # the bindings take subsampled channels at full size and store the samples at even coordinates
     chroma = {name: ((rgb[i] - y) / y).astype(np.float16) for name, i in (("RY", 0), ("BY", 2))}
     channels = {"Y": y.astype(np.float16), **{name: OpenEXR.Channel(c, 2, 2) for name, c in chroma.items()}}
-    OpenEXR.File(header, channels).write(str(paths["yc_4096"]))
+    OpenEXR.File(header, channels).write(str(paths[f"yc_{size}"]))
     return paths
 
 
 def main() -> None:
-    results = {name + "".join(f", {key}={value!r}" for key, value in options.items()): peak_of_read(EXR_DIR / name, options)
-               for name, options in SAMPLES}
     with tempfile.TemporaryDirectory() as folder:
-        for name, path in write_large(Path(folder)).items():
-            results[name] = peak_of_read(path, {})
+        small = write_files(Path(folder), 16)
+        warm_ups = (small["rgb_half_16"], small["yc_16"])
+        reads = [(name + "".join(f", {key}={value!r}" for key, value in options.items()), EXR_DIR / name, options)
+                 for name, options in SAMPLES] + [(name, path, {}) for name, path in write_files(Path(folder), SIZE).items()]
+        results = {name: {**peak_of_read(path, options), "warm": peak_of_read(path, options, warm_ups=warm_ups)}
+                   for name, path, options in reads}
     opening = {name: peak_of_read(EXR_DIR / name, {}, "open") for name in ("formats/Rec709_YC.exr", "Desk.exr")}
     load = os.getloadavg()
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "exr_memory.json").write_text(json.dumps({"reads": results, "opening": opening, "load_average": load}, indent=2) + "\n")
     rows = [f"| {name} | {r['shape']} | {r['returned_mib']} | {r['peak_mib']} | {r['ratio']} | {r['code_mib']} | "
-            f"{round((r['peak_mib'] - r['code_mib']) / r['returned_mib'], 2)} | {r['cpu_seconds']} |" for name, r in results.items()]
-    table = ["| file, options | returned shape | returned MiB | peak MiB | peak / returned | code paged in MiB | "
-             "(peak - code) / returned | CPU s |", "| --- | --- | --- | --- | --- | --- | --- | --- |", *rows]
+            f"{r['warm']['peak_mib']} | {r['warm']['ratio']} | {r['cpu_seconds']} |" for name, r in results.items()]
+    table = ["| file, options | returned shape | returned MiB | first read: peak MiB | peak / returned | code paged in MiB | "
+             "after a warm-up read: peak MiB | peak / returned | CPU s |", "| --- | --- | --- | --- | --- | --- | --- | --- | --- |", *rows]
     opened = ", ".join(f"{name} {r['peak_mib']} MiB ({r['code_mib']} MiB of it code)" for name, r in opening.items())
     (RESULTS / "exr_memory.md").write_text(
         "Peak memory of `tg.io.read_exr(path, **options)`, one fresh process per read:\n\n" + "\n".join(table) + "\n\n"
         "Code paged in is the growth of the process's file-backed resident memory (`RssFile`) during the read: "
         "the OpenEXR and torch library code that the first read in a process touches, counted in the peak "
         "and paid once a process (a second read of the same file adds none). It is most of the fixed cost that "
-        "makes small files' ratios high. Opening a file alone (`tg.io.exr_info`, the headers every read starts "
+        "makes small files' ratios high; the warm-up columns read the file after two 16×16 files (RGB half and "
+        "luminance/chroma) in the same process, which pay it. Opening a file alone (`tg.io.exr_info`, the headers every read starts "
         f"with) peaks at: {opened}.\n\n"
         "CPU s is the reading process's CPU time. On a machine shared with other jobs it swings by "
         "10x from run to run: luminance/chroma runs many strip-sized operations, and torch's "
