@@ -111,10 +111,8 @@ def main() -> None:
         "makes small files' ratios high; the warm-up columns read the file after two 16×16 files (RGB half and "
         "luminance/chroma) in the same process, which pay it. Opening a file alone (`tg.io.exr_info`, the headers every read starts "
         f"with) peaks at: {opened}.\n\n"
-        "CPU s is the reading process's CPU time. On a machine shared with other jobs it swings by "
-        "10x from run to run: luminance/chroma runs many strip-sized operations, and torch's "
-        "threads wait on each other when the cores are busy (4096² luminance/chroma: 2.3 s wall "
-        "with OMP_NUM_THREADS=1, 29.5 s with 2, at a load of 4.5 on 2 cores). Read the memory columns.\n\n"
+        "CPU s is the reading process's CPU time on the first read; it depends on the machine's load. "
+        "Read the memory columns.\n\n"
         f"Load average (1, 5, 15 min) at the end of the run: {', '.join(f'{x:.2f}' for x in load)}.\n\n"
         "Command: `PYTHONPATH=. .venv/bin/python benchmarks/bench_exr_memory.py`\n")
     print("\n".join(table))

@@ -42,6 +42,7 @@ __all__ = [
     "working_dtype",
     "to_input_dtype",
     "full_precision",
+    "one_thread",
     "bounded_pow",
 ]
 
@@ -315,6 +316,27 @@ def full_precision():
             if torch.is_autocast_enabled(device):
                 stack.enter_context(torch.autocast(device, enabled=False))
         yield
+
+
+@contextlib.contextmanager
+def one_thread():
+    """Run the block with one intra-op CPU thread, then restore the count (thread-local under OpenMP and MKL).
+
+    Examples:
+        >>> import torch
+        >>> before = torch.get_num_threads()
+        >>> with one_thread():
+        ...     torch.get_num_threads()
+        1
+        >>> torch.get_num_threads() == before
+        True
+    """
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)
 
 
 _LOG2_HALF_MAX = math.log2(HALF_MAX)

@@ -34,7 +34,6 @@ Examples:
 
 from __future__ import annotations
 
-import contextlib
 import warnings
 from typing import Callable, Optional
 
@@ -42,7 +41,7 @@ import torch
 from torch import nn
 
 from ..color import linear_to_srgb, srgb_to_linear
-from ..core import HALF_MAX, check_choice, check_image, is_tracing, sanitize, to_input_dtype, working_dtype
+from ..core import HALF_MAX, check_choice, check_image, is_tracing, one_thread, sanitize, to_input_dtype, working_dtype
 from ..stage import Control, Stage
 from .kernels import BACKENDS, KERNELS
 from .lattice import check_size, checked_domain, planar_table
@@ -144,27 +143,6 @@ LOOKUP_CHUNK = 32768
 smaller runs pay the fixed cost of each operation more often (about 45 µs a run of 15: 8K-pixel runs
 took 1.3 times as long a 1080p frame, 4K 1.55 times), larger ones leave the cache (64K: even, 128K:
 1.08 times). benchmarks/bench_lut.py measures the time and the temporary bytes per pixel."""
-
-
-@contextlib.contextmanager
-def one_thread():
-    """Run the block with one intra-op CPU thread, then restore the count (thread-local under OpenMP and MKL).
-
-    Examples:
-        >>> import torch
-        >>> before = torch.get_num_threads()
-        >>> with one_thread():
-        ...     torch.get_num_threads()
-        1
-        >>> torch.get_num_threads() == before
-        True
-    """
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(threads)
 
 
 def chunked_lookup(image, rows, size: int, *settings, pixels: int = LOOKUP_CHUNK, tables=None) -> torch.Tensor:
