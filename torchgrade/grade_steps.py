@@ -31,7 +31,7 @@ from .color import (
     safe_sqrt,
     srgb_to_linear,
 )
-from .core import HALF_MAX, Param, apply_matrix, bounded_pow, color_param, matrix_param, scalar_param
+from .core import HALF_MAX, Param, apply_matrix, bounded_pow, color_param, matrix_param, scalar_param, untracked
 from .curves import evaluate_curve
 
 __all__ = [
@@ -206,9 +206,41 @@ def soft_light(base: torch.Tensor, blend: torch.Tensor) -> torch.Tensor:
         >>> soft_light(torch.tensor([0.3]), torch.tensor([0.5])).tolist()  # a 0.5 blend changes nothing
         [0.30000001192092896]
     """
-    darken = 2.0 * base * blend + base * base * (1.0 - 2.0 * blend)
-    lighten = safe_sqrt(base) * (2.0 * blend - 1.0) + 2.0 * base * (1.0 - blend)
-    return torch.where(blend >= 0.5, lighten, darken)
+    return torch.where(blend >= 0.5, _lighten(base, blend), _darken(base, blend))
+
+
+def _darken(base: torch.Tensor, blend: torch.Tensor) -> torch.Tensor:
+    """Soft light below a blend of 0.5: ``2ab + a²(1 - 2b)``."""
+    return 2.0 * base * blend + base * base * (1.0 - 2.0 * blend)
+
+
+def _lighten(base: torch.Tensor, blend: torch.Tensor) -> torch.Tensor:
+    """Soft light from a blend of 0.5 up: ``sqrt(a)(2b - 1) + 2a(1 - b)``."""
+    return safe_sqrt(base) * (2.0 * blend - 1.0) + 2.0 * base * (1.0 - blend)
+
+
+def _soft_light_by_channel(gamma: torch.Tensor, weights: tuple, offsets: tuple) -> torch.Tensor:
+    """Soft-light blends of ``gamma`` with tints ``0.5 + offset · weight`` given by constant per-channel ``offsets``, in place.
+
+    With ``weight`` in [0, 1] a channel's blend stays on the side of 0.5 its offset's sign gives, so only
+    that branch of :func:`soft_light` is computed; an offset of 0 blends with 0.5 exactly, where both
+    branches return the base, and is skipped.
+
+    Examples:
+        >>> base, t = torch.rand(1, 3, 2, 2), torch.rand(1, 1, 2, 2)
+        >>> tint = 0.5 + torch.tensor([-0.2, 0.0, 0.3]).reshape(3, 1, 1) * t
+        >>> torch.equal(_soft_light_by_channel(base.clone(), (t,), ((-0.2, 0.0, 0.3),)), soft_light(base, tint))
+        True
+    """
+    for c in range(gamma.shape[-3]):
+        channel = gamma[..., c : c + 1, :, :]
+        blended = channel
+        for weight, offset in zip(weights, (per_channel[c] for per_channel in offsets)):
+            if offset != 0.0:
+                blended = (_lighten if offset > 0.0 else _darken)(blended, 0.5 + weight * offset)
+        if blended is not channel:
+            channel.copy_(blended)
+    return gamma
 
 
 def split_toning(
@@ -226,8 +258,11 @@ def split_toning(
     """
     gamma = safe_pow(image, 1.0 / 2.2)
     t = (luminance(gamma.clamp(0.0, 1.0), luminance_weights) + scalar_param(balance, image, "split_balance") * 0.01).clamp(0.0, 1.0)
-    shadow_tint = 0.5 + (color_param(shadows, image, "split_shadows") - 0.5) * (1.0 - t)
-    highlight_tint = 0.5 + (color_param(highlights, image, "split_highlights") - 0.5) * t
+    offsets = (color_param(shadows, image, "split_shadows") - 0.5, color_param(highlights, image, "split_highlights") - 0.5)
+    if untracked(gamma, t, *offsets) and all(o.shape == (3, 1, 1) and o.device.type == "cpu" for o in offsets):
+        return safe_pow(_soft_light_by_channel(gamma, (1.0 - t, t), tuple(o.flatten().tolist() for o in offsets)), 2.2)
+    shadow_tint = 0.5 + offsets[0] * (1.0 - t)
+    highlight_tint = 0.5 + offsets[1] * t
     return safe_pow(soft_light(soft_light(gamma, shadow_tint), highlight_tint), 2.2)
 
 

@@ -9,8 +9,11 @@ infinite gradient.
 from __future__ import annotations
 
 import math
+import numbers
 
 import torch
+
+from ..core import untracked
 
 __all__ = [
     "safe_pow", "safe_sqrt", "linear_to_srgb", "srgb_to_linear", "linear_to_logc", "logc_to_linear", "aces_to_acescc", "acescc_to_aces", "linear_to_pq", "pq_to_linear", "hlg_oetf", "hlg_inverse_oetf", "linear_to_acescct", "acescct_to_linear", "LOGC_CUT", "LOGC_E", "ACESCC_MIDGRAY", "ACESCC_MAX", "PQ_M1", "PQ_C1", "PQ_PEAK", "HLG_A", "HLG_B", "HLG_C", "ACESCCT_CUT_LINEAR", "ACESCCT_CUT_LOG", "ACESCCT_A", "LOGC_A", "LOGC_B", "LOGC_C", "LOGC_D", "LOGC_F", "PQ_M2", "PQ_C2", "PQ_C3", "ACESCCT_B",
@@ -23,6 +26,9 @@ def safe_pow(x: torch.Tensor, exponent) -> torch.Tensor:
         >>> safe_pow(torch.tensor([-1.0, 0.0, 4.0]), 0.5).tolist()
         [0.0, 0.0, 2.0]
     """
+    if isinstance(exponent, numbers.Real) and exponent > 0 and x.is_floating_point() and untracked(x):
+        # Unguarded, the same values in two cheap passes and one power instead of four passes.
+        return x.clamp_min(0.0).nan_to_num_(nan=0.0, posinf=math.inf).pow_(exponent)
     positive = x > 0
     return torch.where(positive, torch.where(positive, x, 1.0) ** exponent, 0.0)
 
