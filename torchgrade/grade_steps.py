@@ -12,6 +12,7 @@ import torch
 
 from .color import (
     ACESCC_MIDGRAY,
+    AP1_LUMINANCE,
     CHANNEL,
     REC709_LUMINANCE,
     LOGC_A,
@@ -55,6 +56,7 @@ __all__ = [
     "hue_shift",
     "saturation_curves",
     "saturation",
+    "saturation_matrix",
     "fast_tonemap",
     "fast_tonemap_inverse",
     "yrgb_curves",
@@ -446,6 +448,22 @@ def saturation(image: torch.Tensor, amount: Param, luminance_weights="rec709", f
     lum = luminance(image, luminance_weights)
     scale = 1.0 + scalar_param(amount, image, "saturation") * 0.01
     return lum + (image - lum) * (scale if factor is None else scale * factor)
+
+
+def saturation_matrix(image: torch.Tensor, amount: Param, luminance_weights="rec709") -> torch.Tensor:
+    """:func:`saturation` without curves as one matrix: ``s I + (1 - s) 1 wᵀ``, ``s = 1 + amount/100`` and ``w`` the
+    luminance weights; ``(3, 3)``, or ``(B, 3, 3)`` for a per-sample amount.
+
+    Examples:
+        >>> image = torch.rand(1, 3, 2, 2)
+        >>> bool(torch.allclose(apply_matrix(saturation_matrix(image, 30.0), image), saturation(image, 30.0), atol=1e-6))
+        True
+    """
+    scale = 1.0 + scalar_param(amount, image, "saturation") * 0.01
+    scale = scale.reshape(scale.shape[:1] + (1, 1)) if scale.dim() else scale
+    weights = {"rec709": REC709_LUMINANCE, "ap1": AP1_LUMINANCE}[luminance_weights]
+    weights = torch.tensor(weights, dtype=image.dtype, device=image.device).expand(3, 3)
+    return scale * torch.eye(3, dtype=image.dtype, device=image.device) + (1.0 - scale) * weights
 
 
 def fast_tonemap(image: torch.Tensor) -> torch.Tensor:

@@ -110,6 +110,9 @@ def aces_to_acescc(image: torch.Tensor) -> torch.Tensor:
         0.4136
     """
     x = image.clamp(0.0, _HALF_MAX)
+    if untracked(x):
+        # 2^-16 + x/2 < x exactly from 2^-15 up: the larger one is each segment's argument, one log for both.
+        return torch.maximum(x, x * 0.5 + 2.0**-16).log2_().add_(9.72).div_(17.52)
     low = (torch.log2(2.0**-16 + x * 0.5) + 9.72) / 17.52
     high = (torch.log2(x.clamp_min(2.0**-15)) + 9.72) / 17.52
     return torch.where(x < 2.0**-15, low, high)
@@ -125,6 +128,9 @@ def acescc_to_aces(image: torch.Tensor) -> torch.Tensor:
     top = (math.log2(_HALF_MAX) + 9.72) / 17.52  # a Python float: torch.compile traces no tensor read-back
     x = image.clamp(max=top)
     value = torch.exp2(x * 17.52 - 9.72)
+    if untracked(value):
+        # (v - 2^-16)·2 < v exactly below the knee (v < 2^-15): the smaller one is the segment's value.
+        return torch.minimum(value, (value - 2.0**-16).mul_(2.0), out=value)
     return torch.where(x < _ACESCC_LOW_KNEE, (value - 2.0**-16) * 2.0, value)
 
 PQ_M1, PQ_M2 = 2610.0 / 16384.0, 2523.0 / 4096.0 * 128.0
