@@ -260,13 +260,18 @@ def is_constant(value, constant) -> bool:
     """
     if isinstance(value, torch.Tensor) and value.requires_grad:
         return False
-    if torch.compiler.is_compiling():
-        # Plain values are compared in Python: a tensor made here is traced, and reading its value back is
-        # a graph break (an error with fullgraph=True). A tensor's value is not read: its step is kept.
-        if isinstance(value, torch.Tensor):
+    if isinstance(value, (numbers.Real, list, tuple)):
+        # Plain values are compared in Python: a tensor made here would be traced while compiling (reading its
+        # value back is a graph break), and eager, a grade in strips asks a hundred times a frame.
+        try:
+            values, target = _flat(value), _flat(constant)
+        except (TypeError, ValueError):
             return False
-        values, target = _flat(value), _flat(constant)
-        return values == target or (len(target) == 1 and all(v == target[0] for v in values))
+        if len(values) == 1 or len(target) == 1:  # one number against many broadcasts
+            return all(v == t for v in values for t in target)
+        return values == target
+    if torch.compiler.is_compiling():
+        return False  # a tensor's value is not read while compiling: its step is kept
     try:
         value = torch.as_tensor(value, dtype=torch.float64, device="cpu")
         return bool((value == torch.as_tensor(constant, dtype=torch.float64)).all())
