@@ -8,6 +8,8 @@ units and sources.
 
 from __future__ import annotations
 
+import math
+
 import torch
 
 from .color import (
@@ -166,10 +168,34 @@ def log_contrast(image: torch.Tensor, amount: Param, encoding: str = "logc") -> 
     if encoding == "acescct":
         return acescct_to_linear((linear_to_acescct(image) - ACESCC_MIDGRAY) * k + ACESCC_MIDGRAY)
     if encoding == "acescc":
+        if untracked(image, k):
+            return _acescc_contrast_in_place(image, k)
         return acescc_to_aces((aces_to_acescc(image) - ACESCC_MIDGRAY) * k + ACESCC_MIDGRAY)
     base = (LOGC_A * image + LOGC_B).clamp_min(torch.finfo(image.dtype).tiny)
     gain = torch.pow(10.0, (LOGC_D - ACESCC_MIDGRAY) * (k - 1.0) / LOGC_C)
     return (base**k * gain - LOGC_B) / LOGC_A
+
+
+_ACESCC_PIVOT_STOPS = ACESCC_MIDGRAY * 17.52 - 9.72
+"""ACEScc's pivot as ``log2`` of linear (``log2(0.18)``): the code ``(log2(x) + 9.72) / 17.52`` at ``ACESCC_MIDGRAY``."""
+
+
+def _acescc_contrast_in_place(image: torch.Tensor, k: torch.Tensor) -> torch.Tensor:
+    """ACEScc contrast with the encode, the scaling and the decode folded into one power of two, computed in place.
+
+    ``2^min((log2(u) - p) k + p, log2(65504))`` with ``p`` the pivot in stops and ``u = max(x, 2^-16 + x/2)`` on
+    ``x`` clamped to [0, 65504] (the encode's two segments, :func:`~torchgrade.color.aces_to_acescc`); the decode's
+    low segment ``(v - 2^-16)·2`` is below ``v`` exactly there, so it is ``min(v, (v - 2^-16)·2)``.
+
+    Examples:
+        >>> x = torch.tensor([0.0, 1e-5, 0.18, 1.0, 1e5])
+        >>> bool(torch.allclose(_acescc_contrast_in_place(x, torch.tensor(1.3)), acescc_to_aces((aces_to_acescc(x) - ACESCC_MIDGRAY) * 1.3 + ACESCC_MIDGRAY), rtol=1e-5))
+        True
+    """
+    x = image.clamp(0.0, HALF_MAX)
+    stops = torch.maximum(x, (x * 0.5).add_(2.0**-16), out=x).log2_()
+    value = stops.sub_(_ACESCC_PIVOT_STOPS).mul_(k).add_(_ACESCC_PIVOT_STOPS).clamp_max_(math.log2(HALF_MAX)).exp2_()
+    return torch.minimum(value, (value - 2.0**-16).mul_(2.0), out=value)
 
 
 def contrast(image: torch.Tensor, amount: Param, aces: bool = False, log_space: str = "acescc") -> torch.Tensor:
