@@ -37,8 +37,8 @@ import functools
 
 import torch
 
-from .color import acescg_to_aces, aces_to_unity, matrix, srgb_to_linear
-from .core import HALF_MAX, Param, apply_matrix, check_image, color_param, is_constant, sanitize, scalar_param, to_input_dtype, working_dtype
+from .color import aces_to_unity, matrix, srgb_to_linear
+from .core import HALF_MAX, Param, apply_matrix, check_image, color_param, is_constant, sanitize, scalar_param, to_input_dtype, untracked, working_dtype
 from .curves import CurveControl, check_curve, curve_is_identity, stored_curve
 from .grade_steps import (
     IDENTITY_MATRIX,
@@ -56,6 +56,7 @@ from .grade_steps import (
     post_exposure,
     saturation,
     saturation_curves,
+    saturation_matrix,
     shadows_midtones_highlights,
     smoothstep,
     soft_light,
@@ -181,11 +182,16 @@ def color_grade(image: torch.Tensor, aces: bool = False, log_space: str = "acesc
         factor = saturation_curves(x, p["hue_vs_sat"], p["sat_vs_sat"], p["lum_vs_sat"], weights)
     if "hue_shift" in steps:
         x = hue_shift(x, p["hue_shift"], p["hue_vs_hue"])
-    if "saturation" in steps or factor is not None:
+    # Eager, saturation without curves is a matrix too, folded with the way out of ACEScg.
+    linear = None
+    if factor is None and "saturation" in steps and untracked(x, p["saturation"]):
+        linear = saturation_matrix(x, p["saturation"], weights)
+    elif "saturation" in steps or factor is not None:
         x = saturation(x, p["saturation"], weights, factor)
     if "yrgb_curves" in steps:
-        x = yrgb_curves(x, p["curve_master"], p["curve_red"], p["curve_green"], p["curve_blue"])
-    x = aces_to_unity(acescg_to_aces(x).clamp_min(0.0)) if aces else x.clamp_min(0.0)
+        x = yrgb_curves(_applied(linear, x), p["curve_master"], p["curve_red"], p["curve_green"], p["curve_blue"])
+        linear = None
+    x = aces_to_unity(_applied(_then(linear, matrix("ap1_to_ap0", x)), x).clamp_min(0.0)) if aces else _applied(linear, x).clamp_min(0.0)
     return to_input_dtype(x, image)
 
 

@@ -8,10 +8,13 @@ units and sources.
 
 from __future__ import annotations
 
+import math
+
 import torch
 
 from .color import (
     ACESCC_MIDGRAY,
+    AP1_LUMINANCE,
     CHANNEL,
     REC709_LUMINANCE,
     LOGC_A,
@@ -31,7 +34,7 @@ from .color import (
     safe_sqrt,
     srgb_to_linear,
 )
-from .core import HALF_MAX, Param, apply_matrix, bounded_pow, color_param, matrix_param, scalar_param
+from .core import HALF_MAX, Param, apply_matrix, bounded_pow, color_param, matrix_param, scalar_param, untracked
 from .curves import evaluate_curve
 
 __all__ = [
@@ -55,6 +58,7 @@ __all__ = [
     "hue_shift",
     "saturation_curves",
     "saturation",
+    "saturation_matrix",
     "fast_tonemap",
     "fast_tonemap_inverse",
     "yrgb_curves",
@@ -164,10 +168,34 @@ def log_contrast(image: torch.Tensor, amount: Param, encoding: str = "logc") -> 
     if encoding == "acescct":
         return acescct_to_linear((linear_to_acescct(image) - ACESCC_MIDGRAY) * k + ACESCC_MIDGRAY)
     if encoding == "acescc":
+        if untracked(image, k):
+            return _acescc_contrast_in_place(image, k)
         return acescc_to_aces((aces_to_acescc(image) - ACESCC_MIDGRAY) * k + ACESCC_MIDGRAY)
     base = (LOGC_A * image + LOGC_B).clamp_min(torch.finfo(image.dtype).tiny)
     gain = torch.pow(10.0, (LOGC_D - ACESCC_MIDGRAY) * (k - 1.0) / LOGC_C)
     return (base**k * gain - LOGC_B) / LOGC_A
+
+
+_ACESCC_PIVOT_STOPS = ACESCC_MIDGRAY * 17.52 - 9.72
+"""ACEScc's pivot as ``log2`` of linear (``log2(0.18)``): the code ``(log2(x) + 9.72) / 17.52`` at ``ACESCC_MIDGRAY``."""
+
+
+def _acescc_contrast_in_place(image: torch.Tensor, k: torch.Tensor) -> torch.Tensor:
+    """ACEScc contrast with the encode, the scaling and the decode folded into one power of two, computed in place.
+
+    ``2^min((log2(u) - p) k + p, log2(65504))`` with ``p`` the pivot in stops and ``u = max(x, 2^-16 + x/2)`` on
+    ``x`` clamped to [0, 65504] (the encode's two segments, :func:`~torchgrade.color.aces_to_acescc`); the decode's
+    low segment ``(v - 2^-16)·2`` is below ``v`` exactly there, so it is ``min(v, (v - 2^-16)·2)``.
+
+    Examples:
+        >>> x = torch.tensor([0.0, 1e-5, 0.18, 1.0, 1e5])
+        >>> bool(torch.allclose(_acescc_contrast_in_place(x, torch.tensor(1.3)), acescc_to_aces((aces_to_acescc(x) - ACESCC_MIDGRAY) * 1.3 + ACESCC_MIDGRAY), rtol=1e-5))
+        True
+    """
+    x = image.clamp(0.0, HALF_MAX)
+    stops = torch.maximum(x, (x * 0.5).add_(2.0**-16), out=x).log2_()
+    value = stops.sub_(_ACESCC_PIVOT_STOPS).mul_(k).add_(_ACESCC_PIVOT_STOPS).clamp_max_(math.log2(HALF_MAX)).exp2_()
+    return torch.minimum(value, (value - 2.0**-16).mul_(2.0), out=value)
 
 
 def contrast(image: torch.Tensor, amount: Param, aces: bool = False, log_space: str = "acescc") -> torch.Tensor:
@@ -206,9 +234,41 @@ def soft_light(base: torch.Tensor, blend: torch.Tensor) -> torch.Tensor:
         >>> soft_light(torch.tensor([0.3]), torch.tensor([0.5])).tolist()  # a 0.5 blend changes nothing
         [0.30000001192092896]
     """
-    darken = 2.0 * base * blend + base * base * (1.0 - 2.0 * blend)
-    lighten = safe_sqrt(base) * (2.0 * blend - 1.0) + 2.0 * base * (1.0 - blend)
-    return torch.where(blend >= 0.5, lighten, darken)
+    return torch.where(blend >= 0.5, _lighten(base, blend), _darken(base, blend))
+
+
+def _darken(base: torch.Tensor, blend: torch.Tensor) -> torch.Tensor:
+    """Soft light below a blend of 0.5: ``2ab + a²(1 - 2b)``."""
+    return 2.0 * base * blend + base * base * (1.0 - 2.0 * blend)
+
+
+def _lighten(base: torch.Tensor, blend: torch.Tensor) -> torch.Tensor:
+    """Soft light from a blend of 0.5 up: ``sqrt(a)(2b - 1) + 2a(1 - b)``."""
+    return safe_sqrt(base) * (2.0 * blend - 1.0) + 2.0 * base * (1.0 - blend)
+
+
+def _soft_light_by_channel(gamma: torch.Tensor, weights: tuple, offsets: tuple) -> torch.Tensor:
+    """Soft-light blends of ``gamma`` with tints ``0.5 + offset · weight`` given by constant per-channel ``offsets``, in place.
+
+    With ``weight`` in [0, 1] a channel's blend stays on the side of 0.5 its offset's sign gives, so only
+    that branch of :func:`soft_light` is computed; an offset of 0 blends with 0.5 exactly, where both
+    branches return the base, and is skipped.
+
+    Examples:
+        >>> base, t = torch.rand(1, 3, 2, 2), torch.rand(1, 1, 2, 2)
+        >>> tint = 0.5 + torch.tensor([-0.2, 0.0, 0.3]).reshape(3, 1, 1) * t
+        >>> torch.equal(_soft_light_by_channel(base.clone(), (t,), ((-0.2, 0.0, 0.3),)), soft_light(base, tint))
+        True
+    """
+    for c in range(gamma.shape[-3]):
+        channel = gamma[..., c : c + 1, :, :]
+        blended = channel
+        for weight, offset in zip(weights, (per_channel[c] for per_channel in offsets)):
+            if offset != 0.0:
+                blended = (_lighten if offset > 0.0 else _darken)(blended, 0.5 + weight * offset)
+        if blended is not channel:
+            channel.copy_(blended)
+    return gamma
 
 
 def split_toning(
@@ -226,8 +286,11 @@ def split_toning(
     """
     gamma = safe_pow(image, 1.0 / 2.2)
     t = (luminance(gamma.clamp(0.0, 1.0), luminance_weights) + scalar_param(balance, image, "split_balance") * 0.01).clamp(0.0, 1.0)
-    shadow_tint = 0.5 + (color_param(shadows, image, "split_shadows") - 0.5) * (1.0 - t)
-    highlight_tint = 0.5 + (color_param(highlights, image, "split_highlights") - 0.5) * t
+    offsets = (color_param(shadows, image, "split_shadows") - 0.5, color_param(highlights, image, "split_highlights") - 0.5)
+    if untracked(gamma, t, *offsets) and all(o.shape == (3, 1, 1) and o.device.type == "cpu" for o in offsets):
+        return safe_pow(_soft_light_by_channel(gamma, (1.0 - t, t), tuple(o.flatten().tolist() for o in offsets)), 2.2)
+    shadow_tint = 0.5 + offsets[0] * (1.0 - t)
+    highlight_tint = 0.5 + offsets[1] * t
     return safe_pow(soft_light(soft_light(gamma, shadow_tint), highlight_tint), 2.2)
 
 
@@ -411,6 +474,22 @@ def saturation(image: torch.Tensor, amount: Param, luminance_weights="rec709", f
     lum = luminance(image, luminance_weights)
     scale = 1.0 + scalar_param(amount, image, "saturation") * 0.01
     return lum + (image - lum) * (scale if factor is None else scale * factor)
+
+
+def saturation_matrix(image: torch.Tensor, amount: Param, luminance_weights="rec709") -> torch.Tensor:
+    """:func:`saturation` without curves as one matrix: ``s I + (1 - s) 1 wᵀ``, ``s = 1 + amount/100`` and ``w`` the
+    luminance weights; ``(3, 3)``, or ``(B, 3, 3)`` for a per-sample amount.
+
+    Examples:
+        >>> image = torch.rand(1, 3, 2, 2)
+        >>> bool(torch.allclose(apply_matrix(saturation_matrix(image, 30.0), image), saturation(image, 30.0), atol=1e-6))
+        True
+    """
+    scale = 1.0 + scalar_param(amount, image, "saturation") * 0.01
+    scale = scale.reshape(scale.shape[:1] + (1, 1)) if scale.dim() else scale
+    weights = {"rec709": REC709_LUMINANCE, "ap1": AP1_LUMINANCE}[luminance_weights]
+    weights = torch.tensor(weights, dtype=image.dtype, device=image.device).expand(3, 3)
+    return scale * torch.eye(3, dtype=image.dtype, device=image.device) + (1.0 - scale) * weights
 
 
 def fast_tonemap(image: torch.Tensor) -> torch.Tensor:

@@ -37,7 +37,7 @@ from typing import Any, ClassVar
 import torch
 from torch import nn
 
-from .core import check_choice, check_range, full_precision, is_constant, is_tracing
+from .core import check_choice, check_range, full_precision, is_constant, is_tracing, untracked
 
 __all__ = ["Control", "Stage", "plain", "controls_signature", "STRIP_PIXELS", "in_strips"]
 
@@ -64,8 +64,7 @@ def in_strips(transform, image: torch.Tensor, controls=()) -> torch.Tensor:
         >>> torch.equal(in_strips(torch.sqrt, image), torch.sqrt(image))
         True
     """
-    recorded = torch.is_grad_enabled() and any(isinstance(t, torch.Tensor) and t.requires_grad for t in (image, *controls))
-    if image.dim() < 3 or image.numel() <= 3 * STRIP_PIXELS or recorded or is_tracing():
+    if image.dim() < 3 or image.numel() <= 3 * STRIP_PIXELS or not untracked(image, *controls):
         return transform(image)
     rows = max(1, STRIP_PIXELS * image.shape[-2] * image.shape[-3] // image.numel())
     output = None

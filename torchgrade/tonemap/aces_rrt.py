@@ -14,7 +14,7 @@ import math
 import torch
 
 from ..color import AP0_CHROMATICITIES, MATRICES, matrix, primaries_to_rec709_matrix, safe_sqrt
-from ..core import apply_matrix
+from ..core import apply_matrix, untracked
 
 __all__ = [
     "RRT_SAT_FACTOR",
@@ -96,6 +96,9 @@ def _sigmoid_shaper(x: torch.Tensor) -> torch.Tensor:
 
 def _glow(yc: torch.Tensor, gain: torch.Tensor, mid: float) -> torch.Tensor:
     """ACES ``glow_fwd``: full gain below 2/3·mid, none above 2·mid, ``gain (mid / yc - 1/2)`` between."""
+    if untracked(yc, gain):
+        # yc clamped to the ramp gives gain (to float rounding) below it and exactly 0 above it, without selects.
+        return (mid / yc.clamp(2.0 / 3.0 * mid, 2.0 * mid)).sub_(0.5).mul_(gain)
     between = gain * (mid / yc.clamp_min(2.0 / 3.0 * mid) - 0.5)
     return torch.where(yc <= 2.0 / 3.0 * mid, gain, torch.where(yc >= 2.0 * mid, 0.0, between))
 
@@ -147,11 +150,25 @@ def rrt_glow_and_red_modifier(aces: torch.Tensor, hue_weight, tiny: float = UNIT
     s = _sigmoid_shaper((saturation - 0.4) / 0.2)
     aces = aces * (1.0 + _glow(_rgb_yc(aces), _RRT_GLOW_GAIN * s, _RRT_GLOW_MID))
 
-    centered = _rgb_hue_degrees(aces) - _RRT_RED_HUE
-    centered = torch.where(centered < -180.0, centered + 360.0, torch.where(centered > 180.0, centered - 360.0, centered))
     red, green_blue = aces.split((1, 2), dim=-3)
-    red = red + hue_weight(centered) * saturation * (_RRT_RED_PIVOT - red) * (1.0 - _RRT_RED_SCALE)
-    return torch.cat((red, green_blue), dim=-3)
+    change = hue_weight(_red_centered_hue(aces)) * saturation * (_RRT_RED_PIVOT - red) * (1.0 - _RRT_RED_SCALE)
+    if untracked(aces, change):
+        red.add_(change)  # in place: aces is the glow's product, made above
+        return aces
+    return torch.cat((red + change, green_blue), dim=-3)
+
+
+def _red_centered_hue(rgb: torch.Tensor) -> torch.Tensor:
+    """The hue in degrees relative to red's (``_RRT_RED_HUE``, 0°), in (-180, 180]: ``hue - 0`` wrapped.
+
+    Eager, that is ``atan2`` itself, which also gives 0 for neutrals: the hue's shift into [0, 360) and
+    back is skipped (it moved hues below 0° by float rounding, 3e-5° at most).
+    """
+    if untracked(rgb):
+        r, g, b = rgb.split(1, dim=-3)
+        return torch.atan2((g - b).mul_(3.0**0.5), (2.0 * r).sub_(g).sub_(b)).mul_(180.0 / math.pi)
+    centered = _rgb_hue_degrees(rgb) - _RRT_RED_HUE
+    return torch.where(centered < -180.0, centered + 360.0, torch.where(centered > 180.0, centered - 360.0, centered))
 
 
 def _ap1_y(rgb: torch.Tensor) -> torch.Tensor:

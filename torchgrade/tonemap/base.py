@@ -8,11 +8,12 @@ LUT that clips after its lookup does).
 from __future__ import annotations
 
 import inspect
+import numbers
 from typing import Callable, NamedTuple
 
 import torch
 
-from ..core import apply_matrix
+from ..core import apply_matrix, untracked
 from ..stage import Control
 
 __all__ = ["TONEMAP_INPUT_LIMIT", "WHITE_POINT_RANGE", "ToneMapper", "limited", "display", "apply_rows", "no_tonemap"]
@@ -60,6 +61,8 @@ def limited(image: torch.Tensor, limit=TONEMAP_INPUT_LIMIT) -> torch.Tensor:
         >>> limited(torch.tensor([-1.0, 0.5, 100.0])).tolist()
         [0.0, 0.5, 60.0]
     """
+    if isinstance(limit, numbers.Real) and untracked(image):
+        return image.clamp(0.0, limit)
     return torch.minimum(image.clamp_min(0.0), torch.as_tensor(limit, dtype=image.dtype, device=image.device))
 
 
