@@ -314,6 +314,8 @@ class LUT3D(Stage):
         ({'shaper': 'logc'}, False)
     """
 
+    per_pixel = True
+
     controls = {
         "shaper": Control("linear", tuple(SHAPERS)),
         "output_range": Control(None),
@@ -438,6 +440,8 @@ class LUTLookup(nn.Module):
         >>> lookup(torch.full((1, 3, 1, 1), 0.5)).flatten().tolist()
         [0.5, 0.5, 0.5]
     """
+
+    per_pixel = True
 
     def __init__(self, lut: LUT3D, interpolation: str, backend: str):
         super().__init__()

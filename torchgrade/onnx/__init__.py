@@ -71,7 +71,9 @@ from .graph import (GRADE_INPUTS, OUTPUTS, ExportGraph, GradeWithInputs, default
                     grade_feeds, grade_of, has_state, input_names, output_names, encode_output)
 from .look import export_look, graph_inputs
 from .symbolics import SYMBOLICS, symbolics
-from .verify import DEVICES, RUNTIMES, Inputs, OpenVINOSession, feeds, latency_ms, metadata, node_count, reference, session, verify
+from .strips import scan_strips
+from .verify import (DEVICES, RUNTIMES, Inputs, OpenVINOSession, feeds, graph_nodes, latency_ms, metadata, node_count, reference, session,
+                     verify)
 from ..lut import LUT_BACKENDS, LUTLookup, strip_table, trilinear_strip
 
 __all__ = [
@@ -79,6 +81,6 @@ __all__ = [
     "GRADE_INPUTS", "OUTPUTS", "encode_output", "ExportGraph", "GradeWithInputs", "default_example", "example_inputs", "export_graph", "frame_of",
     "grade_feeds", "grade_of", "has_state", "input_names", "output_names",
     "export_look", "graph_inputs", "SYMBOLICS", "symbolics",
-    "DEVICES", "RUNTIMES", "Inputs", "OpenVINOSession", "feeds", "metadata", "latency_ms", "node_count", "reference", "session", "verify",
+    "scan_strips", "DEVICES", "RUNTIMES", "Inputs", "OpenVINOSession", "feeds", "graph_nodes", "metadata", "latency_ms", "node_count", "reference", "session", "verify",
     "LUT_BACKENDS", "LUTLookup", "strip_table", "trilinear_strip",
 ]
