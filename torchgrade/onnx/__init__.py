@@ -32,6 +32,11 @@ of up to :data:`~torchgrade.bloom.MAX_FRAME_SIDE` pixels a side can have and mas
 levels the frame at hand does not have (``bloom(..., fixed_depth=...)``), so one graph matches
 PyTorch at every resolution up to that size.
 
+**Strips.** The stages that end a look and are per pixel (grade, primary grade, tone mapping, a LUT, and the
+output encoding) run in a ``Scan`` over strips of rows of about :data:`~torchgrade.stage.STRIP_PIXELS` pixels, as
+eager PyTorch runs them (:mod:`~torchgrade.onnx.strips`): each node's strip stays in cache instead of a pass over
+the frame in memory. ``export(..., strips=False)`` keeps them on the whole frame.
+
 **Exposure.** A model with an :class:`~torchgrade.AutoExposure` stage is stateless: it takes
 ``"image"``, ``"adapted"`` ``(batch,)`` (the previous frame's adapted luminance; ``<= 0`` starts
 a sequence) and ``"dt"`` (seconds, a scalar), and returns ``"output"`` and ``"adapted"``

@@ -124,7 +124,7 @@ class ExportGraph(nn.Module):
         io_dtype = image.dtype
         image, *state = self._graded(image.float(), *extra)
         encoded = encode_output(image, self.output)
-        if encoded.is_floating_point():
+        if encoded.is_floating_point() and encoded.dtype != io_dtype:  # a Cast to its own type is a copy of the frame
             encoded = encoded.to(io_dtype)
         return (encoded, *state) if state else encoded
 
