@@ -1,6 +1,7 @@
-"""Exported looks on onnxruntime and OpenVINO vs PyTorch eager at 1920x1080, node counts before and after
-constant folding, the per-pixel stage (grade + tone map) eager vs ``torch.compile``, and the whole look
-under ``torch.compile(fullgraph=True)``.
+"""Exported looks on onnxruntime and OpenVINO vs PyTorch eager at 1920x1080 (the whole look also with its
+per-pixel stages on the whole frame, ``strips=False``), node counts before and after constant folding, the
+per-pixel stage (grade + tone map) eager vs ``torch.compile``, and the whole look under
+``torch.compile(fullgraph=True)``.
 
     .venv/bin/python benchmarks/bench_onnx.py [--device cuda]
 
@@ -176,6 +177,7 @@ def main(argv=None) -> int:
         for stage in config:
             rows[f"stage: {stage}"] = measure(stage, tg.PostFX.from_config({stage: config[stage]}).eval(), image, Path(folder), device)
         rows["full look"] = measure("full", look, image, Path(folder), device)
+        rows["full look, whole-frame graph (strips=False)"] = measure("full_whole", look, image, Path(folder), device, strips=False)
         baked = look.to_lut(33)
         for interpolation, backend in (("tetrahedral", "gather"), ("trilinear", "strip")):
             baked.interpolation = interpolation

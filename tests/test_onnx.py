@@ -9,7 +9,7 @@ import pytest
 import torch
 
 import torchgrade as tg
-from torchgrade.onnx import export, grade_feeds, node_count, session, verify
+from torchgrade.onnx import export, grade_feeds, graph_nodes, node_count, session, verify
 
 from reference.onnx import display_error, hdr, SHAPES, STEP_TOLERANCE, TOLERANCE
 
@@ -84,7 +84,7 @@ def test_lut_matches_in_both_interpolations_and_encodings(exported, interpolatio
     path = exported(f"lut_{interpolation}_{backend}_{encoding}", module, lut_backend=backend)
     model = onnx.load(str(path))
     assert model.opset_import[0].version == opset
-    ops = collections.Counter(node.op_type for node in model.graph.node)
+    ops = collections.Counter(node.op_type for node in graph_nodes(model.graph))
     uses_grid = interpolation == "trilinear" and backend != "gather"
     assert (ops["GridSample"] > 0) == uses_grid and (ops["Gather"] > 0 or uses_grid)
     for shape in SHAPES:
@@ -185,5 +185,5 @@ def test_nan_to_num_exports_without_float64_and_matches_pytorch(tmp_path):
     expected = torch.tensor([1.0, 65509.0, -65511.0, 2.0, 65504.0 + 7e4, -65504.0 - 3e38])
     assert np.array_equal(output[0, 0, 0], expected.numpy())
     assert np.array_equal(output, _NonFinite()(image).numpy())
-    casts = [node for node in onnx.load(str(path)).graph.node if node.op_type == "Cast"]
+    casts = [node for node in graph_nodes(onnx.load(str(path)).graph) if node.op_type == "Cast"]
     assert all(attribute.i != onnx.TensorProto.DOUBLE for node in casts for attribute in node.attribute)

@@ -239,6 +239,8 @@ class ColorGrade(Stage):
         True
     """
 
+    per_pixel = True
+
     # Each control, its identity value and its allowed range, in Unity's order; then the curves.
     controls = {
         "aces": Control(False),

@@ -220,6 +220,8 @@ class PrimaryGrade(Stage):
         ValueError: gamma is not a control of the linear style; it has offset, exposure, contrast, saturation, pivot
     """
 
+    per_pixel = True
+
     # Each control, its identity (or default) and its allowed range; STYLE_CONTROLS says which style has it.
     controls = {
         "style": Control("linear", STYLES),

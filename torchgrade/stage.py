@@ -202,6 +202,10 @@ class Stage(nn.Module):
     display_referred: ClassVar[bool] = False
     """True for stages whose output is display-referred (tone mappers): a LUT baked through one clamps to [0, 1]."""
 
+    per_pixel: ClassVar[bool] = False
+    """True for stages whose every output pixel depends on its input pixel alone (grades, tone mappers, LUTs):
+    an ONNX export runs them on strips of rows (:mod:`torchgrade.onnx.strips`)."""
+
     always_in_config: ClassVar[tuple] = ()
     """Controls written by :meth:`to_config` even at their defaults (a stage's defining settings)."""
 

@@ -26,6 +26,11 @@ def safe_pow(x: torch.Tensor, exponent) -> torch.Tensor:
         >>> safe_pow(torch.tensor([-1.0, 0.0, 4.0]), 0.5).tolist()
         [0.0, 0.0, 2.0]
     """
+    if torch.onnx.is_in_onnx_export() and isinstance(exponent, (int, float)) and exponent > 0:
+        # Exported without the gradient guard's two Where nodes, and as exp(e log x) (0 at x = 0, to a few ulps
+        # of the power): on onnxruntime's CPU a Where ran 4 times as long as a Mul, a Pow 6 times Log, Mul and Exp.
+        x = x.clamp_min(0.0)
+        return x.sqrt() if exponent == 0.5 else torch.exp(torch.log(x) * exponent)
     if isinstance(exponent, numbers.Real) and exponent > 0 and x.is_floating_point() and untracked(x):
         # Unguarded, the same values in two cheap passes and one power instead of four passes.
         return x.clamp_min(0.0).nan_to_num_(nan=0.0, posinf=math.inf).pow_(exponent)

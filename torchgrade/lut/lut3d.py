@@ -292,6 +292,8 @@ class LUT3D(Stage):
         ({'shaper': 'logc'}, False)
     """
 
+    per_pixel = True
+
     controls = {
         "shaper": Control("linear", tuple(SHAPERS)),
         "output_range": Control(None),
@@ -416,6 +418,8 @@ class LUTLookup(nn.Module):
         >>> lookup(torch.full((1, 3, 1, 1), 0.5)).flatten().tolist()
         [0.5, 0.5, 0.5]
     """
+
+    per_pixel = True
 
     def __init__(self, lut: LUT3D, interpolation: str, backend: str):
         super().__init__()

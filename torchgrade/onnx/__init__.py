@@ -32,6 +32,11 @@ of up to :data:`~torchgrade.bloom.MAX_FRAME_SIDE` pixels a side can have and mas
 levels the frame at hand does not have (``bloom(..., fixed_depth=...)``), so one graph matches
 PyTorch at every resolution up to that size.
 
+**Strips.** The stages that end a look and are per pixel (grade, primary grade, tone mapping, a LUT, and the
+output encoding) run in a ``Scan`` over strips of rows of about :data:`~torchgrade.stage.STRIP_PIXELS` pixels, as
+eager PyTorch runs them (:mod:`~torchgrade.onnx.strips`): each node's strip stays in cache instead of a pass over
+the frame in memory. ``export(..., strips=False)`` keeps them on the whole frame.
+
 **Exposure.** A model with an :class:`~torchgrade.AutoExposure` stage is stateless: it takes
 ``"image"``, ``"adapted"`` ``(batch,)`` (the previous frame's adapted luminance; ``<= 0`` starts
 a sequence) and ``"dt"`` (seconds, a scalar), and returns ``"output"`` and ``"adapted"``
@@ -71,7 +76,9 @@ from .graph import (GRADE_INPUTS, OUTPUTS, ExportGraph, GradeWithInputs, default
                     grade_feeds, grade_of, has_state, input_names, output_names, encode_output)
 from .look import export_look, graph_inputs
 from .symbolics import SYMBOLICS, symbolics
-from .verify import DEVICES, RUNTIMES, Inputs, OpenVINOSession, feeds, latency_ms, metadata, node_count, reference, session, verify
+from .strips import scan_strips
+from .verify import (DEVICES, RUNTIMES, Inputs, OpenVINOSession, feeds, graph_nodes, latency_ms, metadata, node_count, reference, session,
+                     verify)
 from ..lut import LUT_BACKENDS, LUTLookup, strip_table, trilinear_strip
 
 __all__ = [
@@ -79,6 +86,6 @@ __all__ = [
     "GRADE_INPUTS", "OUTPUTS", "encode_output", "ExportGraph", "GradeWithInputs", "default_example", "example_inputs", "export_graph", "frame_of",
     "grade_feeds", "grade_of", "has_state", "input_names", "output_names",
     "export_look", "graph_inputs", "SYMBOLICS", "symbolics",
-    "DEVICES", "RUNTIMES", "Inputs", "OpenVINOSession", "feeds", "metadata", "latency_ms", "node_count", "reference", "session", "verify",
+    "scan_strips", "DEVICES", "RUNTIMES", "Inputs", "OpenVINOSession", "feeds", "graph_nodes", "metadata", "latency_ms", "node_count", "reference", "session", "verify",
     "LUT_BACKENDS", "LUTLookup", "strip_table", "trilinear_strip",
 ]

@@ -22,6 +22,7 @@ from ..core import check_on_cpu
 from ..lut import BACKENDS
 from .describe import describe
 from .graph import GRADE_INPUTS, default_example, example_inputs, export_graph, input_names, output_names
+from .strips import scan_strips
 from .symbolics import symbolics
 
 __all__ = ["DEFAULT_OPSET", "VOLUME_OPSET", "IO_DTYPES", "fold_constants", "export"]
@@ -63,7 +64,7 @@ def fold_constants(path) -> None:
 
 def export(module: nn.Module, path, *, example: Optional[torch.Tensor] = None, opset: Optional[int] = None,
            lut_backend: str = "strip", grade_inputs: bool = False, output: str = "linear",
-           io_dtype: torch.dtype = torch.float32, fold: bool = True) -> Path:
+           io_dtype: torch.dtype = torch.float32, fold: bool = True, strips: bool = True) -> Path:
     """Export a torchgrade module or :class:`~torchgrade.PostFX` look to ``path``; returns the path.
 
     Args:
@@ -80,6 +81,8 @@ def export(module: nn.Module, path, *, example: Optional[torch.Tensor] = None, o
         output: the output encoding, one of :data:`~torchgrade.onnx.OUTPUTS` (``"linear"``, ``"srgb"``, ``"srgb8"``).
         io_dtype: the image input's and float output's dtype (:data:`IO_DTYPES`).
         fold: fold constants (:func:`fold_constants`); ``False`` keeps the exporter's graph as traced.
+        strips: run the stages that end the look and are per pixel (grade, tone mapping, LUT, output encoding)
+            on strips of rows in a ``Scan`` (:mod:`~torchgrade.onnx.strips`); ``False`` runs them on the whole frame.
 
     Examples:
         >>> import torchgrade as tg
@@ -95,7 +98,7 @@ def export(module: nn.Module, path, *, example: Optional[torch.Tensor] = None, o
         raise ValueError(f"lut_backend={lut_backend!r} needs opset >= {minimum}, got {opset}")
     if io_dtype not in IO_DTYPES:
         raise ValueError(f"io_dtype must be one of {IO_DTYPES}, got {io_dtype}")
-    graph = export_graph(module, lut_backend, grade_inputs, output)
+    graph = export_graph(module, lut_backend, grade_inputs, output, strips)
     example = default_example(graph) if example is None else example
     inputs = example_inputs(graph, module, example.to(io_dtype))
     names = input_names(graph)
@@ -106,6 +109,7 @@ def export(module: nn.Module, path, *, example: Optional[torch.Tensor] = None, o
             graph, inputs, str(path), dynamo=False, opset_version=opset,
             input_names=names, output_names=output_names(graph), dynamic_axes=_dynamic_axes(names),
         )
+    onnx_lib.save(scan_strips(onnx_lib.load(str(path))), str(path))
     if fold:
         fold_constants(path)
     onnx_lib.save(describe(onnx_lib.load(str(path)), module, output, io_dtype), str(path))

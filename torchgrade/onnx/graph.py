@@ -25,8 +25,9 @@ from torch import nn
 from ..color.transfer import linear_to_srgb
 from ..grade import ColorGrade, color_grade
 from ..lut import BACKENDS
+from .strips import mark
 
-__all__ = ["GRADE_INPUTS", "OUTPUTS", "encode_output", "GradeWithInputs", "ExportGraph", "export_graph", "grade_feeds", "grade_of", "frame_of", "has_state",
+__all__ = ["GRADE_INPUTS", "OUTPUTS", "encode_output", "GradeWithInputs", "ExportGraph", "export_graph", "grade_feeds", "grade_of", "frame_of", "has_state", "is_per_pixel",
            "input_names", "output_names", "example_inputs", "default_example"]
 
 GRADE_INPUTS = tuple(name for name, control in ColorGrade.controls.items() if control.kind == "number")
@@ -84,6 +85,9 @@ class GradeWithInputs(nn.Module):
         torch.Size([1, 3, 2, 2])
     """
 
+    per_pixel = True
+    """Each output pixel depends on its input pixel alone (see :attr:`torchgrade.stage.Stage.per_pixel`)."""
+
     def __init__(self, aces: bool, curves: Optional[dict] = None, log_space: str = "acescc"):
         super().__init__()
         self.aces = aces
@@ -108,17 +112,19 @@ class ExportGraph(nn.Module):
         torch.uint8
     """
 
-    def __init__(self, stages: Sequence[nn.Module], exposure: Optional[nn.Module] = None, output: str = "linear"):
+    def __init__(self, stages: Sequence[nn.Module], exposure: Optional[nn.Module] = None, output: str = "linear",
+                 strips: bool = True):
         super().__init__()
         self.stages = nn.ModuleList(stages)
         self.exposure = exposure
         self.output = output
+        self.strips = strips
 
     def forward(self, image: torch.Tensor, *extra: torch.Tensor):
         io_dtype = image.dtype
         image, *state = self._graded(image.float(), *extra)
         encoded = encode_output(image, self.output)
-        if encoded.is_floating_point():
+        if encoded.is_floating_point() and encoded.dtype != io_dtype:  # a Cast to its own type is a copy of the frame
             encoded = encoded.to(io_dtype)
         return (encoded, *state) if state else encoded
 
@@ -128,9 +134,33 @@ class ExportGraph(nn.Module):
             image, adapted = frame_of(self.exposure)(image, adapted, dt)
         else:
             controls = list(extra)
-        for stage in self.stages:
+        per_pixel = _per_pixel_from(self.stages) if self.strips else len(self.stages)
+        for index, stage in enumerate(self.stages):
+            image = mark(image) if index == per_pixel else image
             image = stage(image, *controls) if isinstance(stage, GradeWithInputs) else stage(image)
         return (image, adapted) if self.exposure is not None else (image,)
+
+
+def is_per_pixel(module: nn.Module) -> bool:
+    """Whether each output pixel of ``module`` depends on its input pixel alone: a stage that says so
+    (:attr:`~torchgrade.stage.Stage.per_pixel`), or an ``nn.Sequential`` of such stages and identity stages.
+
+    Examples:
+        >>> import torchgrade as tg
+        >>> is_per_pixel(nn.Sequential(tg.ColorGrade(contrast=10), tg.Bloom(intensity=0.0), tg.ToneMap())), is_per_pixel(tg.Bloom())
+        (True, False)
+    """
+    if isinstance(module, nn.Sequential):
+        return all(is_per_pixel(child) or getattr(child, "is_identity", False) for child in module)
+    return getattr(module, "per_pixel", False)
+
+
+def _per_pixel_from(stages: Sequence[nn.Module]) -> int:
+    """Index of the first of the stages that end the list and are all per pixel (``len(stages)`` where the last is not)."""
+    index = len(stages)
+    while index and is_per_pixel(stages[index - 1]):
+        index -= 1
+    return index
 
 
 def _look_stages(module: nn.Module) -> tuple:
@@ -163,7 +193,7 @@ def _export_form(stage: nn.Module, options: dict) -> nn.Module:
 
 
 def export_graph(module: nn.Module, lut_backend: str = "strip", grade_inputs: bool = False,
-                 output: str = "linear") -> ExportGraph:
+                 output: str = "linear", strips: bool = True) -> ExportGraph:
     """The export-ready form of ``module`` (see the module docstring for how each stage is asked).
 
     Examples:
@@ -184,7 +214,7 @@ def export_graph(module: nn.Module, lut_backend: str = "strip", grade_inputs: bo
     if grade_inputs and not any(isinstance(s, GradeWithInputs) for s in stages):
         raise ValueError("grade_inputs=True needs a ColorGrade stage (a look's grade, or a ColorGrade)")
     encode_output(torch.zeros(0), output)  # rejects an unknown encoding before the trace
-    return ExportGraph(stages, exposure, output).eval()
+    return ExportGraph(stages, exposure, output, strips).eval()
 
 
 def grade_of(module: nn.Module) -> Optional[ColorGrade]:

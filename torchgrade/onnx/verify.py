@@ -26,7 +26,7 @@ from torch import nn
 
 from .graph import encode_output, frame_of, grade_feeds, grade_of, has_state
 
-__all__ = ["RUNTIMES", "DEVICES", "Inputs", "OpenVINOSession", "session", "feeds", "reference", "verify", "metadata", "node_count",
+__all__ = ["RUNTIMES", "DEVICES", "Inputs", "OpenVINOSession", "session", "feeds", "reference", "verify", "metadata", "graph_nodes", "node_count",
            "latency_ms"]
 
 RUNTIMES = ("onnxruntime", "openvino")
@@ -167,14 +167,33 @@ def metadata(path) -> dict:
     return {prop.key: prop.value for prop in onnx_lib.load(str(path), load_external_data=False).metadata_props}
 
 
+def graph_nodes(graph: onnx_lib.GraphProto) -> list:
+    """Every node of an ONNX graph, those of its subgraphs (a ``Scan``'s body) included, each before its subgraphs' nodes.
+
+    Examples:
+        >>> from onnx import helper
+        >>> body = helper.make_graph([helper.make_node("Relu", ["x"], ["y"])], "body", [], [])
+        >>> graph = helper.make_graph([helper.make_node("Scan", ["a"], ["b"], body=body, num_scan_inputs=1)], "g", [], [])
+        >>> [node.op_type for node in graph_nodes(graph)]
+        ['Scan', 'Relu']
+    """
+    nodes = []
+    for node in graph.node:
+        nodes.append(node)
+        for attribute in node.attribute:
+            if attribute.type == onnx_lib.AttributeProto.GRAPH:
+                nodes += graph_nodes(attribute.g)
+    return nodes
+
+
 def node_count(path) -> int:
-    """Number of nodes in an ONNX file's main graph.
+    """Number of nodes in an ONNX file, those of subgraphs included (:func:`graph_nodes`).
 
     Examples:
         >>> callable(node_count)
         True
     """
-    return len(onnx_lib.load(str(path), load_external_data=False).graph.node)
+    return len(graph_nodes(onnx_lib.load(str(path), load_external_data=False).graph))
 
 
 def latency_ms(path, inputs: Inputs, module: Optional[nn.Module] = None, repeats: int = 5, runtime: str = "onnxruntime",

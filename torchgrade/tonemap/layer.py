@@ -41,6 +41,8 @@ class ToneMap(Stage):
         ValueError: tone mapper 'agx' takes no 'slope'; it takes no parameters
     """
 
+    per_pixel = True
+
     controls = {"mode": Control("neutral", TONEMAP_MODES), "clip": Control(True)}
     """The controls of every mode; :meth:`control_table` adds the mode's curve parameters."""
 

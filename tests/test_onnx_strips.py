@@ -1,0 +1,127 @@
+"""Export forms for speed: the per-pixel stages in a ``Scan`` over strips of rows, on onnxruntime and OpenVINO at
+shapes whose heights are not a whole number of strips, and powers without ``Where`` guards or ``Pow`` nodes."""
+
+import collections
+import json
+from pathlib import Path
+
+import numpy as np
+import onnx
+import pytest
+import torch
+from onnx import TensorProto, helper
+
+import torchgrade as tg
+from torchgrade.core import bounded_pow
+from torchgrade.color.transfer import safe_pow
+from torchgrade.onnx import export, graph_nodes, scan_strips, session, verify
+from torchgrade.onnx.strips import DOMAIN
+from torchgrade.stage import STRIP_PIXELS
+
+from reference.onnx import TOLERANCE
+
+CINEMATIC = json.loads((Path(__file__).resolve().parents[1] / "export" / "looks" / "cinematic.json").read_text())
+SHAPES = [(1, 3, 17, 23), (1, 3, 333, 517), (2, 3, 130, 1100)]
+"""One strip; two strips of 167 rows over 333 (one row of padding); three strips of 44 rows over 130."""
+
+
+def frame(shape) -> torch.Tensor:
+    """The demo scene: on the test noise, many pixels sit on the sharp corners of this look, where the whole-frame graph
+    is 1.2e-4 (onnxruntime, 333x517) and 4.7e-4 (OpenVINO, 2x130x1100) off PyTorch too."""
+    return tg.scene.demo_scene(*shape[2:]).expand(shape).contiguous()
+
+
+def ops(path) -> collections.Counter:
+    return collections.Counter(node.op_type for node in graph_nodes(onnx.load(str(path)).graph))
+
+
+def strip_heights(height: int, width: int, batch: int = 1) -> int:
+    """The strip height the graph should pick, from the formula in :mod:`torchgrade.onnx.strips`."""
+    most = min(height, max(1, STRIP_PIXELS // (batch * width)))
+    count = -(-height // most)
+    return -(-height // count)
+
+
+@pytest.mark.parametrize("shape", SHAPES)
+def test_each_strip_sees_its_own_rows(shape):
+    """A body that writes each strip's height and its first row's values: the strips tile the frame in order."""
+    node = helper.make_node
+    body = [
+        node("Strips", ["image"], ["strip"], domain=DOMAIN),
+        node("Shape", ["strip"], ["shape"]),
+        node("Gather", ["shape", "two"], ["rows"], axis=0),
+        node("Cast", ["rows"], ["rows_f"], to=TensorProto.FLOAT),
+        node("Mul", ["strip", "zero"], ["zeros"]),
+        node("Add", ["zeros", "rows_f"], ["output"]),
+    ]
+    graph = helper.make_graph(
+        body, "heights", [helper.make_tensor_value_info("image", TensorProto.FLOAT, ["n", 3, "h", "w"])],
+        [helper.make_tensor_value_info("output", TensorProto.FLOAT, ["n", 3, "h", "w"])],
+        [onnx.numpy_helper.from_array(np.array(2, np.int64), "two"), onnx.numpy_helper.from_array(np.array(0.0, np.float32), "zero")])
+    model = scan_strips(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17), helper.make_opsetid(DOMAIN, 1)]))
+    onnx.checker.check_model(model)
+    assert [n.op_type for n in model.graph.node].count("Scan") == 1
+    image = np.random.default_rng(0).random(shape, dtype=np.float32)
+    import onnxruntime
+
+    output = onnxruntime.InferenceSession(model.SerializeToString(), providers=["CPUExecutionProvider"]).run(None, {"image": image})[0]
+    assert output.shape == shape
+    assert np.all(output == strip_heights(shape[2], shape[3], shape[0]))
+
+
+@pytest.fixture(scope="module")
+def per_pixel_look(tmp_path_factory):
+    """The cinematic look's grade and tone map (per pixel, the Scan's body), exported with and without strips."""
+    look = tg.PostFX.from_config({"grade": CINEMATIC["grade"], "tonemap": CINEMATIC["tonemap"]}).eval()
+    folder = tmp_path_factory.mktemp("strips")
+    return look, export(look, folder / "strips.onnx"), export(look, folder / "whole.onnx", strips=False)
+
+
+def test_per_pixel_stages_run_in_a_scan_and_match_pytorch_on_both_runtimes(per_pixel_look):
+    look, path, whole = per_pixel_look
+    assert ops(path)["Scan"] == 1 and ops(whole)["Scan"] == 0
+    main = len(onnx.load(str(path)).graph.node)
+    assert main < 30 < sum(ops(path).values()) - main  # the main graph only cuts and joins strips
+    for shape in SHAPES:
+        image = frame(shape)
+        with torch.no_grad():
+            peak = max(1.0, float(look(image).abs().max()))
+        for runtime, precision in (("onnxruntime", None), ("openvino", "f32")):
+            assert verify(look, path, image, runtime, precision) / peak <= TOLERANCE, (shape, runtime)
+
+
+def test_strips_and_whole_frame_graphs_agree(per_pixel_look):
+    _, path, whole = per_pixel_look
+    image = tg.scene.demo_scene(333, 517).numpy()
+    outputs = [session(p).run(None, {"image": image})[0] for p in (path, whole)]
+    np.testing.assert_allclose(outputs[0], outputs[1], atol=1e-6, rtol=1e-6)
+
+
+def test_full_look_with_encoded_output_runs_its_tail_in_strips(tmp_path):
+    """Exposure and bloom stay on the whole frame; grade, tone map and the 8-bit encoding run in strips."""
+    look = tg.PostFX.from_config(CINEMATIC).eval()
+    path = export(look, tmp_path / "look.onnx", output="srgb8")
+    assert ops(path)["Scan"] == 1
+    image = tg.scene.demo_scene(333, 517)
+    inputs = tg.onnx.graph_inputs(look, image)
+    for runtime, precision in (("onnxruntime", None), ("openvino", "f32")):
+        assert verify(look, path, inputs, runtime, precision) <= 1.0, runtime  # 8-bit codes: rounding only
+
+
+class _Powers(torch.nn.Module):
+    """The guarded powers, and plain powers of each exponent form the export treats apart."""
+
+    def forward(self, x):
+        return torch.cat([safe_pow(x, 1.0 / 2.2), safe_pow(x, 2.2), bounded_pow(x, 3.5), x.abs() ** 2, x ** 3,
+                          x.abs() ** 0.5, x.abs() ** 1.7, x ** 4], dim=1)
+
+
+def test_powers_export_without_where_or_pow_and_keep_their_values(tmp_path):
+    path = export(_Powers(), tmp_path / "powers.onnx", example=torch.rand(1, 3, 4, 4))
+    counts = ops(path)
+    assert counts["Where"] == 0 and counts["Pow"] == 3  # bounded_pow, ** 1.7 and ** 4 keep theirs
+    row = torch.tensor([-2.0, -0.5, 0.0, 1e-30, 0.18, 1.0, 3.0, 60.0, 1e4, 65504.0])
+    image = row.reshape(1, 1, 1, -1).expand(1, 3, 2, -1).contiguous()
+    output = session(path).run(None, {"image": image.numpy()})[0]
+    expected = _Powers()(image.double()).numpy()
+    np.testing.assert_allclose(output, expected, rtol=5e-6, atol=1e-30)  # exp(e log x): a few ulps
