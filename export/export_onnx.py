@@ -30,6 +30,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--lut-backend", choices=tg.onnx.LUT_BACKENDS, default="strip")
     parser.add_argument("--grade-inputs", action="store_true", help="grading controls as optional graph inputs")
     parser.add_argument("--output", choices=tg.onnx.OUTPUTS, default="linear", help="output encoding")
+    parser.add_argument("--whole-frame", action="store_true", help="per-pixel stages on the whole frame, not in strips")
     parser.add_argument("--exr-dir", type=Path, default=DEFAULT_EXR_DIR)
     parser.add_argument("--images", nargs="+", default=DEFAULT_IMAGES, help="EXR files (in --exr-dir) to verify on")
     return parser.parse_args(argv)
@@ -41,7 +42,7 @@ def main(argv=None) -> int:
     if args.lut:
         look = look.to_lut(args.lut, args.interpolation)
     images = {name: tg.io.read_exr(args.exr_dir / name)[:3].unsqueeze(0) for name in args.images}
-    print("\n".join(tg.onnx.export_look(look, args.out, images, args.lut_backend, args.grade_inputs, args.output)))
+    print("\n".join(tg.onnx.export_look(look, args.out, images, args.lut_backend, args.grade_inputs, args.output, not args.whole_frame)))
     return 0
 
 

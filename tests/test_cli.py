@@ -163,6 +163,20 @@ def test_export_writes_a_verified_onnx_file_and_reports_it(tmp_path, capsys):
     assert lines[2].endswith("ms (median of 5)")
 
 
+@pytest.mark.parametrize("whole_frame", [False, True])
+def test_export_runs_the_per_pixel_stages_in_strips_unless_asked_for_the_whole_frame(tmp_path, capsys, whole_frame):
+    import onnx
+
+    config = tmp_path / "look.json"
+    config.write_text('{"grade": {"contrast": 15}, "tonemap": "aces"}')
+    out = tmp_path / "look.onnx"
+    flags = ["--whole-frame"] if whole_frame else []
+    assert main(["export", "--config", str(config), "--out", str(out), "--width", "40", "--height", "24", *flags]) == 0
+    errors = dict(part.rsplit(" ", 1) for part in capsys.readouterr().out.splitlines()[1].split("PyTorch: ")[1].split(", "))
+    assert float(errors["onnxruntime"]) < 1e-4 and float(errors["openvino f32"]) < 1e-4
+    assert any(node.op_type == "Scan" for node in onnx.load(str(out)).graph.node) != whole_frame
+
+
 def test_export_of_a_baked_look_reports_the_lut_error_and_both_runtimes(tmp_path, capsys):
     config = tmp_path / "look.json"
     config.write_text('{"grade": {"contrast": 15, "saturation": 10}, "tonemap": "neutral"}')

@@ -42,7 +42,7 @@ def run_export(args: argparse.Namespace) -> str:
         images = {Path(path).name: read_rec709(path).unsqueeze(0) for path in args.scene}
     else:
         images = {"demo scene": demo_scene(args.height, args.width)}
-    return "\n".join(export_look(look, output, images, args.lut_backend, args.grade_inputs, args.output))
+    return "\n".join(export_look(look, output, images, args.lut_backend, args.grade_inputs, args.output, not args.whole_frame))
 
 
 def add_export(commands) -> None:
@@ -55,6 +55,8 @@ def add_export(commands) -> None:
     export.add_argument("--lut-backend", choices=LUT_BACKENDS, default="strip", help="the LUT's graph form (default strip, opset 17)")
     export.add_argument("--grade-inputs", action="store_true", help="grading controls as optional graph inputs")
     export.add_argument("--output", choices=OUTPUTS, default="linear", help="output encoding (default display-linear float)")
+    export.add_argument("--whole-frame", action="store_true",
+                        help="per-pixel stages on the whole frame, not in a Scan over strips of rows (faster on OpenVINO)")
     export.add_argument("--scene", nargs="+", help="EXR files to verify on (default: the built-in scene)")
     export.add_argument("--width", type=int, default=320, help="built-in scene width")
     export.add_argument("--height", type=int, default=180, help="built-in scene height")

@@ -40,17 +40,18 @@ def graph_inputs(look: PostFX, image: torch.Tensor):
 
 
 def export_look(look: PostFX, path, images: Mapping[str, torch.Tensor], lut_backend: str = "strip",
-                grade_inputs: bool = False, output: str = "linear") -> list:
+                grade_inputs: bool = False, output: str = "linear", strips: bool = True) -> list:
     """Export ``look`` to ``path`` and report it: one line with its stages, output encoding and node count,
     for a look baked by :meth:`~torchgrade.PostFX.to_lut` one line with the LUT's error report
     (:class:`~torchgrade.lut.ErrorReport`),
     one line per image of ``images`` (``{name: (1, 3, H, W)}``) with the max abs error against PyTorch on
     each runtime of :data:`~torchgrade.onnx.RUNTIMES` (OpenVINO at float32 and at its default precision;
     in 8-bit codes for ``output="srgb8"``), one line with the median latency of each runtime on the first image.
+    ``strips`` is :func:`~torchgrade.onnx.export`'s.
 
     See the module example.
     """
-    export(look, path, lut_backend=lut_backend, grade_inputs=grade_inputs, output=output)
+    export(look, path, lut_backend=lut_backend, grade_inputs=grade_inputs, output=output, strips=strips)
     lines = [f"{path}: stages {' -> '.join(look.stages())}, output {output}, {node_count(path)} nodes"]
     report = getattr(getattr(look, "lut", None), "error_report", None)
     if report is not None:
