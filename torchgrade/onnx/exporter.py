@@ -109,7 +109,8 @@ def export(module: nn.Module, path, *, example: Optional[torch.Tensor] = None, o
             graph, inputs, str(path), dynamo=False, opset_version=opset,
             input_names=names, output_names=output_names(graph), dynamic_axes=_dynamic_axes(names),
         )
-    onnx_lib.save(scan_strips(onnx_lib.load(str(path))), str(path))
+    if strips:
+        onnx_lib.save(scan_strips(onnx_lib.load(str(path))), str(path))
     if fold:
         fold_constants(path)
     onnx_lib.save(describe(onnx_lib.load(str(path)), module, output, io_dtype), str(path))

@@ -103,6 +103,13 @@ def _int64(name: str, values) -> onnx_lib.TensorProto:
     return numpy_helper.from_array(np.asarray(values, dtype=np.int64), name)
 
 
+def _ceil_div(numerator: str, denominator: str, one: str, quotient: str) -> list:
+    """Nodes computing the int64 ``quotient = ceil(numerator / denominator) = (numerator + denominator - 1) / denominator``."""
+    return [helper.make_node("Sub", [denominator, one], [quotient + "_less"]),
+            helper.make_node("Add", [numerator, quotient + "_less"], [quotient + "_up"]),
+            helper.make_node("Div", [quotient + "_up", denominator], [quotient])]
+
+
 def _strip_plumbing(frame: str, strips: str) -> tuple:
     """Nodes and constants that pad ``frame`` ``(n, c, h, w)`` with zero rows and reshape it into ``strips``
     ``(n, c, count, rows, w)``: ``rows = ceil(h / count)`` with ``count = ceil(h / min(h, max(1, STRIP_PIXELS // (n w))))``.
@@ -118,12 +125,8 @@ def _strip_plumbing(frame: str, strips: str) -> tuple:
         node("Div", [p + "pixels", p + "row_pixels"], [p + "fit"]),
         node("Max", [p + "fit", p + "one"], [p + "fit_one"]),
         node("Min", [p + "fit_one", p + "h_size"], [p + "most_rows"]),
-        node("Sub", [p + "most_rows", p + "one"], [p + "most_rows_less"]),
-        node("Add", [p + "h_size", p + "most_rows_less"], [p + "count_up"]),
-        node("Div", [p + "count_up", p + "most_rows"], [p + "count"]),
-        node("Sub", [p + "count", p + "one"], [p + "count_less"]),
-        node("Add", [p + "h_size", p + "count_less"], [p + "rows_up"]),
-        node("Div", [p + "rows_up", p + "count"], [p + "rows"]),
+        *_ceil_div(p + "h_size", p + "most_rows", p + "one", p + "count"),
+        *_ceil_div(p + "h_size", p + "count", p + "one", p + "rows"),
         node("Mul", [p + "rows", p + "count"], [p + "padded"]),
         node("Sub", [p + "padded", p + "h_size"], [p + "pad"]),
         node("Concat", [p + "no_pads", p + "pad", p + "zero"], [p + "pads"], axis=0),
