@@ -33,7 +33,6 @@ ACES2065-1 as in Unity), and no combination of stages can hand a curve the wrong
 
 from __future__ import annotations
 
-import functools
 
 import torch
 
@@ -66,7 +65,7 @@ from .grade_steps import (
     white_balance_matrix,
     yrgb_curves,
 )
-from .stage import Control, Stage, controls_signature, in_strips
+from .stage import Control, Stage, controls_signature
 
 from . import grade_steps
 
@@ -309,9 +308,7 @@ class ColorGrade(Stage):
         return {name: getattr(self, name) for name in curves if not self.is_default(name)}
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
-        params = self.params()
-        grade = functools.partial(color_grade, **params)
-        return grade(image) if self.is_identity else in_strips(grade, image, params.values())
+        return self.run_in_strips(color_grade, image)
 
 
 ColorGrade.__signature__ = controls_signature(ColorGrade.controls)

@@ -18,14 +18,13 @@ contrasts and gammas multiply); its black/white clamps (off by default) are not 
 
 from __future__ import annotations
 
-import functools
 import inspect
 
 import torch
 
 from .color import CHANNEL
 from .core import Param, bounded_pow, check_choice, check_image, color_param, is_constant, sanitize, scalar_param, to_input_dtype, working_dtype
-from .stage import Control, Stage, controls_signature, in_strips
+from .stage import Control, Stage, controls_signature
 
 __all__ = [
     "PrimaryGrade",
@@ -268,9 +267,7 @@ class PrimaryGrade(Stage):
         return all(self.is_default(name) for name in self._control_names if name not in ("style", *PIVOTS))
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
-        params = self.params()
-        grade = functools.partial(primary_grade, **params)
-        return grade(image) if self.is_identity else in_strips(grade, image, params.values())
+        return self.run_in_strips(primary_grade, image)
 
 
 PrimaryGrade.__signature__ = controls_signature(

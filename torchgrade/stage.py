@@ -29,6 +29,7 @@ Examples:
 
 from __future__ import annotations
 
+import functools
 import inspect
 import numbers
 from dataclasses import dataclass
@@ -273,6 +274,13 @@ class Stage(nn.Module):
     def params(self) -> dict:
         """The controls as stored (numbers, tensors or parameters), by name."""
         return {name: getattr(self, name) for name in self._control_names}
+
+    def run_in_strips(self, function, image: torch.Tensor) -> torch.Tensor:
+        """``function(image, **self.params())`` for a per-pixel stage, on strips of rows (:func:`in_strips`)
+        unless the stage is identity (then the function runs once on the whole frame)."""
+        params = self.params()
+        call = functools.partial(function, **params)
+        return call(image) if self.is_identity else in_strips(call, image, params.values())
 
     # ------------------------------------------------------------------ checks at run time
 

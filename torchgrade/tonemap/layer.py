@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import functools
 import inspect
 
 import torch
 
 from ..core import Param
-from ..stage import Control, Stage, controls_signature, in_strips
+from ..stage import Control, Stage, controls_signature
 from .registry import TONE_MAPPERS, TONEMAP_MODES, tone_mapper, tonemap
 
 __all__ = ["ToneMap"]
@@ -99,8 +98,7 @@ class ToneMap(Stage):
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
         self.check_learnable()
-        params = self.params()
-        return in_strips(functools.partial(tonemap, **params), image, params.values())
+        return self.run_in_strips(tonemap, image)
 
 
 def _signature() -> inspect.Signature:
