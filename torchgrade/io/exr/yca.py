@@ -126,8 +126,8 @@ def yca_to_rgb(y, ry, by, weights: torch.Tensor, out: torch.Tensor | None = None
     with 4-line strips, 1.50x with 8, 1.67x with 16, in one process). So by default a strip is 1/256
     of the height, between 4 and 32 lines; the output does not depend on it. The strips run on one
     CPU thread, as OpenEXR reconstructs its lines: strip-sized operations split over two threads
-    waited on each other whenever the cores were busy (2048x2048 at a load of 7 on 2 cores: 15 s on
-    two threads, 1.1 s on one).
+    waited on each other whenever the cores were busy (the CPU time column of
+    ``benchmarks/results/exr_memory.md``).
 
     Examples:
         >>> rgb = yca_to_rgb(torch.ones(4, 4), torch.zeros(2, 2), torch.full((2, 2), 0.5), torch.tensor((0.2126, 0.7152, 0.0722)))
