@@ -361,3 +361,17 @@ def test_a_state_that_is_not_a_bounded_luminance_gives_a_finite_frame_and_state(
         exposed, new = auto_exposure(image, torch.tensor([state]), torch.tensor(dt), operator=operator)
         assert not exposed.isnan().any() and exposed.abs().max() <= 65504.0
         assert tg.exposure.MIN_LUMINANCE <= new.item() <= tg.exposure.MAX_ADAPTED
+
+
+def test_exported_look_restarts_from_a_nan_or_infinite_state_or_step(tmp_path):
+    """The graph's inputs are unchecked: a NaN step or an infinite state meters afresh instead of a black frame."""
+    pytest.importorskip("onnxruntime")
+    stage = tg.AutoExposure(speed=1.5)
+    runner = tg.onnx.session(tg.onnx.export(stage, tmp_path / "exposure.onnx"))
+    image = torch.rand(1, 3, 24, 32) * 4
+    image[0, :, 0, 0] = torch.tensor([0.0, math.nan, math.inf])
+    fresh = runner.run(None, tg.onnx.feeds(runner, stage, (image, torch.zeros(1), torch.tensor(0.5))))
+    for state, dt in [(math.inf, 0.5), (0.3, math.nan), (math.nan, math.inf), (-math.inf, 0.5)]:
+        exposed, new = runner.run(None, tg.onnx.feeds(runner, stage, (image, torch.tensor([state]), torch.tensor(dt))))
+        assert np.isfinite(exposed).all()
+        np.testing.assert_array_equal(new, fresh[1])
