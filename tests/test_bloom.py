@@ -421,3 +421,19 @@ def test_learnable_control_moved_out_of_range_raises_at_forward():
         scatter.fill_(2.0)
     with pytest.raises(ValueError, match="scatter"):
         stage(torch.rand(1, 3, 16, 16))
+
+
+@pytest.mark.parametrize("mode", tg.bloom.BLOOM_MODES)
+def test_zero_is_identity_says_which_blends_keep_the_image_at_intensity_zero(mode):
+    composite = tg.bloom.COMPOSITES[mode]
+    image = torch.tensor([-1.0, 0.0, 0.1, 0.25, 0.7, 1.0, 3.0, 65504.0]).reshape(1, 1, 2, 4)
+    fraction = torch.full((1, 1, 1, 2), 0.5)
+    out = composite.blend(image, torch.zeros_like(image), torch.tensor(0.0), fraction)
+    assert torch.equal(out, image) == composite.zero_is_identity
+
+
+@pytest.mark.parametrize("mode", tg.bloom.BLOOM_MODES)
+@pytest.mark.parametrize("size", [(5, 7), (7, 300)])
+def test_fixed_depth_form_leaves_a_frame_too_small_for_any_level_unchanged(mode, size):
+    image = torch.rand(1, 3, *size) * 4
+    assert torch.equal(bloom(image, mode=mode, threshold=0.2, fixed_depth=6), image)

@@ -349,3 +349,29 @@ def test_onnxruntime_matches_the_functional_form_at_several_shapes(tmp_path):
         expected_exposed, expected_new = _Functional()(image, adapted, dt)
         np.testing.assert_allclose(new, expected_new.numpy(), rtol=1e-5)
         np.testing.assert_allclose(exposed, expected_exposed.numpy(), rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("state", [math.nan, math.inf, -math.inf, 1e-30, 1e30])
+@pytest.mark.parametrize("operator", ["exposure", "reinhard"])
+def test_a_state_that_is_not_a_bounded_luminance_gives_a_finite_frame_and_state(state, operator):
+    """NaN, infinite or out-of-bounds states: the frame has no NaN and the state lands in [min_luminance, max_adapted]."""
+    image = torch.rand(1, 3, 16, 16) * 4
+    image[0, :, 0, 0] = torch.tensor([0.0, math.nan, math.inf])
+    for dt in (0.0, 0.5, 65504.0):
+        exposed, new = auto_exposure(image, torch.tensor([state]), torch.tensor(dt), operator=operator)
+        assert not exposed.isnan().any() and exposed.abs().max() <= 65504.0
+        assert tg.exposure.MIN_LUMINANCE <= new.item() <= tg.exposure.MAX_ADAPTED
+
+
+def test_exported_look_restarts_from_a_nan_or_infinite_state_or_step(tmp_path):
+    """The graph's inputs are unchecked: a NaN step or an infinite state meters afresh instead of a black frame."""
+    pytest.importorskip("onnxruntime")
+    stage = tg.AutoExposure(speed=1.5)
+    runner = tg.onnx.session(tg.onnx.export(stage, tmp_path / "exposure.onnx"))
+    image = torch.rand(1, 3, 24, 32) * 4
+    image[0, :, 0, 0] = torch.tensor([0.0, math.nan, math.inf])
+    fresh = runner.run(None, tg.onnx.feeds(runner, stage, (image, torch.zeros(1), torch.tensor(0.5))))
+    for state, dt in [(math.inf, 0.5), (0.3, math.nan), (math.nan, math.inf), (-math.inf, 0.5)]:
+        exposed, new = runner.run(None, tg.onnx.feeds(runner, stage, (image, torch.tensor([state]), torch.tensor(dt))))
+        assert np.isfinite(exposed).all()
+        np.testing.assert_array_equal(new, fresh[1])

@@ -76,13 +76,18 @@ def check_image(image: torch.Tensor, name: str = "image") -> None:
 def sanitize(image: torch.Tensor) -> torch.Tensor:
     """Apply the non-finite policy: NaN -> 0, values bounded to [-65504, 65504] (so ±Inf -> ±65504).
 
-    ``clamp`` keeps NaN, so the clamped copy is then fixed in place: one new frame instead of two.
+    ``clamp`` keeps NaN, so the clamped copy is then fixed in place: one new frame instead of two. Exported,
+    ``nan_to_num`` would add a third pass (a ``Clip`` to float32's range, which the clamp already did): the
+    graph holds ``Clip``, ``IsNaN`` and one ``Where``.
 
     Examples:
         >>> sanitize(torch.tensor([float('nan'), float('inf'), -1.0])).tolist()
         [0.0, 65504.0, -1.0]
     """
-    return image.clamp(-HALF_MAX, HALF_MAX).nan_to_num_(nan=0.0)
+    bounded = image.clamp(-HALF_MAX, HALF_MAX)
+    if torch.onnx.is_in_onnx_export():
+        return torch.where(bounded.isnan(), 0.0, bounded)
+    return bounded.nan_to_num_(nan=0.0)
 
 
 def _as_tensor(value: Param, image: torch.Tensor, name: str) -> torch.Tensor:

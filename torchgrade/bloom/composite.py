@@ -51,7 +51,8 @@ class Composite:
     ``level_weight(param, levels, strength)`` returns ``k -> weight`` of level ``k`` joining the one
     above, given ``param(name)`` (a control as a broadcastable tensor) and the number of levels taking
     part (an int, or a 0-d tensor in the fixed-depth form). ``dark_is_identity``: a frame with no light
-    over the knee comes back unchanged, so eager mode skips the pyramid.
+    over the knee comes back unchanged, so eager mode skips the pyramid. ``zero_is_identity``: the blend
+    returns the image unchanged when ``strength`` (and so the glow) is 0.
 
     Examples:
         >>> COMPOSITES["mix"].lerp, COMPOSITES["additive"].level_weight is None
@@ -62,6 +63,7 @@ class Composite:
     level_weight: Optional[Callable] = None
     lerp: bool = False
     dark_is_identity: bool = False
+    zero_is_identity: bool = True
 
 
 def bevy_blend_factor(mip: int, max_mip: int, intensity, boost, curvature, high_pass) -> torch.Tensor:
@@ -179,7 +181,7 @@ COMPOSITES = {
     "energy_conserving": Composite(lerp_blend, bevy_weight, lerp=True),
     "screen": Composite(screen_blend),
     "softlight": Composite(softlight_blend),
-    "replace": Composite(replace_blend),
+    "replace": Composite(replace_blend, zero_is_identity=False),
     "mix": Composite(lerp_blend, lerp=True),
 }
 """Every composite mode by name, in the order the documentation lists them."""

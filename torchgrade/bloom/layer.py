@@ -193,7 +193,7 @@ def _bloomed(image: torch.Tensor, settings: dict, fixed_depth=None) -> torch.Ten
         out = scene
     else:
         out = _composited(scene, light, fraction, settings, param, depth, active, masked=fixed_depth is not None)
-    if fixed_depth is not None:
+    if fixed_depth is not None and not COMPOSITES[settings["mode"]].zero_is_identity:
         out = torch.where(active > 0, out, scene)  # a frame too small for any level is not bloomed
     return to_input_dtype(out.reshape(image.shape), image)
 
@@ -207,6 +207,10 @@ def _composited(scene, light, fraction, settings: dict, param, depth: int, activ
     sigma = None if is_constant(settings["anamorphic_ratio"], 0.0) else anamorphic_sigma(param("anamorphic_ratio"))
     weight = None if composite.level_weight is None else composite.level_weight(param, active, strength)
     glow = glow_pyramid(light, depth, weight, bicubic, sigma, active if masked else None)
+    if masked:
+        # A frame too small for any level is not bloomed: intensity 0 leaves it as it is in every mode whose
+        # ``zero_is_identity`` holds, for the cost of a scalar product instead of a frame-sized select.
+        strength = strength * (active > 0)
     glow = upsample(strength * glow, scene.shape[-2:], bicubic)
     if not is_constant(settings["tint"], 1.0):
         glow = glow * srgb_to_linear(param("tint"))

@@ -91,7 +91,9 @@ def active_levels(image: torch.Tensor, max_iterations: int, downscale_limit: int
 def sum_pool(light: torch.Tensor) -> torch.Tensor:
     """2x2 sums, rounding the size up: blocks at odd edges sum the pixels they have.
 
-    Four strided views added together: on CPU about 3 times faster than ``F.avg_pool2d``.
+    Four strided views added together: on CPU about 3 times faster than ``F.avg_pool2d``. Exported, the
+    opposite holds: onnxruntime's CPU runs one ``AveragePool`` of the padded frame in about a third of
+    the time of its four strided slices and three sums.
 
     Examples:
         >>> sum_pool(torch.ones(1, 1, 3, 4))
@@ -101,6 +103,9 @@ def sum_pool(light: torch.Tensor) -> torch.Tensor:
     odd_height, odd_width = light.shape[-2] % 2, light.shape[-1] % 2
     if odd_height or odd_width or is_tracing():  # F.pad copies the frame even when it adds nothing
         light = F.pad(light, (0, odd_width, 0, odd_height))
+    if torch.onnx.is_in_onnx_export():
+        # zeros padded, so 4 times the mean is the sum; OpenVINO refuses a ceil-mode pool wider than a 1-pixel side
+        return 4.0 * F.avg_pool2d(light, 2)
     return light[..., ::2, ::2] + light[..., 1::2, ::2] + light[..., ::2, 1::2] + light[..., 1::2, 1::2]
 
 

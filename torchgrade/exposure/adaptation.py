@@ -10,7 +10,7 @@ import torch
 from ..color import luminance
 from ..core import HALF_MAX, Param, check_choice, check_image, check_range, is_tracing, sanitize, scalar_param, to_input_dtype, working_dtype
 from ..stage import Control
-from .metering import METERING_MODES, meter_luminance
+from .metering import METERING_MODES, meter_sanitized
 
 __all__ = ["CONTROLS", "MIN_LUMINANCE", "MAX_ADAPTED", "OPERATORS", "adapt_luminance", "auto_exposure", "check_bounds", "checked_control",
            "exposure_operator"]
@@ -152,10 +152,11 @@ def auto_exposure(
     """One frame of eye adaptation, stateless: ``(image, adapted, dt) -> (exposed image, new adapted)``.
 
     1. ``metered = meter_luminance(image, metering)``, bounded to ``[min_luminance, max_adapted]``;
-    2. ``new = adapt_luminance(adapted, metered, dt, speed, ...)``; where ``adapted`` is ``None``
-       or ``<= 0`` (no history: a first frame) ``new = metered``, so a server starts a sequence
-       by feeding zeros;
-    3. the image is exposed with ``new`` by :func:`exposure_operator`.
+    2. ``new = adapt_luminance(adapted, metered, dt, speed, ...)``, bounded the same way; where ``adapted``
+       is ``None`` or ``<= 0`` (no history: a first frame) ``new = metered``, so a server starts a
+       sequence by feeding zeros; a NaN or infinite state or ``dt`` starts it again the same way;
+    3. the image is exposed with ``new`` by :func:`exposure_operator` and bounded to ±65504. ``new`` is
+       finite and at least ``min_luminance``, so the exposed frame has no NaN.
 
     ``adapted`` and the returned state have shape ``image.shape[:-3]`` (``(B,)`` for a batch).
     Every control is a number, a 0-d tensor or a per-sample ``(B,)`` tensor. Differentiable with
@@ -179,14 +180,22 @@ def auto_exposure(
     x = working_dtype(image)
     numbers = {name: value for name, value in controls.items() if name not in ("metering", "operator")}
     c = {name: None if value is None else scalar_param(value, x, name) for name, value in numbers.items()}
-    metered = meter_luminance(x, metering).reshape(x.shape[:-3] + (1, 1, 1))
-    metered = torch.minimum(torch.maximum(metered, c["min_luminance"]), c["max_adapted"])
+    scene = sanitize(x)
+    bounds = c["min_luminance"], c["max_adapted"]
+    metered = _bounded(meter_sanitized(scene, metering).reshape(x.shape[:-3] + (1, 1, 1)), *bounds)
     if adapted is None:
         new = metered
     else:
         previous = _previous_state(adapted, x)
         dt = scalar_param(dt, x, "dt")
         moved = adapt_luminance(previous, metered, dt, c["speed"], c["speed_to_light"], c["speed_to_dark"])
-        new = torch.where(previous > 0, moved, metered)
-    exposed = exposure_operator(sanitize(x), new, c["middle_grey"], c["max_luminance"], operator)
-    return to_input_dtype(sanitize(exposed), image), new.reshape(x.shape[:-3])
+        # a state that is not a positive number, or a step that is not finite, starts the sequence again
+        new = torch.where((previous > 0) & moved.isfinite(), _bounded(moved, *bounds), metered)
+    # new is finite and positive, so the exposed frame has no NaN: bounding it is the whole non-finite policy
+    exposed = exposure_operator(scene, new, c["middle_grey"], c["max_luminance"], operator)
+    return to_input_dtype(exposed.clamp(-HALF_MAX, HALF_MAX), image), new.reshape(x.shape[:-3])
+
+
+def _bounded(luminance: torch.Tensor, low: torch.Tensor, high: torch.Tensor) -> torch.Tensor:
+    """``min(max(luminance, low), high)``."""
+    return torch.minimum(torch.maximum(luminance, low), high)
