@@ -187,3 +187,20 @@ def test_nan_to_num_exports_without_float64_and_matches_pytorch(tmp_path):
     assert np.array_equal(output, _NonFinite()(image).numpy())
     casts = [node for node in graph_nodes(onnx.load(str(path)).graph) if node.op_type == "Cast"]
     assert all(attribute.i != onnx.TensorProto.DOUBLE for node in casts for attribute in node.attribute)
+
+
+def test_the_stage_after_exposure_scrubs_no_nan_again_and_non_finite_frames_still_match(exported):
+    """The exposed frame holds no NaN, so bloom after it bounds its input without a second NaN pass."""
+    look = tg.PostFX(exposure={"speed": 1.5}, bloom={"mode": "scattering", "intensity": 0.6})
+    path = exported("exposure_bloom", look)
+    nodes = onnx.load(str(path)).graph.node
+    isnan_outputs = {node.output[0] for node in nodes if node.op_type == "IsNaN"}
+    scrubs = [node for node in nodes if node.op_type == "Where" and node.input[0] in isnan_outputs]
+    assert len(scrubs) == 1  # the input's
+    image = hdr((1, 3, 37, 53))
+    image[0, :, 3, 4:8] = torch.tensor([float("nan"), float("inf"), -float("inf"), 1e30]).expand(3, 4)
+    inputs = (image, torch.tensor([0.4]), torch.tensor(0.2))
+    with torch.no_grad():
+        peak = float(look.frame(*inputs)[0].abs().max())
+    for runtime in ("onnxruntime", "openvino"):
+        assert verify(look, path, inputs, runtime, "f32") / peak <= TOLERANCE, runtime

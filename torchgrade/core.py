@@ -17,6 +17,7 @@ Every public module of torchgrade goes through these helpers, so the rules are s
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import math
 import numbers
 from typing import Union
@@ -31,6 +32,7 @@ __all__ = [
     "check_image",
     "check_on_cpu",
     "sanitize",
+    "nan_free",
     "scalar_param",
     "color_param",
     "matrix_param",
@@ -73,21 +75,45 @@ def check_image(image: torch.Tensor, name: str = "image") -> None:
         raise ValueError(f"{name} is empty: shape {tuple(image.shape)}")
 
 
+_NAN_FREE = contextvars.ContextVar("nan_free", default=None)
+
+
 def sanitize(image: torch.Tensor) -> torch.Tensor:
     """Apply the non-finite policy: NaN -> 0, values bounded to [-65504, 65504] (so ±Inf -> ±65504).
 
-    ``clamp`` keeps NaN, so the clamped copy is then fixed in place: one new frame instead of two. Exported,
-    ``nan_to_num`` would add a third pass (a ``Clip`` to float32's range, which the clamp already did): the
-    graph holds ``Clip``, ``IsNaN`` and one ``Where``.
+    ``clamp`` keeps NaN, so the clamped copy is then fixed in place: one new frame instead of two. Inside
+    :func:`nan_free` for this very tensor only the bound is applied.
 
     Examples:
         >>> sanitize(torch.tensor([float('nan'), float('inf'), -1.0])).tolist()
         [0.0, 65504.0, -1.0]
     """
-    bounded = image.clamp(-HALF_MAX, HALF_MAX)
+    if _NAN_FREE.get() is image:
+        return image.clamp(-HALF_MAX, HALF_MAX)
     if torch.onnx.is_in_onnx_export():
-        return torch.where(bounded.isnan(), 0.0, bounded)
-    return bounded.nan_to_num_(nan=0.0)
+        # NaN is found on the input itself: OpenVINO's Clip turns NaN into its lower bound (the clamped copy's NaN came
+        # out -65504 there); and nan_to_num would export a second Clip, to the dtype's range, a copy of the frame.
+        return torch.where(torch.isnan(image), 0.0, image.clamp(-HALF_MAX, HALF_MAX))
+    return image.clamp(-HALF_MAX, HALF_MAX).nan_to_num_(nan=0.0)
+
+
+@contextlib.contextmanager
+def nan_free(image: torch.Tensor):
+    """Within the block, :func:`sanitize` of ``image`` (this tensor object) only bounds it: the caller knows that
+    ``image`` holds no NaN (the output of a stage that cannot make one), so the NaN pass, which an exported graph
+    runs as ``IsNaN`` and ``Where`` over the frame, is skipped.
+
+    Examples:
+        >>> x = torch.tensor([1e6, -2.0])
+        >>> with nan_free(x):
+        ...     sanitize(x).tolist()
+        [65504.0, -2.0]
+    """
+    token = _NAN_FREE.set(image)
+    try:
+        yield
+    finally:
+        _NAN_FREE.reset(token)
 
 
 def _as_tensor(value: Param, image: torch.Tensor, name: str) -> torch.Tensor:

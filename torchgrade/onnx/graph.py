@@ -16,6 +16,7 @@ Examples:
 
 from __future__ import annotations
 
+import contextlib
 import inspect
 from typing import Callable, Optional, Sequence
 
@@ -23,6 +24,7 @@ import torch
 from torch import nn
 
 from ..color.transfer import linear_to_srgb
+from ..core import nan_free
 from ..grade import ColorGrade, color_grade
 from ..lut import BACKENDS
 from .strips import mark
@@ -137,7 +139,9 @@ class ExportGraph(nn.Module):
         per_pixel = _per_pixel_from(self.stages) if self.strips else len(self.stages)
         for index, stage in enumerate(self.stages):
             image = mark(image) if index == per_pixel else image
-            image = stage(image, *controls) if isinstance(stage, GradeWithInputs) else stage(image)
+            # the exposed frame holds no NaN (auto_exposure), so the stage after it skips its sanitize's NaN pass
+            with nan_free(image) if index == 0 and self.exposure is not None else contextlib.nullcontext():
+                image = stage(image, *controls) if isinstance(stage, GradeWithInputs) else stage(image)
         return (image, adapted) if self.exposure is not None else (image,)
 
 
