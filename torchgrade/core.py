@@ -82,6 +82,9 @@ def sanitize(image: torch.Tensor) -> torch.Tensor:
         >>> sanitize(torch.tensor([float('nan'), float('inf'), -1.0])).tolist()
         [0.0, 65504.0, -1.0]
     """
+    if torch.onnx.is_in_onnx_export():
+        # ``nan_to_num`` exports with a second Clip, to the dtype's range, that the first one made a copy of the frame.
+        return torch.where(torch.isnan(image), 0.0, image.clamp(-HALF_MAX, HALF_MAX))
     return image.clamp(-HALF_MAX, HALF_MAX).nan_to_num_(nan=0.0)
 
 

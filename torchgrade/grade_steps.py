@@ -170,6 +170,8 @@ def log_contrast(image: torch.Tensor, amount: Param, encoding: str = "logc") -> 
     if encoding == "acescc":
         if untracked(image, k):
             return _acescc_contrast_in_place(image, k)
+        if torch.onnx.is_in_onnx_export():
+            return _acescc_contrast_folded(image, k)
         return acescc_to_aces((aces_to_acescc(image) - ACESCC_MIDGRAY) * k + ACESCC_MIDGRAY)
     base = (LOGC_A * image + LOGC_B).clamp_min(torch.finfo(image.dtype).tiny)
     gain = torch.pow(10.0, (LOGC_D - ACESCC_MIDGRAY) * (k - 1.0) / LOGC_C)
@@ -196,6 +198,26 @@ def _acescc_contrast_in_place(image: torch.Tensor, k: torch.Tensor) -> torch.Ten
     stops = torch.maximum(x, (x * 0.5).add_(2.0**-16), out=x).log2_()
     value = stops.sub_(_ACESCC_PIVOT_STOPS).mul_(k).add_(_ACESCC_PIVOT_STOPS).clamp_max_(math.log2(HALF_MAX)).exp2_()
     return torch.minimum(value, (value - 2.0**-16).mul_(2.0), out=value)
+
+
+def _acescc_contrast_folded(image: torch.Tensor, k) -> torch.Tensor:
+    """:func:`_acescc_contrast_in_place` for export, with min and max of two branches as clamps: one ``Log``, one
+    ``Exp``, no comparison or ``Where`` (on onnxruntime's CPU a ``Where`` took 6 and a ``Log`` 11 ``Mul``s' time).
+
+    ``s = x + max(x, 2^-15)`` with ``x`` clamped to [0, 65504] is twice the encode's ``max(x, 2^-16 + x/2)``, rounded
+    alike; ``v = exp(min(k ln s + ((1 - k) p - k) ln 2, ln 65504))`` the scaled code decoded, with ``p`` the pivot
+    in stops; the decode's ``min(v, (v - 2^-16)·2)`` is ``2v - max(v, 2^-15)``, again with the same rounding.
+
+    Examples:
+        >>> x = torch.tensor([0.0, 2.0**-16, 2.0**-15, 0.18, 1e5])
+        >>> bool(torch.allclose(_acescc_contrast_folded(x, torch.tensor(1.3)), _acescc_contrast_in_place(x, torch.tensor(1.3)), rtol=1e-5))
+        True
+    """
+    x = image.clamp(0.0, HALF_MAX)
+    doubled = x + x.clamp_min(2.0**-15)
+    offset = ((1.0 - k) * _ACESCC_PIVOT_STOPS - k) * math.log(2.0)
+    value = torch.exp((torch.log(doubled) * k + offset).clamp_max(math.log(HALF_MAX)))
+    return 2.0 * value - value.clamp_min(2.0**-15)
 
 
 def contrast(image: torch.Tensor, amount: Param, aces: bool = False, log_space: str = "acescc") -> torch.Tensor:

@@ -115,6 +115,10 @@ def luminance(image: torch.Tensor, weights: str = "rec709") -> torch.Tensor:
         1.0
     """
     w = {"rec709": REC709_LUMINANCE, "ap1": AP1_LUMINANCE}[weights]
+    if torch.onnx.is_in_onnx_export():
+        # Channels times numbers, added: a ReduceSum over 3 channels took 8 Muls' time on onnxruntime's CPU, these 3.
+        r, g, b = image.split(1, dim=CHANNEL)
+        return r * w[0] + g * w[1] + b * w[2]
     w = torch.tensor(w, dtype=image.dtype, device=image.device).reshape(3, 1, 1)
     return (image * w).sum(dim=CHANNEL, keepdim=True)
 
