@@ -174,6 +174,10 @@ def log_contrast(image: torch.Tensor, amount: Param, encoding: str = "logc") -> 
             return _acescc_contrast_folded(image, k)
         return acescc_to_aces((aces_to_acescc(image) - ACESCC_MIDGRAY) * k + ACESCC_MIDGRAY)
     base = (LOGC_A * image + LOGC_B).clamp_min(torch.finfo(image.dtype).tiny)
+    if torch.onnx.is_in_onnx_export():
+        # The power as exp(k ln(base) + ln(gain)): a Pow ran 35 Muls' time on onnxruntime's CPU, a Log and an Exp 12.
+        log_gain = math.log(10.0) * (LOGC_D - ACESCC_MIDGRAY) / LOGC_C * (k - 1.0)
+        return (torch.exp(torch.log(base) * k + log_gain) - LOGC_B) / LOGC_A
     gain = torch.pow(10.0, (LOGC_D - ACESCC_MIDGRAY) * (k - 1.0) / LOGC_C)
     return (base**k * gain - LOGC_B) / LOGC_A
 
