@@ -83,7 +83,8 @@ def sanitize(image: torch.Tensor) -> torch.Tensor:
         [0.0, 65504.0, -1.0]
     """
     if torch.onnx.is_in_onnx_export():
-        # ``nan_to_num`` exports with a second Clip, to the dtype's range, that the first one made a copy of the frame.
+        # NaN is found on the input itself: OpenVINO's Clip turns NaN into its lower bound (the clamped copy's NaN came
+        # out -65504 there); and nan_to_num would export a second Clip, to the dtype's range, a copy of the frame.
         return torch.where(torch.isnan(image), 0.0, image.clamp(-HALF_MAX, HALF_MAX))
     return image.clamp(-HALF_MAX, HALF_MAX).nan_to_num_(nan=0.0)
 
