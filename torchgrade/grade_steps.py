@@ -300,7 +300,7 @@ def _soft_light_by_channel(gamma: torch.Tensor, weights: tuple, offsets: tuple) 
 def _soft_light_planes(gamma: torch.Tensor, weights: tuple, offsets: tuple) -> torch.Tensor:
     """:func:`_soft_light_by_channel` for export: each channel a plane of its own, blended by the branch its offset's
     sign picks (no comparison or ``Where``), in terms of ``s = 2 blend - 1 = 2 offset weight``: ``a + s(√a - a)``
-    (:func:`_lighten`) and ``a + s·a(1 - a)`` (:func:`_darken`), half the nodes of those.
+    (:func:`_lighten`) and ``a + s·a(1 - a)`` (:func:`_darken`), in fewer nodes than those.
 
     Examples:
         >>> base, t = torch.rand(1, 3, 2, 2), torch.rand(1, 1, 2, 2)
