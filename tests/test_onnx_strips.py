@@ -134,6 +134,8 @@ GRADES = {
                                  "split_shadows": (0.0, 1.0, 0.5), "split_highlights": (1.0, 0.0, 0.3), "split_balance": 100},
     "every control at its bottom": {"aces": True, "post_exposure": -20, "temperature": -100, "contrast": -100, "saturation": -100,
                                     "split_shadows": (1.0, 0.0, 0.7), "split_highlights": (0.0, 1.0, 0.2), "split_balance": -100},
+    "ACEScct": {"aces": True, "log_space": "acescct", "contrast": 40, "saturation": -30, "split_shadows": (0.3, 0.5, 0.6),
+                "split_highlights": (0.5, 0.7, 0.4)},
     "linear, split toning": {"contrast": -30, "saturation": -40, "split_balance": 20, "split_shadows": (0.2, 0.9, 0.5),
                              "split_highlights": (0.5, 0.1, 0.7)},
 }
@@ -195,24 +197,25 @@ def test_split_toning_inputs_blend_per_sample_without_where(tmp_path):
         assert pixel_error(runner.run(None, {"image": image.numpy(), **fed})[0], expected) <= TOLERANCE, runtime
 
 
-class _ACEScc(torch.nn.Module):
-    """ACEScc's encode, decode and contrast (one pivot-folded power) as the grade exports them."""
+class _LogEncodings(torch.nn.Module):
+    """ACEScc's encode, decode and contrast (one pivot-folded power), and ACEScct's encode and decode, as the grade exports them."""
 
     def forward(self, x):
-        from torchgrade.color import aces_to_acescc, acescc_to_aces
+        from torchgrade.color import aces_to_acescc, acescc_to_aces, acescct_to_linear, linear_to_acescct
         from torchgrade.grade_steps import log_contrast
 
-        return torch.cat([aces_to_acescc(x), acescc_to_aces(x * 1.5 - 0.5), log_contrast(x, 60.0, "acescc"), log_contrast(x, -60.0, "acescc")], dim=1)
+        return torch.cat([aces_to_acescc(x), acescc_to_aces(x * 1.5 - 0.5), log_contrast(x, 60.0, "acescc"), log_contrast(x, -60.0, "acescc"),
+                          linear_to_acescct(x), acescct_to_linear(x)], dim=1)
 
 
-def test_acescc_exports_without_where_and_keeps_its_values_at_the_cut_points(tmp_path):
-    path = export(_ACEScc(), tmp_path / "acescc.onnx", example=torch.rand(1, 3, 4, 4))
-    assert ops(path)["Where"] == 0 and ops(path)["Less"] == 0
+def test_log_encodings_export_without_where_and_keep_their_values_at_the_cut_points(tmp_path):
+    path = export(_LogEncodings(), tmp_path / "log.onnx", example=torch.rand(1, 3, 4, 4))
+    assert ops(path)["Where"] == 0 and not {"Less", "LessOrEqual"} & set(ops(path))
     codes = [(math.log2(v) + 9.72) / 17.52 for v in (2.0**-16, 2.0**-15)]
-    row = torch.tensor([-1.0, 0.0, 1e-45, 2.0**-17, 2.0**-16, 2.0**-15, 2.0**-15 * (1 + 2.0**-23), 0.18, 1.0, 65504.0, 1e6,
-                        *codes, (codes[1] + 0.5) / 1.5, (9.72 - 15.0) / 17.52])
+    row = torch.tensor([-1.0, 0.0, 1e-45, 2.0**-17, 2.0**-16, 2.0**-15, 2.0**-15 * (1 + 2.0**-23), 2.0**-7, 0.18, 1.0, 65504.0, 1e6,
+                        *codes, (codes[1] + 0.5) / 1.5, (9.72 - 15.0) / 17.52, tg.color.ACESCCT_CUT_LOG, 1.5])
     image = row.reshape(1, 1, 1, -1).expand(1, 3, 1, -1).contiguous()
     with torch.no_grad():
-        expected = _ACEScc()(image).double().numpy()
+        expected = _LogEncodings()(image).double().numpy()
     output = session(path).run(None, {"image": image.numpy()})[0]
     np.testing.assert_allclose(output, expected, rtol=2e-6, atol=1e-9)

@@ -223,6 +223,10 @@ def linear_to_acescct(image: torch.Tensor) -> torch.Tensor:
         [0.0729, 0.4136]
     """
     log = (torch.log2(image.clamp_min(ACESCCT_CUT_LINEAR)) + 9.72) / 17.52
+    if torch.onnx.is_in_onnx_export():
+        # The segments meet at the cut: each on its own side of it, added, less their common value there; no comparison
+        # or Where, each several Muls' time on onnxruntime's CPU.
+        return log + (ACESCCT_A * image.clamp_max(ACESCCT_CUT_LINEAR) + (ACESCCT_B - ACESCCT_CUT_LOG))
     return torch.where(image <= ACESCCT_CUT_LINEAR, ACESCCT_A * image + ACESCCT_B, log)
 
 
@@ -235,4 +239,6 @@ def acescct_to_linear(code: torch.Tensor) -> torch.Tensor:
     """
     top = (math.log2(_HALF_MAX) + 9.72) / 17.52
     log = torch.exp2(code.clamp(ACESCCT_CUT_LOG, top) * 17.52 - 9.72)
+    if torch.onnx.is_in_onnx_export():
+        return log + ((code.clamp_max(ACESCCT_CUT_LOG) - ACESCCT_B) / ACESCCT_A - ACESCCT_CUT_LINEAR)  # as in linear_to_acescct
     return torch.where(code <= ACESCCT_CUT_LOG, (code - ACESCCT_B) / ACESCCT_A, log)
