@@ -297,30 +297,25 @@ def _soft_light_by_channel(gamma: torch.Tensor, weights: tuple, offsets: tuple) 
     return gamma
 
 
-def _soft_light_planes(image: torch.Tensor, gamma: torch.Tensor, weights: tuple, offsets: tuple) -> torch.Tensor:
-    """Split toning's blends and decode for export: each channel a plane of its own, blended by the branch its offsets'
-    signs pick (no comparison or ``Where``), in terms of ``s = 2 blend - 1 = 2 offset weight``: ``a + s(√a - a)``
-    (:func:`_lighten`) and ``a + s·a(1 - a)`` (:func:`_darken`), in fewer nodes than those; then raised to 2.2.
-
-    A channel that neither tint moves keeps its linear value ``max(x, 0)``, what its gamma round trip gives to rounding,
-    without the plane's ``Log``: the cinematic look's grade ran 2 to 7% faster on onnxruntime (one thread).
+def _soft_light_planes(gamma: torch.Tensor, weights: tuple, offsets: tuple) -> torch.Tensor:
+    """:func:`_soft_light_by_channel` for export: each channel a plane of its own, blended by the branch its offset's
+    sign picks (no comparison or ``Where``), in terms of ``s = 2 blend - 1 = 2 offset weight``: ``a + s(√a - a)``
+    (:func:`_lighten`) and ``a + s·a(1 - a)`` (:func:`_darken`), in fewer nodes than those.
 
     Examples:
-        >>> image, t = torch.rand(1, 3, 2, 2), torch.rand(1, 1, 2, 2)
+        >>> base, t = torch.rand(1, 3, 2, 2), torch.rand(1, 1, 2, 2)
         >>> tint = 0.5 + torch.tensor([-0.2, 0.0, 0.3]).reshape(3, 1, 1) * t
-        >>> expected = safe_pow(soft_light(safe_pow(image, 1 / 2.2), tint), 2.2)
-        >>> bool(torch.allclose(_soft_light_planes(image, safe_pow(image, 1 / 2.2), (t,), ((-0.2, 0.0, 0.3),)), expected, atol=1e-6))
+        >>> bool(torch.allclose(_soft_light_planes(base, (t,), ((-0.2, 0.0, 0.3),)), soft_light(base, tint), atol=1e-6))
         True
     """
     planes = []
-    for c, (linear, plane) in enumerate(zip(image.split(1, dim=-3), gamma.split(1, dim=-3))):
-        tints = [(weight, per_channel[c]) for weight, per_channel in zip(weights, offsets) if per_channel[c] != 0.0]
-        for weight, offset in tints:
+    for c, plane in enumerate(gamma.split(1, dim=-3)):
+        for weight, offset in zip(weights, (per_channel[c] for per_channel in offsets)):
             if offset > 0.0:
                 plane = plane + 2.0 * offset * weight * (safe_sqrt(plane) - plane)
-            else:
+            elif offset < 0.0:
                 plane = plane + 2.0 * offset * weight * plane * (1.0 - plane)
-        planes.append(safe_pow(plane, 2.2) if tints else linear.clamp_min(0.0))
+        planes.append(plane)
     return torch.cat(planes, dim=-3)
 
 
@@ -362,7 +357,7 @@ def split_toning(
     if untracked(gamma, t, *offsets) and constant:
         return safe_pow(_soft_light_by_channel(gamma, (1.0 - t, t), tuple(o.flatten().tolist() for o in offsets)), 2.2)
     if torch.onnx.is_in_onnx_export() and constant:
-        return _soft_light_planes(image, gamma, (1.0 - t, t), tuple(o.flatten().tolist() for o in offsets))
+        return safe_pow(_soft_light_planes(gamma, (1.0 - t, t), tuple(o.flatten().tolist() for o in offsets)), 2.2)
     if torch.onnx.is_in_onnx_export():
         return safe_pow(_soft_light_masked(_soft_light_masked(gamma, 1.0 - t, offsets[0]), t, offsets[1]), 2.2)
     shadow_tint = 0.5 + offsets[0] * (1.0 - t)
