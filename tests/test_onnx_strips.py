@@ -2,6 +2,7 @@
 shapes whose heights are not a whole number of strips, and powers without ``Where`` guards or ``Pow`` nodes."""
 
 import collections
+import math
 import json
 from pathlib import Path
 
@@ -125,3 +126,96 @@ def test_powers_export_without_where_or_pow_and_keep_their_values(tmp_path):
     output = session(path).run(None, {"image": image.numpy()})[0]
     expected = _Powers()(image.double()).numpy()
     np.testing.assert_allclose(output, expected, rtol=5e-6, atol=1e-30)  # exp(e log x): a few ulps
+
+
+GRADES = {
+    "cinematic": CINEMATIC["grade"],
+    "every control at its top": {"aces": True, "post_exposure": 20, "temperature": 100, "contrast": 100, "saturation": 100,
+                                 "split_shadows": (0.0, 1.0, 0.5), "split_highlights": (1.0, 0.0, 0.3), "split_balance": 100},
+    "every control at its bottom": {"aces": True, "post_exposure": -20, "temperature": -100, "contrast": -100, "saturation": -100,
+                                    "split_shadows": (1.0, 0.0, 0.7), "split_highlights": (0.0, 1.0, 0.2), "split_balance": -100},
+    "ACEScct": {"aces": True, "log_space": "acescct", "contrast": 40, "saturation": -30, "split_shadows": (0.3, 0.5, 0.6),
+                "split_highlights": (0.5, 0.7, 0.4)},
+    "linear, split toning": {"contrast": -30, "saturation": -40, "split_balance": 20, "split_shadows": (0.2, 0.9, 0.5),
+                             "split_highlights": (0.5, 0.1, 0.7)},
+}
+EDGES = (0.0, -0.0, 1e-45, 1e-38, 2.0**-17, 2.0**-16, 2.0**-15, 2.0**-14, 0.18, 1.0, 60.0, 65504.0, 1e6, 3e38,
+         -1e-30, -2.0**-16, -1.0, -60.0, -65504.0, -3e38, float("inf"), -float("inf"), float("nan"))
+"""Zeros, denormals, ACEScc's cut points, half-float's top and beyond, out-of-gamut negatives, infinities and NaN."""
+
+
+def extreme_frame() -> torch.Tensor:
+    """Each edge value against every other in the three channels, over the demo scene's rows."""
+    edges = torch.tensor(EDGES)
+    rows = torch.stack([torch.stack((edges, edges.roll(k), edges.roll(2 * k))) for k in range(1, 8)], dim=1)
+    return torch.cat((rows.unsqueeze(0), tg.scene.demo_scene(9, len(EDGES))), dim=2)
+
+
+def pixel_error(output: np.ndarray, expected: torch.Tensor) -> float:
+    """The largest error in units of its pixel's largest channel (at least 1): the scale float32 colour matrices round
+    at, where an output channel cancels to near 0 from channels of 1e4."""
+    expected = expected.double().numpy()
+    assert not np.isnan(output).any() and not np.isnan(expected).any()
+    return float((np.abs(output - expected) / np.maximum(1.0, np.abs(expected).max(axis=1, keepdims=True))).max())
+
+
+@pytest.mark.parametrize("name", GRADES)
+def test_grade_exports_with_one_where_and_matches_pytorch_at_the_extremes(tmp_path, name):
+    """The grade's strip body keeps one ``Where``, the non-finite policy's: ACEScc, split toning and luminance export
+    with clamps and per-channel factors instead of comparisons, ``Where`` and ``ReduceSum``."""
+    look = tg.PostFX.from_config({"grade": GRADES[name]}).eval()
+    path = export(look, tmp_path / "grade.onnx")
+    counts = ops(path)
+    assert counts["Where"] == 1 and counts["IsNaN"] == 1 and counts["ReduceSum"] == 0, counts
+    assert not {"Less", "LessOrEqual", "Greater", "GreaterOrEqual", "Equal", "Sign", "Pow"} & set(counts), counts
+    image = extreme_frame()
+    with torch.no_grad():
+        expected = look(image)
+    for runtime, precision in (("onnxruntime", None), ("openvino", "f32")):
+        runner = session(path, runtime, precision)
+        assert pixel_error(runner.run(None, {"image": image.numpy()})[0], expected) <= TOLERANCE, runtime
+
+
+def test_split_toning_inputs_blend_per_sample_without_where(tmp_path):
+    """Graph-input tints of either sign pick their soft-light branch by a 0/1 factor from their sign; PyTorch's reference
+    picks it by ``Where`` on the blend, per pixel. Balance ±100 puts one blend of each pixel at 0.5, the branches' meeting
+    point. OpenVINO takes the inputs' defaults only (it reads them as constants): the exported look's."""
+    look = tg.PostFX(grade={"aces": True, "contrast": 20, "split_shadows": (0.0, 1.0, 0.5), "split_highlights": (1.0, 0.0, 0.3),
+                            "split_balance": 100})
+    path = export(look, tmp_path / "inputs.onnx", grade_inputs=True)
+    assert ops(path)["GreaterOrEqual"] == 0  # soft light's per-pixel test of the blend; the tints' signs are Greater
+    per_sample = tg.ColorGrade(aces=True, contrast=20, split_shadows=torch.tensor([[0.0, 1.0, 0.5], [0.8, 0.3, 0.5], [0.4, 0.5, 0.6]]),
+                               split_highlights=torch.tensor([[1.0, 0.0, 0.3], [0.2, 0.5, 0.9], [0.6, 0.5, 0.4]]),
+                               split_balance=torch.tensor([100.0, -100.0, 10.0]))
+    runs = {"onnxruntime": (extreme_frame().expand(3, -1, -1, -1).contiguous(), tg.onnx.grade_feeds(per_sample, 3)),
+            "openvino": (extreme_frame(), tg.onnx.grade_feeds(look.grade, 1))}
+    for runtime, (image, controls) in runs.items():
+        runner = session(path, runtime, "f32" if runtime == "openvino" else None)
+        fed = {name: value.numpy() for name, value in controls.items()} if runtime == "onnxruntime" else {}
+        with torch.no_grad():
+            expected = tg.onnx.GradeWithInputs(aces=True)(image, *controls.values())
+        assert pixel_error(runner.run(None, {"image": image.numpy(), **fed})[0], expected) <= TOLERANCE, runtime
+
+
+class _LogEncodings(torch.nn.Module):
+    """ACEScc's encode, decode and contrast (one pivot-folded power), and ACEScct's encode and decode, as the grade exports them."""
+
+    def forward(self, x):
+        from torchgrade.color import aces_to_acescc, acescc_to_aces, acescct_to_linear, linear_to_acescct
+        from torchgrade.grade_steps import log_contrast
+
+        return torch.cat([aces_to_acescc(x), acescc_to_aces(x * 1.5 - 0.5), log_contrast(x, 60.0, "acescc"), log_contrast(x, -60.0, "acescc"),
+                          linear_to_acescct(x), acescct_to_linear(x)], dim=1)
+
+
+def test_log_encodings_export_without_where_and_keep_their_values_at_the_cut_points(tmp_path):
+    path = export(_LogEncodings(), tmp_path / "log.onnx", example=torch.rand(1, 3, 4, 4))
+    assert ops(path)["Where"] == 0 and not {"Less", "LessOrEqual"} & set(ops(path))
+    codes = [(math.log2(v) + 9.72) / 17.52 for v in (2.0**-16, 2.0**-15)]
+    row = torch.tensor([-1.0, 0.0, 1e-45, 2.0**-17, 2.0**-16, 2.0**-15, 2.0**-15 * (1 + 2.0**-23), 2.0**-7, 0.18, 1.0, 65504.0, 1e6,
+                        *codes, (codes[1] + 0.5) / 1.5, (9.72 - 15.0) / 17.52, tg.color.ACESCCT_CUT_LOG, 1.5])
+    image = row.reshape(1, 1, 1, -1).expand(1, 3, 1, -1).contiguous()
+    with torch.no_grad():
+        expected = _LogEncodings()(image).double().numpy()
+    output = session(path).run(None, {"image": image.numpy()})[0]
+    np.testing.assert_allclose(output, expected, rtol=2e-6, atol=1e-9)

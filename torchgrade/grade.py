@@ -181,9 +181,9 @@ def color_grade(image: torch.Tensor, aces: bool = False, log_space: str = "acesc
         factor = saturation_curves(x, p["hue_vs_sat"], p["sat_vs_sat"], p["lum_vs_sat"], weights)
     if "hue_shift" in steps:
         x = hue_shift(x, p["hue_shift"], p["hue_vs_hue"])
-    # Eager, saturation without curves is a matrix too, folded with the way out of ACEScg.
+    # Saturation without curves is a matrix too, folded with the way out of ACEScg.
     linear = None
-    if factor is None and "saturation" in steps and untracked(x, p["saturation"]):
+    if factor is None and "saturation" in steps and _saturation_folds(x, p["saturation"]):
         linear = saturation_matrix(x, p["saturation"], weights)
     elif "saturation" in steps or factor is not None:
         x = saturation(x, p["saturation"], weights, factor)
@@ -211,6 +211,14 @@ def _then(first, second: torch.Tensor) -> torch.Tensor:
 def _applied(linear, image: torch.Tensor) -> torch.Tensor:
     """``image`` through the folded matrix ``linear`` (None: unchanged)."""
     return image if linear is None else apply_matrix(linear, image)
+
+
+def _saturation_folds(image: torch.Tensor, amount) -> bool:
+    """Whether saturation is applied as a matrix: eager when nothing records gradients; in an export when ``amount`` is a
+    number, folded into the constant matrices (a graph input's would be a MatMul, which OpenVINO runs in bfloat16)."""
+    if torch.onnx.is_in_onnx_export():
+        return not isinstance(amount, torch.Tensor)
+    return untracked(image, amount)
 
 
 def _check_zone(start: Param, end: Param, zone: str) -> None:
