@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import torch
 
-from ..color import AP1_LUMINANCE, MATRICES, convert, unity_to_aces
+from ..color import AP1_LUMINANCE, MATRICES, convert, safe_pow, unity_to_aces
 from ..core import apply_matrix, untracked
 from .aces_rrt import AP1_TO_REC709, DIM_SURROUND_GAMMA, ODT_SAT_FACTOR, RRT_SAT_FACTOR, rrt_glow_and_red_modifier, smoothstep_hue_weight
 from .base import apply_rows, display, limited
@@ -33,7 +33,9 @@ def _dark_to_dim_surround(xyz: torch.Tensor) -> torch.Tensor:
     total = (big_x + big_y + big_z).clamp_min(1e-4)
     x, y = big_x / total, big_y / total
     new_y = big_y.clamp(0.0, 65504.0)
-    if untracked(new_y):
+    if torch.onnx.is_in_onnx_export():
+        new_y = safe_pow(new_y, DIM_SURROUND_GAMMA)  # exp(e log Y): no Where guards and no Pow (see safe_pow)
+    elif untracked(new_y):
         new_y = new_y.pow_(DIM_SURROUND_GAMMA)  # the guard only keeps the gradient at 0 finite: 0^0.9811 is 0
     else:
         new_y = torch.where(new_y > 0, torch.where(new_y > 0, new_y, 1.0) ** DIM_SURROUND_GAMMA, new_y)

@@ -61,7 +61,7 @@ def limited(image: torch.Tensor, limit=TONEMAP_INPUT_LIMIT) -> torch.Tensor:
         >>> limited(torch.tensor([-1.0, 0.5, 100.0])).tolist()
         [0.0, 0.5, 60.0]
     """
-    if isinstance(limit, numbers.Real) and untracked(image):
+    if isinstance(limit, numbers.Real) and (untracked(image) or torch.onnx.is_in_onnx_export()):
         return image.clamp(0.0, limit)
     return torch.minimum(image.clamp_min(0.0), torch.as_tensor(limit, dtype=image.dtype, device=image.device))
 
