@@ -64,20 +64,22 @@ def rec709_to_aces(image: torch.Tensor) -> torch.Tensor:
 
 
 def _rgb_saturation(rgb: torch.Tensor, tiny: float) -> torch.Tensor:
-    """ACES ``rgb_2_saturation``: ``(max(ma, tiny) - max(mi, tiny)) / max(ma, 1e-2)``."""
-    if torch.onnx.is_in_onnx_export():
-        # Max and Min of the three planes: onnxruntime's CPU ReduceMax over 3 channels ran 9 times as long.
-        r, g, b = rgb.split(1, dim=-3)
-        high, low = torch.maximum(torch.maximum(r, g), b), torch.minimum(torch.minimum(r, g), b)
-    else:
-        high = rgb.amax(dim=-3, keepdim=True)
-        low = rgb.amin(dim=-3, keepdim=True)
+    """ACES ``rgb_2_saturation`` of an image (see :func:`_saturation`)."""
+    return _saturation(rgb.amax(dim=-3, keepdim=True), rgb.amin(dim=-3, keepdim=True), tiny)
+
+
+def _saturation(high: torch.Tensor, low: torch.Tensor, tiny: float) -> torch.Tensor:
+    """ACES ``rgb_2_saturation`` from the channels' max and min: ``(max(ma, tiny) - max(mi, tiny)) / max(ma, 1e-2)``."""
     return (high.clamp_min(tiny) - low.clamp_min(tiny)) / high.clamp_min(1e-2)
 
 
 def _rgb_yc(rgb: torch.Tensor) -> torch.Tensor:
+    """ACES ``rgb_2_yc`` of an image (see :func:`_yc`)."""
+    return _yc(*rgb.split(1, dim=-3))
+
+
+def _yc(r: torch.Tensor, g: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """ACES ``rgb_2_yc``: ``(r + g + b + 1.75 sqrt(b(b-g) + g(g-r) + r(r-b))) / 3``."""
-    r, g, b = rgb.split(1, dim=-3)
     chroma = safe_sqrt(b * (b - g) + g * (g - r) + r * (r - b))
     return (r + g + b + 1.75 * chroma) / 3.0
 
@@ -156,6 +158,8 @@ def rrt_glow_and_red_modifier(aces: torch.Tensor, hue_weight, tiny: float = UNIT
         >>> torch.equal(rrt_glow_and_red_modifier(grey, smoothstep_hue_weight), grey)  # no saturation: no glow
         True
     """
+    if torch.onnx.is_in_onnx_export():
+        return _rrt_glow_and_red_modifier_on_planes(aces, hue_weight, tiny)
     saturation = _rgb_saturation(aces, tiny)
     s = _sigmoid_shaper((saturation - 0.4) / 0.2)
     aces = aces * (1.0 + _glow(_rgb_yc(aces), _RRT_GLOW_GAIN * s, _RRT_GLOW_MID))
@@ -168,14 +172,29 @@ def rrt_glow_and_red_modifier(aces: torch.Tensor, hue_weight, tiny: float = UNIT
     return torch.cat((red + change, green_blue), dim=-3)
 
 
+def _rrt_glow_and_red_modifier_on_planes(aces: torch.Tensor, hue_weight, tiny: float) -> torch.Tensor:
+    """The export form of :func:`rrt_glow_and_red_modifier`: the same modules on the planes of one ``Split``.
+
+    Saturation, ``yc`` and hue each split the image in the eager form, and the glow scales it by a plane; in ONNX each
+    split is a node and that product a broadcast, 2.5 times a plane's product on onnxruntime. Channel max and min are
+    Max and Min of the planes (ReduceMax over 3 channels ran 9 times as long), and the hue is its distance from red
+    (:func:`_red_hue_distance`).
+    """
+    r, g, b = aces.split(1, dim=-3)
+    saturation = _saturation(torch.maximum(torch.maximum(r, g), b), torch.minimum(torch.minimum(r, g), b), tiny)
+    s = _sigmoid_shaper((saturation - 0.4) / 0.2)
+    gain = 1.0 + _glow(_yc(r, g, b), _RRT_GLOW_GAIN * s, _RRT_GLOW_MID)
+    r, g, b = r * gain, g * gain, b * gain
+    change = hue_weight(_red_hue_distance(r, g, b)) * saturation * (_RRT_RED_PIVOT - r) * (1.0 - _RRT_RED_SCALE)
+    return torch.cat((r + change, g, b), dim=-3)
+
+
 def _red_centered_hue(rgb: torch.Tensor) -> torch.Tensor:
     """The hue in degrees relative to red's (``_RRT_RED_HUE``, 0°), in (-180, 180]: ``hue - 0`` wrapped.
 
     Eager, that is ``atan2`` itself, which also gives 0 for neutrals: the hue's shift into [0, 360) and
     back is skipped (it moved hues below 0° by float rounding, 3e-5° at most).
     """
-    if torch.onnx.is_in_onnx_export():
-        return _red_hue_distance(rgb)
     if untracked(rgb):
         r, g, b = rgb.split(1, dim=-3)
         return torch.atan2((g - b).mul_(3.0**0.5), (2.0 * r).sub_(g).sub_(b)).mul_(180.0 / math.pi)
@@ -183,17 +202,16 @@ def _red_centered_hue(rgb: torch.Tensor) -> torch.Tensor:
     return torch.where(centered < -180.0, centered + 360.0, torch.where(centered > 180.0, centered - 360.0, centered))
 
 
-def _red_hue_distance(rgb: torch.Tensor) -> torch.Tensor:
+def _red_hue_distance(r: torch.Tensor, g: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """``|atan2(y, x)|`` in degrees, ``y = sqrt(3)(g - b)``, ``x = 2r - g - b``: the red-centred hue's distance from red,
     all the (symmetric) hue weights read, as ``atan((|y| + max(-x, 0)) / (max(x, 0) + 1e-30))``.
 
-    The export form of :func:`_red_centered_hue`: ONNX's ``atan2`` is an Atan and four selects, and the wraps into
-    (-180, 180] four more (each select 4 to 20 Muls' time on onnxruntime). For ``x > 0`` this is ``atan(|y| / x)``;
+    The export form of :func:`_red_centered_hue`: ``atan2`` exports as an Atan and two selects, and the hue's guards
+    and wraps add five more (a select ran 7 to 20 times a plane's product on onnxruntime). For ``x > 0`` this is ``atan(|y| / x)``;
     for ``x < 0`` the ratio is ``|x| / 1e-30`` or more, so 90° (no weight), as every hue past ±90° has; a neutral
     pixel gets 0°, as ``atan2(0, 0)``. An ``x`` that is not 0 is a float32 step of the pixel's largest channel or
     more, so ``1e-30`` only moves hues of pixels darker than the saturation's floor, where the weight is unused.
     """
-    r, g, b = rgb.split(1, dim=-3)
     y = torch.abs(g - b) * 3.0**0.5
     x = 2.0 * r - g - b
     return torch.atan((y + torch.relu(-x)) / (torch.relu(x) + 1e-30)) * (180.0 / math.pi)
