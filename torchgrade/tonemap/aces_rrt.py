@@ -23,6 +23,7 @@ __all__ = [
     "smoothstep_hue_weight",
     "cubic_basis_hue_weight",
     "rrt_glow_and_red_modifier",
+    "rrt_glow_and_red_modifier_planes",
     "ap1_desaturate",
     "ap1_dim_surround",
     "AP1_TO_REC709",
@@ -159,7 +160,7 @@ def rrt_glow_and_red_modifier(aces: torch.Tensor, hue_weight, tiny: float = UNIT
         True
     """
     if torch.onnx.is_in_onnx_export():
-        return _rrt_glow_and_red_modifier_on_planes(aces, hue_weight, tiny)
+        return torch.cat(rrt_glow_and_red_modifier_planes(aces, hue_weight, tiny), dim=-3)
     saturation = _rgb_saturation(aces, tiny)
     s = _sigmoid_shaper((saturation - 0.4) / 0.2)
     aces = aces * (1.0 + _glow(_rgb_yc(aces), _RRT_GLOW_GAIN * s, _RRT_GLOW_MID))
@@ -172,8 +173,9 @@ def rrt_glow_and_red_modifier(aces: torch.Tensor, hue_weight, tiny: float = UNIT
     return torch.cat((red + change, green_blue), dim=-3)
 
 
-def _rrt_glow_and_red_modifier_on_planes(aces: torch.Tensor, hue_weight, tiny: float) -> torch.Tensor:
-    """The export form of :func:`rrt_glow_and_red_modifier`: the same modules on the planes of one ``Split``.
+def rrt_glow_and_red_modifier_planes(aces: torch.Tensor, hue_weight, tiny: float = UNITY_TINY) -> tuple:
+    """The export form of :func:`rrt_glow_and_red_modifier`: the same modules on the planes of one ``Split``, returned as
+    the three planes ``(..., 1, H, W)``.
 
     Saturation, ``yc`` and hue each split the image in the eager form, and the glow scales it by a plane; in ONNX each
     split is a node and that product a broadcast, 2.5 times a plane's product on onnxruntime. Channel max and min are
@@ -186,7 +188,7 @@ def _rrt_glow_and_red_modifier_on_planes(aces: torch.Tensor, hue_weight, tiny: f
     gain = 1.0 + _glow(_yc(r, g, b), _RRT_GLOW_GAIN * s, _RRT_GLOW_MID)
     r, g, b = r * gain, g * gain, b * gain
     change = hue_weight(_red_hue_distance(r, g, b)) * saturation * (_RRT_RED_PIVOT - r) * (1.0 - _RRT_RED_SCALE)
-    return torch.cat((r + change, g, b), dim=-3)
+    return r + change, g, b
 
 
 def _red_centered_hue(rgb: torch.Tensor) -> torch.Tensor:
