@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import torch
 
-from ..color import AP1_LUMINANCE, MATRICES, convert, safe_pow, unity_to_aces
+from ..color import AP1_LUMINANCE, MATRICES, convert, unity_to_aces
 from ..core import apply_matrix, untracked
 from .aces_rrt import (AP1_TO_REC709, DIM_SURROUND_GAMMA, ODT_SAT_FACTOR, RRT_SAT_FACTOR, rrt_glow_and_red_modifier, rrt_glow_and_red_modifier_planes,
                        smoothstep_hue_weight)
@@ -45,7 +45,7 @@ def _dim_surround_planes(big_x: torch.Tensor, big_y: torch.Tensor, big_z: torch.
     x, y = big_x / total, big_y / total
     new_y = big_y.clamp(0.0, 65504.0)
     if torch.onnx.is_in_onnx_export():
-        new_y = safe_pow(new_y, DIM_SURROUND_GAMMA)  # exp(e log Y): no Where guards and no Pow (see safe_pow)
+        new_y = torch.exp(torch.log(new_y) * DIM_SURROUND_GAMMA)  # Y is clamped: safe_pow's form without its clamp (no Where, no Pow)
     elif untracked(new_y):
         new_y = new_y.pow_(DIM_SURROUND_GAMMA)  # the guard only keeps the gradient at 0 finite: 0^0.9811 is 0
     else:

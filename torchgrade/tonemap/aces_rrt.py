@@ -206,17 +206,17 @@ def _red_centered_hue(rgb: torch.Tensor) -> torch.Tensor:
 
 def _red_hue_distance(r: torch.Tensor, g: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """``|atan2(y, x)|`` in degrees, ``y = sqrt(3)(g - b)``, ``x = 2r - g - b``: the red-centred hue's distance from red,
-    all the (symmetric) hue weights read, as ``atan((|y| + max(-x, 0)) / (max(x, 0) + 1e-30))``.
+    all the (symmetric) hue weights read, as ``atan((|y| + max(-x, 0)) / max(x, 1e-30))``.
 
     The export form of :func:`_red_centered_hue`: ``atan2`` exports as an Atan and two selects, and the hue's guards
     and wraps add five more (a select ran 7 to 20 times a plane's product on onnxruntime). For ``x > 0`` this is ``atan(|y| / x)``;
-    for ``x < 0`` the ratio is ``|x| / 1e-30`` or more, so 90° (no weight), as every hue past ±90° has; a neutral
+    for ``x < 0`` the ratio is ``(|y| + |x|) / 1e-30``, so 90° (no weight), as every hue past ±90° has; a neutral
     pixel gets 0°, as ``atan2(0, 0)``. An ``x`` that is not 0 is a float32 step of the pixel's largest channel or
     more, so ``1e-30`` only moves hues of pixels darker than the saturation's floor, where the weight is unused.
     """
     y = torch.abs(g - b) * 3.0**0.5
     x = 2.0 * r - g - b
-    return torch.atan((y + torch.relu(-x)) / (torch.relu(x) + 1e-30)) * (180.0 / math.pi)
+    return torch.atan((y + torch.relu(-x)) / x.clamp_min(1e-30)) * (180.0 / math.pi)
 
 
 def _ap1_y(rgb: torch.Tensor) -> torch.Tensor:
