@@ -6,8 +6,8 @@ import torch
 
 from ..color import AP1_LUMINANCE, MATRICES, convert, unity_to_aces
 from ..core import apply_matrix, untracked
-from .aces_rrt import (AP1_TO_REC709, DIM_SURROUND_GAMMA, ODT_SAT_FACTOR, RRT_SAT_FACTOR, rrt_glow_and_red_modifier, rrt_glow_and_red_modifier_planes,
-                       smoothstep_hue_weight)
+from .aces_rrt import (AP1_TO_REC709, DIM_SURROUND_GAMMA, ODT_SAT_FACTOR, RRT_SAT_FACTOR, rrt_glow_and_red_modifier,
+                       rrt_glow_and_red_modifier_planes, smoothstep_hue_weight)
 from .base import apply_rows, display, limited, planes_to_image
 
 __all__ = ["aces_fitted", "aces", "aces_hill", "aces_narkowicz"]

@@ -62,7 +62,7 @@ def limited(image: torch.Tensor, limit=TONEMAP_INPUT_LIMIT) -> torch.Tensor:
         [0.0, 0.5, 60.0]
     """
     if isinstance(limit, numbers.Real) and (untracked(image) or torch.onnx.is_in_onnx_export()):
-        return image.clamp(0.0, limit)
+        return image.clamp(0.0, limit)  # exported, one Clip where the other form is a Clip and a Min
     return torch.minimum(image.clamp_min(0.0), torch.as_tensor(limit, dtype=image.dtype, device=image.device))
 
 
