@@ -2,8 +2,8 @@
 shapes whose heights are not a whole number of strips, and powers without ``Where`` guards or ``Pow`` nodes."""
 
 import collections
-import math
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +18,8 @@ from torchgrade.color.transfer import safe_pow
 from torchgrade.onnx import export, graph_nodes, scan_strips, session, verify
 from torchgrade.onnx.strips import DOMAIN
 from torchgrade.stage import STRIP_PIXELS
+from torchgrade.color import unity_to_aces
+from torchgrade.tonemap.aces_rrt import _red_centered_hue, _red_hue_distance, _rgb_yc, cubic_basis_hue_weight, smoothstep_hue_weight
 
 from reference.onnx import TOLERANCE
 
@@ -219,3 +221,64 @@ def test_log_encodings_export_without_where_and_keep_their_values_at_the_cut_poi
         expected = _LogEncodings()(image).double().numpy()
     output = session(path).run(None, {"image": image.numpy()})[0]
     np.testing.assert_allclose(output, expected, rtol=2e-6, atol=1e-9)
+_EXTREMES = (0.0, -0.0, 1e-45, 1e-40, 1e-30, 1e-8, 1e-4, 0.18, 1.0, 60.0, 61.0, 65504.0, 1e30, math.nan, math.inf, -math.inf,
+             -1e-40, -1.0, -65504.0)
+
+
+def _rrt_edges() -> torch.Tensor:
+    """Pixels (N, 3) at the RRT's edges: hues a float step either side of red (0°/360°) and of cyan (the ±180° wrap),
+    near-neutrals, and colours scaled to put the AP0 ``yc`` on the glow's ends 2/3·0.08 and 2·0.08 and a step away."""
+    pixels = []
+    for level in (1e-4, 0.01, 0.18, 1.0, 10.0, 60.0):
+        for spread in (0.0, 1e-7, -1e-7, 1e-5, -1e-3, 0.05, -0.05):
+            for red in (1.5, 0.5, 1.0 + 1e-6, 1.0 - 1e-6, 1.0):
+                pixels.append([level * red, level * (1.0 + spread), level * (1.0 - spread)])
+    colours = torch.rand(40, 3, generator=torch.Generator().manual_seed(0), dtype=torch.float64) ** 2
+    yc = _rgb_yc(unity_to_aces(colours.T[:, :, None])).flatten()
+    for end in (2.0 / 3.0 * 0.08, 2.0 * 0.08):
+        for step in (1.0 - 1e-6, 1.0, 1.0 + 1e-6):
+            pixels += (colours * (end * step / yc)[:, None]).tolist()
+    return torch.tensor(pixels)
+
+
+def _aces_frame() -> torch.Tensor:
+    """Every pair of :data:`_EXTREMES` in two channels (the third cycling through them), :func:`_rrt_edges`, and
+    random colours all round the hue circle over ten decades and out of gamut, as one (1, 3, H, 64) frame."""
+    generator = torch.Generator().manual_seed(1)
+    edges = torch.tensor(_EXTREMES)
+    pairs = torch.cartesian_prod(edges, edges)
+    extremes = torch.cat((pairs, edges.repeat(len(edges))[:, None]), dim=1)
+    hue = torch.rand(2000, 1, generator=generator) * 2.0 * math.pi
+    circle = torch.cat((hue, hue - 2.0 * math.pi / 3.0, hue + 2.0 * math.pi / 3.0), dim=1).cos()
+    level = 10.0 ** (torch.rand(2000, 1, generator=generator) * 10.0 - 6.0)
+    chroma = torch.rand(2000, 1, generator=generator)
+    pixels = torch.cat((extremes, _rrt_edges(), level * (1.0 + chroma * circle), torch.randn(500, 3, generator=generator) * 3.0))
+    pixels = torch.cat((pixels, torch.zeros(-len(pixels) % 64, 3)))
+    return pixels.T.reshape(1, 3, -1, 64).contiguous()
+
+
+@pytest.mark.parametrize("mode, selects, comparisons", [("aces", 1, 0), ("unreal_filmic", 4, 2)])
+def test_aces_rrt_exports_without_selects_and_matches_pytorch_at_extremes(tmp_path, mode, selects, comparisons):
+    """The ACES fit and Unreal's filmic curve, which share the RRT glow and red modifier: no Where but the non-finite
+    policy's NaN → 0 (and Unreal's toe, shoulder and blend: three, two on comparisons), no Pow, Sign or channel reductions;
+    PyTorch's values at 0, denormals, 60, 65504, 1e30, ±Inf, NaN, negatives, both hue wraps, near-neutrals and the
+    glow's ends."""
+    look = tg.PostFX(tonemap=mode).eval()
+    path = export(look, tmp_path / f"{mode}.onnx")
+    counts = ops(path)
+    assert counts["Where"] == selects and counts["IsNaN"] == 1
+    assert sum(counts[op] for op in ("Less", "Greater", "Equal", "LessOrEqual", "GreaterOrEqual")) == comparisons
+    assert not {"Pow", "Sign", "ReduceMax", "ReduceMin"} & set(counts)
+    image = _aces_frame()
+    for runtime, precision in (("onnxruntime", None), ("openvino", "f32")):
+        assert verify(look, path, image, runtime, precision) <= TOLERANCE, runtime
+
+
+@pytest.mark.parametrize("weight", [smoothstep_hue_weight, cubic_basis_hue_weight])
+def test_red_hue_distance_weighs_as_the_centred_hue(weight):
+    """The export form of the hue gives the red modifier's weights on both sides of red, past ±90° (where it stops at
+    90°), at the ±180° wrap (g = b above r), for neutrals (0°) and greys a float step off neutral."""
+    rgb = torch.tensor([[1.0, 0.5, 0.5], [0.0, 1.0, 1.0], [0.2, 0.7, 0.7], [1.0, 1.0, 1.0], [0.0, 0.0, 0.0], [1.0, 0.9, 0.2],
+                        [1.0, 0.2, 0.9], [0.3, 1.0, 0.0], [0.5, 0.5 + 2**-24, 0.5], [0.5, 0.5, 0.5 + 2**-24], [0.5 + 2**-24, 0.5, 0.5],
+                        [1.0, 1e-6, 0.0], [1.0, 0.0, 1e-6], [0.0, 1.0, 1.0 - 1e-6], [0.0, 1.0 - 1e-6, 1.0]]).T[:, :, None]
+    torch.testing.assert_close(weight(_red_hue_distance(*rgb.split(1))), weight(_red_centered_hue(rgb)), rtol=0.0, atol=1e-6)

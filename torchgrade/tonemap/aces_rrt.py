@@ -23,6 +23,7 @@ __all__ = [
     "smoothstep_hue_weight",
     "cubic_basis_hue_weight",
     "rrt_glow_and_red_modifier",
+    "rrt_glow_and_red_modifier_planes",
     "ap1_desaturate",
     "ap1_dim_surround",
     "AP1_TO_REC709",
@@ -64,15 +65,22 @@ def rec709_to_aces(image: torch.Tensor) -> torch.Tensor:
 
 
 def _rgb_saturation(rgb: torch.Tensor, tiny: float) -> torch.Tensor:
-    """ACES ``rgb_2_saturation``: ``(max(ma, tiny) - max(mi, tiny)) / max(ma, 1e-2)``."""
-    high = rgb.amax(dim=-3, keepdim=True)
-    low = rgb.amin(dim=-3, keepdim=True)
+    """ACES ``rgb_2_saturation`` of an image (see :func:`_saturation`)."""
+    return _saturation(rgb.amax(dim=-3, keepdim=True), rgb.amin(dim=-3, keepdim=True), tiny)
+
+
+def _saturation(high: torch.Tensor, low: torch.Tensor, tiny: float) -> torch.Tensor:
+    """ACES ``rgb_2_saturation`` from the channels' max and min: ``(max(ma, tiny) - max(mi, tiny)) / max(ma, 1e-2)``."""
     return (high.clamp_min(tiny) - low.clamp_min(tiny)) / high.clamp_min(1e-2)
 
 
 def _rgb_yc(rgb: torch.Tensor) -> torch.Tensor:
+    """ACES ``rgb_2_yc`` of an image (see :func:`_yc`)."""
+    return _yc(*rgb.split(1, dim=-3))
+
+
+def _yc(r: torch.Tensor, g: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """ACES ``rgb_2_yc``: ``(r + g + b + 1.75 sqrt(b(b-g) + g(g-r) + r(r-b))) / 3``."""
-    r, g, b = rgb.split(1, dim=-3)
     chroma = safe_sqrt(b * (b - g) + g * (g - r) + r * (r - b))
     return (r + g + b + 1.75 * chroma) / 3.0
 
@@ -90,13 +98,18 @@ def _rgb_hue_degrees(rgb: torch.Tensor) -> torch.Tensor:
 
 def _sigmoid_shaper(x: torch.Tensor) -> torch.Tensor:
     """ACES ``sigmoid_shaper``: a 0..1 sigmoid spanning -2..2."""
+    if torch.onnx.is_in_onnx_export():
+        # The same curve without Sign (7 times a product of planes on onnxruntime): with c = clamp(x, -2, 2), t = 1 - |c|/2 and
+        # sign(x) (1 - t²) = c (1 - |c|/4).
+        c = x.clamp(-2.0, 2.0)
+        return 0.5 + c * (0.5 - 0.125 * torch.abs(c))
     t = (1.0 - torch.abs(x / 2.0)).clamp_min(0.0)
     return (1.0 + torch.sign(x) * (1.0 - t * t)) / 2.0
 
 
 def _glow(yc: torch.Tensor, gain: torch.Tensor, mid: float) -> torch.Tensor:
     """ACES ``glow_fwd``: full gain below 2/3·mid, none above 2·mid, ``gain (mid / yc - 1/2)`` between."""
-    if untracked(yc, gain):
+    if untracked(yc, gain) or torch.onnx.is_in_onnx_export():
         # yc clamped to the ramp gives gain (to float rounding) below it and exactly 0 above it, without selects.
         return (mid / yc.clamp(2.0 / 3.0 * mid, 2.0 * mid)).sub_(0.5).mul_(gain)
     between = gain * (mid / yc.clamp_min(2.0 / 3.0 * mid) - 0.5)
@@ -146,6 +159,8 @@ def rrt_glow_and_red_modifier(aces: torch.Tensor, hue_weight, tiny: float = UNIT
         >>> torch.equal(rrt_glow_and_red_modifier(grey, smoothstep_hue_weight), grey)  # no saturation: no glow
         True
     """
+    if torch.onnx.is_in_onnx_export():
+        return torch.cat(rrt_glow_and_red_modifier_planes(aces, hue_weight, tiny), dim=-3)
     saturation = _rgb_saturation(aces, tiny)
     s = _sigmoid_shaper((saturation - 0.4) / 0.2)
     aces = aces * (1.0 + _glow(_rgb_yc(aces), _RRT_GLOW_GAIN * s, _RRT_GLOW_MID))
@@ -156,6 +171,24 @@ def rrt_glow_and_red_modifier(aces: torch.Tensor, hue_weight, tiny: float = UNIT
         red.add_(change)  # in place: aces is the glow's product, made above
         return aces
     return torch.cat((red + change, green_blue), dim=-3)
+
+
+def rrt_glow_and_red_modifier_planes(aces: torch.Tensor, hue_weight, tiny: float = UNITY_TINY) -> tuple:
+    """The export form of :func:`rrt_glow_and_red_modifier`: the same modules on the planes of one ``Split``, returned as
+    the three planes ``(..., 1, H, W)``.
+
+    Saturation, ``yc`` and hue each split the image in the eager form, and the glow scales it by a plane; in ONNX each
+    split is a node, and that broadcast product ran on onnxruntime as long as 3.5 products of planes (here 3). Channel max and min are
+    Max and Min of the planes (ReduceMax over 3 channels ran 9 times as long), and the hue is its distance from red
+    (:func:`_red_hue_distance`).
+    """
+    r, g, b = aces.split(1, dim=-3)
+    saturation = _saturation(torch.maximum(torch.maximum(r, g), b), torch.minimum(torch.minimum(r, g), b), tiny)
+    s = _sigmoid_shaper((saturation - 0.4) / 0.2)
+    gain = 1.0 + _glow(_yc(r, g, b), _RRT_GLOW_GAIN * s, _RRT_GLOW_MID)
+    r, g, b = r * gain, g * gain, b * gain
+    change = hue_weight(_red_hue_distance(r, g, b)) * saturation * (_RRT_RED_PIVOT - r) * (1.0 - _RRT_RED_SCALE)
+    return r + change, g, b
 
 
 def _red_centered_hue(rgb: torch.Tensor) -> torch.Tensor:
@@ -169,6 +202,21 @@ def _red_centered_hue(rgb: torch.Tensor) -> torch.Tensor:
         return torch.atan2((g - b).mul_(3.0**0.5), (2.0 * r).sub_(g).sub_(b)).mul_(180.0 / math.pi)
     centered = _rgb_hue_degrees(rgb) - _RRT_RED_HUE
     return torch.where(centered < -180.0, centered + 360.0, torch.where(centered > 180.0, centered - 360.0, centered))
+
+
+def _red_hue_distance(r: torch.Tensor, g: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """``|atan2(y, x)|`` in degrees, ``y = sqrt(3)(g - b)``, ``x = 2r - g - b``: the red-centred hue's distance from red,
+    all the (symmetric) hue weights read, as ``atan((|y| + max(-x, 0)) / max(x, 1e-30))``.
+
+    The export form of :func:`_red_centered_hue`: ``atan2`` exports as an Atan and two selects, and the hue's guards
+    and wraps add five more (a select ran 7 to 20 times a plane's product on onnxruntime). For ``x > 0`` this is ``atan(|y| / x)``;
+    for ``x < 0`` the ratio is ``(|y| + |x|) / 1e-30``, so 90° (no weight), as every hue past ±90° has; a neutral
+    pixel gets 0°, as ``atan2(0, 0)``. An ``x`` that is not 0 is a float32 step of the pixel's largest channel or
+    more, so ``1e-30`` only moves hues of pixels darker than the saturation's floor, where the weight is unused.
+    """
+    y = torch.abs(g - b) * 3.0**0.5
+    x = 2.0 * r - g - b
+    return torch.atan((y + torch.relu(-x)) / x.clamp_min(1e-30)) * (180.0 / math.pi)
 
 
 def _ap1_y(rgb: torch.Tensor) -> torch.Tensor:
