@@ -81,16 +81,16 @@ _NAN_FREE = contextvars.ContextVar("nan_free", default=None)
 def sanitize(image: torch.Tensor) -> torch.Tensor:
     """Apply the non-finite policy: NaN -> 0, values bounded to [-65504, 65504] (so ±Inf -> ±65504).
 
-    ``clamp`` keeps NaN, so the clamped copy is then fixed in place: one new frame instead of two. Inside
-    :func:`nan_free` for this very tensor only the bound is applied.
+    ``clamp`` keeps NaN, so the clamped copy is then fixed in place: one new frame instead of two. In an ONNX
+    export inside :func:`nan_free` for this very tensor only the bound is applied.
 
     Examples:
         >>> sanitize(torch.tensor([float('nan'), float('inf'), -1.0])).tolist()
         [0.0, 65504.0, -1.0]
     """
-    if _NAN_FREE.get() is image:
-        return image.clamp(-HALF_MAX, HALF_MAX)
     if torch.onnx.is_in_onnx_export():
+        if _NAN_FREE.get() is image:
+            return image.clamp(-HALF_MAX, HALF_MAX)
         # NaN is found on the input itself: OpenVINO's Clip turns NaN into its lower bound (the clamped copy's NaN came
         # out -65504 there); and nan_to_num would export a second Clip, to the dtype's range, a copy of the frame.
         return torch.where(torch.isnan(image), 0.0, image.clamp(-HALF_MAX, HALF_MAX))
@@ -99,15 +99,15 @@ def sanitize(image: torch.Tensor) -> torch.Tensor:
 
 @contextlib.contextmanager
 def nan_free(image: torch.Tensor):
-    """Within the block, :func:`sanitize` of ``image`` (this tensor object) only bounds it: the caller knows that
-    ``image`` holds no NaN (the output of a stage that cannot make one), so the NaN pass, which an exported graph
-    runs as ``IsNaN`` and ``Where`` over the frame, is skipped.
+    """Within the block, an ONNX export's :func:`sanitize` of ``image`` (this tensor object) only bounds it: the
+    exporter knows that ``image`` holds no NaN (the output of a stage that cannot make one), so the NaN pass,
+    ``IsNaN`` and ``Where`` over the frame, is left out of the graph. Eager and compiled calls are unaffected.
 
     Examples:
-        >>> x = torch.tensor([1e6, -2.0])
+        >>> x = torch.tensor([float('nan'), 1e6])
         >>> with nan_free(x):
-        ...     sanitize(x).tolist()
-        [65504.0, -2.0]
+        ...     sanitize(x).tolist()  # not exporting: the whole policy
+        [0.0, 65504.0]
     """
     token = _NAN_FREE.set(image)
     try:
