@@ -7,9 +7,11 @@ per-pixel stage (grade + tone map) eager vs ``torch.compile``, and the whole loo
 
 Writes benchmarks/results/onnx.json and onnx.md (``--device cuda``: onnx_cuda.json and onnx_cuda.md, with
 onnxruntime's CUDA provider and PyTorch on the GPU; OpenVINO runs on the CPU only and is left out there).
-Latencies are the median of 5 runs after a warm-up, batch 1, float32 in and out, in one process on this
+Latencies are the median of 9 runs after a warm-up, batch 1, float32 in and out, in one process on this
 machine, host arrays in and out for onnxruntime; the calls of one row alternate run by run
-(:func:`benchmarks.common.median_ms`), so compare within a row.
+(:func:`benchmarks.common.median_ms`), so compare within a row. One row runs the whole look on one thread
+each (onnxruntime's intra-op threads, PyTorch's): a server that runs a session per core, and a figure
+that a neighbour's load on the other core moves less.
 """
 
 from __future__ import annotations
@@ -31,10 +33,11 @@ sys.path.insert(0, str(ROOT))
 
 import torchgrade as tg  # noqa: E402
 from benchmarks.common import median_ms  # noqa: E402
+from torchgrade.core import one_thread  # noqa: E402
 
 LOOK = ROOT / "export" / "looks" / "cinematic.json"
 RESULTS = ROOT / "benchmarks" / "results"
-HEIGHT, WIDTH, REPEATS = 1080, 1920, 5
+HEIGHT, WIDTH, REPEATS = 1080, 1920, 9
 COMMAND = ".venv/bin/python benchmarks/bench_onnx.py"
 RUNTIMES = {
     "cpu": {"onnxruntime": ("onnxruntime", None), "onnxruntime_no_spin": ("onnxruntime", None),
@@ -78,23 +81,34 @@ def eager(look: tg.PostFX, inputs):
     return (lambda: look.frame(*inputs)) if isinstance(inputs, tuple) else (lambda: look(inputs))
 
 
-def measure(name: str, look: tg.PostFX, image: torch.Tensor, folder: Path, device: str = "cpu", **options) -> dict:
-    """Export ``look`` (as traced and folded); time every runtime of ``device`` and PyTorch eager alternately."""
+def measure(name: str, look: tg.PostFX, image: torch.Tensor, folder: Path, device: str = "cpu", runtimes=None,
+            threads=None, **options) -> dict:
+    """Export ``look`` (as traced and folded); time ``runtimes`` (labels of ``device``'s, default all) and PyTorch
+    eager alternately, each on ``threads`` CPU threads (None: its default)."""
     raw = tg.onnx.export(look, folder / f"{name}_raw.onnx", fold=False, **options)
     path = tg.onnx.export(look, folder / f"{name}.onnx", **options)
     inputs = tg.onnx.graph_inputs(look, image)
     calls = {}
     for label, (runtime, precision) in RUNTIMES[device].items():
+        if runtimes is not None and label not in runtimes:
+            continue
         on = device if runtime == "onnxruntime" else "cpu"
-        runner = tg.onnx.session(path, runtime, precision, on, spin=not label.endswith("_no_spin"))
+        runner = tg.onnx.session(path, runtime, precision, on, spin=not label.endswith("_no_spin"), threads=threads)
         calls[label] = lambda runner=runner, feeds=tg.onnx.feeds(runner, look, inputs): runner.run(None, feeds)
     on_device = tg.onnx.graph_inputs(look, image.to(device))
     calls["pytorch"] = eager(look.to(device), on_device)
+    if threads == 1:
+        calls["pytorch"] = lambda call=calls["pytorch"]: _on_one_thread(call)
     with torch.no_grad():
         medians = median_ms(calls, REPEATS, sync=synchronizer(device))
     look.cpu()
     return {"nodes_traced": tg.onnx.node_count(raw), "nodes": tg.onnx.node_count(path),
             **{f"{label}_ms": round(ms, 1) for label, ms in medians.items()}}
+
+
+def _on_one_thread(call):
+    with one_thread():
+        return call()
 
 
 def compiled(name: str, look: tg.PostFX, inputs, fullgraph: bool, device: str = "cpu") -> dict:
@@ -147,7 +161,7 @@ def table(report: dict) -> list:
     heads = [COLUMNS.get(label, "PyTorch eager ms") for label in labels]
     lines = [f"# ONNX export: {report['look']} at {WIDTH}x{HEIGHT}, median of {REPEATS}", "", device_note(report), "",
              f"| model | nodes as traced | nodes folded | {' | '.join(heads)} |", "| --- |" + " ---: |" * (2 + len(heads))]
-    lines += [f"| {name} | {r['nodes_traced']} | {r['nodes']} | " + " | ".join(str(r[f"{label}_ms"]) for label in labels) + " |"
+    lines += [f"| {name} | {r['nodes_traced']} | {r['nodes']} | " + " | ".join(str(r.get(f"{label}_ms", "–")) for label in labels) + " |"
               for name, r in rows.items()]
     lines += ["", "| torch.compile | eager ms | compiled ms | eager / compiled | compile s |", "| --- | ---: | ---: | ---: | ---: |"]
     for name, r in report["compile"].items():
@@ -178,6 +192,9 @@ def main(argv=None) -> int:
             rows[f"stage: {stage}"] = measure(stage, tg.PostFX.from_config({stage: config[stage]}).eval(), image, Path(folder), device)
         rows["full look"] = measure("full", look, image, Path(folder), device)
         rows["full look, whole-frame graph (strips=False)"] = measure("full_whole", look, image, Path(folder), device, strips=False)
+        if device == "cpu":
+            rows["full look, one thread each"] = measure("full_one_thread", look, image, Path(folder), device,
+                                                         runtimes=("onnxruntime",), threads=1)
         baked = look.to_lut(33)
         for interpolation, backend in (("tetrahedral", "gather"), ("trilinear", "strip")):
             baked.interpolation = interpolation

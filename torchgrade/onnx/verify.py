@@ -54,10 +54,12 @@ class OpenVINOSession:
         ['image']
     """
 
-    def __init__(self, path, precision: Optional[str] = None):
+    def __init__(self, path, precision: Optional[str] = None, threads: Optional[int] = None):
         import openvino
 
         config = {} if precision is None else {"INFERENCE_PRECISION_HINT": precision}
+        if threads is not None:
+            config["INFERENCE_NUM_THREADS"] = threads
         defaults = {init.name for init in onnx_lib.load(str(path), load_external_data=False).graph.initializer}
         self.model = openvino.Core().compile_model(str(path), "CPU", config)
         # OpenVINO reads an input that has an initializer as a constant: a default there cannot be overridden.
@@ -76,9 +78,11 @@ DEVICES = {"cpu": "CPUExecutionProvider", "cuda": "CUDAExecutionProvider"}
 """Devices :func:`session` runs onnxruntime on, and the execution provider of each (OpenVINO: CPU only)."""
 
 
-def session(path, runtime: str = "onnxruntime", precision: Optional[str] = None, device: str = "cpu", spin: bool = True):
+def session(path, runtime: str = "onnxruntime", precision: Optional[str] = None, device: str = "cpu", spin: bool = True,
+            threads: Optional[int] = None):
     """A session on ``runtime`` (see :data:`RUNTIMES`) on ``device`` (see :data:`DEVICES`); ``precision``
-    is OpenVINO's hint. A device whose provider this onnxruntime lacks is an error, not a quiet fall-back to the CPU.
+    is OpenVINO's hint; ``threads`` the CPU threads one call may use (None: the runtime's default, one per core).
+    A device whose provider this onnxruntime lacks is an error, not a quiet fall-back to the CPU.
 
     ``spin=False`` stops onnxruntime's worker threads spinning between tasks
     (``session.intra_op.allow_spinning``): where other processes share the cores, spinning threads wait on
@@ -96,7 +100,7 @@ def session(path, runtime: str = "onnxruntime", precision: Optional[str] = None,
     if device not in DEVICES or (runtime == "openvino" and device != "cpu"):
         raise ValueError(f"{runtime} runs here on {'cpu' if runtime == 'openvino' else tuple(DEVICES)}, got device {device!r}")
     if runtime == "openvino":
-        return OpenVINOSession(path, precision)
+        return OpenVINOSession(path, precision, threads)
     import onnxruntime
 
     if DEVICES[device] not in onnxruntime.get_available_providers():
@@ -104,6 +108,8 @@ def session(path, runtime: str = "onnxruntime", precision: Optional[str] = None,
     options = onnxruntime.SessionOptions()
     options.log_severity_level = 3  # inputs with defaults are optional by design: no warning per control
     options.add_session_config_entry("session.intra_op.allow_spinning", "1" if spin else "0")
+    if threads is not None:
+        options.intra_op_num_threads = threads
     return onnxruntime.InferenceSession(str(path), options, providers=[DEVICES[device]])
 
 
