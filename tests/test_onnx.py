@@ -204,3 +204,16 @@ def test_the_stage_after_exposure_scrubs_no_nan_again_and_non_finite_frames_stil
         peak = float(look.frame(*inputs)[0].abs().max())
     for runtime in ("onnxruntime", "openvino"):
         assert verify(look, path, inputs, runtime, "f32") / peak <= TOLERANCE, runtime
+
+
+def test_sessions_on_a_given_number_of_threads_match(exported):
+    module = tg.ToneMap("aces")
+    path = exported("tonemap_threads", module)
+    runner = session(path, threads=1)
+    assert runner.get_session_options().intra_op_num_threads == 1
+    for runtime in ("onnxruntime", "openvino"):
+        one = session(path, runtime, "f32" if runtime == "openvino" else None, threads=1)
+        image = hdr((1, 3, 16, 24))
+        got = one.run(None, {"image": image.numpy()})[0]
+        with torch.no_grad():
+            assert float(np.abs(got - module(image).numpy()).max()) <= TOLERANCE

@@ -56,7 +56,7 @@ def add_export(commands) -> None:
     export.add_argument("--grade-inputs", action="store_true", help="grading controls as optional graph inputs")
     export.add_argument("--output", choices=OUTPUTS, default="linear", help="output encoding (default display-linear float)")
     export.add_argument("--whole-frame", action="store_true",
-                        help="per-pixel stages on the whole frame, not in a Scan over strips of rows (faster on OpenVINO)")
+                        help="per-pixel stages on the whole frame: a graph without a Scan over strips of rows")
     export.add_argument("--scene", nargs="+", help="EXR files to verify on (default: the built-in scene)")
     export.add_argument("--width", type=int, default=320, help="built-in scene width")
     export.add_argument("--height", type=int, default=180, help="built-in scene height")

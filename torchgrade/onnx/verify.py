@@ -86,8 +86,8 @@ def session(path, runtime: str = "onnxruntime", precision: Optional[str] = None,
 
     ``spin=False`` stops onnxruntime's worker threads spinning between tasks
     (``session.intra_op.allow_spinning``): where other processes share the cores, spinning threads wait on
-    each other's time slices (the whole look ran 1.5 to 1.6 times faster without spinning on a loaded
-    2-core machine, ``benchmarks/results/onnx.md``); on cores of its own spinning saves the wake-up.
+    each other's time slices; on cores of its own spinning saves the wake-up (``benchmarks/results/onnx.md``
+    has both on the same frames).
 
     Examples:
         >>> session("never.onnx", "tensorrt")
