@@ -425,7 +425,7 @@ def bounded_pow(x: torch.Tensor, exponent) -> torch.Tensor:
     """
     exponent = torch.as_tensor(exponent, dtype=x.dtype, device=x.device)
     if torch.onnx.is_in_onnx_export():
-        # Without the gradient guard's two Where nodes (each 4 to 5 Muls' time on onnxruntime); the same values for
+        # Without the gradient guard's two Where nodes (see benchmarks/results/onnx_ops.md); the same values for
         # exponent > 0 (at exponent 0, 1 where x <= 0: both callers multiply by sign(x)).
         return (x.clamp_min(0.0) ** exponent).clamp_max(HALF_MAX)
     limit = torch.exp2(_LOG2_HALF_MAX / exponent.detach())

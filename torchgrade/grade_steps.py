@@ -175,7 +175,7 @@ def log_contrast(image: torch.Tensor, amount: Param, encoding: str = "logc") -> 
         return acescc_to_aces((aces_to_acescc(image) - ACESCC_MIDGRAY) * k + ACESCC_MIDGRAY)
     base = (LOGC_A * image + LOGC_B).clamp_min(torch.finfo(image.dtype).tiny)
     if torch.onnx.is_in_onnx_export():
-        # The power as exp(k ln(base) + ln(gain)): a Pow ran 35 Muls' time on onnxruntime's CPU, a Log and an Exp 12.
+        # The power as exp(k ln(base) + ln(gain)): a Log and an Exp cost less than half a Pow (benchmarks/results/onnx_ops.md).
         log_gain = math.log(10.0) * (LOGC_D - ACESCC_MIDGRAY) / LOGC_C * (k - 1.0)
         return (torch.exp(torch.log(base) * k + log_gain) - LOGC_B) / LOGC_A
     gain = torch.pow(10.0, (LOGC_D - ACESCC_MIDGRAY) * (k - 1.0) / LOGC_C)
@@ -206,7 +206,7 @@ def _acescc_contrast_in_place(image: torch.Tensor, k: torch.Tensor) -> torch.Ten
 
 def _acescc_contrast_folded(image: torch.Tensor, k) -> torch.Tensor:
     """:func:`_acescc_contrast_in_place` for export, with min and max of two branches as clamps: one ``Log``, one
-    ``Exp``, no comparison or ``Where`` (on onnxruntime's CPU a ``Where`` took 6 and a ``Log`` 11 ``Mul``s' time).
+    ``Exp``, no comparison or ``Where`` (their costs on onnxruntime's CPU: ``benchmarks/results/onnx_ops.md``).
 
     ``s = x + max(x, 2^-15)`` with ``x`` clamped to [0, 65504] is twice the encode's ``max(x, 2^-16 + x/2)``, rounded
     alike; ``v = exp(min(k ln s + ((1 - k) p - k) ln 2, ln 65504))`` the scaled code decoded, with ``p`` the pivot

@@ -116,8 +116,8 @@ def luminance(image: torch.Tensor, weights: str = "rec709") -> torch.Tensor:
     """
     w = {"rec709": REC709_LUMINANCE, "ap1": AP1_LUMINANCE}[weights]
     if torch.onnx.is_in_onnx_export():
-        # Three products of channel planes summed: onnxruntime's CPU runs a ReduceSum over channels about 8 times
-        # as long as a Mul of the frame.
+        # Three products of channel planes summed: a ReduceSum over channels costs onnxruntime's CPU several of
+        # them (benchmarks/results/onnx_ops.md).
         red, green, blue = image.split(1, dim=CHANNEL)
         return red * w[0] + green * w[1] + blue * w[2]
     w = torch.tensor(w, dtype=image.dtype, device=image.device).reshape(3, 1, 1)

@@ -28,7 +28,7 @@ def safe_pow(x: torch.Tensor, exponent) -> torch.Tensor:
     """
     if torch.onnx.is_in_onnx_export() and isinstance(exponent, (int, float)) and exponent > 0:
         # Exported without the gradient guard's two Where nodes, and as exp(e log x) (0 at x = 0, to a few ulps
-        # of the power): on onnxruntime's CPU a Where ran 4 times as long as a Mul, a Pow 6 times Log, Mul and Exp.
+        # of the power): their costs on onnxruntime's CPU are in benchmarks/results/onnx_ops.md.
         x = x.clamp_min(0.0)
         return x.sqrt() if exponent == 0.5 else torch.exp(torch.log(x) * exponent)
     if isinstance(exponent, numbers.Real) and exponent > 0 and x.is_floating_point() and untracked(x):
@@ -119,7 +119,7 @@ def aces_to_acescc(image: torch.Tensor) -> torch.Tensor:
         # 2^-16 + x/2 < x exactly from 2^-15 up: the larger one is each segment's argument, one log for both.
         return torch.maximum(x, x * 0.5 + 2.0**-16).log2_().add_(9.72).div_(17.52)
     if torch.onnx.is_in_onnx_export():
-        # The same maximum out of place: no comparison or Where, each several Muls' time on onnxruntime's CPU.
+        # The same maximum out of place: no comparison or Where (benchmarks/results/onnx_ops.md).
         return (torch.log2(torch.maximum(x, x * 0.5 + 2.0**-16)) + 9.72) / 17.52
     low = (torch.log2(2.0**-16 + x * 0.5) + 9.72) / 17.52
     high = (torch.log2(x.clamp_min(2.0**-15)) + 9.72) / 17.52
@@ -225,7 +225,7 @@ def linear_to_acescct(image: torch.Tensor) -> torch.Tensor:
     log = (torch.log2(image.clamp_min(ACESCCT_CUT_LINEAR)) + 9.72) / 17.52
     if torch.onnx.is_in_onnx_export():
         # The segments meet at the cut: each on its own side of it, added, less their common value there; no comparison
-        # or Where, each several Muls' time on onnxruntime's CPU.
+        # or Where (benchmarks/results/onnx_ops.md).
         return log + (ACESCCT_A * image.clamp_max(ACESCCT_CUT_LINEAR) + (ACESCCT_B - ACESCCT_CUT_LOG))
     return torch.where(image <= ACESCCT_CUT_LINEAR, ACESCCT_A * image + ACESCCT_B, log)
 

@@ -89,7 +89,7 @@ def meter_sanitized(scene: torch.Tensor, metering: str) -> torch.Tensor:
     For a caller that sanitizes the frame anyway: one pass over it instead of two.
 
     Examples:
-        >>> meter_sanitized(torch.full((1, 3, 4, 4), 0.5), 'mean').tolist()
+        >>> [round(v, 4) for v in meter_sanitized(torch.full((1, 3, 4, 4), 0.5), 'mean').tolist()]
         [0.5]
     """
     lum = luminance(scene).clamp_min(0).reshape(-1, 1, scene.shape[-2], scene.shape[-1])

@@ -129,7 +129,7 @@ def _avg_pool2d(g, x, kernel_size, stride, padding, ceil_mode, count_include_pad
 
 def _pow(g, x, exponent):
     """``x ** exponent``; a constant exponent 2 or 3 as products, 0.5 as ``Sqrt`` (each correctly rounded, as
-    ``Pow`` is): onnxruntime's CPU ``Pow`` ran 20 times as long as a ``Mul`` and 40 times a ``Sqrt`` on 2^17 pixels."""
+    ``Pow`` is): onnxruntime's CPU runs a ``Pow`` many times as long as a ``Mul`` or a ``Sqrt`` (``benchmarks/results/onnx_ops.md``)."""
     from torch.onnx import symbolic_helper, symbolic_opset9
 
     value = symbolic_helper._maybe_get_const(exponent, "t")

@@ -73,8 +73,8 @@ def aces_fitted(aces: torch.Tensor) -> torch.Tensor:
 
 def _aces_fitted_planes(aces: torch.Tensor) -> torch.Tensor:
     """The export form of :func:`aces_fitted`: the RRT's and the dim surround's planes go into the next matrix as they
-    are (:func:`~torchgrade.tonemap.base.planes_to_image`), without a Concat and a Split each (3% on onnxruntime; the
-    matrices on planes too, as 9 products by constants and 6 sums, gained nothing for 38 more nodes)."""
+    are (:func:`~torchgrade.tonemap.base.planes_to_image`), without a Concat and a Split each (the
+    matrices on planes too, as 9 products by constants and 6 sums, would add 38 nodes)."""
     planes = rrt_glow_and_red_modifier_planes(aces, smoothstep_hue_weight)
     acescg = apply_matrix(_RRT_DESATURATE.to(aces), planes_to_image(MATRICES["ap0_to_ap1"], planes).clamp_min(0.0))
     xyz = convert(_fit(acescg), "ap1_to_xyz")

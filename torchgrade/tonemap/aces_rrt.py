@@ -99,7 +99,7 @@ def _rgb_hue_degrees(rgb: torch.Tensor) -> torch.Tensor:
 def _sigmoid_shaper(x: torch.Tensor) -> torch.Tensor:
     """ACES ``sigmoid_shaper``: a 0..1 sigmoid spanning -2..2."""
     if torch.onnx.is_in_onnx_export():
-        # The same curve without Sign (7 times a product of planes on onnxruntime): with c = clamp(x, -2, 2), t = 1 - |c|/2 and
+        # The same curve without Sign (benchmarks/results/onnx_ops.md): with c = clamp(x, -2, 2), t = 1 - |c|/2 and
         # sign(x) (1 - t²) = c (1 - |c|/4).
         c = x.clamp(-2.0, 2.0)
         return 0.5 + c * (0.5 - 0.125 * torch.abs(c))
@@ -178,8 +178,8 @@ def rrt_glow_and_red_modifier_planes(aces: torch.Tensor, hue_weight, tiny: float
     the three planes ``(..., 1, H, W)``.
 
     Saturation, ``yc`` and hue each split the image in the eager form, and the glow scales it by a plane; in ONNX each
-    split is a node, and that broadcast product ran on onnxruntime as long as 3.5 products of planes (here 3). Channel max and min are
-    Max and Min of the planes (ReduceMax over 3 channels ran 9 times as long), and the hue is its distance from red
+    split is a node, and that broadcast product costs more than the 3 products of planes here. Channel max and min are
+    Max and Min of the planes (no reduction over channels, ``benchmarks/results/onnx_ops.md``), and the hue is its distance from red
     (:func:`_red_hue_distance`).
     """
     r, g, b = aces.split(1, dim=-3)
@@ -209,7 +209,7 @@ def _red_hue_distance(r: torch.Tensor, g: torch.Tensor, b: torch.Tensor) -> torc
     all the (symmetric) hue weights read, as ``atan((|y| + max(-x, 0)) / max(x, 1e-30))``.
 
     The export form of :func:`_red_centered_hue`: ``atan2`` exports as an Atan and two selects, and the hue's guards
-    and wraps add five more (a select ran 7 to 20 times a plane's product on onnxruntime). For ``x > 0`` this is ``atan(|y| / x)``;
+    and wraps add five more (a select's cost: ``benchmarks/results/onnx_ops.md``). For ``x > 0`` this is ``atan(|y| / x)``;
     for ``x < 0`` the ratio is ``(|y| + |x|) / 1e-30``, so 90° (no weight), as every hue past ±90° has; a neutral
     pixel gets 0°, as ``atan2(0, 0)``. An ``x`` that is not 0 is a float32 step of the pixel's largest channel or
     more, so ``1e-30`` only moves hues of pixels darker than the saturation's floor, where the weight is unused.
