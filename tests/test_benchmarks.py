@@ -233,3 +233,13 @@ def test_no_33_logc_table_on_the_scene_lattice_keeps_every_desk_pixel_within_4_c
     matrix = lut_floor.interpolation_matrix(coords, lut_floor.SIZE, "tetrahedral")
     violation = lut_floor.smallest_violation(matrix, direct[2], lut_floor.MAX_BAR, "srgb")
     assert 255.0 * violation > 0.3  # in codes: far beyond HiGHS tolerances (1e-7 table units), so the verdict does not hang on them
+
+
+def test_every_operator_pattern_of_the_onnx_cost_benchmark_builds_and_keeps_the_strip():
+    pytest.importorskip("onnxruntime")
+    from benchmarks import bench_onnx_ops
+
+    strip = np.random.default_rng(0).random(bench_onnx_ops.STRIP, dtype=np.float32)
+    for name, step in bench_onnx_ops.PATTERNS.items():
+        out = bench_onnx_ops.chain_session(step).run(None, {"x": strip})[0]
+        assert out.shape == bench_onnx_ops.STRIP and np.isfinite(out).all(), name
