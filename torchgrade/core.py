@@ -37,6 +37,7 @@ __all__ = [
     "color_param",
     "matrix_param",
     "apply_matrix",
+    "matrix_on_planes",
     "check_range",
     "check_choice",
     "is_constant",
@@ -88,13 +89,14 @@ def sanitize(image: torch.Tensor) -> torch.Tensor:
         >>> sanitize(torch.tensor([float('nan'), float('inf'), -1.0])).tolist()
         [0.0, 65504.0, -1.0]
     """
-    if torch.onnx.is_in_onnx_export():
-        if _NAN_FREE.get() is image:
-            return image.clamp(-HALF_MAX, HALF_MAX)
-        # NaN is found on the input itself: OpenVINO's Clip turns NaN into its lower bound (the clamped copy's NaN came
-        # out -65504 there); and nan_to_num would export a second Clip, to the dtype's range, a copy of the frame.
-        return torch.where(torch.isnan(image), 0.0, image.clamp(-HALF_MAX, HALF_MAX))
-    return image.clamp(-HALF_MAX, HALF_MAX).nan_to_num_(nan=0.0)
+    bounded = image.clamp(-HALF_MAX, HALF_MAX)
+    if not torch.onnx.is_in_onnx_export():
+        return bounded.nan_to_num_(nan=0.0)
+    if _NAN_FREE.get() is image:
+        return bounded
+    # NaN is found on the input itself: OpenVINO's Clip turns NaN into its lower bound (the clamped copy's NaN came
+    # out -65504 there); and nan_to_num would export a second Clip, to the dtype's range, a copy of the frame.
+    return torch.where(torch.isnan(image), 0.0, bounded)
 
 
 @contextlib.contextmanager
@@ -204,12 +206,25 @@ def apply_matrix(matrix: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
     if torch.onnx.is_in_onnx_export():
         # Exported as three broadcast products summed: onnxruntime's CPU Einsum ran 3 to 5 times slower, and a
         # MatMul runs in bfloat16 at OpenVINO's default precision, coefficients and all (7.1 codes p99.9 on the look).
-        return sum(matrix[..., :, j, None, None] * image[..., j : j + 1, :, :] for j in range(3))
+        return matrix_on_planes(matrix, [image[..., j : j + 1, :, :] for j in range(3)])
     if untracked(matrix, image):
         return _channel_sums(matrix, image)
     if matrix.dim() == 2:
         return torch.einsum("ij,...jhw->...ihw", matrix, image)
     return torch.einsum("bij,bjhw->bihw", matrix, image)
+
+
+def matrix_on_planes(matrix: torch.Tensor, planes) -> torch.Tensor:
+    """:func:`apply_matrix` on an image given as its three planes ``(..., 1, H, W)``: ``sum_j matrix[..., :, j] planes[j]``.
+
+    The form every exported matrix takes; export forms that already hold an image's planes pass them here instead of
+    joining them into a frame that the matrix would only slice apart again.
+
+    Examples:
+        >>> matrix_on_planes(torch.eye(3), torch.arange(3.0).reshape(3, 1, 1, 1).unbind()).flatten().tolist()
+        [0.0, 1.0, 2.0]
+    """
+    return sum(matrix[..., :, j, None, None] * plane for j, plane in enumerate(planes))
 
 
 def _channel_sums(matrix: torch.Tensor, image: torch.Tensor) -> torch.Tensor:

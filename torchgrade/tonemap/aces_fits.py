@@ -5,10 +5,10 @@ from __future__ import annotations
 import torch
 
 from ..color import AP1_LUMINANCE, MATRICES, convert, unity_to_aces
-from ..core import apply_matrix, untracked
+from ..core import apply_matrix, matrix_on_planes, untracked
 from .aces_rrt import (AP1_TO_REC709, DIM_SURROUND_GAMMA, ODT_SAT_FACTOR, RRT_SAT_FACTOR, rrt_glow_and_red_modifier,
                        rrt_glow_and_red_modifier_planes, smoothstep_hue_weight)
-from .base import apply_rows, display, limited, planes_to_image
+from .base import apply_rows, display, limited
 
 __all__ = ["aces_fitted", "aces", "aces_hill", "aces_narkowicz"]
 
@@ -73,12 +73,12 @@ def aces_fitted(aces: torch.Tensor) -> torch.Tensor:
 
 def _aces_fitted_planes(aces: torch.Tensor) -> torch.Tensor:
     """The export form of :func:`aces_fitted`: the RRT's and the dim surround's planes go into the next matrix as they
-    are (:func:`~torchgrade.tonemap.base.planes_to_image`), without a Concat and a Split each (the
+    are (:func:`~torchgrade.core.matrix_on_planes`), without a Concat and a Split each (the
     matrices on planes too, as 9 products by constants and 6 sums, would add 38 nodes)."""
     planes = rrt_glow_and_red_modifier_planes(aces, smoothstep_hue_weight)
-    acescg = apply_matrix(_RRT_DESATURATE.to(aces), planes_to_image(MATRICES["ap0_to_ap1"], planes).clamp_min(0.0))
+    acescg = apply_matrix(_RRT_DESATURATE.to(aces), matrix_on_planes(MATRICES["ap0_to_ap1"].to(aces), planes).clamp_min(0.0))
     xyz = convert(_fit(acescg), "ap1_to_xyz")
-    return planes_to_image(_ODT_TAIL, _dim_surround_planes(*xyz.split(1, dim=-3)))
+    return matrix_on_planes(_ODT_TAIL.to(xyz), _dim_surround_planes(*xyz.split(1, dim=-3)))
 
 
 def aces(image: torch.Tensor, clip: bool = True) -> torch.Tensor:

@@ -16,7 +16,7 @@ import torch
 from ..core import apply_matrix, untracked
 from ..stage import Control
 
-__all__ = ["TONEMAP_INPUT_LIMIT", "WHITE_POINT_RANGE", "ToneMapper", "limited", "display", "apply_rows", "planes_to_image", "no_tonemap"]
+__all__ = ["TONEMAP_INPUT_LIMIT", "WHITE_POINT_RANGE", "ToneMapper", "limited", "display", "apply_rows", "no_tonemap"]
 
 TONEMAP_INPUT_LIMIT = 60.0
 """Inputs are clamped to this before tone mapping (Catlike Coding, HDR §3.3: 'a limit of 60')."""
@@ -86,20 +86,6 @@ def apply_rows(rows, image: torch.Tensor) -> torch.Tensor:
         [2.0, 1.0, 3.0]
     """
     return apply_matrix(torch.tensor(rows, dtype=image.dtype, device=image.device), image)
-
-
-def planes_to_image(matrix: torch.Tensor, planes) -> torch.Tensor:
-    """A constant 3x3 ``matrix`` on an image given as its three planes ``(..., 1, H, W)``: ``sum_j m[:, j] p_j``, ``(..., 3, H, W)``.
-
-    For export forms that work on planes: in ONNX, the matrix's export form (three products of a column by a plane,
-    summed) reads the planes themselves, where a Concat of them would be split again into the same planes.
-
-    Examples:
-        >>> planes_to_image(torch.eye(3), torch.arange(3.0).reshape(3, 1, 1, 1).unbind()).flatten().tolist()
-        [0.0, 1.0, 2.0]
-    """
-    columns = matrix.to(planes[0])[:, :, None, None].unbind(1)
-    return sum(column * plane for column, plane in zip(columns, planes))
 
 
 def no_tonemap(image: torch.Tensor, clip: bool = True) -> torch.Tensor:
