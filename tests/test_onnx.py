@@ -217,3 +217,6 @@ def test_sessions_on_a_given_number_of_threads_match(exported):
         if runtime == "onnxruntime":
             assert one.get_session_options().intra_op_num_threads == 1
         assert float(np.abs(one.run(None, {"image": image.numpy()})[0] - expected).max()) <= TOLERANCE
+    for threads in (0, -2, 1.5, True):
+        with pytest.raises(ValueError, match="threads"):
+            session(path, threads=threads)

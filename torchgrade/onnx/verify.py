@@ -97,6 +97,8 @@ def session(path, runtime: str = "onnxruntime", precision: Optional[str] = None,
     """
     if runtime not in RUNTIMES:
         raise ValueError(f"runtime must be one of {RUNTIMES}, got {runtime!r}")
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
+        raise ValueError(f"threads must be a positive int or None, got {threads!r}")
     if device not in DEVICES or (runtime == "openvino" and device != "cpu"):
         raise ValueError(f"{runtime} runs here on {'cpu' if runtime == 'openvino' else tuple(DEVICES)}, got device {device!r}")
     if runtime == "openvino":

@@ -1,0 +1,73 @@
+"""OpenVINO at its default inference precision (bfloat16 on CPUs that have it) against PyTorch: the error of
+exported looks in 8-bit sRGB codes on the demo scene, the figure ``tests/test_openvino.py`` bounds.
+
+    .venv/bin/python benchmarks/openvino_precision.py
+
+Each look (parts of ``export/looks/cinematic.json``, tone mapped with ACES, and the whole look) is exported with
+:func:`torchgrade.onnx.export` and run on OpenVINO's CPU plugin with no precision hint; its display-linear output
+and PyTorch's are clipped to [0, 1], sRGB-encoded and compared in codes at 333x517, the test's largest frame.
+Writes benchmarks/results/openvino_precision.json and openvino_precision.md.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import torchgrade as tg  # noqa: E402
+
+LOOK = ROOT / "export" / "looks" / "cinematic.json"
+RESULTS = ROOT / "benchmarks" / "results"
+COMMAND = ".venv/bin/python benchmarks/openvino_precision.py"
+HEIGHT, WIDTH = 333, 517
+
+
+def looks() -> dict:
+    """The looks compared: each stage before ACES, and the whole cinematic look."""
+    config = json.loads(LOOK.read_text())
+    parts = {f"{stage} + ACES": {stage: config[stage], "tonemap": "aces"} for stage in ("exposure", "bloom", "grade")}
+    return {**parts, "cinematic look": config}
+
+
+def codes(linear: np.ndarray) -> np.ndarray:
+    """8-bit sRGB codes (unrounded) of display-linear values clipped to [0, 1]."""
+    return tg.color.transfer.linear_to_srgb(torch.as_tensor(linear).clamp(0.0, 1.0)).numpy() * 255.0
+
+
+def code_error(config: dict, folder: Path) -> dict:
+    """``{"max": codes, "p999": codes}`` of one look at OpenVINO's default precision."""
+    look = tg.PostFX.from_config(config).eval()
+    runner = tg.onnx.session(tg.onnx.export(look, folder / "look.onnx"), "openvino")
+    inputs = tg.onnx.graph_inputs(look, tg.scene.demo_scene(HEIGHT, WIDTH))
+    error = np.abs(codes(runner.run(None, tg.onnx.feeds(runner, look, inputs))[0]) - codes(tg.onnx.reference(look, inputs)[0].numpy()))
+    return {"max": round(float(error.max()), 2), "p999": round(float(np.percentile(error, 99.9)), 2)}
+
+
+def main() -> int:
+    import openvino
+
+    with tempfile.TemporaryDirectory() as folder:
+        rows = {name: code_error(config, Path(folder)) for name, config in looks().items()}
+    report = {"command": COMMAND, "openvino": openvino.__version__, "frame": [HEIGHT, WIDTH], "results": rows}
+    lines = [f"# OpenVINO default precision vs PyTorch: demo scene {WIDTH}x{HEIGHT}, 8-bit sRGB codes", "",
+             f"`{COMMAND}` (OpenVINO {openvino.__version__}, CPU plugin, no precision hint)", "",
+             "| look | max | p99.9 |", "| --- | ---: | ---: |"]
+    lines += [f"| {name} | {r['max']} | {r['p999']} |" for name, r in rows.items()]
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    (RESULTS / "openvino_precision.json").write_text(json.dumps(report, indent=2) + "\n")
+    (RESULTS / "openvino_precision.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    print(f"\nreproduce: {COMMAND}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
