@@ -10,7 +10,8 @@ The package holds one family per file:
 * :mod:`~torchgrade.lut.lattice`: sizes, lattice coordinates, table layouts, domains;
 * :mod:`~torchgrade.lut.lut3d`: :class:`LUT3D` (a :class:`~torchgrade.stage.Stage`), its lookup
   and compile cache, and :class:`LUTLookup`, its ONNX export form;
-* :mod:`~torchgrade.lut.fit`: :func:`fit_shaper`, a per-channel shaper fitted to a transform;
+* :mod:`~torchgrade.lut.fit`: :func:`fit_shaper` and :func:`fit_scene_shaper`, per-channel shapers fitted to a
+  transform or to a scene;
 * :mod:`~torchgrade.lut.validation` and :mod:`~torchgrade.lut.report`: the colours every baked LUT
   is measured on, and its :class:`ErrorReport`;
 * :mod:`~torchgrade.lut.bake`: :func:`bake_lut`, automatic sizing.
@@ -24,8 +25,8 @@ Examples:
 """
 
 from .bake import AUTO_SIZES, bake_lut, expects_hdr, is_display_referred, scene_domain, srgb_code_error
-from .entries import ANCHOR_WEIGHT, ENTRY_CHOICES, SCENE_WEIGHT, display_miss, fit_entries, fitting_colours
-from .fit import FIT_KNOTS, fit_shaper
+from .entries import ANCHOR_WEIGHT, ENTRY_CHOICES, SCENE_WEIGHT, display_miss, fit_entries, fitting_colours, scene_pixels
+from .fit import FIT_KNOTS, SCENE_FIT_WEIGHT, fit_scene_shaper, fit_shaper
 from .kernels import (BACKENDS, INTERPOLATIONS, KERNELS, LUT_BACKENDS, Kernel, strip_table, tetrahedral, trilinear,
                       trilinear_grid_sample, trilinear_strip, trilinear_strip_lookup)
 from .lattice import MAX_SIZE, MIN_SIZE, check_size, checked_domain, identity_table, lattice, planar_table
@@ -48,5 +49,5 @@ __all__ = [
     "LogCHDRShaper", "Shaper", "lattice_unit",
     "sample_curve", "shaper_decode", "shaper_encode", "FittedShaper",
     "ENTRY_CHOICES", "fit_entries", "fitting_colours", "display_miss", "ANCHOR_WEIGHT", "SCENE_WEIGHT",
-    "FIT_KNOTS", "fit_shaper", "ErrorReport", "LUTAccuracyWarning", "code_errors", "validation_colours",
+    "scene_pixels", "FIT_KNOTS", "SCENE_FIT_WEIGHT", "fit_scene_shaper", "fit_shaper", "ErrorReport", "LUTAccuracyWarning", "code_errors", "validation_colours",
 ]

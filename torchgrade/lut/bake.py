@@ -27,11 +27,12 @@ from tqdm import tqdm
 
 from ..core import check_choice, check_image, check_on_cpu, sanitize
 from .lattice import MIN_SIZE, check_size, checked_domain, lattice
-from .entries import ENTRY_CHOICES, fit_entries
-from .fit import fit_shaper, refine_shaper
+from .entries import ENTRY_CHOICES, SCENE_WEIGHT, fit_entries, scene_pixels
+from .fit import SCENE_FIT_WEIGHT, fit_scene_shaper, fit_shaper, refine_shaper
 from .lut3d import LUT3D, OUTPUT_ENCODINGS, encode_output
 from .report import code_errors, diagnose, enforce, measure, measured_colours
 from .shapers import DEFAULT_DOMAINS, SHAPERS
+from .validation import validation_colours
 
 __all__ = ["AUTO_SIZES", "bake_lut", "expects_hdr", "is_display_referred", "scene_domain", "srgb_code_error"]
 
@@ -84,8 +85,12 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper:
     * ``shaper``: ``"linear"``, ``"logc"`` (black to linear 58.86), ``"logc_hdr"`` (LogC to 58.86, then a
       compressed tail to 65504: :class:`~torchgrade.lut.LogCHDRShaper`), ``"fitted"`` or ``"auto"``
       (``"logc_hdr"`` when :func:`expects_hdr`); the choice is stored as ``lut.shaper`` and shown in ``repr(lut)``.
-      ``"fitted"`` fits a per-channel shaper to the transform (and the scene, when given) from black
-      to 65504 (:func:`~torchgrade.lut.fit_shaper`); its lattice domain is [0, 1].
+      ``"fitted"`` fits a per-channel shaper from black to 65504 (its lattice domain is [0, 1]): to the
+      transform's bends (:func:`~torchgrade.lut.fit_shaper`), or, given a ``scene``, to where tables with
+      fitted entries miss the scene's pixels (:func:`~torchgrade.lut.fit.fit_scene_shaper`: a few bake-and-fit
+      rounds, tens of seconds at 33³). A scene-fitted 33³ table with fitted entries misses the scene by less than
+      any 33³ LogC table can on the strong look, but serves colours far from the scene's worse than the default
+      (benchmarks/results/lut_fit.md); its report says by how much.
     * ``scene``: an image the LUT is for. The lattice domain then follows its dynamic range: the
       top is the scene's largest value (after the non-finite policy), the bottom stays at black.
     * ``domain``: ``(min, max)`` of the lattice in shaper code values (numbers or RGB triples, as
@@ -107,6 +112,8 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper:
       :func:`~torchgrade.lut.fit_entries` for tetrahedral lookup on other validation colours and the
       scene's pixels, for the smallest largest error (detached from the transform's parameters; seconds
       at 33³). On the strong look it cuts the max error on the scene 2-4x (benchmarks/results/lut_fit.md).
+      A scene pixel weighs :data:`~torchgrade.lut.SCENE_WEIGHT` in the fit, or
+      :data:`~torchgrade.lut.fit.SCENE_FIT_WEIGHT` on a scene-fitted lattice.
     * The LUT's error on the validation colours (plus the scene's pixels) is measured and kept as
       ``lut.error_report`` (:class:`~torchgrade.lut.ErrorReport`). Above ``report_tolerance``
       8-bit codes at p99.9 the report names the cause and a bake that meets it, and the bake warns
@@ -135,38 +142,55 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper:
     bake = _baker(transform, domain, scene, chunk, output_encoding, progress, measured, hdr)
     lut = bake(shaper, size) if size != "auto" else _smallest_within(lambda n: bake(shaper, n), transform, scene, tolerance)
     if entries == "fitted":
-        lut = fit_entries(lut, transform, scene, hdr)
+        lut = fit_entries(lut, transform, scene, hdr, scene_weight=_scene_weight(lut, scene))
     report = measure(lut, measured, report_tolerance)
     if not report.within:
-        report = diagnose(report, lut, transform, measured, bake)
+        scene_colours = 0 if scene is None else measured[0].shape[-1] - validation_colours(hdr).shape[1]
+        report = diagnose(report, lut, transform, measured, _rebaker(bake, lut), scene_colours)
     enforce(report, strict)
     lut.error_report = report
     return lut
 
 
 def _baker(transform, domain, scene, chunk: int, output_encoding: str, progress: bool, measured: tuple, hdr: bool) -> Callable:
-    """``bake(shaper, size) -> LUT3D`` for ``transform``: the lattice domain, fitted curve and clip handling of :func:`bake_lut`.
+    """``bake(shaper, size, curve=None, curve_range=(0, 1)) -> LUT3D`` for ``transform``: the lattice domain, fitted
+    curve and clip handling of :func:`bake_lut`. Bakes without a curve are kept and returned again.
 
-    A fitted shaper is fitted once per size, on the ``measured`` colours (:func:`~torchgrade.lut.report.measured_colours`).
+    A fitted shaper is fitted once per size: to the scene's pixels when there is a scene
+    (:func:`~torchgrade.lut.fit.fit_scene_shaper`), else to the transform and the ``measured`` colours
+    (:func:`~torchgrade.lut.report.measured_colours`).
     """
     display = is_display_referred(transform)
     image, reference = measured
     fitted, baked = {}, {}
 
-    def cached(shaper: str, size: int) -> LUT3D:
+    def cached(shaper: str, size: int, curve=None, curve_range=(0.0, 1.0)) -> LUT3D:
+        if curve is not None:
+            return bake(shaper, size, curve, curve_range)
         if (shaper, size) not in baked:
             baked[shaper, size] = bake(shaper, size)
         return baked[shaper, size]
 
+    def fit_to_look(shaper: str, size: int) -> tuple:
+        with _final_clip_off(transform) if display else contextlib.nullcontext():
+            start, curve_range = fit_shaper(transform, hdr=hdr)
+        with torch.no_grad():
+            return refine_shaper(start, curve_range, lambda c: bake(shaper, size, c, curve_range), image[0, :, 0],
+                                 lambda lut: code_errors(reference, lut(image.float())).amax(dim=1).flatten()), curve_range
+
+    def fit_to_scene(shaper: str, size: int) -> tuple:
+        pixels = scene_pixels(scene)
+        with torch.no_grad():
+            direct = transform(pixels.reshape(1, 3, 1, -1)).double()
+        return fit_scene_shaper(
+            lambda c, r: fit_entries(bake(shaper, size, c, r), transform, scene, hdr, scene_weight=SCENE_FIT_WEIGHT),
+            pixels, lambda lut: code_errors(direct, lut(pixels.reshape(1, 3, 1, -1).float())).amax(dim=1).flatten(),
+            size, hdr, progress=progress)
+
     def bake(shaper: str, size: int, curve=None, curve_range=(0.0, 1.0)) -> LUT3D:
         if SHAPERS[shaper].takes_curve and curve is None:
             if size not in fitted:
-                with _final_clip_off(transform) if display else contextlib.nullcontext():
-                    start, curve_range = fit_shaper(transform, scene, hdr=hdr)
-                with torch.no_grad():
-                    fitted[size] = refine_shaper(
-                        start, curve_range, lambda c: bake(shaper, size, c, curve_range), image[0, :, 0],
-                        lambda lut: code_errors(reference, lut(image.float())).amax(dim=1).flatten()), curve_range
+                fitted[size] = (fit_to_look if scene is None else fit_to_scene)(shaper, size)
             curve, curve_range = fitted[size]
         with _final_clip_off(transform) if display else contextlib.nullcontext():
             lattice_domain = domain
@@ -179,6 +203,23 @@ def _baker(transform, domain, scene, chunk: int, output_encoding: str, progress:
                      curve=curve, curve_range=curve_range)
 
     return cached
+
+
+def _scene_weight(lut: LUT3D, scene: Optional[torch.Tensor]) -> float:
+    """Weight of a scene pixel when ``lut``'s entries are fitted: :data:`~torchgrade.lut.fit.SCENE_FIT_WEIGHT` on a
+    scene-fitted lattice, else :data:`~torchgrade.lut.SCENE_WEIGHT`."""
+    return SCENE_FIT_WEIGHT if scene is not None and lut.shaper == "fitted" else SCENE_WEIGHT
+
+
+def _rebaker(bake: Callable, lut: LUT3D) -> Callable:
+    """``rebake(shaper, size)`` for the error report's causes and advice: ``lut``'s own fitted curve at other sizes
+    (its plane density carries over), instead of a new fit per size."""
+    def rebake(shaper: str, size: int) -> LUT3D:
+        if shaper == lut.shaper and lut.curve is not None:
+            return bake(shaper, size, lut.curve.double(), lut.curve_range)
+        return bake(shaper, size)
+
+    return rebake
 
 
 @contextlib.contextmanager

@@ -48,7 +48,7 @@ from .lut3d import LUT3D, decode_output, encode_output
 from .shapers import lattice_unit, shaper_encode
 from .validation import validation_colours
 
-__all__ = ["fit_entries", "fitting_colours", "display_miss", "power_mean", "ANCHOR_WEIGHT", "SCENE_WEIGHT", "FIT_SCENE_PIXELS", "FIT_POWERS", "FIT_ITERATIONS", "FIT_SEED", "ENTRY_CHOICES"]
+__all__ = ["fit_entries", "fitting_colours", "scene_pixels", "display_miss", "power_mean", "ANCHOR_WEIGHT", "SCENE_WEIGHT", "FIT_SCENE_PIXELS", "FIT_POWERS", "FIT_ITERATIONS", "FIT_SEED", "ENTRY_CHOICES"]
 
 FIT_POWERS = (2, 8, 32, 128)
 """The ``p`` of each round of :func:`fit_entries`: least squares first, then ever closer to the max."""
@@ -97,12 +97,24 @@ def fitting_colours(lut: LUT3D, transform, scene: Optional[torch.Tensor], hdr: b
     colours = colours[:, _inside_lattice(lut, colours)]
     weights = torch.ones(colours.shape[1], dtype=torch.float64)
     if scene is not None:
-        pixels = sanitize(scene.detach().double()).movedim(-3, 0).reshape(3, -1)
-        pixels = pixels[:, :: max(1, -(-pixels.shape[1] // FIT_SCENE_PIXELS))]
+        pixels = scene_pixels(scene)
         colours = torch.cat((colours, pixels), dim=1)
         weights = torch.cat((weights, torch.full((pixels.shape[1],), scene_weight, dtype=torch.float64)))
     with torch.no_grad():
         return colours, transform(colours.reshape(1, 3, 1, -1)).double().reshape(3, -1), weights
+
+
+def scene_pixels(scene: torch.Tensor) -> torch.Tensor:
+    """The scene's pixels a fit sees, ``(3, N)`` float64: every one up to :data:`FIT_SCENE_PIXELS`, evenly strided
+    beyond, after the non-finite policy.
+
+    Examples:
+        >>> import torch
+        >>> scene_pixels(torch.ones(1, 3, 2, 2)).shape
+        torch.Size([3, 4])
+    """
+    pixels = sanitize(scene.detach().double()).movedim(-3, 0).reshape(3, -1)
+    return pixels[:, :: max(1, -(-pixels.shape[1] // FIT_SCENE_PIXELS))]
 
 
 def fit_entries(lut: LUT3D, transform, scene: Optional[torch.Tensor] = None, hdr: bool = True,

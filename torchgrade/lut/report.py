@@ -130,8 +130,14 @@ ADVICE_MAX_SIZE = 65
 """Largest lattice the advice bakes (a 129³ bake of a look takes seconds, and would on every warning)."""
 
 
-def diagnose(report: ErrorReport, lut, transform, measured: tuple, rebake: Callable[[str, int], object]) -> ErrorReport:
+def diagnose(report: ErrorReport, lut, transform, measured: tuple, rebake: Callable[[str, int], object],
+             scene_colours: int = 0) -> ErrorReport:
     """``report`` with its causes and advice; ``rebake(shaper, size)`` bakes the same transform otherwise.
+
+    ``scene_colours``: how many of the measured colours, at their end, are a scene's pixels. With a scene the advice
+    tries no fitted shaper (fitted to the scene, it serves the scene rather than the validation colours, and costs
+    rounds of entry fits), and a fitted shaper's lattice, fitted to the scene, is named as a cause with the error on
+    the scene and on the other colours apart.
 
     The lattice range's share is the error of the transform itself on colours clamped to the lattice
     (what no table entry can undo); the interpolation's is told by how the error falls on a finer lattice.
@@ -143,6 +149,8 @@ def diagnose(report: ErrorReport, lut, transform, measured: tuple, rebake: Calla
         within_lattice = (image, transform(clamped).double())
         range_error = _quantile(code_errors(reference, within_lattice[1]))
     causes = []
+    if scene_colours and lut.shaper == "fitted":
+        causes.append(_scene_fitted_cause(lut, measured, scene_colours))
     if range_error > report.tolerance:
         causes.append(f"lattice range: clamping per channel to the lattice (linear {float(high.min()):.4g} at the top) "
                       f"shifts hues, p99.9 {range_error:.2f} codes by itself")
@@ -154,13 +162,25 @@ def diagnose(report: ErrorReport, lut, transform, measured: tuple, rebake: Calla
         kind = "a kink within a cell" if ratio < KINK_RATIO else "size"
         causes.append(f"{kind} (interpolation alone: p99.9 {interpolation:.2f} codes, {ratio:.1f}x less at {finer_size}³)")
     return ErrorReport(report.p99_9, report.max, report.colours, report.tolerance, "; ".join(causes) or None,
-                       _advice(lut, measured, report.tolerance, rebake))
+                       _advice(lut, measured, report.tolerance, rebake, advise_fitted=not scene_colours))
 
 
-def _advice(lut, measured: tuple, tolerance: float, rebake) -> str:
-    """The first of :data:`CANDIDATES` within ``tolerance``, as advice."""
+def _scene_fitted_cause(lut, measured: tuple, scene_colours: int) -> str:
+    """The cause of a scene-fitted lattice: its error on the scene's last ``scene_colours`` measured colours and on the rest."""
+    image, reference = measured
+    with torch.no_grad():
+        errors = code_errors(reference, lut(image.float())).amax(dim=1).flatten()
+    scene, others = errors[-scene_colours:], errors[:-scene_colours]
+    return (f"lattice fitted to the scene (p99.9 {_quantile(scene):.2f}, max {float(scene.max()):.2f} on its "
+            f"{scene_colours} pixels; p99.9 {_quantile(others):.2f}, max {float(others.max()):.2f} on the other colours)")
+
+
+def _advice(lut, measured: tuple, tolerance: float, rebake, advise_fitted: bool = True) -> str:
+    """The first of :data:`CANDIDATES` (a fitted shaper only if ``advise_fitted``) within ``tolerance``, as advice."""
     tried = []
     for shaper, scale in CANDIDATES:
+        if shaper == "fitted" and not advise_fitted:
+            continue
         shaper, size = shaper or lut.shaper, min(scale * (lut.size - 1) + 1, max(ADVICE_MAX_SIZE, lut.size))
         if (shaper, size) in tried or (shaper, size) == (lut.shaper, lut.size):
             continue
@@ -168,7 +188,7 @@ def _advice(lut, measured: tuple, tolerance: float, rebake) -> str:
         trial = measure(rebake(shaper, size), measured, tolerance)
         if trial.within:
             return f"size={size}, shaper={shaper!r} meets it (p99.9 {trial.p99_9:.2f}, max {trial.max:.2f})"
-    return f"no bake up to {max(size for _, size in tried)}³ tried meets it: apply the transform directly"
+    return f"no bake up to {max((size for _, size in tried), default=lut.size)}³ tried meets it: apply the transform directly"
 
 
 def enforce(report: ErrorReport, strict: bool) -> None:

@@ -223,7 +223,8 @@ class CurveShaper(Shaper):
 
 
 class FittedShaper(Shaper):
-    """LogC, then a per-channel monotone curve fitted to a transform (:func:`~torchgrade.lut.fit_shaper`).
+    """LogC, then a per-channel monotone curve fitted to a transform or a scene (:func:`~torchgrade.lut.fit_shaper`,
+    :func:`~torchgrade.lut.fit_scene_shaper`).
 
     ``curve`` ``(n, 3)`` holds the lattice coordinate in [0, 1] at ``n`` LogC code values evenly
     over ``curve_range``; the lattice domain is [0, 1]. The fit puts lattice planes where the
