@@ -117,6 +117,7 @@ def scene_pixels(scene: torch.Tensor) -> torch.Tensor:
     return pixels[:, :: max(1, -(-pixels.shape[1] // FIT_SCENE_PIXELS))]
 
 
+@torch.enable_grad()  # the fit runs on gradients, also when called inside torch.no_grad()
 def fit_entries(lut: LUT3D, transform, scene: Optional[torch.Tensor] = None, hdr: bool = True,
                 interpolation: str = "tetrahedral", scene_weight: float = SCENE_WEIGHT,
                 anchor_weight: float = ANCHOR_WEIGHT, powers=FIT_POWERS, iterations: int = FIT_ITERATIONS) -> LUT3D:
