@@ -97,6 +97,27 @@ def test_fitted_shaper_is_monotone_and_its_decode_inverts_its_encode():
     torch.testing.assert_close(shaper.decode(codes, curve_table, curve_range), linear, rtol=1e-9, atol=1e-12)
 
 
+def test_the_scene_fit_keeps_its_best_lattice_and_moves_from_it_by_half_a_step_after_a_miss():
+    from torchgrade.lut.fit import fit_scene_shaper, move_planes, planes_curve, start_planes
+
+    pixels = torch.rand(3, 500, dtype=torch.float64, generator=torch.Generator().manual_seed(0)) * 8
+    errors = [pixels[0] + 1.0, pixels[1] + 5.0, pixels[2] * 0.1]  # round 1 misses more than round 0, round 2 least
+    curves = []
+
+    def errors_of(curve):
+        curves.append(curve)
+        return errors[len(curves) - 1]
+
+    best = fit_scene_shaper(lambda curve, curve_range: curve, pixels, errors_of, size=9, rounds=3)
+    start = start_planes(pixels, 9)
+    full_step = move_planes(start, pixels, errors[0])
+    half_step = move_planes(start, pixels, errors[0], step=0.5)  # after round 1's miss, from round 0's lattice
+    torch.testing.assert_close(curves[1], planes_curve(full_step)[0])
+    torch.testing.assert_close(curves[2], planes_curve(half_step)[0])
+    assert best[0] is curves[2]
+    assert not torch.allclose(full_step, half_step)
+
+
 def test_fitted_lut_reproduces_the_transform_on_its_lattice_up_to_the_half_float_top():
     look = torch.nn.Sequential(tg.ColorGrade(contrast=20.0, saturation=10.0), tg.ToneMap("aces"))
     lut = quiet_bake(look, size=9, shaper="fitted")
