@@ -82,7 +82,7 @@ ACCURACY_LUTS = ([("aces", SIZE, shaper, "default", encoding) for shaper in ("lo
 default bake (LogC to 58.86 on 27 of 32 intervals, a tail to 65504 on the last 5). LogC: the default
 domain (up to linear 58.86), the full range (up to the sanitize bound 65504, ``domain=FULL_LOGC``) or the scene's
 range (``bake_lut(scene=image)``); fitted: the shaper fitted to the
-look alone (default) or to the look and the scene, from black to 65504."""
+look alone (default) or to the scene, from black to 65504."""
 
 
 FULL_LOGC = (tg.lut.LOGC_BLACK, float(tg.color.linear_to_logc(torch.tensor(65504.0, dtype=torch.float64))))
@@ -264,7 +264,7 @@ def markdown(report: dict) -> str:
             "`bake_lut`'s default (LogC to 58.86 on 27 of 32 intervals, then 4 intervals to LogC 1.3 ≈ 997 and 1 to 65504). "
             "LogC lattice: the default (up to linear 58.86), the full range (black to 65504, `domain=(LOGC_BLACK, 1.744)`), or the scene's "
             "range (`bake_lut(scene=image)`); fitted: "
-            "`shaper=\"fitted\"`, fitted to the look (default) or to the look and the image (scene), black to 65504. "
+            "`shaper=\"fitted\"`, fitted to the look (default) or to the image (scene: tables with fitted entries steer its planes; the rows here sample the entries), black to 65504. "
             "Report: the bake's own `error_report` (validation colours, plus the image's pixels for scene bakes). "
             "Max > 58.86: the max error on pixels with a channel above the LogC lattice's top (Desk 1583 of them, "
             "CandleGlass 27, GoldenGate 2).",

@@ -125,4 +125,3 @@ def test_fitted_entries_bake_inside_no_grad():
     with torch.no_grad():
         inside = quiet_bake(look, size=5, shaper="logc", scene=scene, entries="fitted")
     assert torch.equal(inside.table, outside.table)
-

@@ -17,7 +17,9 @@ missed, not where one channel bends. The start (:func:`start_planes`) spaces eac
 intervals; the next reaches on to the scene's largest value (at least one interval wide), and the last on to
 the half-float top (65504; 1 for SDR), so nothing is clamped. ``T`` is :data:`SCENE_TOP_SCALE` times the
 channel's :data:`SCENE_TOP_QUANTILE` quantile over the scene, at most its largest value: the scene's rarer,
-brighter pixels (a lamp, the sun) share one interval, but none shares the interval to 65504.
+brighter pixels (a lamp, the sun) share one interval, and none but those above the second-last plane's cap (one
+even interval below the top: linear ~41,000 at 33³) shares the interval to 65504. A lattice fitted to a scene
+needs at least 4 points a side.
 
 Each of :data:`SCENE_ROUNDS` rounds bakes, fits the entries to the scene (:func:`~torchgrade.lut.fit_entries`,
 scene pixels weighing :data:`SCENE_FIT_WEIGHT`) and measures every pixel's error; the next lattice resizes the
@@ -48,7 +50,7 @@ from .validation import validation_colours
 
 __all__ = ["fit_shaper", "refine_shaper", "FIT_KNOTS", "FIT_BASES", "FIT_FLOOR", "FIT_ROUNDS", "FIT_BANDS",
            "fit_scene_shaper", "start_planes", "move_planes", "planes_curve", "SCENE_KNOTS", "SCENE_OFFSET",
-           "SCENE_TOP_QUANTILE", "SCENE_TOP_SCALE", "SCENE_GAIN", "SCENE_FIT_WEIGHT", "SCENE_ROUNDS"]
+           "SCENE_TOP_QUANTILE", "SCENE_TOP_SCALE", "SCENE_GAIN", "SCENE_FIT_WEIGHT", "SCENE_ROUNDS", "SCENE_MIN_SIZE"]
 
 FIT_KNOTS = 512
 """Points of a fitted shaper's curve (LogC-spaced from black to 65504)."""
@@ -66,7 +68,7 @@ FIT_BANDS = 64
 """LogC bands per channel over which :func:`refine_shaper` attributes the measured error."""
 
 
-def fit_shaper(transform: Callable[[torch.Tensor], torch.Tensor], knots: int = FIT_KNOTS, hdr: bool = True) -> tuple:
+def fit_shaper(transform: Callable[[torch.Tensor], torch.Tensor], *, knots: int = FIT_KNOTS, hdr: bool = True) -> tuple:
     """``(curve (knots, 3), curve_range)`` of a :class:`~torchgrade.lut.FittedShaper` for ``transform``.
 
     ``hdr=False`` fits from black to 1 instead of 65504.
@@ -159,8 +161,11 @@ def _bend(transform, bases: torch.Tensor, sweep: torch.Tensor, channel: int) -> 
 
 
 SCENE_KNOTS = 2048
-"""Points of a scene-fitted shaper's curve (LogC-spaced from black to the top): planes the rounds move close together
-stay several points apart."""
+"""Points of a scene-fitted shaper's curve (LogC-spaced from black to the top): fine enough that planes as close as the
+rounds usually move them (a fraction of a stop) still fall on distinct points."""
+
+SCENE_MIN_SIZE = 4
+"""Smallest lattice :func:`start_planes` lays out: an interval below ``T``, one to the scene's top, one to 65504."""
 
 SCENE_ROUNDS = 6
 """Bake-and-fit rounds of :func:`fit_scene_shaper` (each fits a table's entries: seconds at 33³)."""
@@ -175,7 +180,8 @@ SCENE_TOP_SCALE = 4.0
 """``T`` over the :data:`SCENE_TOP_QUANTILE` quantile: the scene's rarer, brighter pixels share the last interval."""
 
 SCENE_GAIN = (0.5, 2.0)
-"""Bounds on how much one round narrows (``1 / low``) or widens (``high``) an interval."""
+"""``(low, high)`` bounds on an interval's gain: one round narrows an interval by at most ``high`` and widens it by at
+most ``1 / low``."""
 
 SCENE_FIT_WEIGHT = 1e4
 """Weight of a scene pixel (beside a validation colour or a lattice point's 1) when the entries of a table on a
@@ -190,6 +196,8 @@ def _log_offset(x: torch.Tensor) -> torch.Tensor:
 def start_planes(pixels: torch.Tensor, size: int, hdr: bool = True) -> torch.Tensor:
     """Linear positions ``(size, 3)`` of the start lattice's planes for a scene's ``pixels`` ``(3, N)`` (module docstring).
 
+    ``T`` is at least one even interval above black, so a channel the scene leaves dark still spans colours near it.
+
     Examples:
         >>> import torch
         >>> pixels = torch.rand(3, 10000, dtype=torch.float64, generator=torch.Generator().manual_seed(0)) * 4
@@ -198,6 +206,9 @@ def start_planes(pixels: torch.Tensor, size: int, hdr: bool = True) -> torch.Ten
         >>> planes.shape, float(planes[0, 0]), round(float(planes[-2, 0]), 6), float(planes[-1, 0]), bool(planes[-3, 0] <= 16)
         (torch.Size([9, 3]), 0.0, 100.0, 65504.0, True)
     """
+    if size < SCENE_MIN_SIZE:
+        raise ValueError(f"a lattice fitted to a scene needs size >= {SCENE_MIN_SIZE} (black to T, T to the scene's top, "
+                         f"on to 65504), got {size}")
     top = HALF_MAX if hdr else 1.0
     pixels = pixels.double().clamp(0.0, top)
     sample = pixels[:, :: max(1, pixels.shape[1] // (1 << 16))]  # quantile takes at most 2^24 values; 2^16 suffice
@@ -206,7 +217,7 @@ def start_planes(pixels: torch.Tensor, size: int, hdr: bool = True) -> torch.Ten
     ceiling = _log_offset(torch.tensor(top, dtype=torch.float64))
     even = (ceiling - black) / (size - 1)  # an interval's width when the planes are even to the top
     high = _log_offset(torch.minimum(SCENE_TOP_SCALE * sample.quantile(SCENE_TOP_QUANTILE, dim=1), largest))
-    high = high.clamp(black + 1e-3, ceiling - 2 * even)
+    high = high.clamp(black + even, ceiling - 2 * even)
     steps = torch.linspace(0.0, 1.0, size - 2, dtype=torch.float64).unsqueeze(1)
     dense = black + steps * (high - black)
     width = (high - black) / (size - 3)
@@ -221,8 +232,8 @@ def move_planes(planes: torch.Tensor, pixels: torch.Tensor, errors: torch.Tensor
 
     Per channel, an interval ``k`` is resized in ``log2(x + c)`` by ``g_k^(-step)``, ``g_k = (E_k / median E)^(1/2)``
     (``E_k`` the largest error of a pixel in it, those above counting in the highest; clamped to :data:`SCENE_GAIN`),
-    since linear interpolation misses a smooth curve by ``h² |f''| / 8``; an interval no pixel falls in widens by the
-    clamp's top.
+    since linear interpolation misses a smooth curve by ``h² |f''| / 8``; an interval no pixel falls in widens by
+    ``1 / low``.
 
     Examples:
         >>> import torch

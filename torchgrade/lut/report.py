@@ -135,9 +135,9 @@ def diagnose(report: ErrorReport, lut, transform, measured: tuple, rebake: Calla
     """``report`` with its causes and advice; ``rebake(shaper, size)`` bakes the same transform otherwise.
 
     ``scene_colours``: how many of the measured colours, at their end, are a scene's pixels. With a scene the advice
-    tries no fitted shaper (fitted to the scene, it serves the scene rather than the validation colours, and costs
-    rounds of entry fits), and a fitted shaper's lattice, fitted to the scene, is named as a cause with the error on
-    the scene and on the other colours apart.
+    tries no fitted shaper, the LUT's own included (fitted to the scene, it serves the scene rather than the
+    validation colours, and a new one costs rounds of entry fits), and a fitted shaper's lattice, fitted to the
+    scene, is named as a cause with the error on the scene and on the other colours apart.
 
     The lattice range's share is the error of the transform itself on colours clamped to the lattice
     (what no table entry can undo); the interpolation's is told by how the error falls on a finer lattice.
@@ -179,16 +179,16 @@ def _advice(lut, measured: tuple, tolerance: float, rebake, advise_fitted: bool 
     """The first of :data:`CANDIDATES` (a fitted shaper only if ``advise_fitted``) within ``tolerance``, as advice."""
     tried = []
     for shaper, scale in CANDIDATES:
-        if shaper == "fitted" and not advise_fitted:
-            continue
         shaper, size = shaper or lut.shaper, min(scale * (lut.size - 1) + 1, max(ADVICE_MAX_SIZE, lut.size))
-        if (shaper, size) in tried or (shaper, size) == (lut.shaper, lut.size):
+        if (shaper, size) in tried or (shaper, size) == (lut.shaper, lut.size) or (shaper == "fitted" and not advise_fitted):
             continue
         tried.append((shaper, size))
         trial = measure(rebake(shaper, size), measured, tolerance)
         if trial.within:
             return f"size={size}, shaper={shaper!r} meets it (p99.9 {trial.p99_9:.2f}, max {trial.max:.2f})"
-    return f"no bake up to {max((size for _, size in tried), default=lut.size)}³ tried meets it: apply the transform directly"
+    if not tried:
+        return "no other bake to try: apply the transform directly"
+    return f"no bake up to {max(size for _, size in tried)}³ tried meets it: apply the transform directly"
 
 
 def enforce(report: ErrorReport, strict: bool) -> None:

@@ -228,7 +228,8 @@ class FittedShaper(Shaper):
 
     ``curve`` ``(n, 3)`` holds the lattice coordinate in [0, 1] at ``n`` LogC code values evenly
     over ``curve_range``; the lattice domain is [0, 1]. The fit puts lattice planes where the
-    transform bends, from black to the half-float top (65504), so no HDR highlight is clamped.
+    transform bends or where a scene's pixels are missed, from black to the half-float top (65504), so
+    no HDR highlight is clamped.
 
     Examples:
         >>> import torch
