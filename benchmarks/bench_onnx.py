@@ -32,11 +32,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import torchgrade as tg  # noqa: E402
-from benchmarks.common import median_ms  # noqa: E402
+from benchmarks.common import median_ms, write_results  # noqa: E402
 from torchgrade.core import one_thread  # noqa: E402
 
 LOOK = ROOT / "export" / "looks" / "cinematic.json"
-RESULTS = ROOT / "benchmarks" / "results"
 HEIGHT, WIDTH, REPEATS = 1080, 1920, 9
 COMMAND = ".venv/bin/python benchmarks/bench_onnx.py"
 RUNTIMES = {
@@ -213,13 +212,7 @@ def main(argv=None) -> int:
     }
     report["eager_profile"] = eager_profile(eager(per_pixel.to(device), image.to(device)), HEIGHT * WIDTH)
     report["load_average"] = [load_start, os.getloadavg()[0]]
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    stem = results_stem(device)
-    (RESULTS / f"{stem}.json").write_text(json.dumps(report, indent=2) + "\n")
-    lines = table(report)
-    (RESULTS / f"{stem}.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
-    print(f"\nreproduce: {COMMAND}{'' if device == 'cpu' else ' --device ' + device}")
+    write_results(results_stem(device), report, table(report), f"{COMMAND}{'' if device == 'cpu' else ' --device ' + device}")
     return 0
 
 

@@ -12,7 +12,6 @@ patterns of a round alternate (:func:`benchmarks.common.median_ms`). Reported pe
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 from pathlib import Path
@@ -24,9 +23,8 @@ from onnx import TensorProto, helper, numpy_helper
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from benchmarks.common import median_ms  # noqa: E402
+from benchmarks.common import median_ms, write_results  # noqa: E402
 
-RESULTS = ROOT / "benchmarks" / "results"
 COMMAND = ".venv/bin/python benchmarks/bench_onnx_ops.py"
 STRIP = (1, 3, 68, 1920)
 STRIPS_PER_FRAME = 16
@@ -162,11 +160,7 @@ def main() -> int:
              f"{report['load_average'][0]:.1f} at the start, {report['load_average'][1]:.1f} at the end)", "",
              "| pattern | ms per 1920x1080 frame | over a Mul by a number |", "| --- | ---: | ---: |"]
     lines += [f"| {name} | {r['frame_ms']} | {r['over_mul']} |" for name, r in rows.items()]
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / "onnx_ops.json").write_text(json.dumps(report, indent=2) + "\n")
-    (RESULTS / "onnx_ops.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
-    print(f"\nreproduce: {COMMAND}")
+    write_results("onnx_ops", report, lines, COMMAND)
     return 0
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ctypes
 import functools
+import json
 import statistics
 import time
 from pathlib import Path
@@ -25,6 +26,17 @@ import torchgrade as tg
 ROOT = Path(__file__).resolve().parents[1]
 EXR_DIR = ROOT.parent / "shared" / "data" / "exr"
 """The OpenEXR project's sample images (BSD-3), shared beside the repository."""
+RESULTS = ROOT / "benchmarks" / "results"
+"""Where benchmarks commit their results."""
+
+
+def write_results(stem: str, report: dict, lines: list, command: str) -> None:
+    """Write ``report`` to ``results/<stem>.json`` and ``lines`` to ``results/<stem>.md``, print the table and ``command``."""
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    (RESULTS / f"{stem}.json").write_text(json.dumps(report, indent=2) + "\n")
+    (RESULTS / f"{stem}.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    print(f"\nreproduce: {command}")
 
 
 def sample_exr(name: str, to_rec709: bool = False) -> torch.Tensor:

@@ -23,9 +23,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import torchgrade as tg  # noqa: E402
+from benchmarks.common import write_results  # noqa: E402
 
 LOOK = ROOT / "export" / "looks" / "cinematic.json"
-RESULTS = ROOT / "benchmarks" / "results"
 COMMAND = ".venv/bin/python benchmarks/openvino_precision.py"
 HEIGHT, WIDTH = 333, 517
 
@@ -61,11 +61,7 @@ def main() -> int:
              f"`{COMMAND}` (OpenVINO {openvino.__version__}, CPU plugin, no precision hint)", "",
              "| look | max | p99.9 |", "| --- | ---: | ---: |"]
     lines += [f"| {name} | {r['max']} | {r['p999']} |" for name, r in rows.items()]
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / "openvino_precision.json").write_text(json.dumps(report, indent=2) + "\n")
-    (RESULTS / "openvino_precision.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
-    print(f"\nreproduce: {COMMAND}")
+    write_results("openvino_precision", report, lines, COMMAND)
     return 0
 
 
