@@ -111,6 +111,18 @@ def test_a_scene_fitted_shaper_refuses_what_it_cannot_fit_before_the_transform_r
         bake_lut(transform, shaper="fitted", scene=scene, **arguments)
 
 
+def test_a_scene_with_extreme_and_non_finite_pixels_fits_a_finite_monotone_lattice():
+    """0, grey, 60, 65504, 1e30, NaN, ±Inf and negative pixels go through the non-finite policy before the fit."""
+    look = torch.nn.Sequential(tg.ColorGrade(**STRONG_LOOK), tg.ToneMap("aces"))
+    values = torch.tensor([0.0, 0.18, 60.0, 65504.0, 1e30, float("nan"), float("inf"), -float("inf"), -0.5, 1e-40])
+    scene = torch.stack((values, values.roll(1), values.roll(3))).reshape(1, 3, 2, 5)
+    lut = quiet_bake(look, size=5, shaper="fitted", scene=scene, entries="fitted")
+    assert bool(torch.isfinite(lut.curve).all()) and bool((lut.curve[1:] >= lut.curve[:-1]).all())
+    assert bool(torch.isfinite(lut.table).all())
+    with torch.no_grad():
+        assert bool(torch.isfinite(lut(scene)).all())
+
+
 def test_the_scene_fit_keeps_its_best_lattice_and_moves_from_it_by_half_a_step_after_a_miss():
     from torchgrade.lut.fit import fit_scene_shaper, move_planes, planes_curve, start_planes
 

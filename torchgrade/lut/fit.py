@@ -305,11 +305,12 @@ def fit_scene_shaper(fit: Callable, pixels: torch.Tensor, errors_of: Callable, s
     step = 1.0
     for _ in tqdm(range(rounds), desc=f"fitting a {size}³ lattice to the scene", unit="round",
                   disable=None if progress else True, leave=False):
+        if best is not None:
+            planes = move_planes(best[0], pixels, best[2], step)
         curve = planes_curve(planes, hdr)
         errors = errors_of(fit(*curve))
         if best is None or float(errors.max()) < float(best[2].max()):
             best = (planes, curve, errors)
         else:
             step /= 2
-        planes = move_planes(best[0], pixels, best[2], step)
     return best[1]
