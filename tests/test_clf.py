@@ -28,7 +28,9 @@ def looks():
     look = torch.nn.Sequential(tg.ColorGrade(contrast=20.0, saturation=10.0, temperature=10.0), tg.ToneMap("aces"))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LUTAccuracyWarning)
-        return {shaper: tg.bake_lut(look, size=9, shaper=shaper) for shaper in ("linear", "logc", "logc_hdr", "fitted")}
+        luts = {shaper: tg.bake_lut(look, size=9, shaper=shaper) for shaper in ("linear", "logc", "logc_hdr", "fitted")}
+        luts["fitted to a scene"] = tg.bake_lut(look, size=9, shaper="fitted", scene=hdr_image(), entries="fitted")
+        return luts
 
 
 def ocio_apply(path, image: torch.Tensor, interpolation: str) -> torch.Tensor:
@@ -45,7 +47,7 @@ def hdr_image() -> torch.Tensor:
     return image
 
 
-@pytest.mark.parametrize("shaper", ["linear", "logc", "logc_hdr", "fitted"])
+@pytest.mark.parametrize("shaper", ["linear", "logc", "logc_hdr", "fitted", "fitted to a scene"])
 @pytest.mark.parametrize("interpolation", ["tetrahedral", "trilinear"])
 def test_opencolorio_applies_the_clf_as_the_lut_does(tmp_path, looks, shaper, interpolation):
     lut = looks[shaper]
