@@ -17,7 +17,7 @@ from torchgrade.core import bounded_pow
 from torchgrade.color.transfer import safe_pow
 from torchgrade.onnx import export, graph_nodes, scan_strips, session, verify
 from torchgrade.onnx.strips import DOMAIN
-from torchgrade.stage import STRIP_PIXELS
+from torchgrade.onnx.strips import SCAN_STRIP_PIXELS as STRIP_PIXELS
 from torchgrade.color import unity_to_aces
 from torchgrade.tonemap.aces_rrt import _red_centered_hue, _red_hue_distance, _rgb_yc, cubic_basis_hue_weight, smoothstep_hue_weight
 

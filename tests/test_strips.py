@@ -1,11 +1,15 @@
-"""Per-pixel stages run in strips of rows (``torchgrade.stage.in_strips``): the whole frame's values to float32
-rounding, and the whole frame whenever autograd records the call."""
+"""Per-pixel stages run in strips of rows on the CPU (``torchgrade.runtime.in_strips``): the whole frame's values to
+float32 rounding, and the whole frame whenever autograd records the call or the device is not the CPU; a LUT's pixel
+runs on worker threads give the serial runs' values."""
+
+import threading
 
 import pytest
 import torch
 
 import torchgrade as tg
-from torchgrade import stage
+from torchgrade import runtime
+from torchgrade.runtime import policy
 
 HDR = "../shared/data/exr/Desk.exr"
 
@@ -28,23 +32,54 @@ def test_strips_give_the_whole_frames_values(name, desk, monkeypatch):
     layer = STAGES[name]()
     with torch.no_grad():
         whole = layer(desk)
-        monkeypatch.setattr(stage, "STRIP_PIXELS", 997)  # strips of a few rows, the last one shorter
+        monkeypatch.setattr(policy, "STRIP_PIXELS_PER_THREAD", 997 // torch.get_num_threads())  # strips of a few rows, the last one shorter
         strips = layer(desk)
     torch.testing.assert_close(strips, whole, rtol=1e-5, atol=1e-6)  # a matrix product may block a strip differently
 
 
 def test_strips_are_skipped_when_autograd_records(desk, monkeypatch):
-    monkeypatch.setattr(stage, "STRIP_PIXELS", 997)
+    monkeypatch.setattr(policy, "STRIP_PIXELS_PER_THREAD", 997 // torch.get_num_threads())
     calls = []
     image = desk[..., :64, :64].clone().requires_grad_()
-    out = stage.in_strips(lambda x: calls.append(x.shape) or x * 2.0, image)
+    out = runtime.in_strips(lambda x: calls.append(x.shape) or x * 2.0, image)
     assert calls == [image.shape] and out.requires_grad
     learnable = torch.nn.Parameter(torch.tensor(2.0))
-    stage.in_strips(lambda x: calls.append(x.shape) or x * learnable, desk[..., :64, :64], (learnable,))
+    runtime.in_strips(lambda x: calls.append(x.shape) or x * learnable, desk[..., :64, :64], (learnable,))
     assert calls[-1] == image.shape
     with torch.no_grad():
-        stage.in_strips(lambda x: calls.append(x.shape) or x, desk[..., :64, :64], (learnable,))
+        runtime.in_strips(lambda x: calls.append(x.shape) or x, desk[..., :64, :64], (learnable,))
     assert len(calls) > 3
+
+
+def test_lut_runs_on_worker_threads_give_the_serial_runs_values_and_leave_the_callers_threads_alone(desk, monkeypatch):
+    lut = tg.bake_lut(tg.PostFX(grade={"contrast": 20}, tonemap="aces"), size=17, report_tolerance=float("inf"))
+    image = desk[..., :200, :300]
+    with torch.no_grad():
+        serial = lut(image)
+    monkeypatch.setattr(policy, "PARALLEL_FROM", 1)  # workers from one thread up
+    threads = torch.get_num_threads()
+    try:
+        for count in (threads + 1, threads + 2):  # a new pool for each count: its workers set one thread each
+            torch.set_num_threads(count)
+            with torch.inference_mode():
+                threaded = lut(image)
+            assert threaded.is_inference() and torch.get_num_threads() == count
+            assert torch.equal(threaded, serial)
+            seen = []
+            thread = threading.Thread(target=lambda: seen.append(torch.get_num_threads()))
+            thread.start()
+            thread.join()
+            assert seen == [count]  # a thread started later begins with the caller's count, not the workers' one
+    finally:
+        torch.set_num_threads(threads)
+
+
+def test_other_devices_compute_whole_frames():
+    assert runtime.policy_for(torch.device("meta")).strip_pixels is None
+    calls = []
+    image = torch.empty(1, 3, 2000, 2000, device="meta")
+    runtime.in_strips(lambda x: calls.append(x.shape) or x, image)
+    assert calls == [image.shape]
 
 
 def test_gradients_of_the_folded_grade_match_finite_differences():

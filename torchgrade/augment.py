@@ -46,9 +46,10 @@ from torch import nn
 
 from .augment_ranges import (BLOOM_CONTROLS, COLOUR_CONTROLS, GRADE_CONTROLS, INPUT_SPACES, checked_range,
                              checked_tonemap, grade_identity, is_identity_range)
-from .bloom import BLOOM_MODES, bloom
+from .bloom import BLOOM_MODES, bloom_settings, bloom_with_settings
 from .color import linear_to_srgb, srgb_to_linear
 from .core import check_image, is_tracing, to_input_dtype, working_dtype
+from .runtime import DeferredCheck, policy_for
 from .grade import ColorGrade, color_grade
 from .tonemap import tonemap
 
@@ -58,8 +59,14 @@ SRGB_TOLERANCE = 1e-3
 """How far above 1 an sRGB input may reach (rounding of an earlier step) before it is refused as 0..255 data."""
 
 
+def _check_peak(name: str, peak: torch.Tensor) -> None:
+    if float(peak) > 1.0 + SRGB_TOLERANCE:
+        raise ValueError(f'input_space="srgb" takes images in [0, 1], got values up to {float(peak):g}: divide 0..255 images by 255')
+
+
 def tonemap_per_sample(images: torch.Tensor, choice: torch.Tensor, modes: tuple) -> torch.Tensor:
-    """Tone map sample ``i`` of ``images`` with ``modes[choice[i]]``, each mode evaluated once on its samples.
+    """Tone map sample ``i`` of ``images`` with ``modes[choice[i]]``: on the CPU each mode evaluated once on its
+    samples; where reading the draw back would wait for the device (and while tracing), every mode on every sample.
 
     Examples:
         >>> images = torch.full((2, 3, 1, 1), 4.0)
@@ -69,6 +76,14 @@ def tonemap_per_sample(images: torch.Tensor, choice: torch.Tensor, modes: tuple)
     """
     if len(modes) == 1:
         return tonemap(images, modes[0])
+    if is_tracing() or not policy_for(images.device).reads_values:
+        # Without reading the draw back (a synchronisation off the CPU): every mode on every sample, then a select.
+        picked = choice.reshape(-1, 1, 1, 1)
+        mapped = [tonemap(images, mode) for mode in modes]
+        out = mapped[0]
+        for index, candidate in enumerate(mapped[1:], start=1):
+            out = torch.where(picked == index, candidate, out)
+        return out
     order = torch.argsort(choice, stable=True)
     counts = torch.bincount(choice, minlength=len(modes)).tolist()
     groups = images.index_select(0, order).split(counts)
@@ -194,12 +209,13 @@ class RandomPostFX(IntensityAugmentationBase2D):
         Returns a dict of tensors on ``device``: ``"batch_prob"`` (B,) bool, which samples are changed
         (kornia's name); one entry per sampled control, (B,) or (B, 3) for colours, in its units;
         ``"tonemap"`` (B,) int64, the index of each sample's mode in ``self.tonemap``, when tone mapping.
-        Draws happen on the generator's device (CPU when None), so a seed gives the same look on any device.
+        Draws happen on the generator's device, or without one on ``device`` from torch's default generator there
+        (nothing is copied to a GPU per batch); a CPU generator gives the same draws, and looks, on every device.
         """
         rows = 1 if self.same_on_batch else batch_size
         widths = self._widths()
         columns = 1 + sum(widths) + (1 if self.tonemap else 0)
-        draw_device = generator.device if generator is not None else torch.device("cpu")
+        draw_device = generator.device if generator is not None else torch.device(device or "cpu")
         uniform = torch.rand(rows, columns, generator=generator, device=draw_device)
         uniform = uniform.to(device or draw_device).expand(batch_size, -1).contiguous()
         params = {"batch_prob": uniform[:, 0] < self.p}
@@ -244,7 +260,7 @@ class RandomPostFX(IntensityAugmentationBase2D):
             x = srgb_to_linear(x)
         if self.bloom_ranges:
             controls = {BLOOM_CONTROLS[name][0]: params[name] for name in self.bloom_ranges}
-            x = bloom(x, mode=self.bloom_mode, **controls)
+            x = bloom_with_settings(x, bloom_settings({"mode": self.bloom_mode, **controls}))  # drawn inside their ranges
         x = color_grade(x, aces=self.aces, **{name: params[name] for name in self.grade_ranges})
         if self.tonemap:
             x = tonemap_per_sample(x, params["tonemap"], self.tonemap)
@@ -257,12 +273,13 @@ class RandomPostFX(IntensityAugmentationBase2D):
         return self.transform(input, params)
 
     def _check_display_range(self, images: torch.Tensor) -> None:
-        """Refuse 0..255 floats given as sRGB (kornia would clamp them to white); reads one number back."""
+        """Refuse 0..255 floats given as sRGB (kornia would clamp them to white). The batch's peak is read back
+        without waiting for a GPU (:class:`~torchgrade.runtime.DeferredCheck`): there a batch out of range raises
+        at a later call."""
         if self.input_space == "srgb" and not is_tracing():
-            peak = float(images.detach().max())
-            if peak > 1.0 + SRGB_TOLERANCE:
-                raise ValueError(f'input_space="srgb" takes images in [0, 1], got values up to {peak:g}: '
-                                 "divide 0..255 images by 255")
+            if "_range_check" not in self.__dict__:
+                self._range_check = DeferredCheck()
+            self._range_check({"peak": images.detach().amax()}, _check_peak)
 
     def _graded(self, images: torch.Tensor, params: dict) -> torch.Tensor:
         if self.p == 0 or self.is_identity:
@@ -322,6 +339,7 @@ class RandomPostFX(IntensityAugmentationBase2D):
     def __getstate__(self) -> dict:
         state = dict(super().__getstate__())
         state.pop("_local", None)  # per-thread draws stay with their thread: a copy starts without one
+        state.pop("_range_check", None)  # pending checks hold CUDA events
         return state
 
     def __setstate__(self, state: dict) -> None:

@@ -24,6 +24,10 @@ from typing import Union
 
 import torch
 
+from .runtime.constants import constant
+from .runtime.policy import policy_for
+from .runtime.recording import is_tracing, untracked
+
 Param = Union[float, int, torch.Tensor]
 
 __all__ = [
@@ -38,9 +42,12 @@ __all__ = [
     "matrix_param",
     "apply_matrix",
     "matrix_on_planes",
+    "matrix_product",
+    "channel_sum",
     "check_range",
     "check_choice",
     "is_constant",
+    "readable",
     "is_tracing",
     "untracked",
     "working_dtype",
@@ -125,7 +132,7 @@ def _as_tensor(value: Param, image: torch.Tensor, name: str) -> torch.Tensor:
         return value.to(device=image.device, dtype=image.dtype)
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise TypeError(f"parameter {name!r} must be a number or a tensor, got {type(value).__name__}")
-    return torch.tensor(float(value), device=image.device, dtype=image.dtype)
+    return constant(float(value), image)
 
 
 _INT_DTYPES = (torch.int8, torch.int16, torch.int32, torch.int64, torch.uint8)
@@ -189,14 +196,30 @@ def matrix_param(value, image: torch.Tensor, name: str) -> torch.Tensor:
 
 
 def _sequence(value, image: torch.Tensor, name: str) -> torch.Tensor:
+    """A colour or matrix given as (nested) numbers, as a tensor on ``image``'s device, made there once per value."""
     try:
-        return torch.as_tensor(value, dtype=image.dtype, device=image.device)
+        return constant(_nested_floats(value), image)
     except (TypeError, ValueError, RuntimeError) as error:
         raise TypeError(f"parameter {name!r} must be numbers or a tensor: {error}") from None
 
 
+def _nested_floats(value):
+    """A number or nested sequence of numbers as nested tuples of floats (hashable: a key of the constants' cache)."""
+    if isinstance(value, (list, tuple)):
+        return tuple(_nested_floats(item) for item in value)
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"expected a number, got {type(value).__name__}")
+    return float(value)
+
+
 def apply_matrix(matrix: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
     """``out[..., i, h, w] = sum_j matrix[..., i, j] * image[..., j, h, w]`` for (3,3) or (B,3,3) matrices.
+
+    Three per-channel multiply-adds (a product and two ``addcmul``), never a matrix product: a 3x3 ``einsum``
+    runs as a batched product with an inner dimension of 3, which oneDNN and MKL block poorly (2x the time of
+    these passes on a CPU strip of 2^17 pixels), cuBLAS runs as ``gemv`` calls that nothing fuses (2.59 of a
+    compiled look's 4.47 ms on an H200, ``../shared/measurements/gpu-h200``), and Inductor fuses these into the
+    steps around them. Computed in place where nothing records (:func:`untracked`).
 
     Examples:
         >>> swap = torch.tensor([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
@@ -207,11 +230,13 @@ def apply_matrix(matrix: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
         # Exported as three broadcast products summed: onnxruntime's CPU Einsum ran 3 to 5 times slower, and a
         # MatMul runs in bfloat16 at OpenVINO's default precision, coefficients and all (7.1 codes p99.9 on the look).
         return matrix_on_planes(matrix, [image[..., j : j + 1, :, :] for j in range(3)])
-    if untracked(matrix, image):
-        return _channel_sums(matrix, image)
-    if matrix.dim() == 2:
-        return torch.einsum("ij,...jhw->...ihw", matrix, image)
-    return torch.einsum("bij,bjhw->bihw", matrix, image)
+    columns = matrix.mT[..., None, None].unbind(-4)
+    channels = image.split(1, dim=-3)
+    out = columns[0] * channels[0]
+    in_place = untracked(matrix, image)
+    for column, channel in zip(columns[1:], channels[1:]):
+        out = out.addcmul_(column, channel) if in_place else torch.addcmul(out, column, channel)
+    return out
 
 
 def matrix_on_planes(matrix: torch.Tensor, planes) -> torch.Tensor:
@@ -227,18 +252,35 @@ def matrix_on_planes(matrix: torch.Tensor, planes) -> torch.Tensor:
     return sum(matrix[..., :, j, None, None] * plane for j, plane in enumerate(planes))
 
 
-def _channel_sums(matrix: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
-    """``apply_matrix`` as one product and two fused multiply-adds over the frame, column by column.
+def channel_sum(image: torch.Tensor, weights) -> torch.Tensor:
+    """``sum_j weights[j] * image[..., j, :, :]`` as ``(..., 1, H, W)``, for three Python-number ``weights``.
 
-    A 3x3 ``einsum`` runs as a matrix product with an inner dimension of 3, which oneDNN and MKL block
-    poorly: on a strip of 2^17 pixels it took 2x the time of these three passes.
+    Three passes over the planes (a product and two adds by a number, in place where nothing records): no weight
+    tensor to make or copy, and faster on the CPU than a product and a channel reduction (35 against 71 µs a strip).
+
+    Examples:
+        >>> channel_sum(torch.tensor([1.0, 2.0, 3.0]).reshape(3, 1, 1), (0.5, 0.25, 0.0)).flatten().tolist()
+        [1.0]
     """
-    columns = matrix.mT[..., None, None].unbind(-4)
-    channels = image.split(1, dim=-3)
-    out = columns[0] * channels[0]
-    for column, channel in zip(columns[1:], channels[1:]):
-        out.addcmul_(column, channel)
-    return out
+    red, green, blue = image.split(1, dim=-3)
+    out = red * weights[0]
+    if torch.onnx.is_in_onnx_export() or not untracked(image):
+        # exported as three products and two sums (a ReduceSum over channels costs onnxruntime's CPU several of them,
+        # benchmarks/results/onnx_ops.md)
+        return out + green * weights[1] + blue * weights[2]
+    return out.add_(green, alpha=weights[1]).add_(blue, alpha=weights[2])
+
+
+def matrix_product(second: torch.Tensor, first: torch.Tensor) -> torch.Tensor:
+    """``second @ first`` for (3, 3) or (B, 3, 3) colour matrices, as broadcast products summed: elementwise work
+    that Inductor fuses, where a product of 3x3 matrices is a matrix-library call of its own (see :func:`apply_matrix`).
+
+    Examples:
+        >>> a, b = torch.rand(2, 3, 3), torch.rand(3, 3)
+        >>> bool(torch.allclose(matrix_product(a, b), a @ b))
+        True
+    """
+    return (second[..., :, :, None] * first[..., None, :, :]).sum(dim=-2)
 
 
 def check_range(value: Param, name: str, low: float, high: float) -> None:
@@ -296,11 +338,24 @@ def check_on_cpu(transform, what: str) -> None:
         raise ValueError(f"{what} evaluates on the CPU, but the look holds tensors on {', '.join(devices)}: pass look.cpu()")
 
 
+def readable(value) -> bool:
+    """Whether ``value`` can be checked in a forward pass without waiting for a device: a plain value, or a tensor
+    where the device's policy reads values (the CPU), outside tracing.
+
+    Examples:
+        >>> readable(0.5), readable(torch.tensor(0.5)), readable(torch.tensor(0.5, device="meta"))
+        (True, True, False)
+    """
+    if not isinstance(value, torch.Tensor):
+        return True
+    return not is_tracing() and policy_for(value.device).reads_values
+
+
 def is_constant(value, constant) -> bool:
     """True when ``value`` is a plain (non-learnable) value equal to ``constant`` everywhere.
 
     Learnable parameters (``requires_grad``) are never constant: they may move during training; nor are
-    tensors while ``torch.compile`` traces.
+    tensors while ``torch.compile`` traces, nor tensors off the CPU (reading one back would wait for the device).
 
     Examples:
         >>> is_constant((0.5, 0.5, 0.5), 0.5), is_constant(torch.nn.Parameter(torch.tensor(0.5)), 0.5)
@@ -318,39 +373,13 @@ def is_constant(value, constant) -> bool:
         if len(values) == 1 or len(target) == 1:  # one number against many broadcasts
             return all(v == t for v in values for t in target)
         return values == target
-    if torch.compiler.is_compiling():
-        return False  # a tensor's value is not read while compiling: its step is kept
+    if torch.compiler.is_compiling() or (isinstance(value, torch.Tensor) and not policy_for(value.device).reads_values):
+        return False  # a tensor's value is not read while compiling, nor off the CPU (a sync): its step is kept
     try:
         value = torch.as_tensor(value, dtype=torch.float64, device="cpu")
         return bool((value == torch.as_tensor(constant, dtype=torch.float64)).all())
     except (TypeError, ValueError, RuntimeError):
         return False
-
-
-def is_tracing() -> bool:
-    """True while tracing, compiling or exporting to ONNX: data-dependent checks and shortcuts are skipped.
-
-    Examples:
-        >>> is_tracing()
-        False
-    """
-    return torch.jit.is_tracing() or torch.compiler.is_compiling() or torch.onnx.is_in_onnx_export()
-
-
-def untracked(*tensors) -> bool:
-    """True when nothing records how ``tensors`` are used: no autograd (grad disabled, or none requires grad),
-    no tracing, compiling or exporting. Eager forms that compute in place or skip a guard need this.
-
-    Examples:
-        >>> x = torch.ones(2)
-        >>> untracked(x), untracked(x.requires_grad_())
-        (True, False)
-        >>> with torch.no_grad():
-        ...     untracked(x)
-        True
-    """
-    recorded = torch.is_grad_enabled() and any(isinstance(t, torch.Tensor) and t.requires_grad for t in tensors)
-    return not recorded and not is_tracing()
 
 
 _LOW_PRECISION = (torch.float16, torch.bfloat16)

@@ -37,7 +37,7 @@ from __future__ import annotations
 import torch
 
 from .color import aces_to_unity, matrix, srgb_to_linear
-from .core import HALF_MAX, Param, apply_matrix, check_image, color_param, is_constant, sanitize, scalar_param, to_input_dtype, untracked, working_dtype
+from .core import HALF_MAX, Param, apply_matrix, matrix_product, check_image, color_param, is_constant, sanitize, scalar_param, to_input_dtype, untracked, working_dtype
 from .curves import CurveControl, check_curve, curve_is_identity, stored_curve
 from .grade_steps import (
     IDENTITY_MATRIX,
@@ -65,11 +65,12 @@ from .grade_steps import (
     white_balance_matrix,
     yrgb_curves,
 )
+from .runtime import folded
 from .stage import Control, Stage, controls_signature
 
 from . import grade_steps
 
-__all__ = ["ColorGrade", "color_grade", "active_steps", "is_identity_control", *grade_steps.__all__]
+__all__ = ["ColorGrade", "color_grade", "active_steps", "is_identity_control", "grade_matrix", "output_matrix", *grade_steps.__all__]
 
 # Which controls make each step do something; the zone limits alone change nothing.
 _STEPS = {
@@ -146,23 +147,19 @@ def color_grade(image: torch.Tensor, aces: bool = False, log_space: str = "acesc
         return image
     weights = "ap1" if aces else "rec709"
     x = sanitize(working_dtype(image))
-    # The linear steps between two non-linear ones are folded into one matrix (``linear``), so each
-    # pixel sees one 3x3: post exposure, white balance and the way into contrast's primaries; the way
-    # out of them and the colour filter.
-    linear = None
-    if "post_exposure" in steps:
-        linear = _diagonal(torch.exp2(scalar_param(p["post_exposure"], x, "post_exposure")))
-    if "white_balance" in steps:
-        linear = _then(linear, white_balance_matrix(x, p["temperature"], p["tint"]))
+    # The linear steps between two non-linear ones are folded into one matrix, so each pixel sees one 3x3: post
+    # exposure, white balance and the way into contrast's primaries; the way out of them and the colour filter.
+    # Of plain-number controls the matrix is a constant, made once (runtime.folded).
+    exposure = p["post_exposure"] if "post_exposure" in steps else None
+    balance = (p["temperature"], p["tint"]) if "white_balance" in steps else None
+    tint = p["color_filter"] if "color_filter" in steps else None
     if "contrast" in steps:
         encoding, into, out_of = contrast_space(aces, log_space)
-        x = _applied(linear if into is None else _then(linear, matrix(into, x)), x)
+        x = _applied(folded(grade_matrix, exposure, balance, into, None, like=x), x)
         x = log_contrast(x, p["contrast"], encoding)
-        linear = None if out_of is None else matrix(out_of, x)
-    elif aces:
-        linear = _then(linear, matrix("srgb_to_ap1", x))
-    if "color_filter" in steps:
-        linear = _then(linear, _diagonal(srgb_to_linear(color_param(p["color_filter"], x, "color_filter"))))
+        linear = folded(grade_matrix, None, None, out_of, tint, like=x)
+    else:
+        linear = folded(grade_matrix, exposure, balance, "srgb_to_ap1" if aces else None, tint, like=x)
     # Bounding to the non-finite policy's range after each group of gains keeps the whole documented
     # range finite: post exposure 20, contrast 100 and a filter of 100 reach 1e26, and the next squares overflow.
     x = _applied(linear, x).clamp(0.0, HALF_MAX)
@@ -182,16 +179,52 @@ def color_grade(image: torch.Tensor, aces: bool = False, log_space: str = "acesc
     if "hue_shift" in steps:
         x = hue_shift(x, p["hue_shift"], p["hue_vs_hue"])
     # Saturation without curves is a matrix too, folded with the way out of ACEScg.
-    linear = None
+    amount = None
     if factor is None and "saturation" in steps and _saturation_folds(x, p["saturation"]):
-        linear = saturation_matrix(x, p["saturation"], weights)
+        amount = p["saturation"]
     elif "saturation" in steps or factor is not None:
         x = saturation(x, p["saturation"], weights, factor)
     if "yrgb_curves" in steps:
-        x = yrgb_curves(_applied(linear, x), p["curve_master"], p["curve_red"], p["curve_green"], p["curve_blue"])
-        linear = None
-    x = aces_to_unity(_applied(_then(linear, matrix("ap1_to_ap0", x)), x).clamp_min(0.0)) if aces else _applied(linear, x).clamp_min(0.0)
-    return to_input_dtype(x, image)
+        x = _applied(folded(output_matrix, amount, weights, False, like=x), x)
+        x = yrgb_curves(x, p["curve_master"], p["curve_red"], p["curve_green"], p["curve_blue"])
+        amount = None
+    x = _applied(folded(output_matrix, amount, weights, aces, like=x), x).clamp_min(0.0)
+    return to_input_dtype(aces_to_unity(x) if aces else x, image)
+
+
+def grade_matrix(exposure, balance, space, tint, *, like: torch.Tensor):
+    """The linear steps of the grade before and around contrast as one matrix, ``None`` when there are none.
+
+    In order: post ``exposure`` (stops, or None), white ``balance`` (``(temperature, tint)`` or None), the named
+    :data:`~torchgrade.color.MATRICES` ``space`` (or None), the colour filter ``tint`` (sRGB-encoded, or None).
+
+    Examples:
+        >>> grade_matrix(1.0, None, None, None, like=torch.zeros(1)).diagonal().tolist()
+        [2.0, 2.0, 2.0]
+        >>> grade_matrix(None, None, None, None, like=torch.zeros(1)) is None
+        True
+    """
+    linear = None
+    if exposure is not None:
+        linear = _diagonal(torch.exp2(scalar_param(exposure, like, "post_exposure")))
+    if balance is not None:
+        linear = _then(linear, white_balance_matrix(like, *balance))
+    if space is not None:
+        linear = _then(linear, matrix(space, like))
+    if tint is not None:
+        linear = _then(linear, _diagonal(srgb_to_linear(color_param(tint, like, "color_filter"))))
+    return linear
+
+
+def output_matrix(saturation_amount, weights: str, aces: bool, *, like: torch.Tensor):
+    """Saturation (``None``: none) as a matrix, then, with ``aces``, ACEScg to ACES2065-1; ``None`` when neither.
+
+    Examples:
+        >>> output_matrix(-100.0, "rec709", False, like=torch.zeros((), dtype=torch.float64))[0].tolist()  # each row: luminance weights
+        [0.2126729, 0.7151522, 0.072175]
+    """
+    linear = None if saturation_amount is None else saturation_matrix(like, saturation_amount, weights)
+    return _then(linear, matrix("ap1_to_ap0", like)) if aces else linear
 
 
 _SETTINGS = ("aces", "log_space")
@@ -205,7 +238,7 @@ def _diagonal(gains: torch.Tensor) -> torch.Tensor:
 
 def _then(first, second: torch.Tensor) -> torch.Tensor:
     """The matrix applying ``first`` (None: nothing yet), then ``second``: ``second · first``."""
-    return second if first is None else second @ first
+    return second if first is None else matrix_product(second, first)
 
 
 def _applied(linear, image: torch.Tensor) -> torch.Tensor:

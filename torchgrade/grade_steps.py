@@ -34,7 +34,8 @@ from .color import (
     safe_sqrt,
     srgb_to_linear,
 )
-from .core import HALF_MAX, Param, apply_matrix, bounded_pow, color_param, matrix_param, scalar_param, untracked
+from .core import HALF_MAX, Param, apply_matrix, bounded_pow, matrix_product, color_param, matrix_param, scalar_param, untracked
+from .runtime import constant
 from .curves import evaluate_curve
 
 __all__ = [
@@ -108,7 +109,7 @@ def white_balance_coefficients(temperature: torch.Tensor, tint: torch.Tensor) ->
         ),
         dim=-3,
     )
-    d65 = torch.tensor((0.949237, 1.03542, 1.08728), dtype=lms.dtype, device=lms.device).reshape(3, 1, 1)
+    d65 = constant((0.949237, 1.03542, 1.08728), lms).reshape(3, 1, 1)
     return d65 / lms
 
 
@@ -122,7 +123,7 @@ def white_balance_matrix(image: torch.Tensor, temperature: Param = 0.0, tint: Pa
         True
     """
     gains = white_balance_coefficients(scalar_param(temperature, image, "temperature"), scalar_param(tint, image, "tint"))
-    return matrix("lms_to_linear", image) @ (gains[..., 0] * matrix("linear_to_lms", image))
+    return matrix_product(matrix("lms_to_linear", image), gains[..., 0] * matrix("linear_to_lms", image))
 
 
 def white_balance(image: torch.Tensor, temperature: Param = 0.0, tint: Param = 0.0) -> torch.Tensor:
@@ -352,17 +353,30 @@ def split_toning(
     """
     gamma = safe_pow(image, 1.0 / 2.2)
     t = (luminance(gamma.clamp(0.0, 1.0), luminance_weights) + scalar_param(balance, image, "split_balance") * 0.01).clamp(0.0, 1.0)
+    plain = _plain_offsets(shadows), _plain_offsets(highlights)
+    if None not in plain and untracked(gamma, t):
+        return safe_pow(_soft_light_by_channel(gamma, (1.0 - t, t), plain), 2.2)
+    if None not in plain and torch.onnx.is_in_onnx_export():
+        return safe_pow(_soft_light_planes(gamma, (1.0 - t, t), plain), 2.2)
     offsets = (color_param(shadows, image, "split_shadows") - 0.5, color_param(highlights, image, "split_highlights") - 0.5)
-    constant = all(o.shape == (3, 1, 1) and o.device.type == "cpu" for o in offsets)
-    if untracked(gamma, t, *offsets) and constant:
-        return safe_pow(_soft_light_by_channel(gamma, (1.0 - t, t), tuple(o.flatten().tolist() for o in offsets)), 2.2)
-    if torch.onnx.is_in_onnx_export() and constant:
-        return safe_pow(_soft_light_planes(gamma, (1.0 - t, t), tuple(o.flatten().tolist() for o in offsets)), 2.2)
     if torch.onnx.is_in_onnx_export():
         return safe_pow(_soft_light_masked(_soft_light_masked(gamma, 1.0 - t, offsets[0]), t, offsets[1]), 2.2)
     shadow_tint = 0.5 + offsets[0] * (1.0 - t)
     highlight_tint = 0.5 + offsets[1] * t
     return safe_pow(soft_light(soft_light(gamma, shadow_tint), highlight_tint), 2.2)
+
+
+def _plain_offsets(color):
+    """A split-toning colour given as three numbers, as its offsets from neutral grey ``c - 0.5`` in Python (the branch
+    each channel's blend takes is then known without reading the device); ``None`` for a tensor.
+
+    Examples:
+        >>> _plain_offsets((0.45, 0.5, 0.56)), _plain_offsets(torch.tensor([0.5, 0.5, 0.5]))
+        ((-0.04999999999999999, 0.0, 0.06000000000000005), None)
+    """
+    if isinstance(color, torch.Tensor) or len(color) != 3 or not all(isinstance(c, (int, float)) for c in color):
+        return None
+    return tuple(float(c) - 0.5 for c in color)
 
 
 def channel_mixer(image: torch.Tensor, mixer=IDENTITY_MATRIX) -> torch.Tensor:
@@ -434,7 +448,7 @@ def _trackball(value, image: torch.Tensor, name: str) -> tuple:
 def _minus_luminance(rgb: torch.Tensor) -> torch.Tensor:
     """``rgb - Y(rgb)`` for colours ``(..., 3, 1, 1)``, as ``sum_j w_j (rgb_i - rgb_j)`` with the Rec.709
     weights normalised to sum 1 (Unity's sum to 1.0000001), so a grey colour gives exactly 0."""
-    weights = torch.tensor(REC709_LUMINANCE, dtype=rgb.dtype, device=rgb.device)
+    weights = constant(REC709_LUMINANCE, rgb)
     weights = (weights / weights.sum()).reshape(3, 1, 1)
     return ((rgb.unsqueeze(-3) - rgb.unsqueeze(-4)) * weights).sum(dim=-3)
 
@@ -559,7 +573,7 @@ def saturation_matrix(image: torch.Tensor, amount: Param, luminance_weights="rec
     scale = 1.0 + scalar_param(amount, image, "saturation") * 0.01
     scale = scale.reshape(scale.shape[:1] + (1, 1)) if scale.dim() else scale
     weights = {"rec709": REC709_LUMINANCE, "ap1": AP1_LUMINANCE}[luminance_weights]
-    weights = torch.tensor(weights, dtype=image.dtype, device=image.device).expand(3, 3)
+    weights = constant(weights, image).expand(3, 3)
     return scale * torch.eye(3, dtype=image.dtype, device=image.device) + (1.0 - scale) * weights
 
 

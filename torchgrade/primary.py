@@ -23,7 +23,8 @@ import inspect
 import torch
 
 from .color import CHANNEL
-from .core import Param, bounded_pow, check_choice, check_image, color_param, is_constant, sanitize, scalar_param, to_input_dtype, working_dtype
+from .core import Param, bounded_pow, check_choice, readable, check_image, color_param, is_constant, sanitize, scalar_param, to_input_dtype, working_dtype
+from .runtime import constant
 from .stage import Control, Stage, controls_signature
 
 __all__ = [
@@ -150,7 +151,7 @@ def primary_saturation(image: torch.Tensor, amount: Param = 1.0) -> torch.Tensor
         >>> primary_saturation(torch.tensor([1.0, 0.0, 0.0]).reshape(3, 1, 1), 0.0).flatten().tolist()
         [0.2125999927520752, 0.2125999927520752, 0.2125999927520752]
     """
-    weights = torch.tensor(OCIO_LUMA, dtype=image.dtype, device=image.device).reshape(3, 1, 1)
+    weights = constant(OCIO_LUMA, image).reshape(3, 1, 1)
     luma = (image * weights).sum(dim=CHANNEL, keepdim=True)
     return luma + (image - luma) * scalar_param(amount, image, "saturation")
 
@@ -185,7 +186,8 @@ def primary_grade(image: torch.Tensor, style: str = "linear", **controls) -> tor
     if "contrast" in changed:
         x = (linear_contrast if style == "linear" else log_contrast)(x, p["contrast"], p["pivot"])
     if "gamma" in changed:
-        _check_pivots(p["pivot_black"], p["pivot_white"])
+        if readable(p["pivot_black"]) and readable(p["pivot_white"]):  # a GPU's are not read per frame: a stage checks them when set
+            _check_pivots(p["pivot_black"], p["pivot_white"])
         x = log_gamma(x, p["gamma"], p["pivot_black"], p["pivot_white"])
     if "saturation" in changed:
         x = primary_saturation(x, p["saturation"])
@@ -194,6 +196,10 @@ def primary_grade(image: torch.Tensor, style: str = "linear", **controls) -> tor
 
 def _check_pivots(black: Param, white: Param) -> None:
     """OpenColorIO's rule (``GradingPrimary::validate``): the gamma span needs pivot_black below pivot_white."""
+    if not isinstance(black, torch.Tensor) and not isinstance(white, torch.Tensor):
+        if not black < white:
+            raise ValueError(f"pivot_black must be below pivot_white, got {black} and {white}")
+        return
     black_t, white_t = (torch.as_tensor(v, dtype=torch.float64).detach() for v in (black, white))
     if (black_t >= white_t).any():
         raise ValueError(f"pivot_black must be below pivot_white, got {black_t.tolist()} and {white_t.tolist()}")

@@ -38,43 +38,12 @@ from typing import Any, ClassVar
 import torch
 from torch import nn
 
-from .core import check_choice, check_range, full_precision, is_constant, is_tracing, untracked
+from .core import check_choice, check_range, full_precision, is_constant, is_tracing
+from .runtime import DeferredCheck, in_strips
 
-__all__ = ["Control", "Stage", "plain", "controls_signature", "STRIP_PIXELS", "in_strips"]
+__all__ = ["Control", "Stage", "plain", "controls_signature"]
 
 KINDS = ("number", "int", "bool", "choice", "value")
-
-
-STRIP_PIXELS = 1 << 17
-"""Pixels per strip of :func:`in_strips` (batch included). On a 2-core Xeon (2 MiB L2 a core), grade + tone map
-of ``export/looks/cinematic.json`` at 1920x1080 took 516 ms whole, 418 / 312 / 296 / 308 / 317 ms in strips of
-2^15 / 2^16 / 2^17 / 2^18 / 2^19 pixels (medians of 5, alternating, load average 1.8), with identical output."""
-
-
-def in_strips(transform, image: torch.Tensor, controls=()) -> torch.Tensor:
-    """``transform(image)`` for a per-pixel ``transform``, run on strips of rows of about :data:`STRIP_PIXELS` pixels.
-
-    An eager per-pixel stage is dozens of whole-tensor kernels, each reading and writing the frame from
-    memory; on strips the intermediates stay in cache and each result is copied into the output while
-    hot. The frame is processed whole (the same values) when it is not larger than a strip, while
-    tracing, compiling or exporting (the graph takes any size), and when autograd records the call
-    (``image`` or a tensor of ``controls`` requires grad), which would keep every strip's intermediates.
-
-    Examples:
-        >>> image = torch.rand(1, 3, 300, 1000)
-        >>> torch.equal(in_strips(torch.sqrt, image), torch.sqrt(image))
-        True
-    """
-    if image.dim() < 3 or image.numel() <= 3 * STRIP_PIXELS or not untracked(image, *controls):
-        return transform(image)
-    rows = max(1, STRIP_PIXELS * image.shape[-2] * image.shape[-3] // image.numel())
-    output = None
-    for start in range(0, image.shape[-2], rows):
-        strip = transform(image[..., start : start + rows, :])
-        if output is None:
-            output = strip.new_empty(strip.shape[:-2] + (image.shape[-2], strip.shape[-1]))
-        output[..., start : start + rows, :] = strip
-    return output
 
 
 @dataclass(frozen=True)
@@ -276,8 +245,8 @@ class Stage(nn.Module):
         return {name: getattr(self, name) for name in self._control_names}
 
     def run_in_strips(self, function, image: torch.Tensor) -> torch.Tensor:
-        """``function(image, **self.params())`` for a per-pixel stage, on strips of rows (:func:`in_strips`)
-        unless the stage is identity (then the function runs once on the whole frame)."""
+        """``function(image, **self.params())`` for a per-pixel stage, on strips of rows where the device's
+        execution policy asks (:func:`~torchgrade.runtime.in_strips`), whole when the stage is identity."""
         params = self.params()
         call = functools.partial(function, **params)
         return call(image) if self.is_identity else in_strips(call, image, params.values())
@@ -297,15 +266,30 @@ class Stage(nn.Module):
     def check_learnable(self) -> None:
         """Raise ``ValueError`` naming a learnable control an optimiser moved outside its range (or to NaN).
 
-        Called before every ``forward`` (:meth:`__call__`); skipped while tracing or compiling (the graph carries no checks).
+        Called before every ``forward`` (:meth:`__call__`); skipped while tracing or compiling (the graph carries no
+        checks). A value is checked once per change (an optimiser step changes it in place); on CUDA without waiting
+        for the device, so the error comes at a later forward (:class:`~torchgrade.runtime.DeferredCheck`).
         """
         if is_tracing():
             return
         table = self.control_table()
-        for name, value in self._parameters.items():
-            control = table.get(name)
-            if control is not None and control.kind == "number" and value is not None:
-                control.check(name, value)
+        learnable = {name: value for name, value in self._parameters.items()
+                     if value is not None and name in table and table[name].kind == "number"}
+        if learnable:
+            self.deferred_check()(learnable, lambda name, value: table[name].check(name, value))
+
+    def deferred_check(self) -> DeferredCheck:
+        """This stage's :class:`~torchgrade.runtime.DeferredCheck` of learnable values (made at its first use)."""
+        check = self.__dict__.get("_deferred_check")
+        if check is None:
+            check = self.__dict__["_deferred_check"] = DeferredCheck()
+        return check
+
+    def __getstate__(self):
+        """A saved or copied stage leaves its pending checks behind (they hold CUDA events)."""
+        state = dict(super().__getstate__())
+        state.pop("_deferred_check", None)
+        return state
 
     # ------------------------------------------------------------------ identity and configs
 

@@ -41,7 +41,9 @@ from .composite import (
     replace_blend, scatter_weight, scattering_blend, screen_blend, softlight_blend,
 )
 from .convolution import ConvolutionBloom, DirectConvolutionBloom, check_kernel, convolution_bloom, direct_convolve, fft_convolve
-from .layer import CONTROLS, MAX_FRAME_SIDE, OPTION_DEFAULTS, UNITY_SETTINGS, Bloom, FixedDepthBloom, bloom, check_settings
+from .layer import (
+    CONTROLS, MAX_FRAME_SIDE, OPTION_DEFAULTS, UNITY_SETTINGS, Bloom, FixedDepthBloom, bloom, bloom_settings, bloom_with_settings, check_settings,
+)
 from .prefilter import SOFT_KNEE_EPSILON, bloom_threshold, cross_sum, karis_mean, prefilter, threshold_fraction
 from .pyramid import (
     ANAMORPHIC_TAPS, BLUR_SIGMA, BLUR_TAPS, BSPLINE_AFTER_BILINEAR, active_levels, anamorphic_sigma, block_counts,
@@ -53,7 +55,7 @@ __all__ = [
     # the stages and functionals
     "Bloom", "ConvolutionBloom", "bloom", "bloom_threshold", "convolution_bloom", "fft_convolve", "direct_convolve",
     "FixedDepthBloom", "DirectConvolutionBloom", "MAX_FRAME_SIDE", "CONTROLS", "UNITY_SETTINGS", "OPTION_DEFAULTS",
-    "check_settings", "check_kernel",
+    "check_settings", "check_kernel", "bloom_settings", "bloom_with_settings",
     # composites
     "Composite", "COMPOSITES", "BLOOM_MODES", "LERP_MODES", "bevy_blend_factor", "scatter_weight", "bevy_weight",
     "additive_blend", "scattering_blend", "lerp_blend", "screen_blend", "softlight_blend", "replace_blend",

@@ -137,10 +137,11 @@ class ConvolutionBloom(Stage):
         return value if isinstance(value, torch.Tensor) else float(value)
 
     def check_learnable(self) -> None:
-        """Also check a learnable kernel, which an optimiser may move to a zero sum or to NaN."""
+        """Also check a learnable kernel, which an optimiser may move to a zero sum or to NaN: once per change of the
+        kernel, without waiting for a GPU (:class:`~torchgrade.runtime.DeferredCheck`)."""
         super().check_learnable()
         if isinstance(self.kernel, nn.Parameter) and not is_tracing():
-            check_kernel(self.kernel)
+            self.deferred_check()({"kernel": self.kernel}, lambda name, kernel: check_kernel(kernel))
 
     @property
     def is_identity(self) -> bool:

@@ -38,13 +38,15 @@ from ..core import (
     HALF_MAX, check_image, color_param, is_constant, is_tracing, sanitize,
     scalar_param, to_input_dtype, working_dtype,
 )
+from ..runtime import policy_for
 from ..stage import Control, Stage, controls_signature
 from .composite import BLOOM_MODES, COMPOSITES
 from .prefilter import prefilter
 from .pyramid import active_levels, anamorphic_sigma, glow_pyramid, pyramid_depth, upsample
 from .texture import as_texture, check_texture, resampled
 
-__all__ = ["CONTROLS", "UNITY_SETTINGS", "OPTION_DEFAULTS", "MAX_FRAME_SIDE", "check_settings", "bloom_settings", "bloom", "Bloom", "FixedDepthBloom"]
+__all__ = ["CONTROLS", "UNITY_SETTINGS", "OPTION_DEFAULTS", "MAX_FRAME_SIDE", "check_settings", "bloom_settings", "bloom", "bloom_with_settings", "Bloom",
+           "FixedDepthBloom"]
 
 # Finite bounds make every documented value safe on any finite frame: a threshold of 100 is linear
 # 62,500 (srgb_to_linear), just below the non-finite policy's 65,504, and gains up to 100 keep
@@ -146,8 +148,8 @@ def bloom(image: torch.Tensor, *, fixed_depth: int = None, **settings) -> torch.
     Identity cases return the input object untouched: ``intensity`` a plain 0 (in every mode,
     ``replace`` included), or a pyramid of depth 0 (a side of the quarter-resolution level below
     ``downscale_limit``, or ``max_iterations == 0``). In additive mode, when no block reaches the
-    knee, the output equals the sanitized input exactly (in eager mode the pyramid is then
-    skipped). Options at their defaults (white tint, clamp 65504, ratio 0, dirt intensity 0) are not computed.
+    knee, the output equals the sanitized input exactly (in eager mode on the CPU the pyramid is
+    then skipped; elsewhere reading that back would wait for the device). Options at their defaults (white tint, clamp 65504, ratio 0, dirt intensity 0) are not computed.
 
     Examples:
         >>> image = torch.zeros(1, 3, 16, 16); image[..., 8, 8] = 100.0
@@ -159,7 +161,7 @@ def bloom(image: torch.Tensor, *, fixed_depth: int = None, **settings) -> torch.
     settings = bloom_settings(settings)
     if not is_tracing():
         check_settings(settings)
-    return _bloomed(image, settings, fixed_depth)
+    return bloom_with_settings(image, settings, fixed_depth)
 
 
 bloom.__signature__ = controls_signature(
@@ -167,8 +169,10 @@ bloom.__signature__ = controls_signature(
 )
 
 
-def _bloomed(image: torch.Tensor, settings: dict, fixed_depth=None) -> torch.Tensor:
-    """:func:`bloom` on checked ``settings``: depth, identity shortcuts, working precision, prefilter, composite."""
+def bloom_with_settings(image: torch.Tensor, settings: dict, fixed_depth=None) -> torch.Tensor:
+    """:func:`bloom` on ``settings`` already checked (every one of :func:`bloom_settings`): depth, identity shortcuts,
+    working precision, prefilter, composite. Nothing is read back: a stage's controls were checked when set, and
+    random ones are drawn inside their ranges."""
     height, width = image.shape[-2:]
     most, limit = settings["max_iterations"], settings["downscale_limit"]
     if fixed_depth is None:
@@ -189,13 +193,19 @@ def _bloomed(image: torch.Tensor, settings: dict, fixed_depth=None) -> torch.Ten
     light, fraction = prefilter(
         scene, param("threshold"), param("knee"), settings["fade_fireflies"], settings["karis_average"], bound
     )
-    if COMPOSITES[settings["mode"]].dark_is_identity and not is_tracing() and not bool(light.any()):
+    if COMPOSITES[settings["mode"]].dark_is_identity and _reads_values(light) and not bool(light.any()):
         out = scene
     else:
         out = _composited(scene, light, fraction, settings, param, depth, active, masked=fixed_depth is not None)
     if fixed_depth is not None and not COMPOSITES[settings["mode"]].zero_is_identity:
         out = torch.where(active > 0, out, scene)  # a frame too small for any level is not bloomed
     return to_input_dtype(out.reshape(image.shape), image)
+
+
+def _reads_values(light: torch.Tensor) -> bool:
+    """Whether the eager shortcut may read ``light`` back: not while tracing, and only where the device's policy
+    allows (on the CPU; elsewhere a read waits for the device)."""
+    return not is_tracing() and policy_for(light.device).reads_values
 
 
 def _composited(scene, light, fraction, settings: dict, param, depth: int, active, masked: bool) -> torch.Tensor:
@@ -267,7 +277,7 @@ class Bloom(Stage):
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
         check_image(image)
-        return _bloomed(image, self.params())
+        return bloom_with_settings(image, self.params())
 
     def export_form(self) -> nn.Module:
         """The fixed-depth form (:class:`FixedDepthBloom`) that one ONNX graph serves every frame size with."""
@@ -307,4 +317,4 @@ class FixedDepthBloom(nn.Module):
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
         check_image(image)
-        return _bloomed(image, self.stage.params(), fixed_depth=self.depth)
+        return bloom_with_settings(image, self.stage.params(), fixed_depth=self.depth)

@@ -19,11 +19,11 @@ of reflections for levels narrower than the blur radius.
 
 from __future__ import annotations
 
-import kornia
 import torch
 import torch.nn.functional as F
 
 from ..core import is_tracing
+from ..runtime import device_cached, policy_for
 
 __all__ = [
     "BLUR_SIGMA", "BLUR_TAPS", "ANAMORPHIC_TAPS", "BSPLINE_AFTER_BILINEAR", "pyramid_depth", "active_levels",
@@ -91,17 +91,18 @@ def active_levels(image: torch.Tensor, max_iterations: int, downscale_limit: int
 def sum_pool(light: torch.Tensor) -> torch.Tensor:
     """2x2 sums, rounding the size up: blocks at odd edges sum the pixels they have.
 
-    Four strided views added together: on CPU about 3 times faster than ``F.avg_pool2d``. For export the
-    opposite holds: ``F.avg_pool2d`` with ``divisor_override=1`` exports as one ``AveragePool`` of the frame padded
-    to even sides (:mod:`torchgrade.onnx.symbolics`) instead of four strided slices and three sums (bench_onnx's
-    bloom row), and OpenVINO accepts it on a 1-pixel side, where it refuses a ceil-mode pool.
+    Four strided views added together: on CPU about 3 times faster than ``F.avg_pool2d``. Where the device's
+    policy takes library kernels (CUDA: one launch instead of four) ``F.avg_pool2d`` with ``divisor_override=1``
+    is used instead, and for export: it exports as one ``AveragePool`` of the frame padded to even sides
+    (:mod:`torchgrade.onnx.symbolics`) instead of four strided slices and three sums (bench_onnx's bloom row),
+    and OpenVINO accepts it on a 1-pixel side, where it refuses a ceil-mode pool.
 
     Examples:
         >>> sum_pool(torch.ones(1, 1, 3, 4))
         tensor([[[[4., 4.],
                   [2., 2.]]]])
     """
-    if torch.onnx.is_in_onnx_export():
+    if torch.onnx.is_in_onnx_export() or (not is_tracing() and policy_for(light.device).filters_as_kernels):
         return F.avg_pool2d(light, 2, ceil_mode=True, divisor_override=1)
     odd_height, odd_width = light.shape[-2] % 2, light.shape[-1] % 2
     if odd_height or odd_width or is_tracing():  # F.pad copies the frame even when it adds nothing
@@ -117,15 +118,19 @@ def block_counts(height: int, width: int, like: torch.Tensor) -> torch.Tensor:
         tensor([[[[4., 4.],
                   [2., 2.]]]])
     """
+    return _block_counts(height, width, like.device, like.dtype)
 
+
+@device_cached
+def _block_counts(height: int, width: int, device: torch.device, dtype: torch.dtype) -> torch.Tensor:
     def per_axis(side):
         # Integer arithmetic, cast once: an exported graph run at reduced precision (OpenVINO's bf16
         # default) cannot represent sizes above 256 exactly, and a float count of 0 divides by zero.
-        start = 2 * torch.arange(-(-side // 2), device=like.device)
+        start = 2 * torch.arange(-(-side // 2), device=device)
         return (side - start).clamp(max=2)
 
     counts = per_axis(height)[:, None] * per_axis(width)[None, :]
-    return counts.to(like.dtype).expand(1, 1, -1, -1)
+    return counts.to(dtype).expand(1, 1, -1, -1)
 
 
 def mirror_pad(light: torch.Tensor, radius: int) -> torch.Tensor:
@@ -142,10 +147,15 @@ def mirror_pad(light: torch.Tensor, radius: int) -> torch.Tensor:
         tensor([2., 1., 1., 2., 3., 3., 2.])
     """
     for axis in (-2, -1):
-        side = light.shape[axis]
-        position = torch.arange(-radius, side + radius, device=light.device).remainder(2 * side)
-        light = light.index_select(axis, torch.where(position < side, position, 2 * side - 1 - position))
+        light = light.index_select(axis, _mirror_index(light.shape[axis], radius, light.device))
     return light
+
+
+@device_cached
+def _mirror_index(side: int, radius: int, device: torch.device) -> torch.Tensor:
+    """The source of each pixel of a side of ``side`` pixels extended by ``radius`` (:func:`mirror_pad`)."""
+    position = torch.arange(-radius, side + radius, device=device).remainder(2 * side)
+    return torch.where(position < side, position, 2 * side - 1 - position)
 
 
 def pyramid_blur(light: torch.Tensor, sigma=None) -> torch.Tensor:
@@ -159,10 +169,26 @@ def pyramid_blur(light: torch.Tensor, sigma=None) -> torch.Tensor:
         3.0
     """
     taps = BLUR_TAPS if sigma is None else ANAMORPHIC_TAPS
-    sigma = (BLUR_SIGMA, BLUR_SIGMA) if sigma is None else sigma
     radius = taps // 2
-    blurred = kornia.filters.gaussian_blur2d(mirror_pad(light, radius), taps, sigma)
+    padded = mirror_pad(light, radius)
+    import kornia.filters  # imported at the first blur: kornia takes longer to import than torchgrade itself
+
+    if policy_for(light.device).filters_as_kernels:
+        if sigma is None:
+            kernel_y = kernel_x = _gaussian_kernel(taps, BLUR_SIGMA, light.device, light.dtype)
+        else:  # kornia's gaussian_blur2d would read the sigmas back to check them: they are positive by construction
+            kernel_y, kernel_x = (kornia.filters.get_gaussian_kernel1d(taps, s.unsqueeze(-1)) for s in sigma.to(light).unbind(-1))
+        return kornia.filters.filter2d_separable(padded, kernel_x, kernel_y, padding="valid")
+    blurred = kornia.filters.gaussian_blur2d(padded, taps, (BLUR_SIGMA, BLUR_SIGMA) if sigma is None else sigma)
     return blurred[..., radius:-radius, radius:-radius]
+
+
+@device_cached
+def _gaussian_kernel(taps: int, sigma: float, device: torch.device, dtype: torch.dtype) -> torch.Tensor:
+    """kornia's Gaussian kernel ``(1, taps)``, as ``gaussian_blur2d`` builds it at each call."""
+    import kornia.filters
+
+    return kornia.filters.get_gaussian_kernel1d(taps, torch.tensor([[sigma]], dtype=dtype, device=device))
 
 
 def anamorphic_sigma(ratio: torch.Tensor) -> torch.Tensor:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import torch
 
+from ..runtime import constant
 from .spaces import CHANNEL
 
 __all__ = [
@@ -47,6 +48,6 @@ def hsv_to_rgb(image: torch.Tensor) -> torch.Tensor:
         [2.0, 0.0, 0.0]
     """
     hue, saturation, value = (c.unsqueeze(CHANNEL) for c in image.unbind(CHANNEL))
-    offsets = torch.tensor((0.0, 2.0 / 3.0, 1.0 / 3.0), dtype=image.dtype, device=image.device).reshape(3, 1, 1)
+    offsets = constant((0.0, 2.0 / 3.0, 1.0 / 3.0), image).reshape(3, 1, 1)
     ramp = (torch.abs(torch.frac(hue + offsets + 1.0) * 6.0 - 3.0) - 1.0).clamp(0.0, 1.0)
     return value * (1.0 + saturation * (ramp - 1.0))

@@ -6,6 +6,7 @@ from __future__ import annotations
 import torch
 
 from ..core import apply_matrix
+from ..runtime import constant, values_of
 from .transfer import linear_to_pq, pq_to_linear
 
 __all__ = ["rec2020_to_ictcp", "ictcp_to_rec2020", "REC2020_TO_LMS", "PQ_LMS_TO_ICTCP"]
@@ -18,8 +19,13 @@ _ICTCP_TO_PQ_LMS = torch.linalg.inv(PQ_LMS_TO_ICTCP)
 _LMS_TO_REC2020 = torch.linalg.inv(REC2020_TO_LMS)
 
 
-def _apply(m: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
-    return apply_matrix(m.to(dtype=image.dtype, device=image.device), image)
+_VALUES = {"rec2020_to_lms": values_of(REC2020_TO_LMS), "pq_lms_to_ictcp": values_of(PQ_LMS_TO_ICTCP),
+           "ictcp_to_pq_lms": values_of(_ICTCP_TO_PQ_LMS), "lms_to_rec2020": values_of(_LMS_TO_REC2020)}
+"""The matrices as tuples of floats: device constants (:func:`~torchgrade.runtime.constant`)."""
+
+
+def _apply(name: str, image: torch.Tensor) -> torch.Tensor:
+    return apply_matrix(constant(_VALUES[name], image), image)
 
 
 def rec2020_to_ictcp(nits: torch.Tensor) -> torch.Tensor:
@@ -29,7 +35,7 @@ def rec2020_to_ictcp(nits: torch.Tensor) -> torch.Tensor:
         >>> [round(v, 4) for v in rec2020_to_ictcp(torch.full((3, 1, 1), 100.0)).flatten().tolist()]
         [0.5081, 0.0, 0.0]
     """
-    return _apply(PQ_LMS_TO_ICTCP, linear_to_pq(_apply(REC2020_TO_LMS, nits), reference=1.0))
+    return _apply("pq_lms_to_ictcp", linear_to_pq(_apply("rec2020_to_lms", nits), reference=1.0))
 
 
 def ictcp_to_rec2020(ictcp: torch.Tensor) -> torch.Tensor:
@@ -39,5 +45,5 @@ def ictcp_to_rec2020(ictcp: torch.Tensor) -> torch.Tensor:
         >>> [round(v, 3) for v in ictcp_to_rec2020(rec2020_to_ictcp(torch.tensor([50.0, 20.0, 5.0]).reshape(3, 1, 1))).flatten().tolist()]
         [50.0, 20.0, 5.0]
     """
-    lms = pq_to_linear(_apply(_ICTCP_TO_PQ_LMS, ictcp), reference=1.0)
-    return _apply(_LMS_TO_REC2020, lms)
+    lms = pq_to_linear(_apply("ictcp_to_pq_lms", ictcp), reference=1.0)
+    return _apply("lms_to_rec2020", lms)

@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import torch
 
-from ..core import apply_matrix
+from ..core import apply_matrix, channel_sum
+from ..runtime import constant, values_of
 
 __all__ = [
-    "matrix", "convert", "luminance", "unity_to_aces", "aces_to_unity", "unity_to_acescg", "acescg_to_unity", "aces_to_acescg", "acescg_to_aces", "linear_to_lms", "lms_to_linear", "rgb_to_xyz_matrix", "bradford_adaptation", "primaries_to_rec709_matrix", "CHANNEL", "REC709_LUMINANCE", "AP1_LUMINANCE", "MATRICES", "REC709_CHROMATICITIES", "AP0_CHROMATICITIES", "AP1_CHROMATICITIES", "REC2020_CHROMATICITIES", "P3_D65_CHROMATICITIES",
+    "matrix", "convert", "luminance", "unity_to_aces", "aces_to_unity", "unity_to_acescg", "acescg_to_unity", "aces_to_acescg", "acescg_to_aces", "linear_to_lms", "lms_to_linear", "rgb_to_xyz_matrix", "bradford_adaptation", "primaries_to_rec709_matrix", "CHANNEL", "REC709_LUMINANCE", "AP1_LUMINANCE", "MATRICES", "MATRIX_VALUES", "REC709_CHROMATICITIES", "AP0_CHROMATICITIES", "AP1_CHROMATICITIES", "REC2020_CHROMATICITIES", "P3_D65_CHROMATICITIES",
 ]
 
 CHANNEL = -3
@@ -92,7 +93,7 @@ def matrix(name: str, like: torch.Tensor) -> torch.Tensor:
         >>> m.shape, m.dtype
         (torch.Size([3, 3]), torch.float64)
     """
-    return MATRICES[name].to(device=like.device, dtype=like.dtype)
+    return constant(MATRIX_VALUES[name], like)
 
 
 def convert(image: torch.Tensor, name: str) -> torch.Tensor:
@@ -114,14 +115,7 @@ def luminance(image: torch.Tensor, weights: str = "rec709") -> torch.Tensor:
         >>> round(float(luminance(torch.ones(1, 3, 1, 1))), 4)
         1.0
     """
-    w = {"rec709": REC709_LUMINANCE, "ap1": AP1_LUMINANCE}[weights]
-    if torch.onnx.is_in_onnx_export():
-        # Three products of channel planes summed: a ReduceSum over channels costs onnxruntime's CPU several of
-        # them (benchmarks/results/onnx_ops.md).
-        red, green, blue = image.split(1, dim=CHANNEL)
-        return red * w[0] + green * w[1] + blue * w[2]
-    w = torch.tensor(w, dtype=image.dtype, device=image.device).reshape(3, 1, 1)
-    return (image * w).sum(dim=CHANNEL, keepdim=True)
+    return channel_sum(image, {"rec709": REC709_LUMINANCE, "ap1": AP1_LUMINANCE}[weights])
 
 
 def unity_to_aces(image: torch.Tensor) -> torch.Tensor:
@@ -272,3 +266,6 @@ MATRICES["rec709_to_p3"] = torch.linalg.inv(primaries_to_rec709_matrix(P3_D65_CH
 MATRICES["p3_to_rec709"] = primaries_to_rec709_matrix(P3_D65_CHROMATICITIES)
 
 # SMPTE ST 2084 constants.
+
+MATRIX_VALUES = {name: values_of(m) for name, m in MATRICES.items()}
+""":data:`MATRICES` as tuples of Python floats: what :func:`matrix` makes device constants of."""

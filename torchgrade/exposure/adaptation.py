@@ -9,11 +9,12 @@ import torch
 
 from ..color import luminance
 from ..core import HALF_MAX, Param, check_choice, check_image, check_range, is_tracing, sanitize, scalar_param, to_input_dtype, working_dtype
+from ..runtime import constant
 from ..stage import Control
 from .metering import METERING_MODES, meter_sanitized
 
-__all__ = ["CONTROLS", "MIN_LUMINANCE", "MAX_ADAPTED", "OPERATORS", "adapt_luminance", "auto_exposure", "check_bounds", "checked_control",
-           "exposure_operator"]
+__all__ = ["CONTROLS", "MIN_LUMINANCE", "MAX_ADAPTED", "OPERATORS", "adapt_luminance", "auto_exposure", "check_bounds", "check_step",
+           "checked_control", "exposed_frame", "exposure_operator"]
 
 MIN_LUMINANCE = 1e-3
 """Default lower bound of the adapted luminance: the largest exposure gain is ``middle_grey / 1e-3``."""
@@ -94,7 +95,7 @@ def adapt_luminance(
     if speed_to_light is not None or speed_to_dark is not None:
         to_light = speed if speed_to_light is None else speed_to_light
         to_dark = speed if speed_to_dark is None else speed_to_dark
-        to_light, to_dark = (torch.as_tensor(s, dtype=metered.dtype, device=metered.device) for s in (to_light, to_dark))
+        to_light, to_dark = (s.to(metered) if isinstance(s, torch.Tensor) else constant(float(s), metered) for s in (to_light, to_dark))
         speed = torch.where(metered > adapted, to_light, to_dark)
     return adapted + (metered - adapted) * -torch.expm1(-dt * speed)
 
@@ -177,6 +178,29 @@ def auto_exposure(
     if not is_tracing():
         _check_controls(controls)
         check_range(dt, "dt", 0.0, HALF_MAX)
+    return exposed_frame(image, adapted, dt, **controls)
+
+
+def check_step(dt) -> None:
+    """Raise ``ValueError`` unless a number ``dt`` lies in [0, 65504], checked in Python; a tensor is not read
+    (a stage's forward reads nothing back from the device): a negative, NaN or infinite step there restarts the
+    sequence as :func:`auto_exposure` says.
+
+    Examples:
+        >>> check_step(-1.0)
+        Traceback (most recent call last):
+        ...
+        ValueError: dt must lie in [0.0, 65504.0], got -1.0
+    """
+    if isinstance(dt, torch.Tensor):
+        return
+    if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not 0.0 <= dt <= HALF_MAX:
+        raise ValueError(f"dt must lie in [0.0, {HALF_MAX}], got {dt!r}")
+
+
+def exposed_frame(image: torch.Tensor, adapted: Optional[torch.Tensor], dt: Param, **controls) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`auto_exposure` of controls already checked (a stage's), reading nothing back from the device."""
+    metering, operator = controls["metering"], controls["operator"]
     x = working_dtype(image)
     numbers = {name: value for name, value in controls.items() if name not in ("metering", "operator")}
     c = {name: None if value is None else scalar_param(value, x, name) for name, value in numbers.items()}
@@ -189,8 +213,8 @@ def auto_exposure(
         previous = _previous_state(adapted, x)
         dt = scalar_param(dt, x, "dt")
         moved = adapt_luminance(previous, metered, dt, c["speed"], c["speed_to_light"], c["speed_to_dark"])
-        # a state that is not a positive number, or a step that is not finite, starts the sequence again
-        new = torch.where((previous > 0) & moved.isfinite(), _bounded(moved, *bounds), metered)
+        # a state that is not a positive number, or a step that is not finite or negative, starts the sequence again
+        new = torch.where((previous > 0) & (dt >= 0) & moved.isfinite(), _bounded(moved, *bounds), metered)
     # new is finite and positive, so the exposed frame has no NaN: bounding it is the whole non-finite policy
     exposed = exposure_operator(scene, new, c["middle_grey"], c["max_luminance"], operator)
     return to_input_dtype(exposed.clamp(-HALF_MAX, HALF_MAX), image), new.reshape(x.shape[:-3])

@@ -8,7 +8,7 @@ import torch
 
 from ..core import Param, check_image
 from ..stage import Stage
-from .adaptation import CONTROLS, MAX_ADAPTED, MIN_LUMINANCE, check_bounds, checked_control, auto_exposure
+from .adaptation import CONTROLS, MAX_ADAPTED, MIN_LUMINANCE, check_bounds, check_step, checked_control, exposed_frame
 
 __all__ = ["AutoExposure"]
 
@@ -118,7 +118,9 @@ class AutoExposure(Stage):
             ([0.36, 0.36], 0)
         """
         self.check_learnable()
-        return auto_exposure(image, adapted, dt, **self.params())
+        check_image(image)
+        check_step(dt)
+        return exposed_frame(image, adapted, dt, **self.params())
 
     def forward(self, image: torch.Tensor, dt: Optional[Param] = None, stream: Optional[Hashable] = None) -> torch.Tensor:
         check_image(image)

@@ -1,5 +1,6 @@
-"""Scene metering for eye adaptation: the frame resampled to a fixed power-of-two grid with an exact box
-filter, then 2x2 blocks averaged down to one value (source document 002), as a mean or a log-average."""
+"""Scene metering for eye adaptation: the frame's mean luminance or log-average (source document 002 resamples
+the frame to a power-of-two grid with an exact box filter and averages 2x2 blocks down to one value, which is
+the same mean; :func:`area_resize` and :func:`halving_average` are those two steps)."""
 
 from __future__ import annotations
 
@@ -67,12 +68,13 @@ def halving_average(grid: torch.Tensor) -> torch.Tensor:
 def meter_luminance(image: torch.Tensor, metering: str = "log") -> torch.Tensor:
     """Scene luminance of each image of ``(..., 3, H, W)``, shaped ``image.shape[:-3]``.
 
-    The Rec.709 luminance ``L`` (negative values clipped to 0, non-finite pixels sanitized) is
-    resampled to ``METERING_SIZE`` squared (:func:`area_resize`) and averaged down to one value
-    (:func:`halving_average`). ``"mean"`` gives the arithmetic mean of ``L``; ``"log"`` the
-    log-average ``exp(mean(log(δ + L))) - δ`` (Reinhard et al. 2002, Eq. 1, "the key"), taken per
-    pixel before any averaging so that a few very bright pixels barely move it. Unlike Reinhard's
-    form, δ is subtracted again, so a uniform frame meters exactly its luminance.
+    The Rec.709 luminance ``L`` (negative values clipped to 0, non-finite pixels sanitized) averaged over the
+    frame: ``"mean"`` gives the arithmetic mean of ``L``; ``"log"`` the log-average ``exp(mean(log(δ + L))) - δ``
+    (Reinhard et al. 2002, Eq. 1, "the key"), taken per pixel before any averaging so that a few very bright
+    pixels barely move it. Unlike Reinhard's form, δ is subtracted again, so a uniform frame meters exactly its
+    luminance. The source document's resampling to a 64x64 grid (:func:`area_resize`) and 2x2 averaging down to
+    one value (:func:`halving_average`) give this same mean, to rounding: every cell of the grid covers an equal
+    area; one reduction computes it without the two matrix products.
 
     Examples:
         >>> [round(v, 4) for v in meter_luminance(torch.full((2, 3, 8, 8), 0.5), 'mean').tolist()]
@@ -92,10 +94,10 @@ def meter_sanitized(scene: torch.Tensor, metering: str) -> torch.Tensor:
         >>> [round(v, 4) for v in meter_sanitized(torch.full((1, 3, 4, 4), 0.5), 'mean').tolist()]
         [0.5]
     """
-    lum = luminance(scene).clamp_min(0).reshape(-1, 1, scene.shape[-2], scene.shape[-1])
+    lum = luminance(scene).clamp_min(0)
     if metering == "log":
         lum = torch.log(lum + LOG_DELTA)
-    average = halving_average(area_resize(lum, METERING_SIZE))
+    average = lum.mean(dim=(-3, -2, -1))
     if metering == "log":
         average = torch.exp(average) - LOG_DELTA
-    return average.reshape(scene.shape[:-3])
+    return average

@@ -15,11 +15,12 @@ values instead of piling up in the shadows.
 **Speed.** The lookup is gather-based on a planar ``(3, size³)`` table that :meth:`LUT3D.rows`
 converts once and caches. Every step is per pixel, so ``LUT3D(..., compile=True)`` runs non-finite
 policy, shaper, index math, gathers, weights, decoding and clamp as one ``torch.compile``d pass
-with no temporary buffers. The eager default (:func:`chunked_lookup`) makes one pass per operation
-over runs of :data:`LOOKUP_CHUNK` pixels on one CPU thread, as OpenColorIO's CPU processor does: the
-temporaries stay in cache, and no operation waits at a thread barrier (on a loaded machine each
-barrier can wait for a descheduled thread; benchmarks/results/lut.md measured 131× OpenColorIO
-with two threads). Without autograd, tetrahedral runs its eager form
+with no temporary buffers. The eager default on the CPU (:func:`chunked_lookup`) makes one pass per
+operation over runs of :data:`~torchgrade.runtime.LOOKUP_CHUNK` pixels, each run on one thread, as
+OpenColorIO's CPU processor does: the temporaries stay in cache, and no operation waits at a thread
+barrier (on a loaded machine each barrier can wait for a descheduled thread; benchmarks/results/lut.md
+measured 131× OpenColorIO with two threads). On many cores the runs are spread over worker threads
+(:class:`~torchgrade.runtime.ExecutionPolicy`); on other devices the frame is one pass. Without autograd, tetrahedral runs its eager form
 (:class:`~torchgrade.lut.kernels.TetrahedralRuns`): 15 in-place operations a run into buffers
 allocated once per call, gathering from value-and-step tables derived once per LUT; 12 one-float
 gathers a pixel are about half its time. benchmarks/bench_lut.py measures both against OpenColorIO.
@@ -42,12 +43,13 @@ from torch import nn
 
 from ..color import linear_to_srgb, srgb_to_linear
 from ..core import HALF_MAX, check_choice, check_image, is_tracing, one_thread, sanitize, to_input_dtype, working_dtype
+from ..runtime import LOOKUP_CHUNK, policy_for, run_pieces
 from ..stage import Control, Stage
 from .kernels import BACKENDS, KERNELS
 from .lattice import check_size, checked_domain, planar_table
 from .shapers import SHAPERS, lattice_unit, shaper_encode
 
-__all__ = ["LUT3D", "LUTLookup", "OUTPUT_ENCODINGS", "LOOKUP_CHUNK", "apply_lut", "lookup", "chunked_lookup", "one_thread", "compiled_lookup",
+__all__ = ["LUT3D", "LUTLookup", "OUTPUT_ENCODINGS", "LOOKUP_CHUNK", "apply_lut", "lookup", "chunked_lookup", "compiled_lookup",
            "decode_output", "encode_output", "table_output"]
 
 OUTPUT_ENCODINGS = ("linear", "srgb")
@@ -138,15 +140,8 @@ def lookup(image, rows, size: int, shaper, domain_min, domain_max, interpolation
     return to_input_dtype(y.reshape(x.shape).movedim(0, -3), image)
 
 
-LOOKUP_CHUNK = 32768
-"""Pixels per pass of the eager lookup. Tetrahedral's eager form holds 20 values a pixel (2.5 MiB a run);
-smaller runs pay the fixed cost of each operation more often (about 45 µs a run of 15: 8K-pixel runs
-took 1.3 times as long a 1080p frame, 4K 1.55 times), larger ones leave the cache (64K: even, 128K:
-1.08 times). benchmarks/bench_lut.py measures the time and the temporary bytes per pixel."""
-
-
-def chunked_lookup(image, rows, size: int, *settings, pixels: int = LOOKUP_CHUNK, tables=None) -> torch.Tensor:
-    """:func:`lookup` (same arguments after ``size``) over ``pixels``-sized runs of each CPU image's pixels, one thread.
+def chunked_lookup(image, rows, size: int, *settings, pixels: Optional[int] = None, tables=None) -> torch.Tensor:
+    """:func:`lookup` (same arguments after ``size``) over ``pixels``-sized runs of each CPU image's pixels, each on one thread.
 
     Every step is per pixel, so the runs give the one-pass result. Where the interpolation has an
     eager form (:class:`~torchgrade.lut.EagerForm`: tetrahedral up to 65³) the runs go through it,
@@ -166,24 +161,51 @@ def chunked_lookup(image, rows, size: int, *settings, pixels: int = LOOKUP_CHUNK
     height, width = image.shape[-2:]
     if not _in_runs(image, rows):
         return lookup(image, rows, size, *settings)
+    policy = policy_for(image.device)
+    pixels = pixels or policy.lookup_chunk
     planes = image.reshape(-1, 3, height * width)
     result = torch.empty(planes.shape, dtype=image.dtype)
     eager = KERNELS[settings[3]].eager
-    with one_thread():
+    if eager is not None and size <= eager.max_size and tables is None:
+        tables = eager.tables(rows, size)
+
+    def share(span: tuple) -> None:
+        begin, end = span
         if eager is None or size > eager.max_size:
             for frame, out in zip(planes, result):
-                for start in range(0, height * width, pixels):
-                    run = frame[:, start:start + pixels].unsqueeze(-1)  # (3, run, 1): an image of one column
-                    out[:, start:start + pixels] = lookup(run, rows, size, *settings).squeeze(-1)
+                for start in range(begin, end, pixels):
+                    stop = min(start + pixels, end)
+                    run = frame[:, start:stop].unsqueeze(-1)  # (3, run, 1): an image of one column
+                    out[:, start:stop] = lookup(run, rows, size, *settings).squeeze(-1)
         else:
-            _eager_lookup(planes, result, rows, size, settings, pixels, eager, tables)
+            _eager_lookup(planes[..., begin:end], result[..., begin:end], rows, size, settings, pixels, eager, tables)
+
+    shares = _shares(height * width, pixels, policy.workers)
+    if policy.workers > 1:
+        run_pieces(share, shares, policy.workers)
+    else:
+        with one_thread():
+            share(shares[0])
     return result.reshape(image.shape)
 
 
+def _shares(count: int, pixels: int, workers: int) -> list:
+    """``[(begin, end), ...]``: ``count`` pixels cut into at most ``workers`` contiguous shares of whole runs.
+
+    Examples:
+        >>> _shares(10, 3, 2), _shares(10, 3, 1)
+        ([(0, 6), (6, 10)], [(0, 10)])
+    """
+    runs = -(-count // pixels)
+    per_share = -(-runs // max(1, workers)) * pixels
+    return [(begin, min(begin + per_share, count)) for begin in range(0, count, per_share)]
+
+
 def _in_runs(image: torch.Tensor, rows: torch.Tensor) -> bool:
-    """Whether :func:`chunked_lookup` splits the image into runs: on the CPU, untraced, no gradient flowing."""
+    """Whether :func:`chunked_lookup` splits the image into runs: where the device's policy asks (the CPU),
+    untraced, no gradient flowing."""
     grad = torch.is_grad_enabled() and (image.requires_grad or rows.requires_grad)
-    return not grad and image.device.type == "cpu" and not is_tracing()
+    return not grad and policy_for(image.device).lookup_chunk is not None and not is_tracing()
 
 
 def _eager_lookup(planes, result, rows, size, settings, pixels, eager, tables) -> None:
@@ -333,10 +355,11 @@ class LUT3D(Stage):
         return value
 
     def check_learnable(self) -> None:
-        """Also check a learnable table, which an optimiser may move to NaN or Inf."""
+        """Also check a learnable table, which an optimiser may move to NaN or Inf: once per change of the table,
+        without waiting for a GPU (:class:`~torchgrade.runtime.DeferredCheck`)."""
         super().check_learnable()
         if isinstance(self.table, nn.Parameter) and not is_tracing():
-            _check_table(self.table)
+            self.deferred_check()({"table": self.table}, _check_extremes, summary=_extremes)
 
     @property
     def is_identity(self) -> bool:
@@ -440,6 +463,16 @@ class LUTLookup(nn.Module):
         return table_output(y, lut.output_encoding, lut.output_range)
 
 
+def _extremes(table: torch.Tensor) -> torch.Tensor:
+    """``(max, min)`` of a table: NaN when it holds a NaN, infinite when it holds an infinity."""
+    return torch.stack((table.amax(), table.amin()))
+
+
+def _check_extremes(name: str, extremes: torch.Tensor) -> None:
+    if not bool(torch.isfinite(extremes).all()):
+        raise ValueError("LUT table must be finite: it has NaN or infinite entries")
+
+
 def _check_table(table) -> None:
     if not isinstance(table, torch.Tensor) or not table.is_floating_point():
         raise TypeError(f"LUT table must be a floating-point tensor, got {getattr(table, 'dtype', type(table).__name__)}")
@@ -448,9 +481,7 @@ def _check_table(table) -> None:
         raise ValueError(f"LUT table must have shape (S, S, S, 3), got {tuple(table.shape)}")
     check_size(size)
     # amax and amin propagate NaN and reach ±Inf, without isfinite's table-sized temporaries (336 MiB at 256³).
-    values = table.detach()
-    if not (bool(torch.isfinite(values.amax())) and bool(torch.isfinite(values.amin()))):
-        raise ValueError("LUT table must be finite: it has NaN or infinite entries")
+    _check_extremes("table", _extremes(table.detach()))
 
 
 def _check_curve(curve: torch.Tensor) -> torch.Tensor:

@@ -33,7 +33,7 @@ levels the frame at hand does not have (``bloom(..., fixed_depth=...)``), so one
 PyTorch at every resolution up to that size.
 
 **Strips.** The stages that end a look and are per pixel (grade, primary grade, tone mapping, a LUT, and the
-output encoding) run in a ``Scan`` over strips of rows of about :data:`~torchgrade.stage.STRIP_PIXELS` pixels, as
+output encoding) run in a ``Scan`` over strips of rows of about :data:`~torchgrade.onnx.strips.SCAN_STRIP_PIXELS` pixels, as
 eager PyTorch runs them (:mod:`~torchgrade.onnx.strips`): each node's strip stays in cache instead of a pass over
 the frame in memory. ``export(..., strips=False)`` keeps them on the whole frame.
 

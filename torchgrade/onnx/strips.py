@@ -1,9 +1,9 @@
-"""The per-pixel end of an exported look run on strips of rows, in an ONNX ``Scan``, as eager runs it (:func:`~torchgrade.stage.in_strips`).
+"""The per-pixel end of an exported look run on strips of rows, in an ONNX ``Scan``, as eager runs it (:func:`~torchgrade.runtime.in_strips`).
 
 A per-pixel stage is dozens of elementwise nodes; on a whole 1080p frame each node reads and writes
 24 MiB from memory. :func:`mark` ends the traced head of the look (exposure, bloom) with a marker node,
 and :func:`scan_strips` moves every node after it into the body of a ``Scan`` over strips of about
-:data:`~torchgrade.stage.STRIP_PIXELS` pixels, so a strip's intermediates stay in cache. The frame is
+:data:`SCAN_STRIP_PIXELS` pixels, so a strip's intermediates stay in cache. The frame is
 padded with zero rows to a whole number of strips and the padding is sliced off the output; the strip
 height follows the runtime shape (one strip for a frame up to that size), so one file serves every size.
 
@@ -27,9 +27,12 @@ import onnx as onnx_lib  # the onnx package (absolute import), not this package
 import torch
 from onnx import TensorProto, helper, numpy_helper
 
-from ..stage import STRIP_PIXELS
+__all__ = ["DOMAIN", "SCAN_STRIP_PIXELS", "mark", "scan_strips"]
 
-__all__ = ["DOMAIN", "mark", "scan_strips"]
+SCAN_STRIP_PIXELS = 1 << 17
+"""Pixels per strip of the ``Scan`` (batch included): eager PyTorch's strip on two threads
+(:data:`~torchgrade.runtime.STRIP_PIXELS_PER_THREAD` each), the size ``benchmarks/bench_onnx.py`` measured the
+exported look's strips at."""
 
 DOMAIN = "torchgrade"
 """Domain of the marker node :func:`mark` writes (no runtime reads it: :func:`scan_strips` replaces it)."""
@@ -112,10 +115,10 @@ def _ceil_div(numerator: str, denominator: str, one: str, quotient: str) -> list
 
 def _strip_plumbing(frame: str, strips: str) -> tuple:
     """Nodes and constants that pad ``frame`` ``(n, c, h, w)`` with zero rows and reshape it into ``strips``
-    ``(n, c, count, rows, w)``: ``rows = ceil(h / count)`` with ``count = ceil(h / min(h, max(1, STRIP_PIXELS // (n w))))``.
+    ``(n, c, count, rows, w)``: ``rows = ceil(h / count)`` with ``count = ceil(h / min(h, max(1, SCAN_STRIP_PIXELS // (n w))))``.
     Also returns the names of ``h`` and ``w`` (1-D) that the output's reassembly needs."""
     p = "strips_"
-    constants = [_int64(p + "one", [1]), _int64(p + "pixels", [STRIP_PIXELS]), _int64(p + "no_pads", [0] * 6),
+    constants = [_int64(p + "one", [1]), _int64(p + "pixels", [SCAN_STRIP_PIXELS]), _int64(p + "no_pads", [0] * 6),
                  _int64(p + "zero", [0]), _int64(p + "n", [0]), _int64(p + "c", [1]), _int64(p + "h", [2]), _int64(p + "w", [3])]
     node = helper.make_node
     nodes = [

@@ -8,6 +8,7 @@ import torch
 
 from ..color import convert
 from ..core import HALF_MAX
+from ..runtime import constant, values_of
 from .aces_rrt import ACES_TINY, ODT_SAT_FACTOR, RRT_SAT_FACTOR, ap1_desaturate, ap1_dim_surround, ap1_to_rec709, cubic_basis_hue_weight, rec709_to_aces, rrt_glow_and_red_modifier
 from .base import display
 
@@ -31,8 +32,9 @@ class _SegmentedSpline:
     """
 
     def __init__(self, coefs_low, coefs_high, min_point, mid_point, max_point, slope_low, slope_high, knots):
-        self.low = self._interval_polynomials(coefs_low, knots)
-        self.high = self._interval_polynomials(coefs_high, knots)
+        # tuples of floats: device constants (runtime.constant), not tensors copied to the device at every call
+        self.low = values_of(self._interval_polynomials(coefs_low, knots))
+        self.high = values_of(self._interval_polynomials(coefs_high, knots))
         self.log_min, self.log_mid, self.log_max = (tuple(math.log10(v) for v in p) for p in (min_point, mid_point, max_point))
         self.slope_low, self.slope_high = slope_low, slope_high
 
@@ -43,13 +45,13 @@ class _SegmentedSpline:
         return torch.stack([c[j : j + 3] @ _SPLINE_BASIS for j in range(knots - 1)])
 
     @staticmethod
-    def _bspline(log_x: torch.Tensor, polynomials: torch.Tensor, start: float, end: float) -> torch.Tensor:
+    def _bspline(log_x: torch.Tensor, polynomials: tuple, start: float, end: float) -> torch.Tensor:
         """The spline between ``start`` and ``end`` (log10 x): interval ``j`` and ``t`` in [0, 1) from the knot coordinate."""
-        intervals = polynomials.shape[0]
+        intervals = len(polynomials)
         knot = (log_x - start) * (intervals / (end - start))
         j = knot.detach().floor().clamp(0, intervals - 1)
         t = knot - j
-        a, b, c = polynomials.to(log_x)[j.long()].unbind(-1)
+        a, b, c = constant(polynomials, log_x)[j.long()].unbind(-1)
         return (a * t + b) * t + c
 
     def __call__(self, x: torch.Tensor) -> torch.Tensor:

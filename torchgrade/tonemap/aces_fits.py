@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import torch
 
-from ..color import AP1_LUMINANCE, MATRICES, convert, unity_to_aces
+from ..color import AP1_LUMINANCE, MATRICES, convert, matrix, unity_to_aces
 from ..core import apply_matrix, matrix_on_planes, untracked
+from ..runtime import constant, values_of
 from .aces_rrt import (AP1_TO_REC709, DIM_SURROUND_GAMMA, ODT_SAT_FACTOR, RRT_SAT_FACTOR, rrt_glow_and_red_modifier,
                        rrt_glow_and_red_modifier_planes, smoothstep_hue_weight)
 from .base import apply_rows, display, limited
@@ -25,6 +26,7 @@ def _lerp_to_luminance(factor: float) -> torch.Tensor:
 
 _RRT_DESATURATE = _lerp_to_luminance(RRT_SAT_FACTOR)
 _ODT_TAIL = AP1_TO_REC709 @ _lerp_to_luminance(ODT_SAT_FACTOR) @ MATRICES["xyz_to_ap1"]
+_RRT_DESATURATE_VALUES, _ODT_TAIL_VALUES = values_of(_RRT_DESATURATE), values_of(_ODT_TAIL)
 """After the dim surround: XYZ → AP1, the ODT's desaturation and AP1 → Rec.709, folded into one matrix."""
 
 
@@ -66,9 +68,9 @@ def aces_fitted(aces: torch.Tensor) -> torch.Tensor:
     if torch.onnx.is_in_onnx_export():
         return _aces_fitted_planes(aces)
     aces = rrt_glow_and_red_modifier(aces, smoothstep_hue_weight)
-    acescg = apply_matrix(_RRT_DESATURATE.to(aces), convert(aces, "ap0_to_ap1").clamp_min(0.0))
+    acescg = apply_matrix(constant(_RRT_DESATURATE_VALUES, aces), convert(aces, "ap0_to_ap1").clamp_min(0.0))
     fitted = _fit(acescg)
-    return apply_matrix(_ODT_TAIL.to(fitted), _dark_to_dim_surround(convert(fitted, "ap1_to_xyz")))
+    return apply_matrix(constant(_ODT_TAIL_VALUES, fitted), _dark_to_dim_surround(convert(fitted, "ap1_to_xyz")))
 
 
 def _aces_fitted_planes(aces: torch.Tensor) -> torch.Tensor:
@@ -76,9 +78,9 @@ def _aces_fitted_planes(aces: torch.Tensor) -> torch.Tensor:
     are (:func:`~torchgrade.core.matrix_on_planes`), without a Concat and a Split each (the
     matrices on planes too, as 9 products by constants and 6 sums, would add 38 nodes)."""
     planes = rrt_glow_and_red_modifier_planes(aces, smoothstep_hue_weight)
-    acescg = apply_matrix(_RRT_DESATURATE.to(aces), matrix_on_planes(MATRICES["ap0_to_ap1"].to(aces), planes).clamp_min(0.0))
+    acescg = apply_matrix(constant(_RRT_DESATURATE_VALUES, aces), matrix_on_planes(matrix("ap0_to_ap1", aces), planes).clamp_min(0.0))
     xyz = convert(_fit(acescg), "ap1_to_xyz")
-    return matrix_on_planes(_ODT_TAIL.to(xyz), _dim_surround_planes(*xyz.split(1, dim=-3)))
+    return matrix_on_planes(constant(_ODT_TAIL_VALUES, xyz), _dim_surround_planes(*xyz.split(1, dim=-3)))
 
 
 def aces(image: torch.Tensor, clip: bool = True) -> torch.Tensor:

@@ -13,8 +13,9 @@ import math
 
 import torch
 
-from ..color import AP0_CHROMATICITIES, MATRICES, matrix, primaries_to_rec709_matrix, safe_sqrt
-from ..core import apply_matrix, untracked
+from ..color import AP0_CHROMATICITIES, MATRICES, MATRIX_VALUES, primaries_to_rec709_matrix, safe_sqrt
+from ..core import apply_matrix, channel_sum, untracked
+from ..runtime import constant, values_of
 
 __all__ = [
     "RRT_SAT_FACTOR",
@@ -50,6 +51,7 @@ UNITY_TINY, ACES_TINY = 1e-4, 1e-10
 
 
 REC709_TO_AP0 = torch.linalg.inv(primaries_to_rec709_matrix(AP0_CHROMATICITIES))
+_REC709_TO_AP0_VALUES = values_of(REC709_TO_AP0)
 """Linear Rec.709 → ACES2065-1 from the primaries, Bradford D65 → ACES white, as OpenColorIO's configs.
 Unity's rounded matrix differs by ~1e-4, which very out-of-gamut colours amplify to codes."""
 
@@ -61,7 +63,7 @@ def rec709_to_aces(image: torch.Tensor) -> torch.Tensor:
         >>> [round(v, 6) for v in rec709_to_aces(torch.ones(3, 1, 1, dtype=torch.float64)).flatten().tolist()]
         [1.0, 1.0, 1.0]
     """
-    return apply_matrix(REC709_TO_AP0.to(dtype=image.dtype, device=image.device), image)
+    return apply_matrix(constant(_REC709_TO_AP0_VALUES, image), image)
 
 
 def _rgb_saturation(rgb: torch.Tensor, tiny: float) -> torch.Tensor:
@@ -221,7 +223,7 @@ def _red_hue_distance(r: torch.Tensor, g: torch.Tensor, b: torch.Tensor) -> torc
 
 def _ap1_y(rgb: torch.Tensor) -> torch.Tensor:
     """ACES ``AP1_RGB2Y``: luminance of ACEScg, the middle row of the AP1 → XYZ matrix (full precision)."""
-    return torch.einsum("j,...jhw->...hw", matrix("ap1_to_xyz", rgb)[1], rgb).unsqueeze(-3)
+    return channel_sum(rgb, MATRIX_VALUES["ap1_to_xyz"][1])
 
 
 def ap1_desaturate(rgb: torch.Tensor, factor: float) -> torch.Tensor:
@@ -250,6 +252,7 @@ def ap1_dim_surround(rgb: torch.Tensor) -> torch.Tensor:
 
 
 AP1_TO_REC709 = MATRICES["xyz_to_rec709"] @ MATRICES["d60_to_d65"] @ MATRICES["ap1_to_xyz"]
+_AP1_TO_REC709_VALUES = values_of(AP1_TO_REC709)
 """The ODTs' last step, AP1 → XYZ → Bradford D60 → D65 → linear Rec.709, as one float64 matrix."""
 
 
@@ -260,4 +263,4 @@ def ap1_to_rec709(rgb: torch.Tensor) -> torch.Tensor:
         >>> ap1_to_rec709(torch.zeros(3, 1, 1)).flatten().tolist()
         [0.0, 0.0, 0.0]
     """
-    return apply_matrix(AP1_TO_REC709.to(dtype=rgb.dtype, device=rgb.device), rgb)
+    return apply_matrix(constant(_AP1_TO_REC709_VALUES, rgb), rgb)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import inspect
 import numbers
-from typing import Callable, NamedTuple
+from typing import Callable, NamedTuple, Optional
 
 import torch
 
@@ -26,10 +26,11 @@ WHITE_POINT_RANGE = (1e-3, 1e4)
 
 
 class ToneMapper(NamedTuple):
-    """One tone mapping mode: its ``curve`` and its ``controls`` ``{name: Control(default, range)}``.
+    """One tone mapping mode: its ``curve``, its ``controls`` ``{name: Control(default, range)}`` and what a stage
+    must ``prepare`` when its controls are set (tables searched per value, built outside any graph), or ``None``.
 
     ``curve(image, clip=True, **controls)`` takes scene-referred linear Rec.709 and returns
-    display-referred linear Rec.709, clipped to [0, 1] when ``clip``.
+    display-referred linear Rec.709, clipped to [0, 1] when ``clip``; ``prepare(**controls)`` returns nothing.
 
     Examples:
         >>> entry = ToneMapper.of(no_tonemap)
@@ -39,9 +40,10 @@ class ToneMapper(NamedTuple):
 
     curve: Callable[..., torch.Tensor]
     controls: dict
+    prepare: Optional[Callable[..., None]] = None
 
     @classmethod
-    def of(cls, curve: Callable[..., torch.Tensor], **ranges: tuple) -> "ToneMapper":
+    def of(cls, curve: Callable[..., torch.Tensor], prepare: Optional[Callable[..., None]] = None, **ranges: tuple) -> "ToneMapper":
         """The entry of ``curve`` with a control per ``ranges`` item, its default from ``curve``'s own signature.
 
         Examples:
@@ -51,7 +53,7 @@ class ToneMapper(NamedTuple):
             Control(default=0.5, range=(0.0, 1.0), kind='number')
         """
         defaults = inspect.signature(curve).parameters
-        return cls(curve, {name: Control(defaults[name].default, allowed) for name, allowed in ranges.items()})
+        return cls(curve, {name: Control(defaults[name].default, allowed) for name, allowed in ranges.items()}, prepare)
 
 
 def limited(image: torch.Tensor, limit=TONEMAP_INPUT_LIMIT) -> torch.Tensor:

@@ -8,6 +8,7 @@ import torch
 
 from ..color import convert, unity_to_aces
 from ..core import Param, scalar_param
+from ..runtime import constant
 from .aces_rrt import ODT_SAT_FACTOR, RRT_SAT_FACTOR, ap1_desaturate, ap1_to_rec709, rrt_glow_and_red_modifier, smoothstep_hue_weight
 from .base import WHITE_POINT_RANGE, display, limited
 
@@ -55,7 +56,7 @@ def neutral(image: torch.Tensor, clip: bool = True) -> torch.Tensor:
         >>> [round(v, 3) for v in neutral(torch.tensor([0.18, 1.0, 5.0]).expand(3, 1, 3))[0, 0].tolist()]
         [0.182, 0.631, 1.0]
     """
-    white = torch.tensor(_NEUTRAL_WHITE_LEVEL, dtype=image.dtype, device=image.device)
+    white = constant(_NEUTRAL_WHITE_LEVEL, image)
     scale = 1.0 / _hable_curve(white, **_NEUTRAL)
     return display(_hable_curve(limited(image) * scale, **_NEUTRAL) * scale, clip)
 

@@ -69,6 +69,12 @@ class ToneMap(Stage):
     def control_table(self) -> dict:
         return {**type(self).controls, **TONE_MAPPERS[self.mode].controls}
 
+    def check_together(self) -> None:
+        """Prepare what the mode builds per control value (ACES 2.0's gamut tables), outside any forward."""
+        entry = TONE_MAPPERS[self.mode]
+        if entry.prepare is not None and all(hasattr(self, name) for name in entry.controls):
+            entry.prepare(**{name: getattr(self, name) for name in entry.controls})
+
     @classmethod
     def config_table(cls, config: dict) -> dict:
         """The controls of every mode, and the curve parameters of the config's mode (when it names a known one)."""

@@ -10,7 +10,7 @@ import torch
 
 from ..core import Param, check_choice, check_image, sanitize, to_input_dtype, working_dtype
 from .aces1_reference import aces_reference
-from .aces2_curves import ACES2_HDR_RANGES, aces2_hdr, aces2_sdr
+from .aces2_curves import ACES2_HDR_RANGES, aces2_hdr, aces2_sdr, prepare_aces2_hdr, prepare_aces2_sdr
 from .aces_fits import aces, aces_hill, aces_narkowicz
 from .agx_curves import agx, agx_godot
 from .base import WHITE_POINT_RANGE, ToneMapper, no_tonemap
@@ -37,8 +37,8 @@ TONE_MAPPERS = {
     "agx": ToneMapper.of(agx),
     "agx_godot": ToneMapper.of(agx_godot),
     "khronos_pbr_neutral": ToneMapper.of(khronos_pbr_neutral),
-    "aces2": ToneMapper.of(aces2_sdr),
-    "aces2_hdr": ToneMapper.of(aces2_hdr, **ACES2_HDR_RANGES),
+    "aces2": ToneMapper.of(aces2_sdr, prepare=prepare_aces2_sdr),
+    "aces2_hdr": ToneMapper.of(aces2_hdr, prepare=prepare_aces2_hdr, **ACES2_HDR_RANGES),
     "neutral_hdr": ToneMapper.of(neutral_hdr, **NEUTRAL_HDR_RANGES),
 }
 """Every tone mapper by mode name: its curve and its controls (defaults are the curve's own)."""

@@ -14,11 +14,13 @@ and every power and square root is guarded so that gradients stay finite at 0.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import torch
 
 from ...color import rgb_to_xyz_matrix, safe_pow
+from ...core import apply_matrix
+from ...runtime import constant, values_of
 
 __all__ = ["CAM16_PRIMARIES", "JMhParams", "jmh_params", "rgb_to_aab", "aab_to_jmh", "jmh_to_rgb", "y_to_j", "a_to_y"]
 
@@ -86,6 +88,12 @@ class JMhParams:
     f_l_n: float
     cz: float
     a_w_j: float
+    values: dict = field(init=False, repr=False, compare=False)
+    """The four matrices as tuples of floats by field name: what images are multiplied by (device constants)."""
+
+    def __post_init__(self):
+        names = ("rgb_to_cone", "cone_to_rgb", "cone_to_aab", "aab_to_cone")
+        object.__setattr__(self, "values", {name: values_of(getattr(self, name)) for name in names})
 
 
 def jmh_params(chromaticities) -> JMhParams:
@@ -116,8 +124,11 @@ def jmh_params(chromaticities) -> JMhParams:
     )
 
 
-def _apply(m: torch.Tensor, v: torch.Tensor, dim: int) -> torch.Tensor:
-    m = m.to(dtype=v.dtype, device=v.device)
+def _apply(p: JMhParams, name: str, v: torch.Tensor, dim: int) -> torch.Tensor:
+    """Matrix ``name`` of ``p`` applied along ``dim``: to an image as per-channel products (no matrix-library call)."""
+    if dim == -3 and v.dim() >= 3:
+        return apply_matrix(constant(p.values[name], v), v)
+    m = getattr(p, name).to(dtype=v.dtype, device=v.device)
     return torch.movedim(torch.movedim(v, dim, -1) @ m.T, -1, dim)
 
 
@@ -130,7 +141,7 @@ def rgb_to_aab(rgb: torch.Tensor, p: JMhParams, dim: int = -3) -> torch.Tensor:
         >>> round(float(rgb_to_aab(torch.ones(1, 3, 1, 1, dtype=torch.float64), p)[0, 0]), 6)  # white: A = 1
         1.0
     """
-    return _apply(p.cone_to_aab, cone_compress(_apply(p.rgb_to_cone, rgb, dim)), dim)
+    return _apply(p, "cone_to_aab", cone_compress(_apply(p, "rgb_to_cone", rgb, dim)), dim)
 
 
 def _safe_hypot_atan2(a: torch.Tensor, b: torch.Tensor):
@@ -184,7 +195,7 @@ def jmh_to_rgb(j, m, cos_h, sin_h, p: JMhParams, dim: int = -3) -> torch.Tensor:
     """
     a_ = safe_pow(j / J_SCALE, 1.0 / p.cz)
     aab = torch.stack((a_, m * cos_h, m * sin_h), dim)
-    return _apply(p.cone_to_rgb, cone_expand(_apply(p.aab_to_cone, aab, dim)), dim)
+    return _apply(p, "cone_to_rgb", cone_expand(_apply(p, "aab_to_cone", aab, dim)), dim)
 
 
 def a_to_y(a: torch.Tensor, p: JMhParams) -> torch.Tensor:

@@ -15,6 +15,7 @@ from __future__ import annotations
 import torch
 
 from ...color import safe_pow, safe_sqrt
+from ...runtime import constant, values_of
 
 __all__ = ["count_below", "GamutParams", "gamut_compress", "focus_gain", "solve_j_intersect", "compression_slope",
            "hull_boundary_m", "focus_j"]
@@ -159,6 +160,8 @@ class GamutParams:
         self.limit_j_max, self.mid_j, self.focus_dist = limit_j_max, mid_j, focus_dist
         self.lower_inv, self.model_gamma_inv = lower_inv, model_gamma_inv
         self.hues, self.cusps, self.reach = hues, cusps, reach
+        # the tables as tuples of floats: device constants of a compiled graph, not inputs copied at every call
+        self.hue_values, self.cusp_values, self.reach_values = values_of(hues), values_of(cusps), values_of(reach)
 
     def cusp(self, h: torch.Tensor):
         """``(J_cusp, M_cusp, 1/gamma_top)`` at hue ``h``: linear in the non-uniform hue table.
@@ -170,8 +173,8 @@ class GamutParams:
             >>> [round(float(v), 1) for v in p.cusp(torch.tensor([120.0], dtype=torch.float64))]
             [86.8, 57.3, 1.1]
         """
-        hues = self.hues.to(dtype=h.dtype, device=h.device)
-        table = self.cusps.to(dtype=h.dtype, device=h.device)
+        hues = constant(self.hue_values, h)
+        table = constant(self.cusp_values, h)
         hi = count_below(hues, h.detach()).clamp(1, hues.numel() - 1)
         lo_hue, hi_hue = hues[hi - 1], hues[hi]
         t = ((h - lo_hue) / (hi_hue - lo_hue)).unsqueeze(-1)
@@ -186,7 +189,7 @@ class GamutParams:
             >>> round(float(_output(100.0, "rec709").gamut.reach_m(torch.tensor(0.0, dtype=torch.float64))), 1)
             166.8
         """
-        table = self.reach.to(dtype=h.dtype, device=h.device)
+        table = constant(self.reach_values, h)
         base = torch.floor(h.detach())
         t = h - base
         i = base.long().remainder(360)

@@ -8,19 +8,18 @@ Source: Academy aces-output (ACES 2.0 Output Transforms) and OpenColorIO's built
 
 from __future__ import annotations
 
-import functools
-
 import torch
 
 from ... import color
 from ...core import apply_matrix, check_image, full_precision, sanitize
+from ...runtime import constant, values_of
 from ..aces_rrt import REC709_TO_AP0
 from .cam import REFERENCE_LUMINANCE, aab_to_jmh, jmh_params, jmh_to_rgb, rgb_to_aab, a_to_y, y_to_j
 from .gamut import FOCUS_DISTANCE, FOCUS_DISTANCE_SCALING, GamutParams, gamut_compress
 from .tables import hue_and_cusp_tables, reach_m_table, upper_hull_gamma
 from .tonescale import chroma_compress, chroma_norm, chroma_params, daniele_tonescale, tonescale_params
 
-__all__ = ["PRIMARIES", "ENCODINGS", "Aces2Output", "aces2_output"]
+__all__ = ["PRIMARIES", "ENCODINGS", "Aces2Output", "aces2_output", "prepare_output", "peak_number"]
 
 PRIMARIES = {
     "rec709": color.REC709_CHROMATICITIES,
@@ -78,37 +77,61 @@ class Aces2Output:
         return rgb.clamp(0.0, self.peak / REFERENCE_LUMINANCE)
 
 
-@functools.lru_cache(maxsize=8)
-def _built_output(peak: float, limiting: str) -> Aces2Output:
-    return Aces2Output(peak, limiting)
+_BUILT: dict = {}
+"""Built tables by ``(peak, limiting)``; a few are kept (each is a few hundred kilobytes)."""
+
+MAX_BUILT = 8
 
 
-# The tables are constants of any graph: torch.compile would rebuild them in every call and an ONNX
-# trace would record their search, so they are built with both switched off.
-@torch.compiler.disable
 def _output(peak: float, limiting: str) -> Aces2Output:
-    tracing = torch._C._get_tracing_state()
-    torch._C._set_tracing_state(None)
-    try:
-        return _built_output(peak, limiting)
-    finally:
-        torch._C._set_tracing_state(tracing)
+    """The tables of ``(peak, limiting)``, built once. A stage builds them when its controls are set
+    (:func:`prepare_output`), so a compiled or traced forward finds them here as constants of its graph."""
+    built = _BUILT.get((peak, limiting))
+    return built if built is not None else prepare_output(peak, limiting)
+
+
+def prepare_output(peak: float, limiting: str) -> Aces2Output:
+    """Build (once) and keep the tables of ``(peak, limiting)``, outside any ONNX trace (which would record their search).
+
+    Examples:
+        >>> prepare_output(100.0, "rec709") is prepare_output(100.0, "rec709")
+        True
+    """
+    key = (float(peak), limiting)
+    built = _BUILT.get(key)
+    if built is None:
+        tracing = torch._C._get_tracing_state()
+        torch._C._set_tracing_state(None)
+        try:
+            built = Aces2Output(*key)
+        finally:
+            torch._C._set_tracing_state(tracing)
+        if len(_BUILT) >= MAX_BUILT:
+            _BUILT.pop(next(iter(_BUILT)))
+        _BUILT[key] = built
+    return built
 
 
 def _rgb_to_rgb(source, target) -> torch.Tensor:
-    """Linear RGB -> RGB through XYZ without adaptation (OpenColorIO's ``ADAPTATION_NONE``)."""
+    """Linear RGB -> RGB through XYZ without adaptation (OpenColorIO's ``ADAPTATION_NONE``), float64."""
     return torch.linalg.inv(color.rgb_to_xyz_matrix(target)) @ color.rgb_to_xyz_matrix(source)
 
 
 _AP0_TO_AP1 = _rgb_to_rgb(color.AP0_CHROMATICITIES, color.AP1_CHROMATICITIES)
-_AP1_TO_AP0 = torch.linalg.inv(_AP0_TO_AP1)
+_MATRIX_VALUES = {
+    "rec709_to_ap0": values_of(REC709_TO_AP0),
+    "ap0_to_ap1": values_of(_AP0_TO_AP1),
+    "ap1_to_ap0": values_of(torch.linalg.inv(_AP0_TO_AP1)),
+    **{f"{source}_to_{target}": values_of(_rgb_to_rgb(PRIMARIES[source], PRIMARIES[target])) for source in PRIMARIES for target in PRIMARIES},
+}
+"""The transform's matrices as tuples of floats (device constants, :func:`~torchgrade.runtime.constant`)."""
 
 
-def _apply(m: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
-    return apply_matrix(m.to(dtype=image.dtype, device=image.device), image)
+def _apply(name: str, image: torch.Tensor) -> torch.Tensor:
+    return apply_matrix(constant(_MATRIX_VALUES[name], image), image)
 
 
-def _peak(peak_luminance) -> float:
+def peak_number(peak_luminance) -> float:
     """The peak as a float: a number or a 0-d tensor without gradient (the tables are searched per value)."""
     if isinstance(peak_luminance, torch.Tensor) and peak_luminance.numel() == 1 and not peak_luminance.requires_grad:
         return float(peak_luminance)
@@ -160,7 +183,7 @@ def aces2_output(image: torch.Tensor, peak_luminance: float = 100.0, limiting_pr
     """
     check_image(image)
     display_primaries = display_primaries or limiting_primaries
-    peak = _peak(peak_luminance)
+    peak = peak_number(peak_luminance)
     _check(peak, limiting_primaries, display_primaries, encoding, input_space)
     if image.dtype in (torch.float16, torch.bfloat16):
         raise TypeError(f"aces2_output needs float32 or float64 input (its CAM overflows {image.dtype})")
@@ -175,11 +198,11 @@ def aces2_output(image: torch.Tensor, peak_luminance: float = 100.0, limiting_pr
 
 
 def _display_linear(x: torch.Tensor, peak: float, limiting: str, display: str, input_space: str) -> torch.Tensor:
-    aces = _apply(REC709_TO_AP0, x) if input_space == "rec709" else x
+    aces = _apply("rec709_to_ap0", x) if input_space == "rec709" else x
     output = _output(peak, limiting)
-    ap1 = _apply(_AP0_TO_AP1, aces).clamp(0.0, output.tone.forward_limit)
-    rgb = output.render(_apply(_AP1_TO_AP0, ap1))
-    rgb = _apply(_rgb_to_rgb(PRIMARIES[limiting], PRIMARIES[display]), rgb)
+    ap1 = _apply("ap0_to_ap1", aces).clamp(0.0, output.tone.forward_limit)
+    rgb = output.render(_apply("ap1_to_ap0", ap1))
+    rgb = _apply(f"{limiting}_to_{display}", rgb)
     # Display values below 0 do not exist: clip where a limiting gamut pokes out of the container
     # (P3's red lies just outside Rec.2020), rather than mirror them through the encoding as OpenColorIO does.
     return (rgb / (peak / REFERENCE_LUMINANCE)).clamp(0.0, 1.0)

@@ -1,0 +1,20 @@
+"""The execution policy: per device, whole frames or strips, worker threads, constants kept on the device, and
+the compiled form of a look. Every stage asks here; the maths modules decide nothing about devices.
+
+Examples:
+    >>> import torch
+    >>> import torchgrade as tg
+    >>> tg.runtime.policy_for(torch.device("meta")).strip_pixels is None  # a GPU's: whole frames
+    True
+"""
+
+from .checks import DeferredCheck
+from .compile import compile, compile_mode
+from .constants import constant, device_cached, folded, values_of
+from .recording import is_tracing, untracked
+from .policy import LOOKUP_CHUNK, PARALLEL_FROM, STRIP_PIXELS_PER_THREAD, ExecutionPolicy, policy_for
+from .strips import in_strips
+from .workers import run_pieces
+
+__all__ = ["ExecutionPolicy", "policy_for", "STRIP_PIXELS_PER_THREAD", "PARALLEL_FROM", "LOOKUP_CHUNK", "in_strips", "run_pieces", "constant", "values_of", "device_cached", "folded",
+           "compile", "compile_mode", "DeferredCheck", "is_tracing", "untracked"]

@@ -1,0 +1,67 @@
+"""A compiled look in one word: :func:`compile` wraps a module in ``torch.compile`` with the mode that suits the
+device of the frames it gets.
+
+* **CUDA**: ``mode="reduce-overhead"``: Inductor's fused kernels replayed as a CUDA graph, one launch per frame
+  size instead of one per kernel. A graph's outputs are its own buffers, overwritten by the next call of the
+  same size: clone an output you keep across calls.
+* **CPU and other devices**: Inductor's default mode (fused C++ loops over the pixels).
+
+``fullgraph=True`` always: a look is one graph, so a graph break is an error here rather than a silent slowdown.
+Each device type compiles once, at its first frame; new frame sizes compile again (after the first recompile
+PyTorch marks sizes dynamic). Compile times measured by ``benchmarks/bench_gpu.py``.
+
+Examples:
+    >>> import torch
+    >>> import torchgrade as tg
+    >>> fast = tg.compile(tg.ToneMap("reinhard"))
+    >>> compile_mode(torch.device("cuda")), compile_mode(torch.device("cpu"))
+    ('reduce-overhead', 'default')
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+__all__ = ["compile", "compile_mode", "CompiledModule"]
+
+
+def compile_mode(device: torch.device, cuda_graphs: bool = True) -> str:
+    """The ``torch.compile`` mode for frames on ``device``: CUDA graphs on CUDA (unless ``cuda_graphs=False``)."""
+    return "reduce-overhead" if device.type == "cuda" and cuda_graphs else "default"
+
+
+class CompiledModule(nn.Module):
+    """``module`` compiled per device type at its first frame there (see :func:`compile`); ``module`` is
+    :attr:`module`, so its controls, state and ``to_config`` stay reachable."""
+
+    def __init__(self, module: nn.Module, cuda_graphs: bool = True, dynamic: bool = False):
+        super().__init__()
+        self.module = module
+        self.cuda_graphs = cuda_graphs
+        self.dynamic = dynamic
+        self._compiled: dict = {}
+
+    def compiled_for(self, device: torch.device):
+        """The compiled callable for frames on ``device`` (compiled lazily: the first frame pays the compile time)."""
+        call = self._compiled.get(device.type)
+        if call is None:
+            call = torch.compile(self.module, mode=compile_mode(device, self.cuda_graphs), fullgraph=True, dynamic=self.dynamic)
+            self._compiled[device.type] = call
+        return call
+
+    def forward(self, image: torch.Tensor, *args, **kwargs):
+        return self.compiled_for(image.device)(image, *args, **kwargs)
+
+
+def compile(module: nn.Module, *, cuda_graphs: bool = True, dynamic: bool = False) -> CompiledModule:
+    """``module`` (a stage, a :class:`~torchgrade.PostFX`, a :class:`~torchgrade.RandomPostFX`, a LUT) through
+    ``torch.compile`` with one graph and the device's mode (:func:`compile_mode`).
+
+    ``dynamic`` is passed to ``torch.compile``: ``False`` (default) compiles each frame size as it comes, the form CUDA
+    graphs replay; ``True`` one graph for every size, compiled with symbolic sizes (slower to compile).
+    """
+    if not isinstance(module, nn.Module):
+        raise TypeError(f"compile takes an nn.Module, got {type(module).__name__}")
+    return CompiledModule(module, cuda_graphs=cuda_graphs, dynamic=dynamic)
+

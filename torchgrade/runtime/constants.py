@@ -1,0 +1,131 @@
+"""Constants on the device of the data, made once: no host-to-device copy per frame.
+
+``torch.tensor(0.3, device="cuda")`` or ``MATRIX.to(image)`` copies from host memory at every call (1,419
+pageable copies a 4K frame of the cinematic look on an H200). :func:`constant` keeps each constant tensor per
+value, dtype and device, so a frame after the first builds nothing from Python data. While tracing, compiling
+or exporting it makes the tensor afresh, which the graph records as a constant.
+
+Tables derived from sizes (a blur's kernel, a padding's indices) are kept the same way by :func:`device_cached`.
+Cached tensors are shared: callers never modify them in place.
+
+Examples:
+    >>> import torch
+    >>> like = torch.zeros(1, dtype=torch.float64)
+    >>> a = constant((1.0, 2.0), like)
+    >>> a.tolist(), a.dtype, a is constant((1.0, 2.0), like)
+    ([1.0, 2.0], torch.float64, True)
+"""
+
+from __future__ import annotations
+
+import functools
+
+import torch
+
+from .recording import is_tracing
+
+__all__ = ["constant", "values_of", "device_cached", "folded", "CACHED_CONSTANTS"]
+
+CACHED_CONSTANTS = 4096
+"""Constants kept per kind (least recently used go first): a look holds tens; random controls are tensors, not cached."""
+
+
+def constant(values, like: torch.Tensor) -> torch.Tensor:
+    """``values`` (a number or nested tuples of numbers) as a tensor in ``like``'s dtype on its device, made once there.
+
+    While compiling, the values are written into the graph, which Inductor makes a constant on the device (a
+    tensor held by a module or a global would be an input of the graph instead, copied to the device at every
+    call and keeping CUDA graphs out): module-level tensor constants keep their values as tuples
+    (:func:`values_of`) for this.
+    """
+    if is_tracing():
+        return torch.tensor(values, dtype=like.dtype, device=like.device)
+    return _made(values, like.dtype, like.device)
+
+
+@functools.lru_cache(maxsize=CACHED_CONSTANTS)
+def _made(values, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
+    # made outside inference mode: an inference tensor cannot be saved for a later backward pass
+    with torch.inference_mode(False):
+        return torch.tensor(values, dtype=dtype, device=device)
+
+
+def values_of(tensor: torch.Tensor):
+    """A constant tensor's values as nested tuples of Python floats, for :func:`constant`.
+
+    Examples:
+        >>> values_of(torch.eye(2, dtype=torch.float64))
+        ((1.0, 0.0), (0.0, 1.0))
+    """
+    return _nested_tuple(tensor.tolist())
+
+
+def device_cached(make):
+    """Decorate ``make(*arguments)``, a function of hashable arguments (sizes, a ``torch.device``, a dtype) that
+    builds a constant tensor, so that each tensor is built once; while tracing, compiling or exporting it is
+    built afresh (a graph records how, and an exported graph keeps sizes symbolic).
+
+    Examples:
+        >>> import torch
+        >>> @device_cached
+        ... def ramp(n, device):
+        ...     return torch.arange(n, device=device)
+        >>> ramp(3, torch.device("cpu")) is ramp(3, torch.device("cpu"))
+        True
+    """
+
+    @functools.lru_cache(maxsize=CACHED_CONSTANTS)
+    def cached(*arguments):
+        with torch.inference_mode(False):
+            return make(*arguments)
+
+    @functools.wraps(make)
+    def call(*arguments):
+        return make(*arguments) if is_tracing() else cached(*arguments)
+
+    return call
+
+
+def folded(function, *arguments, like: torch.Tensor):
+    """``function(*arguments, like=like)``, a small tensor of the controls (a colour matrix, gains), made once.
+
+    With plain controls (numbers, strings, nested sequences, ``None``) the result is computed once in float64 on
+    the CPU and kept, in ``like``'s dtype, on its device (:func:`constant`): a frame then launches nothing for it.
+    A tensor among the arguments (a per-sample or learnable control), or tracing, computes it on ``like`` as called.
+
+    Examples:
+        >>> import torch
+        >>> def gain(stops, *, like):
+        ...     return torch.exp2(torch.tensor(stops, dtype=like.dtype, device=like.device))
+        >>> like = torch.zeros(1)
+        >>> folded(gain, 2.0, like=like).item(), folded(gain, 2.0, like=like) is folded(gain, 2.0, like=like)
+        (4.0, True)
+    """
+    if is_tracing():
+        return function(*arguments, like=like)
+    try:
+        key = _frozen(arguments)
+    except TypeError:
+        return function(*arguments, like=like)
+    values = _float64_values(function, key)
+    return None if values is None else constant(values, like)
+
+
+@functools.lru_cache(maxsize=CACHED_CONSTANTS)
+def _float64_values(function, arguments: tuple):
+    result = function(*arguments, like=torch.zeros((), dtype=torch.float64))
+    return None if result is None else values_of(result)
+
+
+def _frozen(value):
+    """``value`` with lists as tuples (a cache key); ``TypeError`` when it holds a tensor or anything unhashable."""
+    if isinstance(value, torch.Tensor):
+        raise TypeError("a tensor is not folded")
+    if isinstance(value, (list, tuple)):
+        return tuple(_frozen(item) for item in value)
+    hash(value)
+    return value
+
+
+def _nested_tuple(values):
+    return tuple(_nested_tuple(v) for v in values) if isinstance(values, list) else values

@@ -1,0 +1,102 @@
+"""Where a frame is computed, and how: the execution policy of each device, decided here and nowhere else.
+
+A per-pixel stage is dozens of elementwise operations. How they should run depends on the device, not on the
+maths, so the maths modules keep one differentiable form each and ask :func:`policy_for`:
+
+* **CPU**: strips of rows of :data:`STRIP_PIXELS_PER_THREAD` pixels per intra-op thread, so that each thread's
+  share of a strip's intermediates stays in its core's cache while every operation uses all the threads; a LUT's
+  pixel runs, one thread each, go to :data:`PARALLEL_FROM` or more worker threads when there are that many. A value
+  of the data may be read back (free on the CPU), and blurs and pooling take the slices the CPU is fastest at.
+* **Any other device** (CUDA, ``meta``, ...): whole frames. Each operation is a kernel launch there, and a strip
+  loop multiplies launches (16,875 a 4K frame of ``export/looks/cinematic.json`` on an H200, against 1,060 whole;
+  ``../shared/measurements/gpu-h200``) for no cache to gain; a value read back is a synchronisation, so no eager
+  shortcut reads one; blurs and pooling are one library kernel each.
+* **While tracing, compiling or exporting**: one graph of whole frames, no reads.
+
+Examples:
+    >>> import torch
+    >>> policy_for(torch.device("meta")).strip_pixels is None
+    True
+    >>> policy_for(torch.device("cpu")).strip_pixels == STRIP_PIXELS_PER_THREAD * torch.get_num_threads()
+    True
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import torch
+
+from .recording import is_tracing
+
+__all__ = ["ExecutionPolicy", "policy_for", "STRIP_PIXELS_PER_THREAD", "PARALLEL_FROM", "LOOKUP_CHUNK"]
+
+STRIP_PIXELS_PER_THREAD = 1 << 16
+"""Pixels of a CPU strip per intra-op thread (batch included). On a 2-core Xeon (2 MiB L2 a core), grade + tone map of
+``export/looks/cinematic.json`` at 1920x1080 took 516 ms whole, 418 / 312 / 296 / 308 / 317 ms in strips of
+2^15 / 2^16 / 2^17 / 2^18 / 2^19 pixels with 2 threads (medians of 5, alternating, load average 1.8), with identical
+output. A strip grows with the thread count: each thread's share stays that size, and a frame on many cores is fewer
+strips, each of the same dozens of operations (Python dispatches every one of them, one at a time)."""
+
+PARALLEL_FROM = 4
+"""Intra-op thread count from which a LUT's pixel runs (one thread each, :func:`torchgrade.lut.chunked_lookup`) go to
+as many worker threads. 2 workers on 2 cores took a 4K lookup from 185-198 ms to 141-170 ms here, but on the 16-core
+host of an H200 16 workers gained little over one thread (``benchmarks/results/gpu.md``); below 4 threads the runs
+stay on the calling thread. Strips of a look do not go to workers: on that host 16 of them ran the cinematic look
+at 1080p no faster than one thread's dispatch of its operations allows (250 ms)."""
+
+LOOKUP_CHUNK = 32768
+"""Pixels per pass of the eager CPU LUT lookup. Tetrahedral's eager form holds 20 values a pixel (2.5 MiB a run);
+smaller runs pay the fixed cost of each operation more often (about 45 µs a run of 15: 8K-pixel runs took 1.3
+times as long a 1080p frame, 4K 1.55 times), larger ones leave the cache (64K: even, 128K: 1.08 times).
+benchmarks/bench_lut.py measures the time and the temporary bytes per pixel."""
+
+
+@dataclass(frozen=True)
+class ExecutionPolicy:
+    """How a device computes a frame.
+
+    Attributes:
+        strip_pixels: pixels per strip of a per-pixel stage, or ``None`` for whole frames.
+        workers: LUT runs computed at once, each on a worker thread of one intra-op thread; 1 runs them in the
+            calling thread.
+        lookup_chunk: pixels per pass of the eager LUT lookup, or ``None`` for one pass over the frame.
+        reads_values: eager shortcuts may read a value of the data (bloom skips its pyramid when no pixel
+            passes the threshold): free on the CPU, a synchronisation of the device elsewhere.
+        filters_as_kernels: a separable blur as two convolutions with kernels made once, and a 2x2 sum as one
+            ``avg_pool2d``: one library kernel each (cuDNN), where the CPU is faster on sums of shifted slices
+            (kornia's ``gaussian_blur2d`` takes them there: a 9-tap blur of 540x960 took 14 ms against 94 ms as a
+            oneDNN convolution; four strided views summed about 3 times faster than ``avg_pool2d``).
+    """
+
+    strip_pixels: Optional[int]
+    workers: int
+    lookup_chunk: Optional[int]
+    reads_values: bool
+    filters_as_kernels: bool
+
+
+WHOLE_FRAMES = ExecutionPolicy(strip_pixels=None, workers=1, lookup_chunk=None, reads_values=False, filters_as_kernels=True)
+
+GRAPH = ExecutionPolicy(strip_pixels=None, workers=1, lookup_chunk=None, reads_values=False, filters_as_kernels=False)
+"""While tracing, compiling or exporting: kornia's blur, which picks its own form for the compiler (convolution on the
+CPU, slices that Inductor fuses on CUDA) and exports as before."""
+
+
+def policy_for(device: torch.device) -> ExecutionPolicy:
+    """The execution policy of ``device``, for the calling thread (its intra-op thread count).
+
+    Examples:
+        >>> import torch
+        >>> policy_for(torch.device("cuda", 0)) == WHOLE_FRAMES
+        True
+    """
+    if is_tracing():
+        return GRAPH
+    if device.type != "cpu":
+        return WHOLE_FRAMES
+    threads = torch.get_num_threads()
+    workers = threads if threads >= PARALLEL_FROM else 1
+    return ExecutionPolicy(strip_pixels=STRIP_PIXELS_PER_THREAD * threads, workers=workers, lookup_chunk=LOOKUP_CHUNK,
+                           reads_values=True, filters_as_kernels=False)

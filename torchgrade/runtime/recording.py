@@ -1,0 +1,36 @@
+"""Whether anything records how tensors are used: tracing, compiling, exporting, autograd.
+
+Eager-only forms (computed in place, strips, shortcuts that read a value) run only where nothing records.
+"""
+
+from __future__ import annotations
+
+import torch
+
+__all__ = ["is_tracing", "untracked"]
+
+
+def is_tracing() -> bool:
+    """True while tracing, compiling or exporting to ONNX: data-dependent checks and shortcuts are skipped.
+
+    Examples:
+        >>> is_tracing()
+        False
+    """
+    return torch.jit.is_tracing() or torch.compiler.is_compiling() or torch.onnx.is_in_onnx_export()
+
+
+def untracked(*tensors) -> bool:
+    """True when nothing records how ``tensors`` are used: no autograd (grad disabled, or none requires grad),
+    no tracing, compiling or exporting. Eager forms that compute in place or skip a guard need this.
+
+    Examples:
+        >>> x = torch.ones(2)
+        >>> untracked(x), untracked(x.requires_grad_())
+        (True, False)
+        >>> with torch.no_grad():
+        ...     untracked(x)
+        True
+    """
+    recorded = torch.is_grad_enabled() and any(isinstance(t, torch.Tensor) and t.requires_grad for t in tensors)
+    return not recorded and not is_tracing()

@@ -1,0 +1,73 @@
+"""Worker threads of one intra-op thread each, for CPU work split into independent pieces (a LUT's pixel runs).
+
+PyTorch's CPU operations release the GIL, so pieces computed in worker threads run on as many cores as there
+are workers, and no operation waits at a barrier for the others (each is single-threaded). A worker computes
+under the caller's autograd mode (``no_grad`` or ``inference_mode``): callers only split work that nothing
+records.
+
+Examples:
+    >>> import torch
+    >>> out = torch.zeros(4)
+    >>> def fill(i):
+    ...     out[i] = i * i
+    >>> run_pieces(fill, range(4), workers=2)
+    >>> out.tolist()
+    [0.0, 1.0, 4.0, 9.0]
+"""
+
+from __future__ import annotations
+
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from typing import Callable, Iterable
+
+import torch
+
+__all__ = ["run_pieces", "worker_pool"]
+
+_POOLS: dict = {}
+_LOCK = threading.Lock()
+
+
+def worker_pool(workers: int) -> ThreadPoolExecutor:
+    """A pool of ``workers`` threads, each set to one intra-op thread, made once per count.
+
+    ``torch.set_num_threads`` in a thread is that thread's own, but it also sets the count threads started
+    later begin with; the caller's count is therefore set again once every worker has started.
+    """
+    with _LOCK:
+        pool = _POOLS.get(workers)
+        if pool is None:
+            threads = torch.get_num_threads()
+            pool = ThreadPoolExecutor(workers, thread_name_prefix="torchgrade-worker", initializer=torch.set_num_threads, initargs=(1,))
+            started = threading.Barrier(workers + 1)
+            for _ in range(workers):
+                pool.submit(started.wait)
+            started.wait()
+            torch.set_num_threads(threads)
+            _POOLS[workers] = pool
+        return pool
+
+
+def run_pieces(work: Callable, pieces: Iterable, workers: int) -> None:
+    """``work(piece)`` for every piece, on ``workers`` threads (in this thread when ``workers`` is 1).
+
+    Pieces must be independent (each writes its own part of an output). The first exception is raised here
+    after every piece has finished.
+    """
+    pieces = list(pieces)
+    if workers <= 1 or len(pieces) <= 1:
+        for piece in pieces:
+            work(piece)
+        return
+    mode = torch.inference_mode if torch.is_inference_mode_enabled() else torch.no_grad
+
+    def run(piece):
+        with mode():
+            work(piece)
+
+    futures = [worker_pool(workers).submit(run, piece) for piece in pieces]
+    errors = [future.exception() for future in futures]
+    for error in errors:
+        if error is not None:
+            raise error
