@@ -1,0 +1,65 @@
+"""The eager CPU paths on this machine's threads: the cinematic look, its stages and a 33³ LUT at 1920x1080.
+
+    python benchmarks/bench_cpu_paths.py [--runs N] [--json FILE]
+
+Prints the median ms of each case (every round runs each case once: A B C A B C ...). It uses only the public API, so
+two versions of torchgrade can be compared by running it under each (``PYTHONPATH=<checkout>``) in turn; the
+closing comparison of a change quotes the medians of such alternating runs. ``--json`` also writes them to FILE.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+from pathlib import Path
+
+import torch
+
+import torchgrade as tg
+
+ROOT = Path(__file__).resolve().parents[1]
+CINEMATIC = json.loads((ROOT / "export" / "looks" / "cinematic.json").read_text())
+
+
+def cases() -> dict:
+    """Every case: a call on a 1920x1080 frame, its inputs made once."""
+    image = tg.scene.demo_scene(1080, 1920)
+    look = tg.PostFX.from_config(CINEMATIC).eval()
+    grade = tg.ColorGrade(**CINEMATIC["grade"])
+    tonemap = tg.ToneMap("aces")
+    bloom = tg.Bloom(**CINEMATIC["bloom"])
+    lut = tg.bake_lut(tg.PostFX(grade={"contrast": 20, "saturation": 10}, tonemap="aces"), size=33, report_tolerance=float("inf"))
+    pixels = torch.rand(1, 3, 1080, 1920, generator=torch.Generator().manual_seed(0)) * 1.1 - 0.05
+    return {
+        "cinematic look": lambda: look(image),
+        "grade": lambda: grade(image),
+        "tone map aces": lambda: tonemap(image),
+        "bloom scattering": lambda: bloom(image),
+        "LUT 33^3 tetrahedral": lambda: lut(pixels, "tetrahedral"),
+    }
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--runs", type=int, default=7)
+    parser.add_argument("--json", type=Path, default=None)
+    args = parser.parse_args(argv)
+    calls = cases()
+    times = {name: [] for name in calls}
+    with torch.no_grad():
+        for attempt in range(args.runs + 1):
+            for name, call in calls.items():
+                start = time.perf_counter()
+                call()
+                if attempt:  # the first round warms up
+                    times[name].append((time.perf_counter() - start) * 1e3)
+    medians = {name: round(statistics.median(values), 2) for name, values in times.items()}
+    print(json.dumps({"threads": torch.get_num_threads(), "torchgrade": str(Path(tg.__file__).parent), "ms": medians}))
+    if args.json:
+        args.json.write_text(json.dumps(medians, indent=2) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# The device check: the CUDA suite and benchmarks/bench_gpu.py on a GPU machine, from the project root, offline.
+#
+#   benchmarks/gpu_check.sh OUT [WHEELS] [EXRS]
+#
+# For a machine that has python3 with torch (CUDA), numpy, pytest (and pytest-xdist) but no kornia, OpenEXR,
+# OpenColorIO or colour-science: they are installed from the wheels in WHEELS (default .gpu/wheels: kornia,
+# kornia-rs, openexr, opencolorio, colour-science, pypng for cp312 manylinux), and the tests read the sample EXRs
+# from EXRS (default .gpu/exr, linked as ../shared/data/exr when that is missing). Logs and gpu.md / gpu.json go
+# to OUT. At most 8.5 minutes (tests 5, benchmark 3.5; the benchmark skips the sections left after its budget, the
+# slowest last). On an H200 on 2026-11-26 the module tests needed more than 150 s with 12 processes.
+set -u
+OUT=${1:?usage: benchmarks/gpu_check.sh OUT [WHEELS] [EXRS]}
+WHEELS=${2:-.gpu/wheels}
+EXRS=${3:-.gpu/exr}
+export PYTHONUNBUFFERED=1
+mkdir -p "$OUT"
+SITE=$(mktemp -d)
+python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --target "$SITE" "$WHEELS"/*.whl || exit 3
+export PYTHONPATH="$SITE:$PWD"
+if [ ! -e ../shared/data/exr ]; then
+  mkdir -p ../shared/data && ln -s "$(realpath "$EXRS")" ../shared/data/exr
+fi
+nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader | tee "$OUT/device.txt"
+python3 -c "import torch; print('torch', torch.__version__, 'cuda', torch.version.cuda)" | tee -a "$OUT/device.txt"
+
+PYTEST="python3 -m pytest -q -p no:cacheprovider -o addopts=-ra"
+TG_TEST_DEVICE=cuda timeout -s INT 120 $PYTEST -n 8 tests/test_device.py tests/test_autocast.py tests/test_gpu_path.py \
+  2>&1 | tee "$OUT/cuda_device_tests.log" | tail -15
+TG_TEST_DEVICE=cuda timeout -s INT 180 $PYTEST -n 12 tests/test_aces2.py tests/test_augment.py tests/test_bloom.py \
+  tests/test_display.py tests/test_exposure.py tests/test_grade.py tests/test_grade_parity.py tests/test_hdr_output.py \
+  tests/test_lut.py tests/test_pipeline.py tests/test_tonemap.py tests/test_strips.py \
+  2>&1 | tee "$OUT/cuda_module_tests.log" | tail -5
+timeout -s INT 200 python3 benchmarks/bench_gpu.py --out "$OUT" --budget 130 2>&1 | tee "$OUT/bench_gpu.log" | tail -40
