@@ -7,13 +7,12 @@ The stages are :data:`torchgrade.catalog.STAGE_KINDS` and the inputs
 ``tests/test_control_ranges.py`` check too. Writes ``benchmarks/results/robustness.md`` and
 ``benchmarks/results/robustness_controls.md`` (the control sweep and autocast, alone with ``--controls``).
 
-    PYTHONPATH=. .venv/bin/python benchmarks/robustness.py [--controls]
+    PYTHONPATH=. .venv/bin/python benchmarks/robustness.py [--controls | --fuzz]
 """
 
 from __future__ import annotations
 
 import contextlib
-import random
 import subprocess
 import sys
 import tempfile
@@ -29,11 +28,12 @@ import torchgrade as tg  # noqa: E402
 import torchgrade.stage  # noqa: E402
 from benchmarks.bench_cube_read import timed_read  # noqa: E402
 from benchmarks.common import EXR_DIR  # noqa: E402
+from benchmarks.fuzz import DEFECTS_FREE, FAMILIES  # noqa: E402
 from torchgrade.catalog import STAGE_KINDS  # noqa: E402
 from torchgrade.scene import extreme_inputs  # noqa: E402
 
 DTYPES = {"float32": torch.float32, "float16": torch.float16, "bfloat16": torch.bfloat16}
-FUZZED_FILES = 5000
+FUZZED_FILES = 2000
 
 
 def non_finite_counts(make, image: torch.Tensor, dtype: torch.dtype) -> tuple[int, int]:
@@ -57,8 +57,9 @@ def extremes_table() -> list[str]:
     return rows
 
 
-# Extreme finite pixels, every combination of three per pixel: what a documented control must survive.
-SWEEP_PIXELS = (0.0, 1e-38, 0.18, 1.0, 60.0, 65504.0, -1.0, -65504.0)
+# Extreme finite pixels, every combination of three per pixel: what a documented control must survive (1e-40: a
+# float32 denormal whose square underflows).
+SWEEP_PIXELS = (0.0, 1e-40, 1e-38, 0.18, 1.0, 60.0, 65504.0, -1.0, -65504.0)
 SWEEP_POINTS = 9
 PLAIN_NUMBERS = ("peak_luminance",)  # ACES 2.0 caches its tables per peak: a plain number, not a tensor
 
@@ -75,7 +76,7 @@ SWEPT = {name: kind.build for name, kind in STAGE_KINDS.items() if number_contro
 
 def sweep_image() -> torch.Tensor:
     grid = torch.cartesian_prod(*[torch.tensor(SWEEP_PIXELS)] * 3)
-    return grid.T.reshape(1, 3, 8, 64).contiguous()
+    return grid.T.reshape(1, 3, len(SWEEP_PIXELS), -1).contiguous()
 
 
 def swept_settings(make) -> list[dict]:
@@ -151,34 +152,14 @@ def damaged_exr_verdicts() -> tuple[int, int]:
     return sum(v == "VERDICT rejected" for v in verdicts), len(verdicts)
 
 
-def mutated_cube(rng: random.Random, valid: bytes) -> bytes:
-    """A valid .cube with a random cut, insertion, token swap or truncation."""
-    tokens = [b"LUT_3D_SIZE", b"LUT_1D_SIZE", b"DOMAIN_MIN", b"DOMAIN_MAX", b"nan", b"inf", b"-1", b"257", b"1e400", b"\x00", b"\n", b"x", b"9" * 30]
-    start = rng.randrange(len(valid) + 1)
-    end = min(len(valid), start + rng.randrange(40))
-    insert = b" ".join(rng.choice(tokens) for _ in range(rng.randrange(4)))
-    return valid[:start] + insert + valid[end:]
-
-
-def fuzzed_cube_verdicts() -> tuple[int, int, int]:
-    """(rejected with ValueError, accepted with a finite table, anything else) over mutated .cube files."""
-    rng = random.Random(0)
-    with tempfile.TemporaryDirectory() as folder:
-        path = Path(folder) / "valid.cube"
-        tg.io.write_cube(path, tg.bake_lut(lambda x: x * 0.5, size=3, shaper="logc"))
-        valid = path.read_bytes()
-        rejected = accepted = other = 0
-        for _ in tqdm(range(FUZZED_FILES), desc=".cube fuzz"):
-            path.write_bytes(mutated_cube(rng, valid))
-            try:
-                lut = tg.io.read_cube(path)
-                accepted += bool(torch.isfinite(lut.table).all())
-                other += not bool(torch.isfinite(lut.table).all())
-            except ValueError:
-                rejected += 1
-            except Exception:  # noqa: BLE001 - counting anything that is not the documented error
-                other += 1
-    return rejected, accepted, other
+def fuzz_report(count: int) -> list[str]:
+    """The counts of :mod:`benchmarks.fuzz`'s verdicts for ``count`` mutations of each family."""
+    lines = ["| family | mutations | refused (ValueError) | accepted (finite) | anything else |", "| --- | ---: | ---: | ---: | --- |"]
+    for family, verdicts_of in tqdm(FAMILIES.items(), desc="fuzz"):
+        verdicts = verdicts_of(count, seed=0)
+        others = ", ".join(f"{n} {verdict}" for verdict, n in verdicts.items() if verdict not in DEFECTS_FREE) or "0"
+        lines.append(f"| {family} | {sum(verdicts.values())} | {verdicts['refused']} | {verdicts['accepted']} | {others} |")
+    return lines
 
 
 def cube_256_read() -> dict:
@@ -209,7 +190,7 @@ def controls_report() -> list[str]:
 def inputs_report() -> list[str]:
     table = extremes_table()
     damaged_rejected, damaged_total = damaged_exr_verdicts()
-    rejected, accepted, other = fuzzed_cube_verdicts()
+    fuzzed = fuzz_report(FUZZED_FILES)
     cube = cube_256_read()
     return [
         "Non-finite outputs per module and input family, for float32 / float16 / bfloat16 inputs, "
@@ -219,8 +200,10 @@ def inputs_report() -> list[str]:
         "",
         f"Damaged EXR files (`../shared/data/exr/damaged/`): {damaged_rejected} of {damaged_total} rejected with "
         "ValueError/OSError, none crashed or hung.",
-        f"Mutated .cube files: {FUZZED_FILES} generated; {rejected} rejected with ValueError, {accepted} still valid "
-        f"(accepted, finite table), {other} failed any other way.",
+        "Fuzzed inputs (`benchmarks/fuzz.py`, seed 0): EXR headers and chunk tables, .cube files, CLF writes, look configs:",
+        "",
+        *fuzzed,
+        "",
         f"A 256³ .cube file ({cube['file_mib']} MiB, a 192 MiB float32 table) reads in {cube['cpu_seconds']} s of CPU "
         f"({cube['seconds']} s wall) with a peak of {cube['peak_mib']} MiB (fresh process, `benchmarks/bench_cube_read.py`'s reader).",
         "",
@@ -236,7 +219,12 @@ def write(name: str, lines: list[str]) -> None:
 
 
 def main() -> None:
-    """The full report (robustness.md and robustness_controls.md); ``--controls`` writes only the second (a minute)."""
+    """The full report (robustness.md and robustness_controls.md); ``--controls`` writes only the second (a minute),
+    ``--fuzz`` only the fuzzing counts (robustness_fuzz.md, a few minutes)."""
+    if "--fuzz" in sys.argv[1:]:
+        write("robustness_fuzz.md", [f"{FUZZED_FILES} mutations of each family (`benchmarks/fuzz.py`, seed 0):", "",
+                                     *fuzz_report(FUZZED_FILES), "", "Command: `PYTHONPATH=. .venv/bin/python benchmarks/robustness.py --fuzz`"])
+        return
     write("robustness_controls.md", controls_report())
     if "--controls" not in sys.argv[1:]:
         write("robustness.md", inputs_report())

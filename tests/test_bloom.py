@@ -8,7 +8,7 @@ import torch
 import torch.nn.functional as F
 
 import torchgrade as tg
-from torchgrade.bloom import upsample
+from torchgrade.bloom import BLOOM_MODES, upsample
 
 bloom = tg.functional.bloom
 
@@ -229,6 +229,19 @@ def test_gradients_are_finite_at_extremes():
         assert torch.isfinite(out).all()
         used = leaves if mode == "scattering" else leaves[:4]
         assert all(leaf.grad is not None and torch.isfinite(leaf.grad).all() for leaf in used)
+
+
+@pytest.mark.parametrize("source", [dict(clamp=100.0), dict(karis_average=True), dict(clamp=100.0, karis_average=True)])
+@pytest.mark.parametrize("mode", BLOOM_MODES)
+def test_gradients_are_finite_where_a_block_holds_denormal_light(mode, source):
+    """A block with a channel at 1e-40 (whose square underflows float32): the block's share of its light divided by a
+    mean of 1e-40 in the branch a select discards, and its infinite gradient times 0 was NaN (scattering bloom)."""
+    image = torch.tensor([1e-40, 1e-45, 0.0, 60.0]).repeat(3, 8, 2).unsqueeze(0)
+    image[:, 1] = 1e-38
+    image.requires_grad_()
+    out = tg.Bloom(mode=mode, intensity=0.5, **source)(image)
+    out.sum().backward()
+    assert torch.isfinite(out).all() and torch.isfinite(image.grad).all()
 
 
 # --- parameters and module ------------------------------------------------------------------------

@@ -213,3 +213,83 @@ def test_export_reports_a_bad_output_without_a_traceback(tmp_path, capsys):
     config.write_text('{"tonemap": "neutral"}')
     assert main(["export", "--config", str(config), "--out", str(tmp_path / "look.txt")]) == 2
     assert "export: error: output must be a .onnx file" in capsys.readouterr().err
+
+
+# --- nothing a user owns is lost ------------------------------------------------------------------
+
+
+def _plate(folder: Path, name: str = "plate.0001.exr") -> Path:
+    folder.mkdir(exist_ok=True)
+    path = folder / name
+    tg.io.write_exr(path, torch.full((3, 4, 6), 10.0))
+    return path
+
+
+@pytest.mark.parametrize("link", ["same path", "another spelling", "symbolic link", "hard link"])
+def test_grade_never_writes_over_its_input(tmp_path, capsys, link):
+    plate = _plate(tmp_path / "ow")
+    before = plate.read_bytes()
+    output = {"same path": plate, "another spelling": tmp_path / "ow" / ".." / "ow" / plate.name}.get(link)
+    if link == "symbolic link":
+        output = tmp_path / "link.exr"
+        output.symlink_to(plate)
+    elif link == "hard link":
+        output = tmp_path / "hard.exr"
+        output.hardlink_to(plate)
+    assert main(["grade", str(plate), "-o", str(output), "--contrast", "20"]) == 2
+    assert "would replace the input" in capsys.readouterr().err
+    assert plate.read_bytes() == before
+
+
+def test_grading_a_shot_over_its_own_frames_writes_none_of_them(tmp_path, capsys):
+    frames = [_plate(tmp_path / "ow", f"plate.{n:04d}.exr") for n in (1, 2, 3)]
+    before = [frame.read_bytes() for frame in frames]
+    assert main(["grade", str(tmp_path / "ow"), "-o", str(tmp_path / "ow" / "plate.%04d.exr"), "-q"]) == 2
+    assert "would replace the input" in capsys.readouterr().err
+    assert [frame.read_bytes() for frame in frames] == before
+
+
+def test_overwrite_input_grades_in_place_when_asked(tmp_path, capsys):
+    plate = _plate(tmp_path / "ow")
+    assert main(["grade", str(plate), "-o", str(plate), "--scene-referred", "--contrast", "20", "--overwrite-input"]) == 0
+    assert tg.io.read_exr(plate).max() != 10.0  # graded: contrast moved the value
+
+
+def test_two_outputs_of_one_command_cannot_be_one_file(tmp_path, capsys):
+    png = tmp_path / "demo.png"
+    (tmp_path / "demo.exr").symlink_to(png)
+    assert main(["demo", "-o", str(png), "--exr", str(tmp_path / "demo.exr"), "--width", "16", "--height", "9"]) == 2
+    assert "are the same file" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("output", ["out.exr", "out.png"])
+def test_a_look_that_changes_nothing_writes_the_non_finite_policys_values(exr_dir, tmp_path, output):
+    """An empty look builds no stage, so nothing sanitised the frame: its NaN and Inf reached the EXR as they were,
+    and a PNG's cast to integers printed numpy's warning (a process of its own: numpy's error state is per process)."""
+    (tmp_path / "empty.json").write_text("{}")
+    extra = ["--scene-referred", "--bit-depth", "float"] if output.endswith(".exr") else []
+    done = subprocess.run([sys.executable, "-m", "torchgrade.cli", "grade", str(exr_dir / "BrightRingsNanInf.exr"), "-o",
+                           str(tmp_path / output), "--config", str(tmp_path / "empty.json"), *extra],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0 and done.stderr == ""
+    if output.endswith(".exr"):
+        written = tg.io.read_exr(tmp_path / output)
+        assert torch.isfinite(written).all() and written.abs().max() <= 65504.0
+
+
+def test_a_tiny_file_asking_for_a_huge_canvas_is_refused_before_grading(tmp_path, capsys):
+    """364 bytes: a 1x1 data window in a 12000x12000 display window. Grading it ran the machine out of memory
+    (`can't allocate` at 7.1 GB) after passing the read budget."""
+    import time
+
+    import OpenEXR
+
+    path = tmp_path / "bomb.exr"
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
+              "dataWindow": ((0, 0), (0, 0)), "displayWindow": ((0, 0), (11999, 11999))}
+    OpenEXR.File(header, {"RGB": np.ones((1, 1, 3), np.float16)}).write(str(path))
+    start = time.perf_counter()
+    assert main(["grade", str(path), "-o", str(tmp_path / "out.png")]) == 2
+    assert time.perf_counter() - start < 1.0
+    assert "displayWindow 12000x12000 needs about" in capsys.readouterr().err
+    assert not (tmp_path / "out.png").exists()

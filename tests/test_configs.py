@@ -120,6 +120,7 @@ def bad_config_files(folder) -> dict:
         "not an object": (write(folder, "list.json", "[1, 2]"), "JSON object"),
         "not utf-8": (write(folder, "binary.json", b'{"grade": "\xff"}'), "not valid JSON"),
         "wrong type": (write(folder, "type.json", '{"grade": {"contrast": "high"}}'), "grade.contrast"),
+        "huge number": (write(folder, "huge.json", '{"bloom": {"intensity": ' + "9" * 400 + "}}"), "bloom.intensity"),
         "missing": (str(folder / "missing.json"), "missing.json"),
     }
 
@@ -153,3 +154,33 @@ def test_the_cli_prints_one_line_and_status_2_for_every_bad_config(tmp_path, cap
         captured = capsys.readouterr()
         assert captured.out == "" and captured.err.count("\n") == 1, name
         assert captured.err.startswith(f"torchgrade {command}: error:") and words in captured.err, name
+
+
+def _number_controls():
+    """Every number control of every configurable stage, with the mode or style that has it."""
+    from torchgrade.pipeline import STAGES
+    from torchgrade.primary import STYLE_CONTROLS
+    from torchgrade.tonemap import TONE_MAPPERS
+
+    for stage, cls in STAGES.items():
+        tables = [({}, cls.controls)]
+        if stage == "tonemap":
+            tables = [({"mode": mode}, entry.controls) for mode, entry in TONE_MAPPERS.items()]
+        for setting, table in tables:
+            for name, control in table.items():
+                if control.kind not in ("number", "int") or name in ("seed",):
+                    continue
+                if stage == "primary":
+                    setting = {"style": next(s for s, names in STYLE_CONTROLS.items() if name in names)}
+                yield pytest.param(stage, setting, name, control, id=f"{stage}.{setting.get('mode', '')}{name}")
+
+
+@pytest.mark.parametrize("stage, setting, name, control", list(_number_controls()))
+def test_a_json_number_too_large_for_a_float_is_a_value_error_naming_the_key(stage, setting, name, control):
+    """JSON numbers have no size limit: a 400-digit integer in any control raised a bare OverflowError."""
+    huge = int("9" * 400)
+    shape = torch.as_tensor(control.default if control.default is not None else 0.0).shape
+    value = torch.full(shape, 0.0).tolist() if shape else 0
+    value = huge if not shape else [huge] + value[1:] if len(shape) == 1 else [[huge, *value[0][1:]], *value[1:]]
+    with pytest.raises(ValueError, match=rf"{stage}\.{name} must be"):
+        tg.PostFX.from_config({stage: {**setting, name: value}})

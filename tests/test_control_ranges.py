@@ -21,12 +21,14 @@ from torch import nn
 import torchgrade as tg
 from torchgrade.bloom import BLOOM_MODES
 from torchgrade.lut import SHAPERS, identity_table
+from torchgrade.lut.lut3d import entry_bound
 from torchgrade.tonemap.registry import TONE_MAPPERS
 
 # Controls that take plain numbers only (ACES 2.0 caches its tables per peak luminance).
 PLAIN_NUMBERS = ("peak_luminance",)
-# Extreme finite pixels: black, the smallest normal float32, grey, Reinhard's 60, half's largest, negatives.
-PIXELS = (0.0, 1e-38, 0.18, 1.0, 60.0, 65504.0, -1.0, -0.18, -65504.0)
+# Extreme finite pixels: black, float32 denormals (the smallest, and 1e-40, whose square underflows) and its smallest
+# normal, grey, Reinhard's 60, half's largest, negatives.
+PIXELS = (0.0, 1e-45, 1e-40, 1e-38, 0.18, 1.0, 60.0, 65504.0, -1.0, -0.18, -65504.0)
 SETTINGS = settings(max_examples=25, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
 
 
@@ -163,14 +165,17 @@ def test_dither_ranges_are_safe():
     check()
 
 
-def test_lut3d_on_any_finite_table_is_safe():
+def test_lut3d_on_any_table_within_its_bound_is_safe():
+    """Entries of the extreme pixels that lie within the bound of the table's encoding (±65504 as the entries store it,
+    :func:`torchgrade.lut.lut3d.entry_bound`); beyond it a table is refused."""
     @SETTINGS
     @given(images(), st.lists(st.sampled_from(PIXELS), min_size=81, max_size=81), control_values(tg.LUT3D.controls, skip=("compile",)),
            st.sampled_from(("trilinear", "tetrahedral")))
     def check(image, entries, controls, interpolation):
         if tg.lut.SHAPERS[controls["shaper"]].takes_curve:
             reject()  # curve shapers take their 1D tables as an argument, drawn by the cube tests
-        table = torch.tensor(entries).reshape(3, 3, 3, 3).requires_grad_()
+        bound = entry_bound(controls["output_encoding"])
+        table = torch.tensor(entries).reshape(3, 3, 3, 3).clamp(-bound, bound).requires_grad_()
         assert_finite(tg.LUT3D(table, **controls), image, {"table": table, **controls}, interpolation=interpolation)
 
     check()
@@ -244,3 +249,36 @@ def test_pivot_black_must_be_below_pivot_white():
     grade = tg.PrimaryGrade("log", gamma=(2.0, 2.0, 2.0))
     with pytest.raises(ValueError, match="pivot_black"):
         grade.pivot_white = -1.0
+
+
+def _shaped_controls():
+    """Every number control whose default is a colour, trackball or matrix, by stage class."""
+    from torchgrade.pipeline import STAGES
+
+    for cls in STAGES.values():
+        for name, control in cls.controls.items():
+            if control.kind == "number" and isinstance(control.default, tuple):
+                yield pytest.param(cls, name, control, id=f"{cls.__name__}.{name}")
+
+
+@pytest.mark.parametrize("cls, name, control", list(_shaped_controls()))
+def test_a_control_of_the_wrong_shape_is_refused_at_construction(cls, name, control):
+    """A lift of three numbers or a 2x2 mixer was taken, and refused only at the first frame."""
+    default = torch.as_tensor(control.default, dtype=torch.float64)
+    short = default.flatten()[:-1].tolist() if default.dim() == 1 else default[:-1, :-1].tolist()
+    from torchgrade.primary import STYLE_CONTROLS
+
+    style = {"style": next(s for s, names in STYLE_CONTROLS.items() if name in names)} if cls is tg.PrimaryGrade else {}
+    with pytest.raises(ValueError, match=rf"{name} must be of shape"):
+        cls(**style, **{name: short})
+
+
+def test_the_log_gamma_span_is_at_least_a_thousandth_and_its_gradients_stay_finite_there():
+    """Drawn with denormal pixels: pivots 6.7e-22 apart gave the pivots infinite gradients (the gamma divides by the span)."""
+    with pytest.raises(ValueError, match="pivot_black must be below pivot_white by at least 0.001"):
+        tg.PrimaryGrade("log", pivot_black=-6.6987e-22, pivot_white=0.0)
+    pixels = torch.tensor(PIXELS)
+    image = pixels[torch.randint(0, len(pixels), (1, 3, 8, 8), generator=torch.Generator().manual_seed(0))]
+    controls = {"pivot_black": torch.tensor(0.5, requires_grad=True), "pivot_white": torch.tensor(0.50101, requires_grad=True),
+                "gamma": torch.full((3,), 0.01, requires_grad=True), "brightness": torch.full((3,), -1023.0, requires_grad=True)}
+    assert_finite(tg.PrimaryGrade("log", **controls), image, controls)

@@ -186,7 +186,7 @@ def test_malformed_files_raise_value_error(tmp_path, name):
 def test_binary_garbage_raises_value_error(tmp_path):
     path = tmp_path / "bad.cube"
     path.write_bytes(b"LUT_3D_SIZE 2\n\xff\xfe\x00garbage\n")
-    with pytest.raises(ValueError, match="non-ASCII"):
+    with pytest.raises(ValueError, match="not a text file"):
         read_cube(path)
 
 
@@ -354,6 +354,35 @@ def test_a_comment_longer_than_any_line_limit_is_skipped_and_other_long_lines_re
 
 def test_1d_file_with_a_constant_channel_keeps_that_constant(tmp_path):
     path = tmp_path / "flat.cube"
-    path.write_text("LUT_1D_SIZE 2\n0 3e38 0.25\n1 3e38 0.25\n")
+    path.write_text("LUT_1D_SIZE 2\n0 65504 0.25\n1 65504 0.25\n")
     out = read_cube(path)(torch.rand(1, 3, 4, 4))
-    assert torch.all(out[:, 1] == np.float32(3e38)) and torch.all(out[:, 2] == 0.25)
+    assert torch.all(out[:, 1] == 65504.0) and torch.all(out[:, 2] == 0.25)
+    path.write_text("LUT_1D_SIZE 2\n0 3e38 0.25\n1 3e38 0.25\n")
+    with pytest.raises(ValueError, match=r"entries must lie in \[-65504, 65504\]"):
+        read_cube(path)
+
+
+def test_a_cube_with_entries_beyond_65504_is_refused_as_the_constructor_refuses_them(tmp_path):
+    """±3.4e38 is finite in float32: such a file was read, and its lookups gave +Inf (tetrahedral) and NaN (trilinear)."""
+    path = tmp_path / "poisoned.cube"
+    rows = ["3.4e38 -3.4e38 0"] + ["0.5 0.5 0.5"] * 7
+    path.write_text("LUT_3D_SIZE 2\n" + "\n".join(rows) + "\n")
+    with pytest.raises(ValueError, match=r"entries must lie in \[-65504, 65504\]"):
+        read_cube(path)
+
+
+@pytest.mark.parametrize("title", ["Résumé, shot 12", "夜景"])
+def test_a_cube_with_a_byte_order_mark_or_a_title_in_any_language_reads_back(tmp_path, title):
+    path = tmp_path / "look.cube"
+    write_cube(path, LUT3D(identity_table(3) ** 1.5), title=title)
+    marked = tmp_path / "marked.cube"
+    marked.write_bytes(b"\xef\xbb\xbf" + path.read_bytes())
+    for written in (path, marked):
+        assert torch.equal(read_cube(written).table, read_cube(path).table)
+
+
+@pytest.mark.parametrize("title", ["shot\r42", "nul\x00", "tab\tbed", 'quote"d'])
+def test_a_title_a_reader_would_refuse_is_refused_when_writing(tmp_path, title):
+    with pytest.raises(ValueError, match="title must be printable text"):
+        write_cube(tmp_path / "look.cube", LUT3D(identity_table(2)), title=title)
+    assert not list(tmp_path.iterdir())

@@ -1,5 +1,6 @@
 """Untrusted OpenEXR input and safe writes: deep files, budgets, library errors, memory, permissions."""
 
+import contextlib
 import json
 import os
 import stat
@@ -13,6 +14,7 @@ import torch
 
 import torchgrade as tg
 from torchgrade.cli import main
+from torchgrade.io.exr.header_bytes import read_headers
 
 
 def declared_size(source, target, size):
@@ -222,3 +224,155 @@ def test_grade_command_grades_luminance_chroma_in_colour(exr_dir, tmp_path):
     assert main(["grade", str(exr_dir / "formats" / "Rec709_YC.exr"), "-o", str(tmp_path / "out.png")]) == 0
     pixels = torch.from_numpy(np.array(Image.open(tmp_path / "out.png"), dtype=np.float32))
     assert (pixels[..., 0] - pixels[..., 2]).abs().mean() > 5  # not grey
+
+
+def corrupt_attribute_name(source, target, name):
+    """Copy ``source`` with the last byte of the name of its first part's attribute ``name`` set to 1, as
+    OpenEXR's damaged sample imf_test_tile_file_fuzz_broken_memleak_exr has ``dataWindo\\x01``."""
+    data = bytearray(source.read_bytes())
+    attribute = next(attribute for attribute in read_headers(data).parts[0] if attribute.name == name)
+    data[attribute.start + len(name) - 1] = 1
+    target.write_bytes(bytes(data))
+    return target
+
+
+def write_tiled(path, parts: bool):
+    """RGB half in 16×16 tiles: one part, or two like OpenEXR's damaged sample
+    imf_test_tile_file_fuzz_broken_memleak_exr."""
+    import numpy as np
+    import OpenEXR
+
+    tiles = OpenEXR.TileDescription()
+    tiles.xSize = tiles.ySize = 16
+    header = {"type": OpenEXR.tiledimage, "tiles": tiles, "compression": OpenEXR.ZIP_COMPRESSION}
+    channels = {c: np.add.outer(np.arange(40), np.arange(50)).astype(np.float16) for c in "RGB"}
+    if parts:
+        OpenEXR.File([OpenEXR.Part({**header, "name": name}, channels) for name in ("a", "b")]).write(str(path))
+    else:
+        OpenEXR.File(header, channels).write(str(path))
+
+
+REQUIRED = [("scanline", name) for name in ("channels", "compression", "dataWindow", "displayWindow", "lineOrder",
+                                            "pixelAspectRatio", "screenWindowCenter", "screenWindowWidth")]
+REQUIRED += [("tiled", "tiles")] + [("parts", name) for name in ("dataWindow", "tiles", "name", "type", "chunkCount")]
+
+
+@pytest.mark.parametrize("layout, name", REQUIRED)
+def test_a_header_without_a_required_attribute_is_refused_naming_it(tmp_path, layout, name):
+    # before: the bindings stood in defaults (a 64x64 data window, no compression, ...) and the file read
+    # as data, or failed for a reason that named something else (no layer, no chunkCount)
+    source = tmp_path / "source.exr"
+    if layout == "scanline":
+        tg.io.write_exr(source, torch.rand(3, 40, 50))
+    else:
+        write_tiled(source, parts=layout == "parts")
+    broken = corrupt_attribute_name(source, tmp_path / "broken.exr", name)
+    with pytest.raises(ValueError, match=rf"broken\.exr: not a readable OpenEXR file \(part 0 lacks the required attribute {name} "):
+        tg.io.read_exr(broken)
+
+
+@contextlib.contextmanager
+def stderr_into(path):
+    """File descriptor 2 of this process pointed at the file ``path`` meanwhile (inside the test: pytest
+    points it at its own capture between a test's phases)."""
+    saved = os.dup(2)
+    with open(path, "wb") as sink:
+        os.dup2(sink.fileno(), 2)
+    try:
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+def test_reads_neither_depend_on_nor_swallow_what_other_threads_write_to_stderr(tmp_path):
+    # before: 20 of 20 reads failed ("damaged OpenEXR file (line ...)") and the lines written meanwhile were lost
+    import threading
+
+    plain, layered = tmp_path / "rgb.exr", tmp_path / "layered.exr"
+    tg.io.write_exr(plain, torch.rand(3, 64, 48))  # decoded whole (OpenEXR.File)
+    write_layered(layered, 64, parts=False)  # the main layer decoded in strips (OpenEXR.InputFile)
+    expected = {path: tg.io.read_exr(path) for path in (plain, layered)}
+    stop, written = threading.Event(), []
+
+    def chatter():
+        while not stop.is_set():
+            os.write(2, f"line {len(written)}\n".encode())
+            written.append(None)
+
+    with stderr_into(tmp_path / "stderr.log"):
+        thread = threading.Thread(target=chatter)
+        thread.start()
+        try:
+            images = [(path, tg.io.read_exr(path)) for path in [plain, layered] * 10]
+        finally:
+            stop.set()
+            thread.join()
+    assert all(torch.equal(image, expected[path]) for path, image in images)
+    lines = (tmp_path / "stderr.log").read_text().splitlines()
+    assert len(written) > 20 and lines == [f"line {n}" for n in range(len(written))], (len(written), len(lines))
+
+
+def rewrite(source, target, edit):
+    """Copy ``source`` with ``edit(data, table)`` applied to its bytes, ``table`` locating the chunks of
+    its first part (:func:`torchgrade.io.exr.chunks.chunk_table`)."""
+    from torchgrade.io.exr.chunks import chunk_table
+
+    data = bytearray(source.read_bytes())
+    edit(data, chunk_table(source, tg.io.exr_info(source)[0]))
+    target.write_bytes(bytes(data))
+    return target
+
+
+def reverse_chunks(data, table):
+    """The chunks of a single-part file laid out last first, its offset table pointing at them."""
+    start, end = int(table.offsets.min()), int((table.offsets + table.leader + table.sizes).max())
+    chunks = [bytes(data[o:o + table.leader + s]) for o, s in zip(table.offsets.tolist(), table.sizes.tolist())]
+    at = start
+    for index in reversed(range(len(chunks))):
+        data[at:at + len(chunks[index])] = chunks[index]
+        struct.pack_into("<Q", data, start - 8 * len(chunks) + 8 * index, at)
+        at += len(chunks[index])
+    assert at == end
+
+
+def next_part(table):
+    """Where the chunks after part 0's last one start: part 1's first chunk."""
+    return int(table.offsets[-1] + table.leader + table.sizes[-1])
+
+
+CHUNK_DAMAGE = {  # (file, edit, message): blocks of 16 rows (3) or of 1 (40), 16x16 tiles (4 x 3), two tiled parts
+    "block y": ("scanline", lambda d, t: struct.pack_into("<i", d, t.offsets[1], 0),
+                r"chunk 1 at offset \d+ holds y \[0\], not its slot's \[16\]"),
+    "line order": ("scanline", reverse_chunks, r"chunk 1 at offset \d+ is out of its INCREASING_Y line order"),
+    "overlap": ("scanline", lambda d, t: struct.pack_into("<i", d, t.offsets[0] + 4, t.sizes[0] + 9), r"chunks 0 and 1 overlap"),
+    "empty": ("scanline", lambda d, t: struct.pack_into("<i", d, t.offsets[2] + 4, 0), r"chunk 2 of 0 bytes .* is empty"),
+    "uncompressed size": ("uncompressed", lambda d, t: struct.pack_into("<i", d, t.offsets[1] + 4, 299),
+                          r"chunk 1 holds 299 bytes of data for pixels of 300 bytes uncompressed"),
+    "into the table": ("scanline", lambda d, t: struct.pack_into("<Q", d, read_headers(d).end + 16, t.offsets[0] - 8),
+                       r"chunk 2 at offset \d+, outside the chunks"),
+    "tile": ("tiled", lambda d, t: struct.pack_into("<i", d, t.offsets[1], 0),
+             r"chunk 1 at offset \d+ holds tile x, y, level x, y \[0, 0, 0, 0\], not its slot's \[1, 0, 0, 0\]"),
+    "another part's tile": ("parts", lambda d, t: struct.pack_into("<Q", d, read_headers(d).end + 8, next_part(t)),
+                            r"chunk 1 at offset \d+ belongs to part 1"),
+}
+
+
+@pytest.mark.parametrize("damage", CHUNK_DAMAGE)
+def test_a_damaged_chunk_table_is_refused_from_the_file_before_the_library_reads_it(tmp_path, damage):
+    # the library would rebuild such a table, complaining on stderr, or read the wrong chunks
+    import numpy as np
+    import OpenEXR
+
+    layout, edit, message = CHUNK_DAMAGE[damage]
+    source = tmp_path / "source.exr"
+    if layout == "scanline":
+        tg.io.write_exr(source, torch.arange(3 * 40 * 50.0).reshape(3, 40, 50) / 6000)
+    elif layout == "uncompressed":  # 300 bytes a line
+        OpenEXR.File({"compression": OpenEXR.NO_COMPRESSION}, {c: np.ones((40, 50), np.float16) for c in "RGB"}).write(str(source))
+    else:
+        write_tiled(source, parts=layout == "parts")
+    broken = rewrite(source, tmp_path / "broken.exr", edit)
+    with stderr_into(tmp_path / "stderr.log"), pytest.raises(ValueError, match=rf"broken\.exr: damaged OpenEXR file \(part 0: {message}"):
+        tg.io.read_exr(broken)
+    assert (tmp_path / "stderr.log").read_bytes() == b""

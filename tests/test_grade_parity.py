@@ -300,7 +300,7 @@ def test_extremes_give_finite_outputs_and_gradients():
 @pytest.mark.parametrize(
     "controls, message",
     [
-        (dict(lift=(1, 1, 1)), "trackball"),
+        (dict(lift=(1, 1, 1)), r"lift must be of shape \(4,\) or \(B, 4\)"),
         (dict(gain=(1, 1, 1, 1.5)), r"gain must lie in \[-1.0, 1.0\]"),
         (dict(curve_master=((0.5, 0.2), (0.4, 0.6))), "curve_master x values must be strictly increasing"),
         (dict(hue_vs_hue=((0.0, 0.5), (1.0, 0.5))), r"hue_vs_hue x values must lie in \[0, 1\)"),

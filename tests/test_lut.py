@@ -9,7 +9,9 @@ import torch
 
 from torchgrade.color import linear_to_logc, linear_to_srgb, logc_to_linear
 from torchgrade.lut import (
+    INTERPOLATIONS,
     LUT3D,
+    LUT_BACKENDS,
     apply_lut,
     bake_lut,
     chunked_lookup,
@@ -479,8 +481,43 @@ def test_a_table_with_one_non_finite_entry_is_refused(bad, dtype):
         LUT3D(table)
 
 
-@pytest.mark.parametrize("extreme", [0.0, 5e-324, 65504.0, -65504.0, 1e30])
-def test_a_table_of_extreme_finite_entries_is_accepted(extreme):
+@pytest.mark.parametrize("extreme", [0.0, 5e-324, 65504.0, -65504.0])
+def test_a_table_of_extreme_entries_within_the_policys_bound_is_accepted(extreme):
     dtype = torch.float16 if abs(extreme) == 65504.0 else torch.float64
     table = torch.full((3, 3, 3, 3), extreme, dtype=dtype)
     assert torch.equal(LUT3D(table).table, table)
+
+
+@pytest.mark.parametrize("extreme", [65520.0, -1e30, 3.4e38])
+def test_a_table_with_an_entry_beyond_65504_is_refused(extreme):
+    """Finite in float32, such entries made tetrahedral's lookup +Inf and trilinear's NaN (±3.4e38)."""
+    table = identity_table(3)
+    table[1, 2, 0, 2] = extreme
+    with pytest.raises(ValueError, match=r"LUT table entries must lie in \[-65504, 65504\]"):
+        LUT3D(table)
+
+
+@pytest.mark.parametrize("form", ["eager", *[f"{i}-{b}" for i in INTERPOLATIONS for b in LUT_BACKENDS]])
+def test_a_table_at_the_bounds_gives_finite_outputs_and_gradients_for_every_interpolation(form):
+    """Entries alternating between -65504 and 65504 (the largest differences a table may hold), inputs from the
+    extremes: every interpolation and graph form stays finite, and so do the gradients to the image and the table."""
+    table = (torch.randint(0, 2, (5, 5, 5, 3), generator=torch.Generator().manual_seed(0)).float() * 2 - 1) * 65504.0
+    lut = LUT3D(table, learnable=True)
+    values = torch.tensor([0.0, 1e-45, 1e-40, 0.5, 1.0 - 1e-7, 1.0, 60.0, 65504.0, 3e38, -3e38])
+    image = values[torch.randint(0, len(values), (1, 3, 6, 6), generator=torch.Generator().manual_seed(1))].requires_grad_()
+    module = (lambda x: lut(x, "tetrahedral")) if form == "eager" else lut.export_form(*form.split("-"))
+    out = module(image)
+    out.sum().backward()
+    assert torch.isfinite(out).all() and out.abs().max() <= 65504.0
+    assert torch.isfinite(image.grad).all() and torch.isfinite(lut.table.grad).all()
+
+
+def test_srgb_encoded_entries_are_bounded_where_they_decode_to_65504():
+    """An sRGB-encoded entry of 200 decodes beyond 65504 (to 4e5): refused, as a linear entry of 4e5 is."""
+    table = identity_table(3)
+    table[2, 2, 2] = 107.0  # decodes to about 64,900
+    lut = LUT3D(table, output_encoding="srgb")
+    assert torch.isfinite(lut(torch.full((1, 3, 1, 1), 1.0))).all()
+    table[2, 2, 2] = 200.0
+    with pytest.raises(ValueError, match=r"entries must lie in \[-107.105, 107.105\]"):
+        LUT3D(table, output_encoding="srgb")

@@ -220,3 +220,28 @@ def test_sessions_on_a_given_number_of_threads_match(exported):
     for threads in (0, -2, 1.5, True):
         with pytest.raises(ValueError, match="threads"):
             session(path, threads=threads)
+
+
+@pytest.mark.parametrize("failing", ["scan_strips", "fold_constants", "describe"])
+def test_a_failed_export_leaves_the_previous_file_whole_and_no_temporary(tmp_path, monkeypatch, failing):
+    """A full disk (or any failure) in any step of an export: the file a previous export wrote is untouched, as the
+    steps write a temporary file beside it that replaces it only once whole and checked."""
+    import errno
+
+    import torchgrade.onnx.exporter as exporter
+
+    path = tmp_path / "look.onnx"
+    tg.onnx.export(tg.ToneMap("aces"), path)
+    before = path.read_bytes()
+    step = getattr(exporter, failing)
+
+    def full_disk(*args, **kwargs):
+        step(*args, **kwargs)  # the step runs, rewriting the temporary file, then the disk fills
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(exporter, failing, full_disk)
+    with pytest.raises(OSError, match="No space left"):
+        tg.onnx.export(tg.PostFX(grade={"contrast": 20}, tonemap="aces"), path)
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["look.onnx"]
+    onnx.checker.check_model(str(path))

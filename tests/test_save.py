@@ -1,5 +1,6 @@
 """Saving looks with torch: whole modules and state dicts read back under ``weights_only=True``."""
 
+import pytest
 import torch
 
 import torchgrade as tg
@@ -49,3 +50,58 @@ def test_baked_look_and_random_layer_round_trip(tmp_path):
     loaded = torch.load(tmp_path / "augment.pt", weights_only=True)
     seed = torch.Generator().manual_seed
     assert torch.equal(loaded(image, generator=seed(1)), augment(image, generator=seed(1)))
+
+
+# --- a saved look is untrusted: what loads is checked as construction checks it ----------------------
+
+
+def test_a_pickled_look_with_a_control_out_of_range_is_refused_at_load(tmp_path):
+    look = tg.PostFX(tonemap={"mode": "reinhard_extended", "white_point": 4.0})
+    look.tonemap.__dict__["white_point"] = 0.0  # what editing the file gives: the pickle holds the value as it is
+    torch.save(look, tmp_path / "look.pt")
+    with pytest.raises(ValueError, match=r"white_point must lie in \[0.001, 10000.0\], got 0.0"):
+        torch.load(tmp_path / "look.pt", weights_only=True)
+
+
+def test_a_state_dict_with_a_nan_lut_entry_is_refused_at_load():
+    baked = tg.PostFX(grade={"contrast": 20}, tonemap="aces").to_lut(5)
+    state = baked.state_dict()
+    state["lut.table"] = state["lut.table"].clone()
+    state["lut.table"][1, 2, 3, 0] = float("nan")
+    with pytest.raises(ValueError, match="LUT table must be finite"):
+        tg.PostFX(lut=tg.LUT3D(tg.lut.identity_table(5))).load_state_dict(state)
+
+
+def test_a_state_dict_with_a_control_tensor_out_of_range_is_refused_at_load():
+    grade = tg.ColorGrade(contrast=torch.tensor([10.0, 20.0]))
+    state = grade.state_dict()
+    state["contrast"] = torch.tensor([10.0, 500.0])
+    with pytest.raises(ValueError, match="contrast must lie in"):
+        tg.ColorGrade(contrast=torch.tensor([0.0, 0.0])).load_state_dict(state)
+
+
+@pytest.mark.parametrize("extra", [
+    "a string", {"parameters": [], "interpolation": "tetrahedral"}, {"stages": {"grade": 3}, "parameters": [], "interpolation": "tetrahedral"},
+    {"stages": {"sharpen": {}}, "parameters": [], "interpolation": "tetrahedral"}, {"stages": {}, "parameters": "all", "interpolation": "tetrahedral"},
+    {"stages": {}, "parameters": [], "interpolation": "cubic"},
+])
+def test_a_malformed_extra_state_is_a_value_error_saying_what(extra):
+    state = tg.PostFX(grade={"contrast": 20}).state_dict()
+    state["_extra_state"] = extra
+    with pytest.raises(ValueError, match="_extra_state is malformed"):
+        tg.PostFX().load_state_dict(state)
+
+
+def test_a_config_number_too_large_for_a_float_in_a_saved_look_is_a_value_error():
+    state = tg.PostFX(grade={"contrast": 20}).state_dict()
+    state["_extra_state"]["stages"]["grade"]["contrast"] = int("9" * 400)
+    with pytest.raises(ValueError, match="grade.contrast must be a number a float can hold"):
+        tg.PostFX().load_state_dict(state)
+
+
+def test_a_pickled_random_layer_with_a_range_out_of_bounds_is_refused_at_load(tmp_path):
+    layer = tg.RandomPostFX(contrast=20)
+    layer.grade_ranges["contrast"] = (-20.0, 500.0)
+    torch.save(layer, tmp_path / "augment.pt")
+    with pytest.raises(ValueError, match="contrast"):
+        torch.load(tmp_path / "augment.pt", weights_only=True)

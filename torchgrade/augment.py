@@ -345,6 +345,7 @@ class RandomPostFX(IntensityAugmentationBase2D):
     def __setstate__(self, state: dict) -> None:
         super().__setstate__(state)
         self._local = threading.local()
+        type(self).from_config(self.to_config())  # a saved layer is untrusted: its ranges are checked as construction checks them
 
     __repr__ = nn.Module.__repr__  # kornia's own repr lists only p and same_on_batch
 

@@ -112,7 +112,9 @@ def _number_array(name: str, value: list) -> torch.Tensor:
         raise ValueError(f"{name} must be a number or a non-empty (nested) list of numbers, got {str(value)[:80]}")
     try:
         return torch.tensor(value, dtype=torch.get_default_dtype())
-    except (TypeError, ValueError, RuntimeError) as error:  # ragged lists; integers beyond 64 bits
+    except OverflowError:  # integers beyond float range
+        raise ValueError(f"{name} must be numbers a float can hold") from None
+    except (TypeError, ValueError, RuntimeError) as error:  # ragged lists
         raise ValueError(f"{name} must be a rectangular list of numbers: {error}") from None
 
 

@@ -33,6 +33,7 @@ Param = Union[float, int, torch.Tensor]
 __all__ = [
     "Param",
     "HALF_MAX",
+    "NEGLIGIBLE_LIGHT",
     "check_image",
     "check_on_cpu",
     "sanitize",
@@ -59,6 +60,11 @@ __all__ = [
 
 HALF_MAX = 65504.0
 """Largest finite half-float value: the bound of the non-finite policy."""
+
+NEGLIGIBLE_LIGHT = 1e-10
+"""Light below this is black at any exposure a display shows (2^-33 of white). Divisions by a quantity of light
+(a hue's chroma, a block's mean) take such values as black, or divide by at least this: squared, a float32
+denormal underflows to 0, and the division's gradient to infinity."""
 
 
 def check_image(image: torch.Tensor, name: str = "image") -> None:

@@ -34,7 +34,7 @@ from .color import (
     safe_sqrt,
     srgb_to_linear,
 )
-from .core import HALF_MAX, Param, apply_matrix, bounded_pow, matrix_product, color_param, matrix_param, scalar_param, untracked
+from .core import HALF_MAX, NEGLIGIBLE_LIGHT, Param, apply_matrix, bounded_pow, matrix_product, color_param, matrix_param, scalar_param, untracked
 from .runtime import constant
 from .curves import evaluate_curve
 
@@ -496,14 +496,9 @@ def lift_gamma_gain(image: torch.Tensor, lift=IDENTITY_TRACKBALL, gamma=IDENTITY
     return torch.sign(c) * bounded_pow(c.abs(), inverse_gamma)
 
 
-# Hue divides by the chroma (max - min); below 1e-10 its square underflows float32 and the hue's gradient
-# overflows (ACEScg turns a grey 1e-38 into a tinted one). Such pixels are black at any exposure a display
-# shows, so the hue steps take them as black.
-HSV_BLACK = 1e-10
-
-
 def _hsv(image: torch.Tensor) -> torch.Tensor:
-    lit = image.amax(dim=CHANNEL, keepdim=True) > HSV_BLACK
+    # Hue divides by the chroma (max - min): ACEScg turns a grey 1e-38 into a tinted one, whose hue's gradient overflows.
+    lit = image.amax(dim=CHANNEL, keepdim=True) > NEGLIGIBLE_LIGHT
     return rgb_to_hsv(torch.where(lit, image, 0.0))
 
 

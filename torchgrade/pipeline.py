@@ -188,11 +188,12 @@ class PostFX(nn.Module):
         }
 
     def set_extra_state(self, state: dict) -> None:
-        self.interpolation = state["interpolation"]
+        self.interpolation = _checked_extra_state(state)["interpolation"]
 
     def _load_from_state_dict(self, state_dict, prefix, *args) -> None:
         extra = state_dict.get(prefix + "_extra_state")
-        if isinstance(extra, dict) and self.lut is None:
+        if extra is not None and self.lut is None:
+            _checked_extra_state(extra)
             for stage in STAGES:
                 config = extra["stages"].get(stage)
                 setattr(self, stage, None if config is None else self._saved_stage(stage, config, extra, state_dict, prefix))
@@ -293,6 +294,34 @@ class PostFX(nn.Module):
 
     def extra_repr(self) -> str:
         return f"interpolation={self.interpolation!r}" if self.lut is not None else ""
+
+
+def _checked_extra_state(extra) -> dict:
+    """A saved look's extra state (:meth:`PostFX.get_extra_state`), or ``ValueError`` saying what in it is malformed:
+    a state dict is untrusted, and a tampered one gave bare ``KeyError``, ``TypeError`` and ``AttributeError``.
+
+    Examples:
+        >>> _checked_extra_state({"stages": [], "parameters": [], "interpolation": "tetrahedral"})
+        Traceback (most recent call last):
+        ...
+        ValueError: a saved look's _extra_state is malformed: stages must map stage names to configs, got list
+    """
+    def malformed(what: str):
+        return ValueError(f"a saved look's _extra_state is malformed: {what}")
+
+    if not isinstance(extra, dict):
+        raise malformed(f"it must be a dict, got {type(extra).__name__}")
+    stages, parameters = extra.get("stages"), extra.get("parameters")
+    if not isinstance(stages, dict):
+        raise malformed(f"stages must map stage names to configs, got {type(stages).__name__}")
+    for stage, config in stages.items():
+        if stage not in STAGES or not isinstance(config, dict):
+            raise malformed(f"stages holds {stage!r}: {type(config).__name__}; stages are {', '.join(STAGES)}, each a dict")
+    if not isinstance(parameters, list) or not all(isinstance(name, str) for name in parameters):
+        raise malformed("parameters must be a list of names")
+    if extra.get("interpolation") not in INTERPOLATIONS:
+        raise malformed(f"interpolation must be one of {INTERPOLATIONS}, got {extra.get('interpolation')!r}")
+    return extra
 
 
 SAFE_GLOBALS = (PostFX, LUT3D, ErrorReport, *STAGES.values())

@@ -194,15 +194,22 @@ def primary_grade(image: torch.Tensor, style: str = "linear", **controls) -> tor
     return to_input_dtype(x, image)
 
 
+MIN_PIVOT_SPAN = 1e-3
+"""Least ``pivot_white - pivot_black``. OpenColorIO asks only that black lie below white (``GradingPrimary::validate``);
+the gamma divides by the span, and at a span of 6.7e-22 its gradient with respect to the pivots overflowed float32.
+A thousandth of a log code is far below any visible gamma range."""
+
+
 def _check_pivots(black: Param, white: Param) -> None:
-    """OpenColorIO's rule (``GradingPrimary::validate``): the gamma span needs pivot_black below pivot_white."""
+    """OpenColorIO's rule, with a least span: ``pivot_white - pivot_black >= MIN_PIVOT_SPAN``."""
+    message = f"pivot_black must be below pivot_white by at least {MIN_PIVOT_SPAN}"
     if not isinstance(black, torch.Tensor) and not isinstance(white, torch.Tensor):
-        if not black < white:
-            raise ValueError(f"pivot_black must be below pivot_white, got {black} and {white}")
+        if not white - black >= MIN_PIVOT_SPAN:
+            raise ValueError(f"{message}, got {black} and {white}")
         return
     black_t, white_t = (torch.as_tensor(v, dtype=torch.float64).detach() for v in (black, white))
-    if (black_t >= white_t).any():
-        raise ValueError(f"pivot_black must be below pivot_white, got {black_t.tolist()} and {white_t.tolist()}")
+    if not bool((white_t - black_t >= MIN_PIVOT_SPAN).all()):
+        raise ValueError(f"{message}, got {black_t.tolist()} and {white_t.tolist()}")
 
 
 class PrimaryGrade(Stage):

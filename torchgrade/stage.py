@@ -94,9 +94,11 @@ class Control:
             # A number control that defaults to None ("not set", as a speed that falls back on another) keeps None.
             if not (value is None and self.default is None):
                 _check_number(value, name, self.range)
+                _check_shape(value, name, self.default)
         elif self.kind == "int":
             if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not self.range[0] <= value <= self.range[1]:
-                raise ValueError(f"{name} must be an integer in [{self.range[0]}, {self.range[1]}], got {value!r}")
+                shown = f"one of {_digits(value)} digits" if _digits(value) > 30 else repr(value)
+                raise ValueError(f"{name} must be an integer in [{self.range[0]}, {self.range[1]}], got {shown}")
             value = int(value)
         elif self.kind == "bool":
             if not isinstance(value, bool):
@@ -203,7 +205,10 @@ class Stage(nn.Module):
         self.check_together()
 
     def _checked(self, name: str, value):
-        return self.control_table()[name].check(name, self.check_control(name, value))
+        try:
+            return self.control_table()[name].check(name, self.check_control(name, value))
+        except OverflowError:  # a Python int beyond float range (JSON allows any number of digits)
+            raise ValueError(f"{name} must be a number a float can hold, got one of {_digits(value)} digits") from None
 
     def check_control(self, name: str, value):
         """Check (and return, possibly normalised) a control before its kind's check; the base accepts anything.
@@ -291,6 +296,33 @@ class Stage(nn.Module):
         state.pop("_deferred_check", None)
         return state
 
+    # ------------------------------------------------------------------ saved stages are untrusted
+
+    def check_state(self) -> None:
+        """Check every stored control (and a subclass's tables) as construction does; ``ValueError`` naming the first
+        one that fails. A saved file is untrusted: :meth:`__setstate__` (``torch.load``) and ``load_state_dict`` run this.
+
+        Examples:
+            >>> import torchgrade as tg
+            >>> tonemap = tg.ToneMap("reinhard_extended")
+            >>> tonemap.__dict__["white_point"] = 0.0  # as a tampered file would hold it
+            >>> tonemap.check_state()
+            Traceback (most recent call last):
+            ...
+            ValueError: white_point must lie in [0.001, 10000.0], got 0.0
+        """
+        for name in self._control_names:
+            self._checked(name, getattr(self, name))
+        self.check_together()
+
+    def __setstate__(self, state) -> None:
+        super().__setstate__(state)
+        self.check_state()
+
+    def _load_from_state_dict(self, state_dict, prefix, *args) -> None:
+        super()._load_from_state_dict(state_dict, prefix, *args)
+        self.check_state()
+
     # ------------------------------------------------------------------ identity and configs
 
     def is_default(self, name: str) -> bool:
@@ -362,3 +394,21 @@ def _check_number(value, name: str, allowed) -> None:
         check_range(value, name, *allowed)
     except (TypeError, RuntimeError) as error:
         raise ValueError(f"{name} must be numbers or a tensor: {error}") from None
+
+
+def _check_shape(value, name: str, default) -> None:
+    """Raise ``ValueError`` unless ``value`` has its control's shape (that of ``default``: a number, a colour ``(3,)``, a
+    trackball ``(4,)``, a matrix ``(3, 3)``) or is a batch of such ``(B, ...)``: a lift of two numbers or a 2x2 mixer was
+    taken and refused only at the first frame."""
+    shape = tuple(torch.as_tensor(default if default is not None else 0.0, dtype=torch.float64).shape)
+    given = tuple(value.shape) if isinstance(value, torch.Tensor) else tuple(torch.as_tensor(value, dtype=torch.float64).shape)
+    if given != shape and given[1:] != shape:
+        expected = "a number or a (B,) tensor" if not shape else f"of shape {shape} or (B, {', '.join(map(str, shape))})"
+        raise ValueError(f"{name} must be {expected}, got shape {given}")
+
+
+def _digits(value) -> int:
+    """The most digits of any integer in ``value`` (a number or nested sequence), for an overflow's message."""
+    if isinstance(value, (list, tuple)):
+        return max((_digits(item) for item in value), default=0)
+    return len(str(abs(value))) if isinstance(value, int) else 0

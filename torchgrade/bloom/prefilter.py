@@ -18,7 +18,7 @@ import torch
 import torch.nn.functional as F
 
 from ..color import CHANNEL, luminance, srgb_to_linear
-from ..core import Param, check_image, scalar_param
+from ..core import NEGLIGIBLE_LIGHT, Param, check_image, scalar_param
 from .pyramid import block_counts, sum_pool
 
 __all__ = ["SOFT_KNEE_EPSILON", "bloom_threshold", "threshold_fraction", "cross_sum", "karis_mean", "prefilter"]
@@ -97,8 +97,14 @@ def karis_mean(image: torch.Tensor, means: torch.Tensor) -> torch.Tensor:
 
 
 def _source_share(source: torch.Tensor, means: torch.Tensor) -> torch.Tensor:
-    """``source / mean`` per channel (1 where they are equal): the share of a block's light its source holds."""
-    return torch.where(source == means, 1.0, source / torch.where(means == 0, 1.0, means))
+    """``source / mean`` per channel (1 where they are equal): the share of a block's light its source holds.
+
+    Blocks whose mean is below :data:`~torchgrade.core.NEGLIGIBLE_LIGHT` are black at any exposure: their share is 1,
+    and both sides of the select divide by at least that floor, so the branch not taken cannot make an infinite
+    gradient (a mean of 1e-40 squared underflows to 0, and 0 times that infinity is NaN).
+    """
+    dark = means < NEGLIGIBLE_LIGHT
+    return torch.where((source == means) | dark, 1.0, source / means.clamp_min(NEGLIGIBLE_LIGHT))
 
 
 def prefilter(image: torch.Tensor, threshold, knee, fade_fireflies: bool, karis_average: bool = False, clamp=None):

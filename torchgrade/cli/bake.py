@@ -21,7 +21,7 @@ import torch
 
 from ..io import write_cube
 from ..lut import ENTRY_CHOICES, LUTAccuracyWarning, bake_lut, expects_hdr, srgb_code_error
-from .common import add_grading_flags, look_from_args, read_rec709, report_line, stages_label
+from .common import add_grading_flags, look_from_args, read_rec709, refuse_overwriting, report_line, stages_label
 
 __all__ = ["run_bake", "add_bake"]
 
@@ -77,6 +77,7 @@ def _cube_shaper(shaper: str, transform) -> str:
 def run_bake(args: argparse.Namespace) -> str:
     """Check the arguments, bake, write the ``.cube``; the line to print (with the error on ``--scene``)."""
     _check_bake_arguments(args)
+    refuse_overwriting([args.output], [args.config, args.scene])
     look = look_from_args(args)
     transform = look.per_pixel_stages()
     live = [name for name in look.stages() if name not in ("grade", "primary", "tonemap")]

@@ -11,6 +11,7 @@ Examples:
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +24,7 @@ from ..io import read_exr, write_exr
 from ..io.atomic import atomic_write
 from ..pipeline import PostFX
 
-__all__ = ["GRADING_FLAGS", "read_rec709", "display_codes", "write_png", "report_line", "stages_label", "grade_from_args", "given_grading_flags", "look_from_args",
+__all__ = ["GRADING_FLAGS", "refuse_overwriting", "read_rec709", "display_codes", "write_png", "report_line", "stages_label", "grade_from_args", "given_grading_flags", "look_from_args",
            "add_grading_flags"]
 
 GRADING_FLAGS = {
@@ -35,6 +36,44 @@ GRADING_FLAGS = {
     "saturation": "-100..100",
 }
 """The grading controls ``grade`` and ``bake`` take as flags (``--post-exposure`` ...), with their units."""
+
+
+def refuse_overwriting(outputs, inputs, allowed: bool = False) -> None:
+    """Raise ``ValueError`` when a file a command would write is one it reads, or two outputs are one file: the same
+    path, or the same file through a symbolic or hard link (same device and inode). ``allowed`` lets an output replace
+    an input (``grade --overwrite-input``), never another output.
+
+    Examples:
+        >>> import tempfile
+        >>> with tempfile.TemporaryDirectory() as folder:
+        ...     plate = Path(folder) / "plate.exr"
+        ...     _ = plate.write_bytes(b"")
+        ...     refuse_overwriting([Path(folder) / "." / "plate.exr"], [plate])
+        Traceback (most recent call last):
+        ...
+        ValueError: ... would replace the input ...plate.exr: pass --overwrite-input to grade in place
+    """
+    def identity(path):
+        try:
+            status = os.stat(path)
+        except (FileNotFoundError, NotADirectoryError):
+            return None
+        return status.st_dev, status.st_ino
+
+    read = {identity(path): path for path in inputs if path is not None}
+    read.pop(None, None)
+    written = {}
+    for path in outputs:
+        if path is None:
+            continue
+        key = identity(path)
+        if key is None:
+            key = os.path.realpath(path)  # not there yet: two outputs can still name it twice
+        if key in written:
+            raise ValueError(f"{written[key]} and {path} are the same file: each output needs a file of its own")
+        written[key] = path
+        if key in read and not allowed:
+            raise ValueError(f"{path} would replace the input {read[key]}: pass --overwrite-input to grade in place")
 
 
 def read_rec709(path, to_rec709: bool = True, adaptation: str = "auto", **options) -> torch.Tensor:

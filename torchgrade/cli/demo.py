@@ -19,7 +19,7 @@ import torch
 from ..io import write_exr
 from ..pipeline import PostFX
 from ..scene import demo_scene
-from .common import stages_label, write_png
+from .common import refuse_overwriting, stages_label, write_png
 
 __all__ = ["DEFAULT_LOOK", "run_demo", "add_demo"]
 
@@ -49,6 +49,7 @@ def run_demo(args: argparse.Namespace) -> str:
         ...     run_demo(args)  # doctest: +ELLIPSIS
         'demo: 32x18, Bloom -> ColorGrade -> ToneMap, ... ms -> ...demo.png'
     """
+    refuse_overwriting([args.output, args.exr], [])
     look = PostFX.from_config(DEFAULT_LOOK)
     start = time.perf_counter()
     scene = demo_scene(args.height, args.width)

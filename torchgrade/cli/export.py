@@ -25,7 +25,7 @@ from ..lut import INTERPOLATIONS, LUT_BACKENDS
 from ..onnx import OUTPUTS, export_look
 from ..pipeline import PostFX
 from ..scene import demo_scene
-from .common import read_rec709
+from .common import read_rec709, refuse_overwriting
 
 __all__ = ["run_export", "add_export"]
 
@@ -35,6 +35,7 @@ def run_export(args: argparse.Namespace) -> str:
     output = Path(args.out)
     if output.suffix.lower() != ".onnx" or not output.parent.is_dir():
         raise ValueError(f"output must be a .onnx file in an existing folder, got {output}")
+    refuse_overwriting([output], [args.config, *(args.scene or ())])
     look = PostFX.from_config(args.config).eval()
     if args.lut is not None:
         look = look.to_lut(args.lut, args.interpolation)

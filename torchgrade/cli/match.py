@@ -32,7 +32,7 @@ from ..io.atomic import atomic_write
 from ..lut import LUTAccuracyWarning
 from ..match import GRADE_CONTROLS, LUT_FILES, match_look
 from ..tonemap import TONEMAP_MODES
-from .common import read_rec709, report_line
+from .common import read_rec709, refuse_overwriting, report_line
 
 __all__ = ["run_match", "add_match", "read_target"]
 
@@ -94,6 +94,7 @@ def _errors(errors: dict) -> str:
 def run_match(args: argparse.Namespace) -> str:
     """Fit the look, write the JSON (and the ``.cube`` or ``.clf``); the line to print (the module shows a run)."""
     _check_outputs(args)
+    refuse_overwriting([args.output, args.cube], [args.source, args.target])
     source, target = read_rec709(args.source), read_target(Path(args.target))
     stages = ("grade",) if args.scene_referred else ("grade", "tonemap")
     start = time.perf_counter()

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ..core import sanitize
 from ..io import write_exr
 from ..io.atomic import atomic_write
 from .common import display_codes, write_png
@@ -79,6 +80,8 @@ def write_frame(path, image: torch.Tensor, depth: str, encoded: bool = False) ->
 
     Integer formats (PNG, 16-bit TIFF) hold sRGB-encoded light clamped to [0, 1], or with ``encoded`` a
     display's signal (:class:`~torchgrade.display.Display`) as it is; EXR and float TIFF hold the values as they are.
+    Every format gets the non-finite policy's values (:func:`~torchgrade.core.sanitize`: NaN 0, ±Inf ±65504): a look
+    that changes nothing (no stage built) would otherwise write the input's NaN and Inf as they are.
 
     Examples:
         >>> import tempfile
@@ -90,6 +93,7 @@ def write_frame(path, image: torch.Tensor, depth: str, encoded: bool = False) ->
     """
     path = Path(path)
     suffix = path.suffix.lower()
+    image = sanitize(image)
     if suffix == ".exr":
         write_exr(path, image, half=depth == "half")
     elif suffix == ".png":

@@ -24,6 +24,7 @@ import torch
 from ..color.transfer import LOGC_A, LOGC_B, LOGC_C, LOGC_D
 from ..lut import LUT3D, SHAPERS
 from .atomic import atomic_write
+from .cube.write import check_title
 
 __all__ = ["write_clf", "clf_text"]
 
@@ -51,6 +52,7 @@ def clf_text(lut: LUT3D, title: str = "torchgrade", interpolation: str = "tetrah
     """
     if interpolation not in ("trilinear", "tetrahedral"):
         raise ValueError(f"CLF interpolation must be 'trilinear' or 'tetrahedral', got {interpolation!r}")
+    check_title(title, "CLF")  # XML 1.0 has no form for control characters: the file would not parse
     lines = ['<?xml version="1.0" encoding="UTF-8"?>', f'<ProcessList compCLFversion="3" id={quoteattr(title)}>',
              f"  <Description>{escape(title)}: {lut.size}³ {lut.shaper} LUT</Description>"]
     lines += _shaper_nodes(lut)

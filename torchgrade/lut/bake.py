@@ -25,7 +25,7 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
-from ..core import check_choice, check_image, check_on_cpu, sanitize
+from ..core import HALF_MAX, check_choice, check_image, check_on_cpu, sanitize
 from .lattice import MIN_SIZE, check_size, checked_domain, lattice
 from .entries import ENTRY_CHOICES, SCENE_WEIGHT, fit_entries, scene_pixels
 from .fit import SCENE_FIT_WEIGHT, SCENE_MIN_SIZE, fit_scene_shaper, fit_shaper, refine_shaper
@@ -207,7 +207,9 @@ def _baker(transform, domain, scene, chunk: int, output_encoding: str, progress:
                 lattice_domain = DEFAULT_DOMAINS[shaper] if scene is None or curve is not None else scene_domain(scene, shaper)
             lattice_domain = checked_domain(lattice_domain)  # the lattice is baked where the lookup will find it
             values = _evaluate_on_lattice(transform, size, shaper, lattice_domain, chunk, progress, curve, curve_range)
-        return LUT3D(encode_output(values, output_encoding), shaper=shaper, domain=lattice_domain,
+        # Bounded as every table is (the non-finite policy's ±65504): a grade clamps there, and a matrix after it can
+        # reach a few hundredths beyond.
+        return LUT3D(encode_output(values.clamp(-HALF_MAX, HALF_MAX), output_encoding), shaper=shaper, domain=lattice_domain,
                      output_range=(0.0, 1.0) if display else None, output_encoding=output_encoding,
                      curve=curve, curve_range=curve_range)
 

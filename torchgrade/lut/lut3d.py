@@ -50,7 +50,7 @@ from .lattice import check_size, checked_domain, planar_table
 from .shapers import SHAPERS, lattice_unit, shaper_encode
 
 __all__ = ["LUT3D", "LUTLookup", "OUTPUT_ENCODINGS", "LOOKUP_CHUNK", "apply_lut", "lookup", "chunked_lookup", "compiled_lookup",
-           "decode_output", "encode_output", "table_output"]
+           "decode_output", "encode_output", "table_output", "entry_bound"]
 
 OUTPUT_ENCODINGS = ("linear", "srgb")
 """How table entries are stored: linear values, or sRGB-encoded values decoded after the lookup."""
@@ -329,7 +329,8 @@ class LUT3D(Stage):
                  compile: bool = False, output_encoding: str = "linear"):
         super().__init__()
         check_choice("shaper", shaper, SHAPERS)
-        _check_table(table)
+        check_choice("output encoding", output_encoding, OUTPUT_ENCODINGS)
+        _check_table(table, output_encoding)
         if SHAPERS[shaper].takes_curve != (curve is not None):
             raise ValueError(f"the {shaper!r} shaper {'needs' if SHAPERS[shaper].takes_curve else 'takes no'} curve=(n, 3) table")
         self.size = table.shape[0]
@@ -359,7 +360,18 @@ class LUT3D(Stage):
         without waiting for a GPU (:class:`~torchgrade.runtime.DeferredCheck`)."""
         super().check_learnable()
         if isinstance(self.table, nn.Parameter) and not is_tracing():
-            self.deferred_check()({"table": self.table}, _check_extremes, summary=_extremes)
+            bound = entry_bound(self.output_encoding)
+            self.deferred_check()({"table": self.table}, lambda name, extremes: _check_extremes(extremes, bound), summary=_extremes)
+
+    def check_state(self) -> None:
+        """Also the table, the domain and a shaper's curve, as the constructor checks them (a saved LUT is untrusted)."""
+        super().check_state()
+        _check_table(self.table, self.output_encoding)
+        checked_domain((self.domain_min, self.domain_max))
+        if SHAPERS[self.shaper].takes_curve != (self.curve is not None):
+            raise ValueError(f"the {self.shaper!r} shaper {'needs' if self.curve is None else 'takes no'} curve=(n, 3) table")
+        if self.curve is not None:
+            _check_curve(self.curve)
 
     @property
     def is_identity(self) -> bool:
@@ -468,12 +480,32 @@ def _extremes(table: torch.Tensor) -> torch.Tensor:
     return torch.stack((table.amax(), table.amin()))
 
 
-def _check_extremes(name: str, extremes: torch.Tensor) -> None:
+def entry_bound(output_encoding: str) -> float:
+    """The largest magnitude a table entry may have: ±65504, the non-finite policy's bound, as the entries store it
+    (sRGB-encoded entries: the code of 65504, about 107.1, which decodes to 65504).
+
+    Examples:
+        >>> entry_bound("linear"), round(entry_bound("srgb"), 3)
+        (65504.0, 107.105)
+    """
+    return _ENTRY_BOUNDS[output_encoding]
+
+
+_ENTRY_BOUNDS = {encoding: float(encode_output(torch.tensor(HALF_MAX, dtype=torch.float64), encoding)) for encoding in OUTPUT_ENCODINGS}
+
+
+def _check_extremes(extremes: torch.Tensor, bound: float = HALF_MAX) -> None:
+    """Every entry finite and within ``bound`` (:func:`entry_bound`): interpolation weights lie in [0, 1] and sum to 1,
+    so a lookup then stays within ±65504 and its gradients finite for every input and interpolation (entries of
+    ±3.4e38, finite in float32, made +Inf through tetrahedral's differences and NaN through trilinear's)."""
     if not bool(torch.isfinite(extremes).all()):
         raise ValueError("LUT table must be finite: it has NaN or infinite entries")
+    if not bool((extremes.abs() <= bound).all()):
+        raise ValueError(f"LUT table entries must lie in [-{bound:g}, {bound:g}], got entries from "
+                         f"{extremes[1].item():.6g} to {extremes[0].item():.6g}")
 
 
-def _check_table(table) -> None:
+def _check_table(table, output_encoding: str = "linear") -> None:
     if not isinstance(table, torch.Tensor) or not table.is_floating_point():
         raise TypeError(f"LUT table must be a floating-point tensor, got {getattr(table, 'dtype', type(table).__name__)}")
     size = table.shape[0] if table.dim() == 4 else None
@@ -481,7 +513,7 @@ def _check_table(table) -> None:
         raise ValueError(f"LUT table must have shape (S, S, S, 3), got {tuple(table.shape)}")
     check_size(size)
     # amax and amin propagate NaN and reach ±Inf, without isfinite's table-sized temporaries (336 MiB at 256³).
-    _check_extremes("table", _extremes(table.detach()))
+    _check_extremes(_extremes(table.detach()), entry_bound(output_encoding))
 
 
 def _check_curve(curve: torch.Tensor) -> torch.Tensor:

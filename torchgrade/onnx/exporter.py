@@ -19,6 +19,7 @@ import torch
 from torch import nn
 
 from ..core import check_on_cpu
+from ..io.atomic import atomic_write
 from ..lut import BACKENDS
 from .describe import describe
 from .graph import GRADE_INPUTS, default_example, example_inputs, export_graph, input_names, output_names
@@ -102,17 +103,22 @@ def export(module: nn.Module, path, *, example: Optional[torch.Tensor] = None, o
     example = default_example(graph) if example is None else example
     inputs = example_inputs(graph, module, example.to(io_dtype))
     names = input_names(graph)
-    path = Path(path)
-    with symbolics(opset), warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # tracer warnings: Python ints frozen by design (bloom depth)
-        torch.onnx.export(
-            graph, inputs, str(path), dynamo=False, opset_version=opset,
-            input_names=names, output_names=output_names(graph), dynamic_axes=_dynamic_axes(names),
-        )
-    if strips:
-        onnx_lib.save(scan_strips(onnx_lib.load(str(path))), str(path))
-    if fold:
-        fold_constants(path)
-    onnx_lib.save(describe(onnx_lib.load(str(path)), module, output, io_dtype), str(path))
-    onnx_lib.checker.check_model(str(path))
-    return path
+
+    def write(temporary: str) -> None:
+        with symbolics(opset), warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # tracer warnings: Python ints frozen by design (bloom depth)
+            torch.onnx.export(
+                graph, inputs, temporary, dynamo=False, opset_version=opset,
+                input_names=names, output_names=output_names(graph), dynamic_axes=_dynamic_axes(names),
+            )
+        if strips:
+            onnx_lib.save(scan_strips(onnx_lib.load(temporary)), temporary)
+        if fold:
+            fold_constants(temporary)
+        onnx_lib.save(describe(onnx_lib.load(temporary), module, output, io_dtype), temporary)
+        onnx_lib.checker.check_model(temporary)
+
+    # Every step rewrites the file: they work on a temporary one beside it, renamed onto the target only when the
+    # model is whole and checked, so a full disk or a failed step leaves the old file as it was.
+    atomic_write(path, write)
+    return Path(path)

@@ -102,7 +102,7 @@ def _read_header(blocks, path):
             line += block.count(b"\n", start, found.start())
             start = found.start()
             end = block.index(b"\n", start) + 1
-            words = [word.decode("ascii") for word in block[start:end].split(None, 1)]
+            words = [word.decode("utf-8") for word in block[start:end].split(None, 1)]
             if _NUMBER.match(words[0]):
                 return header, (line, block[start:])
             _add_keyword(header, words, line, path)
@@ -243,7 +243,7 @@ def _block_rows(block: bytes, line: int, path) -> np.ndarray:
 
 def _data_words(block: bytes, line: int):
     """``(line number, words)`` of each data line of a block (not blank, not a comment)."""
-    for number, text in enumerate(block.decode("ascii").split("\n"), line):
+    for number, text in enumerate(block.decode("utf-8").split("\n"), line):
         words = text.split()
         if words and not words[0].startswith("#"):
             yield number, words

@@ -9,7 +9,7 @@ from ...lut.report import measure
 from ..atomic import atomic_write
 from .limits import MAX_SHAPER_SIZE, SHAPER_SIZE
 
-__all__ = ["write_cube", "cube_text", "shaper_samples", "lattice_only"]
+__all__ = ["write_cube", "cube_text", "check_title", "shaper_samples", "lattice_only"]
 
 
 def write_cube(path, lut: LUT3D, title: str = "torchgrade", shaper_size: int = SHAPER_SIZE, shaper_section: bool = True,
@@ -61,8 +61,7 @@ def cube_text(lut: LUT3D, title: str = "torchgrade", shaper_size: int = SHAPER_S
         >>> cube_text(LUT3D(identity_table(2))).splitlines()[:4]
         ['TITLE "torchgrade"', 'DOMAIN_MIN 0.0 0.0 0.0', 'DOMAIN_MAX 1.0 1.0 1.0', 'LUT_3D_SIZE 2']
     """
-    if '"' in title or "\n" in title:
-        raise ValueError(f"cube title must not contain quotes or newlines, got {title!r}")
+    check_title(title, "cube", '"')
     section = shaper_samples(lut, shaper_size)
     if section is None:
         lines = [f'TITLE "{title}"']
@@ -109,6 +108,22 @@ def _data_lines(rows: torch.Tensor) -> list:
     return [f"{r:.9g} {g:.9g} {b:.9g}" for r, g, b in array]
 
 
+def check_title(title: str, kind: str, forbidden: str = "") -> None:
+    """Raise ``ValueError`` unless ``title`` is printable text (no control characters: a carriage return or NUL ends
+    or corrupts the line a reader sees) without the ``forbidden`` characters of ``kind``'s syntax.
+
+    Examples:
+        >>> check_title("Résumé 2", "cube", '"')
+        >>> check_title("shot" + chr(13) + "42", "cube", '"')
+        Traceback (most recent call last):
+        ...
+        ValueError: cube title must be printable text without control characters or '"', got 'shot\\r42'
+    """
+    if not isinstance(title, str) or not title.isprintable() or any(c in title for c in forbidden):
+        besides = f" or {forbidden!r}" if forbidden else ""
+        raise ValueError(f"{kind} title must be printable text without control characters{besides}, got {title!r}")
+
+
 def _write_text(path: str, text: str) -> None:
-    with open(path, "w", encoding="ascii") as handle:
+    with open(path, "w", encoding="utf-8") as handle:
         handle.write(text)

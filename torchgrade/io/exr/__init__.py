@@ -1,8 +1,10 @@
 """OpenEXR reading and writing through the OpenEXR 3.x bindings (``OpenEXR.File``).
 
-Files are untrusted input: the headers are read on their own first (:func:`exr_info`), deep files
-and files whose decoding would pass the pixel or byte budget are refused before any pixel is
-decoded, and any damage the library reports rejects the file with a ``ValueError`` naming it.
+Files are untrusted input: the headers are read on their own first (:func:`exr_info`), and before
+any pixel is decoded, from the file's bytes, a read refuses deep files, headers that lack an
+attribute the format requires, chunk offset tables the library could not follow soundly, and files
+whose decoding would pass the pixel or byte budget (tiles and display window included); damage the
+library still meets while decoding rejects the file too, with a ``ValueError`` naming it.
 """
 
 from .chromaticities import ADAPTATIONS

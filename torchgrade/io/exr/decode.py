@@ -8,27 +8,29 @@ first copied out, still compressed, into a single-part file in a temporary folde
 channels that leave other channels or parts out are then decoded through ``InputFile``, a strip of
 rows at a time straight into the tensor (``decode_strips``); everything else through ``File``, every
 channel of that one part (``decode``; see ``selective``). The budget counts what the chosen path
-decodes (for a strip read the whole layer, though it holds a strip at a time). ``File`` reports some
-damage (a corrupt chunk table, a chunk that fails to decompress) only by printing to the process's
-standard error and leaving the damaged part out or partly filled, so whatever the library prints
-while decoding (to stdout or stderr) turns into a ``ValueError``; ``InputFile`` raises. The
-redirection is process-wide: output other threads write meanwhile is swallowed with it, and reads in
-several threads decode one at a time. A read decodes one part only: damage elsewhere in the file
-goes unseen.
+decodes (for a strip read the whole layer, though it holds a strip at a time).
+
+Damage is found without watching what the library prints: the process's standard output and error
+are shared with every other thread, so nothing of what they carry can be told to come from a read.
+Instead the library is only given a part of a file whose headers and chunk offset table were checked
+from its bytes first (:mod:`torchgrade.io.exr.chunks`), and what it still cannot decode (a chunk
+whose data does not decompress) it reports in ways of its own: ``InputFile`` raises, and ``File``
+leaves the part out of what it returns. Either rejects the file with a ``ValueError``; the library
+prints its own complaint then (OpenEXR's core to standard error, the bindings a warning to
+``sys.stdout``), never for a file that reads. Reads in several threads decode at once. A read
+decodes one part only: damage in another part's chunks goes unseen.
 """
 
 from __future__ import annotations
 
 import contextlib
-import os
-import sys
 import tempfile
-import threading
 from pathlib import Path
 
 import numpy as np
 import OpenEXR
 
+from .chunks import chunk_table
 from .layout import ExrPart
 from .single_part import write_single_part
 
@@ -39,7 +41,7 @@ MAX_PIXELS = 1 << 28
 
 MAX_BYTES = 1 << 31
 """Default bound (2 GiB) on the memory a read may take: every sample the bindings decode (2 bytes
-half, 4 float), plus the float32 tensor returned."""
+half, 4 float), the row of tiles they buffer for a tiled part, and the float32 tensor returned."""
 
 STRIP_BYTES = 1 << 18
 """Decoded samples a selective read holds at a time (256 KiB): it decodes that many rows per strip."""
@@ -67,8 +69,15 @@ def selective(parts: list[ExrPart], chosen: ExrPart, names) -> bool:
 
 def check_budget(path, parts: list[ExrPart], chosen: ExrPart, names, window: str, output_channels: int, max_pixels: int,
                  max_bytes: int) -> None:
-    """Raise ``ValueError`` naming the numbers when decoding channels ``names`` of ``chosen`` (as
-    ``decode_strips`` or ``decode`` do) and returning ``output_channels`` would pass either bound.
+    """Raise ``ValueError`` naming the file, the header field and its size when decoding channels ``names``
+    of ``chosen`` (as ``decode_strips`` or ``decode`` do) and returning ``output_channels`` over ``window``
+    would pass either bound.
+
+    The bytes are every sample decoded, the float32 tensor returned (over the display window when
+    that is the one returned) and, for a tiled part, the row of tiles OpenEXR's scanline interface
+    (through which both ways decode) buffers for each channel: a tile's height times the data
+    window's width, however few rows the data window has (``InputFile::Data::setFrameBuffer`` in
+    ImfInputFile.cpp). The field named is the one behind the largest of the three.
 
     Examples:
         >>> import pathlib, tempfile, torch, torchgrade as tg
@@ -78,7 +87,7 @@ def check_budget(path, parts: list[ExrPart], chosen: ExrPart, names, window: str
         >>> parts = exr_info(path)
         >>> check_budget(path, parts, parts[0], ["R", "G", "B"], "data", 3, max_pixels=1 << 20, max_bytes=1000)
         Traceback (most recent call last):
-        ValueError: ...rgb.exr: reading needs about 73728 bytes (24576 decoded + 49152 returned), above the budget of 1000 bytes (max_bytes)
+        ValueError: ...rgb.exr: part 0 dataWindow 64x64 makes reading need about 73728 bytes (24576 decoded + 49152 returned), above the budget of 1000 bytes (max_bytes)
     """
     for part in parts:
         if part.deep:
@@ -86,16 +95,27 @@ def check_budget(path, parts: list[ExrPart], chosen: ExrPart, names, window: str
                              "flatten it first (e.g. with OpenImageIO's oiiotool --flatten)")
         height, width = part.size()
         if height <= 0 or width <= 0 or height * width > max_pixels:
-            raise ValueError(f"{path}: part {part.index} data window {width}x{height} is empty or above the "
+            raise ValueError(f"{path}: part {part.index} dataWindow {width}x{height} is empty or above the "
                              f"budget of {max_pixels} pixels (max_pixels)")
-    decoded = _decoded_bytes(chosen, names if selective(parts, chosen, names) else chosen.channels)
+    decoded_names = names if selective(parts, chosen, names) else chosen.channels
     height, width = chosen.size(window)
+    shown = "displayWindow" if window == "display" else "dataWindow"
     if height <= 0 or width <= 0 or height * width > max_pixels:
-        raise ValueError(f"{path}: {window} window {width}x{height} is empty or above the budget of {max_pixels} pixels (max_pixels)")
-    returned = 4 * output_channels * height * width
-    if decoded + returned > max_bytes:
-        raise ValueError(f"{path}: reading needs about {decoded + returned} bytes ({decoded} decoded + {returned} returned), "
-                         f"above the budget of {max_bytes} bytes (max_bytes)")
+        raise ValueError(f"{path}: {shown} {width}x{height} is empty or above the budget of {max_pixels} pixels (max_pixels)")
+    data_height, data_width = chosen.size()
+    decoded, returned = _decoded_bytes(chosen, decoded_names), 4 * output_channels * height * width
+    needs = [(decoded, f"dataWindow {data_width}x{data_height}"), (returned, f"{shown} {width}x{height}")]
+    buffered = ""
+    if chosen.tile_size is not None:
+        tile_width, tile_height = chosen.tile_size
+        rows = tile_height * data_width * sum(chosen.sample_bytes[name] for name in decoded_names)
+        needs.append((rows, f"tiles (tileDesc) {tile_width}x{tile_height}"))
+        buffered = f" + {rows} in the library's row of tiles"
+    total = sum(size for size, _ in needs)
+    if total > max_bytes:
+        field = max(needs, key=lambda need: need[0])[1]
+        raise ValueError(f"{path}: part {chosen.index} {field} makes reading need about {total} bytes "
+                         f"({decoded} decoded + {returned} returned{buffered}), above the budget of {max_bytes} bytes (max_bytes)")
 
 
 def _decoded_bytes(part: ExrPart, names) -> int:
@@ -104,59 +124,33 @@ def _decoded_bytes(part: ExrPart, names) -> int:
     return sum(part.sample_bytes[name] * -(-height // ys) * -(-width // xs) for name, (xs, ys) in samplings.items())
 
 
-_REDIRECTING = threading.Lock()
-"""Held while file descriptors 1 and 2 point elsewhere: two threads redirecting at once would
-restore each other's redirection instead of the real stdout and stderr."""
-
-
-@contextlib.contextmanager
-def _captured_output():
-    """Collect what native code writes to file descriptors 1 and 2 (stdout, stderr) meanwhile."""
-    with _REDIRECTING, tempfile.TemporaryFile() as sink:
-        sys.stdout.flush()
-        sys.stderr.flush()
-        saved = [os.dup(1), os.dup(2)]
-        os.dup2(sink.fileno(), 1)
-        os.dup2(sink.fileno(), 2)
-        messages = []
-        try:
-            yield messages
-        finally:
-            for descriptor, copy in enumerate(saved, start=1):
-                os.dup2(copy, descriptor)
-                os.close(copy)
-            sink.seek(0)
-            messages.extend(sink.read().decode("utf-8", "replace").splitlines())
-
-
 @contextlib.contextmanager
 def _decoding(path, source):
-    """Turn what the library raises or prints meanwhile, decoding ``source`` (``path`` or a copy of
-    one of its parts), into ``ValueError`` naming ``path``."""
-    named = lambda text: str(text).replace(f"{source}: ", "").replace(str(source), str(path))  # noqa: E731
+    """Turn what the library raises meanwhile, decoding ``source`` (``path`` or a copy of one of its
+    parts), into ``ValueError`` naming ``path``."""
     try:
-        with _captured_output() as messages:
-            yield
+        yield
     except MemoryError:
         raise ValueError(f"{path}: not enough memory to decode the pixels (use a smaller max_bytes)") from None
     except Exception as error:
-        raise ValueError(f"{path}: cannot decode OpenEXR pixels ({named(error)})") from None
-    if messages:
-        raise ValueError(f"{path}: damaged OpenEXR file ({named(messages[0])})")
+        message = str(error).replace(f"{source}: ", "").replace(str(source), str(path))
+        raise ValueError(f"{path}: cannot decode OpenEXR pixels ({message})") from None
 
 
 @contextlib.contextmanager
 def _part_file(path, chosen: ExrPart, alone: bool):
-    """The file to decode part ``chosen`` of ``path`` from: ``path`` itself when ``alone`` (the part
-    is the file's only one, or the first, which ``InputFile`` reaches), else a single-part copy of the
-    part in a temporary folder, removed afterwards."""
+    """The file to decode part ``chosen`` of ``path`` from, once the part's chunk offset table is checked
+    (``ValueError`` otherwise): ``path`` itself when ``alone`` (the part is the file's only one, or the
+    first, which ``InputFile`` reaches), else a single-part copy of the part in a temporary folder,
+    removed afterwards."""
+    table = chunk_table(path, chosen)
     if alone:
         yield Path(path)
         return
     with tempfile.TemporaryDirectory(prefix="torchgrade-exr-") as folder:
         copy = Path(folder) / "part.exr"
         with open(copy, "wb") as target:
-            write_single_part(path, chosen, target)
+            write_single_part(path, chosen, table, target)
         yield copy
 
 
@@ -164,8 +158,8 @@ def decode(path, parts: list[ExrPart], chosen: ExrPart, names: list[str]) -> dic
     """Channels ``names`` of part ``chosen`` as ``{name: numpy array}``, decoding every channel of
     that part (of a single-part copy of it in a multi-part file), or ``ValueError``.
 
-    The library's own complaints (printed while decoding) and any channel missing from what it
-    decoded reject the file; a ``MemoryError`` becomes a ``ValueError`` too.
+    What the library raises, the part missing from what it decoded (it leaves out a part it could
+    not decode) or any channel missing reject the file; a ``MemoryError`` becomes a ``ValueError`` too.
 
     Examples:
         >>> import pathlib, tempfile, torch, torchgrade as tg
@@ -179,8 +173,10 @@ def decode(path, parts: list[ExrPart], chosen: ExrPart, names: list[str]) -> dic
     with _part_file(path, chosen, alone=len(parts) == 1) as source, _decoding(path, source):
         opened = OpenEXR.File(str(source), separate_channels=True)
         decoded = [{name: channel.pixels for name, channel in part.channels.items()} for part in opened.parts]
-    if len(decoded) != 1 or set(decoded[0]) != set(chosen.channels):
-        raise ValueError(f"{path}: damaged OpenEXR file (the library returned other parts or channels than the header lists)")
+    if len(decoded) != 1:  # the bindings leave out a part they could not decode, printing why to sys.stdout
+        raise ValueError(f"{path}: damaged OpenEXR file (the library could not decode the pixels of part {chosen.index})")
+    if set(decoded[0]) != set(chosen.channels):
+        raise ValueError(f"{path}: damaged OpenEXR file (the library returned other channels than the header lists)")
     return {name: decoded[0][name] for name in names}
 
 

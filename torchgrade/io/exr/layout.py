@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import OpenEXR
 
-from .header_bytes import sample_bytes
+from .header_bytes import PartBytes, part_bytes
 
 __all__ = ["ExrPart", "exr_info", "split_channel_name"]
 
@@ -55,6 +55,10 @@ class ExrPart:
     """``{full channel name: (view, layer, channel)}``."""
     sample_bytes: dict = field(repr=False)
     """``{full channel name: 2 (half) or 4 (float, uint)}``; 4 where the header bytes did not say."""
+    tile_size: tuple[int, int] | None = field(default=None, repr=False)
+    """``(width, height)`` of a tiled part's tiles, from the header bytes; ``None`` for scanlines, or
+    where the header bytes did not say (such a file fails :func:`torchgrade.io.exr.chunks.chunk_table`
+    before anything is decoded)."""
 
     @property
     def deep(self) -> bool:
@@ -97,7 +101,7 @@ def _chromaticities(header: dict):
     return tuple((float(values[i]), float(values[i + 1])) for i in range(0, 8, 2))
 
 
-def _describe(index: int, part, sizes: dict[str, int] | None) -> ExrPart:
+def _describe(index: int, part, raw: PartBytes | None) -> ExrPart:
     header = part.header
     views = tuple(header.get("multiView") or ())
     part_view = header.get("view")  # in a multi-part file, every channel of the part is in its view
@@ -112,15 +116,18 @@ def _describe(index: int, part, sizes: dict[str, int] | None) -> ExrPart:
         names[channel.name] = (view, layer, letter)
         layers.setdefault((view, layer), []).append(letter)
     kind = str(header.get("type", OpenEXR.scanlineimage)).split(".")[-1]
+    sizes = raw.sample_bytes if raw is not None and raw.sample_bytes.keys() == channels.keys() else dict.fromkeys(channels, 4)
     return ExrPart(index, header.get("name"), kind, _window(header["dataWindow"]), _window(header["displayWindow"]),
                    views, _chromaticities(header), channels, {key: sorted(value) for key, value in layers.items()}, names,
-                   sizes if sizes is not None and sizes.keys() == channels.keys() else dict.fromkeys(channels, 4))
+                   sizes, raw.tile_size if raw is not None and kind in ("tiledimage", "deeptile") else None)
 
 
 def exr_info(path) -> list[ExrPart]:
     """Every part of the file at ``path``, read from the headers only (no pixel is decoded).
 
-    Raises ``ValueError`` when the file is not a readable OpenEXR file.
+    Raises ``ValueError`` when the file is not a readable OpenEXR file. This is what the bindings read
+    in the headers: a header that lacks an attribute the format requires is described with the
+    default they stand in (reading it refuses it: see :mod:`torchgrade.io.exr.chunks`).
 
     Examples:
         >>> import pathlib, tempfile, torch, torchgrade as tg
@@ -132,7 +139,7 @@ def exr_info(path) -> list[ExrPart]:
     """
     try:
         opened = OpenEXR.File(str(path), header_only=True)
-        sizes = sample_bytes(path) or []
-        return [_describe(index, part, sizes[index] if index < len(sizes) else None) for index, part in enumerate(opened.parts)]
+        raw = part_bytes(path) or []
+        return [_describe(index, part, raw[index] if index < len(raw) else None) for index, part in enumerate(opened.parts)]
     except Exception as error:  # the bindings raise RuntimeError/OSError/ValueError/UnicodeError for damaged headers
         raise ValueError(f"{path}: not a readable OpenEXR file ({error})") from None

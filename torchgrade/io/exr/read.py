@@ -11,6 +11,7 @@ from ...color import REC709_CHROMATICITIES
 from ...core import check_choice
 from .chromaticities import ADAPTATIONS, to_rec709_matrix
 from .decode import MAX_BYTES, MAX_PIXELS, check_budget, decode, decode_strips, selective
+from .header_bytes import check_headers
 from .layout import ExrPart, exr_info
 from .yca import luminance_weights, yca_to_rgb
 
@@ -158,7 +159,11 @@ def read_exr(path, to_rec709: bool = False, *, adaptation: str = "auto", layer: 
             is 0, so frames of a sequence share one size).
         max_pixels, max_bytes: the budget checked from the headers before decoding (ValueError).
 
-    Raises ``ValueError`` for damaged, deep, over-budget files and for a missing layer, view or part.
+    Raises ``ValueError`` for damaged, deep, over-budget files and for a missing layer, view or part:
+    the header bytes decide before any pixel is decoded (a header lacking an attribute the format
+    requires, a chunk offset table the bindings could not follow soundly, the bytes a read would take
+    past ``max_bytes``, each named with its field and size; see :mod:`torchgrade.io.exr.chunks` and
+    :func:`torchgrade.io.exr.decode.check_budget`).
 
     Examples:
         >>> import pathlib, tempfile, torch
@@ -173,6 +178,7 @@ def read_exr(path, to_rec709: bool = False, *, adaptation: str = "auto", layer: 
         raise FileNotFoundError(f"no such EXR file: {path}")
     check_choice("window", window, WINDOWS)
     check_choice("adaptation", adaptation, ADAPTATIONS)
+    check_headers(path)  # first: the bindings stand in defaults for some missing attributes, refuse others unnamed
     parts = exr_info(path)
     chosen, channels = _choose(path, parts, part, view, layer)
     colour = channels.keys() & {"R", "G", "B", "Y"}
