@@ -139,6 +139,11 @@ def _cases() -> dict:
                                              dirt=torch.rand(3, 8, 8), dirt_intensity=0.5, karis_average=True),
         "bloom-anamorphic": lambda: tg.Bloom(intensity=0.5, anamorphic_ratio=0.3),
         "exposure-adapting": lambda: _Adapting(tg.AutoExposure(middle_grey=torch.tensor([0.18, 0.12]), speed_to_light=2.0, speed_to_dark=1.0)),
+        "exposure-histogram-limited": lambda: _Adapting(tg.AutoExposure(
+            metering="histogram", metering_mask="spot", min_ev=torch.tensor([-3.0, -1.0]), max_ev=3.0, compensation=torch.tensor([0.5, -0.5]),
+            low_percent=torch.tensor([40.0, 10.0]), compensation_curve=((-8.0, -3.0), (-1.0, 0.0)))),
+        "exposure-user-mask": lambda: tg.AutoExposure(metering="mean", metering_mask=torch.rand(5, 9) + 0.1, fixed_exposure=None),
+        "exposure-fixed": lambda: tg.AutoExposure(fixed_exposure=torch.tensor([1.5, -0.5]), compensation=0.25),
         "lut-learnable": lambda: tg.LUT3D(identity_table(9), learnable=True),
         "bloom-export": lambda: tg.Bloom(threshold=0.8, intensity=0.5).export_form(),
         "convolution-bloom": lambda: tg.ConvolutionBloom(torch.rand(3, 7, 7), threshold=0.8, intensity=0.5),

@@ -100,6 +100,10 @@ def _kinds() -> dict[str, StageKind]:
     kinds.update({f"primary-{style}": StageKind(partial(PrimaryGrade, style), dict(contrast=(1.3, 1.2, 1.1), saturation=1.4)) for style in STYLES})
     kinds["autoexposure-log"] = StageKind(partial(AutoExposure, metering="log"))
     kinds["autoexposure-reinhard"] = StageKind(partial(AutoExposure, metering="mean", operator="reinhard"))
+    kinds["autoexposure-histogram"] = StageKind(partial(AutoExposure, metering="histogram", metering_mask="center"),
+                                                dict(min_ev=-4.0, max_ev=4.0, compensation=0.5, compensation_curve=((-8.0, -3.0), (-1.0, 0.0))))
+    kinds["autoexposure-mask"] = StageKind(partial(AutoExposure, metering="log", metering_mask=torch.tensor([[0.0, 1.0, 0.0], [1.0, 2.0, 1.0]])),
+                                           dict(compensation=-0.5))
     kinds.update({f"bloom-{mode}": StageKind(partial(Bloom, mode=mode), dict(intensity=0.8, threshold=0.8, downscale_limit=1,
                                                                                bicubic_upsampling=mode == "scattering"))
                   for mode in BLOOM_MODES})
@@ -113,5 +117,5 @@ def _kinds() -> dict[str, StageKind]:
 
 STAGE_KINDS: dict[str, StageKind] = _kinds()
 """``{name: StageKind}``: every tone mapper, the grade in Rec.709 and in ACES, both primary grade styles, both
-eye-adaptation operators, every bloom composite, convolution bloom, dither, the LUT with each interpolation,
-and a whole ``PostFX`` look."""
+eye-adaptation operators, histogram metering with its limits and curve, a user's metering mask, every bloom
+composite, convolution bloom, dither, the LUT with each interpolation, and a whole ``PostFX`` look."""

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import os
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -20,12 +19,12 @@ from torch import nn
 
 from .. import TONEMAP_MODES, ColorGrade, ToneMap
 from ..color import linear_to_srgb
-from ..io import read_exr, write_exr
+from ..io import read_exr
 from ..io.atomic import atomic_write
 from ..pipeline import PostFX
 
-__all__ = ["GRADING_FLAGS", "refuse_overwriting", "read_rec709", "display_codes", "write_png", "report_line", "stages_label", "grade_from_args", "given_grading_flags", "look_from_args",
-           "add_grading_flags"]
+__all__ = ["GRADING_FLAGS", "EXPOSURE_FLAGS", "refuse_overwriting", "read_rec709", "display_codes", "write_png", "report_line", "stages_label", "grade_from_args", "given_grading_flags", "look_from_args",
+           "add_grading_flags", "add_exposure_flags", "exposure_from_args", "given_exposure_flags"]
 
 GRADING_FLAGS = {
     "post_exposure": "stops",
@@ -37,6 +36,15 @@ GRADING_FLAGS = {
 }
 """The grading controls ``grade`` and ``bake`` take as flags (``--post-exposure`` ...), with their units."""
 
+EXPOSURE_FLAGS = {
+    "metering": "mean, log or histogram (HDRP's Automatic Histogram, 40-90 %%)",
+    "metering_mask": "average, center or spot",
+    "compensation": "stops added to the metered exposure",
+    "ev_limits": "MIN MAX: the metered exposure's limits, stops around middle grey",
+    "fixed_exposure": "stops: expose by 2^STOPS, metering nothing",
+}
+"""The eye-adaptation flags of ``grade`` (``--metering`` ...): any of them puts an ``AutoExposure`` stage first."""
+
 
 def refuse_overwriting(outputs, inputs, allowed: bool = False) -> None:
     """Raise ``ValueError`` when a file a command would write is one it reads, or two outputs are one file: the same
@@ -45,6 +53,7 @@ def refuse_overwriting(outputs, inputs, allowed: bool = False) -> None:
 
     Examples:
         >>> import tempfile
+        >>> from pathlib import Path
         >>> with tempfile.TemporaryDirectory() as folder:
         ...     plate = Path(folder) / "plate.exr"
         ...     _ = plate.write_bytes(b"")
@@ -103,6 +112,7 @@ def write_png(path, image: torch.Tensor, encoded: bool = False) -> None:
 
     Examples:
         >>> import tempfile
+        >>> from pathlib import Path
         >>> from PIL import Image
         >>> with tempfile.TemporaryDirectory() as folder:
         ...     write_png(Path(folder) / "grey.png", torch.full((3, 2, 4), 0.18))
@@ -160,8 +170,55 @@ def given_grading_flags(args: argparse.Namespace) -> list:
     return ["--" + name.replace("_", "-") for name in (*GRADING_FLAGS, "tonemap") if getattr(args, name) is not None]
 
 
+def given_exposure_flags(args: argparse.Namespace) -> list:
+    """The eye-adaptation flags set on the command line (none where the subcommand has none).
+
+    Examples:
+        >>> given_exposure_flags(argparse.Namespace(metering="histogram", ev_limits=None)), given_exposure_flags(argparse.Namespace())
+        (['--metering'], [])
+    """
+    return ["--" + name.replace("_", "-") for name in EXPOSURE_FLAGS if getattr(args, name, None) is not None]
+
+
+def exposure_from_args(args: argparse.Namespace) -> dict | None:
+    """The ``AutoExposure`` config the eye-adaptation flags ask for, ``None`` without any.
+
+    Examples:
+        >>> args = argparse.Namespace(metering="histogram", metering_mask="center", compensation=None, ev_limits=[-3.0, 3.0],
+        ...                           fixed_exposure=None)
+        >>> exposure_from_args(args)
+        {'metering': 'histogram', 'metering_mask': 'center', 'min_ev': -3.0, 'max_ev': 3.0}
+    """
+    if not given_exposure_flags(args):
+        return None
+    config = {name: getattr(args, name) for name in ("metering", "metering_mask", "compensation", "fixed_exposure")
+              if getattr(args, name) is not None}
+    if args.ev_limits is not None:
+        config["min_ev"], config["max_ev"] = args.ev_limits
+    return config
+
+
+def add_exposure_flags(parser: argparse.ArgumentParser) -> None:
+    """One flag per :data:`EXPOSURE_FLAGS` control.
+
+    Examples:
+        >>> parser = argparse.ArgumentParser()
+        >>> add_exposure_flags(parser)
+        >>> parser.parse_args(["--metering", "histogram", "--ev-limits", "-4", "2"]).ev_limits
+        [-4.0, 2.0]
+    """
+    from ..exposure import METERING_MASKS, METERING_MODES
+
+    flags = parser.add_argument_group("eye adaptation (adds an AutoExposure stage)")
+    flags.add_argument("--metering", choices=METERING_MODES, help=EXPOSURE_FLAGS["metering"])
+    flags.add_argument("--metering-mask", choices=METERING_MASKS, help=EXPOSURE_FLAGS["metering_mask"])
+    flags.add_argument("--compensation", type=float, help=EXPOSURE_FLAGS["compensation"])
+    flags.add_argument("--ev-limits", type=float, nargs=2, metavar=("MIN", "MAX"), help=EXPOSURE_FLAGS["ev_limits"])
+    flags.add_argument("--fixed-exposure", type=float, metavar="STOPS", help=EXPOSURE_FLAGS["fixed_exposure"])
+
+
 def look_from_args(args: argparse.Namespace) -> PostFX:
-    """The look a subcommand applies: from ``--config``, or from the grading flags.
+    """The look a subcommand applies: from ``--config``, or from the grading and eye-adaptation flags.
 
     Examples:
         >>> args = argparse.Namespace(config=None, tonemap=None, post_exposure=None, temperature=None, tint=None,
@@ -171,8 +228,8 @@ def look_from_args(args: argparse.Namespace) -> PostFX:
     """
     if args.config is None:
         grade, tonemap = grade_from_args(args)
-        return PostFX(grade=grade, tonemap=tonemap)
-    given = given_grading_flags(args)
+        return PostFX(exposure=exposure_from_args(args), grade=grade, tonemap=tonemap)
+    given = given_grading_flags(args) + given_exposure_flags(args)
     if given:
         raise ValueError(f"give --config or grading flags, not both (got --config and {', '.join(given)})")
     return PostFX.from_config(args.config)

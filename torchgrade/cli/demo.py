@@ -5,7 +5,7 @@ Examples:
     >>> from torchgrade.cli import main
     >>> with tempfile.TemporaryDirectory() as folder:
     ...     main(["demo", "-o", str(pathlib.Path(folder) / "demo.png"), "--width", "64", "--height", "36"])  # doctest: +ELLIPSIS
-    demo: 64x36, Bloom -> ColorGrade -> ToneMap, ... ms -> ...demo.png
+    demo: 64x36, AutoExposure -> Bloom -> ColorGrade -> ToneMap, ... ms -> ...demo.png
     0
 """
 
@@ -24,19 +24,23 @@ from .common import refuse_overwriting, stages_label, write_png
 __all__ = ["DEFAULT_LOOK", "run_demo", "add_demo"]
 
 DEFAULT_LOOK = {
-    "bloom": {"mode": "scattering", "threshold": 1.0, "knee": 0.5, "intensity": 0.6, "scatter": 0.7},
+    "exposure": {"metering": "histogram", "metering_mask": "center", "speed_to_light": 3.0, "speed_to_dark": 1.0,
+                 "compensation_curve": [[-8, -4], [-2, 0]]},
+    "bloom": {"mode": "scattering", "threshold": 1.0, "knee": 0.5, "intensity": 0.6, "scatter": 0.7, "clamp": 16.0},
     "grade": {
         "aces": True,
-        "post_exposure": 0.5,
-        "temperature": 8.0,
-        "contrast": 15.0,
-        "saturation": 10.0,
-        "split_shadows": (0.45, 0.5, 0.56),
-        "split_highlights": (0.56, 0.5, 0.45),
+        "post_exposure": 0.3,
+        "temperature": 8,
+        "contrast": 15,
+        "saturation": 10,
+        "split_shadows": [0.45, 0.5, 0.56],
+        "split_highlights": [0.56, 0.5, 0.45],
     },
-    "tonemap": "aces",
+    "tonemap": {"mode": "aces"},
 }
-"""The demo's look: scattering bloom, a gentle warm and contrasty grade in ACES, ACES tone mapping."""
+"""The demo's look, ``export/looks/cinematic.json``: eye adaptation as the engines meter (the histogram's 40-90 %
+band, centre-weighted, a compensation curve that keeps dark scenes dark: -4 stops at 8 stops under grey, none from 2
+under), scattering bloom, a gentle warm and contrasty grade in ACES, ACES tone mapping."""
 
 
 def run_demo(args: argparse.Namespace) -> str:
@@ -47,7 +51,7 @@ def run_demo(args: argparse.Namespace) -> str:
         >>> with tempfile.TemporaryDirectory() as folder:
         ...     args = argparse.Namespace(output=str(pathlib.Path(folder) / "demo.png"), exr=None, width=32, height=18)
         ...     run_demo(args)  # doctest: +ELLIPSIS
-        'demo: 32x18, Bloom -> ColorGrade -> ToneMap, ... ms -> ...demo.png'
+        'demo: 32x18, AutoExposure -> Bloom -> ColorGrade -> ToneMap, ... ms -> ...demo.png'
     """
     refuse_overwriting([args.output, args.exr], [])
     look = PostFX.from_config(DEFAULT_LOOK)

@@ -26,7 +26,8 @@ from ..display import DISPLAY_PRESETS, Display, display_settings
 from ..io import read_cube
 from ..io.exr import ADAPTATIONS, exr_info
 from ..pipeline import PostFX
-from .common import add_grading_flags, given_grading_flags, look_from_args, read_rec709, refuse_overwriting, stages_label
+from .common import (add_exposure_flags, add_grading_flags, exposure_from_args, given_exposure_flags, given_grading_flags, look_from_args,
+                     read_rec709, refuse_overwriting, stages_label)
 from .outputs import BIT_DEPTHS, check_output, write_frame
 from .shot import grade_shot, output_paths, shot_frames
 
@@ -42,6 +43,10 @@ def look_to_grade(args: argparse.Namespace) -> PostFX:
     config = {} if args.config is None else PostFX.from_config(args.config).to_config()
     if {"grade", "primary", "tonemap"} & set(config):
         raise ValueError("--lut replaces grade and tone mapping: the --config look may keep only exposure, bloom and dither")
+    if given_exposure_flags(args):
+        if args.config is not None:
+            raise ValueError(f"give --config or {', '.join(given_exposure_flags(args))}, not both")
+        config["exposure"] = exposure_from_args(args)
     return PostFX(**config, lut=read_cube(args.lut))
 
 
@@ -156,4 +161,5 @@ def add_grade(commands) -> None:
                        help=".png (sRGB), .tif (sRGB or float linear) or .exr (linear); out.%%04d.png for a shot")
     _add_shot_flags(grade)
     add_grading_flags(grade)
+    add_exposure_flags(grade)
     grade.set_defaults(run=run_grade)

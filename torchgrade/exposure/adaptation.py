@@ -11,10 +11,10 @@ from ..color import luminance
 from ..core import HALF_MAX, Param, check_choice, check_image, check_range, is_tracing, sanitize, scalar_param, to_input_dtype, working_dtype
 from ..runtime import constant
 from ..stage import Control
-from .metering import METERING_MODES, meter_sanitized
+from .metering import HISTOGRAM_RANGE, METERING_MASKS, METERING_MODES, meter_histogram, meter_sanitized, metering_weights
 
-__all__ = ["CONTROLS", "MIN_LUMINANCE", "MAX_ADAPTED", "OPERATORS", "adapt_luminance", "auto_exposure", "check_bounds", "check_step",
-           "checked_control", "exposed_frame", "exposure_operator"]
+__all__ = ["CONTROLS", "MIN_LUMINANCE", "MAX_ADAPTED", "OPERATORS", "STOPS_RANGE", "adapt_luminance", "auto_exposure", "check_bounds",
+           "check_step", "checked_control", "compensation_at", "exposed_frame", "exposure_key", "exposure_operator", "metered_luminance"]
 
 MIN_LUMINANCE = 1e-3
 """Default lower bound of the adapted luminance: the largest exposure gain is ``middle_grey / 1e-3``."""
@@ -28,6 +28,12 @@ SMALLEST, MAX_MIDDLE_GREY, MIN_WHITE = 1e-6, 100.0, 0.01
 
 OPERATORS = ("exposure", "reinhard")
 
+STOPS_RANGE = (-32.0, 32.0)
+"""Range of every control in stops (limits, compensation, the curve, fixed exposure): 2^32 either way."""
+
+MAX_CURVE_POINTS = 64
+MAX_MASK_SIDE = 4096
+
 
 CONTROLS = {
     "middle_grey": Control(0.18, (SMALLEST, MAX_MIDDLE_GREY)),
@@ -39,20 +45,115 @@ CONTROLS = {
     "speed_to_dark": Control(None, (0.0, HALF_MAX)),
     "min_luminance": Control(MIN_LUMINANCE, (SMALLEST, HALF_MAX)),
     "max_adapted": Control(MAX_ADAPTED, (SMALLEST, HALF_MAX)),
+    "metering_mask": Control("average", kind="value"),
+    "low_percent": Control(40.0, (0.0, 100.0)),
+    "high_percent": Control(90.0, (0.0, 100.0)),
+    "min_ev": Control(None, STOPS_RANGE),
+    "max_ev": Control(None, STOPS_RANGE),
+    "compensation": Control(0.0, STOPS_RANGE),
+    "compensation_curve": Control(None, kind="value"),
+    "fixed_exposure": Control(None, STOPS_RANGE),
 }
 """The controls of :func:`auto_exposure` and :class:`~torchgrade.exposure.AutoExposure`: defaults and documented ranges."""
 
 
-def check_bounds(min_luminance, max_adapted) -> None:
-    """Raise ``ValueError`` where ``min_luminance`` exceeds ``max_adapted``."""
-    low, high = (torch.as_tensor(v, dtype=torch.float64).detach() for v in (min_luminance, max_adapted))
-    if bool((low > high).any()):
-        raise ValueError(f"min_luminance ({low.tolist()}) must not exceed max_adapted ({high.tolist()})")
+def _numbers(value) -> torch.Tensor:
+    return torch.as_tensor(value, dtype=torch.float64).detach().cpu()
+
+
+def check_bounds(min_luminance, max_adapted, min_ev=None, max_ev=None, low_percent=40.0, high_percent=90.0, metering="log") -> None:
+    """Raise ``ValueError`` where a lower bound exceeds its upper one: ``min_luminance`` and ``max_adapted``,
+    ``min_ev`` and ``max_ev``, and, for histogram metering, ``low_percent`` and ``high_percent`` (an empty band).
+
+    Examples:
+        >>> check_bounds(1e-3, 1.0, min_ev=2.0, max_ev=1.0)
+        Traceback (most recent call last):
+        ...
+        ValueError: min_ev ([2.0]) must be below max_ev ([1.0])
+    """
+    pairs = [("min_luminance", min_luminance, "max_adapted", max_adapted, False)]
+    if min_ev is not None and max_ev is not None:
+        pairs.append(("min_ev", min_ev, "max_ev", max_ev, True))
+    if metering == "histogram":
+        pairs.append(("low_percent", low_percent, "high_percent", high_percent, True))
+    for low_name, low, high_name, high, strict in pairs:
+        if any(isinstance(v, torch.Tensor) and v.is_meta for v in (low, high)):
+            continue  # a stage moved to the meta device holds no values to compare
+        low, high = _numbers(low), _numbers(high)
+        if bool((low >= high).any() if strict else (low > high).any()):
+            relation = "be below" if strict else "not exceed"
+            raise ValueError(f"{low_name} ({low.reshape(-1).tolist()}) must {relation} {high_name} ({high.reshape(-1).tolist()})")
+
+
+def histogram_range(min_ev, max_ev) -> tuple:
+    """The stops around middle grey the histogram spans: :data:`HISTOGRAM_RANGE`, widened to the limits where they
+    reach beyond it. Wider than the limits, so a scene scaled by ``2^k`` meters ``k`` stops more until a limit holds it.
+
+    Examples:
+        >>> histogram_range(None, torch.tensor(12.0))
+        (-8.0, tensor(12.))
+    """
+    low, high = HISTOGRAM_RANGE
+    return (low if min_ev is None else torch.clamp(min_ev, max=low), high if max_ev is None else torch.clamp(max_ev, min=high))
+
+
+def check_metering_mask(mask):
+    """``"average"``, ``"center"``, ``"spot"``, or a 2-D mask of finite weights >= 0 with some weight (a list made a
+    tensor), at most :data:`MAX_MASK_SIDE` a side; ``ValueError`` otherwise.
+
+    Examples:
+        >>> check_metering_mask([[0.0, 1.0], [1.0, 0.0]]).shape
+        torch.Size([2, 2])
+    """
+    if isinstance(mask, str):
+        check_choice("metering_mask", mask, METERING_MASKS)
+        return mask
+    if isinstance(mask, (list, tuple)):
+        try:
+            mask = torch.tensor(mask, dtype=torch.get_default_dtype())
+        except (TypeError, ValueError, RuntimeError, OverflowError) as error:
+            raise ValueError(f"metering_mask must be one of {METERING_MASKS} or a 2-D grid of weights: {error}") from None
+    if not isinstance(mask, torch.Tensor) or mask.dim() != 2 or not mask.is_floating_point() or min(mask.shape) < 1:
+        raise ValueError(f"metering_mask must be one of {METERING_MASKS} or a 2-D float tensor of weights, got {mask!r:.80}")
+    if max(mask.shape) > MAX_MASK_SIDE:
+        raise ValueError(f"metering_mask must be at most {MAX_MASK_SIDE} a side, got shape {tuple(mask.shape)}")
+    weights = mask.detach().double()
+    if not bool(weights.isfinite().all()) or bool((weights < 0).any()) or not bool((weights > 0).any()):
+        raise ValueError("metering_mask must hold finite weights >= 0, at least one of them > 0")
+    return mask
+
+
+def check_compensation_curve(curve):
+    """``None``, or 2 to :data:`MAX_CURVE_POINTS` ``(metered stops, compensation stops)`` pairs in
+    :data:`STOPS_RANGE` with the metered stops increasing, as a tuple of float pairs; ``ValueError`` otherwise.
+
+    Examples:
+        >>> check_compensation_curve([[-8, -3], [0, 0]])
+        ((-8.0, -3.0), (0.0, 0.0))
+    """
+    if curve is None:
+        return None
+    try:
+        points = tuple((float(ev), float(stops)) for ev, stops in curve)
+    except (TypeError, ValueError, OverflowError):
+        raise ValueError(f"compensation_curve must be a list of [metered stops, compensation stops] pairs, got {curve!r:.80}") from None
+    if not 2 <= len(points) <= MAX_CURVE_POINTS:
+        raise ValueError(f"compensation_curve must have 2 to {MAX_CURVE_POINTS} points, got {len(points)}")
+    low, high = STOPS_RANGE
+    if not all(low <= v <= high for point in points for v in point):
+        raise ValueError(f"compensation_curve values must lie in [{low}, {high}] stops, got {list(points)}")
+    if not all(a[0] < b[0] for a, b in zip(points, points[1:])):
+        raise ValueError(f"compensation_curve's metered stops must increase, got {[p[0] for p in points]}")
+    return points
 
 
 def checked_control(name: str, value):
     """Control ``name`` of :data:`CONTROLS`, checked (a list made a tensor): the table's
     choices or range, and a positive control (range from :data:`SMALLEST`) named as such."""
+    if name == "metering_mask":
+        return check_metering_mask(value)
+    if name == "compensation_curve":
+        return check_compensation_curve(value)
     value = _from_list(value)
     control = CONTROLS[name]
     if control.kind == "choice":
@@ -69,7 +170,11 @@ def _check_controls(controls: dict) -> None:
     """Validate :func:`auto_exposure`'s controls against :data:`CONTROLS` and order the bounds."""
     for name, value in controls.items():
         checked_control(name, value)
-    check_bounds(controls["min_luminance"], controls["max_adapted"])
+    check_bounds(**{name: controls[name] for name in BOUNDS})
+
+
+BOUNDS = ("min_luminance", "max_adapted", "min_ev", "max_ev", "low_percent", "high_percent", "metering")
+"""The controls :func:`check_bounds` orders."""
 
 
 def _from_list(value):
@@ -149,35 +254,63 @@ def auto_exposure(
     max_adapted: Param = MAX_ADAPTED,
     metering: str = "log",
     operator: str = "exposure",
+    metering_mask="average",
+    low_percent: Param = 40.0,
+    high_percent: Param = 90.0,
+    min_ev: Optional[Param] = None,
+    max_ev: Optional[Param] = None,
+    compensation: Param = 0.0,
+    compensation_curve=None,
+    fixed_exposure: Optional[Param] = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """One frame of eye adaptation, stateless: ``(image, adapted, dt) -> (exposed image, new adapted)``.
 
-    1. ``metered = meter_luminance(image, metering)``, bounded to ``[min_luminance, max_adapted]``;
+    Stops are counted from middle grey: a frame whose metered luminance is ``middle_grey`` meters 0 stops,
+    ``log2(L / middle_grey)`` in general (EV relative to middle grey, not EV100: an image's values are relative
+    until calibrated; for a frame in cd/m², EV100 = ``log2(L * 100 / 12.5)``, HDRP's and Unreal's K = 12.5).
+
+    1. ``metered = meter_luminance(image, metering, metering_mask, ...)`` (``"histogram"`` averages the
+       ``[low_percent, high_percent]`` band of the histogram over ±8 stops, or the limits where wider),
+       bounded to ``[min_ev, max_ev]`` stops (HDRP's Limit Min/Max, Unreal's Min/Max EV100) and to
+       ``[min_luminance, max_adapted]``;
     2. ``new = adapt_luminance(adapted, metered, dt, speed, ...)``, bounded the same way; where ``adapted``
        is ``None`` or ``<= 0`` (no history: a first frame) ``new = metered``, so a server starts a
-       sequence by feeding zeros; a NaN or infinite state or ``dt`` starts it again the same way;
-    3. the image is exposed with ``new`` by :func:`exposure_operator` and bounded to ±65504. ``new`` is
-       finite and at least ``min_luminance``, so the exposed frame has no NaN.
+       sequence by feeding zeros; a NaN or infinite state or ``dt`` starts it again the same way. With
+       ``fixed_exposure`` (stops; HDRP's Fixed mode, Unreal's Manual) nothing is metered: the target is
+       ``middle_grey * 2^-fixed_exposure``, not limited, reached at once on a first frame and at the adaptation's
+       speed from a state (a change of fixed exposure mid-sequence eases in, and a served graph keeps its inputs);
+    3. the image is exposed with ``new`` by :func:`exposure_operator` with the key
+       ``middle_grey * 2^(compensation + curve(stops of new))`` (``compensation_curve``: piecewise-linear
+       ``(metered stops, compensation stops)`` points, constant past its ends, not applied to a fixed exposure)
+       and bounded to ±65504. ``new`` is finite and at least ``min_luminance``, so the exposed frame has no NaN.
 
     ``adapted`` and the returned state have shape ``image.shape[:-3]`` (``(B,)`` for a batch).
-    Every control is a number, a 0-d tensor or a per-sample ``(B,)`` tensor. Differentiable with
-    respect to the image (through the operator and the metering), ``middle_grey`` and the other
-    continuous controls. Bounds: ``MIN_LUMINANCE`` (1e-3) keeps the gain of a black frame finite;
-    ``MAX_ADAPTED`` (65504) sets no upper limit. The document's ``[0.3, 1.0]`` can be passed instead.
+    Every number control is a number, a 0-d tensor or a per-sample ``(B,)`` tensor. Differentiable with
+    respect to the image (through the operator and the metering: histogram metering carries the gradient of
+    the pixels it averages, not of its choice of pixels), ``middle_grey`` and the other continuous controls.
+    Bounds: ``MIN_LUMINANCE`` (1e-3) keeps the gain of a black frame finite; ``MAX_ADAPTED`` (65504) sets no
+    upper limit.
 
     Examples:
         >>> exposed, adapted = auto_exposure(torch.full((1, 3, 4, 4), 0.72), None, metering='mean')
         >>> round(exposed.mean().item(), 4), [round(v, 4) for v in adapted.tolist()]
         (0.18, [0.72])
+        >>> exposed, _ = auto_exposure(torch.full((1, 3, 4, 4), 0.72), None, metering='histogram', min_ev=-1.0, max_ev=1.0)
+        >>> round(exposed.mean().item(), 4)  # 0.72 is 2 stops over grey: the limit leaves it 1 stop over
+        0.36
     """
     check_image(image)
     controls = dict(
         middle_grey=middle_grey, max_luminance=max_luminance, speed=speed, metering=metering, operator=operator,
         speed_to_light=speed_to_light, speed_to_dark=speed_to_dark, min_luminance=min_luminance, max_adapted=max_adapted,
+        metering_mask=metering_mask, low_percent=low_percent, high_percent=high_percent, min_ev=min_ev, max_ev=max_ev,
+        compensation=compensation, compensation_curve=compensation_curve, fixed_exposure=fixed_exposure,
     )
     if not is_tracing():
         _check_controls(controls)
         check_range(dt, "dt", 0.0, HALF_MAX)
+        controls["metering_mask"] = check_metering_mask(metering_mask)
+        controls["compensation_curve"] = check_compensation_curve(compensation_curve)
     return exposed_frame(image, adapted, dt, **controls)
 
 
@@ -198,28 +331,82 @@ def check_step(dt) -> None:
         raise ValueError(f"dt must lie in [0.0, {HALF_MAX}], got {dt!r}")
 
 
+NOT_NUMBERS = ("metering", "operator", "metering_mask", "compensation_curve")
+"""The controls that are not numbers a frame broadcasts: choices, the mask and the curve."""
+
+
 def exposed_frame(image: torch.Tensor, adapted: Optional[torch.Tensor], dt: Param, **controls) -> tuple[torch.Tensor, torch.Tensor]:
     """:func:`auto_exposure` of controls already checked (a stage's), reading nothing back from the device."""
-    metering, operator = controls["metering"], controls["operator"]
     x = working_dtype(image)
-    numbers = {name: value for name, value in controls.items() if name not in ("metering", "operator")}
-    c = {name: None if value is None else scalar_param(value, x, name) for name, value in numbers.items()}
+    c = {name: None if value is None else scalar_param(value, x, name) for name, value in controls.items() if name not in NOT_NUMBERS}
     scene = sanitize(x)
-    bounds = c["min_luminance"], c["max_adapted"]
-    metered = _bounded(meter_sanitized(scene, metering).reshape(x.shape[:-3] + (1, 1, 1)), *bounds)
-    if adapted is None:
-        new = metered
+    if c["fixed_exposure"] is not None:
+        target = (c["middle_grey"] * torch.exp2(-c["fixed_exposure"])).expand(x.shape[:-3] + (1, 1, 1))
+        new = _adapted(scene, target, adapted, dt, c, limited=False)
     else:
-        previous = _previous_state(adapted, x)
-        dt = scalar_param(dt, x, "dt")
-        moved = adapt_luminance(previous, metered, dt, c["speed"], c["speed_to_light"], c["speed_to_dark"])
-        # a state that is not a positive number, or a step that is not finite or negative, starts the sequence again
-        new = torch.where((previous > 0) & (dt >= 0) & moved.isfinite(), _bounded(moved, *bounds), metered)
+        new = _adapted(scene, metered_luminance(scene, c, controls["metering"], controls["metering_mask"]), adapted, dt, c)
+    key = exposure_key(new, c, controls["compensation_curve"])
     # new is finite and positive, so the exposed frame has no NaN: bounding it is the whole non-finite policy
-    exposed = exposure_operator(scene, new, c["middle_grey"], c["max_luminance"], operator)
+    exposed = exposure_operator(scene, new, key, c["max_luminance"], controls["operator"])
     return to_input_dtype(exposed.clamp(-HALF_MAX, HALF_MAX), image), new.reshape(x.shape[:-3])
 
 
-def _bounded(luminance: torch.Tensor, low: torch.Tensor, high: torch.Tensor) -> torch.Tensor:
-    """``min(max(luminance, low), high)``."""
-    return torch.minimum(torch.maximum(luminance, low), high)
+def exposure_key(adapted: torch.Tensor, c: dict, curve) -> torch.Tensor:
+    """The luminance ``adapted`` is exposed to: ``middle_grey * 2^(compensation + curve(log2(adapted / middle_grey)))``,
+    the curve left out for a fixed exposure (``c``: the number controls as :func:`~torchgrade.core.scalar_param` tensors).
+    The exposure applied is ``log2(key / adapted)`` stops."""
+    stops = c["compensation"]
+    if c["fixed_exposure"] is None:
+        stops = stops + compensation_at(curve, torch.log2(adapted / c["middle_grey"]))
+    return c["middle_grey"] * torch.exp2(stops)
+
+
+def metered_luminance(scene: torch.Tensor, c: dict, metering: str, mask) -> torch.Tensor:
+    """The sanitized frame's metered luminance, ``(..., 1, 1, 1)``, bounded by the limits (``c``: the number
+    controls as :func:`~torchgrade.core.scalar_param` tensors)."""
+    weights = metering_weights(mask, scene)
+    if metering == "histogram":
+        low, high = histogram_range(c["min_ev"], c["max_ev"])
+        metered = meter_histogram(scene, weights, low, high, c["low_percent"], c["high_percent"], c["middle_grey"])
+    else:
+        metered = meter_sanitized(scene, metering, weights)
+    return _limited(metered.reshape(scene.shape[:-3] + (1, 1, 1)), c)
+
+
+def _adapted(scene: torch.Tensor, target: torch.Tensor, adapted: Optional[torch.Tensor], dt: Param, c: dict, limited: bool = True) -> torch.Tensor:
+    """The new adapted luminance: ``target`` on a first frame, else ``adapted`` moved towards it by :func:`adapt_luminance`
+    (and bounded by the limits where ``limited``: a fixed exposure is not)."""
+    if adapted is None:
+        return target
+    previous = _previous_state(adapted, scene)
+    dt = scalar_param(dt, scene, "dt")
+    moved = adapt_luminance(previous, target, dt, c["speed"], c["speed_to_light"], c["speed_to_dark"])
+    # a state that is not a positive number, or a step that is not finite or negative, starts the sequence again
+    return torch.where((previous > 0) & (dt >= 0) & moved.isfinite(), _limited(moved, c) if limited else moved, target)
+
+
+def _limited(luminance: torch.Tensor, c: dict) -> torch.Tensor:
+    """``luminance`` bounded to ``[min_ev, max_ev]`` stops around middle grey (where set), then to ``[min_luminance, max_adapted]``."""
+    if c["min_ev"] is not None:
+        luminance = torch.maximum(luminance, c["middle_grey"] * torch.exp2(c["min_ev"]))
+    if c["max_ev"] is not None:
+        luminance = torch.minimum(luminance, c["middle_grey"] * torch.exp2(c["max_ev"]))
+    return torch.minimum(torch.maximum(luminance, c["min_luminance"]), c["max_adapted"])
+
+
+def compensation_at(curve, stops: torch.Tensor) -> torch.Tensor:
+    """The compensation curve's stops at metered ``stops``: piecewise linear through its ``(metered, compensation)``
+    points, constant past the first and last (Bevy's ``AutoExposureCompensationCurve``, Unreal's exposure
+    compensation curve); 0 without a curve. ``y0 + sum_i slope_i * (clamp(x, x_i, x_i+1) - x_i)``: no lookup.
+
+    Examples:
+        >>> compensation_at(((-8.0, -3.0), (0.0, 0.0)), torch.tensor([-12.0, -4.0, 3.0])).tolist()
+        [-3.0, -1.5, 0.0]
+    """
+    if curve is None:
+        return torch.zeros((), dtype=stops.dtype, device=stops.device)
+    xs, ys = zip(*curve)
+    slopes = tuple((y1 - y0) / (x1 - x0) for x0, x1, y0, y1 in zip(xs, xs[1:], ys, ys[1:]))
+    starts, ends = constant(xs[:-1], stops), constant(xs[1:], stops)
+    ramps = torch.minimum(torch.maximum(stops.unsqueeze(-1), starts), ends) - starts
+    return ys[0] + (ramps * constant(slopes, stops)).sum(dim=-1)

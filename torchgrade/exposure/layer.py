@@ -6,9 +6,9 @@ from typing import Hashable, Optional
 
 import torch
 
-from ..core import Param, check_image
+from ..core import Param, check_image, scalar_param
 from ..stage import Stage
-from .adaptation import CONTROLS, MAX_ADAPTED, MIN_LUMINANCE, check_bounds, check_step, checked_control, exposed_frame
+from .adaptation import BOUNDS, CONTROLS, MAX_ADAPTED, MIN_LUMINANCE, NOT_NUMBERS, check_bounds, check_step, checked_control, exposed_frame, exposure_key
 
 __all__ = ["AutoExposure"]
 
@@ -26,6 +26,12 @@ class AutoExposure(Stage):
     ``forward(image, dt, stream=key)`` keeps one state per hashable ``key`` in :attr:`streams` (``None``,
     the default, is :attr:`adapted_luminance`): threads serving one stream each never mix; two threads
     on one key interleave into one adaptation (use a key each, or :meth:`frame`).
+
+    Metering (:func:`auto_exposure`): ``metering`` ``"log"`` (default), ``"mean"`` or ``"histogram"`` (the
+    ``[low_percent, high_percent]`` band, HDRP's default 40-90 %), weighted by ``metering_mask`` (``"average"``,
+    ``"center"``, ``"spot"`` or a 2-D tensor of weights); limits ``min_ev``/``max_ev`` and ``compensation`` in
+    stops around middle grey; a ``compensation_curve`` of the metered stops; ``fixed_exposure`` (stops) meters
+    nothing.
 
     ``operator="exposure"`` (default) returns the scene-referred image scaled by
     ``middle_grey / adapted`` for the rest of the pipeline; ``operator="reinhard"`` returns the
@@ -66,11 +72,21 @@ class AutoExposure(Stage):
         speed_to_dark: Optional[Param] = None,
         min_luminance: Param = MIN_LUMINANCE,
         max_adapted: Param = MAX_ADAPTED,
+        metering_mask="average",
+        low_percent: Param = 40.0,
+        high_percent: Param = 90.0,
+        min_ev: Optional[Param] = None,
+        max_ev: Optional[Param] = None,
+        compensation: Param = 0.0,
+        compensation_curve=None,
+        fixed_exposure: Optional[Param] = None,
     ) -> None:
         super().__init__()
         self.init_controls(
             middle_grey=middle_grey, max_luminance=max_luminance, speed=speed, metering=metering, operator=operator,
             speed_to_light=speed_to_light, speed_to_dark=speed_to_dark, min_luminance=min_luminance, max_adapted=max_adapted,
+            metering_mask=metering_mask, low_percent=low_percent, high_percent=high_percent, min_ev=min_ev, max_ev=max_ev,
+            compensation=compensation, compensation_curve=compensation_curve, fixed_exposure=fixed_exposure,
         )
         self.register_buffer("adapted_luminance", torch.empty(0))
         self.streams: dict = {}
@@ -79,7 +95,7 @@ class AutoExposure(Stage):
         return checked_control(name, value)
 
     def check_together(self) -> None:
-        check_bounds(self.min_luminance, self.max_adapted)
+        check_bounds(**{name: getattr(self, name) for name in BOUNDS})
 
     @property
     def is_identity(self) -> bool:
@@ -121,6 +137,21 @@ class AutoExposure(Stage):
         check_image(image)
         check_step(dt)
         return exposed_frame(image, adapted, dt, **self.params())
+
+    def exposure_stops(self, adapted: torch.Tensor) -> torch.Tensor:
+        """The exposure this stage applies from the adapted luminance ``adapted`` (``(B,)``, as :meth:`frame` returns
+        it), in stops: ``log2(key / adapted)`` with the key of :func:`~torchgrade.exposure.adaptation.exposure_key`
+        (middle grey, compensation and the curve); what HDRP's exposure debug view shows.
+
+        Examples:
+            >>> layer = AutoExposure(metering="mean", compensation=0.5)
+            >>> _, adapted = layer.frame(torch.full((1, 3, 4, 4), 0.72), None, 0.0)
+            >>> [round(v, 3) for v in layer.exposure_stops(adapted).tolist()]  # 2 stops down, half a stop back
+            [-1.5]
+        """
+        like = adapted.reshape(-1, 1, 1, 1)
+        c = {name: None if value is None else scalar_param(value, like, name) for name, value in self.params().items() if name not in NOT_NUMBERS}
+        return torch.log2(exposure_key(like, c, self.compensation_curve) / like).reshape(adapted.shape)
 
     def forward(self, image: torch.Tensor, dt: Optional[Param] = None, stream: Optional[Hashable] = None) -> torch.Tensor:
         check_image(image)

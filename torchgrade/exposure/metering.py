@@ -1,16 +1,27 @@
-"""Scene metering for eye adaptation: the frame's mean luminance or log-average (source document 002 resamples
-the frame to a power-of-two grid with an exact box filter and averages 2x2 blocks down to one value, which is
-the same mean; :func:`area_resize` and :func:`halving_average` are those two steps)."""
+"""Scene metering for eye adaptation: the frame's mean luminance, its log-average, or the average of a
+percentile band of its histogram, each weighted by a metering mask (the whole frame, centre-weighted, a spot
+or a mask of the user's).
+
+Source document 002 resamples the frame to a power-of-two grid with an exact box filter and averages 2x2
+blocks down to one value, which is the same mean; :func:`area_resize` and :func:`halving_average` are those
+two steps. The histogram and the masks follow Unity HDRP's Exposure override (Automatic Histogram, metering
+modes Center Weighted and Spot) and Bevy's ``AutoExposure`` (the metering-mask texture).
+"""
 
 from __future__ import annotations
+
+import math
+from typing import Optional
 
 import torch
 import torch.nn.functional as F
 
 from ..color import luminance
 from ..core import check_choice, check_image, sanitize
+from ..runtime import constant, device_cached
 
-__all__ = ["METERING_MODES", "METERING_SIZE", "LOG_DELTA", "area_resize", "halving_average", "meter_luminance"]
+__all__ = ["METERING_MODES", "METERING_MASKS", "METERING_SIZE", "LOG_DELTA", "HISTOGRAM_BINS", "HISTOGRAM_RANGE",
+           "SPOT_RADIUS", "area_resize", "halving_average", "meter_luminance", "metering_weights", "histogram_band_average"]
 
 METERING_SIZE = 64
 """Side of the square grid the frame is resampled to before the 2x2 averaging (a power of two)."""
@@ -18,7 +29,19 @@ METERING_SIZE = 64
 LOG_DELTA = 1e-4
 """Reinhard's δ in the log-average ``exp(mean(log(δ + L))) - δ``: keeps black pixels finite."""
 
-METERING_MODES = ("mean", "log")
+METERING_MODES = ("mean", "log", "histogram")
+
+METERING_MASKS = ("average", "center", "spot")
+"""The built-in metering masks; a 2-D tensor of weights is the fourth kind (HDRP's Mask Weighted, Bevy's mask)."""
+
+HISTOGRAM_BINS = 128
+"""Bins of the luminance histogram, as in HDRP's ``HISTOGRAM_BINS``."""
+
+HISTOGRAM_RANGE = (-8.0, 8.0)
+"""Stops around middle grey the histogram spans when no limits are set: Bevy's default 16-stop range."""
+
+SPOT_RADIUS = 0.075
+"""HDRP's spot metering radius, as a fraction of half the frame's width plus height."""
 
 
 def _area_weights(size_in, size_out: int, like: torch.Tensor) -> torch.Tensor:
@@ -65,30 +88,119 @@ def halving_average(grid: torch.Tensor) -> torch.Tensor:
     return grid
 
 
-def meter_luminance(image: torch.Tensor, metering: str = "log") -> torch.Tensor:
+def metering_weights(mask, like: torch.Tensor) -> Optional[torch.Tensor]:
+    """The weight of each pixel of ``like`` (``(..., H, W)``) in the metering, ``(H, W)``; ``None`` for ``"average"``.
+
+    With ``d`` a pixel's distance from the frame's centre and ``s = (W + H) / 2``, both in pixels (HDRP's
+    ``ExposureCommon.hlsl``):
+
+    * ``"center"``: ``1 - saturate(d / s)``, weight 1 at the centre falling to 0 at the corners' distance;
+    * ``"spot"``: ``1 - saturate(d - SPOT_RADIUS * s)``, a disc of radius 7.5 % of ``s`` with a one-pixel edge;
+    * a 2-D tensor of non-negative weights: resampled to the frame (bilinear, as a texture is sampled). Where it
+      leaves the frame no weight at all, the frame is metered as ``"average"`` (every weight 1).
+
+    Examples:
+        >>> weights = metering_weights("center", torch.zeros(3, 3, 5))
+        >>> round(weights[1, 2].item(), 3), round(weights[0, 0].item(), 3)  # centre pixel, corner pixel
+        (1.0, 0.441)
+    """
+    if isinstance(mask, str) and mask == "average":
+        return None
+    if isinstance(mask, torch.Tensor):
+        resampled = F.interpolate(mask.to(like)[None, None], size=like.shape[-2:], mode="bilinear", align_corners=False)[0, 0]
+        weights = resampled.clamp_min(0)
+        return weights + (weights.sum() <= 0).to(weights)
+    check_choice("metering_mask", mask, METERING_MASKS)
+    return _shaped_weights(mask, like.shape[-2], like.shape[-1], like.dtype, like.device)
+
+
+@device_cached
+def _shaped_weights(mask: str, height, width, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
+    """The ``"center"`` or ``"spot"`` weights of an ``height x width`` frame (:func:`metering_weights`), made once a size."""
+    rows = torch.arange(height, device=device, dtype=dtype) + (0.5 - height / 2)
+    columns = torch.arange(width, device=device, dtype=dtype) + (0.5 - width / 2)
+    distance = torch.sqrt(rows[:, None] * rows[:, None] + columns * columns)
+    half_extent = (height + width) / 2
+    falloff = distance / half_extent if mask == "center" else distance - SPOT_RADIUS * half_extent
+    return 1 - falloff.clamp(0, 1)
+
+
+def _weighted_mean(values: torch.Tensor, weights: Optional[torch.Tensor]) -> torch.Tensor:
+    """Mean of ``(..., 1, H, W)`` over its last three dimensions, weighted by ``(H, W)`` weights (``None``: equal)."""
+    if weights is None:
+        return values.mean(dim=(-3, -2, -1))
+    return (values * weights).sum(dim=(-3, -2, -1)) / weights.sum()
+
+
+def _per_row(value):
+    """A number as it is; a 0-d or per-sample ``(B, 1, 1, 1)`` tensor as ``(1 or B, 1)``."""
+    return value.reshape(-1, 1) if isinstance(value, torch.Tensor) else value
+
+
+def histogram_band_average(stops: torch.Tensor, weights: Optional[torch.Tensor], low, high, low_percent, high_percent) -> torch.Tensor:
+    """Average of the pixels of ``stops`` (``(B, 1, H, W)``) whose rank lies in ``[low_percent, high_percent]`` %, ``(B,)``.
+
+    The Automatic Histogram of HDRP and Unreal and Bevy's ``AutoExposure``: the pixels' values (log2 luminance,
+    clamped to ``[low, high]``) are counted, with their mask weights, into :data:`HISTOGRAM_BINS` equal bins over
+    ``[low, high]``; with ``share_k`` bin ``k``'s part of the weight and ``[start_k, end_k]`` its span of the
+    cumulative share, its fraction inside the band is ``f_k = |[start_k, end_k] ∩ [low%, high%]| / share_k``, and
+    the result is ``sum_k f_k S_k / sum_k f_k W_k`` with ``S_k`` and ``W_k`` the weighted sum of the values and the
+    weight in bin ``k``. The engines average the bins' positions; the pixels' own values are averaged here, so a
+    uniform frame meters its own value exactly and the result is differentiable in the image (not in the band's
+    choice of pixels). ``low``, ``high`` and the percents are numbers, 0-d or ``(B, 1, 1, 1)`` tensors.
+
+    Examples:
+        >>> stops = torch.tensor([-3.0, -1.0, 0.5, 2.0, 5.0]).reshape(1, 1, 1, 5)
+        >>> round(histogram_band_average(stops, None, -8.0, 8.0, 20.0, 80.0).item(), 4)  # the middle three
+        0.5
+    """
+    batch = stops.shape[0]
+    low, high, low_percent, high_percent = (_per_row(v) for v in (low, high, low_percent, high_percent))
+    values = stops.reshape(batch, -1).clamp(low, high)
+    bins = ((values - low) * (HISTOGRAM_BINS / (high - low))).floor().clamp(0, HISTOGRAM_BINS - 1).long()
+    weight = constant(1.0, values).expand_as(values) if weights is None else weights.reshape(1, -1).expand(batch, -1)
+    empty = torch.zeros(batch, HISTOGRAM_BINS, dtype=values.dtype, device=values.device)
+    weight_in_bin = empty.scatter_add(1, bins, weight)
+    values_in_bin = empty.scatter_add(1, bins, values if weights is None else values * weight)
+    share = weight_in_bin / weight_in_bin.sum(dim=1, keepdim=True)
+    end = share.cumsum(dim=1)
+    inside = (end.clamp(max=high_percent / 100) - (end - share).clamp(min=low_percent / 100)).clamp_min(0)
+    fraction = inside / share.clamp_min(torch.finfo(share.dtype).tiny)  # 0 in an empty bin: nothing of it is inside
+    return (fraction * values_in_bin).sum(dim=1) / (fraction * weight_in_bin).sum(dim=1)
+
+
+def meter_luminance(image: torch.Tensor, metering: str = "log", mask="average", stop_range=HISTOGRAM_RANGE,
+                    percents=(40.0, 90.0), middle_grey=0.18) -> torch.Tensor:
     """Scene luminance of each image of ``(..., 3, H, W)``, shaped ``image.shape[:-3]``.
 
-    The Rec.709 luminance ``L`` (negative values clipped to 0, non-finite pixels sanitized) averaged over the
-    frame: ``"mean"`` gives the arithmetic mean of ``L``; ``"log"`` the log-average ``exp(mean(log(δ + L))) - δ``
-    (Reinhard et al. 2002, Eq. 1, "the key"), taken per pixel before any averaging so that a few very bright
-    pixels barely move it. Unlike Reinhard's form, δ is subtracted again, so a uniform frame meters exactly its
-    luminance. The source document's resampling to a 64x64 grid (:func:`area_resize`) and 2x2 averaging down to
-    one value (:func:`halving_average`) give this same mean, to rounding: every cell of the grid covers an equal
-    area; one reduction computes it without the two matrix products.
+    The Rec.709 luminance ``L`` (negative values clipped to 0, non-finite pixels sanitized), averaged with the
+    weights of ``mask`` (:func:`metering_weights`):
+
+    * ``"mean"``: the arithmetic mean of ``L``;
+    * ``"log"``: the log-average ``exp(mean(log(δ + L))) - δ`` (Reinhard et al. 2002, Eq. 1, "the key"), taken
+      per pixel before any averaging so that a few very bright pixels barely move it. Unlike Reinhard's form, δ
+      is subtracted again, so a uniform frame meters exactly its luminance. The source document's resampling to
+      a 64x64 grid (:func:`area_resize`) and 2x2 averaging (:func:`halving_average`) give this same mean;
+    * ``"histogram"``: ``middle_grey * 2^s`` with ``s`` the average of the ``percents`` band of the histogram of
+      ``log2(L / middle_grey)`` over ``stop_range`` stops (:func:`histogram_band_average`; defaults HDRP's 40-90 %).
 
     Examples:
         >>> [round(v, 4) for v in meter_luminance(torch.full((2, 3, 8, 8), 0.5), 'mean').tolist()]
         [0.5, 0.5]
+        >>> round(meter_luminance(torch.full((1, 3, 8, 8), 0.5), 'histogram').item(), 4)
+        0.5
     """
     check_image(image)
     check_choice("metering", metering, METERING_MODES)
-    return meter_sanitized(sanitize(image), metering)
+    scene = sanitize(image)
+    if metering != "histogram":
+        return meter_sanitized(scene, metering, metering_weights(mask, scene))
+    return meter_histogram(scene, metering_weights(mask, scene), *stop_range, *percents, middle_grey)
 
 
-def meter_sanitized(scene: torch.Tensor, metering: str) -> torch.Tensor:
-    """:func:`meter_luminance` of a frame already sanitized (:func:`~torchgrade.core.sanitize`), unchecked.
-
-    For a caller that sanitizes the frame anyway: one pass over it instead of two.
+def meter_sanitized(scene: torch.Tensor, metering: str, weights: Optional[torch.Tensor] = None) -> torch.Tensor:
+    """:func:`meter_luminance` ``"mean"`` or ``"log"`` of a frame already sanitized (:func:`~torchgrade.core.sanitize`),
+    unchecked, with :func:`metering_weights` ``weights``: for a caller that sanitizes the frame anyway.
 
     Examples:
         >>> [round(v, 4) for v in meter_sanitized(torch.full((1, 3, 4, 4), 0.5), 'mean').tolist()]
@@ -97,7 +209,23 @@ def meter_sanitized(scene: torch.Tensor, metering: str) -> torch.Tensor:
     lum = luminance(scene).clamp_min(0)
     if metering == "log":
         lum = torch.log(lum + LOG_DELTA)
-    average = lum.mean(dim=(-3, -2, -1))
+    average = _weighted_mean(lum, weights)
     if metering == "log":
         average = torch.exp(average) - LOG_DELTA
     return average
+
+
+def meter_histogram(scene: torch.Tensor, weights: Optional[torch.Tensor], low, high, low_percent, high_percent, middle_grey) -> torch.Tensor:
+    """:func:`meter_luminance` ``"histogram"`` of a sanitized ``(..., 3, H, W)`` frame, shaped ``scene.shape[:-3]``:
+    ``middle_grey * 2^s``, ``s`` the :func:`histogram_band_average` of ``log2(L / middle_grey)`` over ``[low, high]``
+    stops. ``middle_grey`` is a number, 0-d or ``(B, 1, 1, 1)``.
+
+    Examples:
+        >>> round(meter_histogram(torch.full((1, 3, 4, 4), 0.09), None, -8.0, 8.0, 40.0, 90.0, 0.18).item(), 4)
+        0.09
+    """
+    # clamped to the smallest normal number, not 0: black is -126 stops (clamped to the range), with a finite gradient
+    lum = luminance(scene).clamp_min(torch.finfo(scene.dtype).tiny).reshape(-1, 1, *scene.shape[-2:])
+    stops = torch.log2(lum) - (torch.log2(middle_grey) if isinstance(middle_grey, torch.Tensor) else math.log2(middle_grey))
+    average = histogram_band_average(stops, weights, low, high, low_percent, high_percent)
+    return (middle_grey * torch.exp2(average.reshape(-1, 1, 1, 1))).reshape(scene.shape[:-3])
