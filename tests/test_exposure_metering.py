@@ -308,7 +308,7 @@ def test_grade_takes_the_eye_adaptation_flags(tmp_path, capsys):
 
     output = tmp_path / "desk.png"
     assert main(["grade", str(SAMPLES / "Desk.exr"), "-o", str(output), "--metering", "histogram", "--metering-mask", "center",
-                 "--ev-limits", "-3", "3", "--compensation", "0.5", "--contrast", "10"]) == 0
+                 "--ev-limits", "-3", "3", "--compensation", "0.5", "--histogram-percent", "10", "95", "--contrast", "10"]) == 0
     assert "AutoExposure -> ColorGrade -> ToneMap" in capsys.readouterr().out and output.stat().st_size > 0
     with pytest.raises(SystemExit):
         main(["grade", str(SAMPLES / "Desk.exr"), "-o", str(tmp_path / "b.png"), "--metering", "median"])

@@ -39,6 +39,7 @@ GRADING_FLAGS = {
 EXPOSURE_FLAGS = {
     "metering": "mean, log or histogram (HDRP's Automatic Histogram, 40-90 %%)",
     "metering_mask": "average, center or spot",
+    "histogram_percent": "LOW HIGH: the band of the histogram metering averages (default 40 90)",
     "compensation": "stops added to the metered exposure",
     "ev_limits": "MIN MAX: the metered exposure's limits, stops around middle grey",
     "fixed_exposure": "stops: expose by 2^STOPS, metering nothing",
@@ -185,7 +186,7 @@ def exposure_from_args(args: argparse.Namespace) -> dict | None:
 
     Examples:
         >>> args = argparse.Namespace(metering="histogram", metering_mask="center", compensation=None, ev_limits=[-3.0, 3.0],
-        ...                           fixed_exposure=None)
+        ...                           fixed_exposure=None, histogram_percent=None)
         >>> exposure_from_args(args)
         {'metering': 'histogram', 'metering_mask': 'center', 'min_ev': -3.0, 'max_ev': 3.0}
     """
@@ -195,6 +196,8 @@ def exposure_from_args(args: argparse.Namespace) -> dict | None:
               if getattr(args, name) is not None}
     if args.ev_limits is not None:
         config["min_ev"], config["max_ev"] = args.ev_limits
+    if args.histogram_percent is not None:
+        config["low_percent"], config["high_percent"] = args.histogram_percent
     return config
 
 
@@ -212,6 +215,7 @@ def add_exposure_flags(parser: argparse.ArgumentParser) -> None:
     flags = parser.add_argument_group("eye adaptation (adds an AutoExposure stage)")
     flags.add_argument("--metering", choices=METERING_MODES, help=EXPOSURE_FLAGS["metering"])
     flags.add_argument("--metering-mask", choices=METERING_MASKS, help=EXPOSURE_FLAGS["metering_mask"])
+    flags.add_argument("--histogram-percent", type=float, nargs=2, metavar=("LOW", "HIGH"), help=EXPOSURE_FLAGS["histogram_percent"])
     flags.add_argument("--compensation", type=float, help=EXPOSURE_FLAGS["compensation"])
     flags.add_argument("--ev-limits", type=float, nargs=2, metavar=("MIN", "MAX"), help=EXPOSURE_FLAGS["ev_limits"])
     flags.add_argument("--fixed-exposure", type=float, metavar="STOPS", help=EXPOSURE_FLAGS["fixed_exposure"])
