@@ -7,8 +7,10 @@
 # OpenColorIO or colour-science: they are installed from the wheels in WHEELS (default .gpu/wheels: kornia,
 # kornia-rs, openexr, opencolorio, colour-science, pypng for cp312 manylinux), and the tests read the sample EXRs
 # from EXRS (default .gpu/exr, linked as ../shared/data/exr when that is missing). Logs and gpu.md / gpu.json go
-# to OUT. At most 8.5 minutes (tests 5, benchmark 3.5; the benchmark skips the sections left after its budget, the
-# slowest last). On an H200 on 2026-11-26 the module tests needed more than 150 s with 12 processes.
+# to OUT. At most 9.5 minutes (tests 5, onnxruntime's CUDA provider 1, benchmark 3.5; the benchmark skips the
+# sections left after its budget, the slowest last). On an H200 on 2026-11-26 the module tests needed more than
+# 150 s with 12 processes. onnxruntime's CUDA provider is checked where the machine's onnxruntime has it
+# (onnxruntime-gpu is a 243 MiB wheel for cp312: it has to be installed there, it is too large to take along).
 set -u
 OUT=${1:?usage: benchmarks/gpu_check.sh OUT [WHEELS] [EXRS]}
 WHEELS=${2:-.gpu/wheels}
@@ -28,7 +30,12 @@ PYTEST="python3 -m pytest -q -p no:cacheprovider -o addopts=-ra"
 TG_TEST_DEVICE=cuda timeout -s INT 120 $PYTEST -n 8 tests/test_device.py tests/test_autocast.py tests/test_gpu_path.py \
   2>&1 | tee "$OUT/cuda_device_tests.log" | tail -15
 TG_TEST_DEVICE=cuda timeout -s INT 180 $PYTEST -n 12 tests/test_aces2.py tests/test_augment.py tests/test_bloom.py \
-  tests/test_display.py tests/test_exposure.py tests/test_grade.py tests/test_grade_parity.py tests/test_hdr_output.py \
+  tests/test_display.py tests/test_exposure.py tests/test_exposure_metering.py tests/test_grade.py tests/test_grade_parity.py tests/test_hdr_output.py \
   tests/test_lut.py tests/test_pipeline.py tests/test_tonemap.py tests/test_strips.py \
   2>&1 | tee "$OUT/cuda_module_tests.log" | tail -5
+if python3 -c "import onnxruntime, sys; sys.exit('CUDAExecutionProvider' not in onnxruntime.get_available_providers())" 2>/dev/null; then
+  TG_TEST_DEVICE=cuda timeout -s INT 60 $PYTEST tests/test_bench_onnx.py 2>&1 | tee "$OUT/onnxruntime_cuda.log" | tail -5
+else
+  echo "onnxruntime's CUDA provider: not on this machine (tg.onnx.session(path, device='cuda') not run)" | tee "$OUT/onnxruntime_cuda.log"
+fi
 timeout -s INT 200 python3 benchmarks/bench_gpu.py --out "$OUT" --budget 130 2>&1 | tee "$OUT/bench_gpu.log" | tail -40

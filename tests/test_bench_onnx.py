@@ -56,6 +56,29 @@ def test_onnxruntime_on_cuda_without_its_provider_is_an_error_not_a_cpu_run(tmp_
         tg.onnx.session(path, "openvino", device="cuda")
 
 
+def test_a_cuda_session_that_would_run_on_the_cpu_is_an_error(tmp_path, monkeypatch):
+    """onnxruntime-gpu lists the CUDA provider even where the CUDA or cuDNN libraries are missing, then logs an error and
+    runs on the CPU: the session refuses that. The CPU provider follows CUDA's for nodes CUDA has no kernel for."""
+    path = tg.onnx.export(tg.ToneMap("reinhard"), tmp_path / "tone.onnx")
+    opened = []
+
+    class FellBack:
+        def __init__(self, model, options, providers):
+            opened.append(providers)
+
+        def get_providers(self):
+            return ["CPUExecutionProvider"]
+
+    monkeypatch.setattr(onnxruntime, "get_available_providers", lambda: ["CUDAExecutionProvider", "CPUExecutionProvider"])
+    monkeypatch.setattr(onnxruntime, "InferenceSession", FellBack)
+    with pytest.raises(ValueError, match="could not start CUDAExecutionProvider .*runs on CPUExecutionProvider"):
+        tg.onnx.session(path, device="cuda:1")
+    assert opened == [[("CUDAExecutionProvider", {"device_id": 1}), "CPUExecutionProvider"]]
+    for device in ("gpu", "cuda:x", "cpu:0", "cuda:"):
+        with pytest.raises(ValueError, match="runs here on"):
+            tg.onnx.session(path, device=device)
+
+
 @pytest.mark.skipif(not (CUDA_ORT and torch.cuda.is_available()), reason="needs a GPU and onnxruntime's CUDA provider")
 def test_a_cuda_row_times_onnxruntime_cuda_and_pytorch_cuda(tmp_path):
     look = tg.PostFX(grade={"contrast": 10}, tonemap="aces").eval()

@@ -1,5 +1,6 @@
-"""Self-describing exports: doc strings and metadata, grading controls optional with the look's values as
-defaults and clamped to their ranges, and the output encodings and float16 I/O on both runtimes."""
+"""Self-describing exports: doc strings and metadata, grading controls as optional inputs (listed, no runtime warning)
+with the look's values as defaults and clamped to their ranges, adaptation inputs a still leaves out, only the opset
+domains used, and the output encodings and float16 I/O on both runtimes."""
 
 import json
 
@@ -40,14 +41,35 @@ def test_the_file_describes_itself(look, with_inputs):
     assert all(graph_output.doc_string for graph_output in model.graph.output)
 
 
-def test_grading_controls_are_optional_with_the_looks_values(look, with_inputs):
-    runner = session(with_inputs)
-    assert [i.name for i in runner.get_inputs()] == ["image"]
+def test_grading_controls_are_optional_inputs_with_the_looks_values(look, with_inputs, capfd):
+    """Listed by get_inputs() (what a server config is written from), left out at will, and no runtime warning:
+    as initializers of the inputs' names they were listed by get_overridable_initializers() alone, 20 warnings a session."""
+    import onnxruntime
+
+    capfd.readouterr()
+    runner = onnxruntime.InferenceSession(str(with_inputs), providers=["CPUExecutionProvider"])
+    assert capfd.readouterr().err == ""
+    assert [(i.name, i.type) for i in runner.get_inputs()] == [("image", "tensor(float)")] + [
+        (name, "optional(tensor(float))") for name in tg.onnx.GRADE_INPUTS]
+    assert runner.get_overridable_initializers() == []
     for shape in [(1, 3, 9, 11), (3, 3, 16, 20)]:
         image = hdr(shape)
         output = runner.run(None, {"image": image.numpy()})[0]
         np.testing.assert_allclose(output, look(image).detach().numpy(), atol=STEP_TOLERANCE, rtol=0)
     assert verify(look, with_inputs, hdr((2, 3, 9, 11)), "openvino", "f32") <= STEP_TOLERANCE
+
+
+def test_plain_inputs_for_runtimes_without_optional_types(look, tmp_path):
+    """optional_inputs=False: every input a plain tensor (OpenVINO and TensorRT read no optional type), fed each call."""
+    path = export(look, tmp_path / "plain.onnx", grade_inputs=True, optional_inputs=False)
+    model = onnx.load(str(path))
+    assert not any(node.op_type.startswith("Optional") for node in model.graph.node)
+    assert all(graph_input.type.HasField("tensor_type") for graph_input in model.graph.input)
+    runner = session(path)
+    with pytest.raises(ValueError, match="Required inputs"):
+        runner.run(None, {"image": hdr((1, 3, 9, 11)).numpy()})
+    for runtime in tg.onnx.RUNTIMES:
+        assert verify(look, path, hdr((2, 3, 9, 11)), runtime, "f32") <= STEP_TOLERANCE
 
 
 def test_one_control_per_sample_the_rest_default(with_inputs):
@@ -84,8 +106,61 @@ def test_float16_input_and_output(look, tmp_path):
         np.testing.assert_allclose(output.astype(np.float32), expected, atol=2e-3, rtol=0)
 
 
+STILL_LOOK = {"exposure": {"speed": 1.5}, "grade": {"contrast": 15}, "tonemap": "aces"}
+
+
+@pytest.mark.parametrize("optional_inputs", [True, False])
+def test_a_still_needs_no_adaptation_inputs_and_video_keeps_feeding_them(tmp_path, optional_inputs):
+    """adapted and dt default to instant adaptation; verify takes the image alone (it raised KeyError: 'adapted')."""
+    look = tg.PostFX.from_config(STILL_LOOK).eval()
+    path = export(look, tmp_path / "still.onnx", optional_inputs=optional_inputs)
+    image = hdr((4, 3, 37, 53))
+    for runtime in tg.onnx.RUNTIMES:
+        assert verify(look, path, image, runtime, "f32") <= TOLERANCE * 60, runtime  # scene-referred: peak ~60
+        video = (image, torch.tensor([0.0, 0.3, 1.0, 5.0]), torch.tensor(0.1))
+        assert verify(look, path, video, runtime, "f32") <= TOLERANCE * 60, runtime
+    if optional_inputs:
+        runner = session(path)
+        still, adapted = runner.run(None, {"image": image.numpy()})
+        with torch.no_grad():
+            expected, expected_adapted = look.frame(image, None, 0.0)
+        np.testing.assert_allclose(still, expected.numpy(), atol=TOLERANCE * 60, rtol=0)
+        np.testing.assert_allclose(adapted, expected_adapted.numpy(), rtol=1e-5)
+
+
+def test_verify_names_a_wrong_input(tmp_path):
+    look = tg.PostFX.from_config(STILL_LOOK).eval()
+    path = export(look, tmp_path / "still.onnx")
+    image = hdr((2, 3, 9, 11))
+    with pytest.raises(ValueError, match=r"takes \(image,\) or \(image, adapted, dt\); got 2 inputs"):
+        verify(look, path, (image, torch.zeros(2)))
+    with pytest.raises(ValueError, match=r"adapted must have shape \(2,\)"):
+        verify(look, path, (image, torch.zeros(3), torch.tensor(0.1)))
+    with pytest.raises(ValueError, match=r"image must have shape \(\.\.\., 3, H, W\) with 3 colour channels, got \(2, 9, 11, 3\)"):
+        verify(look, path, image.permute(0, 2, 3, 1))
+    with pytest.raises(TypeError, match="floating-point"):
+        verify(look, path, (image * 255).to(torch.uint8))
+    tone = tg.ToneMap("aces")
+    with pytest.raises(ValueError, match="image alone"):
+        verify(tone, export(tone, tmp_path / "tone.onnx"), (image, torch.zeros(2), torch.tensor(0.1)))
+
+
+def test_only_the_opset_domains_used_are_declared(with_inputs):
+    """onnxruntime's optimised file declared nine domains (com.microsoft, org.pytorch.aten, ...) for standard nodes."""
+    model = onnx.load(str(with_inputs))
+    assert {node.domain for node in tg.onnx.graph_nodes(model.graph)} == {""}
+    assert [(opset.domain, opset.version) for opset in model.opset_import] == [("", 17)]
+
+
 def test_bad_output_options_raise(look, tmp_path):
     with pytest.raises(ValueError, match="output must be one of"):
         export(look, tmp_path / "x.onnx", output="rec2020")
     with pytest.raises(ValueError, match="io_dtype"):
         export(look, tmp_path / "x.onnx", io_dtype=torch.bfloat16)
+    with pytest.raises(ValueError, match="input_dtype must be one of"):
+        export(look, tmp_path / "x.onnx", input_dtype=torch.int8)
+    with pytest.raises(TypeError, match="input_dtype must be a torch.dtype"):
+        export(look, tmp_path / "x.onnx", input_dtype="uint8")
+    with pytest.raises(ValueError, match="layout must be one of"):
+        export(look, tmp_path / "x.onnx", layout="CHW")
+    assert not list(tmp_path.iterdir())

@@ -55,12 +55,14 @@ def test_each_strip_sees_its_own_rows(shape):
         node("Gather", ["shape", "two"], ["rows"], axis=0),
         node("Cast", ["rows"], ["rows_f"], to=TensorProto.FLOAT),
         node("Mul", ["strip", "zero"], ["zeros"]),
-        node("Add", ["zeros", "rows_f"], ["output"]),
+        node("Add", ["zeros", "rows_f"], ["heights"]),
+        node("StripsEnd", ["heights"], ["output"], domain=DOMAIN),
     ]
     graph = helper.make_graph(
         body, "heights", [helper.make_tensor_value_info("image", TensorProto.FLOAT, ["n", 3, "h", "w"])],
         [helper.make_tensor_value_info("output", TensorProto.FLOAT, ["n", 3, "h", "w"])],
-        [onnx.numpy_helper.from_array(np.array(2, np.int64), "two"), onnx.numpy_helper.from_array(np.array(0.0, np.float32), "zero")])
+        [onnx.numpy_helper.from_array(np.array(2, np.int64), "two"), onnx.numpy_helper.from_array(np.array(0.0, np.float32), "zero")],
+        value_info=[helper.make_tensor_value_info("strip", TensorProto.FLOAT, None)])  # as the exporter types a marker
     model = scan_strips(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17), helper.make_opsetid(DOMAIN, 1)]))
     onnx.checker.check_model(model)
     assert [n.op_type for n in model.graph.node].count("Scan") == 1

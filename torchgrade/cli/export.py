@@ -9,7 +9,7 @@ Examples:
     ...     _ = config.write_text(json.dumps({"tonemap": "aces"}))
     ...     code = main(["export", "--config", str(config), "-o", str(pathlib.Path(folder) / "look.onnx"),
     ...                  "--width", "32", "--height", "18"])  # doctest: +ELLIPSIS
-    /.../look.onnx: stages tonemap, output linear, ... nodes
+    /.../look.onnx: stages tonemap, input float32 NCHW, output linear NCHW, ... nodes
       demo scene (18, 32): max abs error vs PyTorch: openvino default ..., openvino f32 ..., onnxruntime ...
       latency on demo scene: openvino default ... ms, openvino f32 ... ms, onnxruntime ... ms (median of 5)
     >>> code
@@ -21,8 +21,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import torch
+
 from ..lut import INTERPOLATIONS, LUT_BACKENDS
-from ..onnx import OUTPUTS, export_look
+from ..onnx import INPUT_DTYPES, IO_DTYPES, LAYOUTS, OUTPUTS, export_look
 from ..pipeline import PostFX
 from ..scene import demo_scene
 from .common import read_rec709, refuse_overwriting
@@ -43,7 +45,9 @@ def run_export(args: argparse.Namespace) -> str:
         images = {Path(path).name: read_rec709(path).unsqueeze(0) for path in args.scene}
     else:
         images = {"demo scene": demo_scene(args.height, args.width)}
-    return "\n".join(export_look(look, output, images, args.lut_backend, args.grade_inputs, args.output, not args.whole_frame))
+    frames = {"io_dtype": getattr(torch, args.io_dtype), "input_dtype": args.input_dtype and getattr(torch, args.input_dtype),
+              "layout": args.layout, "output_layout": args.output_layout, "optional_inputs": not args.required_inputs}
+    return "\n".join(export_look(look, output, images, args.lut_backend, args.grade_inputs, args.output, not args.whole_frame, **frames))
 
 
 def add_export(commands) -> None:
@@ -56,6 +60,14 @@ def add_export(commands) -> None:
     export.add_argument("--lut-backend", choices=LUT_BACKENDS, default="strip", help="the LUT's graph form (default strip, opset 17)")
     export.add_argument("--grade-inputs", action="store_true", help="grading controls as optional graph inputs")
     export.add_argument("--output", choices=OUTPUTS, default="linear", help="output encoding (default display-linear float)")
+    names = [str(dtype).replace("torch.", "") for dtype in INPUT_DTYPES]
+    export.add_argument("--input-dtype", choices=names, help="image input dtype: float scene-linear, or uint8/uint16 sRGB codes "
+                        "decoded to linear in the graph (default: --io-dtype)")
+    export.add_argument("--io-dtype", choices=[str(dtype).replace("torch.", "") for dtype in IO_DTYPES], default="float32", help="dtype of a float input and a float output")
+    export.add_argument("--layout", type=str.upper, choices=LAYOUTS, default="NCHW", help="image input layout (NHWC: interleaved frames)")
+    export.add_argument("--output-layout", type=str.upper, choices=LAYOUTS, help="output layout (default: --layout)")
+    export.add_argument("--required-inputs", action="store_true",
+                        help="adapted, dt and grading controls as plain inputs fed every call (OpenVINO, TensorRT), not optional ones")
     export.add_argument("--whole-frame", action="store_true",
                         help="per-pixel stages on the whole frame: a graph without a Scan over strips of rows")
     export.add_argument("--scene", nargs="+", help="EXR files to verify on (default: the built-in scene)")

@@ -3,6 +3,11 @@
 ``export(module, path)`` writes one ONNX file that serves every batch size and resolution: the
 image input ``"image"`` ``(batch, 3, height, width)`` and the output ``"output"`` have dynamic axes.
 
+**Frames in and out** (:mod:`~torchgrade.onnx.frames`). ``layout="NHWC"`` takes ``(batch, height, width, 3)``
+(interleaved, as decoders and render targets give frames; ``output_layout`` the output's), ``input_dtype`` takes
+``float32``/``float16`` scene-linear or ``uint8``/``uint16`` sRGB code values, decoded to linear light in the
+graph (the sRGB EOTF), and ``output="srgb8"``/``"srgb16"`` gives 8/16-bit sRGB codes.
+
 **Exporter and opset.** torchgrade uses PyTorch's TorchScript-based exporter
 (``torch.onnx.export(..., dynamo=False)``) at **opset 17** by default. Opset 17 keeps every model
 within the operators that OpenVINO and TensorRT accept (the "Deployment portability" rule of the
@@ -40,11 +45,14 @@ the frame in memory. ``export(..., strips=False)`` keeps them on the whole frame
 **Exposure.** A model with an :class:`~torchgrade.AutoExposure` stage is stateless: it takes
 ``"image"``, ``"adapted"`` ``(batch,)`` (the previous frame's adapted luminance; ``<= 0`` starts
 a sequence) and ``"dt"`` (seconds, a scalar), and returns ``"output"`` and ``"adapted"``
-(named ``"adapted_out"``) for the next frame.
+(named ``"adapted_out"``) for the next frame. ``adapted`` and ``dt`` are optional inputs
+(:mod:`~torchgrade.onnx.defaults`) whose defaults adapt instantly: a still, or a shot's first frame, is the image
+alone; video feeds both.
 
-**Outputs and metadata.** ``output`` picks display-linear float, sRGB-encoded float or 8-bit sRGB
+**Outputs and metadata.** ``output`` picks display-linear float, sRGB-encoded float or 8/16-bit sRGB
 (:data:`OUTPUTS`); ``io_dtype=torch.float16`` takes and returns float16. Constants are folded at
-export (:func:`fold_constants`), and every file describes itself (:mod:`~torchgrade.onnx.describe`).
+export (:func:`fold_constants`), only the opset domains the nodes use are declared (:func:`used_opsets`), and
+every file describes itself (:mod:`~torchgrade.onnx.describe`).
 
 **Verification.** :func:`verify` runs a file on onnxruntime or OpenVINO (:data:`RUNTIMES`) and
 returns the max abs difference from PyTorch; :func:`latency_ms` times it (:mod:`~torchgrade.onnx.verify`).
@@ -57,8 +65,8 @@ control becomes a graph input named as the control, per sample: scalars ``(batch
 ``split_highlights``, ``shadows``, ``midtones``, ``highlights``), trackballs ``(batch, 4)``
 (``lift``, ``gamma``, ``gain``) and ``channel_mixer`` ``(batch, 3, 3)``, in Unity's units. Every
 grading step is then in the graph, so one model serves any look (and a different look per
-sample); :func:`grade_feeds` gives a grade's values. Each input is optional (the look's value is
-its default, :mod:`~torchgrade.onnx.describe`) and clamped in the graph to its range.
+sample); :func:`grade_feeds` gives a grade's values. Each input is optional (listed by onnxruntime's
+``get_inputs()``; the look's value is its default, :mod:`~torchgrade.onnx.defaults`) and clamped in the graph to its range.
 Only the ``aces`` switch and the curves (a variable number of control points) stay baked.
 
 Examples:
@@ -70,10 +78,13 @@ Examples:
     True
 """
 
+from .defaults import STATE_DEFAULTS, optional_names, plain_inputs, with_defaults
 from .describe import INPUT_DOCS, describe, look_config
-from .exporter import DEFAULT_OPSET, IO_DTYPES, VOLUME_OPSET, export, fold_constants
-from .graph import (GRADE_INPUTS, OUTPUTS, ExportGraph, GradeWithInputs, default_example, example_inputs, export_graph, frame_of,
-                    grade_feeds, grade_of, has_state, input_names, output_names, encode_output)
+from .exporter import DEFAULT_OPSET, IO_DTYPES, VOLUME_OPSET, export, fold_constants, used_opsets
+from .frames import (CODE_MAX, INPUT_DTYPES, LAYOUTS, OUTPUTS, FrameFormat, decode_input, eight_bit_codes, encode_output, frame_format,
+                     model_input, read_frame_format)
+from .graph import (GRADE_INPUTS, ExportGraph, GradeWithInputs, default_example, example_inputs, export_graph, frame_of,
+                    grade_feeds, grade_of, has_state, input_names, output_names)
 from .look import export_look, graph_inputs
 from .symbolics import SYMBOLICS, symbolics
 from .strips import scan_strips
@@ -82,8 +93,11 @@ from .verify import (DEVICES, RUNTIMES, Inputs, OpenVINOSession, feeds, graph_no
 from ..lut import LUT_BACKENDS, LUTLookup, strip_table, trilinear_strip
 
 __all__ = [
-    "INPUT_DOCS", "describe", "look_config", "DEFAULT_OPSET", "IO_DTYPES", "VOLUME_OPSET", "export", "fold_constants",
-    "GRADE_INPUTS", "OUTPUTS", "encode_output", "ExportGraph", "GradeWithInputs", "default_example", "example_inputs", "export_graph", "frame_of",
+    "STATE_DEFAULTS", "optional_names", "plain_inputs", "with_defaults",
+    "INPUT_DOCS", "describe", "look_config", "DEFAULT_OPSET", "IO_DTYPES", "VOLUME_OPSET", "export", "fold_constants", "used_opsets",
+    "CODE_MAX", "INPUT_DTYPES", "LAYOUTS", "OUTPUTS", "FrameFormat", "decode_input", "eight_bit_codes", "encode_output", "frame_format",
+    "model_input", "read_frame_format",
+    "GRADE_INPUTS", "ExportGraph", "GradeWithInputs", "default_example", "example_inputs", "export_graph", "frame_of",
     "grade_feeds", "grade_of", "has_state", "input_names", "output_names",
     "export_look", "graph_inputs", "SYMBOLICS", "symbolics",
     "scan_strips", "DEVICES", "RUNTIMES", "Inputs", "OpenVINOSession", "feeds", "graph_nodes", "metadata", "latency_ms", "node_count", "reference", "session", "verify",

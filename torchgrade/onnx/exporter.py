@@ -22,14 +22,16 @@ from ..core import check_on_cpu
 from ..io.atomic import atomic_write
 from ..lut import BACKENDS
 from .describe import describe
+from .frames import FLOAT_DTYPES, FrameFormat, frame_format, retype_uint16
 from .graph import GRADE_INPUTS, default_example, example_inputs, export_graph, input_names, output_names
 from .strips import scan_strips
 from .symbolics import symbolics
+from .verify import graph_nodes
 
-__all__ = ["DEFAULT_OPSET", "VOLUME_OPSET", "IO_DTYPES", "fold_constants", "export"]
+__all__ = ["DEFAULT_OPSET", "VOLUME_OPSET", "IO_DTYPES", "fold_constants", "used_opsets", "export"]
 
-IO_DTYPES = (torch.float32, torch.float16)
-"""Dtypes of the image input and float output (the graph computes in float32 either way)."""
+IO_DTYPES = FLOAT_DTYPES
+"""Dtypes of a float image input and a float output (the graph computes in float32 either way)."""
 
 DEFAULT_OPSET = 17
 """Opset of every export unless a 5-D GridSample LUT asks for :data:`VOLUME_OPSET`."""
@@ -37,8 +39,9 @@ VOLUME_OPSET = BACKENDS["volume"]
 """First opset with 5-D ``GridSample`` (mode spelled ``"linear"``)."""
 
 
-def _dynamic_axes(names: Sequence[str]) -> dict:
-    axes = {"image": {0: "batch", 2: "height", 3: "width"}, "output": {0: "batch", 2: "height", 3: "width"}}
+def _dynamic_axes(names: Sequence[str], frames: FrameFormat) -> dict:
+    sizes = {"NCHW": {0: "batch", 2: "height", 3: "width"}, "NHWC": {0: "batch", 1: "height", 2: "width"}}
+    axes = {"image": sizes[frames.layout], "output": sizes[frames.output_layout]}
     axes.update({name: {0: "batch"} for name in names if name not in axes and name not in GRADE_INPUTS and name != "dt"})
     # A control of its own size (batch or 1): one fed per sample while another keeps its (1, ...) default.
     axes.update({name: {0: f"{name}_batch"} for name in names if name in GRADE_INPUTS})
@@ -63,24 +66,52 @@ def fold_constants(path) -> None:
     onnxruntime.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
 
 
+def used_opsets(model: onnx_lib.ModelProto) -> onnx_lib.ModelProto:
+    """Keep only the ``opset_import`` entries of domains a node uses (the standard one always): onnxruntime's
+    optimised file declares its own nine (``com.microsoft``, ``org.pytorch.aten``, ...) whatever the nodes are.
+
+    Examples:
+        >>> from onnx import helper
+        >>> graph = helper.make_graph([helper.make_node("Relu", ["x"], ["y"])], "g", [], [])
+        >>> model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17), helper.make_opsetid("com.microsoft", 1)])
+        >>> [opset.domain for opset in used_opsets(model).opset_import]
+        ['']
+    """
+    domains = {""} | {node.domain for node in graph_nodes(model.graph)}
+    kept = [opset for opset in model.opset_import if opset.domain in domains]
+    del model.opset_import[:]
+    model.opset_import.extend(kept)
+    return model
+
+
 def export(module: nn.Module, path, *, example: Optional[torch.Tensor] = None, opset: Optional[int] = None,
            lut_backend: str = "strip", grade_inputs: bool = False, output: str = "linear",
-           io_dtype: torch.dtype = torch.float32, fold: bool = True, strips: bool = True) -> Path:
+           io_dtype: torch.dtype = torch.float32, input_dtype: Optional[torch.dtype] = None, layout: str = "NCHW",
+           output_layout: Optional[str] = None, optional_inputs: bool = True, fold: bool = True, strips: bool = True) -> Path:
     """Export a torchgrade module or :class:`~torchgrade.PostFX` look to ``path``; returns the path.
 
     Args:
         module: any torchgrade module, a ``PostFX`` look, or an ``nn.Module`` built from them that
             maps an image to an image.
-        example: image to trace with (default :func:`~torchgrade.onnx.default_example`); the graph
-            keeps batch, height and width dynamic.
+        example: image to trace with, as the look takes it (float ``(batch, 3, height, width)``, default
+            :func:`~torchgrade.onnx.default_example`); the graph keeps batch, height and width dynamic.
         opset: default :data:`DEFAULT_OPSET` (17), or :data:`VOLUME_OPSET` (20) for
             ``lut_backend="volume"``; each backend needs at least its opset in
             :data:`~torchgrade.lut.BACKENDS`.
         lut_backend: ``"strip"``, ``"gather"`` or ``"volume"`` (see :data:`~torchgrade.lut.BACKENDS`).
         grade_inputs: expose the grading controls as graph inputs (see :mod:`torchgrade.onnx`), optional
             (the look's values are their defaults) and clamped to their ranges.
-        output: the output encoding, one of :data:`~torchgrade.onnx.OUTPUTS` (``"linear"``, ``"srgb"``, ``"srgb8"``).
-        io_dtype: the image input's and float output's dtype (:data:`IO_DTYPES`).
+        output: the output encoding, one of :data:`~torchgrade.onnx.OUTPUTS` (``"linear"``, ``"srgb"``, ``"srgb8"``,
+            ``"srgb16"``).
+        io_dtype: the dtype of a float image input and a float output (:data:`IO_DTYPES`).
+        input_dtype: the image input's dtype (default ``io_dtype``): ``torch.float32`` or ``torch.float16``
+            scene-linear, ``torch.uint8`` or ``torch.uint16`` sRGB codes decoded to linear in the graph
+            (:mod:`~torchgrade.onnx.frames`).
+        layout: the image input's layout, ``"NCHW"`` ``(batch, 3, height, width)`` or ``"NHWC"`` ``(batch, height, width, 3)``;
+            ``output_layout`` the output's (default ``layout``).
+        optional_inputs: ``adapted``, ``dt`` and the grading controls as optional inputs with defaults
+            (:mod:`~torchgrade.onnx.defaults`; onnxruntime); ``False`` writes them as plain inputs fed on every call,
+            for runtimes without ONNX optional types (OpenVINO, TensorRT).
         fold: fold constants (:func:`fold_constants`); ``False`` keeps the exporter's graph as traced.
         strips: run the stages that end the look and are per pixel (grade, tone mapping, LUT, output encoding)
             on strips of rows in a ``Scan`` (:mod:`~torchgrade.onnx.strips`); ``False`` runs them on the whole frame.
@@ -97,11 +128,10 @@ def export(module: nn.Module, path, *, example: Optional[torch.Tensor] = None, o
     opset = opset or max(DEFAULT_OPSET, minimum)
     if opset < minimum:
         raise ValueError(f"lut_backend={lut_backend!r} needs opset >= {minimum}, got {opset}")
-    if io_dtype not in IO_DTYPES:
-        raise ValueError(f"io_dtype must be one of {IO_DTYPES}, got {io_dtype}")
-    graph = export_graph(module, lut_backend, grade_inputs, output, strips)
+    frames = frame_format(input_dtype, layout, output, io_dtype, output_layout)
+    graph = export_graph(module, lut_backend, grade_inputs, frames, strips)
     example = default_example(graph) if example is None else example
-    inputs = example_inputs(graph, module, example.to(io_dtype))
+    inputs = example_inputs(graph, module, example)
     names = input_names(graph)
 
     def write(temporary: str) -> None:
@@ -109,13 +139,14 @@ def export(module: nn.Module, path, *, example: Optional[torch.Tensor] = None, o
             warnings.simplefilter("ignore")  # tracer warnings: Python ints frozen by design (bloom depth)
             torch.onnx.export(
                 graph, inputs, temporary, dynamo=False, opset_version=opset,
-                input_names=names, output_names=output_names(graph), dynamic_axes=_dynamic_axes(names),
+                input_names=names, output_names=output_names(graph), dynamic_axes=_dynamic_axes(names, frames),
             )
-        if strips:
-            onnx_lib.save(scan_strips(onnx_lib.load(temporary)), temporary)
+        model = retype_uint16(onnx_lib.load(temporary), frames)
+        onnx_lib.save(scan_strips(model) if strips else model, temporary)
         if fold:
             fold_constants(temporary)
-        onnx_lib.save(describe(onnx_lib.load(temporary), module, output, io_dtype), temporary)
+        model = used_opsets(onnx_lib.load(temporary))
+        onnx_lib.save(describe(model, module, frames, optional_inputs), temporary)
         onnx_lib.checker.check_model(temporary)
 
     # Every step rewrites the file: they work on a temporary one beside it, renamed onto the target only when the

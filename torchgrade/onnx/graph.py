@@ -23,40 +23,17 @@ from typing import Callable, Optional, Sequence
 import torch
 from torch import nn
 
-from ..color.transfer import linear_to_srgb
 from ..core import nan_free
 from ..grade import ColorGrade, color_grade
 from ..lut import BACKENDS
+from .frames import FrameFormat, decode_input, encode_output, from_nchw, to_nchw, trace_input
 from .strips import mark
 
-__all__ = ["GRADE_INPUTS", "OUTPUTS", "encode_output", "GradeWithInputs", "ExportGraph", "export_graph", "grade_feeds", "grade_of", "frame_of", "has_state", "is_per_pixel",
+__all__ = ["GRADE_INPUTS", "GradeWithInputs", "ExportGraph", "export_graph", "grade_feeds", "grade_of", "frame_of", "has_state", "is_per_pixel",
            "input_names", "output_names", "example_inputs", "default_example"]
 
 GRADE_INPUTS = tuple(name for name, control in ColorGrade.controls.items() if control.kind == "number")
 """The :class:`~torchgrade.ColorGrade` controls a ``grade_inputs`` graph takes as inputs, in input order."""
-
-
-OUTPUTS = {
-    "linear": "display-linear float (scene-linear for a look without a tone mapper), Rec.709 primaries, not clamped",
-    "srgb": "sRGB-encoded float in [0, 1] (IEC 61966-2-1), Rec.709 primaries, clamped to [0, 1] before encoding",
-    "srgb8": "8-bit sRGB code values (uint8, 0-255), Rec.709 primaries, clamped to [0, 1] before encoding and rounded",
-}
-"""Output encodings of an exported graph, and what each holds (written into the file's output doc string)."""
-
-
-def encode_output(image: torch.Tensor, output: str = "linear") -> torch.Tensor:
-    """A look's linear output in one of the :data:`OUTPUTS` encodings.
-
-    Examples:
-        >>> encode_output(torch.tensor([0.0, 0.18, 1.0, 4.0]), "srgb8").tolist()
-        [0, 118, 255, 255]
-    """
-    if output not in OUTPUTS:
-        raise ValueError(f"output must be one of {tuple(OUTPUTS)}, got {output!r}")
-    if output == "linear":
-        return image
-    encoded = linear_to_srgb(image.clamp(0.0, 1.0))
-    return torch.round(encoded * 255.0).to(torch.uint8) if output == "srgb8" else encoded
 
 
 def frame_of(stage: nn.Module) -> Optional[Callable]:
@@ -104,41 +81,46 @@ class GradeWithInputs(nn.Module):
 class ExportGraph(nn.Module):
     """The stages of a look as one graph: ``(image[, adapted, dt][, *controls]) -> output[, adapted]``.
 
-    ``output`` picks the output encoding (:data:`OUTPUTS`); the image comes in and a float output goes out
-    in the dtype of the traced image (float16 I/O halves the bytes a server moves), computed in float32.
+    ``frames`` (:class:`~torchgrade.onnx.frames.FrameFormat`) says how the image comes in (layout, dtype; integer
+    codes are decoded to linear) and how the output goes out (encoding, dtype, layout); the stages compute in float32.
 
     Examples:
         >>> import torchgrade as tg
-        >>> graph = ExportGraph([tg.ToneMap()], output="srgb8")
+        >>> graph = ExportGraph([tg.ToneMap()], frames=FrameFormat(torch.float16, output="srgb8"))
         >>> graph(torch.ones(1, 3, 2, 2, dtype=torch.float16)).dtype
         torch.uint8
     """
 
-    def __init__(self, stages: Sequence[nn.Module], exposure: Optional[nn.Module] = None, output: str = "linear",
+    def __init__(self, stages: Sequence[nn.Module], exposure: Optional[nn.Module] = None, frames: FrameFormat = FrameFormat(),
                  strips: bool = True):
         super().__init__()
         self.stages = nn.ModuleList(stages)
         self.exposure = exposure
-        self.output = output
+        self.frames = frames
         self.strips = strips
 
     def forward(self, image: torch.Tensor, *extra: torch.Tensor):
-        io_dtype = image.dtype
-        image, *state = self._graded(image.float(), *extra)
-        encoded = encode_output(image, self.output)
-        if encoded.is_floating_point() and encoded.dtype != io_dtype:  # a Cast to its own type is a copy of the frame
-            encoded = encoded.to(io_dtype)
-        return (encoded, *state) if state else encoded
+        frames = self.frames
+        start = _per_pixel_from(self.stages) if self.strips else len(self.stages)
+        in_strips = start < len(self.stages)
+        # A look per pixel from its input decodes the input in the strips too; onnxruntime's Pad, which cuts the
+        # strips, has no uint16 kernel, so uint16 codes are cast first.
+        from_input = in_strips and start == 0 and self.exposure is None
+        frame = to_nchw(image.float() if frames.input_dtype == torch.uint16 else image, frames.layout)
+        frame = decode_input(mark(frame) if from_input else frame, frames.input_dtype)
+        graded, *state = self._graded(frame, *extra, mark_at=None if from_input else start)
+        encoded = encode_output(graded, frames.output, frames.float_dtype)
+        output = from_nchw(mark(encoded, end=True) if in_strips else encoded, frames.output_layout)
+        return (output, *state) if state else output
 
-    def _graded(self, image: torch.Tensor, *extra: torch.Tensor) -> tuple:
+    def _graded(self, image: torch.Tensor, *extra: torch.Tensor, mark_at: Optional[int] = None) -> tuple:
         if self.exposure is not None:
             adapted, dt, *controls = extra
             image, adapted = frame_of(self.exposure)(image, adapted, dt)
         else:
             controls = list(extra)
-        per_pixel = _per_pixel_from(self.stages) if self.strips else len(self.stages)
         for index, stage in enumerate(self.stages):
-            image = mark(image) if index == per_pixel else image
+            image = mark(image) if index == mark_at else image
             # the exposed frame holds no NaN (auto_exposure), so the stage after it skips its sanitize's NaN pass
             with nan_free(image) if index == 0 and self.exposure is not None else contextlib.nullcontext():
                 image = stage(image, *controls) if isinstance(stage, GradeWithInputs) else stage(image)
@@ -197,7 +179,7 @@ def _export_form(stage: nn.Module, options: dict) -> nn.Module:
 
 
 def export_graph(module: nn.Module, lut_backend: str = "strip", grade_inputs: bool = False,
-                 output: str = "linear", strips: bool = True) -> ExportGraph:
+                 frames: FrameFormat = FrameFormat(), strips: bool = True) -> ExportGraph:
     """The export-ready form of ``module`` (see the module docstring for how each stage is asked).
 
     Examples:
@@ -217,8 +199,7 @@ def export_graph(module: nn.Module, lut_backend: str = "strip", grade_inputs: bo
             stages.append(_export_form(stage, options))
     if grade_inputs and not any(isinstance(s, GradeWithInputs) for s in stages):
         raise ValueError("grade_inputs=True needs a ColorGrade stage (a look's grade, or a ColorGrade)")
-    encode_output(torch.zeros(0), output)  # rejects an unknown encoding before the trace
-    return ExportGraph(stages, exposure, output, strips).eval()
+    return ExportGraph(stages, exposure, frames, strips).eval()
 
 
 def grade_of(module: nn.Module) -> Optional[ColorGrade]:
@@ -277,7 +258,8 @@ def output_names(graph: ExportGraph) -> list:
 
 
 def example_inputs(graph: ExportGraph, module: nn.Module, image: torch.Tensor) -> tuple:
-    """Inputs to trace ``graph`` with: the image, the exposure state and the grading controls.
+    """Inputs to trace ``graph`` with: the image (the look's float ``(batch, 3, height, width)``, as the graph takes
+    it: :func:`~torchgrade.onnx.frames.trace_input`), the exposure state and the grading controls.
 
     Examples:
         >>> import torchgrade as tg
@@ -285,7 +267,7 @@ def example_inputs(graph: ExportGraph, module: nn.Module, image: torch.Tensor) -
         3
     """
     batch = image.shape[0]
-    inputs = [image]
+    inputs = [trace_input(image, graph.frames)]
     if graph.exposure is not None:
         inputs += [torch.full((batch,), 0.5), torch.tensor(1.0 / 30.0)]
     if any(isinstance(s, GradeWithInputs) for s in graph.stages):

@@ -1,9 +1,11 @@
 """The per-pixel end of an exported look run on strips of rows, in an ONNX ``Scan``, as eager runs it (:func:`~torchgrade.runtime.in_strips`).
 
 A per-pixel stage is dozens of elementwise nodes; on a whole 1080p frame each node reads and writes
-24 MiB from memory. :func:`mark` ends the traced head of the look (exposure, bloom) with a marker node,
-and :func:`scan_strips` moves every node after it into the body of a ``Scan`` over strips of about
-:data:`SCAN_STRIP_PIXELS` pixels, so a strip's intermediates stay in cache. The frame is
+24 MiB from memory. :func:`mark` ends the traced head of the look (exposure, bloom; for a look that is per pixel
+from its input, nothing: the input's decoding runs in the strips too) with a marker node, ``mark(..., end=True)``
+ends the per-pixel part (the output's layout is the whole frame's), and :func:`scan_strips` moves every node
+between the two into the body of a ``Scan`` over strips of about :data:`SCAN_STRIP_PIXELS` pixels, so a strip's
+intermediates stay in cache. The frame is
 padded with zero rows to a whole number of strips and the padding is sliced off the output; the strip
 height follows the runtime shape (one strip for a frame up to that size), so one file serves every size.
 
@@ -11,13 +13,15 @@ Examples:
     >>> import onnx
     >>> from onnx import TensorProto, helper
     >>> graph = helper.make_graph(
-    ...     [helper.make_node("Strips", ["image"], ["strip"], domain=DOMAIN), helper.make_node("Sqrt", ["strip"], ["output"])],
+    ...     [helper.make_node("Strips", ["image"], ["strip"], domain=DOMAIN), helper.make_node("Sqrt", ["strip"], ["root"]),
+    ...      helper.make_node("StripsEnd", ["root"], ["frame"], domain=DOMAIN), helper.make_node("Neg", ["frame"], ["output"])],
     ...     "g", [helper.make_tensor_value_info("image", TensorProto.FLOAT, ["n", 3, "h", "w"])],
-    ...     [helper.make_tensor_value_info("output", TensorProto.FLOAT, ["n", 3, "h", "w"])])
+    ...     [helper.make_tensor_value_info("output", TensorProto.FLOAT, ["n", 3, "h", "w"])],
+    ...     value_info=[helper.make_tensor_value_info("strip", TensorProto.FLOAT, None)])  # as the exporter types a marker
     >>> model = scan_strips(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17), helper.make_opsetid(DOMAIN, 1)]))
     >>> scan, = [node for node in model.graph.node if node.op_type == "Scan"]
-    >>> [node.op_type for node in helper.get_attribute_value(scan.attribute[0]).node]
-    ['Sqrt']
+    >>> [node.op_type for node in helper.get_attribute_value(scan.attribute[0]).node], model.graph.node[-1].op_type
+    (['Sqrt'], 'Neg')
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 import onnx as onnx_lib  # the onnx package (absolute import), not this package
 import torch
-from onnx import TensorProto, helper, numpy_helper
+from onnx import helper, numpy_helper
 
 __all__ = ["DOMAIN", "SCAN_STRIP_PIXELS", "mark", "scan_strips"]
 
@@ -39,25 +43,26 @@ DOMAIN = "torchgrade"
 
 
 class _Marker(torch.autograd.Function):
-    """Identity in PyTorch; a ``torchgrade::Strips`` node in the traced graph."""
+    """Identity in PyTorch; a ``torchgrade::Strips`` (or ``StripsEnd``) node in the traced graph."""
 
     @staticmethod
-    def forward(ctx, image):
+    def forward(ctx, image, end):
         return image.clone()
 
     @staticmethod
-    def symbolic(g, image):
-        return g.op(f"{DOMAIN}::Strips", image).setType(image.type())
+    def symbolic(g, image, end):
+        return g.op(f"{DOMAIN}::{'StripsEnd' if end else 'Strips'}", image).setType(image.type())
 
 
-def mark(image: torch.Tensor) -> torch.Tensor:
-    """``image``, marked in an ONNX export as where the per-pixel stages begin (see the module docstring).
+def mark(image: torch.Tensor, end: bool = False) -> torch.Tensor:
+    """``image``, marked in an ONNX export as where the per-pixel stages begin (or, ``end=True``, end; see the
+    module docstring).
 
     Examples:
         >>> bool(torch.equal(mark(torch.ones(2)), torch.ones(2)))
         True
     """
-    return _Marker.apply(image) if torch.onnx.is_in_onnx_export() else image
+    return _Marker.apply(image, end) if torch.onnx.is_in_onnx_export() else image
 
 
 def _downstream(nodes: list, start: str) -> list:
@@ -153,39 +158,38 @@ def _reassembly(strips: str, height: str, width: str, output: str) -> tuple:
 
 
 def scan_strips(model: onnx_lib.ModelProto) -> onnx_lib.ModelProto:
-    """Move the nodes after the ``Strips`` marker into a ``Scan`` over strips of rows (see the module docstring);
-    a model without the marker is returned as it is. The marked part must produce the graph's first output."""
+    """Move the nodes between the ``Strips`` and ``StripsEnd`` markers into a ``Scan`` over strips of rows (see the
+    module docstring); a model without markers is returned as it is."""
     types = _element_types(model)
     graph = model.graph
     nodes = list(graph.node)
-    markers = [node for node in nodes if node.domain == DOMAIN]
+    markers = {node.op_type: node for node in nodes if node.domain == DOMAIN}
     if not markers:
         return model
-    marker, = markers
-    frame, strip = marker.input[0], marker.output[0]
-    body_nodes = _downstream(nodes, strip)
+    if sorted(markers) != ["Strips", "StripsEnd"]:
+        raise ValueError(f"strips need one Strips and one StripsEnd marker, got {sorted(markers)}")
+    start, end = markers["Strips"], markers["StripsEnd"]
+    frame, strip, result = start.input[0], start.output[0], end.input[0]
+    after = _downstream(nodes, end.output[0])
+    outside = {id(node) for node in after} | {id(end)}
+    body_nodes = [node for node in _downstream(nodes, strip) if id(node) not in outside]
+    if result not in {name for node in body_nodes for name in node.output}:
+        raise ValueError(f"the nodes after the strip marker do not produce the end marker's input {result!r}")
     body_nodes = _constants_of(nodes, body_nodes) + body_nodes
-    output = graph.output[0]
-    if output.name not in {name for node in body_nodes for name in node.output}:
-        raise ValueError(f"the nodes after the strip marker do not produce {output.name!r}")
-    result = output.name + "_strip"
-    for node in body_nodes:
-        node.output[:] = [result if name == output.name else name for name in node.output]
-    element = output.type.tensor_type.elem_type
     produced = {strip} | {name for node in body_nodes for name in node.output}
     outer, state_inputs, identities, state_outputs = _carried(body_nodes, produced, types)
     body = helper.make_graph(
         body_nodes + identities, "strip",
-        state_inputs + [helper.make_tensor_value_info(strip, TensorProto.FLOAT, [None] * 4)],
-        state_outputs + [helper.make_tensor_value_info(result, element, [None] * 4)])
+        state_inputs + [helper.make_tensor_value_info(strip, types[frame], [None] * 4)],
+        state_outputs + [helper.make_tensor_value_info(result, types[result], [None] * 4)])
     plumbing, constants, height, width = _strip_plumbing(frame, "strips_in")
     scan = helper.make_node("Scan", outer + ["strips_in"], [f"{name}_strips_last" for name in outer] + ["strips_out"],
                             body=body, num_scan_inputs=1, scan_input_axes=[2], scan_output_axes=[2])
-    reassembly, out_constants = _reassembly("strips_out", height, width, output.name)
-    moved = {id(node) for node in body_nodes} | {id(marker)}
+    reassembly, out_constants = _reassembly("strips_out", height, width, end.output[0])
+    moved = {id(node) for node in body_nodes} | {id(start)} | outside
     kept = [node for node in nodes if id(node) not in moved]
     del graph.node[:]
-    graph.node.extend(kept + plumbing + [scan] + reassembly)
+    graph.node.extend(kept + plumbing + [scan] + reassembly + after)
     graph.initializer.extend(constants + out_constants)
     del graph.value_info[:]  # traced shapes name the frame's height where the body sees a strip's
     imports = [opset for opset in model.opset_import if opset.domain != DOMAIN]

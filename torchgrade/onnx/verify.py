@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import statistics
 import time
+from types import SimpleNamespace
 from typing import NamedTuple, Optional, Sequence, Union
 
 import numpy as np
@@ -24,7 +25,9 @@ import onnx as onnx_lib  # the onnx package (absolute import), not this package
 import torch
 from torch import nn
 
-from .graph import encode_output, frame_of, grade_feeds, grade_of, has_state
+from .defaults import STATE_DEFAULTS, plain_inputs
+from .frames import check_batch, decode_input, eight_bit_codes, encode_output, from_nchw, model_input, read_frame_format, to_nchw
+from .graph import GRADE_INPUTS, frame_of, grade_feeds, grade_of, has_state
 
 __all__ = ["RUNTIMES", "DEVICES", "Inputs", "OpenVINOSession", "session", "feeds", "reference", "verify", "metadata", "graph_nodes", "node_count",
            "latency_ms"]
@@ -41,17 +44,18 @@ class _Port(NamedTuple):
 
 
 class OpenVINOSession:
-    """An OpenVINO compiled model behind onnxruntime's ``get_inputs()`` / ``run(None, feeds)`` calls.
+    """An OpenVINO compiled model behind onnxruntime's ``get_inputs()`` / ``get_modelmeta()`` / ``run(None, feeds)`` calls.
 
-    Inputs that have a default in the file (an initializer) are listed by neither runtime's
-    ``get_inputs()``: feeding them is optional.
+    OpenVINO reads no ONNX optional type: the file is compiled in its plain-input form
+    (:func:`~torchgrade.onnx.defaults.plain_inputs`) and an optional input not fed gets its default here, so
+    feeding is optional on both runtimes, and ``get_inputs()`` lists optional inputs as onnxruntime does.
 
     Examples:
         >>> import tempfile, torch, torchgrade as tg
         >>> with tempfile.TemporaryDirectory() as folder:
-        ...     path = tg.onnx.export(tg.ToneMap("reinhard"), folder + "/tone.onnx")
-        ...     [port.name for port in OpenVINOSession(path, "f32").get_inputs()]
-        ['image']
+        ...     path = tg.onnx.export(tg.PostFX(exposure={}), folder + "/look.onnx")
+        ...     [(port.name, port.type) for port in OpenVINOSession(path, "f32").get_inputs()]
+        [('image', 'tensor(float)'), ('adapted', 'optional(tensor(float))'), ('dt', 'optional(tensor(float))')]
     """
 
     def __init__(self, path, precision: Optional[str] = None, threads: Optional[int] = None):
@@ -60,17 +64,25 @@ class OpenVINOSession:
         config = {} if precision is None else {"INFERENCE_PRECISION_HINT": precision}
         if threads is not None:
             config["INFERENCE_NUM_THREADS"] = threads
-        defaults = {init.name for init in onnx_lib.load(str(path), load_external_data=False).graph.initializer}
-        self.model = openvino.Core().compile_model(str(path), "CPU", config)
-        # OpenVINO reads an input that has an initializer as a constant: a default there cannot be overridden.
-        self.ports = [port for port in self.model.inputs if port.get_any_name() not in defaults]
+        model = onnx_lib.load(str(path))
+        self.meta = SimpleNamespace(custom_metadata_map={prop.key: prop.value for prop in model.metadata_props})
+        plain, self.defaults = plain_inputs(model)
+        core = openvino.Core()
+        self.model = core.compile_model(core.read_model(plain.SerializeToString(), b""), "CPU", config)
 
     def get_inputs(self) -> list:
-        types = {"f16": "tensor(float16)", "f32": "tensor(float)"}
-        return [_Port(port.get_any_name(), types.get(port.get_element_type().get_type_name(), "")) for port in self.ports]
+        types = {"f16": "float16", "f32": "float", "u8": "uint8", "u16": "uint16"}
+        ports = []
+        for port in self.model.inputs:
+            name, element = port.get_any_name(), f"tensor({types.get(port.get_element_type().get_type_name(), '')})"
+            ports.append(_Port(name, f"optional({element})" if name in self.defaults else element))
+        return ports
+
+    def get_modelmeta(self):
+        return self.meta
 
     def run(self, names, feeds: dict) -> list:
-        results = self.model(feeds)
+        results = self.model({**{name: value for name, value in self.defaults.items() if name not in feeds}, **feeds})
         return [results[port] for port in self.model.outputs]
 
 
@@ -80,9 +92,11 @@ DEVICES = {"cpu": "CPUExecutionProvider", "cuda": "CUDAExecutionProvider"}
 
 def session(path, runtime: str = "onnxruntime", precision: Optional[str] = None, device: str = "cpu", spin: bool = True,
             threads: Optional[int] = None):
-    """A session on ``runtime`` (see :data:`RUNTIMES`) on ``device`` (see :data:`DEVICES`); ``precision``
-    is OpenVINO's hint; ``threads`` the CPU threads one call may use (None: the runtime's default, one per core).
-    A device whose provider this onnxruntime lacks is an error, not a quiet fall-back to the CPU.
+    """A session on ``runtime`` (see :data:`RUNTIMES`) on ``device`` (see :data:`DEVICES`; ``"cuda:1"`` picks a GPU);
+    ``precision`` is OpenVINO's hint; ``threads`` the CPU threads one call may use (None: the runtime's default, one per core).
+    A device whose provider this onnxruntime lacks, or could not start (onnxruntime-gpu without the CUDA and cuDNN
+    libraries it needs logs an error and runs on the CPU), is an error, not a quiet CPU run; nodes the CUDA provider
+    has no kernel for run on the CPU provider, as onnxruntime places them.
 
     ``spin=False`` stops onnxruntime's worker threads spinning between tasks
     (``session.intra_op.allow_spinning``): where other processes share the cores, spinning threads wait on
@@ -99,70 +113,121 @@ def session(path, runtime: str = "onnxruntime", precision: Optional[str] = None,
         raise ValueError(f"runtime must be one of {RUNTIMES}, got {runtime!r}")
     if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
         raise ValueError(f"threads must be a positive int or None, got {threads!r}")
-    if device not in DEVICES or (runtime == "openvino" and device != "cpu"):
-        raise ValueError(f"{runtime} runs here on {'cpu' if runtime == 'openvino' else tuple(DEVICES)}, got device {device!r}")
+    kind, numbered, index = str(device).partition(":")
+    if kind not in DEVICES or (runtime == "openvino" and device != "cpu") or (numbered and (kind != "cuda" or not index.isdigit())):
+        raise ValueError(f"{runtime} runs here on {'cpu' if runtime == 'openvino' else ('cpu', 'cuda', 'cuda:N')}, got device {device!r}")
     if runtime == "openvino":
         return OpenVINOSession(path, precision, threads)
     import onnxruntime
 
-    if DEVICES[device] not in onnxruntime.get_available_providers():
-        raise ValueError(f"this onnxruntime has no {DEVICES[device]} (it has {', '.join(onnxruntime.get_available_providers())})")
+    provider = DEVICES[kind]
+    if provider not in onnxruntime.get_available_providers():
+        raise ValueError(f"this onnxruntime has no {provider} (it has {', '.join(onnxruntime.get_available_providers())})")
     options = onnxruntime.SessionOptions()
-    options.log_severity_level = 3  # inputs with defaults are optional by design: no warning per control
     options.add_session_config_entry("session.intra_op.allow_spinning", "1" if spin else "0")
     if threads is not None:
         options.intra_op_num_threads = threads
-    return onnxruntime.InferenceSession(str(path), options, providers=[DEVICES[device]])
+    providers = [(provider, {"device_id": int(index or 0)}), "CPUExecutionProvider"] if kind == "cuda" else [provider]
+    runner = onnxruntime.InferenceSession(str(path), options, providers=providers)
+    if runner.get_providers()[0] != provider:
+        raise ValueError(f"onnxruntime could not start {provider} (it runs on {', '.join(runner.get_providers())}): "
+                         "are the CUDA and cuDNN libraries that this onnxruntime-gpu needs installed and found?")
+    return runner
+
+
+def _inputs(inputs: Inputs, stateful: bool) -> tuple:
+    """``inputs`` as a tuple ``(image[, adapted, dt])``, checked: the image as the look takes it, state only for a
+    look with eye adaptation."""
+    inputs = (inputs,) if isinstance(inputs, torch.Tensor) else tuple(inputs)
+    if len(inputs) not in ((1, 3) if stateful else (1,)):
+        takes = "(image,) or (image, adapted, dt)" if stateful else "the image alone (it has no eye adaptation)"
+        raise ValueError(f"the look takes {takes}; got {len(inputs)} inputs")
+    image = check_batch(inputs[0])
+    if len(inputs) == 3:
+        adapted, dt = (torch.as_tensor(value, dtype=torch.float32) for value in inputs[1:])
+        if adapted.shape != image.shape[:1] or dt.dim() != 0:
+            raise ValueError(f"adapted must have shape ({image.shape[0]},) (one value per image) and dt be a scalar, "
+                             f"got shapes {tuple(adapted.shape)} and {tuple(dt.shape)}")
+        inputs = (image, adapted, dt)
+    return inputs
 
 
 def feeds(runner, module: Optional[nn.Module], inputs: Inputs) -> dict:
-    """Name the ``inputs`` for ``runner``'s graph; grading-control inputs not given take ``module``'s grade.
+    """Name the ``inputs`` for ``runner``'s graph: the image as the look takes it (float ``(batch, 3, height, width)``),
+    converted to the file's frame format (:func:`~torchgrade.onnx.frames.model_input`), then ``adapted`` and ``dt``
+    where given. Inputs not given are left to their defaults where optional; plain ones get a still's state
+    (:data:`~torchgrade.onnx.defaults.STATE_DEFAULTS`) and ``module``'s grade.
 
     Examples:
         >>> callable(feeds)
         True
     """
-    inputs = (inputs,) if isinstance(inputs, torch.Tensor) else tuple(inputs)
     ports = runner.get_inputs()
-    names = [i.name for i in ports]
-    given = dict(zip(names, inputs))
-    missing = [name for name in names if name not in given]
-    if missing:
-        controls = grade_feeds(grade_of(module), inputs[0].shape[0])
-        given.update({name: controls[name] for name in missing})
-    named = {name: value.detach().float().cpu().numpy() for name, value in given.items()}
-    if ports[0].type == "tensor(float16)":
-        named["image"] = named["image"].astype(np.float16)
+    image, *state = _inputs(inputs, any(port.name == "adapted" for port in ports))
+    frames = read_frame_format(runner.get_modelmeta().custom_metadata_map)
+    named = {"image": model_input(image, frames).numpy(), **dict(zip(("adapted", "dt"), (value.numpy() for value in state)))}
+    required = [port.name for port in ports if port.name not in named and not port.type.startswith("optional")]
+    controls = grade_feeds(grade_of(module), image.shape[0]) if set(required) & set(GRADE_INPUTS) else {}
+    for name in required:
+        if name in STATE_DEFAULTS:  # one value per image: onnxruntime plans buffers by the batch the image names
+            default = STATE_DEFAULTS[name]
+            named[name] = np.broadcast_to(default, image.shape[:1] if default.ndim else ()).copy()
+        else:
+            named[name] = controls[name].numpy()
     return named
 
 
 def reference(module: nn.Module, inputs: Inputs) -> tuple:
-    """PyTorch's outputs for ``inputs`` as the exported graph takes them (stateless for exposure).
+    """PyTorch's outputs for ``inputs`` as the exported graph takes them (stateless for exposure; an image alone
+    starts a sequence, as the graph's defaults do).
 
     Examples:
         >>> import torchgrade as tg
         >>> len(reference(tg.AutoExposure(), (torch.ones(1, 3, 4, 4), torch.zeros(1), torch.tensor(0.0))))
         2
+        >>> reference(tg.ToneMap(), (torch.ones(1, 3, 4, 4), torch.zeros(1), torch.tensor(0.0)))
+        Traceback (most recent call last):
+        ...
+        ValueError: the look takes the image alone (it has no eye adaptation); got 3 inputs
+        >>> reference(tg.AutoExposure(), torch.ones(3, 4, 4))
+        Traceback (most recent call last):
+        ...
+        ValueError: image must be a batch, (batch, 3, height, width), got (3, 4, 4)
     """
-    inputs = (inputs,) if isinstance(inputs, torch.Tensor) else tuple(inputs)
+    stateful = has_state(module)
+    image, *state = _inputs(inputs, stateful)
     with torch.no_grad():
-        if has_state(module):
-            return tuple(frame_of(module)(*inputs[:3]))
-        return (module(inputs[0]),)
+        if stateful:
+            adapted, dt = state or (torch.zeros(image.shape[0]), torch.tensor(0.0))
+            return tuple(frame_of(module)(image, adapted, dt))
+        return (module(image),)
 
 
-def verify(module: nn.Module, path, inputs: Inputs, runtime: str = "onnxruntime", precision: Optional[str] = None) -> float:
+def verify(module: nn.Module, path, inputs: Inputs, runtime: str = "onnxruntime", precision: Optional[str] = None,
+           codes: bool = False) -> float:
     """Run the ONNX file on ``runtime`` (CPU) and return the max abs difference from PyTorch.
 
-    ``inputs`` is the image, or ``(image, adapted, dt)`` for a model with exposure; grading
-    controls of a ``grade_inputs`` model take their defaults. PyTorch's output is encoded as the file's
-    ``torchgrade.output`` says (an ``srgb8`` model's error is in 8-bit codes). See the module example.
+    ``inputs`` is the image as the look takes it (float ``(batch, 3, height, width)``), or ``(image, adapted, dt)``
+    for a look with eye adaptation (the image alone: a still). The file gets the image in its own frame format
+    (:func:`~torchgrade.onnx.frames.model_input`: its layout and dtype, integer inputs as sRGB codes) and PyTorch
+    runs the look on that same input, decoded; its output is encoded as the file's (an ``srgb8`` model's error is in
+    8-bit codes). ``codes=True`` gives the image's error in 8-bit sRGB codes whatever the encoding
+    (:func:`~torchgrade.onnx.frames.eight_bit_codes`). See the module example.
     """
     runner = session(path, runtime, precision)
+    frames = read_frame_format(runner.get_modelmeta().custom_metadata_map)
     outputs = runner.run(None, feeds(runner, module, inputs))
-    image, *state = reference(module, inputs)
-    expected = (encode_output(image, metadata(path).get("torchgrade.output", "linear")), *state)
-    return max(float(np.max(np.abs(out.astype(np.float64) - exp.double().numpy()))) for out, exp in zip(outputs, expected))
+    image, *state = _inputs(inputs, has_state(module))
+    decoded = decode_input(to_nchw(model_input(image, frames), frames.layout), frames.input_dtype)
+    result, *expected_state = reference(module, (decoded, *state))
+    expected = (from_nchw(encode_output(result, frames.output, frames.float_dtype), frames.output_layout), *expected_state)
+    errors = []
+    for index, (out, exp) in enumerate(zip(outputs, expected)):
+        out, exp = out.astype(np.float64), exp.double().numpy()
+        if codes and index == 0:
+            out, exp = eight_bit_codes(out, frames.output), eight_bit_codes(exp, frames.output)
+        errors.append(float(np.max(np.abs(out - exp))))
+    return max(errors)
 
 
 def metadata(path) -> dict:
