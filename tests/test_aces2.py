@@ -6,10 +6,12 @@ import math
 import numpy as np
 import pytest
 import torch
+from torch.utils._python_dispatch import TorchDispatchMode
 
 import torchgrade as tg
 from torchgrade.tonemap.aces2 import aces2_output
 from torchgrade.tonemap.aces2.tonescale import daniele_tonescale, tonescale_params
+from torchgrade.tonemap.aces2 import transform
 from torchgrade.tonemap.aces2.transform import _output
 from torchgrade.io import read_exr
 
@@ -192,6 +194,38 @@ def test_autocast_does_not_lower_the_precision():
 def test_tables_are_cached_per_peak_and_primaries():
     assert _output(100.0, "rec709") is _output(100.0, "rec709")
     assert _output(100.0, "rec709") is not _output(100.0, "p3_d65")
+
+
+class ValueReads(TorchDispatchMode):
+    """Counts the values read back (``.item()``, ``.tolist()``, ``float()``): building tables reads, a forward must not."""
+
+    def __init__(self):
+        super().__init__()
+        self.reads = 0
+
+    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+        self.reads += func is torch.ops.aten._local_scalar_dense.default
+        return func(*args, **(kwargs or {}))
+
+
+def test_a_stage_keeps_its_tables_however_many_other_peaks_are_built():
+    stage = tg.ToneMap("aces2_hdr", peak_luminance=1000.0)
+    image = torch.rand(1, 3, 4, 4) * 4
+    expected = stage(image)
+    for step in range(1, transform.MAX_BUILT + 2):
+        tg.ToneMap("aces2_hdr", peak_luminance=1000.0 + step)  # built, then dropped with its stage
+    with ValueReads() as counted:
+        out = stage(image)
+    assert counted.reads == 0  # no table rebuilt in the forward (a compiled forward cannot build them)
+    assert torch.equal(out, expected)
+
+
+def test_tables_no_stage_holds_are_dropped_beyond_the_most_recent():
+    for step in range(transform.MAX_BUILT + 3):
+        transform.prepare_output(2000.0 + step, "rec2020")
+    held = {prepared.key for prepared in transform._HELD}
+    assert len([key for key in transform._BUILT if key not in held]) <= transform.MAX_BUILT
+    assert (2000.0 + transform.MAX_BUILT + 2, "rec2020") in transform._BUILT
 
 
 def test_bad_arguments_raise_clear_errors():

@@ -277,19 +277,32 @@ def test_a_look_that_changes_nothing_writes_the_non_finite_policys_values(exr_di
         assert torch.isfinite(written).all() and written.abs().max() <= 65504.0
 
 
-def test_a_tiny_file_asking_for_a_huge_canvas_is_refused_before_grading(tmp_path, capsys):
+def test_a_tiny_file_asking_for_a_huge_canvas_is_refused_before_grading(tmp_path, capsys, monkeypatch):
     """364 bytes: a 1x1 data window in a 12000x12000 display window. Grading it ran the machine out of memory
-    (`can't allocate` at 7.1 GB) after passing the read budget."""
-    import time
-
+    (`can't allocate` at 7.1 GB) after passing the read budget. It is refused from its header: no frame is read."""
     import OpenEXR
+
+    from torchgrade.cli import common
 
     path = tmp_path / "bomb.exr"
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
               "dataWindow": ((0, 0), (0, 0)), "displayWindow": ((0, 0), (11999, 11999))}
     OpenEXR.File(header, {"RGB": np.ones((1, 1, 3), np.float16)}).write(str(path))
-    start = time.perf_counter()
+    reads = []
+    monkeypatch.setattr(common, "read_exr", lambda *args, **kwargs: reads.append(args))
     assert main(["grade", str(path), "-o", str(tmp_path / "out.png")]) == 2
-    assert time.perf_counter() - start < 1.0
+    assert reads == []
     assert "displayWindow 12000x12000 needs about" in capsys.readouterr().err
     assert not (tmp_path / "out.png").exists()
+
+
+def test_grading_memory_counts_at_most_as_many_frames_at_once_as_there_are(tmp_path):
+    from torchgrade.cli.grade import GRADING_COPIES, check_grading_memory
+
+    frame = tmp_path / "plate.exr"
+    tg.io.write_exr(frame, torch.zeros(3, 10, 10))
+    one_frame = GRADING_COPIES * 4 * 3 * 10 * 10  # float32 RGB buffers grading one frame holds
+    check_grading_memory([frame], None, jobs=8, max_bytes=one_frame)  # one frame: graded alone, whatever --jobs
+    check_grading_memory([frame, frame], None, jobs=8, max_bytes=2 * one_frame)
+    with pytest.raises(ValueError, match=f"needs about {2 * one_frame} bytes .*2 at once"):
+        check_grading_memory([frame, frame], None, jobs=8, max_bytes=2 * one_frame - 1)

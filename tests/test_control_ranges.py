@@ -282,3 +282,24 @@ def test_the_log_gamma_span_is_at_least_a_thousandth_and_its_gradients_stay_fini
     controls = {"pivot_black": torch.tensor(0.5, requires_grad=True), "pivot_white": torch.tensor(0.50101, requires_grad=True),
                 "gamma": torch.full((3,), 0.01, requires_grad=True), "brightness": torch.full((3,), -1023.0, requires_grad=True)}
     assert_finite(tg.PrimaryGrade("log", **controls), image, controls)
+
+
+@pytest.mark.parametrize("make, name", [
+    (lambda value: tg.Bloom(tint=value), "tint"),
+    (lambda value: tg.ColorGrade(color_filter=value), "color_filter"),
+    (lambda value: tg.ColorGrade(shadows=value, highlights=1.1), "shadows"),
+    (lambda value: tg.ColorGrade(midtones=value), "midtones"),
+    (lambda value: tg.PrimaryGrade(exposure=value), "exposure"),
+], ids=["bloom-tint", "color-filter", "shadows", "midtones", "primary-exposure"])
+def test_a_plain_number_for_a_colour_is_that_grey(make, name):
+    image = torch.rand(2, 3, 16, 16) * 4
+    stage, grey = make(0.8), make((0.8, 0.8, 0.8))
+    assert getattr(stage, name) == (0.8, 0.8, 0.8)
+    torch.testing.assert_close(stage(image), grey(image), rtol=0, atol=0)
+
+
+def test_the_functional_forms_take_a_plain_number_for_a_colour_as_that_grey():
+    image = torch.rand(2, 3, 16, 16) * 4
+    torch.testing.assert_close(tg.functional.bloom(image, tint=0.5), tg.functional.bloom(image, tint=(0.5, 0.5, 0.5)), rtol=0, atol=0)
+    torch.testing.assert_close(tg.functional.color_grade(image, color_filter=0.5),
+                               tg.functional.color_grade(image, color_filter=(0.5, 0.5, 0.5)), rtol=0, atol=0)

@@ -262,3 +262,59 @@ def test_reads_in_strips_equal_whole_reads_bit_for_bit(exr_dir, tmp_path, monkey
     assert {path.name for path in strips} >= {"Adjuster.exr", "beachball_multipart.0001.exr", "beachball_singlepart.0001.exr",
                                               "tiled.exr"}
     assert len(strips) >= 20
+
+
+COMPRESSIONS = sorted(name for name in dir(OpenEXR) if name.endswith("_COMPRESSION"))
+"""Every compression the installed OpenEXR names (3.5.3: NO to DWAB, HTJ2K256, HTJ2K32, LJ2K, ZSTD)."""
+LOSSY = {"B44_COMPRESSION", "B44A_COMPRESSION", "DWAA_COMPRESSION", "DWAB_COMPRESSION", "LJ2K_COMPRESSION"}
+"""Compressions that may change half samples (PXR24 keeps halves exactly: it rounds 32-bit floats only)."""
+
+
+def write_compressed(path, compression: str, kind: str, rgb: np.ndarray) -> None:
+    """``rgb`` written with ``compression`` as a scanline or tiled file, or as the second part of a two-part file."""
+    header = {"compression": getattr(OpenEXR, compression), "type": OpenEXR.tiledimage if kind == "tiled" else OpenEXR.scanlineimage}
+    if kind == "tiled":
+        tiles = OpenEXR.TileDescription()
+        tiles.xSize = tiles.ySize = 16
+        header["tiles"] = tiles
+    if kind == "multi-part":
+        parts = [OpenEXR.Part(dict(header), {"RGB": rgb[::-1].copy()}, name="first"), OpenEXR.Part(dict(header), {"RGB": rgb}, name="second")]
+        OpenEXR.File(parts).write(str(path))
+    else:
+        OpenEXR.File(header, {"RGB": rgb}).write(str(path))
+
+
+@pytest.mark.parametrize("kind", ["scanline", "tiled", "multi-part"])
+@pytest.mark.parametrize("compression", COMPRESSIONS)
+def test_every_compression_the_library_writes_reads_back(tmp_path, compression, kind):
+    rgb = (np.random.default_rng(5).random((300, 24, 3)) * 8).astype(np.float16)  # 300 lines: two blocks of 256
+    path = tmp_path / f"{compression}.exr"
+    write_compressed(path, compression, kind, rgb)
+    part = 1 if kind == "multi-part" else 0
+    expected = OpenEXR.File(str(path)).parts[part].channels["RGB"].pixels if compression in LOSSY else rgb
+    image = tg.io.read_exr(path, part=part)
+    assert torch.equal(image, torch.from_numpy(expected.astype(np.float32)).permute(2, 0, 1))
+
+
+def test_a_compression_the_chunk_checks_do_not_know_is_left_to_the_library(tmp_path, monkeypatch):
+    from torchgrade.io.exr import chunks
+
+    rgb = (np.random.default_rng(6).random((40, 8, 3)) * 8).astype(np.float16)
+    write_compressed(tmp_path / "alone.exr", "ZSTD_COMPRESSION", "scanline", rgb)
+    write_compressed(tmp_path / "parts.exr", "ZSTD_COMPRESSION", "multi-part", rgb)
+    monkeypatch.setattr(chunks, "_LINES_PER_CHUNK", {code: lines for code, lines in chunks._LINES_PER_CHUNK.items()
+                                                     if code != int(OpenEXR.ZSTD_COMPRESSION)})  # as a newer code would be
+    assert torch.equal(tg.io.read_exr(tmp_path / "alone.exr"), torch.from_numpy(rgb.astype(np.float32)).permute(2, 0, 1))
+    with pytest.raises(ValueError, match="cannot be copied out of its multi-part file"):
+        tg.io.read_exr(tmp_path / "parts.exr", part=1)
+
+
+def test_a_compression_the_library_does_not_know_either_is_refused_before_decoding(tmp_path):
+    """OpenEXR 3.5.3 reads an unknown compression code as ZIP, without a word: such a file is refused here."""
+    path = tmp_path / "unknown.exr"
+    write_compressed(path, "NO_COMPRESSION", "scanline", np.ones((4, 4, 3), np.float16))
+    data = bytearray(path.read_bytes())
+    data[data.index(b"compression\0compression\0") + 28] = 200  # after the names and the 4-byte size
+    path.write_bytes(bytes(data))
+    with pytest.raises(ValueError, match="its compression 200 is none the installed OpenEXR knows"):
+        tg.io.read_exr(path)

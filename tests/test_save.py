@@ -1,5 +1,9 @@
 """Saving looks with torch: whole modules and state dicts read back under ``weights_only=True``."""
 
+import copy
+import subprocess
+import sys
+
 import pytest
 import torch
 
@@ -105,3 +109,46 @@ def test_a_pickled_random_layer_with_a_range_out_of_bounds_is_refused_at_load(tm
     torch.save(layer, tmp_path / "augment.pt")
     with pytest.raises(ValueError, match="contrast"):
         torch.load(tmp_path / "augment.pt", weights_only=True)
+
+
+@pytest.mark.parametrize("assign", [False, True], ids=["copied", "assigned"])
+def test_a_state_dict_refused_at_load_leaves_the_stage_as_it_was(assign):
+    grade = tg.ColorGrade(contrast=torch.tensor([10.0, 20.0]), saturation=torch.tensor(5.0))
+    state = {**grade.state_dict(), "contrast": torch.tensor([10.0, 500.0]), "saturation": torch.tensor(7.0)}
+    with pytest.raises((ValueError, RuntimeError), match="contrast must lie in"):  # assigned: load_state_dict's report
+        grade.load_state_dict(state, assign=assign)
+    assert grade.contrast.tolist() == [10.0, 20.0] and grade.saturation.item() == 5.0
+    lut = tg.LUT3D(tg.lut.identity_table(5))
+    state = {**lut.state_dict(), "table": torch.full((5, 5, 5, 3), float("nan"))}
+    with pytest.raises(ValueError, match="LUT table must be finite"):
+        lut.load_state_dict(state, assign=assign)
+    assert torch.equal(lut.table, tg.lut.identity_table(5))
+
+
+def test_a_stage_on_meta_deep_copies():
+    for stage in (tg.ColorGrade(contrast=torch.nn.Parameter(torch.tensor(10.0)), shadows_start=torch.tensor([0.0, 0.1])),
+                  tg.LUT3D(tg.lut.identity_table(5)), tg.ConvolutionBloom(torch.ones(1, 3, 3)),
+                  tg.PrimaryGrade(style="log", pivot_black=torch.tensor(0.0))):
+        copied = copy.deepcopy(stage.to("meta"))
+        assert all(tensor.is_meta for tensor in copied.state_dict().values())
+
+
+def test_a_stage_an_optimiser_moved_out_of_range_copies_and_raises_at_its_next_forward():
+    grade = tg.ColorGrade(contrast=torch.nn.Parameter(torch.tensor(10.0)))
+    with torch.no_grad():
+        grade.contrast.fill_(500.0)  # what an optimiser step could do
+    averaged = torch.optim.swa_utils.AveragedModel(grade)  # deep-copies the stage
+    assert averaged.module.contrast.item() == 500.0
+    with pytest.raises(ValueError, match=r"contrast must lie in \[-100.0, 100.0\], got 500.0"):
+        averaged(torch.rand(1, 3, 2, 2))
+
+
+def test_a_random_layer_saved_whole_loads_in_a_fresh_process_under_weights_only(tmp_path):
+    """``import torchgrade`` alone (no kornia: it is imported when a file holds a layer) reads a saved layer back."""
+    path = tmp_path / "augment.pt"
+    torch.save(tg.RandomPostFX(contrast=20, tonemap=("aces", "neutral")), path)
+    load = ("import sys, torch, torchgrade; assert 'kornia' not in sys.modules; "
+            f"layer = torch.load({str(path)!r}, weights_only=True); print(type(layer).__name__, layer.ranges, layer.tonemap)")
+    result = subprocess.run([sys.executable, "-c", load], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert result.stdout.split() == ["RandomPostFX", "{'contrast':", "(-20.0,", "20.0)}", "('aces',", "'neutral')"]

@@ -10,6 +10,7 @@ Examples:
 
 import importlib
 
+from . import augment_saved  # noqa: F401  registers what torch.load(weights_only=True) of a RandomPostFX needs, without kornia
 from . import color, core, curves, functional, runtime, scene
 from .bloom import Bloom, ConvolutionBloom
 from .display import Display

@@ -46,6 +46,7 @@ from torch import nn
 
 from .augment_ranges import (BLOOM_CONTROLS, COLOUR_CONTROLS, GRADE_CONTROLS, INPUT_SPACES, checked_range,
                              checked_tonemap, grade_identity, is_identity_range)
+from .augment_saved import LOADED_NAME
 from .bloom import BLOOM_MODES, bloom_settings, bloom_with_settings
 from .color import linear_to_srgb, srgb_to_linear
 from .core import check_image, is_tracing, to_input_dtype, working_dtype
@@ -277,9 +278,8 @@ class RandomPostFX(IntensityAugmentationBase2D):
         without waiting for a GPU (:class:`~torchgrade.runtime.DeferredCheck`): there a batch out of range raises
         at a later call."""
         if self.input_space == "srgb" and not is_tracing():
-            if "_range_check" not in self.__dict__:
-                self._range_check = DeferredCheck()
-            self._range_check({"peak": images.detach().amax()}, _check_peak)
+            check = self.__dict__.get("_range_check") or self.__dict__.setdefault("_range_check", DeferredCheck())
+            check({"peak": images.detach().amax()}, _check_peak)
 
     def _graded(self, images: torch.Tensor, params: dict) -> torch.Tensor:
         if self.p == 0 or self.is_identity:
@@ -361,4 +361,4 @@ class RandomPostFX(IntensityAugmentationBase2D):
         return ", ".join(settings)
 
 
-torch.serialization.add_safe_globals([RandomPostFX])  # so torch.load(weights_only=True) reads a saved layer back
+torch.serialization.add_safe_globals([(RandomPostFX, LOADED_NAME)])  # a weights_only load fills one (augment_saved)

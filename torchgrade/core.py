@@ -172,12 +172,17 @@ def scalar_param(value: Param, image: torch.Tensor, name: str) -> torch.Tensor:
 
 
 def color_param(value, image: torch.Tensor, name: str) -> torch.Tensor:
-    """An RGB control as ``(3, 1, 1)`` or per sample ``(B, 3, 1, 1)``; accepts a 3-sequence or tensor.
+    """An RGB control as ``(3, 1, 1)`` or per sample ``(B, 3, 1, 1)``; accepts a 3-sequence or tensor, or a plain
+    number ``v`` for the grey ``(v, v, v)``.
 
     Examples:
         >>> color_param((1.0, 0.5, 0.25), torch.zeros(1, 3, 2, 2), 'tint').shape
         torch.Size([3, 1, 1])
+        >>> color_param(0.5, torch.zeros(1, 3, 2, 2), 'tint').flatten().tolist()
+        [0.5, 0.5, 0.5]
     """
+    if isinstance(value, numbers.Real) and not isinstance(value, bool):
+        value = (value,) * 3
     t = _as_tensor(value, image, name) if isinstance(value, torch.Tensor) else _sequence(value, image, name)
     if t.shape == (3,):
         return t.reshape(3, 1, 1)

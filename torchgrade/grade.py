@@ -36,7 +36,8 @@ from __future__ import annotations
 
 import torch
 
-from .color import aces_to_unity, matrix, srgb_to_linear
+from .color import aces_to_unity, srgb_to_linear
+from .color.spaces import shared_matrix
 from .core import HALF_MAX, Param, apply_matrix, matrix_product, check_image, color_param, is_constant, sanitize, scalar_param, to_input_dtype, untracked, working_dtype
 from .curves import CurveControl, check_curve, curve_is_identity, stored_curve
 from .grade_steps import (
@@ -210,7 +211,7 @@ def grade_matrix(exposure, balance, space, tint, *, like: torch.Tensor):
     if balance is not None:
         linear = _then(linear, white_balance_matrix(like, *balance))
     if space is not None:
-        linear = _then(linear, matrix(space, like))
+        linear = _then(linear, shared_matrix(space, like))
     if tint is not None:
         linear = _then(linear, _diagonal(srgb_to_linear(color_param(tint, like, "color_filter"))))
     return linear
@@ -224,7 +225,7 @@ def output_matrix(saturation_amount, weights: str, aces: bool, *, like: torch.Te
         [0.2126729, 0.7151522, 0.072175]
     """
     linear = None if saturation_amount is None else saturation_matrix(like, saturation_amount, weights)
-    return _then(linear, matrix("ap1_to_ap0", like)) if aces else linear
+    return _then(linear, shared_matrix("ap1_to_ap0", like)) if aces else linear
 
 
 _SETTINGS = ("aces", "log_space")
@@ -256,6 +257,8 @@ def _saturation_folds(image: torch.Tensor, amount) -> bool:
 
 def _check_zone(start: Param, end: Param, zone: str) -> None:
     start_t, end_t = torch.as_tensor(start).detach(), torch.as_tensor(end).detach()
+    if start_t.is_meta or end_t.is_meta:  # no values to compare
+        return
     if (start_t >= end_t).any():
         raise ValueError(f"{zone}_start must be below {zone}_end, got {start_t.tolist()} and {end_t.tolist()}")
 

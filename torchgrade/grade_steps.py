@@ -28,12 +28,12 @@ from .color import (
     hsv_to_rgb,
     linear_to_acescct,
     luminance,
-    matrix,
     rgb_to_hsv,
     safe_pow,
     safe_sqrt,
     srgb_to_linear,
 )
+from .color.spaces import shared_matrix
 from .core import HALF_MAX, NEGLIGIBLE_LIGHT, Param, apply_matrix, bounded_pow, matrix_product, color_param, matrix_param, scalar_param, untracked
 from .runtime import constant
 from .curves import evaluate_curve
@@ -123,7 +123,7 @@ def white_balance_matrix(image: torch.Tensor, temperature: Param = 0.0, tint: Pa
         True
     """
     gains = white_balance_coefficients(scalar_param(temperature, image, "temperature"), scalar_param(tint, image, "tint"))
-    return matrix_product(matrix("lms_to_linear", image), gains[..., 0] * matrix("linear_to_lms", image))
+    return matrix_product(shared_matrix("lms_to_linear", image), gains[..., 0] * shared_matrix("linear_to_lms", image))
 
 
 def white_balance(image: torch.Tensor, temperature: Param = 0.0, tint: Param = 0.0) -> torch.Tensor:

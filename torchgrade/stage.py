@@ -41,7 +41,7 @@ from torch import nn
 from .core import check_choice, check_range, full_precision, is_constant, is_tracing
 from .runtime import DeferredCheck, in_strips
 
-__all__ = ["Control", "Stage", "plain", "controls_signature"]
+__all__ = ["Control", "Stage", "plain", "controls_signature", "in_state_check"]
 
 KINDS = ("number", "int", "bool", "choice", "value")
 
@@ -54,7 +54,8 @@ class Control:
 
     * ``"number"``: a number, a sequence of numbers (colours, matrices) or a tensor, every element
       in ``range = (low, high)``; may be a per-sample tensor or an ``nn.Parameter``. A number
-      control whose default is ``None`` (not set) also accepts ``None``.
+      control whose default is ``None`` (not set) also accepts ``None``; a colour (a default of three
+      numbers) also accepts one number ``v``, kept as the grey ``(v, v, v)``.
     * ``"int"``: a Python ``int`` (not ``bool``) in ``range``.
     * ``"bool"``: ``True`` or ``False``.
     * ``"choice"``: one of the strings in ``range``.
@@ -83,6 +84,8 @@ class Control:
         A ``"value"`` control is returned unchecked: its stage checks it (:meth:`Stage.check_control`).
 
         Examples:
+            >>> Control((1.0, 1.0, 1.0), (0.0, 10.0)).check("tint", 0.5)
+            (0.5, 0.5, 0.5)
             >>> Control(16, (0, 16)).check("max_iterations", 17)
             Traceback (most recent call last):
             ...
@@ -93,6 +96,7 @@ class Control:
         if self.kind == "number":
             # A number control that defaults to None ("not set", as a speed that falls back on another) keeps None.
             if not (value is None and self.default is None):
+                value = _as_grey(value, self.default)
                 _check_number(value, name, self.range)
                 _check_shape(value, name, self.default)
         elif self.kind == "int":
@@ -132,6 +136,19 @@ def plain(value):
     if isinstance(value, (tuple, list)):
         return [plain(v) for v in value]
     return value
+
+
+def in_state_check(value) -> bool:
+    """True for a stored value :meth:`Stage.check_state` checks: not a learnable ``nn.Parameter`` (checked at every
+    forward instead, :meth:`Stage.check_learnable`) and not a tensor on ``meta`` (which holds no values).
+
+    Examples:
+        >>> in_state_check(torch.tensor(2.0)), in_state_check(nn.Parameter(torch.tensor(2.0)))
+        (True, False)
+        >>> in_state_check(torch.empty(3, device="meta")), in_state_check(0.5)
+        (False, True)
+    """
+    return not isinstance(value, nn.Parameter) and not (isinstance(value, torch.Tensor) and value.is_meta)
 
 
 def controls_signature(controls: dict, leading: tuple = ()) -> inspect.Signature:
@@ -286,8 +303,8 @@ class Stage(nn.Module):
     def deferred_check(self) -> DeferredCheck:
         """This stage's :class:`~torchgrade.runtime.DeferredCheck` of learnable values (made at its first use)."""
         check = self.__dict__.get("_deferred_check")
-        if check is None:
-            check = self.__dict__["_deferred_check"] = DeferredCheck()
+        if check is None:  # setdefault: threads making it at once share the one that lands first
+            check = self.__dict__.setdefault("_deferred_check", DeferredCheck())
         return check
 
     def __getstate__(self):
@@ -302,6 +319,11 @@ class Stage(nn.Module):
         """Check every stored control (and a subclass's tables) as construction does; ``ValueError`` naming the first
         one that fails. A saved file is untrusted: :meth:`__setstate__` (``torch.load``) and ``load_state_dict`` run this.
 
+        Learnable values (``nn.Parameter``) are left to :meth:`check_learnable`, which checks them at every forward:
+        a copy of a stage whose value an optimiser moved out of range (``copy.deepcopy``,
+        ``torch.optim.swa_utils.AveragedModel``) copies it as it is. Tensors on ``meta`` hold no values to check
+        (:func:`in_state_check`).
+
         Examples:
             >>> import torchgrade as tg
             >>> tonemap = tg.ToneMap("reinhard_extended")
@@ -312,16 +334,47 @@ class Stage(nn.Module):
             ValueError: white_point must lie in [0.001, 10000.0], got 0.0
         """
         for name in self._control_names:
-            self._checked(name, getattr(self, name))
+            value = getattr(self, name)
+            if in_state_check(value):
+                self._checked(name, value)
         self.check_together()
 
     def __setstate__(self, state) -> None:
         super().__setstate__(state)
         self.check_state()
 
-    def _load_from_state_dict(self, state_dict, prefix, *args) -> None:
-        super()._load_from_state_dict(state_dict, prefix, *args)
-        self.check_state()
+    def _load_from_state_dict(self, state_dict, prefix, local_metadata, strict, missing_keys, unexpected_keys, error_msgs) -> None:
+        """Load, then :meth:`check_state`. A state refused, by the check or by the load itself (a shape, a value assigned
+        with ``assign=True``, which ``load_state_dict`` reports), leaves the stage as it was."""
+        kept, errors = self._kept_values(), len(error_msgs)
+        try:
+            super()._load_from_state_dict(state_dict, prefix, local_metadata, strict, missing_keys, unexpected_keys, error_msgs)
+            if len(error_msgs) == errors:
+                self.check_state()
+        except ValueError:
+            self._restore(kept)
+            raise
+        if len(error_msgs) > errors:
+            self._restore(kept)
+
+    def _kept_values(self) -> tuple:
+        """What a load can change: the parameters, buffers and control attributes, and a copy of every tensor's data
+        (a load copies into the tensors it finds)."""
+        attributes = {name: self.__dict__[name] for name in self._control_names if name in self.__dict__}
+        tensors = [*self._parameters.values(), *self._buffers.values()]
+        return dict(self._parameters), dict(self._buffers), attributes, [(t, t.detach().clone()) for t in tensors if t is not None]
+
+    def _restore(self, kept: tuple) -> None:
+        parameters, buffers, attributes, data = kept
+        with torch.no_grad():
+            for tensor, values in data:
+                tensor.copy_(values)
+        for registry, saved in ((self._parameters, parameters), (self._buffers, buffers)):
+            registry.clear()
+            registry.update(saved)
+        for name in self._control_names:
+            self.__dict__.pop(name, None)
+        self.__dict__.update(attributes)
 
     # ------------------------------------------------------------------ identity and configs
 
@@ -394,6 +447,13 @@ def _check_number(value, name: str, allowed) -> None:
         check_range(value, name, *allowed)
     except (TypeError, RuntimeError) as error:
         raise ValueError(f"{name} must be numbers or a tensor: {error}") from None
+
+
+def _as_grey(value, default):
+    """``value``, or the grey ``(v, v, v)`` where ``value`` is a plain number ``v`` and ``default`` a colour (three numbers)."""
+    colour = isinstance(default, (tuple, list)) and len(default) == 3 and all(isinstance(v, numbers.Real) for v in default)
+    is_number = isinstance(value, numbers.Real) and not isinstance(value, bool)
+    return (value,) * 3 if colour and is_number else value
 
 
 def _check_shape(value, name: str, default) -> None:

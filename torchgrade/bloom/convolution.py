@@ -136,11 +136,6 @@ class ConvolutionBloom(Stage):
             return value
         return value if isinstance(value, torch.Tensor) else float(value)
 
-    def check_state(self) -> None:
-        """Also the kernel, as the constructor checks it (a saved stage is untrusted)."""
-        super().check_state()
-        check_kernel(self.kernel)
-
     def check_learnable(self) -> None:
         """Also check a learnable kernel, which an optimiser may move to a zero sum or to NaN: once per change of the
         kernel, without waiting for a GPU (:class:`~torchgrade.runtime.DeferredCheck`)."""

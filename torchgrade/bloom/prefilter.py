@@ -19,7 +19,7 @@ import torch.nn.functional as F
 
 from ..color import CHANNEL, luminance, srgb_to_linear
 from ..core import NEGLIGIBLE_LIGHT, Param, check_image, scalar_param
-from .pyramid import block_counts, sum_pool
+from .pyramid import shared_block_counts, sum_pool
 
 __all__ = ["SOFT_KNEE_EPSILON", "bloom_threshold", "threshold_fraction", "cross_sum", "karis_mean", "prefilter"]
 
@@ -124,7 +124,7 @@ def prefilter(image: torch.Tensor, threshold, knee, fade_fireflies: bool, karis_
         >>> light.shape, round(float(light.sum() / 48 / 4), 4), round(float(fraction.mean()), 4)
         (torch.Size([1, 3, 2, 2]), 0.75, 0.75)
     """
-    counts = block_counts(image.shape[-2], image.shape[-1], image)
+    counts = shared_block_counts(image.shape[-2], image.shape[-1], image)
     means = sum_pool(image) / counts
     source = karis_mean(image, means) if karis_average else means
     if clamp is not None:

@@ -111,12 +111,24 @@ def sum_pool(light: torch.Tensor) -> torch.Tensor:
 
 
 def block_counts(height: int, width: int, like: torch.Tensor) -> torch.Tensor:
-    """How many pixels of a ``height x width`` level each pixel of the 2x2-pooled level covers (1, 2 or 4).
+    """How many pixels of a ``height x width`` level each pixel of the 2x2-pooled level covers (1, 2 or 4): a copy,
+    which the caller may change.
 
     Examples:
         >>> block_counts(3, 4, torch.zeros(1))
         tensor([[[[4., 4.],
                   [2., 2.]]]])
+    """
+    return shared_block_counts(height, width, like).clone()
+
+
+def shared_block_counts(height: int, width: int, like: torch.Tensor) -> torch.Tensor:
+    """:func:`block_counts` as the device constant every pooling shares (made once per size, dtype and device), never
+    to be modified in place.
+
+    Examples:
+        >>> shared_block_counts(3, 4, torch.zeros(1)) is shared_block_counts(3, 4, torch.zeros(1))
+        True
     """
     return _block_counts(height, width, like.device, like.dtype)
 
@@ -243,7 +255,7 @@ def upsample(light: torch.Tensor, size, bicubic: bool) -> torch.Tensor:
         tensor(6.)
     """
     height, width = size
-    means = light / block_counts(height, width, light)
+    means = light / shared_block_counts(height, width, light)
     # channels folded into the batch: PyTorch's CPU kernel is about 3 times faster on one channel
     fine = F.interpolate(means.reshape((-1, 1) + means.shape[-2:]), scale_factor=2.0, mode="bilinear", align_corners=False)
     fine = fine.reshape(means.shape[:-2] + fine.shape[-2:])[..., :height, :width]

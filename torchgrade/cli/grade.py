@@ -68,8 +68,9 @@ it ran the machine out of memory (7.1 GB); an 8K frame (7680x4320) needs 2.8 GB.
 
 
 def check_grading_memory(frames: list, part, jobs: int, max_bytes: int) -> None:
-    """Raise ``ValueError`` naming the frame and its display window when grading it (``jobs`` frames at once) would
-    need more than ``max_bytes``, from the headers alone: a file's few bytes can ask for any canvas.
+    """Raise ``ValueError`` naming the frame and its display window when grading it (``jobs`` frames at once, at most
+    as many as there are frames) would need more than ``max_bytes``, from the headers alone: a file's few bytes can
+    ask for any canvas.
 
     Examples:
         >>> import tempfile, pathlib, torch
@@ -82,16 +83,17 @@ def check_grading_memory(frames: list, part, jobs: int, max_bytes: int) -> None:
         ...
         ValueError: ...plate.exr: displayWindow 100x100 needs about 840000 bytes to grade (7 frames of 120000 bytes), above --max-bytes 524288
     """
+    at_once = min(jobs, len(frames))
     for frame in frames:
         parts = exr_info(frame)
         chosen = [parts[part]] if isinstance(part, int) and 0 <= part < len(parts) else parts
         height, width = max((p.size("display") for p in chosen), key=lambda size: size[0] * size[1])
         frame_bytes = 4 * 3 * height * width
-        need = frame_bytes * GRADING_COPIES * jobs
+        need = frame_bytes * GRADING_COPIES * at_once
         if need > max_bytes:
-            at_once = f", {jobs} at once" if jobs > 1 else ""
+            together = f", {at_once} at once" if at_once > 1 else ""
             raise ValueError(f"{frame}: displayWindow {width}x{height} needs about {need} bytes to grade ({GRADING_COPIES} "
-                             f"frames of {frame_bytes} bytes{at_once}), above --max-bytes {max_bytes}")
+                             f"frames of {frame_bytes} bytes{together}), above --max-bytes {max_bytes}")
 
 
 def run_grade(args: argparse.Namespace) -> str:

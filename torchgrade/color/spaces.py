@@ -86,12 +86,23 @@ MATRICES["xyz_to_ap1"] = torch.linalg.inv(MATRICES["ap1_to_xyz"])
 
 
 def matrix(name: str, like: torch.Tensor) -> torch.Tensor:
-    """One of :data:`MATRICES` in ``like``'s dtype and device.
+    """One of :data:`MATRICES` in ``like``'s dtype and device: a copy, which the caller may change.
 
     Examples:
         >>> m = matrix("srgb_to_ap1", torch.zeros(1, dtype=torch.float64))
         >>> m.shape, m.dtype
         (torch.Size([3, 3]), torch.float64)
+    """
+    return shared_matrix(name, like).clone()
+
+
+def shared_matrix(name: str, like: torch.Tensor) -> torch.Tensor:
+    """:func:`matrix` as the device constant every conversion shares (:func:`~torchgrade.runtime.constant`): made
+    once per dtype and device, never to be modified in place.
+
+    Examples:
+        >>> shared_matrix("ap0_to_ap1", torch.zeros(1)) is shared_matrix("ap0_to_ap1", torch.zeros(1))
+        True
     """
     return constant(MATRIX_VALUES[name], like)
 
@@ -103,7 +114,7 @@ def convert(image: torch.Tensor, name: str) -> torch.Tensor:
         >>> [round(v, 4) for v in convert(torch.ones(1, 3, 1, 1), "ap0_to_ap1").flatten().tolist()]
         [1.0, 1.0, 1.0]
     """
-    return apply_matrix(matrix(name, image), image)
+    return apply_matrix(shared_matrix(name, image), image)
 
 
 def luminance(image: torch.Tensor, weights: str = "rec709") -> torch.Tensor:

@@ -44,7 +44,7 @@ from torch import nn
 from ..color import linear_to_srgb, srgb_to_linear
 from ..core import HALF_MAX, check_choice, check_image, is_tracing, one_thread, sanitize, to_input_dtype, working_dtype
 from ..runtime import LOOKUP_CHUNK, policy_for, run_pieces
-from ..stage import Control, Stage
+from ..stage import Control, Stage, in_state_check
 from .kernels import BACKENDS, KERNELS
 from .lattice import check_size, checked_domain, planar_table
 from .shapers import SHAPERS, lattice_unit, shaper_encode
@@ -364,10 +364,13 @@ class LUT3D(Stage):
             self.deferred_check()({"table": self.table}, lambda name, extremes: _check_extremes(extremes, bound), summary=_extremes)
 
     def check_state(self) -> None:
-        """Also the table, the domain and a shaper's curve, as the constructor checks them (a saved LUT is untrusted)."""
+        """Also the table, the domain and a shaper's curve, as the constructor checks them (a saved LUT is untrusted);
+        a learnable table is checked at every forward instead, and nothing on ``meta`` has values to check."""
         super().check_state()
-        _check_table(self.table, self.output_encoding)
-        checked_domain((self.domain_min, self.domain_max))
+        if in_state_check(self.table):
+            _check_table(self.table, self.output_encoding)
+        if in_state_check(self.domain_min):
+            checked_domain((self.domain_min, self.domain_max))
         if SHAPERS[self.shaper].takes_curve != (self.curve is not None):
             raise ValueError(f"the {self.shaper!r} shaper {'needs' if self.curve is None else 'takes no'} curve=(n, 3) table")
         if self.curve is not None:

@@ -7,8 +7,14 @@ device of the frames it gets.
 * **CPU and other devices**: Inductor's default mode (fused C++ loops over the pixels).
 
 ``fullgraph=True`` always: a look is one graph, so a graph break is an error here rather than a silent slowdown.
-Each device type compiles once, at its first frame; new frame sizes compile again (after the first recompile
-PyTorch marks sizes dynamic). Compile times measured by ``benchmarks/bench_gpu.py``.
+Each device type compiles at its first frame; the first new frame size compiles again, with the sizes that changed
+made symbolic (``dynamic=None``, PyTorch's default), so every later size runs that graph. (``dynamic=False``
+compiles every size as it comes, and the ninth size stops with ``FailOnRecompileLimitHit``: Dynamo's
+``recompile_limit`` is 8 and ``fullgraph=True`` makes hitting it an error.) Compile times measured by
+``benchmarks/bench_gpu.py``.
+
+The compiled graph carries no range checks (they read values), so the wrapper checks every stage's learnable
+controls (:meth:`~torchgrade.Stage.check_learnable`) before each call, as an eager forward does.
 
 Examples:
     >>> import torch
@@ -19,6 +25,8 @@ Examples:
 """
 
 from __future__ import annotations
+
+from typing import Optional
 
 import torch
 from torch import nn
@@ -35,7 +43,7 @@ class CompiledModule(nn.Module):
     """``module`` compiled per device type at its first frame there (see :func:`compile`); ``module`` is
     :attr:`module`, so its controls, state and ``to_config`` stay reachable."""
 
-    def __init__(self, module: nn.Module, cuda_graphs: bool = True, dynamic: bool = False):
+    def __init__(self, module: nn.Module, cuda_graphs: bool = True, dynamic: Optional[bool] = None):
         super().__init__()
         self.module = module
         self.cuda_graphs = cuda_graphs
@@ -51,15 +59,21 @@ class CompiledModule(nn.Module):
         return call
 
     def forward(self, image: torch.Tensor, *args, **kwargs):
+        """Check the learnable controls of every stage (``check_learnable``, which the graph skips), then run the graph."""
+        for stage in self.module.modules():
+            if hasattr(stage, "check_learnable"):
+                stage.check_learnable()
         return self.compiled_for(image.device)(image, *args, **kwargs)
 
 
-def compile(module: nn.Module, *, cuda_graphs: bool = True, dynamic: bool = False) -> CompiledModule:
+def compile(module: nn.Module, *, cuda_graphs: bool = True, dynamic: Optional[bool] = None) -> CompiledModule:
     """``module`` (a stage, a :class:`~torchgrade.PostFX`, a :class:`~torchgrade.RandomPostFX`, a LUT) through
     ``torch.compile`` with one graph and the device's mode (:func:`compile_mode`).
 
-    ``dynamic`` is passed to ``torch.compile``: ``False`` (default) compiles each frame size as it comes, the form CUDA
-    graphs replay; ``True`` one graph for every size, compiled with symbolic sizes (slower to compile).
+    ``dynamic`` is passed to ``torch.compile``: ``None`` (default) compiles the first size with fixed sizes and, at
+    the first new size, one graph with the changed sizes symbolic, which every later size runs; ``True`` symbolic
+    sizes from the start; ``False`` one graph per size, at most eight sizes (Dynamo's ``recompile_limit``: the
+    ninth raises ``FailOnRecompileLimitHit``).
     """
     if not isinstance(module, nn.Module):
         raise TypeError(f"compile takes an nn.Module, got {type(module).__name__}")

@@ -6,7 +6,8 @@ value, dtype and device, so a frame after the first builds nothing from Python d
 or exporting it makes the tensor afresh, which the graph records as a constant.
 
 Tables derived from sizes (a blur's kernel, a padding's indices) are kept the same way by :func:`device_cached`.
-Cached tensors are shared: callers never modify them in place.
+Cached tensors are shared: callers never modify them in place, and public functions hand out copies. Should a
+caller modify one all the same, its version counter moves and the cache makes it again rather than serve it.
 
 Examples:
     >>> import torch
@@ -40,14 +41,27 @@ def constant(values, like: torch.Tensor) -> torch.Tensor:
     """
     if is_tracing():
         return torch.tensor(values, dtype=like.dtype, device=like.device)
-    return _made(values, like.dtype, like.device)
+    return _unchanged(_made(values, like.dtype, like.device), torch.tensor, values, dtype=like.dtype, device=like.device)
 
 
 @functools.lru_cache(maxsize=CACHED_CONSTANTS)
-def _made(values, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
-    # made outside inference mode: an inference tensor cannot be saved for a later backward pass
+def _made(values, dtype: torch.dtype, device: torch.device) -> list:
+    return _kept(torch.tensor, values, dtype=dtype, device=device)
+
+
+def _kept(make, *arguments, **keywords) -> list:
+    """``[tensor, its version]`` of ``make(*arguments, **keywords)``, made outside inference mode (an inference tensor
+    cannot be saved for a later backward pass)."""
     with torch.inference_mode(False):
-        return torch.tensor(values, dtype=dtype, device=device)
+        tensor = make(*arguments, **keywords)
+    return [tensor, tensor._version]
+
+
+def _unchanged(kept: list, make, *arguments, **keywords) -> torch.Tensor:
+    """The tensor of ``kept`` (:func:`_kept`), made again if a caller modified it in place (its version moved)."""
+    if kept[0]._version != kept[1]:
+        kept[:] = _kept(make, *arguments, **keywords)
+    return kept[0]
 
 
 def values_of(tensor: torch.Tensor):
@@ -76,12 +90,11 @@ def device_cached(make):
 
     @functools.lru_cache(maxsize=CACHED_CONSTANTS)
     def cached(*arguments):
-        with torch.inference_mode(False):
-            return make(*arguments)
+        return _kept(make, *arguments)
 
     @functools.wraps(make)
     def call(*arguments):
-        return make(*arguments) if is_tracing() else cached(*arguments)
+        return make(*arguments) if is_tracing() else _unchanged(cached(*arguments), make, *arguments)
 
     return call
 

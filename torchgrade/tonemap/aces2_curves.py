@@ -11,7 +11,7 @@ from __future__ import annotations
 import torch
 
 from .aces2 import aces2_output
-from .aces2.transform import peak_number, prepare_output
+from .aces2.transform import Prepared, peak_number, prepare_output
 from .base import display
 
 __all__ = ["aces2_sdr", "aces2_hdr", "prepare_aces2_sdr", "prepare_aces2_hdr", "ACES2_HDR_RANGES"]
@@ -49,11 +49,12 @@ def aces2_hdr(image: torch.Tensor, peak_luminance: float = 1000.0, clip: bool = 
     return display(aces2_output(image, peak_luminance, "p3_d65", "rec2020"), clip)
 
 
-def prepare_aces2_sdr() -> None:
-    """Build the SDR transform's gamut tables (once), so a compiled or traced forward holds them as constants."""
-    prepare_output(100.0, "rec709")
+def prepare_aces2_sdr() -> Prepared:
+    """Build the SDR transform's gamut tables (once), so a compiled or traced forward holds them as constants; they
+    stay built while the returned :class:`~torchgrade.tonemap.aces2.transform.Prepared` is kept."""
+    return prepare_output(100.0, "rec709")
 
 
-def prepare_aces2_hdr(peak_luminance=1000.0) -> None:
+def prepare_aces2_hdr(peak_luminance=1000.0) -> Prepared:
     """Build the HDR transform's gamut tables for ``peak_luminance`` (once), as :func:`prepare_aces2_sdr`."""
-    prepare_output(peak_number(peak_luminance), "p3_d65")
+    return prepare_output(peak_number(peak_luminance), "p3_d65")

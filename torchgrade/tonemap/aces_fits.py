@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import torch
 
-from ..color import AP1_LUMINANCE, MATRICES, convert, matrix, unity_to_aces
+from ..color import AP1_LUMINANCE, MATRICES, convert, unity_to_aces
+from ..color.spaces import shared_matrix
 from ..core import apply_matrix, matrix_on_planes, untracked
 from ..runtime import constant, values_of
 from .aces_rrt import (AP1_TO_REC709, DIM_SURROUND_GAMMA, ODT_SAT_FACTOR, RRT_SAT_FACTOR, rrt_glow_and_red_modifier,
@@ -78,7 +79,7 @@ def _aces_fitted_planes(aces: torch.Tensor) -> torch.Tensor:
     are (:func:`~torchgrade.core.matrix_on_planes`), without a Concat and a Split each (the
     matrices on planes too, as 9 products by constants and 6 sums, would add 38 nodes)."""
     planes = rrt_glow_and_red_modifier_planes(aces, smoothstep_hue_weight)
-    acescg = apply_matrix(constant(_RRT_DESATURATE_VALUES, aces), matrix_on_planes(matrix("ap0_to_ap1", aces), planes).clamp_min(0.0))
+    acescg = apply_matrix(constant(_RRT_DESATURATE_VALUES, aces), matrix_on_planes(shared_matrix("ap0_to_ap1", aces), planes).clamp_min(0.0))
     xyz = convert(_fit(acescg), "ap1_to_xyz")
     return matrix_on_planes(constant(_ODT_TAIL_VALUES, xyz), _dim_surround_planes(*xyz.split(1, dim=-3)))
 

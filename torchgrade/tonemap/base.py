@@ -30,7 +30,8 @@ class ToneMapper(NamedTuple):
     must ``prepare`` when its controls are set (tables searched per value, built outside any graph), or ``None``.
 
     ``curve(image, clip=True, **controls)`` takes scene-referred linear Rec.709 and returns
-    display-referred linear Rec.709, clipped to [0, 1] when ``clip``; ``prepare(**controls)`` returns nothing.
+    display-referred linear Rec.709, clipped to [0, 1] when ``clip``; ``prepare(**controls)`` returns what the
+    stage keeps so that what was built stays built while the stage lives.
 
     Examples:
         >>> entry = ToneMapper.of(no_tonemap)
@@ -40,10 +41,10 @@ class ToneMapper(NamedTuple):
 
     curve: Callable[..., torch.Tensor]
     controls: dict
-    prepare: Optional[Callable[..., None]] = None
+    prepare: Optional[Callable[..., object]] = None
 
     @classmethod
-    def of(cls, curve: Callable[..., torch.Tensor], prepare: Optional[Callable[..., None]] = None, **ranges: tuple) -> "ToneMapper":
+    def of(cls, curve: Callable[..., torch.Tensor], prepare: Optional[Callable[..., object]] = None, **ranges: tuple) -> "ToneMapper":
         """The entry of ``curve`` with a control per ``ranges`` item, its default from ``curve``'s own signature.
 
         Examples:

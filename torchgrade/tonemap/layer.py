@@ -70,10 +70,17 @@ class ToneMap(Stage):
         return {**type(self).controls, **TONE_MAPPERS[self.mode].controls}
 
     def check_together(self) -> None:
-        """Prepare what the mode builds per control value (ACES 2.0's gamut tables), outside any forward."""
+        """Prepare what the mode builds per control value (ACES 2.0's gamut tables), outside any forward, and keep it:
+        a shared cache drops tables no stage holds, and a compiled forward cannot build them."""
         entry = TONE_MAPPERS[self.mode]
-        if entry.prepare is not None and all(hasattr(self, name) for name in entry.controls):
-            entry.prepare(**{name: getattr(self, name) for name in entry.controls})
+        if all(hasattr(self, name) for name in entry.controls):
+            self._prepared = None if entry.prepare is None else entry.prepare(**{name: getattr(self, name) for name in entry.controls})
+
+    def __getstate__(self):
+        """A saved or copied tone map leaves its prepared tables behind; loading prepares them again (:meth:`check_together`)."""
+        state = super().__getstate__()
+        state.pop("_prepared", None)
+        return state
 
     @classmethod
     def config_table(cls, config: dict) -> dict:

@@ -33,18 +33,26 @@ import struct
 from dataclasses import dataclass
 
 import numpy as np
+import OpenEXR
 
 from .header_bytes import MULTIPART, Headers, channel_list, check_required, read_headers, value
 from .layout import ExrPart
 
-__all__ = ["MAX_CHUNKS", "ChunkTable", "chunk_table"]
+__all__ = ["MAX_CHUNKS", "LIBRARY_COMPRESSIONS", "ChunkTable", "chunk_table"]
 
 MAX_CHUNKS = 1 << 20
 """Most chunks a part may have: OpenEXRCore refuses larger offset tables (``extract_chunk_table``)."""
 
-_LINES_PER_CHUNK = (1, 1, 1, 16, 32, 16, 32, 32, 32, 256, 256, 32)
-"""Scanlines a chunk holds, by compression: NO, RLE, ZIPS, ZIP, PIZ, PXR24, B44, B44A, DWAA, DWAB,
-HTJ2K256, HTJ2K32 (file layout document, "Regular Scan Line Blocks")."""
+_LINES_PER_CHUNK = {0: 1, 1: 1, 2: 1, 3: 16, 4: 32, 5: 16, 6: 32, 7: 32, 8: 32, 9: 256, 10: 256, 11: 32, 12: 256, 13: 1}
+"""Scanlines a chunk holds, by compression code: NO, RLE, ZIPS, ZIP, PIZ, PXR24, B44, B44A, DWAA, DWAB, HTJ2K256,
+HTJ2K32 (file layout document, "Regular Scan Line Blocks"), LJ2K (HTJ2K256's blocks, OpenEXR's ``internal_ht_common``)
+and ZSTD (one line, as OpenEXR 3.5.3 writes it: 1000 chunks for 1000 lines). A code not here that the library knows
+is a newer library's: its scanline parts are left to the library (:func:`chunk_table`)."""
+
+LIBRARY_COMPRESSIONS = frozenset(int(code) for code in OpenEXR.Compression.__members__.values()
+                                 if code != OpenEXR.Compression.NUM_COMPRESSION_METHODS)
+"""The compression codes the installed OpenEXR knows. It reads any other code as ZIP without a word (3.5.3), so a
+file holding one is refused here."""
 
 _LINE_ORDERS = ("INCREASING_Y", "DECREASING_Y", "RANDOM_Y")
 
@@ -102,8 +110,6 @@ def _layout(attributes: dict, data, part: ExrPart) -> tuple[np.ndarray, np.ndarr
     if part.kind == "tiledimage":
         return _tiles(width, height, value(data, attributes["tiles"]))
     (compression,) = value(data, attributes["compression"])
-    if compression >= len(_LINES_PER_CHUNK):
-        raise ValueError(f"its compression {compression} is none OpenEXR knows")
     lines = _LINES_PER_CHUNK[compression]
     count = -(-height // lines)
     if count > MAX_CHUNKS:
@@ -142,6 +148,15 @@ def _leaders(data, offsets: np.ndarray, leader: int) -> np.ndarray:
         return fields
     finally:
         del raw  # a live view of the map would keep it from closing
+
+
+def _left_to_library(attributes: dict, data, part: ExrPart) -> bool:
+    """True for a scanline part whose compression the library knows and these checks do not (how many lines its
+    chunks hold): a newer library's. ``ValueError`` for a code the library does not know either."""
+    (compression,) = value(data, attributes["compression"])
+    if compression not in LIBRARY_COMPRESSIONS:
+        raise ValueError(f"its compression {compression} is none the installed OpenEXR knows")
+    return part.kind != "tiledimage" and compression not in _LINES_PER_CHUNK
 
 
 def _check(headers: Headers, data, part: ExrPart) -> ChunkTable:
@@ -191,10 +206,13 @@ def _check(headers: Headers, data, part: ExrPart) -> ChunkTable:
     return ChunkTable(offsets, sizes, leader)
 
 
-def chunk_table(path, part: ExrPart) -> ChunkTable:
+def chunk_table(path, part: ExrPart) -> ChunkTable | None:
     """Where part ``part`` of the file at ``path`` keeps its chunks, once the headers and the part's
     table are checked against the rules above; ``ValueError`` naming the file and the first attribute,
     or the part and the first chunk, that breaks one.
+
+    ``None`` for a scanline part whose compression the installed library knows and this module does not (how many
+    lines its chunks hold): a newer library's, which the library then decodes or refuses itself.
 
     Examples:
         >>> import pathlib, struct, tempfile, torch, torchgrade as tg
@@ -216,6 +234,8 @@ def chunk_table(path, part: ExrPart) -> ChunkTable:
             headers = read_headers(data)
             check_required(headers, data)  # its messages name the part
             try:
+                if _left_to_library(headers.attributes(part.index), data, part):
+                    return None
                 return _check(headers, data, part)
             except _DAMAGE as error:
                 raise ValueError(f"part {part.index}: {error}") from None

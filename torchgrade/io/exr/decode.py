@@ -142,11 +142,15 @@ def _part_file(path, chosen: ExrPart, alone: bool):
     """The file to decode part ``chosen`` of ``path`` from, once the part's chunk offset table is checked
     (``ValueError`` otherwise): ``path`` itself when ``alone`` (the part is the file's only one, or the
     first, which ``InputFile`` reaches), else a single-part copy of the part in a temporary folder,
-    removed afterwards."""
+    removed afterwards. A part whose compression the checks do not know is left to the library when alone,
+    and refused otherwise (the copy needs its table)."""
     table = chunk_table(path, chosen)
     if alone:
         yield Path(path)
         return
+    if table is None:
+        raise ValueError(f"{path}: part {chosen.index} is compressed with a code whose chunk layout torchgrade does not "
+                         "know, so it cannot be copied out of its multi-part file to decode")
     with tempfile.TemporaryDirectory(prefix="torchgrade-exr-") as folder:
         copy = Path(folder) / "part.exr"
         with open(copy, "wb") as target:

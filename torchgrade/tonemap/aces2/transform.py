@@ -8,6 +8,9 @@ Source: Academy aces-output (ACES 2.0 Output Transforms) and OpenColorIO's built
 
 from __future__ import annotations
 
+import threading
+import weakref
+
 import torch
 
 from ... import color
@@ -19,7 +22,7 @@ from .gamut import FOCUS_DISTANCE, FOCUS_DISTANCE_SCALING, GamutParams, gamut_co
 from .tables import hue_and_cusp_tables, reach_m_table, upper_hull_gamma
 from .tonescale import chroma_compress, chroma_norm, chroma_params, daniele_tonescale, tonescale_params
 
-__all__ = ["PRIMARIES", "ENCODINGS", "Aces2Output", "aces2_output", "prepare_output", "peak_number"]
+__all__ = ["PRIMARIES", "ENCODINGS", "Aces2Output", "Prepared", "aces2_output", "prepare_output", "peak_number"]
 
 PRIMARIES = {
     "rec709": color.REC709_CHROMATICITIES,
@@ -77,39 +80,64 @@ class Aces2Output:
         return rgb.clamp(0.0, self.peak / REFERENCE_LUMINANCE)
 
 
+class Prepared:
+    """What a stage keeps of the tables it prepared (:func:`prepare_output`): while it lives, the shared cache keeps
+    them, so the stage's compiled or traced forward finds them however many other tables were built since.
+
+    Examples:
+        >>> prepare_output(100.0, "rec709").output.peak
+        100.0
+    """
+
+    def __init__(self, key: tuple, output: Aces2Output):
+        self.key, self.output = key, output
+
+
 _BUILT: dict = {}
-"""Built tables by ``(peak, limiting)``; a few are kept (each is a few hundred kilobytes)."""
+"""Built tables by ``(peak, limiting)``, oldest first: the :data:`MAX_BUILT` built last, and any a stage holds."""
 
 MAX_BUILT = 8
+"""Tables kept beyond those a stage holds (each is a few hundred kilobytes); ``_BUILT`` is read without the lock, by
+forwards (a compiled one reads it as a constant), and only ever loses a key no stage holds."""
+
+_HELD = weakref.WeakSet()
+"""The :class:`Prepared` objects alive (held by stages)."""
+
+_LOCK = threading.Lock()
 
 
 def _output(peak: float, limiting: str) -> Aces2Output:
     """The tables of ``(peak, limiting)``, built once. A stage builds them when its controls are set
     (:func:`prepare_output`), so a compiled or traced forward finds them here as constants of its graph."""
     built = _BUILT.get((peak, limiting))
-    return built if built is not None else prepare_output(peak, limiting)
+    return built if built is not None else prepare_output(peak, limiting).output
 
 
-def prepare_output(peak: float, limiting: str) -> Aces2Output:
-    """Build (once) and keep the tables of ``(peak, limiting)``, outside any ONNX trace (which would record their search).
+def prepare_output(peak: float, limiting: str) -> Prepared:
+    """Build (once) the tables of ``(peak, limiting)``, outside any ONNX trace (which would record their search), and
+    keep them while the returned :class:`Prepared` lives (and while they are among the :data:`MAX_BUILT` built last).
 
     Examples:
-        >>> prepare_output(100.0, "rec709") is prepare_output(100.0, "rec709")
+        >>> prepare_output(100.0, "rec709").output is prepare_output(100.0, "rec709").output
         True
     """
     key = (float(peak), limiting)
-    built = _BUILT.get(key)
-    if built is None:
-        tracing = torch._C._get_tracing_state()
-        torch._C._set_tracing_state(None)
-        try:
-            built = Aces2Output(*key)
-        finally:
-            torch._C._set_tracing_state(tracing)
-        if len(_BUILT) >= MAX_BUILT:
-            _BUILT.pop(next(iter(_BUILT)))
-        _BUILT[key] = built
-    return built
+    with _LOCK:
+        built = _BUILT.get(key)
+        if built is None:
+            tracing = torch._C._get_tracing_state()
+            torch._C._set_tracing_state(None)
+            try:
+                built = Aces2Output(*key)
+            finally:
+                torch._C._set_tracing_state(tracing)
+            _BUILT[key] = built
+            held = {prepared.key for prepared in _HELD}
+            for old in [old for old in _BUILT if old not in held and old != key][:max(len(_BUILT) - MAX_BUILT, 0)]:
+                del _BUILT[old]
+        prepared = Prepared(key, built)
+        _HELD.add(prepared)
+    return prepared
 
 
 def _rgb_to_rgb(source, target) -> torch.Tensor:
