@@ -40,17 +40,19 @@ def seeded(seed):
 
 
 def reference_sample(image, params, i, layer):
-    """Sample ``i`` through tg.Bloom, tg.ColorGrade and tg.ToneMap with its sampled parameters."""
+    """Sample ``i`` through tg.Bloom, tg.ColorGrade and tg.ToneMap with its sampled parameters (a skipped sample
+    through the tone mapper alone)."""
     x = image[i : i + 1]
-    if not params["batch_prob"][i]:
+    if not params["batch_prob"][i] and "tonemap" not in params:
         return x
     if layer.input_space == "srgb":
         x = srgb_to_linear(x)
     bloom = {name[len("bloom_") :]: params[name][i].item() for name in BLOOM_RANGES if name in params}
-    if bloom:
+    if bloom and params["batch_prob"][i]:
         x = tg.Bloom(mode=layer.bloom_mode, **bloom)(x)
     grade = {name: params[name][i].tolist() for name in GRADE_RANGES if name in params}
-    x = tg.ColorGrade(aces=layer.aces, **grade)(x)
+    if params["batch_prob"][i]:
+        x = tg.ColorGrade(aces=layer.aces, **grade)(x)
     if "tonemap" in params:
         x = tg.ToneMap(layer.tonemap[params["tonemap"][i]])(x)
     if layer.input_space == "srgb":
@@ -78,14 +80,25 @@ def test_aces_grade_matches_per_sample_layers():
     assert_matches_per_sample(layer, images, layer(images, generator=seeded(6)))
 
 
-def test_skipped_samples_are_the_input_and_applied_ones_graded(device):
+def test_skipped_samples_are_tone_mapped_ungraded_and_applied_ones_graded(device):
+    """The output transform applies to every sample, so a batch never mixes scene- and display-referred values."""
     layer = tg.RandomPostFX(contrast=(20.0, 40.0), tonemap="reinhard", p=0.5)
     images = hdr_batch(batch=12, device=device)
     out = layer(images, generator=seeded(3))
     applied = layer.last_params["batch_prob"]
     assert 0 < applied.sum() < 12, "the seed should skip some samples and apply others"
-    assert torch.equal(out[~applied], images[~applied])
+    assert out.max() <= 1.0
+    torch.testing.assert_close(out[~applied], images[~applied] / (1.0 + images[~applied]), rtol=1e-12, atol=1e-12)
     assert_matches_per_sample(layer, images, out)
+
+
+def test_skipped_samples_are_the_input_exactly_without_an_output_transform():
+    layer = tg.RandomPostFX(contrast=(20.0, 40.0), saturation=20, p=0.5)
+    images = hdr_batch(batch=12)
+    out = layer(images, generator=seeded(3))
+    applied = layer.last_params["batch_prob"]
+    assert 0 < applied.sum() < 12
+    assert torch.equal(out[~applied], images[~applied])
 
 
 def test_srgb_input_is_decoded_graded_and_encoded():
@@ -160,11 +173,16 @@ def test_same_on_batch_draws_once():
         assert (out == out[:1]).all()
 
 
-def test_p_zero_is_identity():
-    layer = tg.RandomPostFX(**FULL, p=0.0)
+def test_p_zero_leaves_only_the_tone_mapper():
     images = hdr_batch()
-    assert torch.equal(layer(images, generator=seeded(0)), images)
-    assert not layer.last_params["batch_prob"].any()
+    untouched = tg.RandomPostFX(**{**FULL, "tonemap": None}, p=0.0)
+    assert torch.equal(untouched(images, generator=seeded(0)), images)
+    assert not untouched.last_params["batch_prob"].any()
+    layer = tg.RandomPostFX(**FULL, p=0.0)
+    out = layer(images, generator=seeded(0))
+    modes = layer.last_params["tonemap"]
+    for index, mode in enumerate(modes.tolist()):
+        torch.testing.assert_close(out[index], tg.ToneMap(MODES[mode])(images[index : index + 1])[0], rtol=1e-12, atol=1e-12)
 
 
 def test_identity_ranges_are_off():

@@ -163,7 +163,7 @@ def _number_controls():
     from torchgrade.tonemap import TONE_MAPPERS
 
     for stage, cls in STAGES.items():
-        tables = [({}, cls.controls)]
+        tables = [({"lut": 2} if stage == "look_lut" else {}, cls.controls)]  # a look LUT needs its table (here 2³)
         if stage == "tonemap":
             tables = [({"mode": mode}, entry.controls) for mode, entry in TONE_MAPPERS.items()]
         for setting, table in tables:

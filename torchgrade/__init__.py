@@ -17,6 +17,7 @@ from .display import Display
 from .dither import Dither
 from .exposure import AutoExposure
 from .grade import ColorGrade
+from .look_lut import LookLUT
 from .lut import LUT3D, bake_lut
 from .match import match_look
 from .pipeline import PostFX
@@ -45,6 +46,7 @@ __all__ = [
     "AutoExposure",
     "ColorGrade",
     "LUT3D",
+    "LookLUT",
     "bake_lut",
     "match_look",
     "PostFX",

@@ -11,8 +11,8 @@ Everything is off by default, as in kornia's ``ColorJiggle``; a range ``(v, v)``
 identity is off too. Controls that are off are not computed; with every control off the layer
 returns its input.
 
-**Order**, that of the library's pipeline: (sRGB decode) -> bloom -> grade -> tone mapper ->
-(sRGB encode).
+**Order**, that of the look's slots (:data:`torchgrade.pipeline.SLOTS`): (sRGB decode) -> bloom -> grade ->
+tone mapper -> look LUT -> (sRGB encode).
 
 **Tone mapping** is off by default (``tonemap=None``): the output of an HDR input stays
 scene-referred linear, ready for the next augmentation or for the network. ``tonemap`` may name
@@ -21,15 +21,21 @@ sample. Each mode is evaluated once, on the samples that chose it (the batch is 
 split, mapped and put back in order), so a batch costs one tone mapper per sample whatever the
 number of modes; counting the modes reads one small tensor back from the device.
 
+**A look LUT** (``look_lut``: a :class:`~torchgrade.LookLUT`, a ``.cube``/CLF path, a
+:class:`~torchgrade.LUT3D` or a table) is applied after the tone mapper, on display-referred values
+(so it needs ``tonemap`` or ``input_space="srgb"``), with a contribution drawn per sample from
+``look_lut_contribution`` (a ``(min, max)`` range in [0, 1]; the stage's own contribution when None).
+
 **sRGB inputs** (``input_space="srgb"``) are display-referred images in [0, 1]: they are decoded
 to linear, graded, encoded again and clamped to [0, 1], the display range they came from. They
 are not tone mapped unless ``tonemap`` is given (then the decoded values are treated as
 scene-referred linear, for example after a positive exposure).
 
-**Skipped samples** (probability ``1 - p``) are blended back with ``torch.where``, so one graph
-serves the whole batch and a skipped sample's output equals its input exactly: with a tone mapper
-and ``p < 1`` skipped samples stay scene-referred (to tone map every sample, follow the layer with
-:class:`torchgrade.ToneMap`). ``p = 0`` returns the input without computing anything.
+**Skipped samples** (probability ``1 - p``) keep their input where the random controls act (bloom and
+grade, blended back with ``torch.where``, so one graph serves the whole batch) and get a look LUT
+contribution of 0, but the output transform, the tone mapper, applies to every sample: a batch never
+mixes scene-referred and display-referred values. Without a tone mapper or look LUT a skipped sample's
+output equals its input exactly. ``p = 0`` skips the random controls without computing them.
 
 **Precision.** float16 and bfloat16 inputs are computed in float32 and returned in their own dtype.
 """
@@ -52,9 +58,14 @@ from .color import linear_to_srgb, srgb_to_linear
 from .core import check_image, is_tracing, to_input_dtype, working_dtype
 from .runtime import DeferredCheck, policy_for
 from .grade import ColorGrade, color_grade
+from .look_lut import LookLUT, look_lut
+from .pipeline import SLOTS
 from .tonemap import tonemap
 
 __all__ = ["RandomPostFX", "tonemap_per_sample", "GRADE_CONTROLS", "BLOOM_CONTROLS", "COLOUR_CONTROLS", "INPUT_SPACES"]
+
+_RANDOM_SLOTS = ("bloom", "grade")
+"""The slots whose controls are drawn and which a skipped sample passes through unchanged."""
 
 SRGB_TOLERANCE = 1e-3
 """How far above 1 an sRGB input may reach (rounding of an earlier step) before it is refused as 0..255 data."""
@@ -92,6 +103,13 @@ def tonemap_per_sample(images: torch.Tensor, choice: torch.Tensor, modes: tuple)
     return mapped.index_select(0, torch.argsort(order))
 
 
+def _look_stage(look_lut) -> LookLUT | None:
+    """``RandomPostFX``'s ``look_lut`` as a stage: a ``LookLUT``, a dict of its arguments (a config's), or its ``lut``."""
+    if look_lut is None or isinstance(look_lut, LookLUT):
+        return look_lut
+    return LookLUT.from_config(look_lut) if isinstance(look_lut, dict) else LookLUT(look_lut)
+
+
 class RandomPostFX(IntensityAugmentationBase2D):
     """Random per-sample post-processing of a batch ``(B, 3, H, W)``, one image ``(3, H, W)`` or clips ``(B, T, 3, H, W)``.
 
@@ -111,11 +129,13 @@ class RandomPostFX(IntensityAugmentationBase2D):
             ``bloom_intensity=(0, 0)``); the others keep ``Bloom``'s defaults. ``bloom_scatter`` needs ``bloom_mode="scattering"``.
         bloom_mode: ``"additive"`` or ``"scattering"``.
         tonemap: None (no tone mapping), a mode of :data:`torchgrade.TONEMAP_MODES`, or a sequence of
-            modes chosen uniformly per sample.
+            modes chosen uniformly per sample; applied to every sample, skipped ones included.
+        look_lut: None, or a creative LUT after the tone mapper (see the module docstring).
+        look_lut_contribution: ``(min, max)`` range of the look LUT's contribution inside [0, 1], or None.
         aces: grade in ACEScc/ACEScg as :class:`torchgrade.ColorGrade` does.
         input_space: ``"linear"`` (scene-referred HDR) or ``"srgb"`` (sRGB-encoded LDR in [0, 1]; 0..255
             floats raise ``ValueError`` rather than being clamped).
-        p: probability that a sample is changed; the others are returned unchanged.
+        p: probability that a sample's random controls act; the others keep their input up to the output transform.
         same_on_batch: one draw for the whole batch (kornia's meaning, ``p`` included).
         keepdim: return a single ``(3, H, W)`` image as ``(3, H, W)`` rather than ``(1, 3, H, W)``.
         same_on_frame: for clips ``(B, T, 3, H, W)``, one look per clip (kornia ``VideoSequential``'s
@@ -155,6 +175,8 @@ class RandomPostFX(IntensityAugmentationBase2D):
         bloom_scatter=None,
         bloom_mode: str = "additive",
         tonemap=None,
+        look_lut=None,
+        look_lut_contribution=None,
         aces: bool = False,
         input_space: str = "linear",
         p: float = 1.0,
@@ -173,11 +195,26 @@ class RandomPostFX(IntensityAugmentationBase2D):
             self.bloom_ranges = {}
         self.bloom_mode = bloom_mode
         self.tonemap = checked_tonemap(tonemap)
+        self.look_lut = _look_stage(look_lut)
+        self.look_ranges = self._look_ranges(look_lut_contribution)
         self.aces = bool(aces)
         self.input_space = input_space
         self.same_on_frame = bool(same_on_frame)
         self._check_settings()
         self._local = threading.local()
+
+    def _look_ranges(self, contribution) -> dict:
+        """The look LUT's contribution range (its own contribution when None), or nothing without a look LUT."""
+        if self.look_lut is None:
+            if contribution is not None:
+                raise ValueError("look_lut_contribution needs a look_lut")
+            return {}
+        if contribution is None:
+            own = self.look_lut.contribution
+            if isinstance(own, torch.Tensor):
+                raise ValueError("give look_lut_contribution as a range: the look LUT's contribution is a tensor")
+            contribution = (own, own)
+        return {"look_lut_contribution": checked_range("look_lut_contribution", contribution, LookLUT.controls["contribution"].range)}
 
     def _check_settings(self) -> None:
         if self.bloom_mode not in BLOOM_MODES:
@@ -188,18 +225,28 @@ class RandomPostFX(IntensityAugmentationBase2D):
             raise ValueError("split_balance changes nothing without split_shadows or split_highlights")
         if self.input_space not in INPUT_SPACES:
             raise ValueError(f"input_space must be one of {INPUT_SPACES}, got {self.input_space!r}")
+        if self.look_lut is not None and not self.tonemap and self.input_space != "srgb":
+            raise ValueError('look_lut takes display-referred values: give a tonemap, or input_space="srgb" images')
         if isinstance(self.p, bool) or not isinstance(self.p, numbers.Real) or not 0.0 <= self.p <= 1.0:
             raise ValueError(f"p must be a probability in [0, 1], got {self.p!r}")
 
     @property
     def ranges(self) -> dict:
         """The ranges sampled, by control name, in sampling order."""
-        return {**self.bloom_ranges, **self.grade_ranges}
+        return {**self.bloom_ranges, **self.grade_ranges, **self.look_ranges}
 
     @property
     def is_identity(self) -> bool:
-        """True when no control, bloom or tone mapper is on: the layer then returns its input."""
+        """True when no control, bloom, tone mapper or look LUT is on: the layer then returns its input."""
         return not (self.ranges or self.tonemap)
+
+    def slots(self) -> tuple:
+        """The look's slots (:data:`~torchgrade.pipeline.SLOTS`) this layer fills, in their order, with whether a
+        skipped sample (``batch_prob`` False) leaves the slot's input unchanged (the random controls) or not (the
+        tone mapper, the output transform; a look LUT's contribution is 0 for it)."""
+        filled = {"bloom": bool(self.bloom_ranges), "grade": bool(self.grade_ranges), "tonemap": bool(self.tonemap),
+                  "look_lut": self.look_lut is not None}
+        return tuple(slot.name for slot in SLOTS if filled.get(slot.name))
 
     def _widths(self) -> list:
         return [3 if name in COLOUR_CONTROLS else 1 for name in self.ranges]
@@ -254,20 +301,40 @@ class RandomPostFX(IntensityAugmentationBase2D):
                 raise ValueError(f"params[{name!r}] must be a tensor with {rows} per-sample values, got {value!r}")
         return {name: value.to(device) for name, value in params.items()}
 
-    def transform(self, images: torch.Tensor, params: dict) -> torch.Tensor:
-        """Apply ``params`` to every sample of ``images`` (B, 3, H, W), ignoring ``batch_prob``."""
+    def transform(self, images: torch.Tensor, params: dict, applied: torch.Tensor | None = None) -> torch.Tensor:
+        """Apply ``params`` to ``images`` (B, 3, H, W), slot by slot in the look's order (:meth:`slots`); with
+        ``applied`` ((B, 1, 1, 1) bool), only its samples get the random controls."""
         x = working_dtype(images)
         if self.input_space == "srgb":
             x = srgb_to_linear(x)
-        if self.bloom_ranges:
-            controls = {BLOOM_CONTROLS[name][0]: params[name] for name in self.bloom_ranges}
-            x = bloom_with_settings(x, bloom_settings({"mode": self.bloom_mode, **controls}))  # drawn inside their ranges
-        x = color_grade(x, aces=self.aces, **{name: params[name] for name in self.grade_ranges})
-        if self.tonemap:
-            x = tonemap_per_sample(x, params["tonemap"], self.tonemap)
+        held = None  # the input of the random controls, kept for the skipped samples
+        for slot in self.slots():
+            random = slot in _RANDOM_SLOTS
+            if random and held is None and applied is not None:
+                held = x
+            if not random and held is not None:
+                x, held = torch.where(applied, x, held), None
+            x = getattr(self, f"_{slot}")(x, params, applied)
         if self.input_space == "srgb":
             x = linear_to_srgb(x).clamp(0.0, 1.0)
-        return to_input_dtype(x, images)
+        x = to_input_dtype(x, images)
+        return x if held is None else torch.where(applied, x, images)  # only random controls: skipped samples exact
+
+    def _bloom(self, x: torch.Tensor, params: dict, applied) -> torch.Tensor:
+        controls = {BLOOM_CONTROLS[name][0]: params[name] for name in self.bloom_ranges}
+        return bloom_with_settings(x, bloom_settings({"mode": self.bloom_mode, **controls}))  # drawn inside their ranges
+
+    def _grade(self, x: torch.Tensor, params: dict, applied) -> torch.Tensor:
+        return color_grade(x, aces=self.aces, **{name: params[name] for name in self.grade_ranges})
+
+    def _tonemap(self, x: torch.Tensor, params: dict, applied) -> torch.Tensor:
+        return tonemap_per_sample(x, params["tonemap"], self.tonemap)
+
+    def _look_lut(self, x: torch.Tensor, params: dict, applied) -> torch.Tensor:
+        contribution = params["look_lut_contribution"]
+        if applied is not None:
+            contribution = contribution * applied.reshape(-1)
+        return look_lut(x, self.look_lut.lut, contribution, self.look_lut.encoding)
 
     def apply_transform(self, input: torch.Tensor, params: dict, flags: dict, transform=None) -> torch.Tensor:
         """kornia's hook: :meth:`transform`."""
@@ -282,11 +349,10 @@ class RandomPostFX(IntensityAugmentationBase2D):
             check({"peak": images.detach().amax()}, _check_peak)
 
     def _graded(self, images: torch.Tensor, params: dict) -> torch.Tensor:
-        if self.p == 0 or self.is_identity:
+        if self.is_identity or (self.p == 0 and not self.tonemap):
             return images
         self._check_display_range(images)
-        applied = params["batch_prob"].bool().reshape(-1, 1, 1, 1)
-        return torch.where(applied, self.transform(images, params), images)
+        return self.transform(images, params, params["batch_prob"].bool().reshape(-1, 1, 1, 1))
 
     def forward(self, x: torch.Tensor, generator: torch.Generator | None = None, params: dict | None = None,
                 **container_args) -> torch.Tensor:
@@ -316,11 +382,12 @@ class RandomPostFX(IntensityAugmentationBase2D):
         ``RandomPostFX.from_config(layer.to_config())`` builds a layer that draws the same looks.
         """
         config = {name: list(pair) for name, pair in self.ranges.items()}
+        look = None if self.look_lut is None else {k: v for k, v in self.look_lut.to_config().items() if k != "contribution"}
         settings = {"bloom_mode": self.bloom_mode if self.bloom_ranges else "additive",
-                    "tonemap": list(self.tonemap) or None, "aces": self.aces, "input_space": self.input_space,
+                    "tonemap": list(self.tonemap) or None, "look_lut": look, "aces": self.aces, "input_space": self.input_space,
                     "p": self.p, "same_on_batch": self.same_on_batch, "keepdim": self.keepdim,
                     "same_on_frame": self.same_on_frame}
-        defaults = {"bloom_mode": "additive", "tonemap": None, "aces": False, "input_space": "linear", "p": 1.0,
+        defaults = {"bloom_mode": "additive", "tonemap": None, "look_lut": None, "aces": False, "input_space": "linear", "p": 1.0,
                     "same_on_batch": False, "keepdim": False, "same_on_frame": True}
         config.update({name: value for name, value in settings.items() if value != defaults[name]})
         return config
@@ -355,6 +422,8 @@ class RandomPostFX(IntensityAugmentationBase2D):
             settings.append(f"bloom_mode={self.bloom_mode!r}")
         if self.tonemap:
             settings.append(f"tonemap={self.tonemap}")
+        if self.look_lut is not None:
+            settings.append(f"look_lut=({self.look_lut.extra_repr()})")
         if self.aces:
             settings.append("aces=True")
         settings += [f"input_space={self.input_space!r}", f"p={self.p}", f"same_on_batch={self.same_on_batch}"]

@@ -32,7 +32,8 @@ from .bloom import BLOOM_MODES, Bloom, ConvolutionBloom
 from .dither import Dither
 from .exposure import AutoExposure
 from .grade import ColorGrade
-from .lut import INTERPOLATIONS, LUT3D, LUTAccuracyWarning, bake_lut, is_display_referred
+from .look_lut import LookLUT
+from .lut import INTERPOLATIONS, LUT3D, LUTAccuracyWarning, bake_lut, identity_table, is_display_referred
 from .pipeline import PostFX
 from .primary import STYLES, PrimaryGrade
 from .tonemap import TONEMAP_MODES, ToneMap
@@ -65,19 +66,6 @@ class StageKind:
         return is_display_referred(self.example())
 
 
-class Lookup(nn.Module):
-    """A ``LUT3D`` applied with one interpolation, as a module of its own."""
-
-    display_referred = True
-
-    def __init__(self, lut: LUT3D, interpolation: str):
-        super().__init__()
-        self.lut, self.interpolation = lut, interpolation
-
-    def forward(self, image: torch.Tensor) -> torch.Tensor:
-        return self.lut(image, interpolation=self.interpolation)
-
-
 @functools.lru_cache(maxsize=1)
 def _strong_lut() -> LUT3D:
     # baking measures the LUT's error (seconds): once, then copies. A 9³ table of this look misses it
@@ -87,9 +75,17 @@ def _strong_lut() -> LUT3D:
         return bake_lut(nn.Sequential(ColorGrade(aces=True, **STRONG_GRADE), ToneMap("aces")), size=9)
 
 
-def _lookup(interpolation: str) -> Lookup:
-    """A 9³ LUT of the strong grade in ACES followed by the ACES tone mapper."""
-    return Lookup(copy.deepcopy(_strong_lut()), interpolation)
+def _lookup(interpolation: str) -> LUT3D:
+    """A 9³ LUT of the strong grade in ACES followed by the ACES tone mapper, looked up with ``interpolation``."""
+    lut = copy.deepcopy(_strong_lut())
+    lut.interpolation = interpolation
+    return lut
+
+
+def _warm_table() -> torch.Tensor:
+    """A 9³ creative table: warmer, with more contrast in sRGB codes (a smoothstep on each channel)."""
+    codes = identity_table(9)
+    return (codes * codes * (3.0 - 2.0 * codes) * torch.tensor([1.0, 0.95, 0.85])).clamp(0.0, 1.0)
 
 
 def _kinds() -> dict[str, StageKind]:
@@ -109,6 +105,7 @@ def _kinds() -> dict[str, StageKind]:
                   for mode in BLOOM_MODES})
     kinds["convolution-bloom"] = StageKind(partial(ConvolutionBloom, torch.ones(1, 3, 3)), dict(intensity=0.8, threshold=0.8))
     kinds["dither"] = StageKind(Dither)
+    kinds["look-lut"] = StageKind(partial(LookLUT, _warm_table()), dict(contribution=0.7))
     kinds.update({f"lut-{interpolation}": StageKind(partial(_lookup, interpolation)) for interpolation in INTERPOLATIONS})
     kinds["postfx"] = StageKind(PostFX, dict(exposure={}, bloom={"mode": "scattering", "intensity": 0.5},
                                              grade={"aces": True, **STRONG_GRADE}, tonemap="aces"))
@@ -118,4 +115,4 @@ def _kinds() -> dict[str, StageKind]:
 STAGE_KINDS: dict[str, StageKind] = _kinds()
 """``{name: StageKind}``: every tone mapper, the grade in Rec.709 and in ACES, both primary grade styles, both
 eye-adaptation operators, histogram metering with its limits and curve, a user's metering mask, every bloom
-composite, convolution bloom, dither, the LUT with each interpolation, and a whole ``PostFX`` look."""
+composite, convolution bloom, dither, the LUT with each interpolation, a creative look LUT, and a whole ``PostFX`` look."""

@@ -1,37 +1,44 @@
-"""``PostFX``: the whole look, ``AutoExposure -> Bloom -> ColorGrade -> PrimaryGrade -> ToneMap -> Dither -> Display``,
-built from arguments or a config.
+r"""``PostFX``: the whole look, its stages in the order of :data:`SLOTS`, built from arguments or a config.
+
+The look's slots, in the order they run (one declaration, :data:`SLOTS`, read by the constructor,
+``forward``, the config, :meth:`PostFX.to_lut`, the ONNX export and :class:`~torchgrade.RandomPostFX`)::
+
+    exposure -> bloom -> grade -> primary -> tonemap -> look_lut -> dither -> display
+                         \______ a baked lut ______/
 
 Each stage is given as a module, a dict of its constructor arguments, or ``None``. Only the stages a
 scene needs are built ("model only what a scene requires"): a grade or primary grade whose controls are
-all identity, a bloom of intensity 0 (or ``max_iterations`` 0) and a dither of amplitude 0 are dropped, so they cost nothing in PyTorch and
-add no ONNX nodes. Tone mapping is never dropped when given (even ``"none"`` clips to [0, 1]).
+all identity, a bloom of intensity 0 (or ``max_iterations`` 0), a look LUT of contribution 0 and a dither of
+amplitude 0 are dropped, so they cost nothing in PyTorch and add no ONNX nodes. Tone mapping is never
+dropped when given (even ``"none"`` clips to [0, 1]).
 
-A config is a dict (or a JSON file) with the keys ``exposure``, ``bloom``, ``grade``, ``primary``,
-``tonemap``, ``dither`` and ``display`` (the last three optional stages are off unless given; without
-``display`` the look returns display-linear light, with it the display's signal, see
-:class:`~torchgrade.display.Display`);
-each holds the arguments of its stage (``tonemap`` may also be just a mode name)::
+A config is a dict (or a JSON file) whose keys are the slots' names (all optional; without ``display``
+the look returns display-linear light, with it the display's signal, see
+:class:`~torchgrade.display.Display`); each holds the arguments of its stage (``tonemap`` may also be
+just a mode name, ``look_lut`` just the path of a ``.cube`` or CLF file)::
 
     {"bloom": {"intensity": 0.8, "threshold": 1.2},
      "grade": {"aces": true, "contrast": 20, "saturation": 10},
-     "tonemap": {"mode": "aces"}}
+     "tonemap": {"mode": "aces"},
+     "look_lut": {"lut": "show.cube", "contribution": 0.6}}
 
 Unknown stages and keys, unknown modes, values of the wrong JSON type and out-of-range values raise
 ``ValueError`` naming the key (``"unknown key 'grade.brightness'"``, ``"grade.contrast must lie in
 [-100.0, 100.0], got 150"``). A list where a control takes one number (or one colour, one matrix) is
 per-sample, and becomes the tensor :meth:`PostFX.to_config` wrote it from (:mod:`torchgrade.config`).
 
-:meth:`PostFX.to_lut` bakes grade and tone mapping into one :class:`~torchgrade.lut.LUT3D` while
-exposure, bloom and dither (which depend on neighbouring pixels, the whole frame or the pixel's position)
-stay live.
+:meth:`PostFX.to_lut` bakes the slots a LUT can hold (grade, primary grade and tone mapping) into one
+:class:`~torchgrade.lut.LUT3D`, the look's ``lut`` slot, while the others (exposure, bloom, the look LUT,
+dither, display) stay live.
 """
 
 from __future__ import annotations
 
 import copy
 import inspect
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
+from typing import Callable, Optional
 
 import torch
 from torch import nn
@@ -42,14 +49,49 @@ from .display import Display, display_settings
 from .dither import Dither
 from .exposure import AutoExposure
 from .grade import ColorGrade
+from .look_lut import LookLUT
 from .lut import INTERPOLATIONS, LUT3D, ErrorReport, bake_lut
 from .primary import PrimaryGrade
 from .tonemap import ToneMap
 
-__all__ = ["PostFX", "STAGES", "SAFE_GLOBALS", "stage_keys", "build_stage", "is_identity_stage"]
+__all__ = ["PostFX", "Slot", "SLOTS", "STAGES", "SAFE_GLOBALS", "stage_keys", "build_stage", "is_identity_stage"]
 
-STAGES = {"exposure": AutoExposure, "bloom": Bloom, "grade": ColorGrade, "primary": PrimaryGrade, "tonemap": ToneMap, "dither": Dither,
-          "display": Display}
+
+@dataclass(frozen=True)
+class Slot:
+    """One place in a look: its ``name`` (the constructor argument, attribute and config key) and ``stage`` class.
+
+    ``shorthand``: the argument a plain string names (``tonemap="aces"`` is ``{"mode": "aces"}``); ``completed``:
+    ``(spec, look) -> spec``, arguments completed from the slots before it; ``timed``: the stage keeps state between
+    frames and takes ``dt``; ``bakes``: a baked LUT holds it; ``baked``: the slot of the baked LUT itself, which stands
+    for the ``bakes`` slots and has no config of its own.
+    """
+
+    name: str
+    stage: type
+    shorthand: Optional[str] = None
+    completed: Optional[Callable] = None
+    timed: bool = False
+    bakes: bool = False
+    baked: bool = False
+
+
+SLOTS = (
+    Slot("exposure", AutoExposure, timed=True),
+    Slot("bloom", Bloom),
+    Slot("grade", ColorGrade, bakes=True),
+    Slot("primary", PrimaryGrade, bakes=True),
+    Slot("tonemap", ToneMap, shorthand="mode", bakes=True),
+    Slot("lut", LUT3D, baked=True),
+    Slot("look_lut", LookLUT, shorthand="lut"),
+    Slot("dither", Dither),
+    Slot("display", Display, completed=lambda spec, look: display_settings(spec, look.tonemap)),
+)
+"""The look's slots, in the order they run: the one declaration of that order. A new slot is one line here."""
+
+SLOT = {slot.name: slot for slot in SLOTS}
+
+STAGES = {slot.name: slot.stage for slot in SLOTS if not slot.baked}
 """The configurable stages, in the order they run, and their classes."""
 
 
@@ -66,7 +108,7 @@ def stage_keys(stage: str) -> tuple:
 
 
 def build_stage(stage: str, spec) -> Optional[nn.Module]:
-    """A stage module from a module, a dict of arguments (``tonemap`` also a mode name) or ``None``.
+    """A stage module from a module, a dict of arguments (a slot's shorthand string too) or ``None``.
 
     Raises ``ValueError`` naming ``stage.key`` for unknown keys and for values the stage rejects.
 
@@ -80,8 +122,9 @@ def build_stage(stage: str, spec) -> Optional[nn.Module]:
     """
     if spec is None or isinstance(spec, nn.Module):
         return spec
-    if stage == "tonemap" and isinstance(spec, str):
-        spec = {"mode": spec}
+    shorthand = SLOT[stage].shorthand
+    if shorthand and isinstance(spec, (str, Path)):
+        spec = {shorthand: spec}
     if not isinstance(spec, dict):
         raise ValueError(f"{stage} must be a module, a dict of its arguments or None, got {type(spec).__name__}")
     known = stage_keys(stage)
@@ -90,7 +133,7 @@ def build_stage(stage: str, spec) -> Optional[nn.Module]:
             raise ValueError(f"unknown key '{stage}.{key}'; {stage} takes {', '.join(known)}")
     try:
         return STAGES[stage].from_config(spec)
-    except (ValueError, TypeError) as error:
+    except (ValueError, TypeError, OSError) as error:
         raise ValueError(_qualified(stage, str(error), spec)) from None
 
 
@@ -110,14 +153,22 @@ def is_identity_stage(module: nn.Module) -> bool:
     return bool(getattr(module, "is_identity", False))
 
 
-class PostFX(nn.Module):
-    """A look: ``PostFX(exposure=None, bloom=None, grade=None, tonemap=None, primary=None, dither=None, display=None)``;
-    see the module docstring.
+def _constructor_signature() -> inspect.Signature:
+    keyword = inspect.Parameter.KEYWORD_ONLY
+    slots = [inspect.Parameter(slot.name, keyword, default=None) for slot in SLOTS]
+    return inspect.Signature([*slots, inspect.Parameter("interpolation", keyword, default=None)])
 
-    ``lut`` (a :class:`~torchgrade.lut.LUT3D`, applied with ``interpolation``) replaces ``grade``,
-    ``primary`` and ``tonemap``; :meth:`to_lut` builds such a look. ``forward(image, dt=None)`` runs the stages in
-    order; ``dt`` (seconds since the previous frame) is passed to the exposure stage, which keeps the
-    adapted luminance between calls (see :class:`~torchgrade.AutoExposure`).
+
+class PostFX(nn.Module):
+    """A look: ``PostFX(exposure=None, bloom=None, grade=None, primary=None, tonemap=None, lut=None, look_lut=None,
+    dither=None, display=None)``, one keyword a slot of :data:`SLOTS`; see the module docstring.
+
+    ``lut`` (a :class:`~torchgrade.lut.LUT3D`) stands for ``grade``, ``primary`` and ``tonemap``; :meth:`to_lut`
+    builds such a look, and ``interpolation`` looks that LUT up another way than its own (the ``LUT3D``'s control). ``look_lut`` (a :class:`~torchgrade.LookLUT`, a
+    ``.cube``/CLF path or a dict of its arguments) is a creative LUT on the display-referred image, so it needs a
+    tone mapper (or a baked LUT that clamps to [0, 1]) before it. ``forward(image, dt=None)`` runs the stages in
+    order; ``dt`` (seconds since the previous frame) is passed to the exposure stage, which keeps the adapted
+    luminance between calls (see :class:`~torchgrade.AutoExposure`).
 
     Examples:
         >>> look = PostFX(grade={"contrast": 20, "saturation": 0.0}, bloom={"intensity": 0.0}, tonemap="aces")
@@ -127,28 +178,45 @@ class PostFX(nn.Module):
         {'grade': {'contrast': 20}, 'tonemap': {'mode': 'aces'}}
     """
 
-    def __init__(self, exposure=None, bloom=None, grade=None, tonemap=None, lut: Optional[LUT3D] = None,
-                 interpolation: str = "tetrahedral", primary=None, dither=None, display=None):
+    def __init__(self, **slots):
         super().__init__()
-        if lut is not None and (grade is not None or primary is not None or tonemap is not None):
-            raise ValueError("a look takes either lut or grade/primary/tonemap, not both")
-        if interpolation not in INTERPOLATIONS:
-            raise ValueError(f"interpolation must be one of {INTERPOLATIONS}, got {interpolation!r}")
-        given = {"exposure": exposure, "bloom": bloom, "grade": grade, "primary": primary, "tonemap": tonemap, "dither": dither,
-                 "display": display}
-        for stage, spec in given.items():
-            module = build_stage(stage, display_settings(spec, self.tonemap) if stage == "display" else spec)
-            setattr(self, stage, None if module is None or is_identity_stage(module) else module)
-        self.lut = lut
-        self.interpolation = interpolation
+        interpolation = slots.pop("interpolation", None)
+        unknown = sorted(set(slots) - set(SLOT))
+        if unknown:
+            raise TypeError(f"PostFX got unknown slot(s) {unknown}; its slots are {', '.join(SLOT)}")
+        baked = [slot.name for slot in SLOTS if slot.bakes and slots.get(slot.name) is not None]
+        if slots.get("lut") is not None and baked:
+            raise ValueError(f"a look takes either lut or {'/'.join(s.name for s in SLOTS if s.bakes)}, not both (got {baked})")
+        for slot in SLOTS:
+            spec = slots.get(slot.name)
+            if slot.baked:
+                module = _baked_lut(spec, interpolation)
+            else:
+                module = build_stage(slot.name, slot.completed(spec, self) if slot.completed and spec is not None else spec)
+            setattr(self, slot.name, None if module is None or is_identity_stage(module) else module)
+        if interpolation is not None and self.lut is None:
+            raise ValueError("interpolation sets a baked look's LUT: the look has no lut")
+        self._check_look_lut_input()
+
+    __signature__ = _constructor_signature()
+
+    def _check_look_lut_input(self) -> None:
+        """A look LUT takes display-referred light: refuse one with nothing before it that makes such light."""
+        if self.look_lut is None:
+            return
+        ahead = self.lut if self.lut is not None else self.tonemap
+        clamps = self.lut is not None and self.lut.output_range is not None and self.lut.output_range[1] <= 1.0
+        if ahead is None or (self.lut is not None and not clamps):
+            raise ValueError("look_lut takes display-referred light: give the look a tonemap (or a baked lut that "
+                             "clamps to [0, 1]) before it")
 
     @classmethod
     def from_config(cls, config) -> "PostFX":
         """Build a look from a config dict or the path of a JSON file holding one.
 
-        A file is read within bounds (see :func:`~torchgrade.config.load_config`); JSON lists where the
-        stage keeps per-sample tensors come back as tensors, so ``to_config`` -> JSON -> ``from_config``
-        rebuilds a per-sample look.
+        A file is read within bounds (see :func:`~torchgrade.config.load_config`), and a look LUT's relative path in
+        it is taken from the file's folder; JSON lists where the stage keeps per-sample tensors come back as
+        tensors, so ``to_config`` -> JSON -> ``from_config`` rebuilds a per-sample look.
 
         Examples:
             >>> import json
@@ -156,23 +224,22 @@ class PostFX(nn.Module):
             >>> PostFX.from_config(json.loads(json.dumps(look.to_config()))).grade.contrast
             tensor([10., 20.])
         """
+        folder = None
         if isinstance(config, (str, Path)):
+            folder = Path(config).parent
             config = load_config(config)
         if not isinstance(config, dict):
             raise ValueError(f"a look config must be a dict, got {type(config).__name__}")
         for key in config:
             if key not in STAGES:
                 raise ValueError(f"unknown key '{key}'; a look config has {', '.join(STAGES)}")
-        return cls(**config)
+        return cls(**_files_beside(config, folder))
 
     def to_config(self) -> dict:
         """The built stages' arguments as plain values (JSON-ready); ``PostFX.from_config`` inverts it."""
         if self.lut is not None:
             raise ValueError("a look baked to a LUT has no config; save the LUT with torchgrade.io.write_cube")
-        config = {}
-        for stage, module in self.stages().items():
-            config[stage] = module.to_config()
-        return config
+        return {name: module.to_config() for name, module in self.stages().items()}
 
     def get_extra_state(self) -> dict:
         """What ``state_dict()`` carries beside the tensors: each stage's config and which tensors are learnable.
@@ -181,14 +248,16 @@ class PostFX(nn.Module):
         ``PostFX().load_state_dict(state)`` rebuilds the look (a look baked to a LUT loads into a look
         built with a LUT of the same size).
         """
-        return {
-            "stages": {name: module.to_config() for name, module in self.stages().items() if name != "lut"},
+        state = {
+            "stages": {name: module.state_config() for name, module in self.stages().items() if not SLOT[name].baked},
             "parameters": sorted(name for name, _ in self.named_parameters()),
-            "interpolation": self.interpolation,
         }
+        return state if self.lut is None else {**state, "interpolation": self.lut.interpolation}
 
     def set_extra_state(self, state: dict) -> None:
-        self.interpolation = _checked_extra_state(state)["interpolation"]
+        interpolation = _checked_extra_state(state).get("interpolation")
+        if interpolation is not None and self.lut is not None:
+            self.lut.interpolation = interpolation
 
     def _load_from_state_dict(self, state_dict, prefix, *args) -> None:
         extra = state_dict.get(prefix + "_extra_state")
@@ -216,26 +285,20 @@ class PostFX(nn.Module):
         return module
 
     def stages(self) -> dict:
-        """The built stages by name, in the order they run (``"lut"`` for a baked look)."""
-        names = ("exposure", "bloom", "grade", "primary", "tonemap", "lut", "dither", "display")
-        return {name: getattr(self, name) for name in names if getattr(self, name) is not None}
+        """The built stages by name, in the order they run (:data:`SLOTS`)."""
+        return {slot.name: getattr(self, slot.name) for slot in SLOTS if getattr(self, slot.name) is not None}
 
     def forward(self, image: torch.Tensor, dt=None) -> torch.Tensor:
-        if self.exposure is not None:
-            image = self.exposure(image, dt)
-        return self.finish(image)
+        for name, stage in self.stages().items():
+            image = stage(image, dt) if SLOT[name].timed else stage(image)
+        return image
 
     def finish(self, image: torch.Tensor) -> torch.Tensor:
-        """The stages after exposure: bloom, then grade, primary grade and tone mapping (or the baked LUT), then dither and display encoding."""
-        if self.bloom is not None:
-            image = self.bloom(image)
-        if self.lut is not None:
-            image = self.lut(image, self.interpolation)
-        for stage in (self.grade, self.primary, self.tonemap):
-            if stage is not None:
+        """The stages after exposure (those that keep no state between frames), in order."""
+        for name, stage in self.stages().items():
+            if not SLOT[name].timed:
                 image = stage(image)
-        image = image if self.dither is None else self.dither(image)
-        return image if self.display is None else self.display(image)
+        return image
 
     def frame(self, image: torch.Tensor, adapted: torch.Tensor, dt) -> tuple:
         """The look without state, for serving: ``(image, adapted, dt) -> (output, new adapted)``.
@@ -248,19 +311,22 @@ class PostFX(nn.Module):
         return self.finish(exposed), adapted
 
     def per_pixel_input(self, image: torch.Tensor) -> torch.Tensor:
-        """One frame as grade, primary grade and tone mapping (or a baked LUT) receive it: exposed as the
-        first frame of a sequence (the adaptation state is left alone), then bloomed. What
-        ``bake_lut(..., scene=)`` should see when the look's per-pixel stages are baked."""
-        if self.exposure is not None:
-            image, _ = self.exposure.frame(image, None, 0.0)
-        return image if self.bloom is None else self.bloom(image)
+        """One frame as the slots a LUT bakes receive it: through the stages before them, exposure as the first frame
+        of a sequence (the adaptation state is left alone). What ``bake_lut(..., scene=)`` should see."""
+        for slot in SLOTS:
+            if slot.bakes or slot.baked:
+                return image
+            stage = getattr(self, slot.name)
+            if stage is not None:
+                image = stage.frame(image, None, 0.0)[0] if slot.timed else stage(image)
+        return image
 
     def per_pixel_stages(self) -> nn.Sequential:
-        """Grade, primary grade and tone mapping (those built) as one transform: what a LUT can hold.
+        """The slots a LUT can hold (grade, primary grade and tone mapping), those built, as one transform.
 
         Raises ``ValueError`` when the look has none of them.
         """
-        transform = nn.Sequential(*(m for m in (self.grade, self.primary, self.tonemap) if m is not None))
+        transform = nn.Sequential(*(getattr(self, s.name) for s in SLOTS if s.bakes and getattr(self, s.name) is not None))
         if len(transform) == 0:
             raise ValueError("nothing to bake: the look has neither a grade nor a tone mapper")
         return transform
@@ -269,10 +335,10 @@ class PostFX(nn.Module):
                entries: str = "sampled") -> "PostFX":
         """An equivalent look with grade, primary grade and tone mapping baked into a ``size``³ ``"logc_hdr"`` LUT.
 
-        Exposure, bloom and dither stay live (copied, so the new look keeps its own adaptation state). The
+        The other slots stay live (copied, so the new look keeps its own adaptation state). The
         LUT's lattice is LogC up to linear 58.86, then a compressed tail up to 65504
         (:class:`~torchgrade.lut.LogCHDRShaper`), so no channel is clamped; a tone-mapped look clamps its
-        output to [0, 1] after the lookup.
+        output to [0, 1] after the lookup. ``interpolation`` is the LUT's (tetrahedral by default).
         ``output_encoding`` and ``entries`` (``"fitted"``: :func:`~torchgrade.lut.fit_entries`) are passed to
         :func:`~torchgrade.bake_lut`; the new LUT keeps the encoding and the
         bake's error report (``look.to_lut().lut.error_report``; a bake over 1 code warns).
@@ -281,19 +347,37 @@ class PostFX(nn.Module):
         lut = bake_lut(transform, size=size, shaper="logc_hdr", output_encoding=output_encoding, entries=entries)
         report = lut.error_report
         lut = LUT3D(lut.table.detach().float(), shaper=lut.shaper, domain=(lut.domain_min, lut.domain_max),
-                    output_range=lut.output_range, output_encoding=lut.output_encoding)
+                    output_range=lut.output_range, output_encoding=lut.output_encoding,
+                    interpolation=interpolation or "tetrahedral")
         lut.error_report = report  # measured on the float64 table these entries are rounded from
-        return PostFX(
-            exposure=copy.deepcopy(self.exposure),
-            bloom=copy.deepcopy(self.bloom),
-            dither=copy.deepcopy(self.dither),
-            display=copy.deepcopy(self.display),
-            lut=lut,
-            interpolation=interpolation or self.interpolation,
-        )
+        live = {s.name: copy.deepcopy(getattr(self, s.name)) for s in SLOTS if not (s.bakes or s.baked)}
+        return PostFX(**live, lut=lut)
 
-    def extra_repr(self) -> str:
-        return f"interpolation={self.interpolation!r}" if self.lut is not None else ""
+
+def _baked_lut(lut, interpolation: Optional[str]) -> Optional[LUT3D]:
+    """The ``lut`` slot's LUT; with another ``interpolation``, a shallow copy looked up with it (the table, learnable or
+    not, is the given LUT's; the given LUT keeps its own interpolation)."""
+    if lut is None:
+        return None
+    if not isinstance(lut, LUT3D):
+        raise ValueError(f"lut must be a LUT3D (a baked look; see PostFX.to_lut), got {type(lut).__name__}")
+    if interpolation is None or interpolation == lut.interpolation:
+        return lut
+    if interpolation not in INTERPOLATIONS:
+        raise ValueError(f"interpolation must be one of {INTERPOLATIONS}, got {interpolation!r}")
+    looked_up = copy.copy(lut)
+    looked_up.interpolation = interpolation
+    return looked_up
+
+
+def _files_beside(config: dict, folder: Optional[Path]) -> dict:
+    """``config`` with a look LUT's relative file path taken from ``folder`` (the config file's), when there is one."""
+    spec = config.get("look_lut")
+    path = spec.get("lut") if isinstance(spec, dict) else spec
+    if folder is None or not isinstance(path, str) or Path(path).is_absolute():
+        return config
+    located = str(folder / path)
+    return {**config, "look_lut": {**spec, "lut": located} if isinstance(spec, dict) else located}
 
 
 def _checked_extra_state(extra) -> dict:
@@ -301,7 +385,7 @@ def _checked_extra_state(extra) -> dict:
     a state dict is untrusted, and a tampered one gave bare ``KeyError``, ``TypeError`` and ``AttributeError``.
 
     Examples:
-        >>> _checked_extra_state({"stages": [], "parameters": [], "interpolation": "tetrahedral"})
+        >>> _checked_extra_state({"stages": [], "parameters": []})
         Traceback (most recent call last):
         ...
         ValueError: a saved look's _extra_state is malformed: stages must map stage names to configs, got list
@@ -319,7 +403,7 @@ def _checked_extra_state(extra) -> dict:
             raise malformed(f"stages holds {stage!r}: {type(config).__name__}; stages are {', '.join(STAGES)}, each a dict")
     if not isinstance(parameters, list) or not all(isinstance(name, str) for name in parameters):
         raise malformed("parameters must be a list of names")
-    if extra.get("interpolation") not in INTERPOLATIONS:
+    if extra.get("interpolation", "tetrahedral") not in INTERPOLATIONS:
         raise malformed(f"interpolation must be one of {INTERPOLATIONS}, got {extra.get('interpolation')!r}")
     return extra
 

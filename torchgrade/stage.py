@@ -404,6 +404,11 @@ class Stage(nn.Module):
             if name in self.always_in_config or not self.is_default(name)
         }
 
+    def state_config(self) -> dict:
+        """What a saved look's state (``state_dict()``'s extra state) records of this stage to rebuild it before its
+        tensors load: :meth:`to_config`, unless the stage's config names something the state dict already holds."""
+        return self.to_config()
+
     @classmethod
     def config_table(cls, config: dict) -> dict:
         """The controls a ``config`` of this stage can set: :attr:`controls` unless a setting adds others (a tone mapper's mode)."""

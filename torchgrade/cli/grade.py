@@ -35,7 +35,22 @@ __all__ = ["run_grade", "add_grade", "look_to_grade", "check_grading_memory", "G
 
 
 def look_to_grade(args: argparse.Namespace) -> PostFX:
-    """The look ``grade`` applies: ``--config`` or the grading flags, with ``--lut`` in place of grade and tone mapping."""
+    """The look ``grade`` applies: ``--config`` or the grading flags, with ``--lut`` in place of grade and tone mapping,
+    and ``--look-lut`` after them."""
+    look = _base_look(args)
+    if args.look_lut is None:
+        if args.look_lut_contribution is not None:
+            raise ValueError("--look-lut-contribution needs --look-lut")
+        return look
+    if look.look_lut is not None:
+        raise ValueError("the --config look has a look_lut already: give --look-lut without it, or edit the config")
+    contribution = 1.0 if args.look_lut_contribution is None else args.look_lut_contribution
+    slots = {name: stage for name, stage in look.stages().items()}
+    return PostFX(**slots, look_lut={"lut": args.look_lut, "contribution": contribution})
+
+
+def _base_look(args: argparse.Namespace) -> PostFX:
+    """The look before ``--look-lut``: ``--config`` or the grading flags, or ``--lut`` in place of grade and tone mapping."""
     if args.lut is None:
         return look_from_args(args)
     if given_grading_flags(args):
@@ -101,7 +116,7 @@ def run_grade(args: argparse.Namespace) -> str:
     depth = check_output(args.output, args.bit_depth, args.scene_referred)
     frames = shot_frames(args.inputs)
     outputs = output_paths(args.output, frames)
-    refuse_overwriting(outputs, [*frames, args.config, args.lut], allowed=args.overwrite_input)
+    refuse_overwriting(outputs, [*frames, args.config, args.lut, args.look_lut], allowed=args.overwrite_input)
     check_grading_memory(frames, args.part, args.jobs, args.max_bytes)
     look = look_to_grade(args)
     if args.display:
@@ -164,4 +179,7 @@ def add_grade(commands) -> None:
     _add_shot_flags(grade)
     add_grading_flags(grade)
     add_exposure_flags(grade)
+    looks = grade.add_argument_group("creative LUT (after tone mapping, as Unity URP's Color Lookup)")
+    looks.add_argument("--look-lut", metavar="FILE", help="a .cube or CLF file applied to the tone-mapped image in sRGB codes")
+    looks.add_argument("--look-lut-contribution", type=float, metavar="C", help="its blend in [0, 1] (default 1)")
     grade.set_defaults(run=run_grade)

@@ -289,7 +289,7 @@ def _pair(value, name: str):
 
 
 class LUT3D(Stage):
-    """A baked 3D LUT: ``LUT3D(table, shaper="linear")(image, interpolation="tetrahedral")``.
+    """A baked 3D LUT: ``LUT3D(table, shaper="linear", interpolation="tetrahedral")(image)``.
 
     The table, the lattice domain and a curve shaper's curve are tensors (buffers, or the table a
     parameter); the settings below are controls, checked on assignment and listed by ``to_config``.
@@ -302,6 +302,9 @@ class LUT3D(Stage):
         output_range: ``(low, high)`` clamp applied after the lookup, or ``None``.
         output_encoding: ``"linear"`` (entries are linear outputs) or ``"srgb"`` (entries are
             sRGB-encoded and decoded after the lookup; :meth:`linear_table` gives linear entries).
+        interpolation: how the lattice is interpolated, a name in :data:`~torchgrade.lut.KERNELS` (``"tetrahedral"``,
+            ``"trilinear"``); a control, so a look, its config and its ONNX export carry it. ``forward(image,
+            interpolation)`` may still name another for one call.
         learnable: hold the table as an ``nn.Parameter`` (fit a LUT by gradient descent).
         compile: run the lookup through ``torch.compile``: one fused pass over the pixels, faster
             than eager, but the first call per interpolation and dtype compiles (seconds; see
@@ -322,11 +325,12 @@ class LUT3D(Stage):
         "curve_range": Control((0.0, 1.0)),
         "output_encoding": Control("linear", OUTPUT_ENCODINGS),
         "compile": Control(False),
+        "interpolation": Control("tetrahedral", tuple(KERNELS)),
     }
 
     def __init__(self, table: torch.Tensor, shaper: str = "linear", domain=None, output_range=None,
                  curve: Optional[torch.Tensor] = None, curve_range=(0.0, 1.0), learnable: bool = False,
-                 compile: bool = False, output_encoding: str = "linear"):
+                 compile: bool = False, output_encoding: str = "linear", interpolation: str = "tetrahedral"):
         super().__init__()
         check_choice("shaper", shaper, SHAPERS)
         check_choice("output encoding", output_encoding, OUTPUT_ENCODINGS)
@@ -346,7 +350,7 @@ class LUT3D(Stage):
         self._tables_cache = (None, None, None)  # (rows, interpolation, the eager form's tables)
         self.error_report = None  # set by bake_lut: a torchgrade.lut.ErrorReport
         self.init_controls(shaper=shaper, output_range=output_range, curve_range=curve_range,
-                           output_encoding=output_encoding, compile=bool(compile))
+                           output_encoding=output_encoding, compile=bool(compile), interpolation=interpolation)
 
     def check_control(self, name: str, value):
         if name == "output_range":
@@ -381,7 +385,8 @@ class LUT3D(Stage):
         """Never: a table is not checked for being the identity, so a LUT always runs."""
         return False
 
-    def forward(self, image: torch.Tensor, interpolation: str = "tetrahedral") -> torch.Tensor:
+    def forward(self, image: torch.Tensor, interpolation: Optional[str] = None) -> torch.Tensor:
+        interpolation = interpolation or self.interpolation
         _check_arguments(image, self.shaper, interpolation, self.output_encoding)
         arguments = (image, self.rows(working_dtype(image).dtype), self.size, self.shaper, self.domain_min, self.domain_max,
                      interpolation, self.output_range, self.curve, self.curve_range, self.output_encoding)
@@ -430,8 +435,10 @@ class LUT3D(Stage):
         """The table with linear output values (decoded by ``output_encoding``), as a ``.cube`` file holds it."""
         return decode_output(self.table, self.output_encoding)
 
-    def export_form(self, interpolation: str = "tetrahedral", backend: str = "strip") -> nn.Module:
-        """The module an ONNX export traces for this LUT looked up with ``interpolation``, in ``backend``'s graph form."""
+    def export_form(self, interpolation: Optional[str] = None, backend: str = "strip") -> nn.Module:
+        """The module an ONNX export traces for this LUT looked up with ``interpolation`` (its own by default), in
+        ``backend``'s graph form."""
+        interpolation = interpolation or self.interpolation
         check_choice("interpolation", interpolation, KERNELS)
         check_choice("lut_backend", backend, BACKENDS)
         return LUTLookup(self, interpolation, backend)
@@ -440,7 +447,8 @@ class LUT3D(Stage):
         domain = f"domain=({_short(self.domain_min)}, {_short(self.domain_max)})"
         clamp = f", output_range={self.output_range}" if self.output_range else ""
         encoding = f", output_encoding={self.output_encoding!r}" if self.output_encoding != "linear" else ""
-        return f"size={self.size}, shaper={self.shaper!r}, {domain}{clamp}{encoding}"
+        interpolation = f", interpolation={self.interpolation!r}" if self.interpolation != "tetrahedral" else ""
+        return f"size={self.size}, shaper={self.shaper!r}, {domain}{clamp}{encoding}{interpolation}"
 
 
 class LUTLookup(nn.Module):

@@ -2,8 +2,8 @@
 
 The exporter asks, it does not look inside: a look (anything with a ``stages()`` method, as
 :class:`~torchgrade.PostFX`) lists its stages; each stage gives its export form, and the export
-options its ``export_form`` accepts by name (``interpolation`` and ``backend`` for a LUT) are
-passed to it; a stage that keeps state between frames gives its stateless frame function.
+options its ``export_form`` accepts by name (``backend`` for a LUT, whose interpolation is its own
+control) are passed to it; a stage that keeps state between frames gives its stateless frame function.
 Only ``grade_inputs`` is grade-specific: :class:`GradeWithInputs` turns a
 :class:`~torchgrade.ColorGrade`'s number controls (:data:`GRADE_INPUTS`) into graph inputs.
 
@@ -150,12 +150,11 @@ def _per_pixel_from(stages: Sequence[nn.Module]) -> int:
 
 
 def _look_stages(module: nn.Module) -> tuple:
-    """``(stateful first stage or None, [stage, ...], options)`` of any exportable module."""
+    """``(stateful first stage or None, [stage, ...])`` of any exportable module."""
     listed = getattr(module, "stages", None)
     stages = list(listed().values()) if callable(listed) else [module]
-    options = {"interpolation": getattr(module, "interpolation", "tetrahedral")} if callable(listed) else {}
     stateful = stages.pop(0) if stages and frame_of(stages[0]) is not None else None
-    return stateful, stages, options
+    return stateful, stages
 
 
 def has_state(module: nn.Module) -> bool:
@@ -189,8 +188,8 @@ def export_graph(module: nn.Module, lut_backend: str = "strip", grade_inputs: bo
     """
     if lut_backend not in BACKENDS:
         raise ValueError(f"lut_backend must be one of {tuple(BACKENDS)}, got {lut_backend!r}")
-    exposure, named, options = _look_stages(module)
-    options["backend"] = lut_backend
+    exposure, named = _look_stages(module)
+    options = {"backend": lut_backend}
     stages = []
     for stage in named:
         if grade_inputs and isinstance(stage, ColorGrade):

@@ -17,22 +17,24 @@ Examples:
 from __future__ import annotations
 
 import math
+from typing import Optional
 from xml.sax.saxutils import escape, quoteattr
 
 import torch
 
-from ..color.transfer import LOGC_A, LOGC_B, LOGC_C, LOGC_D
-from ..lut import LUT3D, SHAPERS
-from .atomic import atomic_write
-from .cube.write import check_title
+from ...color.transfer import LOGC_A, LOGC_B, LOGC_C, LOGC_D
+from ...lut import LUT3D, SHAPERS
+from ..atomic import atomic_write
+from ..cube.write import check_title
 
 __all__ = ["write_clf", "clf_text"]
 
 _DEPTHS = 'inBitDepth="32f" outBitDepth="32f"'
 
 
-def write_clf(path, lut: LUT3D, title: str = "torchgrade", interpolation: str = "tetrahedral") -> None:
-    """Write ``lut`` to ``path`` as a CLF file (atomically: a failed write leaves nothing behind)."""
+def write_clf(path, lut: LUT3D, title: str = "torchgrade", interpolation: Optional[str] = None) -> None:
+    """Write ``lut`` to ``path`` as a CLF file (atomically: a failed write leaves nothing behind), to be interpolated
+    with ``interpolation`` (the LUT's own by default)."""
     text = clf_text(lut, title, interpolation)
 
     def write(temporary: str) -> None:
@@ -42,7 +44,7 @@ def write_clf(path, lut: LUT3D, title: str = "torchgrade", interpolation: str = 
     atomic_write(path, write)
 
 
-def clf_text(lut: LUT3D, title: str = "torchgrade", interpolation: str = "tetrahedral") -> str:
+def clf_text(lut: LUT3D, title: str = "torchgrade", interpolation: Optional[str] = None) -> str:
     """The CLF document of ``lut``: shaper nodes, the lattice ``Range``, the ``LUT3D``, and the display clamp.
 
     Examples:
@@ -50,6 +52,7 @@ def clf_text(lut: LUT3D, title: str = "torchgrade", interpolation: str = "tetrah
         >>> '<LUT3D inBitDepth="32f" outBitDepth="32f" interpolation="trilinear">' in clf_text(LUT3D(identity_table(2)), interpolation="trilinear")
         True
     """
+    interpolation = interpolation or lut.interpolation
     if interpolation not in ("trilinear", "tetrahedral"):
         raise ValueError(f"CLF interpolation must be 'trilinear' or 'tetrahedral', got {interpolation!r}")
     check_title(title, "CLF")  # XML 1.0 has no form for control characters: the file would not parse
