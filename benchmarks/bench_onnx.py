@@ -33,7 +33,7 @@ sys.path.insert(0, str(ROOT))
 
 import torchgrade as tg  # noqa: E402
 from benchmarks.common import median_ms, write_results  # noqa: E402
-from torchgrade.core import one_thread  # noqa: E402
+from torchgrade.base.core import one_thread  # noqa: E402
 
 LOOK = ROOT / "export" / "looks" / "cinematic.json"
 HEIGHT, WIDTH, REPEATS = 1080, 1920, 9

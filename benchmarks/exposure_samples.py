@@ -20,7 +20,7 @@ shadows or its highlights. With ``grey`` the display luminance the look gives a 
   middle grey, so the frame holds no highlights.
 
 A frame that is only shadows or only highlights (a uniform chart) sits at ``grey`` and passes, as a meter
-should leave it. ``tests/test_exposure_samples.py`` applies the rule to every sample image, so a new image or
+should leave it. ``tests/exposure/test_exposure_samples.py`` applies the rule to every sample image, so a new image or
 a new default is judged the same way. Writes ``benchmarks/results/exposure_samples.md`` and
 ``benchmarks/results/exposure_contact_sheet.jpg``.
 """

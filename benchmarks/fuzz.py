@@ -13,7 +13,7 @@ Four families, each a function ``verdicts(count, seed) -> Counter``:
 
 Verdicts: ``"refused"`` (the documented ``ValueError``), ``"accepted"`` (read, built or written, and what came out
 finite), and any other is a defect: the exception's name, ``"non-finite"``, ``"crashed"`` or ``"hung"``. The suite
-runs a few hundred of each (``tests/test_fuzz.py``); ``benchmarks/robustness.py --fuzz`` runs thousands and commits
+runs a few hundred of each (``tests/library/test_fuzz.py``); ``benchmarks/robustness.py --fuzz`` runs thousands and commits
 the counts.
 
 Examples:

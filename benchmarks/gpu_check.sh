@@ -27,14 +27,14 @@ nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader | 
 python3 -c "import torch; print('torch', torch.__version__, 'cuda', torch.version.cuda)" | tee -a "$OUT/device.txt"
 
 PYTEST="python3 -m pytest -q -p no:cacheprovider -o addopts=-ra"
-TG_TEST_DEVICE=cuda timeout -s INT 120 $PYTEST -n 8 tests/test_device.py tests/test_autocast.py tests/test_gpu_path.py \
+TG_TEST_DEVICE=cuda timeout -s INT 120 $PYTEST -n 8 tests/runtime/test_device.py tests/runtime/test_autocast.py tests/runtime/test_gpu_path.py \
   2>&1 | tee "$OUT/cuda_device_tests.log" | tail -15
-TG_TEST_DEVICE=cuda timeout -s INT 180 $PYTEST -n 12 tests/test_aces2.py tests/test_augment.py tests/test_bloom.py \
-  tests/test_display.py tests/test_exposure.py tests/test_exposure_metering.py tests/test_grade.py tests/test_grade_parity.py tests/test_hdr_output.py \
-  tests/test_lut.py tests/test_pipeline.py tests/test_tonemap.py tests/test_strips.py \
+TG_TEST_DEVICE=cuda timeout -s INT 180 $PYTEST -n 12 tests/tonemap/test_aces2.py tests/augment/test_augment.py tests/bloom/test_bloom.py \
+  tests/output/test_display.py tests/exposure/test_exposure.py tests/exposure/test_exposure_metering.py tests/grading/test_grade.py tests/grading/test_grade_parity.py tests/tonemap/test_hdr_output.py \
+  tests/lut/test_lut.py tests/look/test_pipeline.py tests/tonemap/test_tonemap.py tests/runtime/test_strips.py \
   2>&1 | tee "$OUT/cuda_module_tests.log" | tail -5
 if python3 -c "import onnxruntime, sys; sys.exit('CUDAExecutionProvider' not in onnxruntime.get_available_providers())" 2>/dev/null; then
-  TG_TEST_DEVICE=cuda timeout -s INT 60 $PYTEST tests/test_bench_onnx.py 2>&1 | tee "$OUT/onnxruntime_cuda.log" | tail -5
+  TG_TEST_DEVICE=cuda timeout -s INT 60 $PYTEST tests/project/test_bench_onnx.py 2>&1 | tee "$OUT/onnxruntime_cuda.log" | tail -5
 else
   echo "onnxruntime's CUDA provider: not on this machine (tg.onnx.session(path, device='cuda') not run)" | tee "$OUT/onnxruntime_cuda.log"
 fi

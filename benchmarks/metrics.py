@@ -3,7 +3,7 @@
 Errors compare display-referred linear images (a look's output) after encoding them as a display
 does: clamp to [0, 1], sRGB-encode, scale to 8-bit code values (not rounded, so a fraction of a code
 is visible). ΔE2000 is computed by colour-science on CIE Lab (D65) of those sRGB values.
-Used by ``benchmarks/run.py``, ``bench_lut.py`` and ``lut_floor.py``; checked by ``tests/test_benchmarks.py``.
+Used by ``benchmarks/run.py``, ``bench_lut.py`` and ``lut_floor.py``; checked by ``tests/project/test_benchmarks.py``.
 """
 
 from __future__ import annotations

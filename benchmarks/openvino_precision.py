@@ -1,5 +1,5 @@
 """OpenVINO at its default inference precision (bfloat16 on CPUs that have it) against PyTorch: the error of
-exported looks in 8-bit sRGB codes on the demo scene, the figure ``tests/test_openvino.py`` bounds.
+exported looks in 8-bit sRGB codes on the demo scene, the figure ``tests/onnx/test_openvino.py`` bounds.
 
     .venv/bin/python benchmarks/openvino_precision.py
 

@@ -2,9 +2,9 @@
 every control swept across its documented range, the error autocast would cause, how many damaged
 EXR and malformed .cube files are rejected cleanly, and what reading a 256³ .cube costs.
 
-The stages are :data:`torchgrade.catalog.STAGE_KINDS` and the inputs
-:func:`torchgrade.scene.extreme_inputs`, the listing ``tests/test_extremes.py`` and
-``tests/test_control_ranges.py`` check too. Writes ``benchmarks/results/robustness.md`` and
+The stages are :data:`torchgrade.testing.catalog.STAGE_KINDS` and the inputs
+:func:`torchgrade.testing.extremes.extreme_inputs`, the listing ``tests/library/test_extremes.py`` and
+``tests/library/test_control_ranges.py`` check too. Writes ``benchmarks/results/robustness.md`` and
 ``benchmarks/results/robustness_controls.md`` (the control sweep and autocast, alone with ``--controls``).
 
     PYTHONPATH=. .venv/bin/python benchmarks/robustness.py [--controls | --fuzz]
@@ -25,12 +25,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import torchgrade as tg  # noqa: E402
-import torchgrade.stage  # noqa: E402
+import torchgrade.base.stage  # noqa: E402
 from benchmarks.bench_cube_read import timed_read  # noqa: E402
 from benchmarks.common import EXR_DIR  # noqa: E402
 from benchmarks.fuzz import DEFECTS_FREE, FAMILIES  # noqa: E402
-from torchgrade.catalog import STAGE_KINDS  # noqa: E402
-from torchgrade.scene import extreme_inputs  # noqa: E402
+from torchgrade.testing.catalog import STAGE_KINDS  # noqa: E402
+from torchgrade.testing.extremes import extreme_inputs  # noqa: E402
 
 DTYPES = {"float32": torch.float32, "float16": torch.float16, "bfloat16": torch.bfloat16}
 FUZZED_FILES = 2000
@@ -66,7 +66,7 @@ PLAIN_NUMBERS = ("peak_luminance",)  # ACES 2.0 caches its tables per peak: a pl
 
 def number_controls(module) -> dict:
     """The stage's number controls (``{name: Control}``); none for a module that is not a stage."""
-    table = module.control_table() if isinstance(module, torchgrade.stage.Stage) else {}
+    table = module.control_table() if isinstance(module, torchgrade.base.stage.Stage) else {}
     return {name: c for name, c in table.items() if c.kind == "number"}
 
 
@@ -128,13 +128,13 @@ def autocast_codes() -> tuple[float, float]:
     codes = lambda display: tg.color.linear_to_srgb(display.double().clamp(0.0, 1.0)) * 255.0  # noqa: E731
     reference = codes(look(image))
     errors = []
-    for guard in (torchgrade.stage.full_precision, contextlib.nullcontext):
-        shipped, torchgrade.stage.full_precision = torchgrade.stage.full_precision, guard
+    for guard in (torchgrade.base.stage.full_precision, contextlib.nullcontext):
+        shipped, torchgrade.base.stage.full_precision = torchgrade.base.stage.full_precision, guard
         try:
             with torch.autocast("cpu", dtype=torch.bfloat16):
                 errors.append(float((codes(look(image)) - reference).abs().max()))
         finally:
-            torchgrade.stage.full_precision = shipped
+            torchgrade.base.stage.full_precision = shipped
     return errors[0], errors[1]
 
 

@@ -23,7 +23,7 @@ DEFAULT_IMAGES = ("Desk.exr", "Carrots.exr", "GoldenGate.exr")
 
 def parse_args(argv=None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--config", required=True, type=Path, help="look config (JSON, see torchgrade.pipeline)")
+    parser.add_argument("--config", required=True, type=Path, help="look config (JSON, see torchgrade.look.postfx)")
     parser.add_argument("--out", required=True, type=Path, help="ONNX file to write")
     parser.add_argument("--lut", type=int, metavar="SIZE", help="bake grade + tone mapping into a SIZE³ LUT first")
     parser.add_argument("--interpolation", choices=tg.lut.INTERPOLATIONS, default="tetrahedral")

@@ -10,33 +10,39 @@ Examples:
 
 import importlib
 
-from . import augment_saved  # noqa: F401  registers what torch.load(weights_only=True) of a RandomPostFX needs, without kornia
-from . import color, core, curves, functional, runtime, scene
-from .bloom import Bloom, ConvolutionBloom
-from .display import Display
-from .dither import Dither
-from .exposure import AutoExposure
-from .grade import ColorGrade
-from .look_lut import LookLUT
-from .lut import LUT3D, bake_lut
-from .match import match_look
-from .pipeline import PostFX
-from .primary import PrimaryGrade
-from .runtime import compile
-from .tonemap import TONEMAP_MODES, ToneMap
+from . import _moved
+
+_moved.install()  # old import paths (torchgrade.pipeline, ...) keep working for a release, with a warning
+
+from . import augment, color, functional, runtime, scene  # noqa: E402
+from .bloom import Bloom, ConvolutionBloom  # noqa: E402
+from .exposure import AutoExposure  # noqa: E402
+from .grading import ColorGrade, PrimaryGrade  # noqa: E402
+from .look import PostFX  # noqa: E402
+from .lut import LUT3D, bake_lut  # noqa: E402
+from .match import match_look  # noqa: E402
+from .output import Display, Dither, LookLUT  # noqa: E402
+from .runtime import compile  # noqa: E402
+from .tonemap import TONEMAP_MODES, ToneMap  # noqa: E402
 
 __version__ = "0.1.0"
 
 __all__ = [
-    "catalog",
+    "augment",
+    "bloom",
     "color",
-    "core",
-    "curves",
+    "exposure",
     "functional",
+    "grading",
     "io",
+    "look",
+    "lut",
+    "match",
     "onnx",
+    "output",
     "runtime",
     "scene",
+    "tonemap",
     "compile",
     "RandomPostFX",
     "Bloom",
@@ -56,19 +62,14 @@ __all__ = [
 ]
 
 
-_LAZY_MODULES = ("catalog", "io", "onnx")
+_LAZY_MODULES = ("io", "onnx", "testing", "integrations")
 """Subpackages imported at their first use: the onnx, OpenEXR and numpy packages behind them take longer to
 import than torchgrade itself (``import torchgrade`` stays within 0.3 s of ``import torch``)."""
 
 
 def __getattr__(name: str):
-    if name in _LAZY_MODULES:
+    if name in _LAZY_MODULES or f"{__name__}.{name}" in _moved.MOVED:  # a moved module warns as it is imported
         return importlib.import_module(f".{name}", __name__)
-    # RandomPostFX is built on kornia's augmentation base, and kornia takes longer to import than torchgrade:
-    # it is imported at the first use of the name.
-    if name == "RandomPostFX":
-        from .augment import RandomPostFX
-
-        globals()[name] = RandomPostFX
-        return RandomPostFX
+    if name == "RandomPostFX":  # built on kornia, which takes longer to import than torchgrade: imported at first use
+        return augment.RandomPostFX
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -18,7 +18,7 @@ scattering removes from the image. So ``sum(output) = sum(image)`` up to roundin
 knee, scatter and image size; in additive mode the added light is exactly
 ``intensity * levels * sum(prefiltered light)``.
 
-**Non-finite policy** (:func:`torchgrade.core.sanitize`, the library-wide rule): before anything
+**Non-finite policy** (:func:`torchgrade.base.core.sanitize`, the library-wide rule): before anything
 mixes pixels, NaN becomes 0 and values are bounded to ±65504, so +Inf blooms like a 65504 pixel and a
 NaN pixel like a black one; no NaN or Inf reaches the output.
 
@@ -26,7 +26,7 @@ NaN pixel like a black one; no NaN or Inf reaches the output.
 convolved with a user kernel by FFT (``torch.fft.rfft2``), zero-padded so nothing wraps around.
 
 **Precision**: float16 and bfloat16 images are computed in float32 and returned in their own dtype,
-bounded to ±65504 (:func:`torchgrade.core.to_input_dtype`). Scene-referred values are never clamped otherwise.
+bounded to ±65504 (:func:`torchgrade.base.core.to_input_dtype`). Scene-referred values are never clamped otherwise.
 
 Examples:
     >>> import torch
@@ -36,35 +36,10 @@ Examples:
     True
 """
 
-from .composite import (
-    BLOOM_MODES, COMPOSITES, LERP_MODES, Composite, additive_blend, bevy_blend_factor, bevy_weight, lerp_blend,
-    replace_blend, scatter_weight, scattering_blend, screen_blend, softlight_blend,
-)
-from .convolution import ConvolutionBloom, DirectConvolutionBloom, check_kernel, convolution_bloom, direct_convolve, fft_convolve
-from .layer import (
-    CONTROLS, MAX_FRAME_SIDE, OPTION_DEFAULTS, UNITY_SETTINGS, Bloom, FixedDepthBloom, bloom, bloom_settings, bloom_with_settings, check_settings,
-)
-from .prefilter import SOFT_KNEE_EPSILON, bloom_threshold, cross_sum, karis_mean, prefilter, threshold_fraction
-from .pyramid import (
-    ANAMORPHIC_TAPS, BLUR_SIGMA, BLUR_TAPS, BSPLINE_AFTER_BILINEAR, active_levels, anamorphic_sigma, block_counts,
-    bspline_refine, glow_pyramid, mirror_pad, nearest_upsample, pyramid_blur, pyramid_depth, sum_pool, upsample,
-)
-from .texture import as_texture, check_texture, resampled
+from .composite import BLOOM_MODES, COMPOSITES, Composite
+from .convolution import ConvolutionBloom, DirectConvolutionBloom, convolution_bloom, direct_convolve, fft_convolve
+from .layer import Bloom, CONTROLS, FixedDepthBloom, MAX_FRAME_SIDE, OPTION_DEFAULTS, UNITY_SETTINGS, bloom, bloom_settings, bloom_with_settings
+from .prefilter import bloom_threshold
+from .pyramid import active_levels, pyramid_depth
 
-__all__ = [
-    # the stages and functionals
-    "Bloom", "ConvolutionBloom", "bloom", "bloom_threshold", "convolution_bloom", "fft_convolve", "direct_convolve",
-    "FixedDepthBloom", "DirectConvolutionBloom", "MAX_FRAME_SIDE", "CONTROLS", "UNITY_SETTINGS", "OPTION_DEFAULTS",
-    "check_settings", "check_kernel", "bloom_settings", "bloom_with_settings",
-    # composites
-    "Composite", "COMPOSITES", "BLOOM_MODES", "LERP_MODES", "bevy_blend_factor", "scatter_weight", "bevy_weight",
-    "additive_blend", "scattering_blend", "lerp_blend", "screen_blend", "softlight_blend", "replace_blend",
-    # prefilter
-    "SOFT_KNEE_EPSILON", "threshold_fraction", "cross_sum", "karis_mean", "prefilter",
-    # pyramid
-    "BLUR_SIGMA", "BLUR_TAPS", "ANAMORPHIC_TAPS", "BSPLINE_AFTER_BILINEAR", "pyramid_depth", "active_levels", "sum_pool",
-    "block_counts", "mirror_pad", "pyramid_blur", "anamorphic_sigma", "bspline_refine", "upsample", "nearest_upsample",
-    "glow_pyramid",
-    # textures
-    "as_texture", "check_texture", "resampled",
-]
+__all__ = ["BLOOM_MODES", "Bloom", "COMPOSITES", "CONTROLS", "Composite", "ConvolutionBloom", "DirectConvolutionBloom", "FixedDepthBloom", "MAX_FRAME_SIDE", "OPTION_DEFAULTS", "UNITY_SETTINGS", "active_levels", "bloom", "bloom_settings", "bloom_threshold", "bloom_with_settings", "convolution_bloom", "direct_convolve", "fft_convolve", "pyramid_depth"]

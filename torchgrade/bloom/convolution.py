@@ -11,8 +11,18 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from ..core import Param, check_image, check_range, is_constant, is_tracing, sanitize, scalar_param, to_input_dtype, working_dtype
-from ..stage import Control, Stage
+from ..base.core import (
+    Param,
+    check_image,
+    check_range,
+    is_constant,
+    is_tracing,
+    sanitize,
+    scalar_param,
+    to_input_dtype,
+    working_dtype,
+)
+from ..base.stage import Control, Stage
 from .layer import CONTROLS
 from .prefilter import threshold_fraction
 from .texture import as_texture, check_texture

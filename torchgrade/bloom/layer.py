@@ -33,16 +33,29 @@ import numbers
 import torch
 from torch import nn
 
-from ..color import srgb_to_linear
-from ..core import (
-    HALF_MAX, check_image, color_param, is_constant, is_tracing, sanitize,
-    scalar_param, to_input_dtype, working_dtype,
+from ..base.core import (
+    HALF_MAX,
+    check_image,
+    color_param,
+    is_constant,
+    is_tracing,
+    sanitize,
+    scalar_param,
+    to_input_dtype,
+    working_dtype,
 )
+from ..base.stage import Control, Stage, controls_signature
+from ..color import srgb_to_linear
 from ..runtime import policy_for
-from ..stage import Control, Stage, controls_signature
 from .composite import BLOOM_MODES, COMPOSITES
 from .prefilter import prefilter
-from .pyramid import active_levels, anamorphic_sigma, glow_pyramid, pyramid_depth, upsample
+from .pyramid import (
+    active_levels,
+    anamorphic_sigma,
+    glow_pyramid,
+    pyramid_depth,
+    upsample,
+)
 from .texture import as_texture, check_texture, resampled
 
 __all__ = ["CONTROLS", "UNITY_SETTINGS", "OPTION_DEFAULTS", "MAX_FRAME_SIDE", "check_settings", "bloom_settings", "bloom", "bloom_with_settings", "Bloom",

@@ -17,8 +17,8 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
+from ..base.core import NEGLIGIBLE_LIGHT, Param, check_image, scalar_param
 from ..color import CHANNEL, luminance, srgb_to_linear
-from ..core import NEGLIGIBLE_LIGHT, Param, check_image, scalar_param
 from .pyramid import shared_block_counts, sum_pool
 
 __all__ = ["SOFT_KNEE_EPSILON", "bloom_threshold", "threshold_fraction", "cross_sum", "karis_mean", "prefilter"]
@@ -99,7 +99,7 @@ def karis_mean(image: torch.Tensor, means: torch.Tensor) -> torch.Tensor:
 def _source_share(source: torch.Tensor, means: torch.Tensor) -> torch.Tensor:
     """``source / mean`` per channel (1 where they are equal): the share of a block's light its source holds.
 
-    Blocks whose mean is below :data:`~torchgrade.core.NEGLIGIBLE_LIGHT` are black at any exposure: their share is 1,
+    Blocks whose mean is below :data:`~torchgrade.base.core.NEGLIGIBLE_LIGHT` are black at any exposure: their share is 1,
     and both sides of the select divide by at least that floor, so the branch not taken cannot make an infinite
     gradient (a mean of 1e-40 squared underflows to 0, and 0 times that infinity is NaN).
     """

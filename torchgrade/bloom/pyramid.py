@@ -22,7 +22,7 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
-from ..core import is_tracing
+from ..base.core import is_tracing
 from ..runtime import device_cached, policy_for
 
 __all__ = [

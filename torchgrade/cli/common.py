@@ -21,7 +21,7 @@ from .. import TONEMAP_MODES, ColorGrade, ToneMap
 from ..color import linear_to_srgb
 from ..io import read_exr
 from ..io.atomic import atomic_write
-from ..pipeline import PostFX
+from ..look.postfx import PostFX
 
 __all__ = ["GRADING_FLAGS", "EXPOSURE_FLAGS", "refuse_overwriting", "read_rec709", "display_codes", "write_png", "report_line", "stages_label", "grade_from_args", "given_grading_flags", "look_from_args",
            "add_grading_flags", "add_exposure_flags", "exposure_from_args", "given_exposure_flags"]

@@ -17,7 +17,7 @@ import time
 import torch
 
 from ..io import write_exr
-from ..pipeline import PostFX
+from ..look.postfx import PostFX
 from ..scene import demo_scene
 from .common import refuse_overwriting, stages_label, write_png
 

@@ -23,9 +23,9 @@ from pathlib import Path
 
 import torch
 
+from ..look.postfx import PostFX
 from ..lut import INTERPOLATIONS, LUT_BACKENDS
 from ..onnx import INPUT_DTYPES, IO_DTYPES, LAYOUTS, OUTPUTS, export_look
-from ..pipeline import PostFX
 from ..scene import demo_scene
 from .common import read_rec709, refuse_overwriting
 

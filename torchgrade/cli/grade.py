@@ -22,12 +22,22 @@ import argparse
 import time
 from functools import partial
 
-from ..display import DISPLAY_PRESETS, Display, display_settings
 from ..io import read_cube
 from ..io.exr import ADAPTATIONS, exr_info
-from ..pipeline import PostFX
-from .common import (add_exposure_flags, add_grading_flags, exposure_from_args, given_exposure_flags, given_grading_flags, look_from_args,
-                     read_rec709, refuse_overwriting, stages_label)
+from ..look.postfx import PostFX
+from ..output.display import DISPLAY_PRESETS, display_settings
+from ..output.layer import Display
+from .common import (
+    add_exposure_flags,
+    add_grading_flags,
+    exposure_from_args,
+    given_exposure_flags,
+    given_grading_flags,
+    look_from_args,
+    read_rec709,
+    refuse_overwriting,
+    stages_label,
+)
 from .outputs import BIT_DEPTHS, check_output, write_frame
 from .shot import grade_shot, output_paths, shot_frames
 

@@ -27,7 +27,7 @@ import numpy as np
 import torch
 
 from ..color import srgb_to_linear
-from ..grade import ColorGrade
+from ..grading.layer import ColorGrade
 from ..io.atomic import atomic_write
 from ..lut import LUTAccuracyWarning
 from ..match import GRADE_CONTROLS, LUT_FILES, match_look

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..core import sanitize
+from ..base.core import sanitize
 from ..io import write_exr
 from ..io.atomic import atomic_write
 from .common import display_codes, write_png
@@ -79,8 +79,8 @@ def write_frame(path, image: torch.Tensor, depth: str, encoded: bool = False) ->
     """Write a ``(3, H, W)`` linear image to ``path`` in the format its extension and ``depth`` name.
 
     Integer formats (PNG, 16-bit TIFF) hold sRGB-encoded light clamped to [0, 1], or with ``encoded`` a
-    display's signal (:class:`~torchgrade.display.Display`) as it is; EXR and float TIFF hold the values as they are.
-    Every format gets the non-finite policy's values (:func:`~torchgrade.core.sanitize`: NaN 0, ±Inf ±65504): a look
+    display's signal (:class:`~torchgrade.output.layer.Display`) as it is; EXR and float TIFF hold the values as they are.
+    Every format gets the non-finite policy's values (:func:`~torchgrade.base.core.sanitize`: NaN 0, ±Inf ±65504): a look
     that changes nothing (no stage built) would otherwise write the input's NaN and Inf as they are.
 
     Examples:

@@ -24,7 +24,7 @@ from pathlib import Path
 import torch
 from tqdm import tqdm
 
-from ..pipeline import PostFX
+from ..look.postfx import PostFX
 
 __all__ = ["shot_frames", "frame_number", "output_paths", "render_frame", "grade_shot"]
 

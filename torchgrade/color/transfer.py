@@ -13,7 +13,7 @@ import numbers
 
 import torch
 
-from ..core import untracked
+from ..base.core import untracked
 
 __all__ = [
     "safe_pow", "safe_sqrt", "linear_to_srgb", "srgb_to_linear", "linear_to_logc", "logc_to_linear", "aces_to_acescc", "acescc_to_aces", "linear_to_pq", "pq_to_linear", "hlg_oetf", "hlg_inverse_oetf", "linear_to_acescct", "acescct_to_linear", "LOGC_CUT", "LOGC_E", "ACESCC_MIDGRAY", "ACESCC_MAX", "PQ_M1", "PQ_C1", "PQ_PEAK", "HLG_A", "HLG_B", "HLG_C", "ACESCCT_CUT_LINEAR", "ACESCCT_CUT_LOG", "ACESCCT_A", "LOGC_A", "LOGC_B", "LOGC_C", "LOGC_D", "LOGC_F", "PQ_M2", "PQ_C2", "PQ_C3", "ACESCCT_B",

@@ -7,11 +7,29 @@ from typing import Optional
 
 import torch
 
+from ..base.core import (
+    HALF_MAX,
+    Param,
+    check_choice,
+    check_image,
+    check_range,
+    is_tracing,
+    sanitize,
+    scalar_param,
+    to_input_dtype,
+    working_dtype,
+)
+from ..base.stage import Control
 from ..color import luminance
-from ..core import HALF_MAX, Param, check_choice, check_image, check_range, is_tracing, sanitize, scalar_param, to_input_dtype, working_dtype
 from ..runtime import constant
-from ..stage import Control
-from .metering import HISTOGRAM_RANGE, METERING_MASKS, METERING_MODES, meter_histogram, meter_sanitized, metering_weights
+from .metering import (
+    HISTOGRAM_RANGE,
+    METERING_MASKS,
+    METERING_MODES,
+    meter_histogram,
+    meter_sanitized,
+    metering_weights,
+)
 
 __all__ = ["CONTROLS", "MIN_LUMINANCE", "MAX_ADAPTED", "OPERATORS", "STOPS_RANGE", "adapt_luminance", "auto_exposure", "check_bounds",
            "check_step", "checked_control", "compensation_at", "exposed_frame", "exposure_key", "exposure_operator", "metered_luminance"]
@@ -353,7 +371,7 @@ def exposed_frame(image: torch.Tensor, adapted: Optional[torch.Tensor], dt: Para
 
 def exposure_key(adapted: torch.Tensor, c: dict, curve) -> torch.Tensor:
     """The luminance ``adapted`` is exposed to: ``middle_grey * 2^(compensation + curve(log2(adapted / middle_grey)))``,
-    the curve left out for a fixed exposure (``c``: the number controls as :func:`~torchgrade.core.scalar_param` tensors).
+    the curve left out for a fixed exposure (``c``: the number controls as :func:`~torchgrade.base.core.scalar_param` tensors).
     The exposure applied is ``log2(key / adapted)`` stops."""
     stops = c["compensation"]
     if c["fixed_exposure"] is None:
@@ -363,7 +381,7 @@ def exposure_key(adapted: torch.Tensor, c: dict, curve) -> torch.Tensor:
 
 def metered_luminance(scene: torch.Tensor, c: dict, metering: str, mask) -> torch.Tensor:
     """The sanitized frame's metered luminance, ``(..., 1, 1, 1)``, bounded by the limits (``c``: the number
-    controls as :func:`~torchgrade.core.scalar_param` tensors)."""
+    controls as :func:`~torchgrade.base.core.scalar_param` tensors)."""
     weights = metering_weights(mask, scene)
     if metering == "histogram":
         low, high = histogram_range(c["min_ev"], c["max_ev"])

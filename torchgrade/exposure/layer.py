@@ -6,9 +6,20 @@ from typing import Hashable, Optional
 
 import torch
 
-from ..core import Param, check_image, scalar_param
-from ..stage import Stage
-from .adaptation import BOUNDS, CONTROLS, MAX_ADAPTED, MIN_LUMINANCE, NOT_NUMBERS, check_bounds, check_step, checked_control, exposed_frame, exposure_key
+from ..base.core import Param, check_image, scalar_param
+from ..base.stage import Stage
+from .adaptation import (
+    BOUNDS,
+    CONTROLS,
+    MAX_ADAPTED,
+    MIN_LUMINANCE,
+    NOT_NUMBERS,
+    check_bounds,
+    check_step,
+    checked_control,
+    exposed_frame,
+    exposure_key,
+)
 
 __all__ = ["AutoExposure"]
 

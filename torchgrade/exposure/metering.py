@@ -16,8 +16,8 @@ from typing import Optional
 import torch
 import torch.nn.functional as F
 
+from ..base.core import check_choice, check_image, sanitize
 from ..color import luminance
-from ..core import check_choice, check_image, sanitize
 from ..runtime import constant, device_cached
 
 __all__ = ["METERING_MODES", "METERING_MASKS", "METERING_SIZE", "LOG_DELTA", "HISTOGRAM_BINS", "HISTOGRAM_RANGE",
@@ -199,7 +199,7 @@ def meter_luminance(image: torch.Tensor, metering: str = "log", mask="average", 
 
 
 def meter_sanitized(scene: torch.Tensor, metering: str, weights: Optional[torch.Tensor] = None) -> torch.Tensor:
-    """:func:`meter_luminance` ``"mean"`` or ``"log"`` of a frame already sanitized (:func:`~torchgrade.core.sanitize`),
+    """:func:`meter_luminance` ``"mean"`` or ``"log"`` of a frame already sanitized (:func:`~torchgrade.base.core.sanitize`),
     unchecked, with :func:`metering_weights` ``weights``: for a caller that sanitizes the frame anyway.
 
     Examples:

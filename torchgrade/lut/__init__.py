@@ -8,7 +8,7 @@ The package holds one family per file:
 * :mod:`~torchgrade.lut.kernels`: the interpolations (:data:`KERNELS`), each with its gather form
   and its ``GridSample`` graph forms by export backend;
 * :mod:`~torchgrade.lut.lattice`: sizes, lattice coordinates, table layouts, domains;
-* :mod:`~torchgrade.lut.lut3d`: :class:`LUT3D` (a :class:`~torchgrade.stage.Stage`), its lookup
+* :mod:`~torchgrade.lut.lookup`: :class:`LUT3D` (a :class:`~torchgrade.base.stage.Stage`), its lookup
   and compile cache, and :class:`LUTLookup`, its ONNX export form;
 * :mod:`~torchgrade.lut.fit`: :func:`fit_shaper` and :func:`fit_scene_shaper`, per-channel shapers fitted to a
   transform or to a scene;
@@ -30,8 +30,17 @@ from .fit import FIT_KNOTS, SCENE_FIT_WEIGHT, fit_scene_shaper, fit_shaper
 from .kernels import (BACKENDS, INTERPOLATIONS, KERNELS, LUT_BACKENDS, Kernel, strip_table, tetrahedral, trilinear,
                       trilinear_grid_sample, trilinear_strip, trilinear_strip_lookup)
 from .lattice import MAX_SIZE, MIN_SIZE, check_size, checked_domain, identity_table, lattice, planar_table
-from .lut3d import (LUT3D, OUTPUT_ENCODINGS, LUTLookup, apply_lut, compiled_lookup, decode_output, encode_output,
-                    chunked_lookup, lookup, table_output)
+from .layer import LUT3D, LUTLookup
+from .lookup import (
+    OUTPUT_ENCODINGS,
+    apply_lut,
+    compiled_lookup,
+    decode_output,
+    encode_output,
+    chunked_lookup,
+    lookup,
+    table_output,
+)
 from .report import ErrorReport, LUTAccuracyWarning, code_errors
 from .shapers import (DEFAULT_DOMAINS, LOGC_BLACK, LOGC_HALF_MAX, LOGC_TOP, SHAPERS, CurveShaper, FittedShaper, LinearShaper,
                       LogCHDRShaper, LogCShaper, Shaper, lattice_unit, sample_curve, shaper_decode, shaper_encode)

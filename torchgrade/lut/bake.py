@@ -1,7 +1,7 @@
 """Baking: evaluate any per-pixel transform on a LUT's lattice, pick its size, and report its error.
 
 **Display-referred LUTs** (baked from a transform containing a display-referred stage, a tone
-mapper: :attr:`~torchgrade.stage.Stage.display_referred`) record ``output_range = (0, 1)``: the clip
+mapper: :attr:`~torchgrade.base.stage.Stage.display_referred`) record ``output_range = (0, 1)``: the clip
 happens *after* the lookup. A transform that ends with its tone mapper is baked with that tone
 mapper's ``clip`` off, so the table holds a smooth curve and the clip is exact instead of
 interpolated. Kinks inside the transform (the tone mapper's ``max(0, ·)`` of its graded input, on
@@ -25,11 +25,18 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
-from ..core import HALF_MAX, check_choice, check_image, check_on_cpu, sanitize
-from .lattice import MIN_SIZE, check_size, checked_domain, lattice
+from ..base.core import HALF_MAX, check_choice, check_image, check_on_cpu, sanitize
 from .entries import ENTRY_CHOICES, SCENE_WEIGHT, fit_entries, scene_pixels
-from .fit import SCENE_FIT_WEIGHT, SCENE_MIN_SIZE, fit_scene_shaper, fit_shaper, refine_shaper
-from .lut3d import LUT3D, OUTPUT_ENCODINGS, encode_output
+from .fit import (
+    SCENE_FIT_WEIGHT,
+    SCENE_MIN_SIZE,
+    fit_scene_shaper,
+    fit_shaper,
+    refine_shaper,
+)
+from .lattice import MIN_SIZE, check_size, checked_domain, lattice
+from .layer import LUT3D
+from .lookup import OUTPUT_ENCODINGS, encode_output
 from .report import code_errors, diagnose, enforce, measure, measured_colours
 from .shapers import DEFAULT_DOMAINS, SHAPERS
 from .validation import validation_colours

@@ -40,11 +40,12 @@ from typing import Optional
 
 import torch
 
+from ..base.core import sanitize
 from ..color import linear_to_srgb
-from ..core import sanitize
 from .kernels import KERNELS
 from .lattice import planar_table
-from .lut3d import LUT3D, decode_output, encode_output
+from .layer import LUT3D
+from .lookup import decode_output, encode_output
 from .shapers import lattice_unit, shaper_encode
 from .validation import validation_colours
 

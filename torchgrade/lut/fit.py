@@ -44,8 +44,8 @@ from typing import Callable
 import torch
 from tqdm import tqdm
 
+from ..base.core import HALF_MAX
 from ..color import linear_to_logc, linear_to_srgb, logc_to_linear
-from ..core import HALF_MAX
 from .validation import validation_colours
 
 __all__ = ["fit_shaper", "refine_shaper", "FIT_KNOTS", "FIT_BASES", "FIT_FLOOR", "FIT_ROUNDS", "FIT_BANDS",

@@ -29,8 +29,8 @@ from typing import Callable, Optional
 
 import torch
 
+from ..base.core import sanitize
 from ..color import linear_to_srgb
-from ..core import sanitize
 from .shapers import SHAPERS
 from .validation import validation_colours
 

@@ -23,8 +23,8 @@ from typing import Optional
 
 import torch
 
+from ..base.core import HALF_MAX
 from ..color import linear_to_logc, logc_to_linear
-from ..core import HALF_MAX
 
 __all__ = ["Shaper", "LinearShaper", "LogCShaper", "LogCHDRShaper", "CurveShaper", "FittedShaper", "SHAPERS", "LOGC_BLACK",
            "LOGC_TOP", "LOGC_HALF_MAX", "DEFAULT_DOMAINS", "shaper_encode", "shaper_decode", "sample_curve", "lattice_unit"]

@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import torch
 
+from ..base.core import HALF_MAX
 from ..color import linear_to_logc, logc_to_linear
-from ..core import HALF_MAX
 
 __all__ = ["validation_colours", "FOOTAGE_COLOURS", "GRID_LEVELS"]
 

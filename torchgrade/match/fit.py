@@ -21,10 +21,11 @@ from torch import nn
 from tqdm import tqdm
 
 from ..color import linear_to_logc, linear_to_srgb, srgb_to_linear
-from ..grade import ColorGrade, color_grade
+from ..grading.grade import color_grade
+from ..grading.layer import ColorGrade
+from ..look.postfx import PostFX
 from ..lut import planar_table
-from ..pipeline import PostFX
-from ..tonemap import tonemap, tone_mapper
+from ..tonemap import tone_mapper, tonemap
 from .bounded import BoundedControls, fittable_names
 from .metrics import display_codes, match_errors
 from .pixels import PixelPairs

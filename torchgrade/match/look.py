@@ -21,10 +21,17 @@ import torch
 from torch import nn
 
 from ..io import read_cube, write_clf, write_cube
+from ..look.postfx import PostFX
 from ..lut import LUT3D, bake_lut
-from ..pipeline import PostFX
 from ..tonemap import tone_mapper
-from .fit import GRADE_CONTROLS, TONEMAP_CANDIDATES, every_loss, evaluate, fit_controls, fit_residual
+from .fit import (
+    GRADE_CONTROLS,
+    TONEMAP_CANDIDATES,
+    evaluate,
+    every_loss,
+    fit_controls,
+    fit_residual,
+)
 from .pixels import PixelPairs, sample_pairs
 from .residual import ResidualLUT
 

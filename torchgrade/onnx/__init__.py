@@ -17,7 +17,7 @@ down-conversion writes opset-18 ``Split`` attributes into opset-17 files). Where
 symbolic functions are missing or wrong for an op torchgrade uses, :mod:`~torchgrade.onnx.symbolics`
 supplies them for the duration of the export.
 
-**Stages.** The exporter asks each stage for its :meth:`~torchgrade.stage.Stage.export_form`
+**Stages.** The exporter asks each stage for its :meth:`~torchgrade.base.stage.Stage.export_form`
 (:mod:`~torchgrade.onnx.graph`); a look lists its stages.
 
 **LUTs.** ``lut_backend`` picks how a :class:`~torchgrade.lut.LUT3D` is looked up in the graph
@@ -81,7 +81,7 @@ Examples:
 from .defaults import STATE_DEFAULTS, optional_names, plain_inputs, with_defaults
 from .describe import INPUT_DOCS, describe, look_config
 from .exporter import DEFAULT_OPSET, IO_DTYPES, VOLUME_OPSET, export, fold_constants, used_opsets
-from .frames import (CODE_MAX, INPUT_DTYPES, LAYOUTS, OUTPUTS, FrameFormat, decode_input, eight_bit_codes, encode_output, frame_format,
+from .frames import (CODE_MAX, INPUT_DTYPES, LAYOUTS, OUTPUTS, FrameFormat, decode_frame, eight_bit_codes, encode_frame, frame_format,
                      model_input, read_frame_format)
 from .graph import (GRADE_INPUTS, ExportGraph, GradeWithInputs, default_example, example_inputs, export_graph, frame_of,
                     grade_feeds, grade_of, has_state, input_names, output_names)
@@ -95,7 +95,7 @@ from ..lut import LUT_BACKENDS, LUTLookup, strip_table, trilinear_strip
 __all__ = [
     "STATE_DEFAULTS", "optional_names", "plain_inputs", "with_defaults",
     "INPUT_DOCS", "describe", "look_config", "DEFAULT_OPSET", "IO_DTYPES", "VOLUME_OPSET", "export", "fold_constants", "used_opsets",
-    "CODE_MAX", "INPUT_DTYPES", "LAYOUTS", "OUTPUTS", "FrameFormat", "decode_input", "eight_bit_codes", "encode_output", "frame_format",
+    "CODE_MAX", "INPUT_DTYPES", "LAYOUTS", "OUTPUTS", "FrameFormat", "decode_frame", "eight_bit_codes", "encode_frame", "frame_format",
     "model_input", "read_frame_format",
     "GRADE_INPUTS", "ExportGraph", "GradeWithInputs", "default_example", "example_inputs", "export_graph", "frame_of",
     "grade_feeds", "grade_of", "has_state", "input_names", "output_names",

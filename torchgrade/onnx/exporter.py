@@ -18,12 +18,19 @@ import onnx as onnx_lib  # the onnx package (absolute import), not this package
 import torch
 from torch import nn
 
-from ..core import check_on_cpu
+from ..base.core import check_on_cpu
 from ..io.atomic import atomic_write
 from ..lut import BACKENDS
 from .describe import describe
 from .frames import FLOAT_DTYPES, FrameFormat, frame_format, retype_uint16
-from .graph import GRADE_INPUTS, default_example, example_inputs, export_graph, input_names, output_names
+from .graph import (
+    GRADE_INPUTS,
+    default_example,
+    example_inputs,
+    export_graph,
+    input_names,
+    output_names,
+)
 from .strips import scan_strips
 from .symbolics import symbolics
 from .verify import graph_nodes

@@ -19,7 +19,7 @@ Examples:
     >>> frame = model_input(torch.full((1, 3, 2, 2), 0.18), fmt)
     >>> frame.shape, frame.dtype, int(frame[0, 0, 0, 0])
     (torch.Size([1, 2, 2, 3]), torch.uint8, 118)
-    >>> round(float(decode_input(to_nchw(frame, "NHWC"), torch.uint8)[0, 0, 0, 0]), 4)
+    >>> round(float(decode_frame(to_nchw(frame, "NHWC"), torch.uint8)[0, 0, 0, 0]), 4)
     0.1812
 """
 
@@ -32,11 +32,11 @@ import onnx as onnx_lib  # the onnx package (absolute import), not this package
 import torch
 from onnx import TensorProto, helper
 
+from ..base.core import check_image
 from ..color.transfer import linear_to_srgb, srgb_to_linear
-from ..core import check_image
 
 __all__ = ["LAYOUTS", "INPUT_DTYPES", "FLOAT_DTYPES", "OUTPUTS", "CODE_MAX", "FrameFormat", "frame_format", "read_frame_format", "metadata_of",
-           "to_nchw", "from_nchw", "decode_input", "encode_output", "check_batch", "model_input", "trace_input", "eight_bit_codes", "retype_uint16"]
+           "to_nchw", "from_nchw", "decode_frame", "encode_frame", "check_batch", "model_input", "trace_input", "eight_bit_codes", "retype_uint16"]
 
 LAYOUTS = ("NCHW", "NHWC")
 """Image layouts: ``(batch, 3, height, width)`` (PyTorch's) and ``(batch, height, width, 3)`` (decoders', interleaved)."""
@@ -151,11 +151,11 @@ def from_nchw(image: torch.Tensor, layout: str) -> torch.Tensor:
     return image.permute(0, 2, 3, 1) if layout == "NHWC" else image
 
 
-def decode_input(image: torch.Tensor, dtype: torch.dtype) -> torch.Tensor:
+def decode_frame(image: torch.Tensor, dtype: torch.dtype) -> torch.Tensor:
     """The float32 linear light of an input of ``dtype``: floats as they are, integer sRGB codes through the EOTF.
 
     Examples:
-        >>> decode_input(torch.tensor([0, 255], dtype=torch.uint8), torch.uint8).tolist()
+        >>> decode_frame(torch.tensor([0, 255], dtype=torch.uint8), torch.uint8).tolist()
         [0.0, 1.0]
     """
     if dtype not in CODE_MAX:
@@ -163,14 +163,14 @@ def decode_input(image: torch.Tensor, dtype: torch.dtype) -> torch.Tensor:
     return srgb_to_linear(image.float() * (1.0 / CODE_MAX[dtype]))
 
 
-def encode_output(image: torch.Tensor, output: str = "linear", dtype: torch.dtype = torch.float32) -> torch.Tensor:
+def encode_frame(image: torch.Tensor, output: str = "linear", dtype: torch.dtype = torch.float32) -> torch.Tensor:
     """A look's linear output in one of the :data:`OUTPUTS` encodings; a float encoding in ``dtype``.
 
     In an ONNX export ``srgb16`` gives float codes: the exporter's TorchScript tracer has no uint16, so
     :func:`retype_uint16` appends the ``Cast``.
 
     Examples:
-        >>> encode_output(torch.tensor([0.0, 0.18, 1.0, 4.0]), "srgb8").tolist()
+        >>> encode_frame(torch.tensor([0.0, 0.18, 1.0, 4.0]), "srgb8").tolist()
         [0, 118, 255, 255]
     """
     encoded = image if _named(output, OUTPUTS, "output") == "linear" else linear_to_srgb(image.clamp(0.0, 1.0))
@@ -181,7 +181,7 @@ def encode_output(image: torch.Tensor, output: str = "linear", dtype: torch.dtyp
 
 
 def check_batch(image) -> torch.Tensor:
-    """``image`` if it is a look's input, a float ``(batch, 3, height, width)`` tensor (:func:`~torchgrade.core.check_image`
+    """``image`` if it is a look's input, a float ``(batch, 3, height, width)`` tensor (:func:`~torchgrade.base.core.check_image`
     and a batch axis); otherwise the error that names what it is.
 
     Examples:

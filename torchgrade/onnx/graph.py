@@ -1,4 +1,4 @@
-"""The export-ready form of a look: each stage's :meth:`~torchgrade.stage.Stage.export_form` in one graph.
+"""The export-ready form of a look: each stage's :meth:`~torchgrade.base.stage.Stage.export_form` in one graph.
 
 The exporter asks, it does not look inside: a look (anything with a ``stages()`` method, as
 :class:`~torchgrade.PostFX`) lists its stages; each stage gives its export form, and the export
@@ -23,10 +23,18 @@ from typing import Callable, Optional, Sequence
 import torch
 from torch import nn
 
-from ..core import nan_free
-from ..grade import ColorGrade, color_grade
+from ..base.core import nan_free
+from ..grading.grade import color_grade
+from ..grading.layer import ColorGrade
 from ..lut import BACKENDS
-from .frames import FrameFormat, decode_input, encode_output, from_nchw, to_nchw, trace_input
+from .frames import (
+    FrameFormat,
+    decode_frame,
+    encode_frame,
+    from_nchw,
+    to_nchw,
+    trace_input,
+)
 from .strips import mark
 
 __all__ = ["GRADE_INPUTS", "GradeWithInputs", "ExportGraph", "export_graph", "grade_feeds", "grade_of", "frame_of", "has_state", "is_per_pixel",
@@ -65,7 +73,7 @@ class GradeWithInputs(nn.Module):
     """
 
     per_pixel = True
-    """Each output pixel depends on its input pixel alone (see :attr:`torchgrade.stage.Stage.per_pixel`)."""
+    """Each output pixel depends on its input pixel alone (see :attr:`torchgrade.base.stage.Stage.per_pixel`)."""
 
     def __init__(self, aces: bool, curves: Optional[dict] = None, log_space: str = "acescc"):
         super().__init__()
@@ -107,9 +115,9 @@ class ExportGraph(nn.Module):
         # strips, has no uint16 kernel, so uint16 codes are cast first.
         from_input = in_strips and start == 0 and self.exposure is None
         frame = to_nchw(image.float() if frames.input_dtype == torch.uint16 else image, frames.layout)
-        frame = decode_input(mark(frame) if from_input else frame, frames.input_dtype)
+        frame = decode_frame(mark(frame) if from_input else frame, frames.input_dtype)
         graded, *state = self._graded(frame, *extra, mark_at=None if from_input else start)
-        encoded = encode_output(graded, frames.output, frames.float_dtype)
+        encoded = encode_frame(graded, frames.output, frames.float_dtype)
         output = from_nchw(mark(encoded, end=True) if in_strips else encoded, frames.output_layout)
         return (output, *state) if state else output
 
@@ -129,7 +137,7 @@ class ExportGraph(nn.Module):
 
 def is_per_pixel(module: nn.Module) -> bool:
     """Whether each output pixel of ``module`` depends on its input pixel alone: a stage that says so
-    (:attr:`~torchgrade.stage.Stage.per_pixel`), or an ``nn.Sequential`` of such stages and identity stages.
+    (:attr:`~torchgrade.base.stage.Stage.per_pixel`), or an ``nn.Sequential`` of such stages and identity stages.
 
     Examples:
         >>> import torchgrade as tg

@@ -15,7 +15,7 @@ from typing import Mapping
 
 import torch
 
-from ..pipeline import PostFX
+from ..look.postfx import PostFX
 from .exporter import export
 from .frames import CODE_MAX, read_frame_format
 from .graph import has_state

@@ -1,6 +1,6 @@
 """Running exported files on onnxruntime and OpenVINO: verification against PyTorch, node count and latency.
 
-Both runtimes are tested on every exported model (``tests/test_openvino.py``). OpenVINO's CPU plugin
+Both runtimes are tested on every exported model (``tests/onnx/test_openvino.py``). OpenVINO's CPU plugin
 computes in bfloat16 by default where the processor has it (``precision=None`` here); pass
 ``precision="f32"`` (OpenVINO's ``{"INFERENCE_PRECISION_HINT": "f32"}``) to match PyTorch's float32.
 
@@ -26,7 +26,7 @@ import torch
 from torch import nn
 
 from .defaults import STATE_DEFAULTS, plain_inputs
-from .frames import check_batch, decode_input, eight_bit_codes, encode_output, from_nchw, model_input, read_frame_format, to_nchw
+from .frames import check_batch, decode_frame, eight_bit_codes, encode_frame, from_nchw, model_input, read_frame_format, to_nchw
 from .graph import GRADE_INPUTS, frame_of, grade_feeds, grade_of, has_state
 
 __all__ = ["RUNTIMES", "DEVICES", "Inputs", "OpenVINOSession", "session", "feeds", "reference", "verify", "metadata", "graph_nodes", "node_count",
@@ -218,9 +218,9 @@ def verify(module: nn.Module, path, inputs: Inputs, runtime: str = "onnxruntime"
     frames = read_frame_format(runner.get_modelmeta().custom_metadata_map)
     outputs = runner.run(None, feeds(runner, module, inputs))
     image, *state = _inputs(inputs, has_state(module))
-    decoded = decode_input(to_nchw(model_input(image, frames), frames.layout), frames.input_dtype)
+    decoded = decode_frame(to_nchw(model_input(image, frames), frames.layout), frames.input_dtype)
     result, *expected_state = reference(module, (decoded, *state))
-    expected = (from_nchw(encode_output(result, frames.output, frames.float_dtype), frames.output_layout), *expected_state)
+    expected = (from_nchw(encode_frame(result, frames.output, frames.float_dtype), frames.output_layout), *expected_state)
     errors = []
     for index, (out, exp) in enumerate(zip(outputs, expected)):
         out, exp = out.astype(np.float64), exp.double().numpy()

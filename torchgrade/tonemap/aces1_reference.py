@@ -6,10 +6,20 @@ import math
 
 import torch
 
+from ..base.core import HALF_MAX
 from ..color import convert
-from ..core import HALF_MAX
 from ..runtime import constant, values_of
-from .aces_rrt import ACES_TINY, ODT_SAT_FACTOR, RRT_SAT_FACTOR, ap1_desaturate, ap1_dim_surround, ap1_to_rec709, cubic_basis_hue_weight, rec709_to_aces, rrt_glow_and_red_modifier
+from .aces_rrt import (
+    ACES_TINY,
+    ODT_SAT_FACTOR,
+    RRT_SAT_FACTOR,
+    ap1_desaturate,
+    ap1_dim_surround,
+    ap1_to_rec709,
+    cubic_basis_hue_weight,
+    rec709_to_aces,
+    rrt_glow_and_red_modifier,
+)
 from .base import display
 
 __all__ = ["aces_reference"]

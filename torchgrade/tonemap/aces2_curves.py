@@ -2,7 +2,7 @@
 
 Both wrap :func:`~torchgrade.tonemap.aces2.aces2_output` (the Academy's ACES 2.0 Output Transform,
 within 0.02 8-bit codes of OpenColorIO 2.6's builtin views on the sample images; see
-``tests/test_aces2.py``). Unlike the fits, they have no 60 ceiling: the transform takes every
+``tests/tonemap/test_aces2.py``). Unlike the fits, they have no 60 ceiling: the transform takes every
 value the non-finite policy lets through and handles out-of-gamut colours itself.
 """
 

@@ -4,12 +4,19 @@ from __future__ import annotations
 
 import torch
 
+from ..base.core import apply_matrix, matrix_on_planes, untracked
 from ..color import AP1_LUMINANCE, MATRICES, convert, unity_to_aces
 from ..color.spaces import shared_matrix
-from ..core import apply_matrix, matrix_on_planes, untracked
 from ..runtime import constant, values_of
-from .aces_rrt import (AP1_TO_REC709, DIM_SURROUND_GAMMA, ODT_SAT_FACTOR, RRT_SAT_FACTOR, rrt_glow_and_red_modifier,
-                       rrt_glow_and_red_modifier_planes, smoothstep_hue_weight)
+from .aces_rrt import (
+    AP1_TO_REC709,
+    DIM_SURROUND_GAMMA,
+    ODT_SAT_FACTOR,
+    RRT_SAT_FACTOR,
+    rrt_glow_and_red_modifier,
+    rrt_glow_and_red_modifier_planes,
+    smoothstep_hue_weight,
+)
 from .base import apply_rows, display, limited
 
 __all__ = ["aces_fitted", "aces", "aces_hill", "aces_narkowicz"]
@@ -76,7 +83,7 @@ def aces_fitted(aces: torch.Tensor) -> torch.Tensor:
 
 def _aces_fitted_planes(aces: torch.Tensor) -> torch.Tensor:
     """The export form of :func:`aces_fitted`: the RRT's and the dim surround's planes go into the next matrix as they
-    are (:func:`~torchgrade.core.matrix_on_planes`), without a Concat and a Split each (the
+    are (:func:`~torchgrade.base.core.matrix_on_planes`), without a Concat and a Split each (the
     matrices on planes too, as 9 products by constants and 6 sums, would add 38 nodes)."""
     planes = rrt_glow_and_red_modifier_planes(aces, smoothstep_hue_weight)
     acescg = apply_matrix(constant(_RRT_DESATURATE_VALUES, aces), matrix_on_planes(shared_matrix("ap0_to_ap1", aces), planes).clamp_min(0.0))

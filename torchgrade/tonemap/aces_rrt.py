@@ -13,8 +13,14 @@ import math
 
 import torch
 
-from ..color import AP0_CHROMATICITIES, MATRICES, MATRIX_VALUES, primaries_to_rec709_matrix, safe_sqrt
-from ..core import apply_matrix, channel_sum, untracked
+from ..base.core import apply_matrix, channel_sum, untracked
+from ..color import (
+    AP0_CHROMATICITIES,
+    MATRICES,
+    MATRIX_VALUES,
+    primaries_to_rec709_matrix,
+    safe_sqrt,
+)
 from ..runtime import constant, values_of
 
 __all__ = [

@@ -13,8 +13,8 @@ from typing import Callable, NamedTuple, Optional
 
 import torch
 
-from ..core import apply_matrix, untracked
-from ..stage import Control
+from ..base.core import apply_matrix, untracked
+from ..base.stage import Control
 
 __all__ = ["TONEMAP_INPUT_LIMIT", "WHITE_POINT_RANGE", "ToneMapper", "limited", "display", "apply_rows", "no_tonemap"]
 

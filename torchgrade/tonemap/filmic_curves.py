@@ -6,10 +6,17 @@ import math
 
 import torch
 
+from ..base.core import Param, scalar_param
 from ..color import convert, unity_to_aces
-from ..core import Param, scalar_param
 from ..runtime import constant
-from .aces_rrt import ODT_SAT_FACTOR, RRT_SAT_FACTOR, ap1_desaturate, ap1_to_rec709, rrt_glow_and_red_modifier, smoothstep_hue_weight
+from .aces_rrt import (
+    ODT_SAT_FACTOR,
+    RRT_SAT_FACTOR,
+    ap1_desaturate,
+    ap1_to_rec709,
+    rrt_glow_and_red_modifier,
+    smoothstep_hue_weight,
+)
 from .base import WHITE_POINT_RANGE, display, limited
 
 __all__ = ["HABLE_RANGES", "FILMIC_RANGES", "UNREAL_FILMIC_RANGES", "neutral", "filmic", "hable", "unreal_filmic"]

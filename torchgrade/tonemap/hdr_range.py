@@ -13,7 +13,7 @@ from __future__ import annotations
 import torch
 
 from .. import color
-from ..core import Param, scalar_param
+from ..base.core import Param, scalar_param
 from .base import display
 
 __all__ = ["bt2390_eetf", "unity_reinhard_nits", "neutral_hdr", "NEUTRAL_HDR_RANGES", "HDR_PRIMARIES"]
@@ -94,7 +94,7 @@ def neutral_hdr(image: torch.Tensor, paper_white: Param = 203.0, min_luminance: 
 
     ``paper_white`` defaults to BT.2408's HDR reference white (203 cd/m²). Encode for a Rec.2100
     PQ display with ``torchgrade.color.linear_to_pq(x, reference=peak_luminance)`` or
-    :class:`torchgrade.display.Display`. Input policy: each Rec.2020 channel is clamped at 10000
+    :class:`torchgrade.output.layer.Display`. Input policy: each Rec.2020 channel is clamped at 10000
     cd/m² (the end of PQ, which the EETF maps to the peak anyway); negative (out-of-gamut) values
     reach the ICtCp path clamped in LMS, as Unity's ``max(0, lms)``.
 

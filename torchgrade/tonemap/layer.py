@@ -6,8 +6,8 @@ import inspect
 
 import torch
 
-from ..core import Param
-from ..stage import Control, Stage, controls_signature
+from ..base.core import Param
+from ..base.stage import Control, Stage, controls_signature
 from .registry import TONE_MAPPERS, TONEMAP_MODES, tone_mapper, tonemap
 
 __all__ = ["ToneMap"]

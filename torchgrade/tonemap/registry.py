@@ -8,14 +8,35 @@ from __future__ import annotations
 
 import torch
 
-from ..core import Param, check_choice, check_image, sanitize, to_input_dtype, working_dtype
+from ..base.core import (
+    Param,
+    check_choice,
+    check_image,
+    sanitize,
+    to_input_dtype,
+    working_dtype,
+)
 from .aces1_reference import aces_reference
-from .aces2_curves import ACES2_HDR_RANGES, aces2_hdr, aces2_sdr, prepare_aces2_hdr, prepare_aces2_sdr
+from .aces2_curves import (
+    ACES2_HDR_RANGES,
+    aces2_hdr,
+    aces2_sdr,
+    prepare_aces2_hdr,
+    prepare_aces2_sdr,
+)
 from .aces_fits import aces, aces_hill, aces_narkowicz
 from .agx_curves import agx, agx_godot
 from .base import WHITE_POINT_RANGE, ToneMapper, no_tonemap
+from .filmic_curves import (
+    FILMIC_RANGES,
+    HABLE_RANGES,
+    UNREAL_FILMIC_RANGES,
+    filmic,
+    hable,
+    neutral,
+    unreal_filmic,
+)
 from .hdr_range import HDR_PRIMARIES, NEUTRAL_HDR_RANGES, neutral_hdr
-from .filmic_curves import FILMIC_RANGES, HABLE_RANGES, UNREAL_FILMIC_RANGES, filmic, hable, neutral, unreal_filmic
 from .khronos_pbr import khronos_pbr_neutral
 from .reinhard_curves import reinhard, reinhard_extended, reinhard_luminance
 

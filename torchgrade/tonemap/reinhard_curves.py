@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import torch
 
+from ..base.core import Param, scalar_param
 from ..color import luminance
-from ..core import Param, scalar_param
 from .base import display, limited
 
 __all__ = ["reinhard", "reinhard_extended", "reinhard_luminance"]

@@ -7,10 +7,17 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ...base.core import check_choice
 from ...color import REC709_CHROMATICITIES
-from ...core import check_choice
 from .chromaticities import ADAPTATIONS, to_rec709_matrix
-from .decode import MAX_BYTES, MAX_PIXELS, check_budget, decode, decode_strips, selective
+from .decode import (
+    MAX_BYTES,
+    MAX_PIXELS,
+    check_budget,
+    decode,
+    decode_strips,
+    selective,
+)
 from .header_bytes import check_headers
 from .layout import ExrPart, exr_info
 from .yca import luminance_weights, yca_to_rgb

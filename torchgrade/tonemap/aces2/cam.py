@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 
 import torch
 
+from ...base.core import apply_matrix
 from ...color import rgb_to_xyz_matrix, safe_pow
-from ...core import apply_matrix
 from ...runtime import constant, values_of
 
 __all__ = ["CAM16_PRIMARIES", "JMhParams", "jmh_params", "rgb_to_aab", "aab_to_jmh", "jmh_to_rgb", "y_to_j", "a_to_y"]

@@ -14,13 +14,27 @@ import weakref
 import torch
 
 from ... import color
-from ...core import apply_matrix, check_image, full_precision, sanitize
+from ...base.core import apply_matrix, check_image, full_precision, sanitize
 from ...runtime import constant, values_of
 from ..aces_rrt import REC709_TO_AP0
-from .cam import REFERENCE_LUMINANCE, aab_to_jmh, jmh_params, jmh_to_rgb, rgb_to_aab, a_to_y, y_to_j
+from .cam import (
+    REFERENCE_LUMINANCE,
+    a_to_y,
+    aab_to_jmh,
+    jmh_params,
+    jmh_to_rgb,
+    rgb_to_aab,
+    y_to_j,
+)
 from .gamut import FOCUS_DISTANCE, FOCUS_DISTANCE_SCALING, GamutParams, gamut_compress
 from .tables import hue_and_cusp_tables, reach_m_table, upper_hull_gamma
-from .tonescale import chroma_compress, chroma_norm, chroma_params, daniele_tonescale, tonescale_params
+from .tonescale import (
+    chroma_compress,
+    chroma_norm,
+    chroma_params,
+    daniele_tonescale,
+    tonescale_params,
+)
 
 __all__ = ["PRIMARIES", "ENCODINGS", "Aces2Output", "Prepared", "aces2_output", "prepare_output", "peak_number"]
 
@@ -195,7 +209,7 @@ def aces2_output(image: torch.Tensor, peak_luminance: float = 100.0, limiting_pr
     * ``"pq"``: SMPTE ST 2084 of ``L * peak`` cd/m², OpenColorIO's "Rec.2100-PQ - Display".
 
     Matches OpenColorIO's "ACES 2.0 - SDR 100 nits (Rec.709)" and "ACES 2.0 - HDR 1000 nits
-    (Rec.2020)" / "(P3 D65)" views (Academy ACES 2.0; see ``tests/test_aces2.py`` for the measured
+    (Rec.2020)" / "(P3 D65)" views (Academy ACES 2.0; see ``tests/tonemap/test_aces2.py`` for the measured
     distance). Differentiable with respect to the image. ``peak_luminance`` is a number (or a
     0-d tensor without gradient) in ``[100, 10000]`` cd/m², not a learnable parameter: the gamut
     tables are searched for it, once per ``(peak_luminance, limiting_primaries)``, then cached.

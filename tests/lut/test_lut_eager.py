@@ -1,0 +1,141 @@
+"""The eager no-grad CPU lookup (tetrahedral's eager form, ``TetrahedralRuns``) against the gather form that
+autograd, ``torch.compile`` and exports run: the same values to float rounding over shapers, domains, output
+encodings and clamps, dtypes, lattice sizes and non-finite or huge inputs; its lattice coordinates bit for bit."""
+
+import pytest
+import torch
+
+from torchgrade.base.core import sanitize
+from torchgrade.lut import KERNELS, LUT3D, chunked_lookup, identity_table, lattice, lattice_unit, lookup, planar_table
+from torchgrade.lut.lookup import _LatticeCoordinates
+
+MAX_SIZE = KERNELS["tetrahedral"].eager.max_size
+
+
+def hostile_image(dtype=torch.float32) -> torch.Tensor:
+    """Random pixels inside and outside [0, 1], plus NaN, ±Inf, huge, negative zero and exact lattice coordinates."""
+    image = (torch.rand(2, 3, 23, 31, dtype=torch.float64) * 1.6 - 0.3).to(dtype)
+    specials = [float("nan"), float("inf"), -float("inf"), 1e30, -1e30, 7e4, 65504.0, -0.0, 0.0, 1.0, 0.5]
+    if dtype == torch.float16:
+        specials = [v for v in specials if abs(v) <= 65504 or v != v or abs(v) == float("inf")]
+    for k, value in enumerate(specials):
+        image[0, k % 3, 1, k] = value
+        image[1, :, 2, k] = value
+    for row, (a, b) in enumerate(((0, 1), (1, 2), (0, 2)), start=5):  # ties between two fractions
+        image[1, b, row] = image[1, a, row]
+    return image
+
+
+def curve_settings():
+    ramp = torch.linspace(0.0, 1.0, 9).unsqueeze(1).repeat(1, 3) ** torch.tensor([1.0, 0.5, 2.0])
+    return {"curve": ramp, "curve_range": (-0.1, 2.0)}
+
+
+SHAPED = [
+    ("linear", None, {}),
+    ("linear", (-0.25, (1.0, 2.0, 4.0)), {}),  # per-channel domain: shifted and scaled
+    ("linear", (0.0, 1e6), {}),  # a domain past the half-float range: sanitize's clamp matters
+    ("logc", None, {}),
+    ("curve", None, curve_settings()),
+]
+
+
+@pytest.mark.parametrize("shaper, domain, extra", SHAPED)
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64, torch.float16])
+def test_lattice_coordinates_are_those_of_lookup_bit_for_bit(shaper, domain, extra, dtype):
+    size = 17
+    lut = LUT3D(torch.rand(size, size, size, 3), shaper=shaper, domain=domain, **extra)
+    work = torch.float32 if dtype == torch.float16 else dtype
+    x = hostile_image(dtype)[0].reshape(3, -1)
+    expected = lattice_unit(sanitize(x.to(work)), shaper, lut.domain_min, lut.domain_max, lut.curve, lut.curve_range) * (size - 1)
+    coordinates = _LatticeCoordinates(work, size, shaper, lut.domain_min, lut.domain_max, lut.curve, lut.curve_range)
+    got = coordinates(x, torch.empty(x.shape, dtype=work))
+    assert torch.equal(got, expected)
+
+
+@pytest.mark.parametrize("shaper, domain, extra", SHAPED)
+@pytest.mark.parametrize("encoding, output_range", [("linear", None), ("srgb", None), ("linear", (0.0, 0.9))])
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64, torch.float16])
+def test_eager_tetrahedral_matches_the_gather_form(shaper, domain, extra, encoding, output_range, dtype):
+    size = 9
+    table = torch.rand(size, size, size, 3, dtype=torch.float64) * 3 - 1
+    lut = LUT3D(table.to(torch.float64 if dtype == torch.float64 else torch.float32), shaper=shaper, domain=domain,
+                output_range=output_range, output_encoding=encoding, **extra)
+    image = hostile_image(dtype)
+    with torch.no_grad():
+        eager = lut(image)
+        one_pass = lookup(image, lut.rows(lut.table.dtype), size, lut.shaper, lut.domain_min, lut.domain_max, "tetrahedral",
+                          lut.output_range, lut.curve, lut.curve_range, lut.output_encoding)
+    assert eager.dtype == one_pass.dtype == dtype and torch.isfinite(eager).all()
+    # a few roundings of values up to 2 (sRGB decoding has slope up to ~2.4 over these entries)
+    eps = torch.finfo(torch.float32 if dtype == torch.float16 else dtype).eps
+    atol = max(8 * 2.4 * 2 * eps, torch.finfo(dtype).eps * 2 if dtype == torch.float16 else 0.0)
+    torch.testing.assert_close(eager, one_pass, atol=atol, rtol=0)
+
+
+@pytest.mark.parametrize("size", [2, 3, 33, MAX_SIZE])
+def test_eager_tetrahedral_is_exact_on_lattice_points_and_close_to_the_gather_form_at_every_size(size):
+    points = lattice(size, torch.float32).reshape(1, -1, 1, 3).permute(0, 3, 1, 2)
+    assert torch.equal(LUT3D(identity_table(size))(points), points)
+    table = torch.rand(size, size, size, 3) * 2 - 1
+    rows = planar_table(table)
+    image = hostile_image()
+    image[..., :4, :] = 1.0  # the top face of the lattice, where the corner is not clamped to S - 2
+    image[0, 1, :4, :] = torch.rand(4, image.shape[-1])
+    settings = (size, "linear", 0.0, 1.0, "tetrahedral", None, None, (0.0, 1.0), "linear")
+    with torch.no_grad():
+        torch.testing.assert_close(chunked_lookup(image, rows, *settings), lookup(image, rows, *settings), atol=1e-6, rtol=0)
+    assert torch.equal(LUT3D(table)(points), planar_table(table).t().reshape(1, -1, 1, 3).permute(0, 3, 1, 2))
+
+
+def test_lattices_above_the_eager_forms_largest_run_the_gather_form_bit_for_bit():
+    size = MAX_SIZE + 1
+    rows = planar_table(torch.rand(size, size, size, 3))
+    image = hostile_image()
+    settings = (size, "linear", 0.0, 1.0, "tetrahedral", None, None, (0.0, 1.0), "linear")
+    with torch.no_grad():
+        assert torch.equal(chunked_lookup(image, rows, *settings, pixels=1000), lookup(image, rows, *settings))
+
+
+def test_a_constant_table_gives_its_constant_exactly():
+    lut = LUT3D(torch.full((5, 5, 5, 3), 0.3))
+    with torch.no_grad():
+        assert torch.equal(lut(hostile_image()), torch.full((2, 3, 23, 31), 0.3))
+
+
+@pytest.mark.parametrize("requires_grad", ["image", "table"])
+def test_the_autograd_path_and_the_eager_path_give_the_same_values(requires_grad):
+    table = torch.rand(9, 9, 9, 3)
+    lut = LUT3D(table.clone(), learnable=requires_grad == "table")
+    image = hostile_image().requires_grad_(requires_grad == "image")
+    with_grad = lut(image)
+    assert with_grad.requires_grad
+    with torch.no_grad():
+        eager = lut(image)
+    torch.testing.assert_close(with_grad.detach(), eager, atol=4 * 2.0 ** -24, rtol=0)
+    with_grad.sum().backward()  # the gradient still flows
+    assert (image.grad if requires_grad == "image" else lut.table.grad) is not None
+
+
+def test_eager_tables_are_cached_and_follow_the_table():
+    lut = LUT3D(torch.rand(5, 5, 5, 3))
+    image = torch.rand(1, 3, 6, 7)
+    before = lut(image)
+    tables = lut._tables_cache[2]
+    lut(image)
+    assert lut._tables_cache[2] is tables  # one derivation per table
+    with torch.no_grad():
+        lut.table.mul_(0.5)
+    torch.testing.assert_close(lut(image), 0.5 * before, atol=1e-7, rtol=0)
+    assert lut._tables_cache[2] is not tables
+
+
+def test_strided_and_channels_last_images_give_the_contiguous_result_bit_for_bit():
+    lut = LUT3D(torch.rand(9, 9, 9, 3))
+    image = hostile_image()
+    with torch.no_grad():
+        expected = lut(image)
+        assert torch.equal(lut(image.to(memory_format=torch.channels_last)), expected)
+        wide = torch.zeros(2, 3, 23, 62)
+        wide[..., ::2] = image
+        assert torch.equal(lut(wide[..., ::2]), expected)

@@ -1,0 +1,187 @@
+"""The GPU path, measured on the CPU: what a frame would cost a GPU, counted where no GPU is needed.
+
+* **Launches.** Every operation PyTorch dispatches on a device that is not the CPU is a kernel launch on CUDA.
+  On the ``meta`` device (shapes, no data) the execution policy is that of a GPU (whole frames, no reads), so
+  the operations a 4K frame dispatches there are the launches it would make: held under :data:`LAUNCH_BUDGET`.
+* **No host synchronisation.** After the first frame (which may build constants and tables), a forward reads
+  no value back (``_local_scalar_dense``: ``.item()``, ``bool()``, ``.tolist()``) and makes no tensor from host
+  data (``lift_fresh``, a CPU-to-device copy): on CUDA each is a wait or a pageable copy. Checked for every case
+  of ``tests/runtime/test_device.py``, in inference and in training.
+* **Fused, compiled.** Inductor on the CPU compiles the cinematic look with no matrix-library call (a 3x3
+  colour matrix as ``mm``/``bmm`` is a cuBLAS ``gemv`` on CUDA that nothing fuses) and in few kernels; every
+  stage and look is captured as one graph (``fullgraph=True``).
+"""
+
+from __future__ import annotations
+
+import collections
+import json
+import re
+from pathlib import Path
+
+import pytest
+import torch
+from torch.utils._python_dispatch import TorchDispatchMode
+
+import torchgrade as tg
+from test_device import CASES
+
+CINEMATIC = json.loads((Path(__file__).resolve().parents[2] / "export" / "looks" / "cinematic.json").read_text())
+
+LAUNCH_BUDGET = {"cinematic": 410, "exposure": 60, "bloom": 150, "grade": 95, "tonemap": 110}
+"""Operations dispatched for one 3840x2160 frame of ``export/looks/cinematic.json`` (no_grad), per stage and whole.
+Measured 401 (exposure 54, bloom 148, grade 90, tone map 109). With the log-average metering and no bloom clamp the
+look measured 354 (exposure 16, bloom 139): the histogram (128 bins filled by two scatters, the percentile band, the
+compensation curve) costs 38 operations, most on 128-value tensors; an H200 counted 370 launches for 351 of them
+(``benchmarks/results/gpu.md``), where the look made 16,875 in strips and 1,060 in whole frames before
+(``../shared/measurements/gpu-h200``)."""
+
+VIEWS = {"view", "_unsafe_view", "t", "expand", "unsqueeze", "squeeze", "split", "unbind", "slice", "select", "reshape",
+         "alias", "permute", "detach", "as_strided", "transpose", "split_with_sizes", "_reshape_alias"}
+"""Operations that make a view: metadata only, no kernel."""
+
+
+class Dispatched(TorchDispatchMode):
+    """Counts the operations dispatched (views aside), the values read back and the tensors made from host data."""
+
+    def __init__(self):
+        super().__init__()
+        self.launches = 0
+        self.reads = collections.Counter()
+        self.host_data = collections.Counter()
+
+    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+        kwargs = kwargs or {}
+        name = func.overloadpacket.__name__
+        if func is torch.ops.aten._local_scalar_dense.default:
+            self.reads[name] += 1
+        elif func in (torch.ops.aten.lift_fresh.default, torch.ops.aten.lift_fresh_copy.default):
+            self.host_data[name] += 1
+        elif func in (torch.ops.aten._to_copy.default, torch.ops.aten.copy_.default) and _from_host(args, kwargs):
+            self.host_data[f"{name} from the CPU"] += 1
+        elif name not in VIEWS:
+            self.launches += 1
+        return func(*args, **kwargs)
+
+
+def _from_host(args, kwargs) -> bool:
+    devices = {a.device.type for a in args if isinstance(a, torch.Tensor)}
+    if "device" in kwargs and kwargs["device"] is not None:
+        devices.add(torch.device(kwargs["device"]).type)
+    return "cpu" in devices and len(devices) > 1
+
+
+def _cinematic_stages() -> dict:
+    look = tg.PostFX.from_config(CINEMATIC).eval()
+    return {"cinematic": look, **{name: stage for name, stage in look.stages().items()}}
+
+
+def _second_frame(module, image: torch.Tensor, train: bool = False) -> Dispatched:
+    """What the second frame through ``module`` dispatches (the first builds constants and tables)."""
+    for frame in range(2):
+        counted = Dispatched()
+        with torch.set_grad_enabled(train), counted:
+            out = module(image)
+            if train:
+                out.sum().backward()
+    return counted
+
+
+@pytest.mark.parametrize("name", list(LAUNCH_BUDGET))
+def test_a_4k_frame_of_the_cinematic_look_launches_within_its_budget(name):
+    module = _cinematic_stages()[name].to("meta")
+    counted = _second_frame(module, torch.empty(1, 3, 2160, 3840, device="meta"))
+    assert counted.launches <= LAUNCH_BUDGET[name], f"{name}: {counted.launches} operations a 4K frame"
+
+
+HOST_DRAWS = {name: "draws from the CPU generator the case passes, so that every device sees the same looks"
+              for name in ("random-postfx", "random-postfx-tonemaps")}
+"""Cases that copy from the host by the caller's choice, and why (without a generator a layer draws on the device:
+:func:`test_a_random_layer_draws_on_the_images_device`)."""
+
+
+@pytest.mark.parametrize("train", [False, True], ids=["inference", "training"])
+@pytest.mark.parametrize("name", [name for name in CASES if name not in HOST_DRAWS])
+def test_after_the_first_frame_nothing_is_read_back_or_copied_from_the_host(name, train):
+    module = CASES[name]().to("meta")
+    image = torch.empty(2, 3, 40, 56, device="meta", requires_grad=train)
+    counted = _second_frame(module, image, train)
+    assert not counted.reads and not counted.host_data, f"reads {dict(counted.reads)}, host data {dict(counted.host_data)}"
+
+
+def test_a_random_layer_draws_on_the_images_device():
+    layer = tg.RandomPostFX(contrast=30, saturation=20, bloom_intensity=(0.2, 0.6), tonemap=("aces", "neutral"))
+    counted = _second_frame(layer, torch.empty(4, 3, 40, 56, device="meta"))
+    assert not counted.reads and not counted.host_data, f"reads {dict(counted.reads)}, host data {dict(counted.host_data)}"
+    assert all(value.device.type == "meta" for value in layer.last_params.values())
+
+
+EXTERN_MATRIX_CALLS = re.compile(r"extern_kernels\.(mm|bmm|addmm|baddbmm)\b|aten\.(mm|bmm|addmm)\b")
+FUSED_KERNEL_CALL = re.compile(r"^\s+cpp_fused_\w+\(", re.MULTILINE)
+FUSED_KERNEL_BUDGET = 12
+"""Fused kernels a frame of the compiled cinematic look calls on the CPU (measured 9: the bloom pyramid's levels,
+the rest fused with them; beside them, the pyramid's depthwise convolutions, which kornia picks on the CPU)."""
+
+
+def test_inductor_compiles_the_cinematic_look_without_matrix_calls_in_few_kernels():
+    from torch._inductor import metrics
+    from torch._inductor.utils import run_and_get_code
+
+    torch._dynamo.reset()
+    look = tg.PostFX.from_config(CINEMATIC).eval()
+    compiled = tg.compile(look)
+    image = torch.rand(1, 3, 64, 96) * 8
+    with torch.no_grad():
+        out, code = run_and_get_code(compiled, image)
+        expected = tg.PostFX.from_config(CINEMATIC).eval()(image)
+    source = "\n".join(code)
+    assert not EXTERN_MATRIX_CALLS.search(source), EXTERN_MATRIX_CALLS.findall(source)
+    launched = FUSED_KERNEL_CALL.findall(source)
+    assert len(launched) <= FUSED_KERNEL_BUDGET, f"{len(launched)} fused kernels a frame ({metrics.generated_kernel_count} generated)"
+    torch.testing.assert_close(out, expected, rtol=1e-4, atol=1e-5)
+
+
+GRAPHS = {
+    **{f"tonemap-{mode}": (lambda mode=mode: tg.ToneMap(mode)) for mode in tg.TONEMAP_MODES},
+    "cinematic": lambda: tg.PostFX.from_config(CINEMATIC).eval(),
+    "random-postfx": lambda: tg.RandomPostFX(contrast=30, saturation=20, bloom_intensity=(0.2, 0.6), tonemap="aces"),
+    "lut": lambda: tg.LUT3D(tg.lut.identity_table(9) ** 1.5, shaper="logc"),
+}
+
+
+@pytest.mark.parametrize("name", list(GRAPHS))
+def test_every_stage_and_look_is_captured_as_one_graph(name):
+    """Dynamo alone (backend "eager": the capture is what can break); ``fullgraph=True`` raises at a graph break."""
+    torch._dynamo.reset()
+    module = GRAPHS[name]()
+    image = torch.rand(2, 3, 24, 32) * 4
+    with torch.no_grad():
+        torch.manual_seed(1)
+        captured = torch.compile(module, fullgraph=True, backend="eager")(image)
+        torch.manual_seed(1)
+        eager = module(image)
+    torch.testing.assert_close(captured, eager, rtol=1e-5, atol=1e-6)
+
+
+def test_compile_picks_cuda_graphs_on_cuda_only():
+    assert tg.runtime.compile_mode(torch.device("cuda")) == "reduce-overhead"
+    assert tg.runtime.compile_mode(torch.device("cuda"), cuda_graphs=False) == "default"
+    assert tg.runtime.compile_mode(torch.device("cpu")) == "default"
+    with pytest.raises(TypeError, match="nn.Module"):
+        tg.compile(lambda x: x)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="device-conditional: needs CUDA")
+def test_on_cuda_a_learnable_control_out_of_range_raises_at_a_later_forward_without_a_sync():
+    grade = tg.ColorGrade(contrast=torch.nn.Parameter(torch.tensor(20.0))).cuda()
+    image = torch.rand(1, 3, 16, 16, device="cuda")
+    grade(image)
+    with torch.no_grad():
+        grade.contrast.fill_(500.0)  # what an optimiser step could do
+    counted = Dispatched()
+    with counted:
+        grade(image)  # the step's forward: the value's copy is on its way
+    assert not counted.reads
+    torch.cuda.synchronize()
+    with pytest.raises(ValueError, match=r"contrast must lie in \[-100.0, 100.0\], got 500.0"):
+        grade(image)

@@ -1,0 +1,443 @@
+"""Random post-processing for training: ``RandomPostFX``, a per-sample random grade of a batch.
+
+Follows kornia.augmentation's conventions: ``p`` (probability that a sample is changed),
+``same_on_batch`` (one draw for the whole batch), ``keepdim``, and the sampled parameters kept in
+``last_params`` and accepted back by ``forward(x, params=...)`` to replay the exact look, for
+example on a label image. Unlike kornia, scene-referred values are never clamped.
+
+**Ranges.** Every continuous control takes ``None`` (off) or a ``(min, max)`` range, sampled
+uniformly per sample, in the units of :class:`torchgrade.ColorGrade` and :class:`torchgrade.Bloom`.
+Everything is off by default, as in kornia's ``ColorJiggle``; a range ``(v, v)`` at the control's
+identity is off too. Controls that are off are not computed; with every control off the layer
+returns its input.
+
+**Order**, that of the look's slots (:data:`torchgrade.look.slots.SLOTS`): (sRGB decode) -> bloom -> grade ->
+tone mapper -> look LUT -> (sRGB encode).
+
+**Tone mapping** is off by default (``tonemap=None``): the output of an HDR input stays
+scene-referred linear, ready for the next augmentation or for the network. ``tonemap`` may name
+one mode of :data:`torchgrade.TONEMAP_MODES` or a sequence of them, one chosen uniformly per
+sample. Each mode is evaluated once, on the samples that chose it (the batch is sorted by mode,
+split, mapped and put back in order), so a batch costs one tone mapper per sample whatever the
+number of modes; counting the modes reads one small tensor back from the device.
+
+**A look LUT** (``look_lut``: a :class:`~torchgrade.LookLUT`, a ``.cube``/CLF path, a
+:class:`~torchgrade.LUT3D` or a table) is applied after the tone mapper, on display-referred values
+(so it needs ``tonemap`` or ``input_space="srgb"``), with a contribution drawn per sample from
+``look_lut_contribution`` (a ``(min, max)`` range in [0, 1]; the stage's own contribution when None).
+
+**sRGB inputs** (``input_space="srgb"``) are display-referred images in [0, 1]: they are decoded
+to linear, graded, encoded again and clamped to [0, 1], the display range they came from. They
+are not tone mapped unless ``tonemap`` is given (then the decoded values are treated as
+scene-referred linear, for example after a positive exposure).
+
+**Skipped samples** (probability ``1 - p``) keep their input where the random controls act (bloom and
+grade, blended back with ``torch.where``, so one graph serves the whole batch) and get a look LUT
+contribution of 0, but the output transform, the tone mapper, applies to every sample: a batch never
+mixes scene-referred and display-referred values. Without a tone mapper or look LUT a skipped sample's
+output equals its input exactly. ``p = 0`` skips the random controls without computing them.
+
+**Precision.** float16 and bfloat16 inputs are computed in float32 and returned in their own dtype.
+"""
+
+from __future__ import annotations
+
+import inspect
+import numbers
+import threading
+
+import torch
+from kornia.augmentation import IntensityAugmentationBase2D
+from torch import nn
+
+from ..base.core import check_image, is_tracing, to_input_dtype, working_dtype
+from ..bloom import BLOOM_MODES, bloom_settings, bloom_with_settings
+from ..color import linear_to_srgb, srgb_to_linear
+from ..grading.grade import color_grade
+from ..grading.layer import ColorGrade
+from ..look.slots import SLOTS
+from ..output.layer import LookLUT
+from ..output.look import look_lut
+from ..runtime import DeferredCheck, policy_for
+from ..tonemap import tonemap
+from .ranges import (
+    BLOOM_CONTROLS,
+    COLOUR_CONTROLS,
+    GRADE_CONTROLS,
+    INPUT_SPACES,
+    checked_range,
+    checked_tonemap,
+    grade_identity,
+    is_identity_range,
+)
+from .saved import LOADED_NAME
+
+__all__ = ["RandomPostFX", "tonemap_per_sample", "GRADE_CONTROLS", "BLOOM_CONTROLS", "COLOUR_CONTROLS", "INPUT_SPACES"]
+
+_RANDOM_SLOTS = ("bloom", "grade")
+"""The slots whose controls are drawn and which a skipped sample passes through unchanged."""
+
+SRGB_TOLERANCE = 1e-3
+"""How far above 1 an sRGB input may reach (rounding of an earlier step) before it is refused as 0..255 data."""
+
+
+def _check_peak(name: str, peak: torch.Tensor) -> None:
+    if float(peak) > 1.0 + SRGB_TOLERANCE:
+        raise ValueError(f'input_space="srgb" takes images in [0, 1], got values up to {float(peak):g}: divide 0..255 images by 255')
+
+
+def tonemap_per_sample(images: torch.Tensor, choice: torch.Tensor, modes: tuple) -> torch.Tensor:
+    """Tone map sample ``i`` of ``images`` with ``modes[choice[i]]``: on the CPU each mode evaluated once on its
+    samples; where reading the draw back would wait for the device (and while tracing), every mode on every sample.
+
+    Examples:
+        >>> images = torch.full((2, 3, 1, 1), 4.0)
+        >>> out = tonemap_per_sample(images, torch.tensor([1, 0]), ("none", "reinhard"))
+        >>> out.flatten().tolist()
+        [0.800000011920929, 0.800000011920929, 0.800000011920929, 1.0, 1.0, 1.0]
+    """
+    if len(modes) == 1:
+        return tonemap(images, modes[0])
+    if is_tracing() or not policy_for(images.device).reads_values:
+        # Without reading the draw back (a synchronisation off the CPU): every mode on every sample, then a select.
+        picked = choice.reshape(-1, 1, 1, 1)
+        mapped = [tonemap(images, mode) for mode in modes]
+        out = mapped[0]
+        for index, candidate in enumerate(mapped[1:], start=1):
+            out = torch.where(picked == index, candidate, out)
+        return out
+    order = torch.argsort(choice, stable=True)
+    counts = torch.bincount(choice, minlength=len(modes)).tolist()
+    groups = images.index_select(0, order).split(counts)
+    mapped = torch.cat([tonemap(group, mode) for group, mode in zip(groups, modes) if len(group)])
+    return mapped.index_select(0, torch.argsort(order))
+
+
+def _look_stage(look_lut) -> LookLUT | None:
+    """``RandomPostFX``'s ``look_lut`` as a stage: a ``LookLUT``, a dict of its arguments (a config's), or its ``lut``."""
+    if look_lut is None or isinstance(look_lut, LookLUT):
+        return look_lut
+    return LookLUT.from_config(look_lut) if isinstance(look_lut, dict) else LookLUT(look_lut)
+
+
+class RandomPostFX(IntensityAugmentationBase2D):
+    """Random per-sample post-processing of a batch ``(B, 3, H, W)``, one image ``(3, H, W)`` or clips ``(B, T, 3, H, W)``.
+
+    A kornia intensity augmentation: inside ``kornia.augmentation.AugmentationSequential`` its draw is
+    recorded and replayed like ``ColorJiggle``'s, ``inverse()`` leaves it out (it moves no pixel) and
+    masks, boxes and keypoints pass through untouched.
+
+    Args:
+        post_exposure, temperature, tint, contrast, split_balance, hue_shift, saturation: ``(min, max)``
+            ranges in :class:`torchgrade.ColorGrade`'s units (stops; -100..100; hue in degrees), a
+            magnitude ``x`` meaning ``(-x, x)`` as in kornia, or None.
+        split_shadows, split_highlights: ``(min, max)`` range of each gamma-space channel of the
+            split-toning colours, inside [0, 1] (0.5 is neutral; a magnitude ``x`` is ``0.5 ± x``), or None.
+            ``split_balance`` needs one of them.
+        bloom_threshold, bloom_intensity, bloom_scatter: ``(min, max)`` ranges of :func:`torchgrade.bloom.bloom`'s
+            controls (threshold in gamma space), or None. Bloom runs when any of them is given (unless
+            ``bloom_intensity=(0, 0)``); the others keep ``Bloom``'s defaults. ``bloom_scatter`` needs ``bloom_mode="scattering"``.
+        bloom_mode: ``"additive"`` or ``"scattering"``.
+        tonemap: None (no tone mapping), a mode of :data:`torchgrade.TONEMAP_MODES`, or a sequence of
+            modes chosen uniformly per sample; applied to every sample, skipped ones included.
+        look_lut: None, or a creative LUT after the tone mapper (see the module docstring).
+        look_lut_contribution: ``(min, max)`` range of the look LUT's contribution inside [0, 1], or None.
+        aces: grade in ACEScc/ACEScg as :class:`torchgrade.ColorGrade` does.
+        input_space: ``"linear"`` (scene-referred HDR) or ``"srgb"`` (sRGB-encoded LDR in [0, 1]; 0..255
+            floats raise ``ValueError`` rather than being clamped).
+        p: probability that a sample's random controls act; the others keep their input up to the output transform.
+        same_on_batch: one draw for the whole batch (kornia's meaning, ``p`` included).
+        keepdim: return a single ``(3, H, W)`` image as ``(3, H, W)`` rather than ``(1, 3, H, W)``.
+        same_on_frame: for clips ``(B, T, 3, H, W)``, one look per clip (kornia ``VideoSequential``'s
+            default) rather than one per frame; parameters then hold ``B`` rows, else ``B * T``.
+
+    ``forward(x, generator=None, params=None)``: parameters are drawn from ``generator`` (a
+    ``torch.Generator``; the global generator when None), or taken from ``params`` to replay a
+    previous draw. The parameters used are kept in ``last_params`` (see :meth:`sample_params`), one
+    copy per thread, so threads sharing the layer each read back their own draw; to pass a draw
+    along explicitly, draw it with :meth:`sample_params` and give it as ``params``.
+
+    Examples:
+        >>> augment = RandomPostFX(contrast=(-30, 30), saturation=20, tonemap="neutral")
+        >>> images = torch.rand(4, 3, 8, 8) * 4
+        >>> out = augment(images, generator=torch.Generator().manual_seed(0))
+        >>> sorted(augment.last_params)
+        ['batch_prob', 'contrast', 'saturation', 'tonemap']
+        >>> torch.equal(augment(images, params=augment.last_params), out)  # replayed exactly
+        True
+        >>> RandomPostFX.from_config(augment.to_config()).ranges == augment.ranges
+        True
+    """
+
+    def __init__(
+        self,
+        post_exposure=None,
+        temperature=None,
+        tint=None,
+        contrast=None,
+        split_shadows=None,
+        split_highlights=None,
+        split_balance=None,
+        hue_shift=None,
+        saturation=None,
+        bloom_threshold=None,
+        bloom_intensity=None,
+        bloom_scatter=None,
+        bloom_mode: str = "additive",
+        tonemap=None,
+        look_lut=None,
+        look_lut_contribution=None,
+        aces: bool = False,
+        input_space: str = "linear",
+        p: float = 1.0,
+        same_on_batch: bool = False,
+        keepdim: bool = False,
+        same_on_frame: bool = True,
+    ):
+        given = dict(locals())  # the range arguments, by name
+        super().__init__(p=p, same_on_batch=bool(same_on_batch), keepdim=bool(keepdim))
+        grade_ranges = {name: checked_range(name, given[name], ColorGrade.controls[name].range, grade_identity(name))
+                        for name in GRADE_CONTROLS}
+        self.grade_ranges = {name: r for name, r in grade_ranges.items() if r is not None and not is_identity_range(name, r)}
+        bloom_ranges = {name: checked_range(name, given[name], allowed) for name, (_, allowed) in BLOOM_CONTROLS.items()}
+        self.bloom_ranges = {name: r for name, r in bloom_ranges.items() if r is not None}
+        if self.bloom_ranges.get("bloom_intensity") == (0.0, 0.0):
+            self.bloom_ranges = {}
+        self.bloom_mode = bloom_mode
+        self.tonemap = checked_tonemap(tonemap)
+        self.look_lut = _look_stage(look_lut)
+        self.look_ranges = self._look_ranges(look_lut_contribution)
+        self.aces = bool(aces)
+        self.input_space = input_space
+        self.same_on_frame = bool(same_on_frame)
+        self._check_settings()
+        self._local = threading.local()
+
+    def _look_ranges(self, contribution) -> dict:
+        """The look LUT's contribution range (its own contribution when None), or nothing without a look LUT."""
+        if self.look_lut is None:
+            if contribution is not None:
+                raise ValueError("look_lut_contribution needs a look_lut")
+            return {}
+        if contribution is None:
+            own = self.look_lut.contribution
+            if isinstance(own, torch.Tensor):
+                raise ValueError("give look_lut_contribution as a range: the look LUT's contribution is a tensor")
+            contribution = (own, own)
+        return {"look_lut_contribution": checked_range("look_lut_contribution", contribution, LookLUT.controls["contribution"].range)}
+
+    def _check_settings(self) -> None:
+        if self.bloom_mode not in BLOOM_MODES:
+            raise ValueError(f"bloom_mode must be one of {BLOOM_MODES}, got {self.bloom_mode!r}")
+        if "bloom_scatter" in self.bloom_ranges and self.bloom_mode != "scattering":
+            raise ValueError('bloom_scatter only acts in scattering mode: pass bloom_mode="scattering"')
+        if "split_balance" in self.grade_ranges and not set(COLOUR_CONTROLS) & set(self.grade_ranges):
+            raise ValueError("split_balance changes nothing without split_shadows or split_highlights")
+        if self.input_space not in INPUT_SPACES:
+            raise ValueError(f"input_space must be one of {INPUT_SPACES}, got {self.input_space!r}")
+        if self.look_lut is not None and not self.tonemap and self.input_space != "srgb":
+            raise ValueError('look_lut takes display-referred values: give a tonemap, or input_space="srgb" images')
+        if isinstance(self.p, bool) or not isinstance(self.p, numbers.Real) or not 0.0 <= self.p <= 1.0:
+            raise ValueError(f"p must be a probability in [0, 1], got {self.p!r}")
+
+    @property
+    def ranges(self) -> dict:
+        """The ranges sampled, by control name, in sampling order."""
+        return {**self.bloom_ranges, **self.grade_ranges, **self.look_ranges}
+
+    @property
+    def is_identity(self) -> bool:
+        """True when no control, bloom, tone mapper or look LUT is on: the layer then returns its input."""
+        return not (self.ranges or self.tonemap)
+
+    def slots(self) -> tuple:
+        """The look's slots (:data:`~torchgrade.look.slots.SLOTS`) this layer fills, in their order, with whether a
+        skipped sample (``batch_prob`` False) leaves the slot's input unchanged (the random controls) or not (the
+        tone mapper, the output transform; a look LUT's contribution is 0 for it)."""
+        filled = {"bloom": bool(self.bloom_ranges), "grade": bool(self.grade_ranges), "tonemap": bool(self.tonemap),
+                  "look_lut": self.look_lut is not None}
+        return tuple(slot.name for slot in SLOTS if filled.get(slot.name))
+
+    def _widths(self) -> list:
+        return [3 if name in COLOUR_CONTROLS else 1 for name in self.ranges]
+
+    def sample_params(self, batch_size: int, generator: torch.Generator | None = None, device=None) -> dict:
+        """Draw the parameters of a batch in one call to ``torch.rand`` (kornia's ``forward_parameters``).
+
+        Returns a dict of tensors on ``device``: ``"batch_prob"`` (B,) bool, which samples are changed
+        (kornia's name); one entry per sampled control, (B,) or (B, 3) for colours, in its units;
+        ``"tonemap"`` (B,) int64, the index of each sample's mode in ``self.tonemap``, when tone mapping.
+        Draws happen on the generator's device, or without one on ``device`` from torch's default generator there
+        (nothing is copied to a GPU per batch); a CPU generator gives the same draws, and looks, on every device.
+        """
+        rows = 1 if self.same_on_batch else batch_size
+        widths = self._widths()
+        columns = 1 + sum(widths) + (1 if self.tonemap else 0)
+        draw_device = generator.device if generator is not None else torch.device(device or "cpu")
+        uniform = torch.rand(rows, columns, generator=generator, device=draw_device)
+        uniform = uniform.to(device or draw_device).expand(batch_size, -1).contiguous()
+        params = {"batch_prob": uniform[:, 0] < self.p}
+        controls = uniform[:, 1 : 1 + sum(widths)].split(widths, dim=1)
+        for (name, (low, high)), u in zip(self.ranges.items(), controls):
+            value = (low + (high - low) * u).clamp(low, high)  # the clamp only absorbs rounding
+            params[name] = value if name in COLOUR_CONTROLS else value.squeeze(1)
+        if self.tonemap:
+            params["tonemap"] = (uniform[:, -1] * len(self.tonemap)).long().clamp_max(len(self.tonemap) - 1)
+        return params
+
+    def forward_parameters(self, batch_shape) -> dict:
+        """kornia's hook: the draw for a batch of ``batch_shape[0]`` images, from the global generator, with
+        the input shape kornia's mask and box handlers read."""
+        return {**self.sample_params(batch_shape[0]), "forward_input_shape": torch.tensor(tuple(batch_shape))}
+
+    @property
+    def last_params(self) -> dict | None:
+        """The parameters of this thread's last call (None before it has one)."""
+        return getattr(self._local, "params", None)
+
+    def _param_names(self) -> set:
+        return {"batch_prob", *self.ranges, *(("tonemap",) if self.tonemap else ())}
+
+    def _checked_params(self, params: dict, rows: int, device) -> dict:
+        """Replayed parameters, checked against this layer's controls and the batch, on the images' device."""
+        expected = self._param_names()
+        if isinstance(params, dict):
+            params = {name: value for name, value in params.items() if name != "forward_input_shape"}  # kornia's, unused
+        if not isinstance(params, dict) or set(params) != expected:
+            given = sorted(params) if isinstance(params, dict) else type(params).__name__
+            raise ValueError(f"params must be a dict with keys {sorted(expected)} (see last_params), got {given}")
+        for name, value in params.items():
+            if not isinstance(value, torch.Tensor) or value.dim() == 0 or value.shape[0] != rows:
+                raise ValueError(f"params[{name!r}] must be a tensor with {rows} per-sample values, got {value!r}")
+        return {name: value.to(device) for name, value in params.items()}
+
+    def transform(self, images: torch.Tensor, params: dict, applied: torch.Tensor | None = None) -> torch.Tensor:
+        """Apply ``params`` to ``images`` (B, 3, H, W), slot by slot in the look's order (:meth:`slots`); with
+        ``applied`` ((B, 1, 1, 1) bool), only its samples get the random controls."""
+        x = working_dtype(images)
+        if self.input_space == "srgb":
+            x = srgb_to_linear(x)
+        held = None  # the input of the random controls, kept for the skipped samples
+        for slot in self.slots():
+            random = slot in _RANDOM_SLOTS
+            if random and held is None and applied is not None:
+                held = x
+            if not random and held is not None:
+                x, held = torch.where(applied, x, held), None
+            x = getattr(self, f"_{slot}")(x, params, applied)
+        if self.input_space == "srgb":
+            x = linear_to_srgb(x).clamp(0.0, 1.0)
+        x = to_input_dtype(x, images)
+        return x if held is None else torch.where(applied, x, images)  # only random controls: skipped samples exact
+
+    def _bloom(self, x: torch.Tensor, params: dict, applied) -> torch.Tensor:
+        controls = {BLOOM_CONTROLS[name][0]: params[name] for name in self.bloom_ranges}
+        return bloom_with_settings(x, bloom_settings({"mode": self.bloom_mode, **controls}))  # drawn inside their ranges
+
+    def _grade(self, x: torch.Tensor, params: dict, applied) -> torch.Tensor:
+        return color_grade(x, aces=self.aces, **{name: params[name] for name in self.grade_ranges})
+
+    def _tonemap(self, x: torch.Tensor, params: dict, applied) -> torch.Tensor:
+        return tonemap_per_sample(x, params["tonemap"], self.tonemap)
+
+    def _look_lut(self, x: torch.Tensor, params: dict, applied) -> torch.Tensor:
+        contribution = params["look_lut_contribution"]
+        if applied is not None:
+            contribution = contribution * applied.reshape(-1)
+        return look_lut(x, self.look_lut.lut, contribution, self.look_lut.encoding)
+
+    def apply_transform(self, input: torch.Tensor, params: dict, flags: dict, transform=None) -> torch.Tensor:
+        """kornia's hook: :meth:`transform`."""
+        return self.transform(input, params)
+
+    def _check_display_range(self, images: torch.Tensor) -> None:
+        """Refuse 0..255 floats given as sRGB (kornia would clamp them to white). The batch's peak is read back
+        without waiting for a GPU (:class:`~torchgrade.runtime.DeferredCheck`): there a batch out of range raises
+        at a later call."""
+        if self.input_space == "srgb" and not is_tracing():
+            check = self.__dict__.get("_range_check") or self.__dict__.setdefault("_range_check", DeferredCheck())
+            check({"peak": images.detach().amax()}, _check_peak)
+
+    def _graded(self, images: torch.Tensor, params: dict) -> torch.Tensor:
+        if self.is_identity or (self.p == 0 and not self.tonemap):
+            return images
+        self._check_display_range(images)
+        return self.transform(images, params, params["batch_prob"].bool().reshape(-1, 1, 1, 1))
+
+    def forward(self, x: torch.Tensor, generator: torch.Generator | None = None, params: dict | None = None,
+                **container_args) -> torch.Tensor:
+        """Grade ``x`` with a new draw (or ``params``). ``container_args`` (``data_keys`` ...) are what
+        kornia's containers pass along with an image; an intensity layer needs none of them."""
+        check_image(x)
+        if x.dim() not in (3, 4, 5):
+            raise ValueError(f"RandomPostFX takes (3, H, W), (B, 3, H, W) or (B, T, 3, H, W) images, got shape {tuple(x.shape)}")
+        images = x if x.dim() == 4 else x.reshape(-1, *x.shape[-3:])
+        clips, frames = (x.shape[0], x.shape[1]) if x.dim() == 5 else (images.shape[0], 1)
+        rows = clips if self.same_on_frame else images.shape[0]
+        if params is None:
+            params = self.sample_params(rows, generator, images.device)
+        else:
+            params = self._checked_params(params, rows, images.device)
+        self._local.params = params
+        self._commit_state(params=params)
+        per_image = params if rows == images.shape[0] else {k: v.repeat_interleave(frames, 0) for k, v in params.items()}
+        out = self._graded(images, per_image)
+        if x.dim() == 5 or (self.keepdim and x.dim() == 3):
+            return out.reshape(x.shape)
+        return out
+
+    def to_config(self) -> dict:
+        """The layer's arguments that differ from their defaults, as plain values (JSON-ready).
+
+        ``RandomPostFX.from_config(layer.to_config())`` builds a layer that draws the same looks.
+        """
+        config = {name: list(pair) for name, pair in self.ranges.items()}
+        look = None if self.look_lut is None else {k: v for k, v in self.look_lut.to_config().items() if k != "contribution"}
+        settings = {"bloom_mode": self.bloom_mode if self.bloom_ranges else "additive",
+                    "tonemap": list(self.tonemap) or None, "look_lut": look, "aces": self.aces, "input_space": self.input_space,
+                    "p": self.p, "same_on_batch": self.same_on_batch, "keepdim": self.keepdim,
+                    "same_on_frame": self.same_on_frame}
+        defaults = {"bloom_mode": "additive", "tonemap": None, "look_lut": None, "aces": False, "input_space": "linear", "p": 1.0,
+                    "same_on_batch": False, "keepdim": False, "same_on_frame": True}
+        config.update({name: value for name, value in settings.items() if value != defaults[name]})
+        return config
+
+    @classmethod
+    def from_config(cls, config: dict) -> "RandomPostFX":
+        """Build the layer from a dict of its arguments (what :meth:`to_config` returns)."""
+        if not isinstance(config, dict):
+            raise ValueError(f"a RandomPostFX config must be a dict, got {type(config).__name__}")
+        known = set(inspect.signature(cls).parameters)
+        unknown = sorted(set(config) - known)
+        if unknown:
+            raise ValueError(f"unknown RandomPostFX argument(s) {unknown}; known: {', '.join(sorted(known))}")
+        return cls(**config)
+
+    def __getstate__(self) -> dict:
+        state = dict(super().__getstate__())
+        state.pop("_local", None)  # per-thread draws stay with their thread: a copy starts without one
+        state.pop("_range_check", None)  # pending checks hold CUDA events
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        super().__setstate__(state)
+        self._local = threading.local()
+        type(self).from_config(self.to_config())  # a saved layer is untrusted: its ranges are checked as construction checks them
+
+    __repr__ = nn.Module.__repr__  # kornia's own repr lists only p and same_on_batch
+
+    def extra_repr(self) -> str:
+        settings = [f"{name}={r}" for name, r in self.ranges.items()]
+        if self.bloom_ranges:
+            settings.append(f"bloom_mode={self.bloom_mode!r}")
+        if self.tonemap:
+            settings.append(f"tonemap={self.tonemap}")
+        if self.look_lut is not None:
+            settings.append(f"look_lut=({self.look_lut.extra_repr()})")
+        if self.aces:
+            settings.append("aces=True")
+        settings += [f"input_space={self.input_space!r}", f"p={self.p}", f"same_on_batch={self.same_on_batch}"]
+        return ", ".join(settings)
+
+
+torch.serialization.add_safe_globals([(RandomPostFX, LOADED_NAME)])  # a weights_only load fills one (augment_saved)

@@ -1,0 +1,478 @@
+"""``Stage``: the one base of every torchgrade layer, and its table of controls.
+
+A stage declares its controls once, as a table ``{name: Control(default, range)}``. From that table
+the base stores each value (an ``nn.Parameter`` as a parameter, a tensor as a buffer, anything else
+as a plain attribute), validates it at construction, on assignment (``grade.contrast = 500`` raises)
+and, for values an optimiser moves, at forward (:meth:`Stage.check_learnable`), serialises it
+(:meth:`Stage.to_config` / :meth:`Stage.from_config`) and decides whether the stage can change an
+image at all (:attr:`Stage.is_identity`). :class:`~torchgrade.RandomPostFX` and the CLI read ranges
+from the same tables, so a range is written in exactly one place.
+
+Examples:
+    >>> import torch
+    >>> class Gain(Stage):
+    ...     controls = {"gain": Control(1.0, (0.0, 10.0))}
+    ...     def __init__(self, gain=1.0):
+    ...         super().__init__()
+    ...         self.init_controls(gain=gain)
+    ...     def forward(self, image):
+    ...         return image * self.gain
+    >>> Gain(2.0).to_config()
+    {'gain': 2.0}
+    >>> Gain().is_identity
+    True
+    >>> Gain(20.0)
+    Traceback (most recent call last):
+    ...
+    ValueError: gain must lie in [0.0, 10.0], got 20.0
+"""
+
+from __future__ import annotations
+
+import functools
+import inspect
+import numbers
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import torch
+from torch import nn
+
+from ..runtime import DeferredCheck, in_strips
+from .config import config_value
+from .core import check_choice, check_range, full_precision, is_constant, is_tracing
+
+__all__ = ["Control", "Stage", "plain", "controls_signature", "in_state_check"]
+
+KINDS = ("number", "int", "bool", "choice", "value")
+
+
+@dataclass(frozen=True)
+class Control:
+    """One control of a stage: its ``default`` (identity where the stage has one) and its ``range``.
+
+    ``kind`` says how values are checked:
+
+    * ``"number"``: a number, a sequence of numbers (colours, matrices) or a tensor, every element
+      in ``range = (low, high)``; may be a per-sample tensor or an ``nn.Parameter``. A number
+      control whose default is ``None`` (not set) also accepts ``None``; a colour (a default of three
+      numbers) also accepts one number ``v``, kept as the grey ``(v, v, v)``.
+    * ``"int"``: a Python ``int`` (not ``bool``) in ``range``.
+    * ``"bool"``: ``True`` or ``False``.
+    * ``"choice"``: one of the strings in ``range``.
+    * ``"value"``: checked by the stage itself (:meth:`Stage.check_control`): textures, curves.
+
+    Examples:
+        >>> Control(0.0, (-100.0, 100.0)).kind
+        'number'
+        >>> Control("log", ("mean", "log")).kind
+        'choice'
+    """
+
+    default: Any
+    range: Any = None
+    kind: str = ""
+
+    def __post_init__(self):
+        if not self.kind:
+            object.__setattr__(self, "kind", _inferred_kind(self.default, self.range))
+        if self.kind not in KINDS:
+            raise ValueError(f"kind must be one of {KINDS}, got {self.kind!r}")
+
+    def check(self, name: str, value):
+        """``value`` checked against this control's kind and range (an ``"int"`` returned as ``int``), or ``ValueError`` naming ``name``.
+
+        A ``"value"`` control is returned unchecked: its stage checks it (:meth:`Stage.check_control`).
+
+        Examples:
+            >>> Control((1.0, 1.0, 1.0), (0.0, 10.0)).check("tint", 0.5)
+            (0.5, 0.5, 0.5)
+            >>> Control(16, (0, 16)).check("max_iterations", 17)
+            Traceback (most recent call last):
+            ...
+            ValueError: max_iterations must be an integer in [0, 16], got 17
+            >>> Control(0.0, (-100.0, 100.0)).check("contrast", [10.0, 20.0])
+            [10.0, 20.0]
+        """
+        if self.kind == "number":
+            # A number control that defaults to None ("not set", as a speed that falls back on another) keeps None.
+            if not (value is None and self.default is None):
+                value = _as_grey(value, self.default)
+                _check_number(value, name, self.range)
+                _check_shape(value, name, self.default)
+        elif self.kind == "int":
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not self.range[0] <= value <= self.range[1]:
+                shown = f"one of {_digits(value)} digits" if _digits(value) > 30 else repr(value)
+                raise ValueError(f"{name} must be an integer in [{self.range[0]}, {self.range[1]}], got {shown}")
+            value = int(value)
+        elif self.kind == "bool":
+            if not isinstance(value, bool):
+                raise ValueError(f"{name} must be True or False, got {value!r}")
+        elif self.kind == "choice":
+            check_choice(name, value, self.range)
+        return value
+
+
+def _inferred_kind(default, allowed) -> str:
+    if isinstance(default, bool):
+        return "bool"
+    if isinstance(default, str):
+        return "choice"
+    if isinstance(default, int) and allowed is not None:
+        return "int"
+    return "number" if allowed is not None else "value"
+
+
+def plain(value):
+    """A stored control as a plain, JSON-ready value: tensors as numbers or nested lists, tuples as lists.
+
+    Examples:
+        >>> plain(torch.tensor([1.0, 2.0]))
+        [1.0, 2.0]
+        >>> plain(((1.0, 0.0), (0.0, 1.0)))
+        [[1.0, 0.0], [0.0, 1.0]]
+    """
+    if isinstance(value, torch.Tensor):
+        return value.detach().cpu().tolist()
+    if isinstance(value, (tuple, list)):
+        return [plain(v) for v in value]
+    return value
+
+
+def in_state_check(value) -> bool:
+    """True for a stored value :meth:`Stage.check_state` checks: not a learnable ``nn.Parameter`` (checked at every
+    forward instead, :meth:`Stage.check_learnable`) and not a tensor on ``meta`` (which holds no values).
+
+    Examples:
+        >>> in_state_check(torch.tensor(2.0)), in_state_check(nn.Parameter(torch.tensor(2.0)))
+        (True, False)
+        >>> in_state_check(torch.empty(3, device="meta")), in_state_check(0.5)
+        (False, True)
+    """
+    return not isinstance(value, nn.Parameter) and not (isinstance(value, torch.Tensor) and value.is_meta)
+
+
+def controls_signature(controls: dict, leading: tuple = ()) -> inspect.Signature:
+    """A constructor signature listing ``leading`` parameters, then every control as a keyword with its default.
+
+    Stages that take ``**controls`` set it as ``__signature__`` so ``help()`` and IDEs show the names.
+
+    Examples:
+        >>> str(controls_signature({"contrast": Control(0.0, (-100.0, 100.0))}))
+        '(*, contrast=0.0)'
+    """
+    keyword = inspect.Parameter.KEYWORD_ONLY
+    parameters = list(leading)
+    parameters += [inspect.Parameter(name, keyword, default=control.default) for name, control in controls.items()]
+    return inspect.Signature(parameters)
+
+
+class Stage(nn.Module):
+    """Base of every stage: controls stored, validated and serialised from one table.
+
+    Subclasses set :attr:`controls` (or override :meth:`control_table` when the table depends on a
+    setting, as a tone mapper's on its mode), call :meth:`init_controls` in ``__init__`` and read
+    their controls as attributes. Cross-control rules (a zone's start below its end) go in
+    :meth:`check_together`; checks of a ``"value"`` control in :meth:`check_control`.
+
+    Examples:
+        >>> import torchgrade as tg
+        >>> grade = tg.ColorGrade(contrast=20)
+        >>> grade.to_config()
+        {'contrast': 20}
+        >>> grade.contrast = 500
+        Traceback (most recent call last):
+        ...
+        ValueError: contrast must lie in [-100.0, 100.0], got 500.0
+    """
+
+    controls: ClassVar[dict] = {}
+    """``{name: Control(default, range)}``, in the order the stage documents them."""
+
+    display_referred: ClassVar[bool] = False
+    """True for stages whose output is display-referred (tone mappers): a LUT baked through one clamps to [0, 1]."""
+
+    per_pixel: ClassVar[bool] = False
+    """True for stages whose every output pixel depends on its input pixel alone (grades, tone mappers, LUTs):
+    an ONNX export runs them on strips of rows (:mod:`torchgrade.onnx.strips`)."""
+
+    always_in_config: ClassVar[tuple] = ()
+    """Controls written by :meth:`to_config` even at their defaults (a stage's defining settings)."""
+
+    def __init__(self):
+        super().__init__()
+        self._control_names: list[str] = []
+
+    # ------------------------------------------------------------------ the table
+
+    def control_table(self) -> dict:
+        """This stage's controls, ``{name: Control}``; the class's :attr:`controls` unless overridden."""
+        return type(self).controls
+
+    def init_controls(self, **values) -> None:
+        """Check and store every control of the table: ``values[name]`` if given, else its default.
+
+        Raises ``ValueError`` for a name the table does not have, naming the known ones.
+        """
+        table = self.control_table()
+        unknown = [name for name in values if name not in table]
+        if unknown:
+            raise ValueError(f"unknown {type(self).__name__} control(s) {sorted(unknown)}; known: {', '.join(table)}")
+        for name, control in table.items():
+            self._store(name, self._checked(name, values.get(name, control.default)))
+        self.check_together()
+
+    def _checked(self, name: str, value):
+        try:
+            return self.control_table()[name].check(name, self.check_control(name, value))
+        except OverflowError:  # a Python int beyond float range (JSON allows any number of digits)
+            raise ValueError(f"{name} must be a number a float can hold, got one of {_digits(value)} digits") from None
+
+    def check_control(self, name: str, value):
+        """Check (and return, possibly normalised) a control before its kind's check; the base accepts anything.
+
+        The checks of ``"value"`` controls live here, and a stage's own rule for any control (stated
+        in its own words, or a list normalised to a tensor) runs before the table's range check.
+        """
+        return value
+
+    def check_together(self) -> None:
+        """Rules between controls, run after construction and after every assignment; none by default."""
+
+    def _store(self, name: str, value) -> None:
+        for registry in (self._parameters, self._buffers):
+            registry.pop(name, None)
+        self.__dict__.pop(name, None)
+        if isinstance(value, nn.Parameter):
+            self.register_parameter(name, value)
+        elif isinstance(value, torch.Tensor):
+            self.register_buffer(name, value)
+        else:
+            object.__setattr__(self, name, value)
+        if name not in self._control_names:
+            self._control_names.append(name)
+
+    def set_param(self, name: str, value) -> None:
+        """Check and store control ``name`` (also what ``stage.name = value`` does)."""
+        self._store(name, self._checked(name, value))
+        self.check_together()
+
+    def __setattr__(self, name: str, value) -> None:
+        if name != "_control_names" and name in self.__dict__.get("_control_names", ()):
+            self.set_param(name, value)
+        else:
+            super().__setattr__(name, value)
+
+    def params(self) -> dict:
+        """The controls as stored (numbers, tensors or parameters), by name."""
+        return {name: getattr(self, name) for name in self._control_names}
+
+    def run_in_strips(self, function, image: torch.Tensor) -> torch.Tensor:
+        """``function(image, **self.params())`` for a per-pixel stage, on strips of rows where the device's
+        execution policy asks (:func:`~torchgrade.runtime.in_strips`), whole when the stage is identity."""
+        params = self.params()
+        call = functools.partial(function, **params)
+        return call(image) if self.is_identity else in_strips(call, image, params.values())
+
+    # ------------------------------------------------------------------ checks at run time
+
+    def __call__(self, *args, **kwargs):
+        """Check the learnable controls, then run ``forward`` with autocast off (see :func:`~torchgrade.base.core.full_precision`).
+
+        Every stage goes through here, so the range policy and the precision policy hold for all of
+        them without each ``forward`` repeating them.
+        """
+        self.check_learnable()
+        with full_precision():
+            return super().__call__(*args, **kwargs)
+
+    def check_learnable(self) -> None:
+        """Raise ``ValueError`` naming a learnable control an optimiser moved outside its range (or to NaN).
+
+        Called before every ``forward`` (:meth:`__call__`); skipped while tracing or compiling (the graph carries no
+        checks). A value is checked once per change (an optimiser step changes it in place); on CUDA without waiting
+        for the device, so the error comes at a later forward (:class:`~torchgrade.runtime.DeferredCheck`).
+        """
+        if is_tracing():
+            return
+        table = self.control_table()
+        learnable = {name: value for name, value in self._parameters.items()
+                     if value is not None and name in table and table[name].kind == "number"}
+        if learnable:
+            self.deferred_check()(learnable, lambda name, value: table[name].check(name, value))
+
+    def deferred_check(self) -> DeferredCheck:
+        """This stage's :class:`~torchgrade.runtime.DeferredCheck` of learnable values (made at its first use)."""
+        check = self.__dict__.get("_deferred_check")
+        if check is None:  # setdefault: threads making it at once share the one that lands first
+            check = self.__dict__.setdefault("_deferred_check", DeferredCheck())
+        return check
+
+    def __getstate__(self):
+        """A saved or copied stage leaves its pending checks behind (they hold CUDA events)."""
+        state = dict(super().__getstate__())
+        state.pop("_deferred_check", None)
+        return state
+
+    # ------------------------------------------------------------------ saved stages are untrusted
+
+    def check_state(self) -> None:
+        """Check every stored control (and a subclass's tables) as construction does; ``ValueError`` naming the first
+        one that fails. A saved file is untrusted: :meth:`__setstate__` (``torch.load``) and ``load_state_dict`` run this.
+
+        Learnable values (``nn.Parameter``) are left to :meth:`check_learnable`, which checks them at every forward:
+        a copy of a stage whose value an optimiser moved out of range (``copy.deepcopy``,
+        ``torch.optim.swa_utils.AveragedModel``) copies it as it is. Tensors on ``meta`` hold no values to check
+        (:func:`in_state_check`).
+
+        Examples:
+            >>> import torchgrade as tg
+            >>> tonemap = tg.ToneMap("reinhard_extended")
+            >>> tonemap.__dict__["white_point"] = 0.0  # as a tampered file would hold it
+            >>> tonemap.check_state()
+            Traceback (most recent call last):
+            ...
+            ValueError: white_point must lie in [0.001, 10000.0], got 0.0
+        """
+        for name in self._control_names:
+            value = getattr(self, name)
+            if in_state_check(value):
+                self._checked(name, value)
+        self.check_together()
+
+    def __setstate__(self, state) -> None:
+        super().__setstate__(state)
+        self.check_state()
+
+    def _load_from_state_dict(self, state_dict, prefix, local_metadata, strict, missing_keys, unexpected_keys, error_msgs) -> None:
+        """Load, then :meth:`check_state`. A state refused, by the check or by the load itself (a shape, a value assigned
+        with ``assign=True``, which ``load_state_dict`` reports), leaves the stage as it was."""
+        kept, errors = self._kept_values(), len(error_msgs)
+        try:
+            super()._load_from_state_dict(state_dict, prefix, local_metadata, strict, missing_keys, unexpected_keys, error_msgs)
+            if len(error_msgs) == errors:
+                self.check_state()
+        except ValueError:
+            self._restore(kept)
+            raise
+        if len(error_msgs) > errors:
+            self._restore(kept)
+
+    def _kept_values(self) -> tuple:
+        """What a load can change: the parameters, buffers and control attributes, and a copy of every tensor's data
+        (a load copies into the tensors it finds)."""
+        attributes = {name: self.__dict__[name] for name in self._control_names if name in self.__dict__}
+        tensors = [*self._parameters.values(), *self._buffers.values()]
+        return dict(self._parameters), dict(self._buffers), attributes, [(t, t.detach().clone()) for t in tensors if t is not None]
+
+    def _restore(self, kept: tuple) -> None:
+        parameters, buffers, attributes, data = kept
+        with torch.no_grad():
+            for tensor, values in data:
+                tensor.copy_(values)
+        for registry, saved in ((self._parameters, parameters), (self._buffers, buffers)):
+            registry.clear()
+            registry.update(saved)
+        for name in self._control_names:
+            self.__dict__.pop(name, None)
+        self.__dict__.update(attributes)
+
+    # ------------------------------------------------------------------ identity and configs
+
+    def is_default(self, name: str) -> bool:
+        """True when control ``name`` is a plain value equal to its default (learnable values never are)."""
+        value, default = getattr(self, name), self.control_table()[name].default
+        if default is None or isinstance(default, (bool, str)):
+            return not isinstance(value, torch.Tensor) and value == default
+        return value is not None and is_constant(value, default)
+
+    @property
+    def is_identity(self) -> bool:
+        """True when the stage cannot change any image (it is then skipped and not exported).
+
+        The base: every control at its default. Stages whose default is not identity override it.
+        """
+        return all(self.is_default(name) for name in self._control_names)
+
+    def to_config(self) -> dict:
+        """The controls that differ from their defaults (and :attr:`always_in_config`), as plain values.
+
+        ``type(stage).from_config(stage.to_config())`` builds an equal stage.
+        """
+        return {
+            name: plain(getattr(self, name))
+            for name in self._control_names
+            if name in self.always_in_config or not self.is_default(name)
+        }
+
+    def state_config(self) -> dict:
+        """What a saved look's state (``state_dict()``'s extra state) records of this stage to rebuild it before its
+        tensors load: :meth:`to_config`, unless the stage's config names something the state dict already holds."""
+        return self.to_config()
+
+    @classmethod
+    def config_table(cls, config: dict) -> dict:
+        """The controls a ``config`` of this stage can set: :attr:`controls` unless a setting adds others (a tone mapper's mode)."""
+        return cls.controls
+
+    @classmethod
+    def from_config(cls, config: dict) -> "Stage":
+        """Build the stage from a dict of its constructor arguments (what :meth:`to_config` returns).
+
+        A JSON list where the stage keeps a per-sample tensor comes back as that tensor
+        (:func:`~torchgrade.base.config.config_value`), so ``to_config`` -> JSON -> ``from_config`` rebuilds it.
+
+        Examples:
+            >>> import json
+            >>> import torchgrade as tg
+            >>> grade = tg.ColorGrade(contrast=torch.tensor([10.0, 20.0]))
+            >>> tg.ColorGrade.from_config(json.loads(json.dumps(grade.to_config()))).contrast
+            tensor([10., 20.])
+        """
+        if not isinstance(config, dict):
+            raise ValueError(f"a {cls.__name__} config must be a dict, got {type(config).__name__}")
+        table = cls.config_table(config)
+        return cls(**{key: config_value(key, value, table[key]) if key in table else value for key, value in config.items()})
+
+    def export_form(self) -> nn.Module:
+        """The module an ONNX export traces for this stage; the stage itself unless it needs another form."""
+        return self
+
+    def extra_repr(self) -> str:
+        return ", ".join(f"{key}={value!r}" for key, value in self.to_config().items())
+
+
+def _check_number(value, name: str, allowed) -> None:
+    if isinstance(value, bool) or isinstance(value, str):
+        raise ValueError(f"{name} must be a number or a tensor, got {value!r}")
+    if isinstance(value, torch.Tensor) and (value.is_complex() or value.dtype == torch.bool):
+        raise ValueError(f"{name} must be a real number tensor, got {value.dtype}")
+    try:
+        check_range(value, name, *allowed)
+    except (TypeError, RuntimeError) as error:
+        raise ValueError(f"{name} must be numbers or a tensor: {error}") from None
+
+
+def _as_grey(value, default):
+    """``value``, or the grey ``(v, v, v)`` where ``value`` is a plain number ``v`` and ``default`` a colour (three numbers)."""
+    colour = isinstance(default, (tuple, list)) and len(default) == 3 and all(isinstance(v, numbers.Real) for v in default)
+    is_number = isinstance(value, numbers.Real) and not isinstance(value, bool)
+    return (value,) * 3 if colour and is_number else value
+
+
+def _check_shape(value, name: str, default) -> None:
+    """Raise ``ValueError`` unless ``value`` has its control's shape (that of ``default``: a number, a colour ``(3,)``, a
+    trackball ``(4,)``, a matrix ``(3, 3)``) or is a batch of such ``(B, ...)``: a lift of two numbers or a 2x2 mixer was
+    taken and refused only at the first frame."""
+    shape = tuple(torch.as_tensor(default if default is not None else 0.0, dtype=torch.float64).shape)
+    given = tuple(value.shape) if isinstance(value, torch.Tensor) else tuple(torch.as_tensor(value, dtype=torch.float64).shape)
+    if given != shape and given[1:] != shape:
+        expected = "a number or a (B,) tensor" if not shape else f"of shape {shape} or (B, {', '.join(map(str, shape))})"
+        raise ValueError(f"{name} must be {expected}, got shape {given}")
+
+
+def _digits(value) -> int:
+    """The most digits of any integer in ``value`` (a number or nested sequence), for an overflow's message."""
+    if isinstance(value, (list, tuple)):
+        return max((_digits(item) for item in value), default=0)
+    return len(str(abs(value))) if isinstance(value, int) else 0

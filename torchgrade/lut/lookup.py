@@ -1,0 +1,284 @@
+"""The lookup behind :class:`~torchgrade.LUT3D` (:mod:`.layer`): a pixel through the shaper, the lattice and the table, its eager runs and its compile cache.
+
+A :class:`LUT3D` maps a linear Rec.709 pixel ``x`` to an output colour in five steps::
+
+    s = shaper(x)                                   # torchgrade.lut.shapers: linear, logc, curve
+    u = clamp((s - domain_min) / (domain_max - domain_min), 0, 1)      # per channel
+    y = interpolate(table, u * (size - 1))          # torchgrade.lut.kernels: trilinear, tetrahedral
+    y = decode(y, output_encoding)                  # "linear": y; "srgb": sRGB decoding
+    y = clamp(y, *output_range)                     # only for display-referred LUTs
+
+**Output encoding.** A table may store sRGB-encoded outputs (``output_encoding="srgb"``, decoded
+after the lookup, sign-preserving): the interpolation error is then spread evenly over display code
+values instead of piling up in the shadows.
+
+**Speed.** The lookup is gather-based on a planar ``(3, size³)`` table that :meth:`LUT3D.rows`
+converts once and caches. Every step is per pixel, so ``LUT3D(..., compile=True)`` runs non-finite
+policy, shaper, index math, gathers, weights, decoding and clamp as one ``torch.compile``d pass
+with no temporary buffers. The eager default on the CPU (:func:`chunked_lookup`) makes one pass per
+operation over runs of :data:`~torchgrade.runtime.LOOKUP_CHUNK` pixels, each run on one thread, as
+OpenColorIO's CPU processor does: the temporaries stay in cache, and no operation waits at a thread
+barrier (on a loaded machine each barrier can wait for a descheduled thread; benchmarks/results/lut.md
+measured 131× OpenColorIO with two threads). On many cores the runs are spread over worker threads
+(:class:`~torchgrade.runtime.ExecutionPolicy`); on other devices the frame is one pass. Without autograd, tetrahedral runs its eager form
+(:class:`~torchgrade.lut.kernels.TetrahedralRuns`): 15 in-place operations a run into buffers
+allocated once per call, gathering from value-and-step tables derived once per LUT; 12 one-float
+gathers a pixel are about half its time. benchmarks/bench_lut.py measures both against OpenColorIO.
+
+Examples:
+    >>> import torch
+    >>> from torchgrade.lut import LUT3D, identity_table
+    >>> lut = LUT3D(identity_table(5))
+    >>> lut(torch.full((1, 3, 2, 2), 0.3)).flatten()[:3].tolist()  # doctest: +ELLIPSIS
+    [0.3..., 0.3..., 0.3...]
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Optional
+
+import torch
+
+from ..base.core import (
+    HALF_MAX,
+    check_choice,
+    check_image,
+    is_tracing,
+    one_thread,
+    sanitize,
+    to_input_dtype,
+    working_dtype,
+)
+from ..color import linear_to_srgb, srgb_to_linear
+from ..runtime import LOOKUP_CHUNK, policy_for, run_pieces
+from .kernels import KERNELS
+from .lattice import planar_table
+from .shapers import SHAPERS, lattice_unit, shaper_encode
+
+__all__ = [ "OUTPUT_ENCODINGS", "LOOKUP_CHUNK", "apply_lut", "lookup", "chunked_lookup", "compiled_lookup",
+           "decode_output", "encode_output", "table_output"]
+
+OUTPUT_ENCODINGS = ("linear", "srgb")
+"""How table entries are stored: linear values, or sRGB-encoded values decoded after the lookup."""
+
+
+def decode_output(values: torch.Tensor, encoding: str) -> torch.Tensor:
+    """Linear output of interpolated table values: identity, or :func:`torchgrade.color.srgb_to_linear`.
+
+    sRGB decoding is sign-preserving (linear segment below 0) and defined above 1, so any table encodes.
+
+    Examples:
+        >>> import torch
+        >>> decode_output(torch.tensor([1.0]), "srgb").tolist()
+        [1.0]
+    """
+    return values if encoding == "linear" else srgb_to_linear(values)
+
+
+def encode_output(values: torch.Tensor, encoding: str) -> torch.Tensor:
+    """Table entries of linear outputs: the inverse of :func:`decode_output`.
+
+    Examples:
+        >>> import torch
+        >>> encode_output(torch.tensor([0.5]), "linear").tolist()
+        [0.5]
+    """
+    return values if encoding == "linear" else linear_to_srgb(values)
+
+
+def table_output(values: torch.Tensor, output_encoding: str, output_range) -> torch.Tensor:
+    """A LUT's output from interpolated table values: :func:`decode_output`, then the clamp to ``output_range`` (if any).
+
+    Examples:
+        >>> import torch
+        >>> table_output(torch.tensor([1.5]), "linear", (0.0, 1.0)).tolist()
+        [1.0]
+    """
+    y = decode_output(values, output_encoding)
+    return y if output_range is None else y.clamp(*output_range)
+
+
+def check_lookup_arguments(image: torch.Tensor, shaper: str, interpolation: str, output_encoding: str) -> None:
+    check_image(image)
+    check_choice("interpolation", interpolation, KERNELS)
+    check_choice("shaper", shaper, SHAPERS)
+    check_choice("output encoding", output_encoding, OUTPUT_ENCODINGS)
+
+
+def apply_lut(image: torch.Tensor, table: torch.Tensor, shaper: str = "linear", domain_min=0.0, domain_max=1.0,
+              interpolation: str = "tetrahedral", output_range=None, curve: Optional[torch.Tensor] = None,
+              curve_range=(0.0, 1.0), output_encoding: str = "linear") -> torch.Tensor:
+    """Apply a 3D LUT to a linear image ``(..., 3, H, W)``; see the module docstring for the steps.
+
+    Non-finite pixels follow the library policy (:func:`torchgrade.base.core.sanitize`) before the
+    shaper; inputs outside the domain clamp to it. Differentiable with respect to the image and the
+    table; float16/bfloat16 are computed in float32.
+
+    Examples:
+        >>> import torch
+        >>> from torchgrade.lut import identity_table
+        >>> apply_lut(torch.full((1, 3, 1, 1), 2.0), identity_table(3)).flatten().tolist()
+        [1.0, 1.0, 1.0]
+    """
+    check_lookup_arguments(image, shaper, interpolation, output_encoding)
+    rows = planar_table(table.to(working_dtype(image).dtype))
+    return chunked_lookup(image, rows, table.shape[0], shaper, domain_min, domain_max, interpolation, output_range, curve, curve_range, output_encoding)
+
+
+def lookup(image, rows, size: int, shaper, domain_min, domain_max, interpolation, output_range, curve, curve_range, output_encoding) -> torch.Tensor:
+    """:func:`apply_lut` on a planar table ``rows`` ``(3, size³)`` already in the image's working dtype.
+
+    One pass per pixel from input to output: non-finite policy, shaper, lattice coordinates,
+    interpolation, output decoding and clamp. Arguments are not checked (see :func:`apply_lut`);
+    this is the function ``LUT3D(..., compile=True)`` compiles.
+
+    Examples:
+        >>> import torch
+        >>> from torchgrade.lut import identity_table, planar_table
+        >>> rows = planar_table(identity_table(2))
+        >>> x = torch.full((1, 3, 1, 1), 0.5)
+        >>> lookup(x, rows, 2, "linear", 0.0, 1.0, "trilinear", None, None, (0.0, 1.0), "linear").flatten().tolist()
+        [0.5, 0.5, 0.5]
+    """
+    x = sanitize(working_dtype(image)).movedim(-3, 0)  # (3, ..., H, W): a view
+    unit = lattice_unit(x.reshape(3, -1), shaper, domain_min, domain_max, curve, curve_range)
+    y = table_output(KERNELS[interpolation](unit * (size - 1), rows, size), output_encoding, output_range)
+    return to_input_dtype(y.reshape(x.shape).movedim(0, -3), image)
+
+
+def chunked_lookup(image, rows, size: int, *settings, pixels: Optional[int] = None, tables=None) -> torch.Tensor:
+    """:func:`lookup` (same arguments after ``size``) over ``pixels``-sized runs of each CPU image's pixels, each on one thread.
+
+    Every step is per pixel, so the runs give the one-pass result. Where the interpolation has an
+    eager form (:class:`~torchgrade.lut.EagerForm`: tetrahedral up to 65³) the runs go through it,
+    into buffers allocated once per call, from its ``tables`` (derived from ``rows`` when not given;
+    :class:`LUT3D` caches them): the same values to float rounding. While gradients flow to the image
+    or the table (autograd keeps every temporary anyway), off the CPU, and while tracing (an export
+    records one pass), the whole image is one pass of :func:`lookup`.
+
+    Examples:
+        >>> import torch
+        >>> from torchgrade.lut import identity_table, planar_table
+        >>> x = torch.rand(2, 3, 4, 5)
+        >>> args = (planar_table(torch.rand(3, 3, 3, 3)), 3, "linear", 0.0, 1.0, "trilinear", None, None, (0.0, 1.0), "linear")
+        >>> torch.equal(chunked_lookup(x, *args, pixels=7), lookup(x, *args))
+        True
+    """
+    height, width = image.shape[-2:]
+    if not in_runs(image, rows):
+        return lookup(image, rows, size, *settings)
+    policy = policy_for(image.device)
+    pixels = pixels or policy.lookup_chunk
+    planes = image.reshape(-1, 3, height * width)
+    result = torch.empty(planes.shape, dtype=image.dtype)
+    eager = KERNELS[settings[3]].eager
+    if eager is not None and size <= eager.max_size and tables is None:
+        tables = eager.tables(rows, size)
+
+    def share(span: tuple) -> None:
+        begin, end = span
+        if eager is None or size > eager.max_size:
+            for frame, out in zip(planes, result):
+                for start in range(begin, end, pixels):
+                    stop = min(start + pixels, end)
+                    run = frame[:, start:stop].unsqueeze(-1)  # (3, run, 1): an image of one column
+                    out[:, start:stop] = lookup(run, rows, size, *settings).squeeze(-1)
+        else:
+            _eager_lookup(planes[..., begin:end], result[..., begin:end], rows, size, settings, pixels, eager, tables)
+
+    shares = _shares(height * width, pixels, policy.workers)
+    if policy.workers > 1:
+        run_pieces(share, shares, policy.workers)
+    else:
+        with one_thread():
+            share(shares[0])
+    return result.reshape(image.shape)
+
+
+def _shares(count: int, pixels: int, workers: int) -> list:
+    """``[(begin, end), ...]``: ``count`` pixels cut into at most ``workers`` contiguous shares of whole runs.
+
+    Examples:
+        >>> _shares(10, 3, 2), _shares(10, 3, 1)
+        ([(0, 6), (6, 10)], [(0, 10)])
+    """
+    runs = -(-count // pixels)
+    per_share = -(-runs // max(1, workers)) * pixels
+    return [(begin, min(begin + per_share, count)) for begin in range(0, count, per_share)]
+
+
+def in_runs(image: torch.Tensor, rows: torch.Tensor) -> bool:
+    """Whether :func:`chunked_lookup` splits the image into runs: where the device's policy asks (the CPU),
+    untraced, no gradient flowing."""
+    grad = torch.is_grad_enabled() and (image.requires_grad or rows.requires_grad)
+    return not grad and policy_for(image.device).lookup_chunk is not None and not is_tracing()
+
+
+def _eager_lookup(planes, result, rows, size, settings, pixels, eager, tables) -> None:
+    """:func:`chunked_lookup` through an eager form: ``planes`` ``(N, 3, P)`` into ``result``, runs of ``pixels``."""
+    shaper, domain_min, domain_max, _, output_range, curve, curve_range, output_encoding = settings
+    run = max(1, min(pixels, planes.shape[-1]))
+    runs = eager.runs(eager.tables(rows, size) if tables is None else tables, size, run)
+    direct = output_encoding == "linear" and output_range is None and result.dtype == rows.dtype
+    values = None if direct else torch.empty(3 * run, dtype=rows.dtype)
+    lattice = _LatticeCoordinates(rows.dtype, size, shaper, domain_min, domain_max, curve, curve_range)
+    for frame, out in zip(planes, result):
+        for start in range(0, frame.shape[-1], run):
+            x = frame[:, start:start + run]
+            n = x.shape[-1]
+            lattice(x, runs.coords(n))
+            if direct:
+                runs(out[:, start:start + n])
+            else:
+                y = runs(values[:3 * n].view(3, n))
+                out[:, start:start + n] = to_input_dtype(table_output(y, output_encoding, output_range), out)
+
+
+class _LatticeCoordinates:
+    """``lattice_unit(sanitize(x)) * (size - 1)`` of ``(3, n)`` runs written into a buffer: the operations of
+    :func:`lookup`, bit for bit, less those that are exact identities for the LUT's domain."""
+
+    def __init__(self, dtype, size, shaper, domain_min, domain_max, curve, curve_range):
+        def column(value):  # as lattice_unit forms it
+            return torch.as_tensor(value, dtype=dtype).reshape(-1, 1).expand(3, 1)
+
+        self.low, high = column(domain_min), column(domain_max)
+        self.span = high - self.low
+        self.size, self.dtype, self.shaper, self.curve, self.curve_range = size, dtype, shaper, curve, curve_range
+        self.shift = bool((self.low != 0).any())  # x - 0 and x / 1 are exact: skipped
+        self.scale = bool((self.span != 1).any())
+        # A linear shaper's domain inside ±HALF_MAX clamps whatever sanitize's clamp to ±HALF_MAX would,
+        # to the same ends; nan_to_num then does the rest of sanitize (NaN -> 0, ±Inf -> ±HALF_MAX).
+        bounded = bool((self.low >= -HALF_MAX).all()) and bool((high <= HALF_MAX).all())
+        self.unclamped = shaper == "linear" and bounded
+
+    def __call__(self, x: torch.Tensor, buffer: torch.Tensor) -> torch.Tensor:
+        if x.dtype != self.dtype:
+            x = buffer.copy_(x)
+        if self.unclamped:
+            codes = torch.nan_to_num(x, nan=0.0, posinf=HALF_MAX, neginf=-HALF_MAX, out=buffer)
+        else:
+            torch.clamp(x, -HALF_MAX, HALF_MAX, out=buffer).nan_to_num_(nan=0.0)
+            codes = shaper_encode(buffer, self.shaper, self.curve, self.curve_range)
+        if self.shift or codes is not buffer:
+            codes = torch.sub(codes, self.low, out=buffer)
+        if self.scale:
+            codes.div_(self.span)
+        return codes.clamp_(0.0, 1.0).mul_(self.size - 1)
+
+
+_COMPILED = None
+
+
+def compiled_lookup() -> Callable:
+    """:func:`lookup` through ``torch.compile`` (created once, on first use; pixel counts become dynamic
+    after the first recompile, so new frame sizes do not compile again).
+
+    Examples:
+        >>> compiled_lookup() is compiled_lookup()
+        True
+    """
+    global _COMPILED
+    if _COMPILED is None:
+        _COMPILED = torch.compile(lookup)
+    return _COMPILED
