@@ -11,7 +11,7 @@ import torch.nn.functional as F
 
 import torchgrade as tg
 from torchgrade.bloom.composite import bevy_blend_factor
-from torchgrade.bloom.prefilter.prefilter import karis_mean
+from torchgrade.bloom.prefilter import karis_mean
 from torchgrade.bloom.pyramid import anamorphic_sigma
 
 bloom = tg.functional.bloom
