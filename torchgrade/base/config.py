@@ -16,11 +16,10 @@ import json
 import os
 import re
 import stat
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
-
-from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # the stage module reads configs with config_value: a type only, so no import circle
     from .stage import Control

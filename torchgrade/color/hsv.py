@@ -11,6 +11,7 @@ __all__ = [
     "rgb_to_hsv", "hsv_to_rgb",
 ]
 
+
 def rgb_to_hsv(image: torch.Tensor) -> torch.Tensor:
     """RGB -> HSV with hue in turns [0, 1), for non-negative RGB.
 

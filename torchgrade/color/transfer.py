@@ -19,6 +19,7 @@ __all__ = [
     "safe_pow", "safe_sqrt", "linear_to_srgb", "srgb_to_linear", "linear_to_logc", "logc_to_linear", "aces_to_acescc", "acescc_to_aces", "linear_to_pq", "pq_to_linear", "hlg_oetf", "hlg_inverse_oetf", "linear_to_acescct", "acescct_to_linear", "LOGC_CUT", "LOGC_E", "ACESCC_MIDGRAY", "ACESCC_MAX", "PQ_M1", "PQ_C1", "PQ_PEAK", "HLG_A", "HLG_B", "HLG_C", "ACESCCT_CUT_LINEAR", "ACESCCT_CUT_LOG", "ACESCCT_A", "LOGC_A", "LOGC_B", "LOGC_C", "LOGC_D", "LOGC_F", "PQ_M2", "PQ_C2", "PQ_C3", "ACESCCT_B",
 ]
 
+
 def safe_pow(x: torch.Tensor, exponent) -> torch.Tensor:
     """``max(x, 0) ** exponent`` with a finite gradient at 0 (HLSL ``PositivePow`` on clamped input).
 
@@ -142,6 +143,7 @@ def acescc_to_aces(image: torch.Tensor) -> torch.Tensor:
     if torch.onnx.is_in_onnx_export():
         return torch.minimum(value, (value - 2.0**-16) * 2.0)  # the same minimum, without a comparison and Where
     return torch.where(x < _ACESCC_LOW_KNEE, (value - 2.0**-16) * 2.0, value)
+
 
 PQ_M1, PQ_M2 = 2610.0 / 16384.0, 2523.0 / 4096.0 * 128.0
 PQ_C1, PQ_C2, PQ_C3 = 3424.0 / 4096.0, 2413.0 / 4096.0 * 32.0, 2392.0 / 4096.0 * 32.0

@@ -29,6 +29,7 @@ from .primary import (
 
 __all__ = ["ColorGrade", "PrimaryGrade"]
 
+
 def _check_zone(start: Param, end: Param, zone: str) -> None:
     start_t, end_t = torch.as_tensor(start).detach(), torch.as_tensor(end).detach()
     if start_t.is_meta or end_t.is_meta:  # no values to compare

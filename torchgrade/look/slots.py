@@ -19,6 +19,7 @@ from ..tonemap import ToneMap
 
 __all__ = ["Slot", "SLOTS", "SLOT", "STAGES", "stage_keys", "build_stage", "is_identity_stage"]
 
+
 @dataclass(frozen=True)
 class Slot:
     """One place in a look: its ``name`` (the constructor argument, attribute and config key) and ``stage`` class.

@@ -32,6 +32,7 @@ from .shapers import SHAPERS, lattice_unit
 
 __all__ = ["LUT3D", "LUTLookup", "entry_bound"]
 
+
 def _pair(value, name: str):
     try:
         low, high = (float(v) for v in value)

@@ -20,7 +20,6 @@ import torch
 __all__ = ["SYMBOLICS", "symbolics"]
 
 
-
 def _constant(g, value: float):
     return g.op("Constant", value_t=torch.tensor(value, dtype=torch.float32))
 

@@ -8,7 +8,12 @@ Examples:
     True
 """
 
-from .display import DISPLAY_ENCODINGS, DISPLAY_PRESETS, DISPLAY_PRIMARIES, encode_display
+from .display import (
+           DISPLAY_ENCODINGS,
+           DISPLAY_PRESETS,
+           DISPLAY_PRIMARIES,
+           encode_display,
+)
 from .dither import dither, dither_pattern
 from .layer import Display, Dither, LookLUT
 from .look import LOOK_ENCODINGS, look_lut, read_lut_file

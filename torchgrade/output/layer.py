@@ -18,6 +18,7 @@ from .look import LOOK_ENCODINGS, look_lut, read_lut_file
 
 __all__ = ["Display", "Dither", "LookLUT", "LookLUTForm", "lut_settings"]
 
+
 class LookLUT(Stage):
     """A creative LUT after tone mapping: ``LookLUT(lut, contribution=1.0, encoding="srgb", interpolation=None)``.
 
