@@ -38,7 +38,7 @@ from typing import Any, ClassVar
 import torch
 from torch import nn
 
-from .core import check_choice, check_range, full_precision, is_constant, is_tracing
+from .core import check_choice, check_image, check_range, full_precision, is_constant, is_tracing, warn_if_eight_bit, with_alpha
 from .runtime import DeferredCheck, in_strips
 
 __all__ = ["Control", "Stage", "plain", "controls_signature", "in_state_check"]
@@ -275,15 +275,25 @@ class Stage(nn.Module):
 
     # ------------------------------------------------------------------ checks at run time
 
-    def __call__(self, *args, **kwargs):
-        """Check the learnable controls, then run ``forward`` with autocast off (see :func:`~torchgrade.core.full_precision`).
+    def __call__(self, image, *args, **kwargs):
+        """Check the learnable controls and the whole image, then run ``forward`` with autocast off (see
+        :func:`~torchgrade.core.full_precision`) on its colour channels.
 
-        Every stage goes through here, so the range policy and the precision policy hold for all of
-        them without each ``forward`` repeating them.
+        Every stage goes through here, so the range, precision and input policies hold for all of them without each
+        ``forward`` repeating them:
+
+        * ``image`` is scene-referred linear light ``(..., 3, H, W)``, or ``(..., 4, H, W)`` whose fourth channel (alpha)
+          comes back unchanged, bit for bit, as OpenColorIO and compositors grade RGBA
+          (:func:`~torchgrade.core.with_alpha`);
+        * display-referred pictures are decoded first: ``tg.color.srgb_to_linear(png.float() / 255)``; floats that look
+          like 0..255 data warn (:func:`~torchgrade.core.warn_if_eight_bit`, on the CPU);
+        * errors name the caller's shape, not a strip's.
         """
         self.check_learnable()
+        check_image(image, alpha=True)
+        warn_if_eight_bit(image)
         with full_precision():
-            return super().__call__(*args, **kwargs)
+            return with_alpha(super().__call__, image, *args, **kwargs)
 
     def check_learnable(self) -> None:
         """Raise ``ValueError`` naming a learnable control an optimiser moved outside its range (or to NaN).
