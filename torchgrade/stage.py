@@ -174,6 +174,12 @@ class Stage(nn.Module):
     their controls as attributes. Cross-control rules (a zone's start below its end) go in
     :meth:`check_together`; checks of a ``"value"`` control in :meth:`check_control`.
 
+    Every stage takes linear light ``(..., 3, H, W)`` or ``(..., 4, H, W)``: the fourth channel, alpha, comes back
+    unchanged, bit for bit, as OpenColorIO and compositors grade RGBA, so ``tg.io.read_exr`` of a file with alpha goes
+    through any stage or look as it is; ``forward`` sees the colour alone (:meth:`__call__`). An sRGB-encoded picture
+    (PNG, JPEG, 0..255 codes) is decoded first, ``tg.color.srgb_to_linear(codes.float() / 255)``: taken as linear it
+    would be graded as other light than it shows, and floats that look like 0..255 data warn.
+
     Examples:
         >>> import torchgrade as tg
         >>> grade = tg.ColorGrade(contrast=20)
