@@ -157,6 +157,7 @@ def _modules() -> dict:
         "bloom": tg.Bloom(intensity=0.5),
         "exposure": tg.AutoExposure(),
         "look": tg.PostFX(exposure={}, grade={"contrast": 10}, tonemap="aces"),
+        "strip-look": tg.PostFX(grade={"contrast": 10}, tonemap="aces"),  # its first stage runs in strips
         "baked-look": baked,
     }
 
