@@ -131,6 +131,11 @@ def test_the_warning_judges_a_frame_by_its_whole_sample_not_its_corner():
     assert _caught(lambda: tg.ToneMap("neutral")(image)) == []
 
 
+def test_an_rgba_frame_is_judged_by_its_colour():
+    rgba = torch.cat((_eight_bit(), torch.rand(1, 1, 270, 480)), dim=1)  # 0..255 colour, alpha in [0, 1]
+    assert len(_caught(lambda: tg.ToneMap("neutral")(rgba))) == 1
+
+
 def test_an_integer_image_is_refused_naming_the_fix():
     with pytest.raises(TypeError) as error:
         tg.ToneMap("neutral")(torch.zeros(1, 3, 8, 8, dtype=torch.uint8))

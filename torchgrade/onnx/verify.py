@@ -133,7 +133,7 @@ def session(path, runtime: str = "onnxruntime", precision: Optional[str] = None,
     providers = [(provider, {"device_id": int(index or 0)}), "CPUExecutionProvider"] if kind == "cuda" else [provider]
     try:
         runner = onnxruntime.InferenceSession(str(path), options, providers=providers)
-    except _UNREADABLE as error:
+    except _unreadable() as error:
         raise ValueError(f"{str(path)!r} is not an ONNX model onnxruntime can load: {error}") from None
     if runner.get_providers()[0] != provider:
         raise ValueError(f"onnxruntime could not start {provider} (it runs on {', '.join(runner.get_providers())}): "
@@ -146,9 +146,6 @@ def _unreadable() -> tuple:
     from onnxruntime.capi import onnxruntime_pybind11_state as state
 
     return state.InvalidProtobuf, state.InvalidGraph, state.NoModel, state.Fail
-
-
-_UNREADABLE = _unreadable()
 
 
 def _inputs(inputs: Inputs, stateful: bool) -> tuple:
