@@ -192,7 +192,7 @@ def test_bad_controls_name_the_parameter(controls, message):
 def test_bad_images_raise_clear_errors():
     grade = tg.ColorGrade(contrast=10)
     with pytest.raises(ValueError, match="3 colour channels"):
-        grade(torch.rand(1, 4, 2, 2))
+        grade(torch.rand(1, 5, 2, 2))
     with pytest.raises(TypeError, match="floating-point"):
         grade(torch.ones(1, 3, 2, 2, dtype=torch.uint8))
     with pytest.raises(ValueError, match="empty"):

@@ -36,13 +36,13 @@ MODULES = _modules()
     "image, error, message",
     [
         (torch.rand(1, 2, 8, 8), ValueError, "3 colour channels"),
-        (torch.rand(1, 4, 8, 8), ValueError, "3 colour channels"),
+        (torch.rand(1, 5, 8, 8), ValueError, "3 colour channels"),
         (torch.ones(1, 3, 8, 8, dtype=torch.int64), TypeError, "floating-point"),
         (torch.ones(1, 3, 8, 8, dtype=torch.complex64), TypeError, "floating-point"),
         (torch.rand(1, 3, 0, 8), ValueError, "empty"),
         (torch.rand(0, 3, 8, 8), ValueError, "empty"),
     ],
-    ids=["2-channels", "4-channels", "int64", "complex64", "zero-height", "zero-batch"],
+    ids=["2-channels", "5-channels", "int64", "complex64", "zero-height", "zero-batch"],
 )
 def test_bad_images_raise_clear_errors(name, image, error, message):
     with pytest.raises(error, match=message):

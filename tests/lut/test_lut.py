@@ -360,7 +360,7 @@ def test_bad_arguments_raise():
     with pytest.raises(ValueError, match="interpolation"):
         lut(torch.rand(1, 3, 2, 2), interpolation="cubic")
     with pytest.raises(ValueError, match="3 colour channels"):
-        lut(torch.rand(1, 4, 2, 2))
+        lut(torch.rand(1, 5, 2, 2))
     with pytest.raises(TypeError):
         lut(torch.zeros(1, 3, 2, 2, dtype=torch.uint8))
     with pytest.raises(ValueError, match="shaper"):

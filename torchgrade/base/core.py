@@ -2,8 +2,9 @@
 
 Every public module of torchgrade goes through these helpers, so the rules are stated once:
 
-* Images are float tensors ``(..., 3, H, W)``; anything else is a ``TypeError`` (dtype) or a
-  ``ValueError`` (shape), with a message naming the problem.
+* Images are float tensors ``(..., 3, H, W)`` (a stage also takes ``(..., 4, H, W)``, its alpha passed through:
+  :func:`with_alpha`); anything else is a ``TypeError`` (dtype) or a ``ValueError`` (shape), with a message naming
+  the problem and the caller's shape.
 * Parameters may be a Python number, a 0-d tensor, a per-sample tensor ``(B,)`` (colours ``(B, 3)``,
   matrices ``(B, 3, 3)``) or an ``nn.Parameter``; they are cast to the image's dtype and device and
   shaped to broadcast against ``(B, 3, H, W)``.
@@ -20,6 +21,7 @@ import contextlib
 import contextvars
 import math
 import numbers
+import warnings
 from typing import Union
 
 import torch
@@ -27,6 +29,7 @@ import torch
 from ..runtime.constants import constant
 from ..runtime.policy import policy_for
 from ..runtime.recording import is_tracing, untracked
+from ..runtime.strips import named_as
 
 Param = Union[float, int, torch.Tensor]
 
@@ -35,6 +38,8 @@ __all__ = [
     "HALF_MAX",
     "NEGLIGIBLE_LIGHT",
     "check_image",
+    "with_alpha",
+    "warn_if_eight_bit",
     "check_on_cpu",
     "sanitize",
     "nan_free",
@@ -67,8 +72,9 @@ NEGLIGIBLE_LIGHT = 1e-10
 denormal underflows to 0, and the division's gradient to infinity."""
 
 
-def check_image(image: torch.Tensor, name: str = "image") -> None:
-    """Raise a clear error unless ``image`` is a non-empty floating tensor shaped ``(..., 3, H, W)``.
+def check_image(image: torch.Tensor, name: str = "image", alpha: bool = False) -> None:
+    """Raise a clear error unless ``image`` is a non-empty floating tensor shaped ``(..., 3, H, W)`` (with ``alpha``, also
+    ``(..., 4, H, W)``: colour and alpha).
 
     Examples:
         >>> check_image(torch.zeros(1, 4, 2, 2))
@@ -80,13 +86,66 @@ def check_image(image: torch.Tensor, name: str = "image") -> None:
         raise TypeError(f"{name} must be a torch.Tensor, got {type(image).__name__}")
     if not image.is_floating_point():
         raise TypeError(
-            f"{name} must be a floating-point tensor (float16, bfloat16, float32 or float64), "
-            f"got {image.dtype}; convert integer images with image.float() / 255"
+            f"{name} must be a floating-point tensor (float16, bfloat16, float32 or float64), got {image.dtype}; "
+            "an 8-bit image holds sRGB codes: tg.color.srgb_to_linear(image.float() / 255) gives the linear light a "
+            'stage takes, and RandomPostFX(input_space="srgb") grades image.float() / 255 as it is'
         )
-    if image.dim() < 3 or image.shape[-3] != 3:
-        raise ValueError(f"{name} must have shape (..., 3, H, W) with 3 colour channels, got {tuple(image.shape)}")
+    channels = (3, 4) if alpha else (3,)
+    if image.dim() < 3 or image.shape[-3] not in channels:
+        with_alpha = ", or (..., 4, H, W) with alpha" if alpha else ""
+        raise ValueError(f"{name} must have shape (..., 3, H, W) with 3 colour channels{with_alpha}, got {tuple(image.shape)}")
     if image.numel() == 0:
         raise ValueError(f"{name} is empty: shape {tuple(image.shape)}")
+
+
+def with_alpha(function, image: torch.Tensor, *args, **kwargs) -> torch.Tensor:
+    """``function(image, *args, **kwargs)`` for a checked ``(..., 3, H, W)`` image; for ``(..., 4, H, W)``, ``function`` of the
+    colour channels with the fourth (alpha) appended unchanged, as OpenColorIO and compositors grade RGBA. An error
+    naming the colour's shape names the caller's.
+
+    Examples:
+        >>> rgba = torch.tensor([1.0, 2.0, 3.0, 0.5]).reshape(1, 4, 1, 1)
+        >>> with_alpha(lambda x: x * 2, rgba).flatten().tolist()
+        [2.0, 4.0, 6.0, 0.5]
+    """
+    check_image(image, alpha=True)
+    if image.shape[-3] == 3:
+        return function(image, *args, **kwargs)
+    colour, alpha = image.split((3, 1), dim=-3)
+    with named_as(colour.shape, image.shape):
+        return torch.cat((function(colour, *args, **kwargs), alpha), dim=-3)
+
+
+EIGHT_BIT_ROWS = 8
+"""Rows :func:`warn_if_eight_bit` reads at most (at least half as many), evenly spaced, of the colour of the first image
+of a batch: whole rows, read in order. In the cinematic look at 1920x1080 (CPU time, one thread) the check took 0.24 ms
+a stage call, 0.3 % of the frame; 64x64 values spread over the frame took 0.39 ms (a cache line fetched per value)."""
+
+
+def warn_if_eight_bit(image: torch.Tensor) -> None:
+    """Warn when a linear ``image`` looks like 0..255 data: a sample of it holds whole numbers only, not all the same,
+    none negative, the largest in (1, 255]. Such floats taken as light come out nearly white; an HDR frame holds
+    fractions, and a frame of one grey is no 8-bit picture. Only where the device's policy reads values (the CPU,
+    :func:`readable`): on a GPU the read would wait for the device at every frame.
+
+    Examples:
+        >>> import warnings
+        >>> with warnings.catch_warnings(record=True) as caught:
+        ...     warnings.simplefilter("always")
+        ...     warn_if_eight_bit(torch.arange(48.0).reshape(3, 4, 4) * 5)
+        >>> "divide by 255" in str(caught[0].message)
+        True
+    """
+    if not readable(image):
+        return
+    first = image.detach()[(0,) * (image.dim() - 3)][:3]  # colour, without an alpha
+    sample = first[:, :: max(1, first.shape[-2] // EIGHT_BIT_ROWS)]
+    low, high = torch.stack(sample.aminmax()).tolist()  # one read
+    if 0.0 <= low < high and 1.0 < high <= 255.0 and torch.equal(sample, sample.round()):
+        warnings.warn(
+            f"the image looks like 0..255 data (whole numbers up to {high:g}), but stages take linear light: divide "
+            "by 255, and decode sRGB-encoded pictures (PNG, JPEG) with tg.color.srgb_to_linear or grade them with "
+            'RandomPostFX(input_space="srgb")', UserWarning, stacklevel=3)
 
 
 _NAN_FREE = contextvars.ContextVar("nan_free", default=None)

@@ -38,9 +38,9 @@ from typing import Any, ClassVar
 import torch
 from torch import nn
 
-from ..runtime import DeferredCheck, in_strips
 from .config import config_value
-from .core import check_choice, check_range, full_precision, is_constant, is_tracing
+from .core import check_choice, check_image, check_range, full_precision, is_constant, is_tracing, warn_if_eight_bit, with_alpha
+from ..runtime import DeferredCheck, in_strips
 
 __all__ = ["Control", "Stage", "plain", "controls_signature", "in_state_check"]
 
@@ -175,6 +175,12 @@ class Stage(nn.Module):
     their controls as attributes. Cross-control rules (a zone's start below its end) go in
     :meth:`check_together`; checks of a ``"value"`` control in :meth:`check_control`.
 
+    Every stage takes linear light ``(..., 3, H, W)`` or ``(..., 4, H, W)``: the fourth channel, alpha, comes back
+    unchanged, bit for bit, as OpenColorIO and compositors grade RGBA, so ``tg.io.read_exr`` of a file with alpha goes
+    through any stage or look as it is; ``forward`` sees the colour alone (:meth:`__call__`). An sRGB-encoded picture
+    (PNG, JPEG, 0..255 codes) is decoded first, ``tg.color.srgb_to_linear(codes.float() / 255)``: taken as linear it
+    would be graded as other light than it shows, and floats that look like 0..255 data warn.
+
     Examples:
         >>> import torchgrade as tg
         >>> grade = tg.ColorGrade(contrast=20)
@@ -276,15 +282,25 @@ class Stage(nn.Module):
 
     # ------------------------------------------------------------------ checks at run time
 
-    def __call__(self, *args, **kwargs):
-        """Check the learnable controls, then run ``forward`` with autocast off (see :func:`~torchgrade.base.core.full_precision`).
+    def __call__(self, image, *args, **kwargs):
+        """Check the learnable controls and the whole image, then run ``forward`` with autocast off (see
+        :func:`~torchgrade.base.core.full_precision`) on its colour channels.
 
-        Every stage goes through here, so the range policy and the precision policy hold for all of
-        them without each ``forward`` repeating them.
+        Every stage goes through here, so the range, precision and input policies hold for all of them without each
+        ``forward`` repeating them:
+
+        * ``image`` is scene-referred linear light ``(..., 3, H, W)``, or ``(..., 4, H, W)`` whose fourth channel (alpha)
+          comes back unchanged, bit for bit, as OpenColorIO and compositors grade RGBA
+          (:func:`~torchgrade.base.core.with_alpha`);
+        * display-referred pictures are decoded first: ``tg.color.srgb_to_linear(png.float() / 255)``; floats that look
+          like 0..255 data warn (:func:`~torchgrade.base.core.warn_if_eight_bit`, on the CPU);
+        * errors name the caller's shape, not a strip's.
         """
         self.check_learnable()
+        check_image(image, alpha=True)
+        warn_if_eight_bit(image)
         with full_precision():
-            return super().__call__(*args, **kwargs)
+            return with_alpha(super().__call__, image, *args, **kwargs)
 
     def check_learnable(self) -> None:
         """Raise ``ValueError`` naming a learnable control an optimiser moved outside its range (or to NaN).

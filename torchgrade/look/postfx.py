@@ -44,6 +44,7 @@ from torch import nn
 
 from .._moved import OLD_CLASS_PATHS
 from ..base.config import load_config
+from ..base.core import with_alpha
 from ..lut import INTERPOLATIONS, LUT3D, ErrorReport, bake_lut
 from .slots import SLOT, SLOTS, STAGES, build_stage, is_identity_stage
 
@@ -187,6 +188,10 @@ class PostFX(nn.Module):
         return {slot.name: getattr(self, slot.name) for slot in SLOTS if getattr(self, slot.name) is not None}
 
     def forward(self, image: torch.Tensor, dt=None) -> torch.Tensor:
+        return with_alpha(self._graded, image, dt)  # an RGBA frame's alpha is split off once, not at every stage
+
+    def _graded(self, image: torch.Tensor, dt) -> torch.Tensor:
+        """The stages in order on the colour channels, ``dt`` to those that keep state between frames."""
         for name, stage in self.stages().items():
             image = stage(image, dt) if SLOT[name].timed else stage(image)
         return image

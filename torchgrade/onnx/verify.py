@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import statistics
 import time
+from pathlib import Path
 from types import SimpleNamespace
 from typing import NamedTuple, Optional, Sequence, Union
 
@@ -111,6 +112,8 @@ def session(path, runtime: str = "onnxruntime", precision: Optional[str] = None,
     """
     if runtime not in RUNTIMES:
         raise ValueError(f"runtime must be one of {RUNTIMES}, got {runtime!r}")
+    if not Path(path).is_file():
+        raise ValueError(f"no ONNX file at {str(path)!r}")
     if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
         raise ValueError(f"threads must be a positive int or None, got {threads!r}")
     kind, numbered, index = str(device).partition(":")
@@ -128,11 +131,21 @@ def session(path, runtime: str = "onnxruntime", precision: Optional[str] = None,
     if threads is not None:
         options.intra_op_num_threads = threads
     providers = [(provider, {"device_id": int(index or 0)}), "CPUExecutionProvider"] if kind == "cuda" else [provider]
-    runner = onnxruntime.InferenceSession(str(path), options, providers=providers)
+    try:
+        runner = onnxruntime.InferenceSession(str(path), options, providers=providers)
+    except _unreadable() as error:
+        raise ValueError(f"{str(path)!r} is not an ONNX model onnxruntime can load: {error}") from None
     if runner.get_providers()[0] != provider:
         raise ValueError(f"onnxruntime could not start {provider} (it runs on {', '.join(runner.get_providers())}): "
                          "are the CUDA and cuDNN libraries that this onnxruntime-gpu needs installed and found?")
     return runner
+
+
+def _unreadable() -> tuple:
+    """onnxruntime's errors for a file that is no model it can load (they derive from ``Exception`` alone)."""
+    from onnxruntime.capi import onnxruntime_pybind11_state as state
+
+    return state.InvalidProtobuf, state.InvalidGraph, state.NoModel, state.Fail
 
 
 def _inputs(inputs: Inputs, stateful: bool) -> tuple:
@@ -144,7 +157,10 @@ def _inputs(inputs: Inputs, stateful: bool) -> tuple:
         raise ValueError(f"the look takes {takes}; got {len(inputs)} inputs")
     image = check_batch(inputs[0])
     if len(inputs) == 3:
-        adapted, dt = (torch.as_tensor(value, dtype=torch.float32) for value in inputs[1:])
+        try:
+            adapted, dt = (torch.as_tensor(value, dtype=torch.float32) for value in inputs[1:])
+        except (TypeError, ValueError, RuntimeError):
+            raise ValueError(f"adapted and dt must be numbers or tensors, got {type(inputs[1]).__name__} and {type(inputs[2]).__name__}") from None
         if adapted.shape != image.shape[:1] or dt.dim() != 0:
             raise ValueError(f"adapted must have shape ({image.shape[0]},) (one value per image) and dt be a scalar, "
                              f"got shapes {tuple(adapted.shape)} and {tuple(dt.shape)}")
@@ -163,7 +179,12 @@ def feeds(runner, module: Optional[nn.Module], inputs: Inputs) -> dict:
         True
     """
     ports = runner.get_inputs()
-    image, *state = _inputs(inputs, any(port.name == "adapted" for port in ports))
+    stateful = any(port.name == "adapted" for port in ports)
+    if module is not None and has_state(module) != stateful:
+        mismatch = ("the file takes adapted and dt (a look with eye adaptation) but the module has no exposure stage" if stateful
+                    else "the module has an exposure stage but the file takes no adapted and dt")
+        raise ValueError(f"{mismatch}: pass the module the file was exported from")
+    image, *state = _inputs(inputs, stateful)
     frames = read_frame_format(runner.get_modelmeta().custom_metadata_map)
     named = {"image": model_input(image, frames).numpy(), **dict(zip(("adapted", "dt"), (value.numpy() for value in state)))}
     required = [port.name for port in ports if port.name not in named and not port.type.startswith("optional")]

@@ -9,12 +9,14 @@ Examples:
 
 from __future__ import annotations
 
+import contextlib
+
 import torch
 
 from .recording import untracked
 from .policy import policy_for
 
-__all__ = ["in_strips"]
+__all__ = ["in_strips", "named_as"]
 
 
 def in_strips(transform, image: torch.Tensor, controls=()) -> torch.Tensor:
@@ -35,8 +37,31 @@ def in_strips(transform, image: torch.Tensor, controls=()) -> torch.Tensor:
     rows = max(1, pixels * height * image.shape[-3] // image.numel())
     output = None
     for start in range(0, height, rows):
-        strip = transform(image[..., start : start + rows, :])
+        part = image[..., start : start + rows, :]
+        with named_as(part.shape, image.shape):
+            strip = transform(part)
         if output is None:
             output = strip.new_empty(strip.shape[:-2] + (height, strip.shape[-1]))
         output[..., start : start + rows, :] = strip
     return output
+
+
+@contextlib.contextmanager
+def named_as(part: torch.Size, whole: torch.Size):
+    """A ``ValueError`` or ``TypeError`` raised in the block that names the shape ``part`` (of a strip, or of an image's
+    colour channels) is raised naming ``whole``, the shape the caller passed.
+
+    Examples:
+        >>> with named_as(torch.Size((1, 3, 8, 10)), torch.Size((1, 3, 80, 10))):
+        ...     raise ValueError("got (1, 3, 8, 10)")
+        Traceback (most recent call last):
+        ...
+        ValueError: got (1, 3, 80, 10)
+    """
+    try:
+        yield
+    except (ValueError, TypeError) as error:
+        seen, caller = str(tuple(part)), str(tuple(whole))
+        if type(error) not in (ValueError, TypeError) or seen == caller or seen not in str(error):
+            raise
+        raise type(error)(str(error).replace(seen, caller)).with_traceback(error.__traceback__) from None

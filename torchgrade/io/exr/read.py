@@ -150,9 +150,10 @@ def read_exr(path, to_rec709: bool = False, *, adaptation: str = "auto", layer: 
     By default this is what OpenEXR's RGBA interface gives: the main layer (channels ``R``, ``G``,
     ``B``, ``A``, or luminance/chroma ``Y``, ``RY``, ``BY``) of the default view (the first of a
     ``multiView`` attribute) of the first part that has one, as ``(3, H, W)`` RGB or ``(4, H, W)``
-    RGBA; missing R, G or B are zeros, luminance/chroma is reconstructed to RGB as OpenEXR does
-    (see :mod:`torchgrade.io.exr.yca`), a Y-only file is grey. Other channels (``mask.R``,
-    ``left.R``) never mix in. :func:`exr_info` lists what a file holds.
+    RGBA (every stage grades the colour and returns the alpha unchanged); missing R, G or B are zeros,
+    luminance/chroma is reconstructed to RGB as OpenEXR does (see :mod:`torchgrade.io.exr.yca`), a Y-only
+    file is grey. Other channels (``mask.R``, ``left.R``) never mix in. :func:`exr_info` lists what a file
+    holds.
 
     Args:
         to_rec709: convert RGB from the file's ``chromaticities`` to linear Rec.709 (files without
