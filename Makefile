@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 # The CPU build of PyTorch; an unpinned torch would pull the multi-GB CUDA build.
 TORCH_PIN := torch==2.13.0
 
-.PHONY: demo test setup clean
+.PHONY: demo test docs setup clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -24,5 +24,9 @@ demo: setup
 test: setup
 	$(BIN)/python -m pytest -q
 
+# The documentation site (docs/, mkdocs.yml) into build/site; `$(BIN)/mkdocs serve` shows it while editing.
+docs: setup
+	$(BIN)/mkdocs build --strict --site-dir build/site
+
 clean:
-	rm -rf $(VENV) demo.png
+	rm -rf $(VENV) demo.png build/site

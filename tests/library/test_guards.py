@@ -18,7 +18,7 @@ import pytest
 import torch
 
 import torchgrade as tg
-from test_device import CASES
+from runtime.test_device import CASES  # tests/runtime, a namespace package beside this folder
 from torchgrade.base.stage import Stage
 
 EXR = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "exr"
@@ -29,11 +29,11 @@ NO_ALPHA = {
     "match-controls": "a look fitter's parameterisation, not a stage",
     "match-residual": "a look fitter's residual LUT, not a stage",
 }
-"""Cases of ``tests/test_device.py`` that are no stage (nor a look of stages), and why."""
+"""Cases of ``tests/runtime/test_device.py`` that are no stage (nor a look of stages), and why."""
 
 ALPHA_CASES = sorted(name for name in CASES if name not in NO_ALPHA and not name.endswith("-export")
                      and not re.match(r"lut-\w+-(strip|gather|volume)$", name))
-"""Every stage and look of ``tests/test_device.py``; export forms are what an ONNX graph traces, on colour only."""
+"""Every stage and look of ``tests/runtime/test_device.py``; export forms are what an ONNX graph traces, on colour only."""
 
 
 def _frames() -> tuple:

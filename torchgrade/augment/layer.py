@@ -128,15 +128,23 @@ class RandomPostFX(IntensityAugmentationBase2D):
     masks, boxes and keypoints pass through untouched.
 
     Args:
-        post_exposure, temperature, tint, contrast, split_balance, hue_shift, saturation: ``(min, max)``
-            ranges in :class:`torchgrade.ColorGrade`'s units (stops; -100..100; hue in degrees), a
-            magnitude ``x`` meaning ``(-x, x)`` as in kornia, or None.
-        split_shadows, split_highlights: ``(min, max)`` range of each gamma-space channel of the
-            split-toning colours, inside [0, 1] (0.5 is neutral; a magnitude ``x`` is ``0.5 ± x``), or None.
-            ``split_balance`` needs one of them.
-        bloom_threshold, bloom_intensity, bloom_scatter: ``(min, max)`` ranges of :func:`torchgrade.bloom.bloom`'s
-            controls (threshold in gamma space), or None. Bloom runs when any of them is given (unless
-            ``bloom_intensity=(0, 0)``); the others keep ``Bloom``'s defaults. ``bloom_scatter`` needs ``bloom_mode="scattering"``.
+        post_exposure: ``(min, max)`` range in :class:`torchgrade.ColorGrade`'s units (stops), a magnitude
+            ``x`` meaning ``(-x, x)`` as in kornia, or None.
+        temperature: the same, in ``ColorGrade``'s units (-100..100).
+        tint: the same, in ``ColorGrade``'s units (-100..100).
+        contrast: the same, in ``ColorGrade``'s units (-100..100).
+        split_balance: the same, in ``ColorGrade``'s units (-100..100); needs ``split_shadows`` or
+            ``split_highlights``.
+        hue_shift: the same, in degrees.
+        saturation: the same, in ``ColorGrade``'s units (-100..100).
+        split_shadows: ``(min, max)`` range of each gamma-space channel of the shadows' split-toning colour,
+            inside [0, 1] (0.5 is neutral; a magnitude ``x`` is ``0.5 ± x``), or None.
+        split_highlights: the same for the highlights' split-toning colour.
+        bloom_threshold: ``(min, max)`` range of :func:`torchgrade.bloom.bloom`'s ``threshold`` (in gamma space),
+            or None. Bloom runs when any bloom range is given (unless ``bloom_intensity=(0, 0)``); the others
+            keep ``Bloom``'s defaults.
+        bloom_intensity: the same for ``intensity``.
+        bloom_scatter: the same for ``scatter``; needs ``bloom_mode="scattering"``.
         bloom_mode: ``"additive"`` or ``"scattering"``.
         tonemap: None (no tone mapping), a mode of :data:`torchgrade.TONEMAP_MODES`, or a sequence of
             modes chosen uniformly per sample; applied to every sample, skipped ones included.

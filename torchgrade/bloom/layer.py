@@ -130,7 +130,7 @@ def bloom_settings(given: dict) -> dict:
 def bloom(image: torch.Tensor, *, fixed_depth: int = None, **settings) -> torch.Tensor:
     """Bloom an HDR image ``(..., 3, H, W)``; see :mod:`torchgrade.bloom` for the passes and guarantees.
 
-    Args:
+    Keyword Args:
         mode: one of :data:`~torchgrade.bloom.BLOOM_MODES`: ``"additive"`` (``image + intensity * glow``),
             ``"scattering"`` (moves light; conserves it), ``"energy_conserving"`` (Bevy's), or Godot's
             ``"screen"``, ``"softlight"``, ``"replace"``, ``"mix"``.
@@ -148,8 +148,9 @@ def bloom(image: torch.Tensor, *, fixed_depth: int = None, **settings) -> torch.
         karis_average: Karis' luminance-weighted 2x2 average in the prefilter.
         dirt: lens dirt texture ``(1 or 3, h, w)``, resampled to the frame.
         dirt_intensity: >= 0, weight of the dirt-modulated glow added to the output.
-        low_frequency_boost, low_frequency_boost_curvature, high_pass_frequency: Bevy's controls of
-            the energy-conserving level weights, in [0, 1], [0, 0.99] and [0.01, 1].
+        low_frequency_boost: Bevy's control of the energy-conserving level weights, in [0, 1].
+        low_frequency_boost_curvature: Bevy's control of the energy-conserving level weights, in [0, 0.99].
+        high_pass_frequency: Bevy's control of the energy-conserving level weights, in [0.01, 1].
 
     Continuous parameters are numbers, 0-d tensors or per-sample ``(B,)`` tensors, differentiable.
 

@@ -51,7 +51,8 @@ CODE_MAX = {torch.uint8: 255, torch.uint16: 65535}
 """Top code of each integer dtype (sRGB 1.0)."""
 
 OUTPUTS = {
-    "linear": "display-linear float (scene-linear for a look without a tone mapper), Rec.709 primaries, not clamped",
+    "linear": "display-linear float, Rec.709 primaries, clamped to [0, 1] by the look's tone mapper "
+              "(scene-linear and not clamped for a look without a tone mapper)",
     "srgb": "sRGB-encoded float in [0, 1] (IEC 61966-2-1), Rec.709 primaries, clamped to [0, 1] before encoding",
     "srgb8": "8-bit sRGB code values (uint8, 0-255), Rec.709 primaries, clamped to [0, 1] before encoding and rounded",
     "srgb16": "16-bit sRGB code values (uint16, 0-65535), Rec.709 primaries, clamped to [0, 1] before encoding and rounded",

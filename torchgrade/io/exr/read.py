@@ -165,7 +165,8 @@ def read_exr(path, to_rec709: bool = False, *, adaptation: str = "auto", layer: 
         part: a part index or name; by default the first part holding the layer in the view.
         window: ``"data"`` (the pixels stored) or ``"display"`` (the frame: outside the data window
             is 0, so frames of a sequence share one size).
-        max_pixels, max_bytes: the budget checked from the headers before decoding (ValueError).
+        max_pixels: the budget of pixels checked from the headers before decoding (ValueError).
+        max_bytes: the budget of bytes checked from the headers before decoding (ValueError).
 
     Raises ``ValueError`` for damaged, deep, over-budget files and for a missing layer, view or part:
     the header bytes decide before any pixel is decoded (a header lacking an attribute the format

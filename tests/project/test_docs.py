@@ -1,0 +1,64 @@
+"""The documentation site: every Python example on its pages runs, blocks left out say why, the gallery's pictures
+are the ones its script writes, and ``mkdocs build --strict`` (links, anchors, the nav, the API pages made from the
+docstrings) passes without a warning."""
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+DOCS = ROOT / "docs"
+PAGES = sorted(DOCS.rglob("*.md"))
+BLOCKS = [(page, index, block) for page in PAGES
+          for index, block in enumerate(re.findall(r"```python\n(.*?)```", page.read_text(), flags=re.S))]
+NOT_RUN = [(page, block) for page in PAGES for block in re.findall(r"```py\n(.*?)```", page.read_text(), flags=re.S)]
+
+
+def test_docs_have_python_examples():
+    """The pattern finds the pages' examples: each page of a stage or a use shows one."""
+    with_examples = {page.name for page, _, _ in BLOCKS}
+    assert {"index.md", "tonemap.md", "grading.md", "bloom.md", "exposure.md", "lut.md", "onnx.md", "augment.md",
+            "saving.md", "match.md"} <= with_examples
+
+
+@pytest.mark.parametrize("page, index, block", BLOCKS, ids=[f"{p.relative_to(DOCS)}-{i + 1}" for p, i, _ in BLOCKS])
+def test_docs_python_examples_run(page, index, block, monkeypatch):
+    monkeypatch.chdir(ROOT)  # blocks read export/looks/ and ../shared from the repository's root
+    exec(compile(block, f"{page.relative_to(ROOT)}, Python block {index + 1}", "exec"), {})
+
+
+def test_blocks_left_out_say_why():
+    """A block fenced ``py`` (not ``python``) is not run; its first line says why, on the page."""
+    for page, block in NOT_RUN:
+        assert block.startswith("# not run by the tests: "), page
+    assert not [page for page in PAGES if re.search(r"```(python3|py3|pycon|ipython)\n", page.read_text())]
+
+
+def test_gallery_pictures_are_the_scripts(tmp_path):
+    """The gallery page shows what docs/gallery.py writes, the committed pictures stay small, and the script runs."""
+    sys.path.insert(0, str(DOCS))
+    try:
+        import gallery
+    finally:
+        sys.path.remove(str(DOCS))
+    names = gallery.sheet_names()
+    shown = re.findall(r"\]\(gallery/([^)]+)\)", (DOCS / "gallery.md").read_text())
+    committed = sorted(path.name for path in (DOCS / "gallery").iterdir())
+    assert sorted(shown) == sorted(names) == committed
+    assert sum((DOCS / "gallery" / name).stat().st_size for name in committed) < 2 * 1024 * 1024
+    written = gallery.main(["--out", str(tmp_path), "--images", "CandleGlass", "--tile", "24", "--modes", "none", "agx",
+                            "--exr-dir", str(ROOT.parent / "shared" / "data" / "exr")])
+    assert [path.name for path in written] == gallery.sheet_names(["CandleGlass"])
+    assert all(path.stat().st_size > 0 for path in written)
+
+
+def test_docs_build_strict(tmp_path):
+    """``mkdocs build --strict``: a broken link or anchor, a page outside the nav or a docstring the API pages cannot
+    read is a warning, and a warning fails the build."""
+    run = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(tmp_path / "site")],
+                         cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0 and "WARNING" not in run.stderr, run.stderr[-4000:]
+    assert (tmp_path / "site" / "api" / "grading" / "index.html").read_text().count("ColorGrade") > 1
