@@ -9,7 +9,7 @@ import pytest
 import torch
 
 import torchgrade as tg
-from torchgrade.lut import SHAPERS, LUTAccuracyWarning, bake_lut, fit_shaper, lattice, validation_colours
+from torchgrade.lut import SHAPERS, LUTAccuracyWarning, bake_lut, fit_shaper, lattice, realistic_colours, validation_colours
 
 
 def srgb_codes(values: np.ndarray) -> np.ndarray:
@@ -42,19 +42,20 @@ def test_validation_colours_cover_the_gamut_out_of_gamut_values_and_the_half_flo
     assert float(ldr.max()) == 1.0
 
 
-def test_report_numbers_are_the_error_on_the_validation_colours():
+def test_report_numbers_are_the_error_on_realistic_colours_and_the_worst_case_on_the_validation_colours():
     lut = bake_lut(curve, size=9, shaper="linear", report_tolerance=1e9)
-    colours = validation_colours(hdr=False)
-    image = colours.reshape(1, 3, 1, -1)
-    direct = curve(image).numpy()
-    with torch.no_grad():
-        looked_up = lut(image.float()).double().numpy()
-    errors = np.abs(srgb_codes(direct) - srgb_codes(looked_up))
     report = lut.error_report
-    assert report.colours == colours.shape[1]
-    assert report.max == pytest.approx(errors.max(), abs=1e-9)
-    assert report.p99_9 == pytest.approx(np.quantile(errors, 0.999, method="higher"), abs=1e-9)
+    for numbers, colours in ((report, realistic_colours(hdr=False)), (report.worst_case, validation_colours(hdr=False))):
+        image = colours.reshape(1, 3, 1, -1)
+        direct = curve(image).numpy()
+        with torch.no_grad():
+            looked_up = lut(image.float()).double().numpy()
+        errors = np.abs(srgb_codes(direct) - srgb_codes(looked_up))
+        assert numbers.colours == colours.shape[1]
+        assert numbers.max == pytest.approx(errors.max(), abs=1e-9)
+        assert numbers.p99_9 == pytest.approx(np.quantile(errors, 0.999, method="higher"), abs=1e-9)
     assert report.cause is None and report.advice is None  # within its (huge) tolerance: no diagnosis
+    assert "realistic colours" in str(report) and "worst case" in str(report)
 
 
 def test_a_small_lattice_warns_names_size_and_its_advice_meets_the_tolerance():
@@ -85,7 +86,8 @@ def test_a_kink_oblique_to_the_lattice_is_named():
 def test_the_logc_lattice_reports_its_range_on_hdr_highlights():
     look = torch.nn.Sequential(tg.ColorGrade(contrast=30.0, saturation=20.0, temperature=20.0), tg.ToneMap("aces"))
     lut = quiet_bake(look, size=17, shaper="logc")
-    assert "lattice range" in lut.error_report.cause and "58.86" in lut.error_report.cause
+    worst = lut.error_report.worst_case
+    assert "lattice range" in worst.cause and "58.86" in worst.cause and worst.cause in str(lut.error_report)
 
 
 def test_fitted_shaper_is_monotone_and_its_decode_inverts_its_encode():
@@ -168,14 +170,21 @@ def test_to_lut_with_fitted_entries_reports_the_fitted_tables_smaller_error(recw
     assert (fitted.table - sampled.table).abs().max() > 1e-3
 
 
-def test_bake_command_prints_the_report(tmp_path, capsys):
+def test_bake_command_prints_the_report_and_refuses_a_lut_over_its_tolerance_unless_accepted(tmp_path, capsys):
     from torchgrade.cli import main
 
-    assert main(["bake", "-o", str(tmp_path / "look.cube"), "--size", "9", "--contrast", "10"]) == 0
+    flags = ["--size", "9", "--contrast", "10"]
+    assert main(["bake", "-o", str(tmp_path / "refused.cube"), *flags]) == 3
+    err = capsys.readouterr().err
+    assert not (tmp_path / "refused.cube").exists()
+    assert "realistic colours" in err and "worst case" in err and "validation colours over the whole domain" in err
+    assert all(remedy in err for remedy in ("--size 65", "--scene SHOT.exr --shaper fitted --entries fitted",
+                                            "torchgrade grade", "--accept-error"))
+    assert main(["bake", "-o", str(tmp_path / "accepted.cube"), *flags, "--accept-error"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
-    assert lines[-1].startswith("error: ") and "p99.9" in lines[-1] and "validation colours" in lines[-1]
-    assert main(["bake", "-o", str(tmp_path / "strict.cube"), "--size", "3", "--contrast", "10", "--strict"]) == 2
-    assert "misses its transform" in capsys.readouterr().err and not (tmp_path / "strict.cube").exists()
+    assert (tmp_path / "accepted.cube").exists() and lines[-1].startswith("error: OVER TOLERANCE: p99.9 ")
+    assert main(["bake", "-o", str(tmp_path / "within.cube"), "--size", "65", "--contrast", "10"]) == 0
+    assert capsys.readouterr().out.strip().splitlines()[-1].startswith("error: p99.9 ")
 
 
 # ---------------------------------------------------------------- the bar on real images

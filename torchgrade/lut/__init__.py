@@ -35,7 +35,7 @@ from .lut3d import (LUT3D, OUTPUT_ENCODINGS, LUTLookup, apply_lut, compiled_look
 from .report import ErrorReport, LUTAccuracyWarning, code_errors
 from .shapers import (DEFAULT_DOMAINS, LOGC_BLACK, LOGC_HALF_MAX, LOGC_TOP, SHAPERS, CurveShaper, FittedShaper, LinearShaper,
                       LogCHDRShaper, LogCShaper, Shaper, lattice_unit, sample_curve, shaper_decode, shaper_encode)
-from .validation import validation_colours
+from .validation import realistic_colours, validation_colours
 
 
 __all__ = [
@@ -50,4 +50,5 @@ __all__ = [
     "sample_curve", "shaper_decode", "shaper_encode", "FittedShaper",
     "ENTRY_CHOICES", "fit_entries", "fitting_colours", "display_miss", "ANCHOR_WEIGHT", "SCENE_WEIGHT",
     "scene_pixels", "FIT_KNOTS", "SCENE_FIT_WEIGHT", "fit_scene_shaper", "fit_shaper", "ErrorReport", "LUTAccuracyWarning", "code_errors", "validation_colours",
+    "realistic_colours",
 ]
