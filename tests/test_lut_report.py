@@ -249,3 +249,52 @@ def test_a_neutral_strong_look_is_within_tolerance_or_the_bake_says_it_cannot_be
     else:
         assert any(issubclass(w.category, LUTAccuracyWarning) for w in caught)
         assert report.cause and report.advice
+
+
+# ---------------------------------------------------------------- the headline figure against real frames
+
+PREDICTION_MARGIN = 1.3
+"""The report's p99.9 on realistic colours is within this factor, either way, of the p99.9 measured on the natural
+sample images pooled (benchmarks/results/lut_realistic.md: 0.82-1.16 for these looks at 17³-65³)."""
+
+README_LOOKS = {
+    "bake": ({"grade": {"aces": True, "contrast": 20.0}, "tonemap": "aces"}, "logc"),
+    "python": ({"grade": {"contrast": 20.0, "saturation": 10.0}, "tonemap": "aces"}, "logc_hdr"),
+    "cinematic": ("export/looks/cinematic.json", "logc_hdr"),
+}
+"""The README's first bake (a .cube bakes logc), its Python example and its export example, as their commands bake."""
+
+
+@pytest.mark.parametrize("name", README_LOOKS)
+def test_the_reports_realistic_figure_predicts_the_error_on_the_sample_images(exr_dir, name):
+    """Bakes at 33³ and 65³; on 16384 pixels drawn from every 4th of each natural sample image, as the LUT receives
+    them, the p99.9 error (numpy sRGB codes against the look in float64) pooled over the images is within
+    PREDICTION_MARGIN of the report's figure, and a tolerance of 1 code gives both the same verdict."""
+    from pathlib import Path
+
+    from torchgrade.io import read_exr
+
+    config, shaper = README_LOOKS[name]
+    if isinstance(config, str):
+        config = Path(__file__).resolve().parents[1] / config
+    look = tg.PostFX.from_config(config).eval()
+    transform = look.per_pixel_stages()
+    generator = torch.Generator().manual_seed(0)
+    pixels = []
+    for image_name in ("CandleGlass", "Carrots", "Desk", "Garden", "GoldenGate"):
+        with torch.no_grad():
+            image = look.per_pixel_input(read_exr(exr_dir / f"{image_name}.exr")[:3, ::4, ::4].unsqueeze(0))
+        flat = image.reshape(1, 3, 1, -1)
+        pixels.append(flat[..., torch.randint(0, flat.shape[-1], (16384,), generator=generator)])
+    pixels = torch.cat(pixels, dim=-1)
+    with torch.no_grad():
+        direct = srgb_codes(transform(pixels.double()).numpy())
+    for size in (33, 65):
+        lut = bake_lut(transform, size=size, shaper=shaper, report_tolerance=float("inf"))  # no diagnosis: seconds
+        with torch.no_grad():
+            measured = np.quantile(np.abs(srgb_codes(lut(pixels, "tetrahedral").double().numpy()) - direct), 0.999,
+                                   method="higher")
+        report = lut.error_report
+        assert measured / PREDICTION_MARGIN <= report.p99_9 <= measured * PREDICTION_MARGIN, (size, report.p99_9, measured)
+        assert (report.p99_9 <= 1.0) == (measured <= 1.0), (size, report.p99_9, measured)
+        assert report.worst_case.p99_9 > report.p99_9  # the whole domain, reported beside it

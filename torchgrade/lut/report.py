@@ -194,7 +194,7 @@ def _range_cause(lut, range_error: float, tolerance: float) -> Optional[str]:
     if range_error <= tolerance:
         return None
     low, high = _linear_bounds(lut)
-    return (f"lattice range: clamping per channel to the lattice (linear {float(low.max()):.4g} to {float(high.min()):.4g}) "
+    return (f"lattice range: clamping per channel to the lattice (linear {round(float(low.max()), 6) + 0.0:.4g} to {float(high.min()):.4g}) "
             f"shifts hues, p99.9 {range_error:.2f} codes by itself")
 
 
