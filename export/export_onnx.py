@@ -49,7 +49,7 @@ def main(argv=None) -> int:
             warnings.simplefilter("ignore", tg.lut.LUTAccuracyWarning)
             look = look.to_lut(args.lut, args.interpolation)
         try:
-            refuse_lut_over_tolerance(look.lut.error_report, args.accept_error, REMEDIES)
+            refuse_lut_over_tolerance(look.lut.error_report, args.accept_error, REMEDIES.format(size=args.lut))
         except LUTOverTolerance as error:
             print(f"export: error: {error}", file=sys.stderr)
             return OVER_TOLERANCE

@@ -30,10 +30,10 @@ from .common import (add_grading_flags, look_from_args, read_rec709, refuse_lut_
 
 __all__ = ["run_bake", "add_bake", "REMEDIES"]
 
-REMEDIES = ("a larger lattice (--size 65; the report's advice names a bake that meets the tolerance, when one up to 65³ "
-            "does), a lattice and entries fitted to the shot (--scene SHOT.exr --shaper fitted --entries fitted), or the "
+REMEDIES = ("a larger lattice (--size above {size}; the report's advice names one that meets the tolerance, when one up to "
+            "65³ does), a lattice and entries fitted to the shot (--scene SHOT.exr --shaper fitted --entries fitted), or the "
             "look applied directly (torchgrade grade)")
-"""What a bake over its tolerance can do instead, as the refusal lists it."""
+"""What a bake of ``size`` over its tolerance can do instead, as the refusal lists it (``str.format`` template)."""
 
 
 def _lut_size(text: str):
@@ -106,7 +106,7 @@ def run_bake(args: argparse.Namespace) -> str:
         lut = bake_lut(transform, size=args.size, shaper=_cube_shaper(args.shaper, transform), scene=scene, tolerance=tolerance, progress=True,
                        report_tolerance=args.report_tolerance, entries=args.entries)
     elapsed = time.perf_counter() - start
-    refuse_lut_over_tolerance(lut.error_report, args.accept_error, REMEDIES)
+    refuse_lut_over_tolerance(lut.error_report, args.accept_error, REMEDIES.format(size=lut.size))
     title = Path(args.output).stem.replace('"', "")
     write_cube(args.output, lut, title=title)
     line = f"bake: {lut.size}³ {lut.shaper} LUT of {stages_label(transform)}, {elapsed:.1f} s -> {args.output}"

@@ -32,8 +32,9 @@ from .common import read_rec709, refuse_lut_over_tolerance, refuse_overwriting
 
 __all__ = ["run_export", "add_export", "REMEDIES"]
 
-REMEDIES = "a larger lattice (--lut 65; the report's advice names a size that meets the tolerance), or the look exported as it is (no --lut)"
-"""What an ``export --lut`` over its tolerance can do instead, as the refusal lists it."""
+REMEDIES = ("a larger lattice (--lut above {size}; the report's advice names one that meets the tolerance, when one up to 65³ "
+            "does), or the look exported as it is (no --lut)")
+"""What an ``export --lut`` of ``size`` over its tolerance can do instead, as the refusal lists it (``str.format`` template)."""
 
 
 def run_export(args: argparse.Namespace) -> str:
@@ -48,7 +49,7 @@ def run_export(args: argparse.Namespace) -> str:
         with warnings.catch_warnings():  # the report is printed with the export, or refused with what to do
             warnings.simplefilter("ignore", LUTAccuracyWarning)
             look = look.to_lut(args.lut, args.interpolation)
-        refuse_lut_over_tolerance(look.lut.error_report, args.accept_error, REMEDIES)
+        refuse_lut_over_tolerance(look.lut.error_report, args.accept_error, REMEDIES.format(size=args.lut))
     if args.scene:
         images = {Path(path).name: read_rec709(path).unsqueeze(0) for path in args.scene}
     else:
