@@ -152,7 +152,7 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper:
     hdr = shaper != "linear" or expects_hdr(transform)
     realistic = realistic_colours(hdr)
     measured = measured_colours(transform, realistic, scene)
-    worst = measured_colours(transform, validation_colours(hdr), scene)
+    worst = measured_colours(transform, validation_colours(hdr), None)
     bake = _baker(transform, domain, scene, chunk, output_encoding, progress, worst, hdr)
     lut = bake(shaper, size) if size != "auto" else _smallest_within(lambda n: bake(shaper, n), transform, scene, tolerance)
     if entries == "fitted":

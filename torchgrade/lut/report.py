@@ -2,9 +2,10 @@
 
 :func:`~torchgrade.bake_lut` measures every LUT it bakes against the transform evaluated directly in
 float64, in what a viewer sees: 8-bit sRGB display codes, p99.9 and max over every channel value, on
-two sets of colours (:mod:`~torchgrade.lut.validation`), each with the scene's pixels when given:
+two sets of colours (:mod:`~torchgrade.lut.validation`):
 
-* the **realistic colours**, what frames hold: the headline figure, which the tolerance judges
+* the **realistic colours**, what frames hold, and the scene's pixels when given: the headline figure, which
+  the tolerance judges
   (``benchmarks/results/lut_realistic.md``: within 1.5x of the p99.9 pooled over the sample images);
 * the **validation colours** over the whole domain (up to 65504, out of gamut, the gamut's corners):
   the worst case, shown beside it (``ErrorReport.worst_case``).
@@ -155,11 +156,11 @@ def diagnose(report: ErrorReport, lut, transform, measured: tuple, rebake: Calla
     """``report`` with its causes and advice; ``rebake(shaper, size)`` bakes the same transform otherwise.
 
     ``scene_colours``: how many of the measured colours, at their end, are a scene's pixels. With a scene the advice
-    tries no fitted shaper, the LUT's own included (fitted to the scene, it serves the scene rather than the
-    validation colours, and a new one costs rounds of entry fits), and a fitted shaper's lattice, fitted to the
+    tries no fitted shaper, the LUT's own included (fitted to the scene, it serves the scene rather than other
+    colours, and a new one costs rounds of entry fits), and a fitted shaper's lattice, fitted to the
     scene, is named as a cause with the error on the scene and on the other colours apart.
 
-    The lattice range's share is told by :func:`range_cause`; the interpolation's by how the error falls on a finer
+    The lattice range's share is told by :func:`_within_lattice`; the interpolation's by how the error falls on a finer
     lattice.
     """
     range_error, within_lattice = _within_lattice(lut, transform, measured)
@@ -194,8 +195,8 @@ def _range_cause(lut, range_error: float, tolerance: float) -> Optional[str]:
     if range_error <= tolerance:
         return None
     low, high = _linear_bounds(lut)
-    return (f"lattice range: clamping per channel to the lattice (linear {round(float(low.max()), 6) + 0.0:.4g} to {float(high.min()):.4g}) "
-            f"shifts hues, p99.9 {range_error:.2f} codes by itself")
+    bounds = f"linear {round(float(low.max()), 6) + 0.0:.4g} to {float(high.min()):.4g}"  # LogC's black decodes to -1.6e-10
+    return f"lattice range: clamping per channel to the lattice ({bounds}) shifts hues, p99.9 {range_error:.2f} codes by itself"
 
 
 def worst_case(lut, transform, measured: tuple, tolerance: float) -> ErrorReport:
