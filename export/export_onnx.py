@@ -1,7 +1,7 @@
 """Export a look to ONNX, verify it with onnxruntime on real EXRs, and report error, size and speed.
 
     python export/export_onnx.py --config export/looks/cinematic.json --out look.onnx
-    python -m export --config export/looks/cinematic.json --out look.onnx --lut 33 --output srgb8
+    python -m export --config export/looks/cinematic.json --out look.onnx --lut 65 --output srgb8
 
 Prints, for the exported file: the node count, the max abs error against PyTorch on each EXR on
 onnxruntime and OpenVINO (float32 and its default precision; display-referred, outputs in [0, 1] for a

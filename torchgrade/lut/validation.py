@@ -21,7 +21,7 @@ on these colours with the error measured on the sample images.
 * **gamut grid**: every combination of ``GRID_LEVELS`` levels per channel, evenly spaced in LogC
   from black to the top: primaries, secondaries and greys at every intensity.
 
-An LDR transform (one that takes [0, 1] input) is measured on the same construction with the top at 1.
+An LDR transform (one that takes [0, 1] input) is measured on the same constructions with the top at 1.
 
 Examples:
     >>> colours = validation_colours()
@@ -30,6 +30,8 @@ Examples:
 """
 
 from __future__ import annotations
+
+import math
 
 import torch
 
@@ -77,7 +79,8 @@ def realistic_colours(hdr: bool = True, seed: int = 0) -> torch.Tensor:
     """The realistic colours, ``(3, REALISTIC_COLOURS)`` float64: see the module docstring; the same on every call.
 
     ``Y = 0.18 * 2 ** U(REALISTIC_STOPS)``, ``rgb = r / (w · r) * Y`` with ``ln r ~ N(0, CHROMA_SIGMA²)`` per channel
-    and ``w`` Rec.709's luminance weights; an LDR transform's (``hdr=False``) are clamped to [0, 1].
+    and ``w`` Rec.709's luminance weights. An LDR transform's (``hdr=False``) stop at luminance 1 (the range's top
+    lowered to log2(1 / 0.18) stops) and are clamped to [0, 1].
 
     Examples:
         >>> colours = realistic_colours()
@@ -85,9 +88,12 @@ def realistic_colours(hdr: bool = True, seed: int = 0) -> torch.Tensor:
         >>> luminance = weights @ colours
         >>> bool(luminance.min() >= 0.18 * 2 ** -12), bool(luminance.max() <= 0.18 * 2 ** 8), bool((colours >= 0).all())
         (True, True, True)
+        >>> float(realistic_colours(hdr=False).max())
+        1.0
     """
     generator = torch.Generator().manual_seed(seed)
     low, high = REALISTIC_STOPS
+    high = high if hdr else math.log2(1.0 / 0.18)
     stops = low + (high - low) * torch.rand(REALISTIC_COLOURS, generator=generator, dtype=torch.float64)
     ratios = torch.exp(CHROMA_SIGMA * torch.randn(3, REALISTIC_COLOURS, generator=generator, dtype=torch.float64))
     weights = torch.tensor(REC709_LUMINANCE, dtype=torch.float64).reshape(3, 1)
