@@ -1,5 +1,6 @@
-"""Every baked LUT reports its own error: the validation colours, the report's numbers, its causes and advice,
-the fitted shaper, and the report through PostFX.to_lut and the bake command."""
+"""Every baked LUT reports its own error: the validation colours, the report's numbers (realistic colours, the worst
+case beside them), its causes and advice, the fitted shaper, the report through PostFX.to_lut and the bake command,
+and how well the realistic figure predicts the error on the sample images."""
 
 import re
 import warnings

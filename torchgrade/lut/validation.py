@@ -7,11 +7,12 @@ the five natural sample images (CandleGlass, Carrots, Desk, Garden, GoldenGate, 
 and +7.6; log-uniform because a frame's exposure is not known, so every level in that range is as
 likely to hold the worst pixels. Chroma: per-channel log-normal ratios with ``CHROMA_SIGMA`` = 0.5,
 which spreads ln(R / B) by 0.70, the median of the four colour images' 0.48 / 0.63 / 0.77 / 1.11
-(pixels above each image's 10th luminance percentile). No negative values and no channel far above
-the luminance: those belong to the worst case. ``benchmarks/lut_realistic.py`` compares the error
+(pixels above each image's 10th luminance percentile). No negative values and no highlights above
+linear 46 in luminance: those belong to the worst case. ``benchmarks/lut_realistic.py`` compares the error
 on these colours with the error measured on the sample images.
 
-**Validation colours** (:func:`validation_colours`), the worst case, in three parts, concatenated as ``(3, N)`` float64 linear Rec.709 values:
+**Validation colours** (:func:`validation_colours`), the worst case, in three parts, concatenated as ``(3, N)``
+float64 linear Rec.709 values:
 
 * **footage**: luminance drawn as real footage spreads it, log-normal around 18 % grey (2.5 stops
   standard deviation), with a tail drawn log-uniformly up to the half-float top (65504); chroma from
