@@ -92,7 +92,8 @@ def test_grade_help_names_the_chromaticities_default(capsys):
 
 def test_bake_writes_the_cube_of_the_graded_look(tmp_path, capsys):
     out = tmp_path / "look.cube"
-    assert main(["bake", "-o", str(out), "--size", "17", "--contrast", "20", "--saturation", "10", "--tonemap", "neutral"]) == 0
+    assert main(["bake", "-o", str(out), "--size", "17", "--contrast", "20", "--saturation", "10", "--tonemap", "neutral",
+                 "--accept-error"]) == 0
     line = capsys.readouterr().out.strip()
     assert line.startswith("bake: 17³ logc LUT of ColorGrade -> ToneMap") and str(out) in line
     look = torch.nn.Sequential(tg.ColorGrade(contrast=20, saturation=10), tg.ToneMap("neutral"))
@@ -105,7 +106,7 @@ def test_bake_writes_the_cube_of_the_graded_look(tmp_path, capsys):
 
 
 def test_bake_with_fitted_entries_writes_another_table_and_reports_its_smaller_error(tmp_path, capsys):
-    flags = ["--size", "9", "--contrast", "30", "--saturation", "20", "--tonemap", "aces"]
+    flags = ["--size", "9", "--contrast", "30", "--saturation", "20", "--tonemap", "aces", "--accept-error"]
     reports = {}
     for entries in ("sampled", "fitted"):
         assert main(["bake", "-o", str(tmp_path / f"{entries}.cube"), "--entries", entries, *flags]) == 0
@@ -121,7 +122,7 @@ def test_bake_from_a_config_covers_the_scene_as_the_lut_receives_it(exr_dir, tmp
     out = tmp_path / "cinematic.cube"
     config = Path(__file__).resolve().parents[2] / "export" / "looks" / "cinematic.json"
     scene_path = exr_dir / "CandleGlass.exr"
-    assert main(["bake", "--config", str(config), "-o", str(out), "--size", "9", "--scene", str(scene_path)]) == 0
+    assert main(["bake", "--config", str(config), "-o", str(out), "--size", "9", "--scene", str(scene_path), "--accept-error"]) == 0
     line = capsys.readouterr().out.strip()
     assert "left live, not in the LUT: exposure, bloom" in line and "on CandleGlass.exr:" in line
     look = tg.PostFX.from_config(config)
@@ -182,7 +183,7 @@ def test_export_of_a_baked_look_reports_the_lut_error_and_both_runtimes(tmp_path
     config.write_text('{"grade": {"contrast": 15, "saturation": 10}, "tonemap": "neutral"}')
     out = tmp_path / "look.onnx"
     assert main(["export", "--config", str(config), "--out", str(out), "--lut", "9", "--output", "srgb8",
-                 "--width", "24", "--height", "16"]) == 0
+                 "--width", "24", "--height", "16", "--accept-error"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
     look = tg.PostFX.from_config(str(config)).to_lut(9)
     assert lines[0].endswith(f"{tg.onnx.node_count(out)} nodes") and "output srgb8" in lines[0]
@@ -191,6 +192,17 @@ def test_export_of_a_baked_look_reports_the_lut_error_and_both_runtimes(tmp_path
     assert sorted(errors) == ["onnxruntime", "openvino default", "openvino f32"]
     assert float(errors["onnxruntime"]) <= 1 and float(errors["openvino f32"]) <= 1  # 8-bit codes
     assert "onnxruntime" in lines[3] and "openvino f32" in lines[3]
+
+
+def test_export_of_a_lut_over_its_tolerance_exits_3_writes_nothing_and_says_what_to_do(tmp_path, capsys):
+    config = tmp_path / "look.json"
+    config.write_text('{"grade": {"contrast": 15, "saturation": 10}, "tonemap": "neutral"}')
+    out = tmp_path / "look.onnx"
+    assert main(["export", "--config", str(config), "--out", str(out), "--lut", "9", "--width", "24", "--height", "16"]) == 3
+    err = capsys.readouterr().err
+    assert "torchgrade export: error: the baked LUT misses the look" in err and "realistic colours" in err
+    assert "--lut above 9" in err and "no --lut" in err and "--accept-error" in err
+    assert not out.exists()
 
 
 def test_python_m_export_runs_the_same_report(exr_dir, tmp_path):

@@ -103,7 +103,7 @@ def test_the_fit_reaches_the_linear_programs_smallest_max_error():
 
 
 def test_fitted_entries_miss_colours_the_fit_did_not_see_by_less():
-    """The error report is measured on validation colours of another seed than the fit's: at p99.9 it falls; the
+    """The error report is measured on colours the fit did not see (realistic ones): at p99.9 it falls; the
     largest error within the lattice falls too (outside it, the face's entries serve colours clamped onto them)."""
     look = strong_look()
     sampled, fitted = (quiet_bake(look, size=17, entries=entries) for entries in ("sampled", "fitted"))

@@ -14,6 +14,7 @@ import sys
 
 from .. import __version__
 from .bake import add_bake
+from .common import OVER_TOLERANCE, LUTOverTolerance
 from .demo import add_demo
 from .export import add_export
 from .grade import add_grade
@@ -35,7 +36,9 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the command line ``argv``; a bad input prints one line on stderr and returns 2, never a traceback.
+    """Run the command line ``argv``; a bad input prints one line on stderr and returns 2, never a traceback; a LUT
+    baked past its tolerance (``bake``, ``export --lut``) prints its report and what to do, and returns
+    :data:`~torchgrade.cli.common.OVER_TOLERANCE` (3) unless ``--accept-error`` is given.
 
     Examples:
         >>> main(["bake", "-o", "look.txt"])  # stderr: torchgrade bake: error: output must end in .cube, got look.txt
@@ -47,5 +50,8 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, TypeError, OSError) as error:
         print(f"torchgrade {args.command}: error: {error}", file=sys.stderr)
         return 2
+    except LUTOverTolerance as error:
+        print(f"torchgrade {args.command}: error: {error}", file=sys.stderr)
+        return OVER_TOLERANCE
     return 0
 

@@ -4,10 +4,14 @@ Examples:
     >>> import tempfile, pathlib
     >>> from torchgrade.cli import main
     >>> with tempfile.TemporaryDirectory() as folder:
-    ...     main(["bake", "-o", str(pathlib.Path(folder) / "look.cube"), "--size", "5", "--contrast", "20"])  # doctest: +ELLIPSIS
-    bake: 5³ logc LUT of ColorGrade -> ToneMap, ... s -> ...look.cube
-    error: OVER TOLERANCE: p99.9 ... 8-bit codes on 17113 validation colours (tolerance 1 at p99.9); cause: lattice range: ...
+    ...     main(["bake", "-o", str(pathlib.Path(folder) / "look.cube"), "--size", "65", "--contrast", "20"])  # doctest: +ELLIPSIS
+    bake: 65³ logc LUT of ColorGrade -> ToneMap, ... s -> ...look.cube
+    error: p99.9 0.48, max 2.48 8-bit codes on 16384 realistic colours (tolerance 1 at p99.9); worst case: ...
     0
+
+At 33³ the same look misses realistic colours by p99.9 1.64 codes: the command writes nothing, prints the
+report and what to do on stderr and returns :data:`~torchgrade.cli.common.OVER_TOLERANCE` (3), unless
+``--accept-error`` is given.
 """
 
 from __future__ import annotations
@@ -21,9 +25,15 @@ import torch
 
 from ..io import write_cube
 from ..lut import ENTRY_CHOICES, LUTAccuracyWarning, bake_lut, expects_hdr, srgb_code_error
-from .common import add_grading_flags, look_from_args, read_rec709, refuse_overwriting, report_line, stages_label
+from .common import (add_grading_flags, look_from_args, read_rec709, refuse_lut_over_tolerance, refuse_overwriting,
+                     report_line, stages_label)
 
-__all__ = ["run_bake", "add_bake"]
+__all__ = ["run_bake", "add_bake", "REMEDIES"]
+
+REMEDIES = ("a larger lattice (--size above {size}; the report's advice names one that meets the tolerance, when one up to "
+            "65³ does), a lattice and entries fitted to the shot (--scene SHOT.exr --shaper fitted --entries fitted), or the "
+            "look applied directly (torchgrade grade)")
+"""What a bake of ``size`` over its tolerance can do instead, as the refusal lists it (``str.format`` template)."""
 
 
 def _lut_size(text: str):
@@ -55,6 +65,8 @@ def _check_bake_arguments(args: argparse.Namespace) -> None:
         raise ValueError(f"output must end in .cube, got {output}")
     if not output.parent.is_dir():
         raise ValueError(f"output folder {output.parent} does not exist")
+    if output.is_dir():
+        raise ValueError(f"output {output} is a folder")
     if args.size == "auto" and args.scene is None:
         raise ValueError("--size auto needs --scene, the image to measure the error on")
     if args.tolerance is not None and (args.size != "auto" or args.tolerance <= 0):
@@ -75,7 +87,9 @@ def _cube_shaper(shaper: str, transform) -> str:
 
 
 def run_bake(args: argparse.Namespace) -> str:
-    """Check the arguments, bake, write the ``.cube``; the line to print (with the error on ``--scene``)."""
+    """Check the arguments, bake, write the ``.cube``; the line to print (with the error on ``--scene``). A LUT over
+    ``--report-tolerance`` is not written without ``--accept-error``
+    (:class:`~torchgrade.cli.common.LUTOverTolerance`)."""
     _check_bake_arguments(args)
     refuse_overwriting([args.output], [args.config, args.scene])
     look = look_from_args(args)
@@ -90,8 +104,9 @@ def run_bake(args: argparse.Namespace) -> str:
     with warnings.catch_warnings():  # the report is printed below, with its cause and advice
         warnings.simplefilter("ignore", LUTAccuracyWarning)
         lut = bake_lut(transform, size=args.size, shaper=_cube_shaper(args.shaper, transform), scene=scene, tolerance=tolerance, progress=True,
-                       report_tolerance=args.report_tolerance, strict=args.strict, entries=args.entries)
+                       report_tolerance=args.report_tolerance, entries=args.entries)
     elapsed = time.perf_counter() - start
+    refuse_lut_over_tolerance(lut.error_report, args.accept_error, REMEDIES.format(size=lut.size))
     title = Path(args.output).stem.replace('"', "")
     write_cube(args.output, lut, title=title)
     line = f"bake: {lut.size}³ {lut.shaper} LUT of {stages_label(transform)}, {elapsed:.1f} s -> {args.output}"
@@ -124,8 +139,10 @@ def add_bake(commands) -> None:
                       "and the error is reported on it")
     bake.add_argument("--tolerance", type=float, help="with --size auto: 8-bit sRGB codes at p99.9 (default 0.5)")
     bake.add_argument("--report-tolerance", type=float, default=1.0,
-                      help="8-bit sRGB codes at p99.9 on the validation colours above which the report names a cause and a fix (default 1)")
-    bake.add_argument("--strict", action="store_true", help="fail instead of writing a LUT over --report-tolerance")
+                      help="8-bit sRGB codes at p99.9 on realistic colours (and --scene) above which the report names a cause "
+                      "and a fix and the LUT is not written (default 1)")
+    bake.add_argument("--accept-error", action="store_true",
+                      help="write a LUT over --report-tolerance anyway (else exit status 3 and nothing written)")
     bake.add_argument("--entries", choices=ENTRY_CHOICES, default="sampled",
                       help="fitted: refine the table for the smallest largest error on validation colours and --scene (seconds)")
     add_grading_flags(bake)

@@ -23,7 +23,7 @@ from ..io import read_exr
 from ..io.atomic import atomic_write
 from ..look.postfx import PostFX
 
-__all__ = ["GRADING_FLAGS", "EXPOSURE_FLAGS", "refuse_overwriting", "read_rec709", "display_codes", "write_png", "report_line", "stages_label", "grade_from_args", "given_grading_flags", "look_from_args",
+__all__ = ["GRADING_FLAGS", "EXPOSURE_FLAGS", "refuse_overwriting", "read_rec709", "display_codes", "write_png", "report_line", "LUTOverTolerance", "OVER_TOLERANCE", "refuse_lut_over_tolerance", "stages_label", "grade_from_args", "given_grading_flags", "look_from_args",
            "add_grading_flags", "add_exposure_flags", "exposure_from_args", "given_exposure_flags"]
 
 GRADING_FLAGS = {
@@ -137,6 +137,34 @@ def report_line(report) -> str:
     """
     verdict = "" if report.within else "OVER TOLERANCE: "
     return f"error: {verdict}{report}"
+
+
+OVER_TOLERANCE = 3
+"""Exit status of ``bake`` and ``export --lut`` when the baked LUT misses the look by more than its tolerance."""
+
+
+class LUTOverTolerance(Exception):
+    """A baked LUT over its tolerance, not accepted: the command exits with :data:`OVER_TOLERANCE`."""
+
+
+def refuse_lut_over_tolerance(report, accepted: bool, remedies: str) -> None:
+    """Raise :class:`LUTOverTolerance` with ``report`` and ``remedies`` (what to do, in flags) when ``report`` is over
+    its tolerance and ``accepted`` (``--accept-error``) is false.
+
+    Examples:
+        >>> from torchgrade.lut import ErrorReport
+        >>> refuse_lut_over_tolerance(ErrorReport(0.5, 4.0, 100, 1.0), False, "--size 65")  # within: nothing
+        >>> refuse_lut_over_tolerance(ErrorReport(1.5, 4.0, 100, 1.0), False, "--size 65")
+        Traceback (most recent call last):
+        ...
+        torchgrade.cli.common.LUTOverTolerance: the baked LUT misses the look by more than its tolerance, so nothing was written
+          report: p99.9 1.50, max 4.00 8-bit codes on 100 validation colours (tolerance 1 at p99.9)
+          do one of: --size 65; or --accept-error to write it as it is
+    """
+    if report.within or accepted:
+        return
+    raise LUTOverTolerance(f"the baked LUT misses the look by more than its tolerance, so nothing was written\n"
+                           f"  report: {report}\n  do one of: {remedies}; or --accept-error to write it as it is")
 
 
 def stages_label(look: nn.Module) -> str:

@@ -19,28 +19,37 @@ Examples:
 from __future__ import annotations
 
 import argparse
+import warnings
 from pathlib import Path
 
 import torch
 
 from ..look.postfx import PostFX
-from ..lut import INTERPOLATIONS, LUT_BACKENDS
+from ..lut import INTERPOLATIONS, LUT_BACKENDS, LUTAccuracyWarning
 from ..onnx import INPUT_DTYPES, IO_DTYPES, LAYOUTS, OUTPUTS, export_look
 from ..scene import demo_scene
-from .common import read_rec709, refuse_overwriting
+from .common import read_rec709, refuse_lut_over_tolerance, refuse_overwriting
 
-__all__ = ["run_export", "add_export"]
+__all__ = ["run_export", "add_export", "REMEDIES"]
+
+REMEDIES = ("a larger lattice (--lut above {size}; the report's advice names one that meets the tolerance, when one up to 65³ "
+            "does), or the look exported as it is (no --lut)")
+"""What an ``export --lut`` of ``size`` over its tolerance can do instead, as the refusal lists it (``str.format`` template)."""
 
 
 def run_export(args: argparse.Namespace) -> str:
-    """Export ``--config`` (baked to a LUT with ``--lut``), verify on the scenes; the lines to print."""
+    """Export ``--config`` (baked to a LUT with ``--lut``), verify on the scenes; the lines to print. A LUT over its
+    tolerance is not exported without ``--accept-error`` (:class:`~torchgrade.cli.common.LUTOverTolerance`)."""
     output = Path(args.out)
     if output.suffix.lower() != ".onnx" or not output.parent.is_dir():
         raise ValueError(f"output must be a .onnx file in an existing folder, got {output}")
     refuse_overwriting([output], [args.config, *(args.scene or ())])
     look = PostFX.from_config(args.config).eval()
     if args.lut is not None:
-        look = look.to_lut(args.lut, args.interpolation)
+        with warnings.catch_warnings():  # the report is printed with the export, or refused with what to do
+            warnings.simplefilter("ignore", LUTAccuracyWarning)
+            look = look.to_lut(args.lut, args.interpolation)
+        refuse_lut_over_tolerance(look.lut.error_report, args.accept_error, REMEDIES.format(size=args.lut))
     if args.scene:
         images = {Path(path).name: read_rec709(path).unsqueeze(0) for path in args.scene}
     else:
@@ -56,6 +65,8 @@ def add_export(commands) -> None:
     export.add_argument("--config", required=True, help="look JSON (PostFX config)")
     export.add_argument("--out", "-o", required=True, help=".onnx file to write")
     export.add_argument("--lut", type=int, metavar="SIZE", help="bake grade and tone mapping into a SIZE³ LUT first")
+    export.add_argument("--accept-error", action="store_true", help="export a LUT over its tolerance (p99.9 1 code on "
+                        "realistic colours) anyway (else exit status 3 and nothing written)")
     export.add_argument("--interpolation", choices=INTERPOLATIONS, default="tetrahedral", help="the LUT's (with --lut)")
     export.add_argument("--lut-backend", choices=LUT_BACKENDS, default="strip", help="the LUT's graph form (default strip, opset 17)")
     export.add_argument("--grade-inputs", action="store_true", help="grading controls as optional graph inputs")

@@ -44,7 +44,7 @@ from .lookup import (
 from .report import ErrorReport, LUTAccuracyWarning, code_errors
 from .shapers import (DEFAULT_DOMAINS, LOGC_BLACK, LOGC_HALF_MAX, LOGC_TOP, SHAPERS, CurveShaper, FittedShaper, LinearShaper,
                       LogCHDRShaper, LogCShaper, Shaper, lattice_unit, sample_curve, shaper_decode, shaper_encode)
-from .validation import validation_colours
+from .validation import realistic_colours, validation_colours
 
 
 __all__ = [
@@ -59,4 +59,5 @@ __all__ = [
     "sample_curve", "shaper_decode", "shaper_encode", "FittedShaper",
     "ENTRY_CHOICES", "fit_entries", "fitting_colours", "display_miss", "ANCHOR_WEIGHT", "SCENE_WEIGHT",
     "scene_pixels", "FIT_KNOTS", "SCENE_FIT_WEIGHT", "fit_scene_shaper", "fit_shaper", "ErrorReport", "LUTAccuracyWarning", "code_errors", "validation_colours",
+    "realistic_colours",
 ]

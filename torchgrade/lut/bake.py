@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+from dataclasses import replace
 from typing import Callable, Optional
 
 import torch
@@ -27,19 +28,13 @@ from tqdm import tqdm
 
 from ..base.core import HALF_MAX, check_choice, check_image, check_on_cpu, sanitize
 from .entries import ENTRY_CHOICES, SCENE_WEIGHT, fit_entries, scene_pixels
-from .fit import (
-    SCENE_FIT_WEIGHT,
-    SCENE_MIN_SIZE,
-    fit_scene_shaper,
-    fit_shaper,
-    refine_shaper,
-)
+from .fit import SCENE_FIT_WEIGHT, SCENE_MIN_SIZE, fit_scene_shaper, fit_shaper, refine_shaper
 from .lattice import MIN_SIZE, check_size, checked_domain, lattice
 from .layer import LUT3D
 from .lookup import OUTPUT_ENCODINGS, encode_output
-from .report import code_errors, diagnose, enforce, measure, measured_colours
+from .report import REALISTIC, code_errors, diagnose, enforce, measure, measured_colours, worst_case
 from .shapers import DEFAULT_DOMAINS, SHAPERS
-from .validation import validation_colours
+from .validation import realistic_colours, validation_colours
 
 __all__ = ["AUTO_SIZES", "bake_lut", "expects_hdr", "is_display_referred", "scene_domain", "srgb_code_error"]
 
@@ -122,10 +117,12 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper:
       1.48 / 0.25 / 0.56 codes on Desk / CandleGlass / GoldenGate (benchmarks/results/lut_fit.md).
       A scene pixel weighs :data:`~torchgrade.lut.SCENE_WEIGHT` in the fit, or
       :data:`~torchgrade.lut.fit.SCENE_FIT_WEIGHT` on a scene-fitted lattice.
-    * The LUT's error on the validation colours (plus the scene's pixels) is measured and kept as
-      ``lut.error_report`` (:class:`~torchgrade.lut.ErrorReport`). Above ``report_tolerance``
-      8-bit codes at p99.9 the report names the cause and a bake that meets it, and the bake warns
-      (:class:`~torchgrade.lut.LUTAccuracyWarning`), or raises ``ValueError`` with ``strict=True``.
+    * The LUT's error on realistic colours (:func:`~torchgrade.lut.realistic_colours`, plus the scene's
+      pixels) is measured and kept as ``lut.error_report`` (:class:`~torchgrade.lut.ErrorReport`), with the
+      worst case, on the validation colours over the whole domain, as its ``worst_case``. Above
+      ``report_tolerance`` 8-bit codes at p99.9 on the realistic colours the report names the cause and a bake
+      that meets it, and the bake warns (:class:`~torchgrade.lut.LUTAccuracyWarning`), or raises ``ValueError``
+      with ``strict=True``.
 
     Examples:
         >>> bake_lut(lambda image: image, size=5, shaper="logc").shaper
@@ -154,15 +151,18 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper:
     if domain is not None:
         domain = checked_domain(domain)
     hdr = shaper != "linear" or expects_hdr(transform)
-    measured = measured_colours(transform, scene, hdr)
-    bake = _baker(transform, domain, scene, chunk, output_encoding, progress, measured, hdr)
+    realistic = realistic_colours(hdr)
+    measured = measured_colours(transform, realistic, scene)
+    worst = measured_colours(transform, validation_colours(hdr), None)
+    bake = _baker(transform, domain, scene, chunk, output_encoding, progress, worst, hdr)
     lut = bake(shaper, size) if size != "auto" else _smallest_within(lambda n: bake(shaper, n), transform, scene, tolerance)
     if entries == "fitted":
         lut = fit_entries(lut, transform, scene, hdr, scene_weight=_scene_weight(lut, scene))
-    report = measure(lut, measured, report_tolerance)
+    report = measure(lut, measured, report_tolerance, REALISTIC if scene is None else f"{REALISTIC} and scene pixels")
     if not report.within:
-        scene_colours = 0 if scene is None else measured[0].shape[-1] - validation_colours(hdr).shape[1]
+        scene_colours = measured[0].shape[-1] - realistic.shape[1]
         report = diagnose(report, lut, transform, measured, _rebaker(bake, lut), scene_colours)
+    report = replace(report, worst_case=worst_case(lut, transform, worst, report_tolerance))
     enforce(report, strict)
     lut.error_report = report
     return lut
@@ -174,7 +174,7 @@ def _baker(transform, domain, scene, chunk: int, output_encoding: str, progress:
 
     A fitted shaper is fitted once per size: to the scene's pixels when there is a scene
     (:func:`~torchgrade.lut.fit.fit_scene_shaper`), else to the transform and the ``measured`` colours
-    (:func:`~torchgrade.lut.report.measured_colours`).
+    (:func:`~torchgrade.lut.report.measured_colours` of the validation colours: the whole domain).
     """
     display = is_display_referred(transform)
     image, reference = measured

@@ -17,9 +17,9 @@ clip has no gradient and an entry can stay stuck there.
 
 A fitted table is only as good as the colours it was fitted on: entries no colour reads keep their
 sampled values, and colours between the fitted ones may move either way. :func:`fitting_colours` holds
-the validation set drawn with another seed than the one the error report measures, plus the scene's
-pixels, so the report of a fitted bake is measured on colours the fit did not see (the scene's pixels
-excepted: those are the point of fitting to a scene).
+the validation set drawn with another seed than the one the error report's worst case measures, plus the
+scene's pixels, so the report of a fitted bake (realistic colours and worst case) is measured on colours the
+fit did not see (the scene's pixels excepted: those are the point of fitting to a scene).
 
 Examples:
     >>> import torch

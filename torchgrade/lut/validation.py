@@ -1,6 +1,18 @@
-"""The validation colours a baked LUT is measured on: deterministic, footage-like, gamut- and range-covering.
+"""The colours a baked LUT is measured on: realistic ones for its headline error, and validation colours
+covering the whole domain for its worst case.
 
-Three parts, concatenated as ``(3, N)`` float64 linear Rec.709 values:
+**Realistic colours** (:func:`realistic_colours`): what a frame holds. Luminance log-uniform over
+``REALISTIC_STOPS`` (-12 to +8) around 18 % grey: the 1st and 99th percentiles of log2(Y / 0.18) over
+the five natural sample images (CandleGlass, Carrots, Desk, Garden, GoldenGate, pooled) are -12.4
+and +7.6; log-uniform because a frame's exposure is not known, so every level in that range is as
+likely to hold the worst pixels. Chroma: per-channel log-normal ratios with ``CHROMA_SIGMA`` = 0.5,
+which spreads ln(R / B) by 0.70, the median of the four colour images' 0.48 / 0.63 / 0.77 / 1.11
+(pixels above each image's 10th luminance percentile). No negative values and no highlights above
+linear 46 in luminance: those belong to the worst case. ``benchmarks/lut_realistic.py`` compares the error
+on these colours with the error measured on the sample images.
+
+**Validation colours** (:func:`validation_colours`), the worst case, in three parts, concatenated as ``(3, N)``
+float64 linear Rec.709 values:
 
 * **footage**: luminance drawn as real footage spreads it, log-normal around 18 % grey (2.5 stops
   standard deviation), with a tail drawn log-uniformly up to the half-float top (65504); chroma from
@@ -10,7 +22,7 @@ Three parts, concatenated as ``(3, N)`` float64 linear Rec.709 values:
 * **gamut grid**: every combination of ``GRID_LEVELS`` levels per channel, evenly spaced in LogC
   from black to the top: primaries, secondaries and greys at every intensity.
 
-An LDR transform (one that takes [0, 1] input) is measured on the same construction with the top at 1.
+An LDR transform (one that takes [0, 1] input) is measured on the same constructions with the top at 1.
 
 Examples:
     >>> colours = validation_colours()
@@ -20,18 +32,31 @@ Examples:
 
 from __future__ import annotations
 
+import math
+
 import torch
 
 from ..base.core import HALF_MAX
 from ..color import linear_to_logc, logc_to_linear
+from ..color.spaces import REC709_LUMINANCE
 
-__all__ = ["validation_colours", "FOOTAGE_COLOURS", "GRID_LEVELS"]
+__all__ = ["validation_colours", "realistic_colours", "FOOTAGE_COLOURS", "GRID_LEVELS", "REALISTIC_COLOURS",
+           "REALISTIC_STOPS", "CHROMA_SIGMA"]
 
 FOOTAGE_COLOURS = 16384
 """Footage-like colours in the validation set (the gamut grid adds ``GRID_LEVELS ** 3``)."""
 
 GRID_LEVELS = 9
 """Levels per channel of the gamut grid (LogC-spaced; 0 and the top included)."""
+
+REALISTIC_COLOURS = 16384
+"""Realistic colours a LUT's headline error is measured on."""
+
+REALISTIC_STOPS = (-12.0, 8.0)
+"""Range of the realistic colours' luminance, in stops around 18 % grey (linear 4.4e-5 to 46)."""
+
+CHROMA_SIGMA = 0.5
+"""Standard deviation of the realistic colours' natural-log channel ratios."""
 
 
 def validation_colours(hdr: bool = True, seed: int = 0) -> torch.Tensor:
@@ -49,6 +74,32 @@ def validation_colours(hdr: bool = True, seed: int = 0) -> torch.Tensor:
     negative = -0.2 * torch.rand(FOOTAGE_COLOURS, generator=generator, dtype=torch.float64) * footage.mean(0)
     footage[channel[flipped], flipped.nonzero().flatten()] = negative[flipped]
     return torch.cat((footage, _gamut_grid(top)), dim=1)
+
+
+def realistic_colours(hdr: bool = True, seed: int = 0) -> torch.Tensor:
+    """The realistic colours, ``(3, REALISTIC_COLOURS)`` float64: see the module docstring; the same on every call.
+
+    ``Y = 0.18 * 2 ** U(REALISTIC_STOPS)``, ``rgb = r / (w · r) * Y`` with ``ln r ~ N(0, CHROMA_SIGMA²)`` per channel
+    and ``w`` Rec.709's luminance weights. An LDR transform's (``hdr=False``) stop at luminance 1 (the range's top
+    lowered to log2(1 / 0.18) stops) and are clamped to [0, 1].
+
+    Examples:
+        >>> colours = realistic_colours()
+        >>> weights = torch.tensor([0.2126729, 0.7151522, 0.0721750], dtype=torch.float64)
+        >>> luminance = weights @ colours
+        >>> bool(luminance.min() >= 0.18 * 2 ** -12), bool(luminance.max() <= 0.18 * 2 ** 8), bool((colours >= 0).all())
+        (True, True, True)
+        >>> float(realistic_colours(hdr=False).max())
+        1.0
+    """
+    generator = torch.Generator().manual_seed(seed)
+    low, high = REALISTIC_STOPS
+    high = high if hdr else math.log2(1.0 / 0.18)
+    stops = low + (high - low) * torch.rand(REALISTIC_COLOURS, generator=generator, dtype=torch.float64)
+    ratios = torch.exp(CHROMA_SIGMA * torch.randn(3, REALISTIC_COLOURS, generator=generator, dtype=torch.float64))
+    weights = torch.tensor(REC709_LUMINANCE, dtype=torch.float64).reshape(3, 1)
+    colours = ratios / (weights * ratios).sum(0) * 0.18 * stops.exp2()
+    return colours if hdr else colours.clamp(max=1.0)
 
 
 def _footage(generator: torch.Generator, top: float) -> torch.Tensor:

@@ -1,0 +1,118 @@
+"""Does a baked LUT's headline error (its report on realistic colours) predict its error on real frames?
+
+Usage::
+
+    PYTHONPATH=. .venv/bin/python benchmarks/lut_realistic.py
+
+For each look and lattice size, bakes the look's per-pixel stages as the commands do (``torchgrade bake``: ``logc``
+for a look given by flags; ``look.to_lut`` and ``export --lut``: ``logc_hdr``; tetrahedral, linear entries) and
+compares the report's figure on realistic colours (`tg.lut.realistic_colours`) with the p99.9
+error measured on the five natural sample images (CandleGlass, Carrots, Desk, Garden, GoldenGate), every
+4th pixel of each (`STRIDE`) as the LUT receives it (after the look's exposure and bloom), in 8-bit sRGB codes
+against the look evaluated directly in float64. *Pooled*: the p99.9 over 16,384 pixels (`PIXELS`) drawn from each
+image (every image weighs the same). Ratio: report / pooled. The worst case (validation colours over the whole
+domain) is shown beside it. Writes ``benchmarks/results/lut_realistic.{md,json}``; about a minute on 2 cores.
+"""
+
+from __future__ import annotations
+
+import sys
+import warnings
+from pathlib import Path
+
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import torchgrade as tg  # noqa: E402
+from benchmarks.common import sample_exr, write_results  # noqa: E402
+from torchgrade.lut import LUTAccuracyWarning, code_errors  # noqa: E402
+
+IMAGES = ("CandleGlass", "Carrots", "Desk", "Garden", "GoldenGate")
+"""The natural sample images (the others are charts and ramps)."""
+
+STRIDE = 4
+"""Every STRIDE-th pixel of each image, in both directions."""
+
+PIXELS = 16384
+"""Pixels drawn (seeded) from each image's strided pixels for the pooled figure."""
+
+SIZES = (17, 33, 65)
+
+TOLERANCE = 1.0
+"""``bake_lut``'s default ``report_tolerance``: 8-bit codes at p99.9."""
+
+LOOKS = {
+    "README bake: ACES grade, contrast 20, ACES": ({"grade": {"aces": True, "contrast": 20.0}, "tonemap": "aces"}, "logc"),
+    "README Python: contrast 20, saturation 10, ACES": ({"grade": {"contrast": 20.0, "saturation": 10.0}, "tonemap": "aces"},
+                                                         "logc_hdr"),
+    "cinematic (export/looks/cinematic.json)": (ROOT / "export" / "looks" / "cinematic.json", "logc_hdr"),
+    "strong: contrast 30, saturation 20, temperature 20, ACES": (
+        {"grade": {"contrast": 30.0, "saturation": 20.0, "temperature": 20.0}, "tonemap": "aces"}, "logc_hdr"),
+    "strong, Reinhard": ({"grade": {"contrast": 30.0, "saturation": 20.0, "temperature": 20.0}, "tonemap": "reinhard"},
+                         "logc_hdr"),
+}
+"""Each look's config and the shaper its command bakes."""
+
+
+def quantile_999(errors: torch.Tensor) -> float:
+    """The 99.9th percentile of ``errors`` (the higher value, as the report takes it)."""
+    flat = errors.flatten()
+    return float(flat.kthvalue(max(1, -(-999 * flat.numel() // 1000))).values)
+
+
+def received_pixels(look: tg.PostFX) -> dict:
+    """Each image's strided pixels as the look's per-pixel stages receive them, ``{name: (1, 3, 1, N) float32}``."""
+    pixels = {}
+    with torch.no_grad():
+        for name in IMAGES:
+            image = look.per_pixel_input(sample_exr(name)[..., ::STRIDE, ::STRIDE])
+            pixels[name] = image.reshape(1, 3, 1, -1)
+    return pixels
+
+
+def measured(look: tg.PostFX, shaper: str, size: int, pixels: dict) -> dict:
+    """The report's figures and the measured p99.9 on each image and pooled, for one bake."""
+    transform = look.per_pixel_stages()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", LUTAccuracyWarning)
+        lut = tg.bake_lut(transform, size=size, shaper=shaper, report_tolerance=float("inf"))
+    errors = {}
+    with torch.no_grad():
+        for name, image in pixels.items():
+            errors[name] = code_errors(transform(image.double()), lut(image, "tetrahedral"))
+    generator = torch.Generator().manual_seed(0)
+    pooled = torch.cat([e[..., torch.randint(0, e.shape[-1], (PIXELS,), generator=generator)] for e in errors.values()], -1)
+    report = lut.error_report
+    return {"realistic": report.p99_9, "worst_p99_9": report.worst_case.p99_9, "worst_max": report.worst_case.max,
+            "pooled": quantile_999(pooled), "images": {name: quantile_999(e) for name, e in errors.items()}}
+
+
+def main() -> None:
+    torch.manual_seed(0)
+    rows, lines = [], ["# A baked LUT's report on realistic colours against its error on the sample images", "",
+                       __doc__.split("\n\n")[3].replace("\n", " ").replace("``", "`"), "",
+                       "| look | size | shaper | report: realistic p99.9 | pooled images p99.9 | ratio | images p99.9 "
+                       f"({' / '.join(IMAGES)}) | worst case p99.9 / max |",
+                       "| --- | ---: | --- | ---: | ---: | ---: | --- | ---: |"]
+    for label, (config, shaper) in LOOKS.items():
+        look = tg.PostFX.from_config(config).eval()
+        pixels = received_pixels(look)
+        for size in SIZES:
+            row = {"look": label, "size": size, "shaper": shaper, **measured(look, shaper, size, pixels)}
+            rows.append(row)
+            per_image = " / ".join(f"{row['images'][name]:.2f}" for name in IMAGES)
+            lines.append(f"| {label} | {size}³ | {shaper} | {row['realistic']:.2f} | {row['pooled']:.2f} | "
+                         f"{row['realistic'] / row['pooled']:.2f} | {per_image} | {row['worst_p99_9']:.2f} / {row['worst_max']:.1f} |")
+    ratios = [row["realistic"] / row["pooled"] for row in rows]
+    agree = sum((row["realistic"] <= TOLERANCE) == (row["pooled"] <= TOLERANCE) for row in rows)
+    lines += ["", f"Ratio report / pooled: {min(ratios):.2f} to {max(ratios):.2f} over {len(rows)} bakes; "
+              f"single images' p99.9 range from {min(min(r['images'].values()) / r['realistic'] for r in rows):.2f}x "
+              f"to {max(max(r['images'].values()) / r['realistic'] for r in rows):.2f}x the report's figure. "
+              f"The verdict (p99.9 within {TOLERANCE:g} code) agrees with the pooled images' in {agree} of {len(rows)}."]
+    write_results("lut_realistic", {"rows": rows}, lines, "PYTHONPATH=. .venv/bin/python benchmarks/lut_realistic.py")
+
+
+if __name__ == "__main__":
+    main()
