@@ -7,8 +7,9 @@ Every benchmark that writes results takes ``--out DIR`` (:func:`argument_parser`
 (git-ignored); the committed results in ``benchmarks/results`` change only with ``--out benchmarks/results``.
 Each result records where it was measured (:func:`environment`: device, threads, load, versions).
 
-Timing alternates the things compared (A B A B …: every round runs each once), so a change of machine
-load during the run hits all of them alike, and reports medians. Peak memory is read from the kernel's
+Timing alternates the things compared (A B A B …: every round runs each once, each round starting one place
+later), so a change of machine load during the run hits all of them alike and no call always follows the same
+one, and reports medians. Peak memory is read from the kernel's
 peak-RSS counter (Linux) or from CUDA's allocator statistics.
 """
 
@@ -106,18 +107,20 @@ def run_and_reset(call) -> tuple:
 
 
 def interleaved_ms(calls: dict, runs: int, warmup: int = 1, sync: Optional[Callable[[], None]] = None) -> dict:
-    """Wall times in ms, ``{name: [runs times]}``, of each call in ``calls``, every round running each call once.
+    """Wall times in ms, ``{name: [runs times]}``, of each call in ``calls``, every round running each call once,
+    round ``k`` starting at the ``k``-th call (what ran just before a call, e.g. a large free, changes round to round).
 
     A call is ``run`` or ``(run, reset)``: ``reset`` (or None) runs untimed before each ``run``, e.g. to restore a
     buffer an in-place call overwrites. ``warmup`` untimed rounds come first. ``sync`` (see :func:`synchronizer`)
     brackets each timed call. Autograd is off: no benchmark times a backward pass.
     """
     sync = sync or (lambda: None)
-    pairs = {name: run_and_reset(call) for name, call in calls.items()}
+    pairs = [(name, *run_and_reset(call)) for name, call in calls.items()]
     times = {name: [] for name in calls}
     with torch.no_grad():
         for attempt in range(warmup + runs):
-            for name, (run, reset) in pairs.items():
+            start_at = attempt % len(pairs)
+            for name, run, reset in pairs[start_at:] + pairs[:start_at]:
                 if reset:
                     reset()
                 sync()

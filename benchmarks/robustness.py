@@ -71,8 +71,10 @@ def number_controls(module) -> dict:
     return {name: c for name, c in table.items() if c.kind == "number"}
 
 
-SWEPT = {name: kind.build for name, kind in STAGE_KINDS.items() if number_controls(kind.build())}
-"""The stages with number controls (ACES 2.0's ``peak_luminance`` included: it takes plain numbers)."""
+def swept_stages() -> dict:
+    """The stages with number controls (ACES 2.0's ``peak_luminance`` included: it takes plain numbers), ``{name: build}``;
+    built on demand, not at import (building every stage takes seconds)."""
+    return {name: kind.build for name, kind in STAGE_KINDS.items() if number_controls(kind.build())}
 
 
 def sweep_image() -> torch.Tensor:
@@ -116,7 +118,7 @@ def sweep_counts(make) -> tuple[int, int, int, int]:
 
 def sweep_table() -> list[str]:
     rows = ["| module | settings run | refused (cross-control rule) | non-finite outputs | non-finite gradients |", "| --- | --- | --- | --- | --- |"]
-    for name, make in tqdm(SWEPT.items(), desc="control sweep"):
+    for name, make in tqdm(swept_stages().items(), desc="control sweep"):
         rows.append(f"| {name} | " + " | ".join(map(str, sweep_counts(make))) + " |")
     return rows
 
