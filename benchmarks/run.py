@@ -19,7 +19,7 @@ a row whose compilation fails records why); exported to ONNX and run by onnxrunt
 written as .cube files and applied by OpenColorIO's CPU processor. Two *whole-look* rows (bloom included)
 compare PyTorch and onnxruntime on the exported look. Linear-shaper LUTs clip above 1: the table keeps
 them, the plot leaves them out. ``--quick`` keeps the LUT rows a choice hangs on (33³ and 65³, LogC and
-the default lattice; OpenColorIO at 33³; onnxruntime tetrahedral only).
+the default lattice; OpenColorIO at 33³; onnxruntime tetrahedral only) and measures no peak memory.
 
 **Accuracy** is measured on the whole look: the scene goes through bloom (in the row's dtype) and the
 row's per-pixel stage, and is compared with the float64 look, on the sample EXRs (Desk, CandleGlass,
@@ -33,7 +33,8 @@ on the demo scene rendered at 1920×1080 (bloomed first for per-pixel rows). Eve
 timed in one session, alternated (each round runs each once, after a warm-up round), so a change of
 load hits them all alike: median ms per megapixel, and ratios to a plain copy of the frame (the memory
 floor) and to OpenColorIO's 33³ LogC tetrahedral processor as medians of each round's ratio. The
-report checks the eager whole look against its parts timed in the same rounds. OpenColorIO is
+report checks the eager whole look against its parts timed in the same rounds; ``results.json`` keeps every
+round's ms (``rounds_ms``). OpenColorIO is
 timed on its in-place apply (the buffer is restored between runs, untimed); onnxruntime on
 ``session.run`` with the image already in a numpy array, ``intra_op_num_threads`` = CPU count.
 Bloom, the part every look pays on top of a per-pixel row, is timed on its own (``baselines``).
@@ -77,15 +78,17 @@ def measure_everything(work: Workload) -> dict:
     times = measure.time_rows(work, methods)
     base = measure.add_speed(records, times)
     points = measure.scaling(work)
-    measure.record_peak_memory(work, methods, records)
+    if work.plan.peak_memory:
+        measure.record_peak_memory(work, methods, records)
     return {"baselines": base, "rows": records, "scaling": points, "check": measure.whole_look_check(times),
-            "advice": report.advice(records, base)}
+            "advice": report.advice(records, base), "rounds_ms": {name: [round(ms, 2) for ms in t] for name, t in times.items()}}
 
 
 def main(argv=None) -> dict:
     parser = common.argument_parser(__doc__)
     parser.add_argument("--quick", action="store_true",
-                        help="the rows a choice hangs on, smaller accuracy images, fewer rounds, no torch.compile, scaling up to 1024²")
+                        help="the rows a choice hangs on, smaller accuracy images, fewer rounds, scaling up to 1024², "
+                             "no torch.compile, no peak memory")
     parser.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
     plan = Plan.from_args(parser.parse_args(argv))
     started = time.perf_counter()

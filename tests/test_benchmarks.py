@@ -223,6 +223,17 @@ def test_results_record_where_they_were_measured(tmp_path):
     assert not (common.RESULTS / "tiny.json").exists()
 
 
+def test_compare_runs_lists_every_ratio_both_runs_measured_and_its_spread():
+    from benchmarks import compare_runs
+
+    first = {"rows": [{"method": "a", "ratio_to_copy": 4.0, "ratio_to_opencolorio": None}, {"method": "only here", "ratio_to_copy": 1.0}],
+             "check": {"whole_over_parts": 1.1}}
+    second = {"rows": [{"method": "a", "ratio_to_copy": 5.0, "ratio_to_opencolorio": 2.0}], "check": {"whole_over_parts": 1.0}}
+    rows = compare_runs.ratio_rows(first, second)
+    assert [(r["method"], r["ratio"]) for r in rows] == [("a", "× copy"), ("eager whole look", "/ (bloom + per-pixel)")]
+    assert [r["spread"] for r in rows] == pytest.approx([0.25, 0.1])
+
+
 RESULT_SCRIPTS = sorted(path.stem for path in (common.ROOT / "benchmarks").glob("*.py")
                         if "__main__" in path.read_text() and path.stem != "bench_cpu_paths")
 """Every runnable benchmark but bench_cpu_paths, which prints its figures (``--json FILE`` on request) and imports
@@ -245,7 +256,6 @@ def test_a_tiny_run_writes_to_out_only_and_collects_its_warnings(tmp_path, monke
     for name, value in {"FRAME": (24, 32), "DEMO_SIZE": (24, 32), "BATCHES": (1,), "BATCH_SIDE": 8,
                         "RESOLUTIONS": ((8, 8),) * 3, "QUICK_RUNS": 2}.items():
         monkeypatch.setattr(workload, name, value)
-    monkeypatch.setattr(common, "map_large_buffers", lambda: False)  # keeps glibc's allocator as the other tests have it
     monkeypatch.setattr(workload, "accuracy_scenes", lambda plan: {"demo scene": tg.scene.demo_scene(16, 24)})
     kept = ("direct float32", "direct float32, whole look", methods.lut_name(33, "logc", "tetrahedral"), methods.PEER)
     every_row = methods.method_rows
@@ -256,6 +266,8 @@ def test_a_tiny_run_writes_to_out_only_and_collects_its_warnings(tmp_path, monke
     assert {p.name for p in tmp_path.iterdir()} == {"results.json", "results.md", "pareto.png", "scaling.png"}
     written = json.loads((tmp_path / "results.json").read_text())
     assert written["environment"]["device"] == "cpu" and written["runs"] == 2
+    assert set(written["rounds_ms"]) == {*kept, measure.COPY, measure.BLOOM, measure.BLOOM64}
+    assert all(len(ms) == 2 for ms in written["rounds_ms"].values())
     assert {w["category"] for w in written["warnings"]} == {"LUTAccuracyWarning"}  # the 33³ bakes miss the look
     assert [line.split(":")[0] for line in results["advice"]] == ["Training augmentation", "Serving", "Baking a LUT"]
     assert results["check"]["whole_over_parts"] > 0

@@ -52,19 +52,21 @@ class Plan:
     shapers: tuple = ("linear", "logc", "logc_hdr")
     opencolorio_sizes: tuple = (9, 17, 33, 65)
     onnx_lut_interpolations: tuple = ("trilinear", "tetrahedral")
+    peak_memory: bool = True
 
     @classmethod
     def from_args(cls, args) -> "Plan":
         """The full plan, or with ``--quick``: the LUT rows a choice hangs on (33³ and 65³, LogC and the default
         lattice; OpenColorIO at 33³; onnxruntime tetrahedral only), smaller accuracy images, scaling up to 1024²,
-        no ``torch.compile``."""
+        no ``torch.compile``, no peak memory."""
         device, out = torch.device(args.device), Path(args.out)
         if not args.quick:
             return cls(quick=False, device=device, out=out, runs=11, scaling_runs=5, accuracy_side=None,
                        delta_e_samples=200_000, resolutions=RESOLUTIONS, compile=True)
         return cls(quick=True, device=device, out=out, runs=QUICK_RUNS, scaling_runs=3, accuracy_side=400,
                    delta_e_samples=20_000, resolutions=RESOLUTIONS[:3], compile=False, lut_sizes=(33, 65),
-                   shapers=("logc", "logc_hdr"), opencolorio_sizes=(33,), onnx_lut_interpolations=("tetrahedral",))
+                   shapers=("logc", "logc_hdr"), opencolorio_sizes=(33,), onnx_lut_interpolations=("tetrahedral",),
+                   peak_memory=False)
 
     def command(self) -> str:
         out = self.out.resolve()
