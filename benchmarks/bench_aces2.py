@@ -9,12 +9,12 @@ OpenColorIO 2.6's builtin ``studio-config-v4.0.0_aces-v2.0_ocio-v2.5``: "Linear 
 to OpenColorIO. The frame is the Desk sample exposed to a median luminance of 0.18, tiled to 1920×1080;
 the outputs' largest difference in 8-bit codes is reported too.
 
-Run: ``.venv/bin/python benchmarks/bench_aces2.py`` (writes benchmarks/results/aces2.json and aces2.md).
+Run: ``.venv/bin/python benchmarks/bench_aces2.py [--out DIR]`` (writes aces2.json and aces2.md to ``--out``,
+default benchmarks/out; the committed ones with ``--out benchmarks/results``).
 """
 
 from __future__ import annotations
 
-import json
 import platform
 import sys
 import time
@@ -26,7 +26,7 @@ import torch
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from benchmarks.common import median_ms, packed_rgb, sample_exr  # noqa: E402
+from benchmarks.common import argument_parser, median_ms, packed_rgb, sample_exr, write_results  # noqa: E402
 from torchgrade.tonemap.aces2 import aces2_output  # noqa: E402
 
 COMMAND = ".venv/bin/python benchmarks/bench_aces2.py"
@@ -96,9 +96,11 @@ def markdown(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-if __name__ == "__main__":
+def main(argv=None) -> None:
+    args = argument_parser(__doc__).parse_args(argv)
     result = measure()
-    out = ROOT / "benchmarks" / "results"
-    (out / "aces2.json").write_text(json.dumps(result, indent=2) + "\n")
-    (out / "aces2.md").write_text(markdown(result))
-    print(markdown(result))
+    write_results(args.out, "aces2", result, markdown(result).splitlines(), COMMAND)
+
+
+if __name__ == "__main__":
+    main()

@@ -8,7 +8,8 @@ Three layers on the same batch (default 32x3x224x224 float32, CPU, torch's defau
 
 The ranges are in the JSON. Runs are interleaved (one of each layer per round), so a busy machine slows all of them alike; the
 median of the rounds after a warm-up is reported (:func:`benchmarks.common.median_ms`), with its ratio to ColorJiggle's median.
-Writes ``benchmarks/results/augment.json`` and ``augment.md``. With ``--device cuda`` it measures
+Writes ``augment.json`` and ``augment.md`` to ``--out`` (default benchmarks/out; the committed ones with
+``--out benchmarks/results``). With ``--device cuda`` it measures
 on the GPU (default batch 256 there) and writes ``augment_cuda.json`` / ``augment_cuda.md``.
 
     .venv/bin/python benchmarks/bench_augment.py [--device cuda] [--batch N] [--resolution N] [--rounds N]
@@ -16,9 +17,7 @@ on the GPU (default batch 256 there) and writes ``augment_cuda.json`` / ``augmen
 
 from __future__ import annotations
 
-import argparse
 import functools
-import json
 import platform
 import sys
 from pathlib import Path
@@ -30,9 +29,8 @@ from kornia.augmentation import ColorJiggle
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import torchgrade as tg  # noqa: E402
-from benchmarks.common import median_ms, synchronizer  # noqa: E402
+from benchmarks.common import argument_parser, median_ms, synchronizer, write_results  # noqa: E402
 
-RESULTS = Path(__file__).resolve().parent / "results"
 
 JIGGLE = dict(brightness=0.2, contrast=0.2, saturation=0.2, hue=0.1)
 
@@ -117,23 +115,20 @@ def markdown(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def main(argv=None) -> None:
+    parser = argument_parser(__doc__)
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--batch", type=int, default=None, help="batch size (default 32 on CPU, 256 on CUDA)")
     parser.add_argument("--resolution", type=int, default=224)
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--warmup", type=int, default=1)
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     size = args.batch or (256 if args.device.startswith("cuda") else 32)
     command = " ".join([".venv/bin/python", "benchmarks/bench_augment.py", *sys.argv[1:]])
     images = batch(size, args.resolution, args.device)
     result = report(measure(images, args.rounds, args.warmup), images, args.rounds, command)
     suffix = "" if args.device == "cpu" else "_" + args.device.split(":")[0]
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / f"augment{suffix}.json").write_text(json.dumps(result, indent=2) + "\n")
-    (RESULTS / f"augment{suffix}.md").write_text(markdown(result))
-    print(markdown(result))
+    write_results(args.out, f"augment{suffix}", result, markdown(result).splitlines(), command, args.device)
 
 
 if __name__ == "__main__":

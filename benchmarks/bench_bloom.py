@@ -3,16 +3,15 @@
 Measures float32 bloom at 1920x1080 in each mode, how the time grows with resolution (512^2 to 4K)
 and with ``max_iterations``; each timing is the median (and minimum) of several runs, with the copy
 timed alternately with it (:func:`benchmarks.common.interleaved_ms`) so that both see the same machine load. Results go to
-``benchmarks/results/bloom.json`` and ``bloom.md``.
+``bloom.json`` and ``bloom.md`` in ``--out`` (default benchmarks/out; the committed ones with ``--out benchmarks/results``).
 
 Run from the repository root::
 
-    .venv/bin/python benchmarks/bench_bloom.py
+    .venv/bin/python benchmarks/bench_bloom.py [--out DIR]
 """
 
 from __future__ import annotations
 
-import json
 import platform
 import statistics
 import sys
@@ -24,9 +23,8 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import torchgrade as tg  # noqa: E402
-from benchmarks.common import interleaved_ms  # noqa: E402
+from benchmarks.common import argument_parser, interleaved_ms, write_results  # noqa: E402
 
-RESULTS = Path(__file__).resolve().parent / "results"
 COMMAND = ".venv/bin/python benchmarks/bench_bloom.py"
 FULL_HD = (1080, 1920)
 RESOLUTIONS = [(512, 512), (1024, 1024), FULL_HD, (1440, 2560), (2160, 3840)]
@@ -77,7 +75,8 @@ def table(rows: list[dict], label: str, key) -> str:
     return "\n".join(lines)
 
 
-def main() -> None:
+def main(argv=None) -> None:
+    args = argument_parser(__doc__).parse_args(argv)
     started = time.perf_counter()
     frame = hdr_frame(*FULL_HD)
     variants = [dict(measure(frame, 7, **settings), variant=name) for name, settings in VARIANTS.items()]
@@ -96,7 +95,7 @@ def main() -> None:
         "seconds": round(time.perf_counter() - started, 1),
     }
     headline = variants[0]
-    markdown = "\n\n".join(
+    lines = "\n\n".join(
         [
             "# Bloom on CPU",
             f"`{COMMAND}` on {machine}. Times are the median (and minimum) of several runs; the copy "
@@ -109,12 +108,7 @@ def main() -> None:
             "## Resolution (additive)\n\n" + table(resolutions, "frame", lambda r: f"{r['width']}x{r['height']}"),
         ]
     )
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "bloom.json").write_text(json.dumps(results, indent=2) + "\n")
-    (RESULTS / "bloom.md").write_text(markdown + "\n")
-    print(markdown)
-    print(f"\nwrote {RESULTS / 'bloom.json'} and {RESULTS / 'bloom.md'} in {results['seconds']} s")
-    print(f"reproduce: {COMMAND}")
+    write_results(args.out, "bloom", results, lines.splitlines(), COMMAND)
 
 
 if __name__ == "__main__":

@@ -3,15 +3,14 @@ a file of 200 MB of comment lines (80-byte lines, and 2-byte lines, the most lin
 
 Each read runs in a fresh Python process, so its peak resident memory (the kernel's ``VmHWM``, minus
 the resident memory after the imports) counts only what the read allocates, the returned LUT
-included. The table itself is 256³ × 3 float32 = 192 MiB. Writes ``results/cube_read.json`` and
-``results/cube_read.md``.
+included. The table itself is 256³ × 3 float32 = 192 MiB. Writes ``cube_read.json`` and ``cube_read.md``
+to ``--out`` (default benchmarks/out; the committed ones with ``--out benchmarks/results``).
 
-Run: ``PYTHONPATH=. .venv/bin/python benchmarks/bench_cube_read.py``
+Run: ``PYTHONPATH=. .venv/bin/python benchmarks/bench_cube_read.py [--out DIR]``
 """
 
 from __future__ import annotations
 
-import json
 import subprocess
 import sys
 import tempfile
@@ -20,8 +19,9 @@ from pathlib import Path
 import torch
 
 import torchgrade as tg
+from benchmarks.common import argument_parser, write_results
 
-RESULTS = Path(__file__).resolve().parent / "results"
+COMMAND = "PYTHONPATH=. .venv/bin/python benchmarks/bench_cube_read.py"
 SIZE = 256
 COMMENT_BYTES = 200 << 20
 
@@ -61,7 +61,8 @@ def comment_file(path: Path, line: bytes) -> None:
             handle.write(line * 1024)
 
 
-def main() -> None:
+def main(argv=None) -> None:
+    args = argument_parser(__doc__).parse_args(argv)
     generator = torch.Generator().manual_seed(0)
     with tempfile.TemporaryDirectory() as folder:
         big = Path(folder) / "256.cube"
@@ -72,13 +73,10 @@ def main() -> None:
         for name, line in (("comments_200mb", b"# " + b"c" * 77 + b"\n"), ("short_comments_200mb", b"#\n")):
             comment_file(comments, line)
             results[name] = timed_read(comments)
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "cube_read.json").write_text(json.dumps(results, indent=2) + "\n")
     rows = [f"| {name} | {r['file_mib']} | {r['seconds']} | {r['cpu_seconds']} | {r['peak_mib']} | {r['outcome']} |"
             for name, r in results.items() if isinstance(r, dict)]
     table = ["| file | MiB | wall s | CPU s | peak MiB | outcome |", "| --- | --- | --- | --- | --- | --- |", *rows]
-    (RESULTS / "cube_read.md").write_text(f"256³ table: {results['table_mib']:.0f} MiB float32\n\n" + "\n".join(table) + "\n")
-    print("\n".join(table))
+    write_results(args.out, "cube_read", results, [f"256³ table: {results['table_mib']:.0f} MiB float32", "", *table], COMMAND)
 
 
 if __name__ == "__main__":

@@ -7,15 +7,15 @@ after the imports, and the peak it reaches during the read, minus the resident m
 is divided by the returned tensor's bytes. Each file is read twice so: as the first read of the
 process, and after a warm-up read of two 16×16 files (RGB half and luminance/chroma), which pages in
 the library code and starts torch's threads, the fixed costs of a process's first read. Writes
-``results/exr_memory.json`` and ``results/exr_memory.md``.
+``exr_memory.json`` and ``exr_memory.md`` to ``--out`` (default benchmarks/out; the committed ones with
+``--out benchmarks/results``).
 
-Run: ``PYTHONPATH=. .venv/bin/python benchmarks/bench_exr_memory.py`` (Linux)
+Run: ``PYTHONPATH=. .venv/bin/python benchmarks/bench_exr_memory.py [--out DIR]`` (Linux)
 """
 
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 import tempfile
@@ -27,9 +27,9 @@ import OpenEXR
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from benchmarks.common import EXR_DIR  # noqa: E402
+from benchmarks.common import EXR_DIR, argument_parser, write_results  # noqa: E402
 
-RESULTS = ROOT / "benchmarks" / "results"
+COMMAND = "PYTHONPATH=. .venv/bin/python benchmarks/bench_exr_memory.py"
 SIZE = 4096
 SAMPLES = [("formats/Adjuster.exr", {}), ("GoldenGate.exr", {}), ("formats/beachball_multipart.0001.exr", {}),
            ("formats/beachball_multipart.0001.exr", {"part": 1, "layer": ""}), ("formats/beachball_multipart.0001.exr", {"view": "left"}),
@@ -86,7 +86,8 @@ def write_files(folder: Path, size: int) -> dict[str, Path]:
     return paths
 
 
-def main() -> None:
+def main(argv=None) -> None:
+    args = argument_parser(__doc__).parse_args(argv)
     with tempfile.TemporaryDirectory() as folder:
         small = write_files(Path(folder), 16)
         warm_ups = (small["rgb_half_16"], small["yc_16"])
@@ -95,16 +96,12 @@ def main() -> None:
         results = {name: {**peak_of_read(path, options), "warm": peak_of_read(path, options, warm_ups=warm_ups)}
                    for name, path, options in reads}
     opening = {name: peak_of_read(EXR_DIR / name, {}, "open") for name in ("formats/Rec709_YC.exr", "Desk.exr")}
-    load = os.getloadavg()
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "exr_memory.json").write_text(json.dumps({"reads": results, "opening": opening, "load_average": load}, indent=2) + "\n")
     rows = [f"| {name} | {r['shape']} | {r['returned_mib']} | {r['peak_mib']} | {r['ratio']} | {r['code_mib']} | "
             f"{r['warm']['peak_mib']} | {r['warm']['ratio']} | {r['cpu_seconds']} |" for name, r in results.items()]
     table = ["| file, options | returned shape | returned MiB | first read: peak MiB | peak / returned | code paged in MiB | "
              "after a warm-up read: peak MiB | peak / returned | CPU s |", "| --- | --- | --- | --- | --- | --- | --- | --- | --- |", *rows]
     opened = ", ".join(f"{name} {r['peak_mib']} MiB ({r['code_mib']} MiB of it code)" for name, r in opening.items())
-    (RESULTS / "exr_memory.md").write_text(
-        "Peak memory of `tg.io.read_exr(path, **options)`, one fresh process per read:\n\n" + "\n".join(table) + "\n\n"
+    text = ("Peak memory of `tg.io.read_exr(path, **options)`, one fresh process per read:\n\n" + "\n".join(table) + "\n\n"
         "Code paged in is the growth of the process's file-backed resident memory (`RssFile`) during the read: "
         "the OpenEXR and torch library code that the first read in a process touches, counted in the peak "
         "and paid once a process (a second read of the same file adds none). It is most of the fixed cost that "
@@ -112,10 +109,8 @@ def main() -> None:
         "luminance/chroma) in the same process, which pay it. Opening a file alone (`tg.io.exr_info`, the headers every read starts "
         f"with) peaks at: {opened}.\n\n"
         "CPU s is the reading process's CPU time on the first read; it depends on the machine's load. "
-        "Read the memory columns.\n\n"
-        f"Load average (1, 5, 15 min) at the end of the run: {', '.join(f'{x:.2f}' for x in load)}.\n\n"
-        "Command: `PYTHONPATH=. .venv/bin/python benchmarks/bench_exr_memory.py`\n")
-    print("\n".join(table))
+        f"Read the memory columns.\n\nCommand: `{COMMAND}`")
+    write_results(args.out, "exr_memory", {"reads": results, "opening": opening}, text.splitlines(), COMMAND)
 
 
 if __name__ == "__main__":

@@ -17,12 +17,11 @@ Sections, each skipped once ``--budget`` seconds have passed (compiles are the s
 * ``cpu``: the look and the LUT on the host's cores, all of them against 2, and the LUT against OpenColorIO;
 * ``augment_compiled``: both augmentations compiled (kornia's takes over a minute to compile).
 
-Writes ``gpu.json`` and ``gpu.md`` to ``--out`` (default ``benchmarks/results``).
+Writes ``gpu.json`` and ``gpu.md`` to ``--out`` (default ``benchmarks/out``; the committed ones with ``--out benchmarks/results``).
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import statistics
@@ -37,7 +36,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import torchgrade as tg  # noqa: E402
-from benchmarks.common import ROOT, ocio_processor, packed_rgb, write_results  # noqa: E402
+from benchmarks.common import ROOT, argument_parser, ocio_processor, packed_rgb, write_results  # noqa: E402
 
 CINEMATIC = json.loads((ROOT / "export" / "looks" / "cinematic.json").read_text())
 SIZES = {"1080p": (1080, 1920), "4K": (2160, 3840)}
@@ -301,8 +300,7 @@ def markdown(info: dict) -> list:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", type=Path, default=None, help="folder for gpu.json and gpu.md (default benchmarks/results)")
+    parser = argument_parser(__doc__)
     parser.add_argument("--budget", type=float, default=420.0, help="seconds after which the remaining sections are skipped")
     parser.add_argument("--sections", default=",".join(SECTIONS), help=f"comma-separated, of {', '.join(SECTIONS)}")
     args = parser.parse_args(argv)
@@ -335,13 +333,7 @@ def main(argv=None) -> int:
     report = {"info": info, "rows": ROWS, "errors": errors, "skipped": skipped}
     lines = markdown(info) + ([""] + [f"Skipped: {', '.join(skipped)}."] if skipped else []) + \
         ([""] + [f"Failed: {e['section']}: {e['error']}" for e in errors] if errors else [])
-    if args.out is None:
-        write_results("gpu", report, lines, info["command"])
-    else:
-        args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / "gpu.json").write_text(json.dumps(report, indent=2) + "\n")
-        (args.out / "gpu.md").write_text("\n".join(lines) + "\n")
-        print("\n".join(lines))
+    write_results(args.out, "gpu", report, lines, info["command"], device.type)
     return 1 if errors else 0
 
 

@@ -18,7 +18,8 @@ fitted shapers), applied to every
 and max), beside each bake's own error report. ``lut_floor.py`` asks what the best
 possible 33³ table would do on the same pixels.
 
-Run: ``.venv/bin/python benchmarks/bench_lut.py`` (writes benchmarks/results/lut.json and lut.md).
+Run: ``.venv/bin/python benchmarks/bench_lut.py [--out DIR]`` (writes lut.json and lut.md to ``--out``, default
+benchmarks/out; the committed ones with ``--out benchmarks/results``).
 """
 
 from __future__ import annotations
@@ -40,7 +41,7 @@ sys.path.insert(0, str(ROOT))
 
 import torchgrade as tg  # noqa: E402
 from benchmarks.common import (  # noqa: E402
-    EXR_DIR, map_large_buffers, median_ms, ocio_in_place, ocio_processor, peak_rss_mb, run_and_reset, sample_exr)
+    EXR_DIR, argument_parser, map_large_buffers, median_ms, ocio_in_place, ocio_processor, peak_rss_mb, run_and_reset, sample_exr, write_results)
 from benchmarks.metrics import srgb_codes  # noqa: E402
 from torchgrade.lut import INTERPOLATIONS, OUTPUT_ENCODINGS, trilinear_grid_sample  # noqa: E402
 
@@ -189,10 +190,13 @@ def speed_rows(methods: dict, compile_s: dict, memory: dict, pixels: int) -> lis
     return results
 
 
-def main() -> None:
+def main(argv=None) -> None:
+    parser = argument_parser(__doc__)
+    parser.add_argument("--memory", action="store_true", help="measure memory only and print it (the child process)")
+    args = parser.parse_args(argv)
     import PyOpenColorIO as OCIO
 
-    measure_memory = "--memory" in sys.argv
+    measure_memory = args.memory
     if not measure_memory:  # time cold compiles: a fresh inductor cache, which the memory child then reuses
         inductor_cache = tempfile.TemporaryDirectory()
         os.environ["TORCHINDUCTOR_CACHE_DIR"] = inductor_cache.name
@@ -229,12 +233,7 @@ def main() -> None:
         "results": speed,
         "accuracy": accuracy() if EXR_DIR.is_dir() else [],
     }
-    out = ROOT / "benchmarks" / "results"
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "lut.json").write_text(json.dumps(report, indent=2) + "\n")
-    (out / "lut.md").write_text(markdown(report))
-    print(markdown(report))
-    print(f"reproduce: {COMMAND}")
+    write_results(args.out, "lut", report, markdown(report).splitlines(), COMMAND)
 
 
 def markdown(report: dict) -> str:

@@ -9,8 +9,8 @@ than the fit's, plus the scene for scene bakes). *Floor*: bounds on the smallest
 lattice reaches on the seen pixels (HiGHS, :func:`benchmarks.lut_floor.lowest_max_error`; the LogC floors are
 read from ``results/lut_floor.json``, the lowest over its lattices and both interpolations).
 
-Run: ``.venv/bin/python benchmarks/bench_lut_fit.py`` (about 15 minutes on two cores; writes
-results/lut_fit.json and lut_fit.md).
+Run: ``.venv/bin/python benchmarks/bench_lut_fit.py [--out DIR]`` (about 15 minutes on two cores; writes
+lut_fit.json and lut_fit.md to ``--out``, default benchmarks/out; the committed ones with ``--out benchmarks/results``).
 """
 
 from __future__ import annotations
@@ -27,12 +27,12 @@ import torch
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from benchmarks.common import RESULTS, argument_parser, write_results  # noqa: E402
 from benchmarks.bench_lut import ACCURACY_IMAGES, SIZE, sample_exr, strong_look  # noqa: E402
 from benchmarks.lut_floor import interpolation_matrix, lowest_max_error  # noqa: E402
 from benchmarks.metrics import srgb_codes  # noqa: E402
 from torchgrade.lut import SCENE_FIT_WEIGHT, SCENE_WEIGHT, bake_lut, fit_entries, lattice_unit  # noqa: E402
 
-RESULTS = ROOT / "benchmarks" / "results"
 COMMAND = ".venv/bin/python benchmarks/bench_lut_fit.py"
 LATTICES = {"LogC to 65504 (default)": {"shaper": "logc_hdr"}, "LogC to 58.86": {"shaper": "logc"}, "fitted to the look": {"shaper": "fitted"},
             "fitted to the scene": {"shaper": "fitted", "scene": True}}
@@ -131,15 +131,13 @@ def markdown(report: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main() -> None:
+def main(argv=None) -> None:
+    args = argument_parser(__doc__).parse_args(argv)
     torch.manual_seed(0)
     rows = [row for name in ACCURACY_IMAGES for row in image_rows(name)]
     report = {"command": COMMAND, "torch": torch.__version__, "size": SIZE,
               "logc_floor": {name: logc_floor(name) for name in ACCURACY_IMAGES}, "rows": rows}
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / "lut_fit.json").write_text(json.dumps(report, indent=1))
-    (RESULTS / "lut_fit.md").write_text(markdown(report))
-    print(markdown(report))
+    write_results(args.out, "lut_fit", report, markdown(report).splitlines(), COMMAND)
 
 
 if __name__ == "__main__":

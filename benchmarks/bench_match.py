@@ -7,15 +7,15 @@ controls, screens the default tone mapper candidates, then fits a 17³ residual 
 as a 65³ ``.cube`` and read back. Errors are on held-out pixels (8-bit sRGB codes, mean ΔE2000).
 
 Torch runs on ``--threads`` threads (default 1: on a shared 2-core machine one thread was several times faster
-than two for these small fits). Writes ``benchmarks/results/match.json``, ``match.md`` and ``match.png`` (before,
-target, matched by the controls, with the residual LUT; the loss curve).
+than two for these small fits). Writes ``match.json``, ``match.md`` and ``match.png`` (before, target, matched by
+the controls, with the residual LUT; the loss curve) to ``--out`` (default benchmarks/out; the committed ones with
+``--out benchmarks/results``).
 
-    .venv/bin/python benchmarks/bench_match.py [--threads N]
+    .venv/bin/python benchmarks/bench_match.py [--threads N] [--out DIR]
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import platform
 import sys
@@ -28,9 +28,9 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import torchgrade as tg  # noqa: E402
-from benchmarks.common import EXR_DIR, ocio_look  # noqa: E402
+from benchmarks.common import EXR_DIR, argument_parser, ocio_look, write_results  # noqa: E402
 
-RESULTS = Path(__file__).resolve().parent / "results"
+COMMAND = ".venv/bin/python benchmarks/bench_match.py"
 EXR = EXR_DIR / "GoldenGate.exr"
 
 
@@ -97,10 +97,11 @@ def markdown(rows: list, threads: int) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def main(argv=None) -> None:
+    parser = argument_parser(__doc__)
     parser.add_argument("--threads", type=int, default=1)
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
+    args.out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(args.threads)
     source = tg.io.read_exr(EXR)[:3].double()
     large = torch.nn.functional.interpolate(source[None], scale_factor=2, mode="bilinear", align_corners=False)[0]
@@ -111,9 +112,9 @@ def main() -> None:
         rows.append(row)
         print(json.dumps({k: row[k] for k in ("megapixels", "fit_s", "cube_s", "controls", "residual", "cube")}))
         if picture is source:
-            figure(source[:, ::2, ::2], target[:, ::2, ::2], result, RESULTS / "match.png")
-    (RESULTS / "match.json").write_text(json.dumps({"threads": args.threads, "rows": rows}, indent=2) + "\n")
-    (RESULTS / "match.md").write_text(markdown(rows, args.threads))
+            figure(source[:, ::2, ::2], target[:, ::2, ::2], result, args.out / "match.png")
+    write_results(args.out, "match", {"threads": args.threads, "rows": rows}, markdown(rows, args.threads).splitlines(),
+                  f"{COMMAND} --threads {args.threads}")
 
 
 if __name__ == "__main__":

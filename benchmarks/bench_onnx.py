@@ -3,9 +3,10 @@ per-pixel stages on the whole frame, ``strips=False``), node counts before and a
 per-pixel stage (grade + tone map) eager vs ``torch.compile``, and the whole look under
 ``torch.compile(fullgraph=True)``.
 
-    .venv/bin/python benchmarks/bench_onnx.py [--device cuda]
+    .venv/bin/python benchmarks/bench_onnx.py [--device cuda] [--out DIR]
 
-Writes benchmarks/results/onnx.json and onnx.md (``--device cuda``: onnx_cuda.json and onnx_cuda.md, with
+Writes onnx.json and onnx.md to ``--out`` (default benchmarks/out; the committed ones with ``--out benchmarks/results``;
+``--device cuda``: onnx_cuda.json and onnx_cuda.md, with
 onnxruntime's CUDA provider and PyTorch on the GPU; OpenVINO runs on the CPU only and is left out there).
 Latencies are the median of 9 runs after a warm-up, batch 1, float32 in and out, in one process on this
 machine, host arrays in and out for onnxruntime; the calls of one row alternate run by run
@@ -32,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import torchgrade as tg  # noqa: E402
-from benchmarks.common import median_ms, write_results  # noqa: E402
+from benchmarks.common import argument_parser, median_ms, write_results  # noqa: E402
 from torchgrade.base.core import one_thread  # noqa: E402
 
 LOOK = ROOT / "export" / "looks" / "cinematic.json"
@@ -49,13 +50,13 @@ COLUMNS = {"onnxruntime": "onnxruntime ms", "onnxruntime_no_spin": "onnxruntime,
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    """``--device cpu`` (default) or ``cuda``.
+    """``--device cpu`` (default) or ``cuda``, and ``--out DIR``.
 
     Examples:
         >>> parse_args(["--device", "cuda"]).device
         'cuda'
     """
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argument_parser(__doc__)
     parser.add_argument("--device", choices=tuple(RUNTIMES), default="cpu", help="where onnxruntime and PyTorch run")
     return parser.parse_args(argv)
 
@@ -176,7 +177,8 @@ def table(report: dict) -> list:
 
 
 def main(argv=None) -> int:
-    device = parse_args(argv).device
+    args = parse_args(argv)
+    device = args.device
     if device == "cuda" and not torch.cuda.is_available():
         print("--device cuda: PyTorch sees no CUDA device here", file=sys.stderr)
         return 2
@@ -212,7 +214,7 @@ def main(argv=None) -> int:
     }
     report["eager_profile"] = eager_profile(eager(per_pixel.to(device), image.to(device)), HEIGHT * WIDTH)
     report["load_average"] = [load_start, os.getloadavg()[0]]
-    write_results(results_stem(device), report, table(report), f"{COMMAND}{'' if device == 'cpu' else ' --device ' + device}")
+    write_results(args.out, results_stem(device), report, table(report), f"{COMMAND}{'' if device == 'cpu' else ' --device ' + device}", device)
     return 0
 
 

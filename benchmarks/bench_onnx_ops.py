@@ -7,7 +7,8 @@ export forms (:mod:`torchgrade.onnx`), which trade ``Where``, comparisons, ``Sig
 Each operator (or short pattern) is repeated 20 times in a chain on a strip of 3 x 68 x 1920 float32 values (about
 2^17 pixels, the strips a look's per-pixel end runs on), in one onnxruntime session on one intra-op thread; the
 patterns of a round alternate (:func:`benchmarks.common.median_ms`). Reported per pattern: ms for a 1920x1080 frame
-(16 strips) and that over the ``Mul``'s. Writes benchmarks/results/onnx_ops.json and onnx_ops.md.
+(16 strips) and that over the ``Mul``'s. Writes onnx_ops.json and onnx_ops.md to ``--out`` (default benchmarks/out;
+the committed ones with ``--out benchmarks/results``).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from onnx import TensorProto, helper, numpy_helper
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from benchmarks.common import median_ms, write_results  # noqa: E402
+from benchmarks.common import argument_parser, median_ms, write_results  # noqa: E402
 
 COMMAND = ".venv/bin/python benchmarks/bench_onnx_ops.py"
 STRIP = (1, 3, 68, 1920)
@@ -149,7 +150,8 @@ def measure() -> dict:
     return {name: {"frame_ms": round(ms, 2), "over_mul": round(ms / mul, 1)} for name, ms in frame.items()}
 
 
-def main() -> int:
+def main(argv=None) -> int:
+    args = argument_parser(__doc__).parse_args(argv)
     load = os.getloadavg()[0]
     rows = measure()
     report = {"command": COMMAND, "onnxruntime": onnxruntime.__version__, "strip": STRIP, "chain": CHAIN, "repeats": REPEATS,
@@ -160,7 +162,7 @@ def main() -> int:
              f"{report['load_average'][0]:.1f} at the start, {report['load_average'][1]:.1f} at the end)", "",
              "| pattern | ms per 1920x1080 frame | over a Mul by a number |", "| --- | ---: | ---: |"]
     lines += [f"| {name} | {r['frame_ms']} | {r['over_mul']} |" for name, r in rows.items()]
-    write_results("onnx_ops", report, lines, COMMAND)
+    write_results(args.out, "onnx_ops", report, lines, COMMAND)
     return 0
 
 

@@ -1,19 +1,28 @@
-"""What the benchmarks share: the interleaved timer, peak-memory readers, OpenColorIO processors, the sample EXRs.
+"""What the benchmarks share: output folder and record, the interleaved timer, peak-memory readers, OpenColorIO, the sample EXRs.
 
 Nothing here measures on its own; each benchmark says what it measures with these and how to run it
 (for example ``.venv/bin/python benchmarks/run.py --quick``, which uses every part of this module).
 
-Timing alternates the things compared (A B A B …: every round runs each once), so a change of machine
-load during the run hits all of them alike, and reports medians. Peak memory is read from the kernel's
+Every benchmark that writes results takes ``--out DIR`` (:func:`argument_parser`), default ``benchmarks/out``
+(git-ignored); the committed results in ``benchmarks/results`` change only with ``--out benchmarks/results``.
+Each result records where it was measured (:func:`environment`: device, threads, load, versions).
+
+Timing alternates the things compared (A B A B …: every round runs each once, each round starting one place
+later), so a change of machine load during the run hits all of them alike and no call always follows the same
+one, and reports medians. Peak memory is read from the kernel's
 peak-RSS counter (Linux) or from CUDA's allocator statistics.
 """
 
 from __future__ import annotations
 
+import argparse
 import ctypes
 import functools
 import json
+import os
+import platform
 import statistics
+import sys
 import time
 from pathlib import Path
 from typing import Callable, Optional
@@ -27,16 +36,56 @@ ROOT = Path(__file__).resolve().parents[1]
 EXR_DIR = ROOT.parent / "shared" / "data" / "exr"
 """The OpenEXR project's sample images (BSD-3), shared beside the repository."""
 RESULTS = ROOT / "benchmarks" / "results"
-"""Where benchmarks commit their results."""
+"""Where the committed results live; written only when a run is given ``--out benchmarks/results``."""
+OUT = ROOT / "benchmarks" / "out"
+"""Where a benchmark writes by default (git-ignored)."""
+PEERS = {"onnxruntime": "onnxruntime", "PyOpenColorIO": "opencolorio", "kornia": "kornia", "openvino": "openvino"}
+"""Peer libraries whose version a result records when the run imported them: module name -> record key."""
 
 
-def write_results(stem: str, report: dict, lines: list, command: str) -> None:
-    """Write ``report`` to ``results/<stem>.json`` and ``lines`` to ``results/<stem>.md``, print the table and ``command``."""
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / f"{stem}.json").write_text(json.dumps(report, indent=2) + "\n")
-    (RESULTS / f"{stem}.md").write_text("\n".join(lines) + "\n")
+def argument_parser(doc: str) -> argparse.ArgumentParser:
+    """A benchmark's parser, described by the first paragraph of its docstring ``doc``, with ``--out DIR``."""
+    parser = argparse.ArgumentParser(description=" ".join(doc.strip().split("\n\n")[0].split()))
+    parser.add_argument("--out", type=Path, default=OUT,
+                        help="folder for the results (default benchmarks/out, git-ignored; "
+                             "pass benchmarks/results to replace the committed results)")
+    return parser
+
+
+def environment(device: str = "cpu") -> dict:
+    """Where a result was measured: device, CPU and torch thread counts, load averages (1, 5, 15 min) now,
+    and the versions of torch, torchgrade and every peer library this process imported."""
+    versions = {"torch": torch.__version__, "torchgrade": tg.__version__}
+    versions.update({key: sys.modules[module].__version__ for module, key in PEERS.items() if module in sys.modules})
+    device_name = torch.cuda.get_device_name(device) if str(device).startswith("cuda") else platform.processor() or platform.machine()
+    return {"device": str(device), "device_name": device_name, "cpu_count": os.cpu_count(),
+            "torch_threads": torch.get_num_threads(), "load_average": [round(x, 2) for x in os.getloadavg()],
+            "versions": versions, "platform": platform.platform()}
+
+
+def environment_line(env: dict) -> str:
+    """:func:`environment` as one markdown line."""
+    versions = ", ".join(f"{name} {version}" for name, version in env["versions"].items())
+    load = " / ".join(f"{x:.2f}" for x in env["load_average"])
+    return (f"Measured on {env['device']} ({env['device_name']}), {env['cpu_count']} CPUs, {env['torch_threads']} torch threads, "
+            f"load average {load} (1 / 5 / 15 min, at the end); {versions}.")
+
+
+def write_markdown(out: Path, name: str, lines: list, device: str = "cpu") -> dict:
+    """Write ``lines`` and a line of their :func:`environment` to ``out/<name>``; returns the environment."""
+    env = environment(device)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / name).write_text("\n".join([*lines, "", environment_line(env)]) + "\n", encoding="utf-8")
+    return env
+
+
+def write_results(out: Path, stem: str, report: dict, lines: list, command: str, device: str = "cpu") -> None:
+    """Write ``lines`` to ``out/<stem>.md`` and ``report`` to ``out/<stem>.json``, each with its
+    :func:`environment`; print the table and ``command``."""
+    env = write_markdown(out, f"{stem}.md", lines, device)
+    (out / f"{stem}.json").write_text(json.dumps({**report, "environment": env}, indent=2, ensure_ascii=False) + "\n")
     print("\n".join(lines))
-    print(f"\nreproduce: {command}")
+    print(f"\nwrote {out / stem}.json and .md; reproduce: {command}")
 
 
 def sample_exr(name: str, to_rec709: bool = False) -> torch.Tensor:
@@ -58,18 +107,20 @@ def run_and_reset(call) -> tuple:
 
 
 def interleaved_ms(calls: dict, runs: int, warmup: int = 1, sync: Optional[Callable[[], None]] = None) -> dict:
-    """Wall times in ms, ``{name: [runs times]}``, of each call in ``calls``, every round running each call once.
+    """Wall times in ms, ``{name: [runs times]}``, of each call in ``calls``, every round running each call once,
+    round ``k`` starting at the ``k``-th call (what ran just before a call, e.g. a large free, changes round to round).
 
     A call is ``run`` or ``(run, reset)``: ``reset`` (or None) runs untimed before each ``run``, e.g. to restore a
     buffer an in-place call overwrites. ``warmup`` untimed rounds come first. ``sync`` (see :func:`synchronizer`)
     brackets each timed call. Autograd is off: no benchmark times a backward pass.
     """
     sync = sync or (lambda: None)
-    pairs = {name: run_and_reset(call) for name, call in calls.items()}
+    pairs = [(name, *run_and_reset(call)) for name, call in calls.items()]
     times = {name: [] for name in calls}
     with torch.no_grad():
         for attempt in range(warmup + runs):
-            for name, (run, reset) in pairs.items():
+            start_at = attempt % len(pairs)
+            for name, run, reset in pairs[start_at:] + pairs[:start_at]:
                 if reset:
                     reset()
                 sync()
@@ -84,6 +135,12 @@ def interleaved_ms(calls: dict, runs: int, warmup: int = 1, sync: Optional[Calla
 def median_ms(calls: dict, runs: int, warmup: int = 1, sync: Optional[Callable[[], None]] = None) -> dict:
     """Median ms of each call, ``{name: ms}``, timed by :func:`interleaved_ms`."""
     return {name: statistics.median(times) for name, times in interleaved_ms(calls, runs, warmup, sync).items()}
+
+
+def median_ratio(times: dict, name: str, baseline: str) -> float:
+    """The median over rounds of ``name``'s time over ``baseline``'s in the same round, from :func:`interleaved_ms`:
+    a load change between rounds cancels in each ratio."""
+    return statistics.median(ms / base for ms, base in zip(times[name], times[baseline]))
 
 
 # ---------------------------------------------------------------- peak memory

@@ -2,7 +2,7 @@
 
 Usage::
 
-    PYTHONPATH=. .venv/bin/python benchmarks/exposure_samples.py [--look export/looks/cinematic.json]
+    PYTHONPATH=. .venv/bin/python benchmarks/exposure_samples.py [--look export/looks/cinematic.json] [--out DIR]
 
 For every image of ``../shared/data/exr`` (and ``formats/``; a deep file holds no flat image and is listed as
 such) the table gives the exposure the look's eye adaptation applies, in stops from viewing the file as it
@@ -21,13 +21,12 @@ shadows or its highlights. With ``grey`` the display luminance the look gives a 
 
 A frame that is only shadows or only highlights (a uniform chart) sits at ``grey`` and passes, as a meter
 should leave it. ``tests/exposure/test_exposure_samples.py`` applies the rule to every sample image, so a new image or
-a new default is judged the same way. Writes ``benchmarks/results/exposure_samples.md`` and
-``benchmarks/results/exposure_contact_sheet.jpg``.
+a new default is judged the same way. Writes ``exposure_samples.md`` and ``exposure_contact_sheet.jpg`` to ``--out``
+(default benchmarks/out; the committed ones with ``--out benchmarks/results``).
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import warnings
@@ -44,10 +43,10 @@ import torchgrade as tg  # noqa: E402
 from torchgrade.color import linear_to_srgb, luminance  # noqa: E402
 from torchgrade.io import read_exr  # noqa: E402
 from torchgrade.io.atomic import atomic_write  # noqa: E402
+from benchmarks.common import argument_parser, write_markdown  # noqa: E402
 
 SAMPLES = ROOT.parent / "shared" / "data" / "exr"
 LOOK = ROOT / "export" / "looks" / "cinematic.json"
-RESULTS = ROOT / "benchmarks" / "results"
 TILE = 200
 """Width of a contact-sheet tile, pixels."""
 
@@ -137,7 +136,7 @@ def contact_sheet(rows: list, path: Path) -> None:
 
 
 def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = argument_parser(__doc__)
     parser.add_argument("--look", default=str(LOOK), help="look JSON (default export/looks/cinematic.json)")
     args = parser.parse_args(argv)
     look = tg.PostFX.from_config(json.loads(Path(args.look).read_text())).eval()
@@ -165,9 +164,8 @@ def main(argv=None) -> None:
                          f"{a.p5:.2f} / {a.median:.2f} / {a.p95:.2f} | {verdict(a, grey)} |")
             rows.append((name, before, after))
     lines += ["", "![Contact sheet](exposure_contact_sheet.jpg)", ""]
-    RESULTS.mkdir(exist_ok=True)
-    atomic_write(RESULTS / "exposure_samples.md", lambda temporary: Path(temporary).write_text("\n".join(lines)))
-    contact_sheet(rows, RESULTS / "exposure_contact_sheet.jpg")
+    write_markdown(args.out, "exposure_samples.md", lines)
+    contact_sheet(rows, args.out / "exposure_contact_sheet.jpg")
     print("\n".join(lines))
 
 

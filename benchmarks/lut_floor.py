@@ -28,14 +28,14 @@ Lattices: 33³ LogC on the two domains ``bake_lut`` offers, the default (black t
 document's) and the scene's range (black to the image's largest value, ``bake_lut(scene=image)``),
 then, on Desk, lattices whose bottom is raised above black. Lookups are taken in float64.
 
-Run: ``.venv/bin/python benchmarks/lut_floor.py`` (two worker processes, about 25 minutes on two cores; writes
-benchmarks/results/lut_floor.json and .md).
+Run: ``.venv/bin/python benchmarks/lut_floor.py [--out DIR]`` (two worker processes, about 25 minutes on two cores;
+writes lut_floor.json and .md to ``--out``, default benchmarks/out; the committed ones with ``--out benchmarks/results``,
+which benchmarks/bench_lut_fit.py reads).
 """
 
 from __future__ import annotations
 
 import functools
-import json
 import math
 import sys
 import time
@@ -52,6 +52,7 @@ from tqdm import tqdm
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from benchmarks.common import argument_parser, write_results  # noqa: E402
 from benchmarks.bench_lut import ACCURACY_IMAGES, SIZE, accuracy_image, strong_look  # noqa: E402
 from benchmarks.metrics import srgb_codes  # noqa: E402
 from torchgrade.color import linear_to_logc, srgb_to_linear  # noqa: E402
@@ -366,16 +367,13 @@ def markdown(report: dict) -> str:
     return "\n".join(lines)
 
 
-def main() -> None:
+def main(argv=None) -> None:
+    args = argument_parser(__doc__).parse_args(argv)
     work = tasks()
     with ProcessPoolExecutor(max_workers=2) as pool:
         rows = list(tqdm(pool.map(_row, work), total=len(work), desc="lattices", unit="lattice"))
     report = {"command": COMMAND, "size": SIZE, "scipy": scipy.__version__, "torch": torch.__version__, "rows": rows}
-    out = ROOT / "benchmarks" / "results"
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "lut_floor.json").write_text(json.dumps(report, indent=2) + "\n")
-    (out / "lut_floor.md").write_text(markdown(report))
-    print(markdown(report))
+    write_results(args.out, "lut_floor", report, markdown(report).splitlines(), COMMAND)
 
 
 if __name__ == "__main__":

@@ -6,7 +6,8 @@ exported looks in 8-bit sRGB codes on the demo scene, the figure ``tests/onnx/te
 Each look (parts of ``export/looks/cinematic.json``, tone mapped with ACES, and the whole look) is exported with
 :func:`torchgrade.onnx.export` and run on OpenVINO's CPU plugin with no precision hint; its display-linear output
 and PyTorch's are clipped to [0, 1], sRGB-encoded and compared in codes at 333x517, the test's largest frame.
-Writes benchmarks/results/openvino_precision.json and openvino_precision.md.
+Writes openvino_precision.json and openvino_precision.md to ``--out`` (default benchmarks/out; the committed ones
+with ``--out benchmarks/results``).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import torchgrade as tg  # noqa: E402
-from benchmarks.common import write_results  # noqa: E402
+from benchmarks.common import argument_parser, write_results  # noqa: E402
 
 LOOK = ROOT / "export" / "looks" / "cinematic.json"
 COMMAND = ".venv/bin/python benchmarks/openvino_precision.py"
@@ -51,7 +52,8 @@ def code_error(config: dict, folder: Path) -> dict:
     return {"max": round(float(error.max()), 2), "p999": round(float(np.percentile(error, 99.9)), 2)}
 
 
-def main() -> int:
+def main(argv=None) -> int:
+    args = argument_parser(__doc__).parse_args(argv)
     import openvino
 
     with tempfile.TemporaryDirectory() as folder:
@@ -61,7 +63,7 @@ def main() -> int:
              f"`{COMMAND}` (OpenVINO {openvino.__version__}, CPU plugin, no precision hint)", "",
              "| look | max | p99.9 |", "| --- | ---: | ---: |"]
     lines += [f"| {name} | {r['max']} | {r['p999']} |" for name, r in rows.items()]
-    write_results("openvino_precision", report, lines, COMMAND)
+    write_results(args.out, "openvino_precision", report, lines, COMMAND)
     return 0
 
 

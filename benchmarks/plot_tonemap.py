@@ -7,12 +7,12 @@
   in display codes on every finite pixel of every top-level sample image (exposed so the median positive
   Rec.709 luminance is 0.18; pixels beyond ±65504, which the library's non-finite policy bounds, left out).
 
-Run: ``.venv/bin/python benchmarks/plot_tonemap.py [--skip-distance]`` (writes to benchmarks/results/).
+Run: ``.venv/bin/python benchmarks/plot_tonemap.py [--skip-distance] [--out DIR]`` (writes to ``--out``, default
+benchmarks/out; the committed ones with ``--out benchmarks/results``).
 """
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
@@ -27,10 +27,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import torchgrade as tg  # noqa: E402
-from benchmarks.common import EXR_DIR  # noqa: E402
+from benchmarks.common import EXR_DIR, argument_parser, write_results  # noqa: E402
 from torchgrade.functional import tonemap  # noqa: E402
 
-OUT = ROOT / "benchmarks" / "results"
+COMMAND = ".venv/bin/python benchmarks/plot_tonemap.py"
 HDR_MODES = {"aces2_hdr": dict(peak_luminance=1000.0), "neutral_hdr": dict(peak_luminance=1000.0)}
 # mode -> (OpenColorIO config, display, view, encoding of our display-linear output, code scale)
 OCIO_VIEWS = {
@@ -134,11 +134,17 @@ def markdown(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-if __name__ == "__main__":
-    OUT.mkdir(parents=True, exist_ok=True)
-    plot_curves(OUT / "tonemap_curves.png")
-    plot_aces1_vs_aces2(OUT / "aces1_vs_aces2.png")
-    if "--skip-distance" not in sys.argv:
+def main(argv=None) -> None:
+    parser = argument_parser(__doc__)
+    parser.add_argument("--skip-distance", action="store_true", help="only the plots, not the distance to OpenColorIO")
+    args = parser.parse_args(argv)
+    args.out.mkdir(parents=True, exist_ok=True)
+    plot_curves(args.out / "tonemap_curves.png")
+    plot_aces1_vs_aces2(args.out / "aces1_vs_aces2.png")
+    if not args.skip_distance:
         measured = distances()
-        (OUT / "tonemap_distance.json").write_text(json.dumps(measured, indent=2) + "\n")
-        (OUT / "tonemap_distance.md").write_text(markdown(measured))
+        write_results(args.out, "tonemap_distance", measured, markdown(measured).splitlines(), COMMAND)
+
+
+if __name__ == "__main__":
+    main()

@@ -4,10 +4,11 @@ EXR and malformed .cube files are rejected cleanly, and what reading a 256³ .cu
 
 The stages are :data:`torchgrade.testing.catalog.STAGE_KINDS` and the inputs
 :func:`torchgrade.testing.extremes.extreme_inputs`, the listing ``tests/library/test_extremes.py`` and
-``tests/library/test_control_ranges.py`` check too. Writes ``benchmarks/results/robustness.md`` and
-``benchmarks/results/robustness_controls.md`` (the control sweep and autocast, alone with ``--controls``).
+``tests/library/test_control_ranges.py`` check too. Writes ``robustness.md`` and ``robustness_controls.md`` (the control
+sweep and autocast, alone with ``--controls``) to ``--out`` (default benchmarks/out; the committed ones with
+``--out benchmarks/results``).
 
-    PYTHONPATH=. .venv/bin/python benchmarks/robustness.py [--controls | --fuzz]
+    PYTHONPATH=. .venv/bin/python benchmarks/robustness.py [--controls | --fuzz] [--out DIR]
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ sys.path.insert(0, str(ROOT))
 import torchgrade as tg  # noqa: E402
 import torchgrade.base.stage  # noqa: E402
 from benchmarks.bench_cube_read import timed_read  # noqa: E402
-from benchmarks.common import EXR_DIR  # noqa: E402
+from benchmarks.common import EXR_DIR, argument_parser, write_markdown  # noqa: E402
 from benchmarks.fuzz import DEFECTS_FREE, FAMILIES  # noqa: E402
 from torchgrade.testing.catalog import STAGE_KINDS  # noqa: E402
 from torchgrade.testing.extremes import extreme_inputs  # noqa: E402
@@ -70,8 +71,10 @@ def number_controls(module) -> dict:
     return {name: c for name, c in table.items() if c.kind == "number"}
 
 
-SWEPT = {name: kind.build for name, kind in STAGE_KINDS.items() if number_controls(kind.build())}
-"""The stages with number controls (ACES 2.0's ``peak_luminance`` included: it takes plain numbers)."""
+def swept_stages() -> dict:
+    """The stages with number controls (ACES 2.0's ``peak_luminance`` included: it takes plain numbers), ``{name: build}``;
+    built on demand, not at import (building every stage takes seconds)."""
+    return {name: kind.build for name, kind in STAGE_KINDS.items() if number_controls(kind.build())}
 
 
 def sweep_image() -> torch.Tensor:
@@ -115,7 +118,7 @@ def sweep_counts(make) -> tuple[int, int, int, int]:
 
 def sweep_table() -> list[str]:
     rows = ["| module | settings run | refused (cross-control rule) | non-finite outputs | non-finite gradients |", "| --- | --- | --- | --- | --- |"]
-    for name, make in tqdm(SWEPT.items(), desc="control sweep"):
+    for name, make in tqdm(swept_stages().items(), desc="control sweep"):
         rows.append(f"| {name} | " + " | ".join(map(str, sweep_counts(make))) + " |")
     return rows
 
@@ -211,22 +214,25 @@ def inputs_report() -> list[str]:
     ]
 
 
-def write(name: str, lines: list[str]) -> None:
-    out = ROOT / "benchmarks" / "results" / name
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
-
-
-def main() -> None:
+def main(argv=None) -> None:
     """The full report (robustness.md and robustness_controls.md); ``--controls`` writes only the second (a minute),
     ``--fuzz`` only the fuzzing counts (robustness_fuzz.md, a few minutes)."""
-    if "--fuzz" in sys.argv[1:]:
+    parser = argument_parser(__doc__)
+    only = parser.add_mutually_exclusive_group()
+    only.add_argument("--controls", action="store_true", help="only the control sweep and autocast (robustness_controls.md)")
+    only.add_argument("--fuzz", action="store_true", help="only the fuzzing counts (robustness_fuzz.md)")
+    args = parser.parse_args(argv)
+
+    def write(name: str, lines: list) -> None:
+        write_markdown(args.out, name, lines)
+        print("\n".join(lines))
+
+    if args.fuzz:
         write("robustness_fuzz.md", [f"{FUZZED_FILES} mutations of each family (`benchmarks/fuzz.py`, seed 0):", "",
                                      *fuzz_report(FUZZED_FILES), "", "Command: `PYTHONPATH=. .venv/bin/python benchmarks/robustness.py --fuzz`"])
         return
     write("robustness_controls.md", controls_report())
-    if "--controls" not in sys.argv[1:]:
+    if not args.controls:
         write("robustness.md", inputs_report())
 
 

@@ -1,12 +1,14 @@
 """The suite's measurements: each row's accuracy on the scenes, its speed and peak memory at 1920×1080, and scaling.
 
-Accuracy pools the scenes against the float64 look (8-bit sRGB code errors, mean ΔE2000 on sampled pixels);
-speed is the median of interleaved runs (:func:`benchmarks.common.median_ms`). Part of
+Accuracy pools the scenes against the float64 look (8-bit sRGB code errors, mean ΔE2000 on sampled pixels).
+Speed times every row and baseline in one session, alternated (each round runs each once,
+:func:`benchmarks.common.interleaved_ms`): medians, and ratios as medians of each round's ratio. Part of
 ``.venv/bin/python benchmarks/run.py [--quick] [--out DIR]``.
 """
 
 from __future__ import annotations
 
+import statistics
 from typing import Callable, Optional
 
 import numpy as np
@@ -16,7 +18,7 @@ from tqdm import tqdm
 import torchgrade as tg
 from benchmarks import common, metrics
 from benchmarks.suite import workload
-from benchmarks.suite.methods import PEER, Method, lut_name, method_rows
+from benchmarks.suite.methods import DEFAULT_SHAPER, PEER, Method, lut_name, method_rows
 from benchmarks.suite.workload import Workload, as_strip
 
 
@@ -39,27 +41,21 @@ def accuracy(work: Workload, method: Method) -> dict:
     return summary
 
 
-def speed(work: Workload, method: Method) -> float:
-    timed = {method.name: method.timed_call(timing_input(work, method))}
-    return common.median_ms(timed, work.plan.runs, sync=common.synchronizer(work.plan.device))[method.name]
-
-
 def measure_row(work: Workload, name: str, build: Callable[[], Method]):
-    """Build and measure one row; a row that fails records its error instead of stopping the run."""
+    """Build one row and measure its accuracy; a row that fails records its error instead of stopping the run."""
     try:
         method = build()
         record = {"method": name, "family": method.family, "dtype": str(method.dtype).replace("torch.", ""),
                   "timed": "whole look" if method.whole_look else "per-pixel stage",
                   "device": "cpu" if method.host else work.plan.device.type, **method.info}
         record.update(accuracy(work, method))
-        record["ms"] = speed(work, method)
         return method, record
     except Exception as error:  # noqa: BLE001 — e.g. torch.compile without a working compiler
         return None, {"method": name, "error": f"{type(error).__name__}: {str(error).splitlines()[0] if str(error) else ''}"}
 
 
 def measure_rows(work: Workload) -> tuple:
-    """Accuracy and speed of every row, with a progress bar; returns the built methods and their records."""
+    """Accuracy of every row, with a progress bar; returns the built methods and their records."""
     methods, records = {}, []
     bar = tqdm(method_rows(work), desc="rows", unit="row")
     for name, build in bar:
@@ -71,28 +67,41 @@ def measure_rows(work: Workload) -> tuple:
     return methods, records
 
 
-def baselines(work: Workload) -> dict:
+COPY, BLOOM, BLOOM64 = "plain frame copy", "bloom float32", "bloom float64"
+
+
+def baseline_calls(work: Workload) -> dict:
     """Timed-only references: the plain frame copy (the memory floor) and bloom, which every look adds."""
-    frame = work.frame
-    calls = {
-        "plain frame copy": lambda: frame.clone(),
-        "bloom float32": lambda: work.look.bloom(frame),
-        "bloom float64": lambda: work.look.bloom(work.frame.double()),
-    }
-    return common.median_ms(calls, work.plan.runs, sync=common.synchronizer(work.plan.device))
+    frame, frame64 = work.frame, work.frame.double()
+    return {COPY: lambda: frame.clone(), BLOOM: lambda: work.look.bloom(frame), BLOOM64: lambda: work.look.bloom(frame64)}
 
 
-def add_ratios(records: list, base: dict) -> None:
-    """ms per megapixel at 1920×1080, and ratios to the frame copy and (per-pixel rows) to OpenColorIO."""
+def time_rows(work: Workload, methods: dict) -> dict:
+    """ms of every round, ``{name: [ms, ...]}``, of the baselines and every built row, all alternated in one session.
+
+    Timed apart, each row met its own machine load: on a shared machine the whole look once came out faster than
+    its own per-pixel part. Alternated, a load change hits every row in the same rounds.
+    """
+    calls = baseline_calls(work)
+    calls.update({name: method.timed_call(timing_input(work, method)) for name, method in methods.items()})
+    print(f"timing {len(calls)} rows and baselines, alternated, {work.plan.runs} rounds after a warm-up", flush=True)
+    return common.interleaved_ms(calls, work.plan.runs, sync=common.synchronizer(work.plan.device))
+
+
+def add_speed(records: list, times: dict) -> dict:
+    """ms, ms per megapixel at 1920×1080, and ratios to the frame copy and (per-pixel rows) to OpenColorIO, from
+    :func:`time_rows`; returns the baselines' median ms."""
     megapixels = workload.FRAME[0] * workload.FRAME[1] / 1e6
-    peer = next((r["ms"] for r in records if r["method"] == PEER and "ms" in r), None)
     for record in records:
-        if "ms" not in record:
+        name = record["method"]
+        if name not in times:
             continue
+        record["ms"] = statistics.median(times[name])
         record["ms_per_megapixel"] = record["ms"] / megapixels
-        record["ratio_to_copy"] = record["ms"] / base["plain frame copy"]
+        record["ratio_to_copy"] = common.median_ratio(times, name, COPY)
         per_pixel = record["timed"] == "per-pixel stage"
-        record["ratio_to_opencolorio"] = record["ms"] / peer if peer and per_pixel else None
+        record["ratio_to_opencolorio"] = common.median_ratio(times, name, PEER) if PEER in times and per_pixel else None
+    return {name: statistics.median(times[name]) for name in (COPY, BLOOM, BLOOM64)}
 
 
 def peak_memory(work: Workload, method: Method) -> Optional[float]:
@@ -114,9 +123,9 @@ def record_peak_memory(work: Workload, methods: dict, records: list) -> None:
 
 
 def scaling(work: Workload) -> list:
-    """ms and ms per megapixel of the direct float32 and 33³ LogC tetrahedral stages by resolution and by batch."""
-    lut = work.lut(33, "logc")
-    paths = {"direct float32": work.per_pixel, lut_name(33, "logc", "tetrahedral"): lambda x: lut(x, "tetrahedral")}
+    """ms and ms per megapixel of the direct float32 and 33³ default-lattice tetrahedral stages by resolution and by batch."""
+    lut = work.lut(33, DEFAULT_SHAPER)
+    paths = {"direct float32": work.per_pixel, lut_name(33, DEFAULT_SHAPER, "tetrahedral"): lambda x: lut(x, "tetrahedral")}
     shapes = [("resolution", 1, h, w) for h, w in work.plan.resolutions]
     shapes += [("batch", b, workload.BATCH_SIDE, workload.BATCH_SIDE) for b in workload.BATCHES]
     sync = common.synchronizer(work.plan.device)
@@ -128,3 +137,18 @@ def scaling(work: Workload) -> list:
             points.append({"path": path, "kind": kind, "batch": batch, "height": height, "width": width, "ms": ms,
                            "ms_per_megapixel": ms / (batch * height * width / 1e6)})
     return points
+
+
+WHOLE_LOOK, PER_PIXEL = "direct float32, whole look", "direct float32"
+
+
+def whole_look_check(times: dict) -> Optional[dict]:
+    """The eager whole look against its parts timed in the same rounds: median ms of each, and the median over
+    rounds of whole look / (bloom + per-pixel stage), which should not fall below 1. None if a part is missing."""
+    names = (WHOLE_LOOK, PER_PIXEL, BLOOM)
+    if not all(name in times for name in names):
+        return None
+    whole, per_pixel, bloom = (times[name] for name in names)
+    ratio = statistics.median(w / (p + b) for w, p, b in zip(whole, per_pixel, bloom))
+    return {"whole_look_ms": statistics.median(whole), "per_pixel_ms": statistics.median(per_pixel),
+            "bloom_ms": statistics.median(bloom), "whole_over_parts": ratio}

@@ -21,8 +21,10 @@ import torchgrade as tg
 from benchmarks.common import ocio_apply, ocio_in_place, ocio_processor
 from benchmarks.suite.workload import LOOK, Workload, float32_lut
 
-LUT_SIZES = (9, 17, 33, 65)
-SHAPERS = ("linear", "logc")
+DEFAULT_SHAPER = "logc_hdr"
+"""The lattice ``PostFX.to_lut`` and ``bake_lut(shaper="auto")`` give an HDR look (LogC, then a tail to 65504)."""
+HDR_UNUSABLE = "linear"
+"""The shaper whose lattice clips everything above 1: its rows are kept in the table, never offered for HDR."""
 INTERPOLATIONS = ("trilinear", "tetrahedral")
 FITTED_SIZES = (33, 65)
 """Sizes also baked with the lattice reaching the scenes' brightest pixel (tetrahedral rows)."""
@@ -71,8 +73,8 @@ def fitted_lut_name(size: int) -> str:
     return f"LUT {size}³ logc tetrahedral, domain fitted to the scenes"
 
 
-def lut_keys() -> list:
-    return [(size, shaper, interpolation) for size in LUT_SIZES for shaper in SHAPERS for interpolation in INTERPOLATIONS]
+def lut_keys(sizes, shapers) -> list:
+    return [(size, shaper, interpolation) for size in sizes for shaper in shapers for interpolation in INTERPOLATIONS]
 
 
 def lut_rows(work: Workload) -> list:
@@ -87,12 +89,12 @@ def lut_rows(work: Workload) -> list:
         info = {"lut_size": size, "shaper": "logc", "interpolation": "tetrahedral", "domain_top_linear": round(top, 1)}
         return Method(fitted_lut_name(size), "lut", lambda x: lut(x, "tetrahedral"), info=info)
 
-    rows = [(lut_name(*key), functools.partial(build, *key)) for key in lut_keys()]
+    rows = [(lut_name(*key), functools.partial(build, *key)) for key in lut_keys(work.plan.lut_sizes, work.plan.shapers)]
     return rows + [(fitted_lut_name(size), functools.partial(build_fitted, size)) for size in FITTED_SIZES]
 
 
 def compile_rows(work: Workload) -> list:
-    """``torch.compile`` of the direct float32 stage and of the 33³ LogC lookups; compile time = first call at 1080p."""
+    """``torch.compile`` of the direct float32 stage and of the 33³ default-lattice lookups; compile time = first call at 1080p."""
 
     def build(name, module, interpolation=None):
         apply = (lambda x: module(x, interpolation)) if interpolation else module
@@ -105,9 +107,9 @@ def compile_rows(work: Workload) -> list:
 
     rows = [("torch.compile direct float32", lambda: build("torch.compile direct float32", torch.compile(work.per_pixel)))]
     for interpolation in INTERPOLATIONS:
-        name = f"torch.compile {lut_name(33, 'logc', interpolation)}"
+        name = f"torch.compile {lut_name(33, DEFAULT_SHAPER, interpolation)}"
         rows.append((name, functools.partial(
-            lambda n, i: build(n, float32_lut(work.lut(33, "logc"), compile=True), i), name, interpolation)))
+            lambda n, i: build(n, float32_lut(work.lut(33, DEFAULT_SHAPER), compile=True), i), name, interpolation)))
     return rows
 
 
@@ -150,10 +152,10 @@ def onnx_rows(work: Workload) -> list:
         ("onnxruntime direct float32", lambda: onnx_method("onnxruntime direct float32", per_pixel, folder / "direct.onnx")),
         ("onnxruntime whole look", lambda: onnx_method("onnxruntime whole look", look, folder / "look.onnx", whole_look=True)),
     ]
-    for interpolation in INTERPOLATIONS:
-        name = f"onnxruntime {lut_name(33, 'logc', interpolation)}"
+    for interpolation in work.plan.onnx_lut_interpolations:
+        name = f"onnxruntime {lut_name(33, DEFAULT_SHAPER, interpolation)}"
         rows.append((name, functools.partial(
-            lambda n, i: onnx_method(n, tg.PostFX(lut=work.lut(33, "logc"), interpolation=i), folder / f"lut_{i}.onnx"),
+            lambda n, i: onnx_method(n, tg.PostFX(lut=work.lut(33, DEFAULT_SHAPER), interpolation=i), folder / f"lut_{i}.onnx"),
             name, interpolation)))
     return rows
 
@@ -170,8 +172,9 @@ def opencolorio_method(work: Workload, size: int, shaper: str, interpolation: st
 
 
 def opencolorio_rows(work: Workload) -> list:
+    keys = lut_keys(work.plan.opencolorio_sizes, work.plan.shapers)
     return [(f"OpenColorIO {size}³ {shaper} {interpolation}", functools.partial(opencolorio_method, work, size, shaper, interpolation))
-            for size, shaper, interpolation in lut_keys()]
+            for size, shaper, interpolation in keys]
 
 
 def method_rows(work: Workload) -> list:

@@ -1,4 +1,5 @@
-"""The suite's report: the markdown table of every row, the speed-vs-accuracy (Pareto) plot and the scaling plot.
+"""The suite's report: the markdown table of every row, advice computed from it, the warnings the run raised,
+the speed-vs-accuracy (Pareto) plot and the scaling plot.
 
 Part of ``.venv/bin/python benchmarks/run.py [--quick] [--out DIR]``, which writes ``results.md``,
 ``pareto.png`` and ``scaling.png`` with these beside ``results.json``.
@@ -6,17 +7,17 @@ Part of ``.venv/bin/python benchmarks/run.py [--quick] [--out DIR]``, which writ
 
 from __future__ import annotations
 
-import os
-import platform
+from collections import Counter
 from pathlib import Path
 
-import torch
-
 from benchmarks.suite import workload
-from benchmarks.suite.methods import PEER
+from benchmarks.suite.methods import DEFAULT_SHAPER, HDR_UNUSABLE, PEER, lut_name
 
 ERROR_FLOOR = 1e-3
 """Errors below this (the float64 reference's 0) are drawn at it on the log axis."""
+EXACT_CODES = 1.0
+"""An error (8-bit sRGB codes) a row may reach and still count as the look: training asks it of the max, serving
+and baking of the 99.9th percentile."""
 
 
 def fmt(value, digits: int = 2) -> str:
@@ -25,6 +26,8 @@ def fmt(value, digits: int = 2) -> str:
 
 def row_note(record: dict) -> str:
     notes = []
+    if record.get("shaper") == HDR_UNUSABLE:
+        notes.append("clips above 1: unusable for HDR")
     if "domain_top_linear" in record:
         notes.append(f"lattice up to linear {record['domain_top_linear']:g}")
     if "compile_s" in record:
@@ -47,33 +50,110 @@ def markdown_table(records: list) -> str:
     return "\n".join(lines)
 
 
-def markdown(report: dict) -> str:
+def timed(records: list, keep) -> list:
+    """The records with a time that ``keep(record)`` accepts."""
+    return [r for r in records if "ms" in r and keep(r)]
+
+
+def fastest(records: list, keep):
+    return min(timed(records, keep), key=lambda r: r["ms"], default=None)
+
+
+def summary(record: dict) -> str:
+    return (f"{record['method']} ({record['ms_per_megapixel']:.1f} ms/MP, p99.9 {record['p999_error_8bit']:.2f}, "
+            f"max {record['max_error_8bit']:.2f} codes)")
+
+
+def per_pixel(record: dict) -> bool:
+    return record["timed"] == "per-pixel stage"
+
+
+def training_advice(records: list) -> str:
+    """The fastest PyTorch per-pixel stage within :data:`EXACT_CODES` of float64 everywhere (gradients reach the controls)."""
+    torch_rows = lambda r: per_pixel(r) and r["family"] in ("direct", "torch.compile")  # noqa: E731
+    exact = fastest(records, lambda r: torch_rows(r) and r["max_error_8bit"] <= EXACT_CODES)
+    quickest = fastest(records, torch_rows)
+    if exact is None:
+        return "Training augmentation: no PyTorch row stayed within 1 code of float64."
+    line = f"Training augmentation: {summary(exact)}"
+    if quickest is not exact:
+        line += f"; {quickest['method']} takes {quickest['ms'] / exact['ms']:.2f}× its time but is up to {quickest['max_error_8bit']:.1f} codes off"
+    return line + "."
+
+
+def serving_advice(records: list, baselines: dict) -> str:
+    """The fastest per-pixel stage of any runtime within :data:`EXACT_CODES` at p99.9, and what the fastest HDR-capable row gives up."""
+    exact = fastest(records, lambda r: per_pixel(r) and r["p999_error_8bit"] <= EXACT_CODES)
+    quickest = min(hdr_choices(records), key=lambda r: r["ms"], default=None)
+    bloom = f"plus live bloom ({baselines['bloom float32'] / (workload.FRAME[0] * workload.FRAME[1] / 1e6):.1f} ms/MP)"
+    if exact is None:
+        return f"Serving: no row stayed within 1 code at p99.9; the fastest is {summary(quickest)}, {bloom}."
+    line = f"Serving: {summary(exact)}, {bloom}"
+    if quickest is not exact:
+        line += f"; {quickest['method']} takes {quickest['ms'] / exact['ms']:.2f}× its time at p99.9 {quickest['p999_error_8bit']:.2f} codes"
+    return line + "."
+
+
+def baking_advice(records: list) -> str:
+    """The most accurate HDR-capable LUT row (p99.9, then time), against the default lattice at the default size."""
+    luts = timed(records, lambda r: r["family"] == "lut" and r.get("shaper") != HDR_UNUSABLE)
+    if not luts:
+        return "Baking a LUT: no LUT row was measured."
+    best = min(luts, key=lambda r: (r["p999_error_8bit"], r["ms"]))
+    default = next((r for r in luts if r["method"] == lut_name(33, DEFAULT_SHAPER, "tetrahedral")), None)
+    line = f"Baking a LUT: {summary(best)}"
+    if default is not None and default is not best:
+        line += f"; the default ({DEFAULT_SHAPER}, 33³ tetrahedral): p99.9 {default['p999_error_8bit']:.2f}, max {default['max_error_8bit']:.2f} codes"
+    return line + "."
+
+
+def advice(records: list, baselines: dict) -> list:
+    """One line per use (training, serving, baking), computed from this run's records."""
+    return [training_advice(records), serving_advice(records, baselines), baking_advice(records)]
+
+
+def warning_records(caught: list) -> list:
+    """Warnings caught by ``warnings.catch_warnings(record=True)``, one entry per distinct message with its count."""
+    counts = Counter((w.category.__name__, str(w.message)) for w in caught)
+    return [{"category": category, "message": message, "count": count} for (category, message), count in counts.items()]
+
+
+def check_line(check) -> str:
+    if check is None:
+        return "Check: the whole-look or per-pixel float32 row was not timed."
+    return (f"Check: the eager whole look took {check['whole_look_ms']:.0f} ms, its parts bloom {check['bloom_ms']:.0f} ms + "
+            f"per-pixel stage {check['per_pixel_ms']:.0f} ms; per round, whole look / parts = {check['whole_over_parts']:.2f} (median)"
+            + (": below 1, so this run's timings are not to be trusted." if check["whole_over_parts"] < 1 else "."))
+
+
+def markdown(report: dict) -> list:
+    """The report as markdown lines: method, table, check, advice, warnings."""
     megapixels = workload.FRAME[0] * workload.FRAME[1] / 1e6
     base = ", ".join(f"{name} {ms / megapixels:.1f} ms/MP" for name, ms in report["baselines"].items())
-    m = report["machine"]
-    return "\n".join([
+    warned = [f"- {w['category']} ×{w['count']}: {w['message']}" for w in report["warnings"]] or ["none"]
+    return [
         f"# torchgrade benchmark ({'quick' if report['quick'] else 'full'}, {report['device']})",
         "",
-        f"`{report['command']}` — {m['cpu_count']} CPUs, {m['torch_threads']} torch threads, torch {m['torch']}, "
-        f"onnxruntime {m['onnxruntime']}, OpenColorIO {m['opencolorio']}; {report['wall_s']:.0f} s in all.",
+        f"`{report['command']}` — {report['wall_s']:.0f} s in all.",
         "",
-        "Speed: the timed part of each row on a 1920×1080 frame, median of "
-        f"{report['runs']} runs; × copy and × OCIO are ratios to a plain frame copy and to {PEER}, measured in this run. "
+        "Speed: the timed part of each row on a 1920×1080 frame, every row and baseline alternated in one session, median of "
+        f"{report['runs']} rounds; × copy and × OCIO are medians of each round's ratio to a plain frame copy and to {PEER}. "
         f"Per-pixel rows exclude bloom, which every look adds: {base}.",
         f"Accuracy: the whole look on {', '.join(report['scenes'])} against the float64 look; "
         f"ΔE2000 over {report['delta_e_samples']} sampled pixels. Peak MiB: memory the timed part adds at 1920×1080.",
         "",
         markdown_table(report["rows"]),
         "",
-    ])
-
-
-def machine() -> dict:
-    import onnxruntime
-    import PyOpenColorIO as OCIO
-
-    return {"cpu_count": os.cpu_count(), "torch_threads": torch.get_num_threads(), "torch": torch.__version__,
-            "onnxruntime": onnxruntime.__version__, "opencolorio": OCIO.__version__, "platform": platform.platform()}
+        check_line(report["check"]),
+        "",
+        "## Which method for which use (from this run)",
+        "",
+        *[f"- {line}" for line in report["advice"]],
+        "",
+        "## Warnings raised during the run",
+        "",
+        *warned,
+    ]
 
 
 def family_colours() -> dict:
@@ -107,15 +187,25 @@ def _save(fig, path: Path) -> None:
     _pyplot().close(fig)
 
 
+def hdr_choices(records: list) -> list:
+    """The rows the Pareto plot offers: timed per-pixel rows, without linear-shaper LUTs (they clip HDR input)."""
+    return timed(records, lambda r: per_pixel(r) and r.get("shaper") != HDR_UNUSABLE)
+
+
 def plot_pareto(records: list, path: Path) -> None:
+    """:func:`hdr_choices` by time and error, the Pareto front labelled, default-lattice LUTs drawn as diamonds."""
     fig, ax = _pyplot().subplots(figsize=(9, 6), dpi=90)
-    points = []
+    points, choices = [], hdr_choices(records)
     for family, colour in family_colours().items():
-        rows = [r for r in records if r.get("family") == family and r.get("timed") == "per-pixel stage" and "ms" in r]
-        xs = [r["ms_per_megapixel"] for r in rows]
-        ys = [max(r["p999_error_8bit"], ERROR_FLOOR) for r in rows]
-        ax.scatter(xs, ys, s=22, color=colour, label=family, alpha=0.8)
-        points += [(x, y, r["method"]) for x, y, r in zip(xs, ys, rows)]
+        rows = [r for r in choices if r["family"] == family]
+        for default in (False, True):
+            drawn = [r for r in rows if (r.get("shaper") == DEFAULT_SHAPER) == default]
+            xs = [r["ms_per_megapixel"] for r in drawn]
+            ys = [max(r["p999_error_8bit"], ERROR_FLOOR) for r in drawn]
+            label = f"{family}, default lattice ({DEFAULT_SHAPER})" if default else family
+            ax.scatter(xs, ys, s=40 if default else 22, color=colour, marker="D" if default else "o",
+                       edgecolors="black" if default else "none", label=label if drawn else None, alpha=0.8)
+            points += [(x, y, r["method"]) for x, y, r in zip(xs, ys, drawn)]
     front = pareto_front(points)
     ax.plot([p[0] for p in front], [p[1] for p in front], color="black", lw=1, ls="--", label="Pareto front")
     for rank, (ms, error, name) in enumerate(front):  # staggered: front points often share an error
@@ -124,7 +214,7 @@ def plot_pareto(records: list, path: Path) -> None:
     ax.set_yscale("log")
     ax.set_xlabel("per-pixel stage, ms per megapixel at 1920×1080 (log)")
     ax.set_ylabel(f"whole look, 99.9th percentile error, 8-bit sRGB codes (log; 0 drawn at {ERROR_FLOOR})")
-    ax.set_title("Speed vs accuracy of the look's per-pixel stage")
+    ax.set_title(f"Speed vs accuracy of the look's per-pixel stage (HDR-capable rows; no {HDR_UNUSABLE}-shaper LUT)")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     _save(fig, path)

@@ -30,6 +30,9 @@ FRAME = (1080, 1920)
 RESOLUTIONS = ((256, 256), (512, 512), (1024, 1024), (1080, 1920), (2160, 3840))
 BATCHES = (1, 2, 4, 8)
 BATCH_SIDE = 512
+QUICK_RUNS = 7
+"""Rounds timed under ``--quick``: enough for every ratio of two runs to agree within 20 % on a shared
+2-core machine (benchmarks/results/quick_stability.md)."""
 
 
 @dataclass(frozen=True)
@@ -45,25 +48,30 @@ class Plan:
     delta_e_samples: int
     resolutions: tuple
     compile: bool
+    lut_sizes: tuple = (9, 17, 33, 65)
+    shapers: tuple = ("linear", "logc", "logc_hdr")
+    opencolorio_sizes: tuple = (9, 17, 33, 65)
+    onnx_lut_interpolations: tuple = ("trilinear", "tetrahedral")
+    peak_memory: bool = True
 
     @classmethod
     def from_args(cls, args) -> "Plan":
-        quick = args.quick
-        default_out = ROOT / "benchmarks" / "results" / ("quick" if quick else "full")
-        return cls(
-            quick=quick,
-            device=torch.device(args.device),
-            out=Path(args.out) if args.out else default_out,
-            runs=2 if quick else 5,
-            scaling_runs=3,
-            accuracy_side=400 if quick else None,
-            delta_e_samples=20_000 if quick else 200_000,
-            resolutions=RESOLUTIONS[:-1] if quick else RESOLUTIONS,
-            compile=not quick,
-        )
+        """The full plan, or with ``--quick``: the LUT rows a choice hangs on (33³ and 65³, LogC and the default
+        lattice; OpenColorIO at 33³; onnxruntime tetrahedral only), smaller accuracy images, scaling up to 1024²,
+        no ``torch.compile``, no peak memory."""
+        device, out = torch.device(args.device), Path(args.out)
+        if not args.quick:
+            return cls(quick=False, device=device, out=out, runs=11, scaling_runs=5, accuracy_side=None,
+                       delta_e_samples=200_000, resolutions=RESOLUTIONS, compile=True)
+        return cls(quick=True, device=device, out=out, runs=QUICK_RUNS, scaling_runs=3, accuracy_side=400,
+                   delta_e_samples=20_000, resolutions=RESOLUTIONS[:3], compile=False, lut_sizes=(33, 65),
+                   shapers=("logc", "logc_hdr"), opencolorio_sizes=(33,), onnx_lut_interpolations=("tetrahedral",),
+                   peak_memory=False)
 
     def command(self) -> str:
-        return ".venv/bin/python benchmarks/run.py" + (" --quick" if self.quick else "") + f" --device {self.device.type}"
+        out = self.out.resolve()
+        shown = out.relative_to(ROOT) if out.is_relative_to(ROOT) else out
+        return f".venv/bin/python benchmarks/run.py{' --quick' if self.quick else ''} --device {self.device.type} --out {shown}"
 
 
 def downscale(image: torch.Tensor, max_side: Optional[int]) -> torch.Tensor:

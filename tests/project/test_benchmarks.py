@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import importlib
+import json
+import os
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +15,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
+import torchgrade as tg  # noqa: E402
 from benchmarks import common, lut_floor, metrics  # noqa: E402
 from benchmarks.suite import measure, methods, report, workload  # noqa: E402
 from torchgrade.color import linear_to_logc, srgb_to_linear  # noqa: E402
@@ -101,7 +106,7 @@ def row(work, name):
 
 def test_direct_float32_row_matches_the_reference(tiny_work):
     _, record = row(tiny_work, "direct float32")
-    assert record["max_error_8bit"] < 0.1 and record["mean_delta_e2000"] < 0.01 and record["ms"] > 0
+    assert record["max_error_8bit"] < 0.1 and record["mean_delta_e2000"] < 0.01
 
 
 def test_opencolorio_applies_the_same_lut_as_torchgrade(tiny_work):
@@ -121,17 +126,151 @@ def test_failing_row_records_its_error(tiny_work):
 
 
 def test_report_and_plots(tiny_work, tmp_path):
-    _, record = row(tiny_work, methods.lut_name(9, "linear", "trilinear"))
+    _, record = row(tiny_work, methods.lut_name(9, "logc_hdr", "trilinear"))
     records = [record, {"method": "broken", "error": "RuntimeError: x"}]
-    measure.add_ratios(records, {"plain frame copy": 1.0})
-    assert record["ratio_to_copy"] == record["ms"] and record["ratio_to_opencolorio"] is None
     assert "failed: RuntimeError: x" in report.markdown_table(records)
+    measure.add_speed(records, {record["method"]: [2.0], measure.COPY: [1.0], measure.BLOOM: [1.0], measure.BLOOM64: [1.0]})
     report.plot_pareto(records, tmp_path / "pareto.png")
     points = measure.scaling(tiny_work)
     report.plot_scaling(points, tmp_path / "scaling.png")
-    assert {p["path"] for p in points} == {"direct float32", methods.lut_name(33, "logc", "tetrahedral")}
+    assert {p["path"] for p in points} == {"direct float32", methods.lut_name(33, methods.DEFAULT_SHAPER, "tetrahedral")}
     for name in ("pareto.png", "scaling.png"):
         assert 0 < (tmp_path / name).stat().st_size < 200_000
+
+
+def test_timer_alternates_and_rotates_the_calls():
+    order = []
+    calls = {name: (lambda name=name: order.append(name)) for name in "ABC"}
+    times = common.interleaved_ms(calls, runs=2, warmup=1)
+    assert "".join(order) == "ABCBCACAB" and {name: len(ms) for name, ms in times.items()} == {"A": 2, "B": 2, "C": 2}
+
+
+def test_ratios_are_medians_of_each_rounds_ratio():
+    """Rounds where the machine slowed everything 3x: each round's ratio is 2, while the ratio of the medians is not."""
+    times = {"row": [2.0, 6.0, 6.0, 2.0, 2.0], measure.COPY: [1.0, 3.0, 3.0, 1.0, 1.0], methods.PEER: [4.0, 4.0, 4.0, 4.0, 4.0],
+             measure.BLOOM: [1.0] * 5, measure.BLOOM64: [1.0] * 5}
+    records = [{"method": "row", "timed": "per-pixel stage"}, {"method": "not built", "error": "x"}]
+    base = measure.add_speed(records, times)
+    assert records[0]["ms"] == 2.0 and records[0]["ratio_to_copy"] == 2.0 and records[0]["ratio_to_opencolorio"] == 0.5
+    assert base == {measure.COPY: 1.0, measure.BLOOM: 1.0, measure.BLOOM64: 1.0} and "ms" not in records[1]
+
+
+def test_whole_look_check_flags_a_look_faster_than_its_parts():
+    times = {measure.WHOLE_LOOK: [10.0, 12.0, 30.0], measure.PER_PIXEL: [8.0, 9.0, 20.0], measure.BLOOM: [3.0, 3.0, 9.0]}
+    check = measure.whole_look_check(times)
+    assert check["whole_over_parts"] == pytest.approx(1.0) and check["whole_look_ms"] == 12.0  # rounds: 10/11, 12/12, 30/29
+    assert "not to be trusted" in report.check_line(measure.whole_look_check({**times, measure.WHOLE_LOOK: [5.0, 5.0, 5.0]}))
+    assert "not to be trusted" not in report.check_line({**check, "whole_over_parts": 1.1})
+    assert measure.whole_look_check({measure.PER_PIXEL: [1.0]}) is None
+
+
+def record_of(method, family, ms, p999, largest, shaper=None, timed="per-pixel stage"):
+    megapixels = workload.FRAME[0] * workload.FRAME[1] / 1e6
+    return {"method": method, "family": family, "timed": timed, "ms": ms, "ms_per_megapixel": ms / megapixels,
+            "p999_error_8bit": p999, "max_error_8bit": largest, **({"shaper": shaper} if shaper else {})}
+
+
+def test_advice_follows_the_measured_numbers():
+    default = methods.lut_name(33, methods.DEFAULT_SHAPER, "tetrahedral")
+    records = [record_of("direct float32", "direct", 100.0, 0.0, 0.2), record_of("direct float16", "direct", 60.0, 0.1, 9.0),
+               record_of("LUT 9³ linear tetrahedral", "lut", 5.0, 40.0, 150.0, shaper="linear"),
+               record_of(default, "lut", 20.0, 6.0, 12.0, shaper=methods.DEFAULT_SHAPER),
+               record_of("LUT 65³ logc tetrahedral", "lut", 25.0, 3.0, 40.0, shaper="logc")]
+    training, serving, baking = report.advice(records, {"bloom float32": 20.0})
+    assert training.startswith("Training augmentation: direct float32") and "direct float16 takes 0.60×" in training
+    assert serving.startswith("Serving: direct float16") and f"{default} takes 0.33×" in serving and "linear" not in serving
+    assert baking.startswith("Baking a LUT: LUT 65³ logc tetrahedral") and f"the default ({methods.DEFAULT_SHAPER}" in baking
+    records[0]["max_error_8bit"] = 2.0  # float32 no longer within a code: float64 would be needed, and none was timed
+    assert report.training_advice(records).startswith("Training augmentation: no PyTorch row")
+
+
+def test_pareto_plot_offers_no_linear_shaper_lut():
+    records = [record_of("LUT 33³ linear tetrahedral", "lut", 5.0, 40.0, 150.0, shaper="linear"),
+               record_of("OpenColorIO 33³ linear tetrahedral", "opencolorio", 5.0, 40.0, 150.0, shaper="linear"),
+               record_of("LUT 33³ logc_hdr tetrahedral", "lut", 6.0, 6.0, 12.0, shaper="logc_hdr"),
+               record_of("direct float32, whole look", "direct", 9.0, 0.0, 0.2, timed="whole look")]
+    assert [r["method"] for r in report.hdr_choices(records)] == ["LUT 33³ logc_hdr tetrahedral"]
+
+
+def test_the_default_lattice_is_the_librarys():
+    look = tg.PostFX.from_config(workload.LOOK)
+    assert look.to_lut(size=3).lut.shaper == methods.DEFAULT_SHAPER
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", tg.lut.LUTAccuracyWarning)
+        assert tg.bake_lut(look.per_pixel_stages(), size=3).shaper == methods.DEFAULT_SHAPER
+
+
+def test_warnings_are_counted_once_per_message():
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for _ in range(3):
+            warnings.warn("lattice too small", tg.lut.LUTAccuracyWarning)
+        warnings.warn("other", UserWarning)
+    assert report.warning_records(caught) == [{"category": "LUTAccuracyWarning", "message": "lattice too small", "count": 3},
+                                              {"category": "UserWarning", "message": "other", "count": 1}]
+
+
+def test_results_record_where_they_were_measured(tmp_path):
+    out = tmp_path / "out"
+    common.write_results(out, "tiny", {"rows": [1]}, ["| a |"], "cmd")
+    record = json.loads((out / "tiny.json").read_text())
+    env = record["environment"]
+    assert record["rows"] == [1] and env["device"] == "cpu" and env["torch_threads"] == torch.get_num_threads()
+    assert len(env["load_average"]) == 3 and env["cpu_count"] == os.cpu_count()
+    assert env["versions"]["torch"] == torch.__version__ and env["versions"]["torchgrade"] == tg.__version__
+    assert ("onnxruntime" in env["versions"]) == ("onnxruntime" in sys.modules)
+    assert (out / "tiny.md").read_text().splitlines()[-1].startswith("Measured on cpu")
+    assert not (common.RESULTS / "tiny.json").exists()
+
+
+def test_compare_runs_lists_every_ratio_both_runs_measured_and_its_spread():
+    from benchmarks import compare_runs
+
+    first = {"rows": [{"method": "a", "ratio_to_copy": 4.0, "ratio_to_opencolorio": None}, {"method": "only here", "ratio_to_copy": 1.0}],
+             "check": {"whole_over_parts": 1.1}}
+    second = {"rows": [{"method": "a", "ratio_to_copy": 5.0, "ratio_to_opencolorio": 2.0}], "check": {"whole_over_parts": 1.0}}
+    rows = compare_runs.ratio_rows(first, second)
+    assert [(r["method"], r["ratio"]) for r in rows] == [("a", "× copy"), ("eager whole look", "/ (bloom + per-pixel)")]
+    assert [r["spread"] for r in rows] == pytest.approx([0.25, 0.1])
+
+
+RESULT_SCRIPTS = sorted(path.stem for path in (common.ROOT / "benchmarks").glob("*.py")
+                        if "__main__" in path.read_text() and path.stem != "bench_cpu_paths")
+"""Every runnable benchmark but bench_cpu_paths, which prints its figures (``--json FILE`` on request) and imports
+only torchgrade, so that it runs under another checkout's ``PYTHONPATH``."""
+
+
+@pytest.mark.parametrize("script", RESULT_SCRIPTS)
+def test_every_benchmark_takes_out_and_defaults_away_from_the_committed_results(script, capsys):
+    module = importlib.import_module(f"benchmarks.{script}")
+    with pytest.raises(SystemExit) as exit_info:
+        module.main(["--help"])
+    assert exit_info.value.code == 0
+    usage = " ".join(capsys.readouterr().out.split())
+    assert "--out OUT" in usage and "default benchmarks/out" in usage
+
+
+def test_a_tiny_run_writes_to_out_only_and_collects_its_warnings(tmp_path, monkeypatch):
+    from benchmarks import run
+
+    for name, value in {"FRAME": (24, 32), "DEMO_SIZE": (24, 32), "BATCHES": (1,), "BATCH_SIDE": 8,
+                        "RESOLUTIONS": ((8, 8),) * 3, "QUICK_RUNS": 2}.items():
+        monkeypatch.setattr(workload, name, value)
+    monkeypatch.setattr(workload, "accuracy_scenes", lambda plan: {"demo scene": tg.scene.demo_scene(16, 24)})
+    kept = ("direct float32", "direct float32, whole look", methods.lut_name(33, "logc", "tetrahedral"), methods.PEER)
+    every_row = methods.method_rows
+    monkeypatch.setattr(measure, "method_rows", lambda work: [(n, b) for n, b in every_row(work) if n in kept])
+    before = sorted(common.RESULTS.rglob("*"))
+    results = run.main(["--quick", "--out", str(tmp_path)])
+    assert sorted(common.RESULTS.rglob("*")) == before
+    assert {p.name for p in tmp_path.iterdir()} == {"results.json", "results.md", "pareto.png", "scaling.png"}
+    written = json.loads((tmp_path / "results.json").read_text())
+    assert written["environment"]["device"] == "cpu" and written["runs"] == 2
+    assert set(written["rounds_ms"]) == {*kept, measure.COPY, measure.BLOOM, measure.BLOOM64}
+    assert all(len(ms) == 2 for ms in written["rounds_ms"].values())
+    assert {w["category"] for w in written["warnings"]} == {"LUTAccuracyWarning"}  # the 33³ bakes miss the look
+    assert [line.split(":")[0] for line in results["advice"]] == ["Training augmentation", "Serving", "Baking a LUT"]
+    assert results["check"]["whole_over_parts"] > 0
 
 
 @pytest.mark.parametrize("interpolation", ["trilinear", "tetrahedral"])
