@@ -11,7 +11,8 @@ error measured on the five natural sample images (CandleGlass, Carrots, Desk, Ga
 4th pixel of each (`STRIDE`) as the LUT receives it (after the look's exposure and bloom), in 8-bit sRGB codes
 against the look evaluated directly in float64. *Pooled*: the p99.9 over 16,384 pixels (`PIXELS`) drawn from each
 image (every image weighs the same). Ratio: report / pooled. The worst case (validation colours over the whole
-domain) is shown beside it. Writes ``benchmarks/results/lut_realistic.{md,json}``; about a minute on 2 cores.
+domain) is shown beside it. Writes ``lut_realistic.{md,json}`` to ``--out`` (default benchmarks/out; the committed ones
+with ``--out benchmarks/results``); about a minute on 2 cores.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import torchgrade as tg  # noqa: E402
-from benchmarks.common import sample_exr, write_results  # noqa: E402
+from benchmarks.common import argument_parser, sample_exr, write_results  # noqa: E402
 from torchgrade.lut import LUTAccuracyWarning, code_errors  # noqa: E402
 
 IMAGES = ("CandleGlass", "Carrots", "Desk", "Garden", "GoldenGate")
@@ -89,7 +90,8 @@ def measured(look: tg.PostFX, shaper: str, size: int, pixels: dict) -> dict:
             "pooled": quantile_999(pooled), "images": {name: quantile_999(e) for name, e in errors.items()}}
 
 
-def main() -> None:
+def main(argv=None) -> None:
+    out = argument_parser(__doc__).parse_args(argv).out
     torch.manual_seed(0)
     rows, lines = [], ["# A baked LUT's report on realistic colours against its error on the sample images", "",
                        __doc__.split("\n\n")[3].replace("\n", " ").replace("``", "`"), "",
@@ -111,7 +113,7 @@ def main() -> None:
               f"single images' p99.9 range from {min(min(r['images'].values()) / r['realistic'] for r in rows):.2f}x "
               f"to {max(max(r['images'].values()) / r['realistic'] for r in rows):.2f}x the report's figure. "
               f"The verdict (p99.9 within {TOLERANCE:g} code) agrees with the pooled images' in {agree} of {len(rows)}."]
-    write_results("lut_realistic", {"rows": rows}, lines, "PYTHONPATH=. .venv/bin/python benchmarks/lut_realistic.py")
+    write_results(out, "lut_realistic", {"rows": rows}, lines, "PYTHONPATH=. .venv/bin/python benchmarks/lut_realistic.py --out benchmarks/results")
 
 
 if __name__ == "__main__":

@@ -6,7 +6,8 @@
 ``torch.load(path, weights_only=True)`` (:data:`OLD_CLASS_PATHS`).
 
 Examples:
-    >>> import warnings
+    >>> import sys, warnings
+    >>> _ = sys.modules.pop("torchgrade.pipeline", None)  # as in a process that has not imported it yet
     >>> with warnings.catch_warnings(record=True) as caught:
     ...     warnings.simplefilter("always")
     ...     from torchgrade.pipeline import PostFX
@@ -40,7 +41,7 @@ MOVED = {
     "torchgrade.augment_saved": ("torchgrade.augment.saved",),
     "torchgrade.distributed": ("torchgrade.integrations.ray",),
     "torchgrade.catalog": ("torchgrade.testing.catalog",),
-    "torchgrade.lut.lut3d": ("torchgrade.lut.lookup", "torchgrade.lut.layer"),
+    "torchgrade.lut.lut3d": ("torchgrade.lut.apply", "torchgrade.lut.layer"),
 }
 """Each old module path and the modules its names now live in, searched in order."""
 

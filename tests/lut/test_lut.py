@@ -179,7 +179,7 @@ def test_compiled_lookup_matches_eager(interpolation):
 
 
 def test_compile_failure_falls_back_to_eager(monkeypatch):
-    import torchgrade.lut.lookup as lut_module
+    import torchgrade.lut.layer as lut_module  # where LUT3D looks compiled_lookup up
 
     def broken(*args):
         raise RuntimeError("no compiler")

@@ -7,7 +7,7 @@ import torch
 
 from torchgrade.base.core import sanitize
 from torchgrade.lut import KERNELS, LUT3D, chunked_lookup, identity_table, lattice, lattice_unit, lookup, planar_table
-from torchgrade.lut.lookup import _LatticeCoordinates
+from torchgrade.lut.apply import _LatticeCoordinates
 
 MAX_SIZE = KERNELS["tetrahedral"].eager.max_size
 

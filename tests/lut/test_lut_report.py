@@ -275,7 +275,7 @@ def test_the_reports_realistic_figure_predicts_the_error_on_the_sample_images(ex
 
     config, shaper = README_LOOKS[name]
     if isinstance(config, str):
-        config = Path(__file__).resolve().parents[1] / config
+        config = Path(__file__).resolve().parents[2] / config
     look = tg.PostFX.from_config(config).eval()
     transform = look.per_pixel_stages()
     generator = torch.Generator().manual_seed(0)

@@ -53,7 +53,7 @@ gradient of -250 on the H200). TF32 is switched off for the comparison: it is th
 DISPLAY_SIGNALS = ("display-",)
 """Cases whose output is an encoded display signal in [0, 1]: compared as codes of that signal."""
 
-DISPLAY_LINEAR = ("tonemap-", "postfx", "random-postfx", "lut-", "dither", "match-")
+DISPLAY_LINEAR = ("tonemap-", "postfx", "random-postfx", "lut-", "look-lut", "dither", "match-")
 """Cases whose output is display-linear light: compared after the sRGB encoding. Every other case is scene-referred
 and is viewed through the neutral tone mapper first."""
 
@@ -150,8 +150,10 @@ def _cases() -> dict:
         "convolution-bloom-export": lambda: tg.ConvolutionBloom(torch.rand(3, 7, 7), intensity=0.5).export_form(),
         "convolution-bloom-learnable": lambda: tg.ConvolutionBloom(nn.Parameter(torch.rand(3, 7, 7)), intensity=0.5),
         "dither": lambda: tg.Dither(amplitude=2.0 / 255.0),
+        "look-lut": lambda: tg.LookLUT(identity_table(9) ** 1.5, contribution=torch.tensor([0.3, 0.9])),
         "postfx": lambda: tg.PostFX(exposure={}, bloom={"mode": "scattering", "intensity": 0.5}, grade={"aces": True, **GRADE},
                                     primary={"style": "log", **PRIMARY["log"]}, tonemap="aces", dither={}, display={"encoding": "srgb"}),
+        "postfx-look-lut": lambda: tg.PostFX(grade=GRADE, tonemap="neutral", look_lut=tg.LookLUT(identity_table(9) ** 0.8, contribution=0.6)),
         "random-postfx": lambda: _Seeded(tg.RandomPostFX(contrast=30, saturation=20, split_shadows=0.2, bloom_intensity=(0.2, 0.6), tonemap="aces")),
         "random-postfx-tonemaps": lambda: _Seeded(tg.RandomPostFX(contrast=30, tonemap=("aces", "neutral", "agx"))),
         "match-controls": lambda: MatchedControls(("post_exposure", "contrast", "color_filter", "lift"), "filmic"),

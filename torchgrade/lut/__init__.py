@@ -8,7 +8,7 @@ The package holds one family per file:
 * :mod:`~torchgrade.lut.kernels`: the interpolations (:data:`KERNELS`), each with its gather form
   and its ``GridSample`` graph forms by export backend;
 * :mod:`~torchgrade.lut.lattice`: sizes, lattice coordinates, table layouts, domains;
-* :mod:`~torchgrade.lut.lookup`: :class:`LUT3D` (a :class:`~torchgrade.base.stage.Stage`), its lookup
+* :mod:`~torchgrade.lut.apply`: :class:`LUT3D` (a :class:`~torchgrade.base.stage.Stage`), its lookup
   and compile cache, and :class:`LUTLookup`, its ONNX export form;
 * :mod:`~torchgrade.lut.fit`: :func:`fit_shaper` and :func:`fit_scene_shaper`, per-channel shapers fitted to a
   transform or to a scene;
@@ -31,7 +31,7 @@ from .kernels import (BACKENDS, INTERPOLATIONS, KERNELS, LUT_BACKENDS, Kernel, s
                       trilinear_grid_sample, trilinear_strip, trilinear_strip_lookup)
 from .lattice import MAX_SIZE, MIN_SIZE, check_size, checked_domain, identity_table, lattice, planar_table
 from .layer import LUT3D, LUTLookup
-from .lookup import (
+from .apply import (
     OUTPUT_ENCODINGS,
     apply_lut,
     compiled_lookup,

@@ -31,7 +31,7 @@ from .entries import ENTRY_CHOICES, SCENE_WEIGHT, fit_entries, scene_pixels
 from .fit import SCENE_FIT_WEIGHT, SCENE_MIN_SIZE, fit_scene_shaper, fit_shaper, refine_shaper
 from .lattice import MIN_SIZE, check_size, checked_domain, lattice
 from .layer import LUT3D
-from .lookup import OUTPUT_ENCODINGS, encode_output
+from .apply import OUTPUT_ENCODINGS, encode_output
 from .report import REALISTIC, code_errors, diagnose, enforce, measure, measured_colours, worst_case
 from .shapers import DEFAULT_DOMAINS, SHAPERS
 from .validation import realistic_colours, validation_colours

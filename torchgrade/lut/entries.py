@@ -45,7 +45,7 @@ from ..color import linear_to_srgb
 from .kernels import KERNELS
 from .lattice import planar_table
 from .layer import LUT3D
-from .lookup import decode_output, encode_output
+from .apply import decode_output, encode_output
 from .shapers import lattice_unit, shaper_encode
 from .validation import validation_colours
 

@@ -18,7 +18,7 @@ from ..base.core import (
 from ..base.stage import Control, Stage, in_state_check
 from .kernels import BACKENDS, KERNELS
 from .lattice import check_size, checked_domain, planar_table
-from .lookup import (
+from .apply import (
     OUTPUT_ENCODINGS,
     check_lookup_arguments,
     chunked_lookup,
