@@ -43,7 +43,8 @@ import torchgrade as tg  # noqa: E402
 from benchmarks.common import (  # noqa: E402
     EXR_DIR, argument_parser, map_large_buffers, median_ms, ocio_in_place, ocio_processor, peak_rss_mb, run_and_reset, sample_exr, write_results)
 from benchmarks.metrics import srgb_codes  # noqa: E402
-from torchgrade.lut import INTERPOLATIONS, OUTPUT_ENCODINGS, trilinear_grid_sample  # noqa: E402
+from torchgrade.lut import INTERPOLATIONS, OUTPUT_ENCODINGS  # noqa: E402
+from torchgrade.lut.kernels import trilinear_grid_sample  # noqa: E402
 
 COMMAND = ".venv/bin/python benchmarks/bench_lut.py"
 HEIGHT, WIDTH, SIZE, RUNS = 1080, 1920, 33, 7
@@ -86,7 +87,7 @@ range (``bake_lut(scene=image)``); fitted: the shaper fitted to the
 look alone (default) or to the scene, from black to 65504."""
 
 
-FULL_LOGC = (tg.lut.LOGC_BLACK, float(tg.color.linear_to_logc(torch.tensor(65504.0, dtype=torch.float64))))
+FULL_LOGC = (tg.lut.shapers.LOGC_BLACK, float(tg.color.linear_to_logc(torch.tensor(65504.0, dtype=torch.float64))))
 """A LogC lattice from black to 65504 (LogC ≈ 1.744): no channel is clamped, at 1.8 times the default's spacing."""
 
 LATTICE_TOP = 58.86

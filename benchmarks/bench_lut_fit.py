@@ -31,7 +31,10 @@ from benchmarks.common import RESULTS, argument_parser, write_results  # noqa: E
 from benchmarks.bench_lut import ACCURACY_IMAGES, SIZE, sample_exr, strong_look  # noqa: E402
 from benchmarks.lut_floor import interpolation_matrix, lowest_max_error  # noqa: E402
 from benchmarks.metrics import srgb_codes  # noqa: E402
-from torchgrade.lut import SCENE_FIT_WEIGHT, SCENE_WEIGHT, bake_lut, fit_entries, lattice_unit  # noqa: E402
+from torchgrade.lut.fit import SCENE_FIT_WEIGHT  # noqa: E402
+from torchgrade.lut.entries import SCENE_WEIGHT  # noqa: E402
+from torchgrade.lut import bake_lut, fit_entries  # noqa: E402
+from torchgrade.lut.shapers import lattice_unit  # noqa: E402
 
 COMMAND = ".venv/bin/python benchmarks/bench_lut_fit.py"
 LATTICES = {"LogC to 65504 (default)": {"shaper": "logc_hdr"}, "LogC to 58.86": {"shaper": "logc"}, "fitted to the look": {"shaper": "fitted"},

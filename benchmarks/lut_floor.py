@@ -56,7 +56,10 @@ from benchmarks.common import argument_parser, write_results  # noqa: E402
 from benchmarks.bench_lut import ACCURACY_IMAGES, SIZE, accuracy_image, strong_look  # noqa: E402
 from benchmarks.metrics import srgb_codes  # noqa: E402
 from torchgrade.color import linear_to_logc, srgb_to_linear  # noqa: E402
-from torchgrade.lut import DEFAULT_DOMAINS, INTERPOLATIONS, bake_lut, lattice_unit, scene_domain, tetrahedral, trilinear  # noqa: E402
+from torchgrade.lut import DEFAULT_DOMAINS, INTERPOLATIONS, bake_lut  # noqa: E402
+from torchgrade.lut.shapers import lattice_unit  # noqa: E402
+from torchgrade.lut.bake import scene_domain  # noqa: E402
+from torchgrade.lut.kernels import tetrahedral, trilinear  # noqa: E402
 
 COMMAND = ".venv/bin/python benchmarks/lut_floor.py"
 MAX_BAR, P999_BAR = 4.0, 1.0

@@ -57,7 +57,7 @@ def test_round_trip_keeps_the_table_bit_exact(tmp_path, shaper):
 def test_the_logc_hdr_tail_does_not_fit_a_cube_section_so_the_file_clamps_at_58_86(tmp_path, interpolation):
     """A 1D section samples evenly in linear values: the file holds LogC up to 58.86 (its 65536 points 0.0009 apart)
     and clamps each channel above it, as a "logc" LUT's file does; OpenColorIO and read_cube agree on it."""
-    from torchgrade.lut import LOGC_TOP
+    from torchgrade.lut.shapers import LOGC_TOP
 
     lut = bake_lut(look, size=17, shaper="logc_hdr")
     path = unique_cube(tmp_path)

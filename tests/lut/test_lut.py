@@ -8,23 +8,12 @@ import pytest
 import torch
 
 from torchgrade.color import linear_to_logc, linear_to_srgb, logc_to_linear
-from torchgrade.lut import (
-    INTERPOLATIONS,
-    LUT3D,
-    LUT_BACKENDS,
-    apply_lut,
-    bake_lut,
-    chunked_lookup,
-    expects_hdr,
-    identity_table,
-    lattice,
-    lookup,
-    planar_table,
-    shaper_decode,
-    tetrahedral,
-    trilinear,
-    trilinear_grid_sample,
-)
+from torchgrade.lut import INTERPOLATIONS, LUT3D, LUT_BACKENDS, apply_lut, bake_lut, identity_table, lattice
+from torchgrade.lut.apply import chunked_lookup, lookup
+from torchgrade.lut.bake import expects_hdr
+from torchgrade.lut.lattice import planar_table
+from torchgrade.lut.shapers import shaper_decode
+from torchgrade.lut.kernels import tetrahedral, trilinear, trilinear_grid_sample
 
 
 def mix(image: torch.Tensor) -> torch.Tensor:

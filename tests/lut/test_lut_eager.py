@@ -6,7 +6,10 @@ import pytest
 import torch
 
 from torchgrade.base.core import sanitize
-from torchgrade.lut import KERNELS, LUT3D, chunked_lookup, identity_table, lattice, lattice_unit, lookup, planar_table
+from torchgrade.lut import KERNELS, LUT3D, identity_table, lattice
+from torchgrade.lut.apply import chunked_lookup, lookup
+from torchgrade.lut.shapers import lattice_unit
+from torchgrade.lut.lattice import planar_table
 from torchgrade.lut.apply import _LatticeCoordinates
 
 MAX_SIZE = KERNELS["tetrahedral"].eager.max_size

@@ -10,8 +10,9 @@ import pytest
 import torch
 
 from torchgrade.color import linear_to_srgb
-from torchgrade.lut import (KERNELS, bake_lut, code_errors, decode_output, display_miss, fit_entries, fitting_colours,
-                            validation_colours)
+from torchgrade.lut import KERNELS, bake_lut, code_errors, fit_entries, validation_colours
+from torchgrade.lut.apply import decode_output
+from torchgrade.lut.entries import display_miss, fitting_colours
 from torchgrade.lut.entries import _inside_lattice, _lattice_coords
 
 STRONG_LOOK = dict(contrast=30.0, saturation=20.0, temperature=20.0)

@@ -9,7 +9,8 @@ import pytest
 import torch
 
 import torchgrade as tg
-from torchgrade.onnx import export, grade_feeds, graph_nodes, node_count, session, verify
+from torchgrade.onnx import export, grade_feeds, node_count, session, verify
+from torchgrade.onnx.verify import graph_nodes
 
 from reference.onnx import display_error, hdr, SHAPES, STEP_TOLERANCE, TOLERANCE
 
@@ -93,7 +94,7 @@ def test_lut_matches_in_both_interpolations_and_encodings(exported, interpolatio
 
 def test_strip_lookup_matches_the_gather_kernel_on_lattice_points():
     """Lattice points come back exactly from the strip layout (no half-texel offset)."""
-    from torchgrade.onnx import strip_table, trilinear_strip
+    from torchgrade.lut.kernels import strip_table, trilinear_strip
 
     table = torch.rand(5, 5, 5, 3)
     unit = tg.lut.lattice(5).permute(3, 0, 1, 2).reshape(1, 3, 25, 5).float()

@@ -9,7 +9,8 @@ import torch
 
 import torchgrade as tg
 from torchgrade.cli import main
-from torchgrade.onnx import export, graph_nodes, session, verify
+from torchgrade.onnx import export, session, verify
+from torchgrade.onnx.verify import graph_nodes
 
 from reference.onnx import hdr
 

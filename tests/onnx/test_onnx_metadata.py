@@ -11,6 +11,7 @@ import torch
 
 import torchgrade as tg
 from torchgrade.onnx import export, metadata, session, verify
+from torchgrade.onnx.verify import graph_nodes
 
 from reference.onnx import STEP_TOLERANCE, TOLERANCE, hdr
 
@@ -148,7 +149,7 @@ def test_verify_names_a_wrong_input(tmp_path):
 def test_only_the_opset_domains_used_are_declared(with_inputs):
     """onnxruntime's optimised file declared nine domains (com.microsoft, org.pytorch.aten, ...) for standard nodes."""
     model = onnx.load(str(with_inputs))
-    assert {node.domain for node in tg.onnx.graph_nodes(model.graph)} == {""}
+    assert {node.domain for node in graph_nodes(model.graph)} == {""}
     assert [(opset.domain, opset.version) for opset in model.opset_import] == [("", 17)]
 
 

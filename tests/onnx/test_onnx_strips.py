@@ -15,7 +15,9 @@ from onnx import TensorProto, helper
 import torchgrade as tg
 from torchgrade.base.core import bounded_pow
 from torchgrade.color.transfer import safe_pow
-from torchgrade.onnx import export, graph_nodes, scan_strips, session, verify
+from torchgrade.onnx import export, session, verify
+from torchgrade.onnx.verify import graph_nodes
+from torchgrade.onnx.strips import scan_strips
 from torchgrade.onnx.strips import DOMAIN
 from torchgrade.onnx.strips import SCAN_STRIP_PIXELS as STRIP_PIXELS
 from torchgrade.color import unity_to_aces
@@ -197,7 +199,7 @@ def test_split_toning_inputs_blend_per_sample_without_where(tmp_path):
         runner = session(path, runtime, "f32" if runtime == "openvino" else None)
         fed = {name: value.numpy() for name, value in controls.items()} if runtime == "onnxruntime" else {}
         with torch.no_grad():
-            expected = tg.onnx.GradeWithInputs(aces=True)(image, *controls.values())
+            expected = tg.onnx.graph.GradeWithInputs(aces=True)(image, *controls.values())
         assert pixel_error(runner.run(None, {"image": image.numpy(), **fed})[0], expected) <= TOLERANCE, runtime
 
 

@@ -24,7 +24,8 @@ from pathlib import Path
 import torch
 
 from ..io import write_cube
-from ..lut import ENTRY_CHOICES, LUTAccuracyWarning, bake_lut, expects_hdr, srgb_code_error
+from ..lut import ENTRY_CHOICES, LUTAccuracyWarning, bake_lut, srgb_code_error
+from ..lut.bake import expects_hdr
 from .common import (add_grading_flags, look_from_args, read_rec709, refuse_lut_over_tolerance, refuse_overwriting,
                      report_line, stages_label)
 

@@ -24,40 +24,24 @@ Examples:
     0.25
 """
 
-from .bake import AUTO_SIZES, bake_lut, expects_hdr, is_display_referred, scene_domain, srgb_code_error
-from .entries import ANCHOR_WEIGHT, ENTRY_CHOICES, SCENE_WEIGHT, display_miss, fit_entries, fitting_colours, scene_pixels
-from .fit import FIT_KNOTS, SCENE_FIT_WEIGHT, fit_scene_shaper, fit_shaper
-from .kernels import (BACKENDS, INTERPOLATIONS, KERNELS, LUT_BACKENDS, Kernel, strip_table, tetrahedral, trilinear,
-                      trilinear_grid_sample, trilinear_strip, trilinear_strip_lookup)
-from .lattice import MAX_SIZE, MIN_SIZE, check_size, checked_domain, identity_table, lattice, planar_table
-from .layer import LUT3D, LUTLookup
-from .apply import (
-    OUTPUT_ENCODINGS,
-    apply_lut,
-    compiled_lookup,
-    decode_output,
-    encode_output,
-    chunked_lookup,
-    lookup,
-    table_output,
-)
+from .bake import AUTO_SIZES, bake_lut, srgb_code_error
+from .entries import ENTRY_CHOICES, fit_entries
+from .fit import fit_scene_shaper, fit_shaper
+from .kernels import BACKENDS, INTERPOLATIONS, KERNELS, LUT_BACKENDS, Kernel
+from .lattice import MAX_SIZE, MIN_SIZE, identity_table, lattice
+from .layer import LUT3D
+from .apply import OUTPUT_ENCODINGS, apply_lut
 from .report import ErrorReport, LUTAccuracyWarning, code_errors
-from .shapers import (DEFAULT_DOMAINS, LOGC_BLACK, LOGC_HALF_MAX, LOGC_TOP, SHAPERS, CurveShaper, FittedShaper, LinearShaper,
-                      LogCHDRShaper, LogCShaper, Shaper, lattice_unit, sample_curve, shaper_decode, shaper_encode)
+from .shapers import DEFAULT_DOMAINS, SHAPERS, Shaper
 from .validation import realistic_colours, validation_colours
 
 
 __all__ = [
-    "AUTO_SIZES", "bake_lut", "expects_hdr", "is_display_referred", "scene_domain", "srgb_code_error",
-    "BACKENDS", "INTERPOLATIONS", "KERNELS", "LUT_BACKENDS", "Kernel", "strip_table", "tetrahedral", "trilinear",
-    "trilinear_grid_sample", "trilinear_strip", "trilinear_strip_lookup",
-    "MAX_SIZE", "MIN_SIZE", "check_size", "checked_domain", "identity_table", "lattice", "planar_table",
-    "LUT3D", "OUTPUT_ENCODINGS", "LUTLookup", "apply_lut", "compiled_lookup", "decode_output", "encode_output",
-    "lookup", "chunked_lookup", "table_output",
-    "DEFAULT_DOMAINS", "LOGC_BLACK", "LOGC_HALF_MAX", "LOGC_TOP", "SHAPERS", "CurveShaper", "LinearShaper", "LogCShaper",
-    "LogCHDRShaper", "Shaper", "lattice_unit",
-    "sample_curve", "shaper_decode", "shaper_encode", "FittedShaper",
-    "ENTRY_CHOICES", "fit_entries", "fitting_colours", "display_miss", "ANCHOR_WEIGHT", "SCENE_WEIGHT",
-    "scene_pixels", "FIT_KNOTS", "SCENE_FIT_WEIGHT", "fit_scene_shaper", "fit_shaper", "ErrorReport", "LUTAccuracyWarning", "code_errors", "validation_colours",
-    "realistic_colours",
+    "LUT3D", "bake_lut", "apply_lut", "identity_table", "lattice", "fit_entries", "fit_shaper", "fit_scene_shaper",
+    "ErrorReport", "LUTAccuracyWarning", "code_errors", "srgb_code_error", "realistic_colours",
+    "validation_colours", "INTERPOLATIONS", "KERNELS", "Kernel", "BACKENDS", "LUT_BACKENDS", "SHAPERS", "Shaper",
+    "DEFAULT_DOMAINS", "OUTPUT_ENCODINGS", "ENTRY_CHOICES", "AUTO_SIZES", "MIN_SIZE", "MAX_SIZE",
 ]
+"""The names a user calls. The package also imports its building blocks (kernels, lattice helpers, the lookup's
+pieces, shaper classes, fitting weights) for its modules, the ONNX export and the tests; they are not part of the
+API contract: import them from their modules."""

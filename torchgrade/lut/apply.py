@@ -134,7 +134,8 @@ def lookup(image, rows, size: int, shaper, domain_min, domain_max, interpolation
 
     Examples:
         >>> import torch
-        >>> from torchgrade.lut import identity_table, planar_table
+        >>> from torchgrade.lut import identity_table
+        >>> from torchgrade.lut.lattice import planar_table
         >>> rows = planar_table(identity_table(2))
         >>> x = torch.full((1, 3, 1, 1), 0.5)
         >>> lookup(x, rows, 2, "linear", 0.0, 1.0, "trilinear", None, None, (0.0, 1.0), "linear").flatten().tolist()
@@ -158,7 +159,8 @@ def chunked_lookup(image, rows, size: int, *settings, pixels: Optional[int] = No
 
     Examples:
         >>> import torch
-        >>> from torchgrade.lut import identity_table, planar_table
+        >>> from torchgrade.lut import identity_table
+        >>> from torchgrade.lut.lattice import planar_table
         >>> x = torch.rand(2, 3, 4, 5)
         >>> args = (planar_table(torch.rand(3, 3, 3, 3)), 3, "linear", 0.0, 1.0, "trilinear", None, None, (0.0, 1.0), "linear")
         >>> torch.equal(chunked_lookup(x, *args, pixels=7), lookup(x, *args))

@@ -121,7 +121,8 @@ def tetrahedral_tables(rows: torch.Tensor, size: int) -> torch.Tensor:
     step leaves the lattice (read only with weight 0), then ``S + 1`` zeros (the same).
 
     Examples:
-        >>> from torchgrade.lut import identity_table, planar_table
+        >>> from torchgrade.lut import identity_table
+        >>> from torchgrade.lut.lattice import planar_table
         >>> tables = tetrahedral_tables(planar_table(identity_table(2)), 2)
         >>> tables.shape, tables[0, :8].tolist(), tables[0, 8:16].tolist()
         (torch.Size([3, 35]), [0.0, 1.0, 0.0, 1.0, 0.0, 1.0, 0.0, 1.0], [1.0, 0.0, 1.0, 0.0, 1.0, 0.0, 1.0, 0.0])
@@ -154,7 +155,8 @@ class TetrahedralRuns:
     and the step tables' zeros and padding keep the indices inside the tables.
 
     Examples:
-        >>> from torchgrade.lut import identity_table, planar_table
+        >>> from torchgrade.lut import identity_table
+        >>> from torchgrade.lut.lattice import planar_table
         >>> runs = TetrahedralRuns(tetrahedral_tables(planar_table(identity_table(3)), 3), 3, 4)
         >>> runs.coords(1).copy_(torch.tensor([[1.5], [0.25], [2.0]]))[0].tolist()
         [1.5]

@@ -24,7 +24,7 @@ from ..color import linear_to_logc, linear_to_srgb, srgb_to_linear
 from ..grading.grade import color_grade
 from ..grading.layer import ColorGrade
 from ..look.postfx import PostFX
-from ..lut import planar_table
+from ..lut.lattice import planar_table
 from ..tonemap import tone_mapper, tonemap
 from .bounded import BoundedControls, fittable_names
 from .metrics import display_codes, match_errors

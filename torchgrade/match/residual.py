@@ -91,7 +91,7 @@ def lookup_matrix(display_linear: torch.Tensor, size: int) -> torch.Tensor:
     Examples:
         >>> display = torch.rand(1, 3, 6, 1, dtype=torch.float64)
         >>> residual = ResidualLUT(5)
-        >>> from torchgrade.lut import planar_table
+        >>> from torchgrade.lut.lattice import planar_table
         >>> by_matrix = (lookup_matrix(display, 5) @ planar_table(residual.lut.table).T).T.reshape(1, 3, 6, 1)
         >>> bool(torch.allclose(by_matrix, linear_to_srgb(residual(display)), atol=1e-9))
         True

@@ -33,14 +33,8 @@ from ..exposure import AutoExposure
 from ..grading.layer import ColorGrade, PrimaryGrade
 from ..grading.primary import STYLES
 from ..look.postfx import PostFX
-from ..lut import (
-    INTERPOLATIONS,
-    LUT3D,
-    LUTAccuracyWarning,
-    bake_lut,
-    identity_table,
-    is_display_referred,
-)
+from ..lut import INTERPOLATIONS, LUT3D, LUTAccuracyWarning, bake_lut, identity_table
+from ..lut.bake import is_display_referred
 from ..output.layer import Dither, LookLUT
 from ..tonemap import TONEMAP_MODES, ToneMap
 
