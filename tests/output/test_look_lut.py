@@ -216,3 +216,14 @@ def test_grade_applies_a_look_lut_from_the_command_line(tmp_path, cube_file, exr
     assert codes_apart(graded, expected) < 0.5  # written as half floats
     assert main(["grade", str(tmp_path / "frame.exr"), "-o", str(tmp_path / "out2.exr"), "--look-lut-contribution", "0.5", "--quiet"]) == 2
     assert not (tmp_path / "out2.exr").exists()
+
+
+def test_an_interpolation_given_with_a_lut_leaves_the_callers_lut_as_it_was():
+    table = torch.from_numpy(lattice_rows(blue_fastest=False).reshape(SIZE, SIZE, SIZE, 3)).float()
+    lut = tg.LUT3D(table)
+    look = LookLUT(lut, interpolation="trilinear")
+    baked = tg.PostFX(lut=lut, interpolation="trilinear")
+    assert lut.interpolation == "tetrahedral"
+    assert look.lut.interpolation == baked.lut.interpolation == "trilinear" and look.lut.table is lut.table
+    with pytest.raises(ValueError, match="interpolation must be one of"):
+        LookLUT(lut, interpolation="cubic")

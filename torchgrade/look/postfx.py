@@ -258,19 +258,12 @@ class PostFX(nn.Module):
 
 
 def _baked_lut(lut, interpolation: Optional[str]) -> Optional[LUT3D]:
-    """The ``lut`` slot's LUT; with another ``interpolation``, a shallow copy looked up with it (the table, learnable or
-    not, is the given LUT's; the given LUT keeps its own interpolation)."""
+    """The ``lut`` slot's LUT, looked up with ``interpolation`` when given (:meth:`LUT3D.looked_up_with`)."""
     if lut is None:
         return None
     if not isinstance(lut, LUT3D):
         raise ValueError(f"lut must be a LUT3D (a baked look; see PostFX.to_lut), got {type(lut).__name__}")
-    if interpolation is None or interpolation == lut.interpolation:
-        return lut
-    if interpolation not in INTERPOLATIONS:
-        raise ValueError(f"interpolation must be one of {INTERPOLATIONS}, got {interpolation!r}")
-    looked_up = copy.copy(lut)
-    looked_up.interpolation = interpolation
-    return looked_up
+    return lut.looked_up_with(interpolation)
 
 
 def _files_beside(config: dict, folder: Optional[Path]) -> dict:

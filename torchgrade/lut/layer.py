@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import warnings
 from typing import Optional
 
@@ -185,6 +186,23 @@ class LUT3D(Stage):
                 tables = eager.tables(rows, self.size)
             self._tables_cache = (rows, interpolation, tables)
         return tables
+
+    def looked_up_with(self, interpolation: Optional[str]) -> "LUT3D":
+        """This LUT, or with another ``interpolation`` a shallow copy looked up with it: the copy shares this LUT's table
+        (learnable or not) and this LUT keeps its own interpolation; ``ValueError`` for an unknown interpolation.
+
+        Examples:
+            >>> from torchgrade.lut import identity_table
+            >>> lut = LUT3D(identity_table(3))
+            >>> trilinear = lut.looked_up_with("trilinear")
+            >>> trilinear.interpolation, lut.interpolation, trilinear.table is lut.table
+            ('trilinear', 'tetrahedral', True)
+        """
+        if interpolation is None or interpolation == self.interpolation:
+            return self
+        looked_up = copy.copy(self)
+        looked_up.interpolation = interpolation  # the control's check refuses an unknown name
+        return looked_up
 
     def linear_table(self) -> torch.Tensor:
         """The table with linear output values (decoded by ``output_encoding``), as a ``.cube`` file holds it."""

@@ -53,9 +53,7 @@ class LookLUT(Stage):
     def __init__(self, lut, contribution: Param = 1.0, encoding: str = "srgb", interpolation=None):
         super().__init__()
         self.source = str(lut) if isinstance(lut, (str, Path)) else None
-        self.lut = _as_lut(lut)
-        if interpolation is not None:
-            self.lut.interpolation = interpolation
+        self.lut = _as_lut(lut).looked_up_with(interpolation)  # a LUT3D given keeps its own interpolation
         self.init_controls(contribution=contribution, encoding=encoding)
 
     @property
