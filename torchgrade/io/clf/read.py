@@ -128,9 +128,11 @@ def _table(node: ElementTree.Element, path) -> tuple:
     if values.size != 3 * size**3:
         raise ValueError(f"{path}: the LUT3D Array of dim {size} {size} {size} 3 needs {3 * size**3} numbers, got {values.size}")
     values = values / _depth_scale(node, "outBitDepth", path)
-    if not np.isfinite(values.astype(np.float32)).all():
+    with np.errstate(over="ignore"):  # a value beyond float32 becomes inf here, and is refused as such
+        held = values.astype(np.float32)
+    if not np.isfinite(held).all():
         raise ValueError(f"{path}: the LUT3D Array holds a value that is not finite in float32")
-    table = torch.from_numpy(values.astype(np.float32)).reshape(size, size, size, 3)  # [r, g, b]: blue fastest
+    table = torch.from_numpy(held).reshape(size, size, size, 3)  # [r, g, b]: blue fastest
     return table.permute(2, 1, 0, 3).contiguous(), interpolation
 
 
