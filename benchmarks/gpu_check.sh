@@ -7,7 +7,7 @@
 # OpenColorIO or colour-science: they are installed from the wheels in WHEELS (default .gpu/wheels: kornia,
 # kornia-rs, openexr, opencolorio, colour-science, pypng for cp312 manylinux), and the tests read the sample EXRs
 # from EXRS (default .gpu/exr, linked as ../shared/data/exr when that is missing). Logs and gpu.md / gpu.json go
-# to OUT. At most 9.5 minutes (tests 5, onnxruntime's CUDA provider 1, benchmark 3.5; the benchmark skips the
+# to OUT, and the meta-device counts of benchmarks/gpu_proxy.py. At most 9.5 minutes (tests 5, onnxruntime's CUDA provider 1, benchmark 3.5; the benchmark skips the
 # sections left after its budget, the slowest last). On an H200 on 2026-11-26 the module tests needed more than
 # 150 s with 12 processes. onnxruntime's CUDA provider is checked where the machine's onnxruntime has it
 # (onnxruntime-gpu is a 243 MiB wheel for cp312: it has to be installed there, it is too large to take along).
@@ -39,3 +39,5 @@ else
   echo "onnxruntime's CUDA provider: not on this machine (tg.onnx.session(path, device='cuda') not run)" | tee "$OUT/onnxruntime_cuda.log"
 fi
 timeout -s INT 200 python3 benchmarks/bench_gpu.py --out "$OUT" --budget 130 2>&1 | tee "$OUT/bench_gpu.log" | tail -40
+# the counts and the time they predict, beside the times measured above (gpu_proxy.md: CPU only, about 10 s)
+timeout -s INT 60 python3 benchmarks/gpu_proxy.py --out "$OUT" 2>&1 | tail -14

@@ -382,3 +382,15 @@ def test_every_operator_pattern_of_the_onnx_cost_benchmark_builds_and_keeps_the_
     for name, step in bench_onnx_ops.PATTERNS.items():
         out = bench_onnx_ops.chain_session(step).run(None, {"x": strip})[0]
         assert out.shape == bench_onnx_ops.STRIP and np.isfinite(out).all(), name
+
+
+def test_gpu_proxy_charges_a_frame_pass_its_copy_time_and_a_small_launch_the_launch_floor():
+    from benchmarks import gpu_proxy
+    from torchgrade.testing.dispatch import DispatchCount
+
+    frame = torch.empty(1, 3, 2160, 3840, device="meta")
+    with DispatchCount(frame=frame) as count:
+        frame * 2.0  # reads and writes the frame once: one frame pass
+        frame[..., :1, :1] + 1.0  # a view (no launch), then a launch that moves 24 bytes
+    assert count.launches == 2 and count.frame_passes == pytest.approx(1.0, abs=1e-6)
+    assert gpu_proxy.predicted_ms(count) == pytest.approx(gpu_proxy.PASS_COST * gpu_proxy.COPY_4K_MS + gpu_proxy.LAUNCH_MS, rel=1e-6)

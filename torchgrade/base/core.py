@@ -26,7 +26,7 @@ from typing import Union
 
 import torch
 
-from ..runtime.constants import constant
+from ..runtime.constants import constant, where
 from ..runtime.policy import policy_for
 from ..runtime.recording import is_tracing, untracked
 from ..runtime.strips import named_as
@@ -154,18 +154,19 @@ _NAN_FREE = contextvars.ContextVar("nan_free", default=None)
 def sanitize(image: torch.Tensor) -> torch.Tensor:
     """Apply the non-finite policy: NaN -> 0, values bounded to [-65504, 65504] (so ±Inf -> ±65504).
 
-    ``clamp`` keeps NaN, so the clamped copy is then fixed in place: one new frame instead of two. In an ONNX
-    export inside :func:`nan_free` for this very tensor only the bound is applied.
+    ``clamp`` keeps NaN, so the clamped copy is then fixed in place: one new frame instead of two. Inside
+    :func:`nan_free` for this very tensor only the bound is applied.
 
     Examples:
         >>> sanitize(torch.tensor([float('nan'), float('inf'), -1.0])).tolist()
         [0.0, 65504.0, -1.0]
     """
     bounded = image.clamp(-HALF_MAX, HALF_MAX)
-    if not torch.onnx.is_in_onnx_export():
-        return bounded.nan_to_num_(nan=0.0)
-    if _NAN_FREE.get() is image:
+    exporting = torch.onnx.is_in_onnx_export()
+    if (exporting or not is_tracing()) and _NAN_FREE.get() is image:  # a compiler would break its graph to read it
         return bounded
+    if not exporting:
+        return bounded.nan_to_num_(nan=0.0)
     # NaN is found on the input itself: OpenVINO's Clip turns NaN into its lower bound (the clamped copy's NaN came
     # out -65504 there); and nan_to_num would export a second Clip, to the dtype's range, a copy of the frame.
     return torch.where(torch.isnan(image), 0.0, bounded)
@@ -173,15 +174,17 @@ def sanitize(image: torch.Tensor) -> torch.Tensor:
 
 @contextlib.contextmanager
 def nan_free(image: torch.Tensor):
-    """Within the block, an ONNX export's :func:`sanitize` of ``image`` (this tensor object) only bounds it: the
-    exporter knows that ``image`` holds no NaN (the output of a stage that cannot make one), so the NaN pass,
-    ``IsNaN`` and ``Where`` over the frame, is left out of the graph. Eager and compiled calls are unaffected.
+    """Within the block, :func:`sanitize` of ``image`` (this tensor object) only bounds it: the caller knows that
+    ``image`` holds no NaN (the output of a stage, which never makes one: ``tests/library/test_extremes.py``), so
+    the NaN pass over the frame (a kernel, or ``IsNaN`` and ``Where`` in an exported graph) is left out.
 
     Examples:
         >>> x = torch.tensor([float('nan'), 1e6])
-        >>> with nan_free(x):
-        ...     sanitize(x).tolist()  # not exporting: the whole policy
+        >>> sanitize(x).tolist()
         [0.0, 65504.0]
+        >>> with nan_free(x):
+        ...     sanitize(x).tolist()  # trusted: only bounded
+        [nan, 65504.0]
     """
     token = _NAN_FREE.set(image)
     try:
@@ -544,5 +547,5 @@ def bounded_pow(x: torch.Tensor, exponent) -> torch.Tensor:
         return (x.clamp_min(0.0) ** exponent).clamp_max(HALF_MAX)
     limit = torch.exp2(_LOG2_HALF_MAX / exponent.detach())
     inside = (x > 0) & (x < limit)
-    powered = torch.where(inside, x, 1.0) ** exponent
+    powered = where(inside, x, 1.0) ** exponent
     return torch.where(inside, powered, (x > 0).to(x.dtype) * HALF_MAX)

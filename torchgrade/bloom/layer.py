@@ -46,7 +46,7 @@ from ..base.core import (
 )
 from ..base.stage import Control, Stage, controls_signature
 from ..color import srgb_to_linear
-from ..runtime import policy_for
+from ..runtime import constant, policy_for
 from .composite import BLOOM_MODES, COMPOSITES
 from .prefilter import prefilter
 from .pyramid import (
@@ -203,9 +203,12 @@ def bloom_with_settings(image: torch.Tensor, settings: dict, fixed_depth=None) -
         convert = color_param if name == "tint" else scalar_param
         return convert(settings[name], reference, name)
 
+    def number_or_param(name):  # a number folds into terms made once (runtime.folded)
+        return settings[name] if isinstance(settings[name], (int, float)) else param(name)
+
     bound = None if is_constant(settings["clamp"], HALF_MAX) else param("clamp")
     light, fraction = prefilter(
-        scene, param("threshold"), param("knee"), settings["fade_fireflies"], settings["karis_average"], bound
+        scene, number_or_param("threshold"), number_or_param("knee"), settings["fade_fireflies"], settings["karis_average"], bound
     )
     if COMPOSITES[settings["mode"]].dark_is_identity and _reads_values(light) and not bool(light.any()):
         out = scene
@@ -227,7 +230,9 @@ def _composited(scene, light, fraction, settings: dict, param, depth: int, activ
     composite = COMPOSITES[settings["mode"]]
     bicubic = settings["bicubic_upsampling"]
     strength = param("intensity")
-    strength = strength.clamp(max=1.0) if composite.lerp else strength
+    if composite.lerp:  # a lerp's weight is at most 1; a plain number is bounded before it is a constant (no launch)
+        number = settings["intensity"]
+        strength = constant(min(float(number), 1.0), strength) if isinstance(number, (int, float)) else strength.clamp(max=1.0)
     sigma = None if is_constant(settings["anamorphic_ratio"], 0.0) else anamorphic_sigma(param("anamorphic_ratio"))
     weight = None if composite.level_weight is None else composite.level_weight(param, active, strength)
     glow = glow_pyramid(light, depth, weight, bicubic, sigma, active if masked else None)

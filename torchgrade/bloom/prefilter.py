@@ -19,9 +19,10 @@ import torch.nn.functional as F
 
 from ..base.core import NEGLIGIBLE_LIGHT, Param, check_image, scalar_param
 from ..color import CHANNEL, luminance, srgb_to_linear
+from ..runtime import folded
 from .pyramid import shared_block_counts, sum_pool
 
-__all__ = ["SOFT_KNEE_EPSILON", "bloom_threshold", "threshold_fraction", "cross_sum", "karis_mean", "prefilter"]
+__all__ = ["SOFT_KNEE_EPSILON", "bloom_threshold", "threshold_fraction", "soft_knee", "cross_sum", "karis_mean", "prefilter"]
 
 SOFT_KNEE_EPSILON = 1e-5
 """Unity's guard in ``w = 0.25 / (y + 0.00001)`` and ``contribution / max(brightness, 0.00001)``."""
@@ -41,32 +42,45 @@ def bloom_threshold(image: torch.Tensor, threshold: Param = 1.0, knee: Param = 0
     return image * threshold_fraction(image, scalar_param(threshold, image, "threshold"), scalar_param(knee, image, "knee"))
 
 
-def threshold_fraction(image: torch.Tensor, threshold: torch.Tensor, knee: torch.Tensor) -> torch.Tensor:
+def threshold_fraction(image: torch.Tensor, threshold: Param, knee: Param) -> torch.Tensor:
     """The soft-knee fraction ``r = max(soft, b - t) / max(b, 1e-5)`` of each pixel's light, ``(..., 1, H, W)``.
 
-    ``b`` is the max channel, ``t = srgb_to_linear(threshold)``, ``k = t * knee``,
-    ``soft = clamp(b - t + k, 0, 2k)^2 / (4 (k + 1e-5))`` (Unity ``DoBloom``'s threshold vector:
-    x = t, y = k - t, z = 2k, w = 0.25 / (k + 1e-5)). ``r`` lies in [0, 1].
+    ``b`` is the max channel and ``soft = clamp(b - t + k, 0, 2k)^2 / (4 (k + 1e-5))`` with the terms of
+    :func:`soft_knee`. ``r`` lies in [0, 1]. ``threshold`` and ``knee`` are numbers (the terms are then made once,
+    :func:`~torchgrade.runtime.folded`) or tensors that broadcast against ``image``.
 
     Examples:
-        >>> threshold_fraction(torch.full((1, 3, 1, 1), 4.0), torch.tensor(1.0), torch.tensor(0.5)).item()
+        >>> threshold_fraction(torch.full((1, 3, 1, 1), 4.0), 1.0, 0.5).item()
         0.75
     """
     brightness = image.amax(dim=CHANNEL, keepdim=True)
-    linear = srgb_to_linear(threshold)
-    half_width = linear * knee
-    soft = torch.minimum((brightness - linear + half_width).clamp_min(0.0), 2.0 * half_width)
-    soft = soft * soft * (0.25 / (half_width + SOFT_KNEE_EPSILON))
+    linear, offset, width, scale = folded(soft_knee, threshold, knee, like=brightness).unbind(-1)
+    soft = torch.minimum((brightness + offset).clamp_min(0.0), width)
+    soft = soft * soft * scale
     return torch.maximum(soft, brightness - linear) / brightness.clamp_min(SOFT_KNEE_EPSILON)
+
+
+def soft_knee(threshold: Param, knee: Param, *, like: torch.Tensor) -> torch.Tensor:
+    """Unity's threshold vector (``DoBloom``) ``(t, k - t, 2k, 0.25 / (k + 1e-5))`` on a last axis of 4, with
+    ``t = srgb_to_linear(threshold)`` the linear threshold and ``k = t · knee`` half the knee's width.
+
+    Examples:
+        >>> [round(v, 4) for v in soft_knee(1.0, 0.5, like=torch.zeros(())).tolist()]
+        [1.0, -0.5, 1.0, 0.5]
+    """
+    linear = srgb_to_linear(torch.as_tensor(threshold, dtype=like.dtype, device=like.device))
+    half_width = linear * knee
+    terms = linear, half_width - linear, 2.0 * half_width, 0.25 / (half_width + SOFT_KNEE_EPSILON)
+    return torch.stack(torch.broadcast_tensors(*terms), dim=-1)
 
 
 def cross_sum(values: torch.Tensor) -> torch.Tensor:
     """Sum over the firefly prefilter's 5 taps, those outside the frame left out.
 
     The taps are the centre and the 4 diagonal neighbours at half resolution: the shader's offsets
-    of 2 source texels, each a bilinear tap that averages a 2x2 block. A sum of 5 shifted views of
-    the zero-padded tensor: on CPU about 100 times faster than a 3x3 convolution
-    (``kornia.filters.filter2d``), which oneDNN runs slowly.
+    of 2 source texels, each a bilinear tap that averages a 2x2 block. Sums of shifted views of
+    the zero-padded tensor, the two neighbours of each row first: on CPU about 100 times faster than a
+    3x3 convolution (``kornia.filters.filter2d``), which oneDNN runs slowly.
 
     Examples:
         >>> cross_sum(torch.ones(1, 1, 3, 3))[0, 0]
@@ -74,10 +88,9 @@ def cross_sum(values: torch.Tensor) -> torch.Tensor:
                 [3., 5., 3.],
                 [2., 3., 2.]])
     """
-    height, width = values.shape[-2:]
     padded = F.pad(values, (1, 1, 1, 1))
-    corners = padded[..., :height, :width] + padded[..., :height, 2:] + padded[..., 2:, :width] + padded[..., 2:, 2:]
-    return values + corners
+    beside = padded[..., :, :-2] + padded[..., :, 2:]
+    return values + (beside[..., :-2, :] + beside[..., 2:, :])
 
 
 def karis_mean(image: torch.Tensor, means: torch.Tensor) -> torch.Tensor:
@@ -97,14 +110,19 @@ def karis_mean(image: torch.Tensor, means: torch.Tensor) -> torch.Tensor:
 
 
 def _source_share(source: torch.Tensor, means: torch.Tensor) -> torch.Tensor:
-    """``source / mean`` per channel (1 where they are equal): the share of a block's light its source holds.
+    """``source / mean`` per channel, both at least :data:`~torchgrade.base.core.NEGLIGIBLE_LIGHT`: the share of a
+    block's light its source holds.
 
-    Blocks whose mean is below :data:`~torchgrade.base.core.NEGLIGIBLE_LIGHT` are black at any exposure: their share is 1,
-    and both sides of the select divide by at least that floor, so the branch not taken cannot make an infinite
-    gradient (a mean of 1e-40 squared underflows to 0, and 0 times that infinity is NaN).
+    Exactly 1 where they are equal (``x / x``) and in blocks darker than that floor, which are black at any exposure;
+    dividing by at least the floor keeps the gradient finite (a mean of 1e-40 squared underflows to 0). A source
+    below the floor in a brighter block (a clamp under 1e-10) gives a share of at most ``1e-10 / mean``, of light the
+    threshold does not pass on.
+
+    Examples:
+        >>> _source_share(torch.tensor([0.5, 2.0, 0.0]), torch.tensor([1.0, 2.0, 0.0])).tolist()
+        [0.5, 1.0, 1.0]
     """
-    dark = means < NEGLIGIBLE_LIGHT
-    return torch.where((source == means) | dark, 1.0, source / means.clamp_min(NEGLIGIBLE_LIGHT))
+    return source.clamp_min(NEGLIGIBLE_LIGHT) / means.clamp_min(NEGLIGIBLE_LIGHT)
 
 
 def prefilter(image: torch.Tensor, threshold, knee, fade_fireflies: bool, karis_average: bool = False, clamp=None):

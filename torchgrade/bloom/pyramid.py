@@ -152,12 +152,17 @@ def mirror_pad(light: torch.Tensor, radius: int) -> torch.Tensor:
     so it repeats when the frame is narrower than ``radius``. A symmetric kernel applied to it is a
     symmetric, row-stochastic operator, hence also column-stochastic: every pixel keeps all of its
     light inside the frame, and a uniform frame stays uniform. Written as index arithmetic on the
-    tensor's own sizes, so a traced graph (ONNX) keeps working at every frame size.
+    tensor's own sizes, so a traced graph (ONNX) keeps working at every frame size; where the device's
+    policy takes library kernels (one launch each) the two axes are one gather over the flattened plane.
 
     Examples:
         >>> mirror_pad(torch.tensor([[[[1.0, 2.0, 3.0]]]]), 2)[0, 0, 0]
         tensor([2., 1., 1., 2., 3., 3., 2.])
     """
+    height, width = light.shape[-2:]
+    if not is_tracing() and policy_for(light.device).filters_as_kernels:
+        index = _mirror_plane_index(height, width, radius, light.device)
+        return light.flatten(-2).index_select(-1, index).unflatten(-1, (height + 2 * radius, width + 2 * radius))
     for axis in (-2, -1):
         light = light.index_select(axis, _mirror_index(light.shape[axis], radius, light.device))
     return light
@@ -168,6 +173,13 @@ def _mirror_index(side: int, radius: int, device: torch.device) -> torch.Tensor:
     """The source of each pixel of a side of ``side`` pixels extended by ``radius`` (:func:`mirror_pad`)."""
     position = torch.arange(-radius, side + radius, device=device).remainder(2 * side)
     return torch.where(position < side, position, 2 * side - 1 - position)
+
+
+@device_cached
+def _mirror_plane_index(height: int, width: int, radius: int, device: torch.device) -> torch.Tensor:
+    """The source of each pixel of the extended plane in the flattened ``height x width`` plane (:func:`mirror_pad`)."""
+    rows, columns = _mirror_index(height, radius, device), _mirror_index(width, radius, device)
+    return (rows[:, None] * width + columns[None, :]).flatten()
 
 
 def pyramid_blur(light: torch.Tensor, sigma=None) -> torch.Tensor:
@@ -185,7 +197,12 @@ def pyramid_blur(light: torch.Tensor, sigma=None) -> torch.Tensor:
     padded = mirror_pad(light, radius)
     import kornia.filters  # imported at the first blur: kornia takes longer to import than torchgrade itself
 
-    if policy_for(light.device).filters_as_kernels:
+    policy = policy_for(light.device)
+    if policy.filters_as_kernels:
+        small = policy.one_kernel_blur_pixels is not None and light.shape[-2] * light.shape[-1] <= policy.one_kernel_blur_pixels
+        if sigma is None and small:
+            planes = padded.reshape((-1, 1) + padded.shape[-2:])
+            return F.conv2d(planes, _gaussian_kernel_2d(taps, BLUR_SIGMA, light.device, light.dtype)).reshape(light.shape)
         if sigma is None:
             kernel_y = kernel_x = _gaussian_kernel(taps, BLUR_SIGMA, light.device, light.dtype)
         else:  # kornia's gaussian_blur2d would read the sigmas back to check them: they are positive by construction
@@ -201,6 +218,13 @@ def _gaussian_kernel(taps: int, sigma: float, device: torch.device, dtype: torch
     import kornia.filters
 
     return kornia.filters.get_gaussian_kernel1d(taps, torch.tensor([[sigma]], dtype=dtype, device=device))
+
+
+@device_cached
+def _gaussian_kernel_2d(taps: int, sigma: float, device: torch.device, dtype: torch.dtype) -> torch.Tensor:
+    """:func:`_gaussian_kernel` times itself, ``(1, 1, taps, taps)``: the separable blur as one convolution's weight."""
+    kernel = _gaussian_kernel(taps, sigma, device, dtype)
+    return (kernel.mT * kernel).reshape(1, 1, taps, taps)
 
 
 def anamorphic_sigma(ratio: torch.Tensor) -> torch.Tensor:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import torch
 
-from ..runtime import constant
+from ..runtime import constant, where
 from .spaces import CHANNEL
 
 __all__ = [
@@ -29,14 +29,14 @@ def rgb_to_hsv(image: torch.Tensor) -> torch.Tensor:
     value, argmax = image.max(dim=CHANNEL)
     delta = value - image.min(dim=CHANNEL).values
     chromatic = delta > 0
-    safe_delta = torch.where(chromatic, delta, 1.0)
+    safe_delta = where(chromatic, delta, 1.0)
     hue_r = torch.remainder((g - b) / safe_delta, 6.0)
     hue_g = (b - r) / safe_delta + 2.0
     hue_b = (r - g) / safe_delta + 4.0
     hue = torch.where(argmax == 0, hue_r, torch.where(argmax == 1, hue_g, hue_b)) / 6.0
-    hue = torch.where(chromatic, hue, 0.0)
+    hue = where(chromatic, hue, 0.0)
     lit = value > 0
-    saturation = torch.where(lit, delta / torch.where(lit, value, 1.0), 0.0)
+    saturation = where(lit, delta / where(lit, value, 1.0), 0.0)
     return torch.stack((hue, saturation, value), dim=CHANNEL)
 
 

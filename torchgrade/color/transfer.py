@@ -14,6 +14,8 @@ import numbers
 import torch
 
 from ..base.core import untracked
+from ..runtime.constants import constant, where
+from ..runtime.policy import policy_for
 
 __all__ = [
     "safe_pow", "safe_sqrt", "linear_to_srgb", "srgb_to_linear", "linear_to_logc", "logc_to_linear", "aces_to_acescc", "acescc_to_aces", "linear_to_pq", "pq_to_linear", "hlg_oetf", "hlg_inverse_oetf", "linear_to_acescct", "acescct_to_linear", "LOGC_CUT", "LOGC_E", "ACESCC_MIDGRAY", "ACESCC_MAX", "PQ_M1", "PQ_C1", "PQ_PEAK", "HLG_A", "HLG_B", "HLG_C", "ACESCCT_CUT_LINEAR", "ACESCCT_CUT_LOG", "ACESCCT_A", "LOGC_A", "LOGC_B", "LOGC_C", "LOGC_D", "LOGC_F", "PQ_M2", "PQ_C2", "PQ_C3", "ACESCCT_B",
@@ -33,10 +35,13 @@ def safe_pow(x: torch.Tensor, exponent) -> torch.Tensor:
         x = x.clamp_min(0.0)
         return x.sqrt() if exponent == 0.5 else torch.exp(torch.log(x) * exponent)
     if isinstance(exponent, numbers.Real) and exponent > 0 and x.is_floating_point() and untracked(x):
-        # Unguarded, the same values in two cheap passes and one power instead of four passes.
+        # Unguarded, the same values in two cheap passes (or one fmax, where the device's policy says) and one power
+        # instead of four passes.
+        if policy_for(x.device).nan_dropping_max:
+            return torch.fmax(x, constant(0.0, x)).pow_(exponent)
         return x.clamp_min(0.0).nan_to_num_(nan=0.0, posinf=math.inf).pow_(exponent)
     positive = x > 0
-    return torch.where(positive, torch.where(positive, x, 1.0) ** exponent, 0.0)
+    return where(positive, where(positive, x, 1.0) ** exponent, 0.0)
 
 
 def safe_sqrt(x: torch.Tensor) -> torch.Tensor:

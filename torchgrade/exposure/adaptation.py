@@ -362,7 +362,7 @@ def exposed_frame(image: torch.Tensor, adapted: Optional[torch.Tensor], dt: Para
         target = (c["middle_grey"] * torch.exp2(-c["fixed_exposure"])).expand(x.shape[:-3] + (1, 1, 1))
         new = _adapted(scene, target, adapted, dt, c, limited=False)
     else:
-        new = _adapted(scene, metered_luminance(scene, c, controls["metering"], controls["metering_mask"]), adapted, dt, c)
+        new = _adapted(scene, metered_luminance(scene, c, controls), adapted, dt, c)
     key = exposure_key(new, c, controls["compensation_curve"])
     # new is finite and positive, so the exposed frame has no NaN: bounding it is the whole non-finite policy
     exposed = exposure_operator(scene, new, key, c["max_luminance"], controls["operator"])
@@ -379,16 +379,23 @@ def exposure_key(adapted: torch.Tensor, c: dict, curve) -> torch.Tensor:
     return c["middle_grey"] * torch.exp2(stops)
 
 
-def metered_luminance(scene: torch.Tensor, c: dict, metering: str, mask) -> torch.Tensor:
+def metered_luminance(scene: torch.Tensor, c: dict, controls: dict) -> torch.Tensor:
     """The sanitized frame's metered luminance, ``(..., 1, 1, 1)``, bounded by the limits (``c``: the number
-    controls as :func:`~torchgrade.base.core.scalar_param` tensors)."""
-    weights = metering_weights(mask, scene)
-    if metering == "histogram":
+    controls as :func:`~torchgrade.base.core.scalar_param` tensors; ``controls``: all of them as given)."""
+    weights = metering_weights(controls["metering_mask"], scene)
+    if controls["metering"] == "histogram":
         low, high = histogram_range(c["min_ev"], c["max_ev"])
-        metered = meter_histogram(scene, weights, low, high, c["low_percent"], c["high_percent"], c["middle_grey"])
+        # the percents and middle grey as given where they are plain numbers: arithmetic on them launches nothing
+        low_percent, high_percent, grey = (_number_or(controls[name], c[name]) for name in ("low_percent", "high_percent", "middle_grey"))
+        metered = meter_histogram(scene, weights, low, high, low_percent, high_percent, grey)
     else:
-        metered = meter_sanitized(scene, metering, weights)
+        metered = meter_sanitized(scene, controls["metering"], weights)
     return _limited(metered.reshape(scene.shape[:-3] + (1, 1, 1)), c)
+
+
+def _number_or(value, tensor: torch.Tensor):
+    """``value`` where it is a plain number, else its tensor ``tensor``."""
+    return value if isinstance(value, (int, float)) and not isinstance(value, bool) else tensor
 
 
 def _adapted(scene: torch.Tensor, target: torch.Tensor, adapted: Optional[torch.Tensor], dt: Param, c: dict, limited: bool = True) -> torch.Tensor:
@@ -409,7 +416,7 @@ def _limited(luminance: torch.Tensor, c: dict) -> torch.Tensor:
         luminance = torch.maximum(luminance, c["middle_grey"] * torch.exp2(c["min_ev"]))
     if c["max_ev"] is not None:
         luminance = torch.minimum(luminance, c["middle_grey"] * torch.exp2(c["max_ev"]))
-    return torch.minimum(torch.maximum(luminance, c["min_luminance"]), c["max_adapted"])
+    return torch.clamp(luminance, c["min_luminance"], c["max_adapted"])
 
 
 def compensation_at(curve, stops: torch.Tensor) -> torch.Tensor:
@@ -426,5 +433,5 @@ def compensation_at(curve, stops: torch.Tensor) -> torch.Tensor:
     xs, ys = zip(*curve)
     slopes = tuple((y1 - y0) / (x1 - x0) for x0, x1, y0, y1 in zip(xs, xs[1:], ys, ys[1:]))
     starts, ends = constant(xs[:-1], stops), constant(xs[1:], stops)
-    ramps = torch.minimum(torch.maximum(stops.unsqueeze(-1), starts), ends) - starts
+    ramps = torch.clamp(stops.unsqueeze(-1), starts, ends) - starts
     return ys[0] + (ramps * constant(slopes, stops)).sum(dim=-1)

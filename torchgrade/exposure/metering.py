@@ -157,7 +157,8 @@ def histogram_band_average(stops: torch.Tensor, weights: Optional[torch.Tensor],
     batch = stops.shape[0]
     low, high, low_percent, high_percent = (_per_row(v) for v in (low, high, low_percent, high_percent))
     values = stops.reshape(batch, -1).clamp(low, high)
-    bins = ((values - low) * (HISTOGRAM_BINS / (high - low))).floor().clamp(0, HISTOGRAM_BINS - 1).long()
+    # values - low >= 0, so the cast's truncation is the floor
+    bins = ((values - low) * (HISTOGRAM_BINS / (high - low))).clamp_max_(HISTOGRAM_BINS - 1).long()
     weight = constant(1.0, values).expand_as(values) if weights is None else weights.reshape(1, -1).expand(batch, -1)
     empty = torch.zeros(batch, HISTOGRAM_BINS, dtype=values.dtype, device=values.device)
     weight_in_bin = empty.scatter_add(1, bins, weight)

@@ -19,6 +19,7 @@ from ..base.core import (
     apply_matrix,
     bounded_pow,
     color_param,
+    is_constant,
     matrix_param,
     matrix_product,
     scalar_param,
@@ -46,7 +47,7 @@ from ..color import (
     srgb_to_linear,
 )
 from ..color.spaces import shared_matrix
-from ..runtime import constant
+from ..runtime import constant, folded, where
 from .curves import evaluate_curve
 
 __all__ = [
@@ -176,7 +177,7 @@ def log_contrast(image: torch.Tensor, amount: Param, encoding: str = "logc") -> 
         >>> [round(v, 3) for v in log_contrast(torch.tensor([0.18, 1.0]), 50.0, "acescc").tolist()]
         [0.18, 2.357]
     """
-    k = 1.0 + scalar_param(amount, image, "contrast") * 0.01
+    k = folded(_contrast_slope, amount, like=image)
     if encoding == "acescct":
         return acescct_to_linear((linear_to_acescct(image) - ACESCC_MIDGRAY) * k + ACESCC_MIDGRAY)
     if encoding == "acescc":
@@ -194,6 +195,16 @@ def log_contrast(image: torch.Tensor, amount: Param, encoding: str = "logc") -> 
     return (base**k * gain - LOGC_B) / LOGC_A
 
 
+def _contrast_slope(amount: Param, *, like: torch.Tensor) -> torch.Tensor:
+    """The slope ``k = 1 + amount / 100`` of :func:`log_contrast` (made once for a plain number, ``runtime.folded``).
+
+    Examples:
+        >>> _contrast_slope(50.0, like=torch.zeros(())).item()
+        1.5
+    """
+    return 1.0 + scalar_param(amount, like, "contrast") * 0.01
+
+
 _ACESCC_PIVOT_STOPS = ACESCC_MIDGRAY * 17.52 - 9.72
 """ACEScc's pivot as ``log2`` of linear (``log2(0.18)``): the code ``(log2(x) + 9.72) / 17.52`` at ``ACESCC_MIDGRAY``."""
 
@@ -201,9 +212,10 @@ _ACESCC_PIVOT_STOPS = ACESCC_MIDGRAY * 17.52 - 9.72
 def _acescc_contrast_in_place(image: torch.Tensor, k: torch.Tensor) -> torch.Tensor:
     """ACEScc contrast with the encode, the scaling and the decode folded into one power of two, computed in place.
 
-    ``2^min((log2(u) - p) k + p, log2(65504))`` with ``p`` the pivot in stops and ``u = max(x, 2^-16 + x/2)`` on
-    ``x`` clamped to [0, 65504] (the encode's two segments, :func:`~torchgrade.color.aces_to_acescc`); the decode's
-    low segment ``(v - 2^-16)·2`` is below ``v`` exactly there, so it is ``min(v, (v - 2^-16)·2)``.
+    ``2^min(k log2(2u) + p - k(1 + p), log2(65504))``, that is ``2^min((log2(u) - p) k + p, log2(65504))``, with ``p``
+    the pivot in stops and ``2u = x + max(x, 2^-15)`` twice the encode's ``u = max(x, 2^-16 + x/2)`` on ``x`` clamped
+    to [0, 65504] (its two segments, :func:`~torchgrade.color.aces_to_acescc`); the decode's low segment
+    ``(v - 2^-16)·2`` is below ``v`` exactly where ``v < 2^-15``, so the decode is ``2v - max(v, 2^-15)``.
 
     Examples:
         >>> x = torch.tensor([0.0, 1e-5, 0.18, 1.0, 1e5])
@@ -211,9 +223,9 @@ def _acescc_contrast_in_place(image: torch.Tensor, k: torch.Tensor) -> torch.Ten
         True
     """
     x = image.clamp(0.0, HALF_MAX)
-    stops = torch.maximum(x, (x * 0.5).add_(2.0**-16), out=x).log2_()
-    value = stops.sub_(_ACESCC_PIVOT_STOPS).mul_(k).add_(_ACESCC_PIVOT_STOPS).clamp_max_(math.log2(HALF_MAX)).exp2_()
-    return torch.minimum(value, (value - 2.0**-16).mul_(2.0), out=value)
+    offset = _ACESCC_PIVOT_STOPS - k * (1.0 + _ACESCC_PIVOT_STOPS)
+    value = x.clamp_min(2.0**-15).add_(x).log2_().mul_(k).add_(offset).clamp_max_(math.log2(HALF_MAX)).exp2_()
+    return value.clamp_min(2.0**-15).lerp_(value, 2.0)  # m + 2(v - m) = 2v - m
 
 
 def _acescc_contrast_folded(image: torch.Tensor, k) -> torch.Tensor:
@@ -286,49 +298,39 @@ def _lighten(base: torch.Tensor, blend: torch.Tensor) -> torch.Tensor:
 
 
 def _soft_light_by_channel(gamma: torch.Tensor, weights: tuple, offsets: tuple) -> torch.Tensor:
-    """Soft-light blends of ``gamma`` with tints ``0.5 + offset · weight`` given by constant per-channel ``offsets``, in place.
+    """Soft-light blends of ``gamma`` with tints ``0.5 + offset · weight`` given by constant per-channel ``offsets``.
 
-    With ``weight`` in [0, 1] a channel's blend stays on the side of 0.5 its offset's sign gives, so only
-    that branch of :func:`soft_light` is computed; an offset of 0 blends with 0.5 exactly, where both
-    branches return the base, and is skipped.
-
-    Examples:
-        >>> base, t = torch.rand(1, 3, 2, 2), torch.rand(1, 1, 2, 2)
-        >>> tint = 0.5 + torch.tensor([-0.2, 0.0, 0.3]).reshape(3, 1, 1) * t
-        >>> torch.equal(_soft_light_by_channel(base.clone(), (t,), ((-0.2, 0.0, 0.3),)), soft_light(base, tint))
-        True
-    """
-    for c in range(gamma.shape[-3]):
-        channel = gamma[..., c : c + 1, :, :]
-        blended = channel
-        for weight, offset in zip(weights, (per_channel[c] for per_channel in offsets)):
-            if offset != 0.0:
-                blended = (_lighten if offset > 0.0 else _darken)(blended, 0.5 + weight * offset)
-        if blended is not channel:
-            channel.copy_(blended)
-    return gamma
-
-
-def _soft_light_planes(gamma: torch.Tensor, weights: tuple, offsets: tuple) -> torch.Tensor:
-    """:func:`_soft_light_by_channel` for export: each channel a plane of its own, blended by the branch its offset's
-    sign picks (no comparison or ``Where``), in terms of ``s = 2 blend - 1 = 2 offset weight``: ``a + s(√a - a)``
-    (:func:`_lighten`) and ``a + s·a(1 - a)`` (:func:`_darken`), in fewer nodes than those.
+    With ``weight`` in [0, 1] a channel's blend stays on the side of 0.5 its offset's sign gives, so each channel is
+    blended by that branch of :func:`soft_light` alone, written with ``s = 2 blend - 1 = 2 offset weight``:
+    ``a + s(√a - a)`` (:func:`_lighten`) and ``a + s·a(1 - a)`` (:func:`_darken`), one multiply-add each; an offset of
+    0 blends with 0.5 exactly, where both branches return the base, and is skipped. In place where nothing records
+    (:func:`untracked`), one plane at a time.
 
     Examples:
         >>> base, t = torch.rand(1, 3, 2, 2), torch.rand(1, 1, 2, 2)
         >>> tint = 0.5 + torch.tensor([-0.2, 0.0, 0.3]).reshape(3, 1, 1) * t
-        >>> bool(torch.allclose(_soft_light_planes(base, (t,), ((-0.2, 0.0, 0.3),)), soft_light(base, tint), atol=1e-6))
+        >>> bool(torch.allclose(_soft_light_by_channel(base.clone(), (t,), ((-0.2, 0.0, 0.3),)), soft_light(base, tint), atol=1e-6))
         True
     """
+    in_place = untracked(gamma, *weights)
+    exporting = torch.onnx.is_in_onnx_export()
     planes = []
     for c, plane in enumerate(gamma.split(1, dim=-3)):
         for weight, offset in zip(weights, (per_channel[c] for per_channel in offsets)):
-            if offset > 0.0:
-                plane = plane + 2.0 * offset * weight * (safe_sqrt(plane) - plane)
-            elif offset < 0.0:
-                plane = plane + 2.0 * offset * weight * plane * (1.0 - plane)
+            if offset == 0.0:
+                continue
+            if offset < 0.0:  # a(1 - a), as a - a² in one pass where not exported
+                shift = plane * (1.0 - plane) if exporting else torch.addcmul(plane, plane, plane, value=-1.0)
+            else:  # the planes are finite and at least 0 (gamma of a bounded frame; each blend keeps them so)
+                shift = (plane.sqrt() if in_place else safe_sqrt(plane)) - plane
+            if exporting:  # Mul and Add nodes: ``addcmul`` with a value has no ONNX form of its own
+                plane = plane + 2.0 * offset * weight * shift
+            elif in_place:
+                plane = plane.addcmul_(weight, shift, value=2.0 * offset)
+            else:
+                plane = torch.addcmul(plane, weight, shift, value=2.0 * offset)
         planes.append(plane)
-    return torch.cat(planes, dim=-3)
+    return gamma if in_place else torch.cat(planes, dim=-3)
 
 
 def _soft_light_masked(base: torch.Tensor, weight: torch.Tensor, offset: torch.Tensor) -> torch.Tensor:
@@ -363,12 +365,13 @@ def split_toning(
         True
     """
     gamma = safe_pow(image, 1.0 / 2.2)
-    t = (luminance(gamma.clamp(0.0, 1.0), luminance_weights) + scalar_param(balance, image, "split_balance") * 0.01).clamp(0.0, 1.0)
+    t = luminance(gamma.clamp(0.0, 1.0), luminance_weights)
+    if not is_constant(balance, 0.0):
+        t = t + scalar_param(balance, image, "split_balance") * 0.01
+    t = t.clamp(0.0, 1.0)
     plain = _plain_offsets(shadows), _plain_offsets(highlights)
-    if None not in plain and untracked(gamma, t):
+    if None not in plain:
         return safe_pow(_soft_light_by_channel(gamma, (1.0 - t, t), plain), 2.2)
-    if None not in plain and torch.onnx.is_in_onnx_export():
-        return safe_pow(_soft_light_planes(gamma, (1.0 - t, t), plain), 2.2)
     offsets = (color_param(shadows, image, "split_shadows") - 0.5, color_param(highlights, image, "split_highlights") - 0.5)
     if torch.onnx.is_in_onnx_export():
         return safe_pow(_soft_light_masked(_soft_light_masked(gamma, 1.0 - t, offsets[0]), t, offsets[1]), 2.2)
@@ -510,7 +513,7 @@ def lift_gamma_gain(image: torch.Tensor, lift=IDENTITY_TRACKBALL, gamma=IDENTITY
 def _hsv(image: torch.Tensor) -> torch.Tensor:
     # Hue divides by the chroma (max - min): ACEScg turns a grey 1e-38 into a tinted one, whose hue's gradient overflows.
     lit = image.amax(dim=CHANNEL, keepdim=True) > NEGLIGIBLE_LIGHT
-    return rgb_to_hsv(torch.where(lit, image, 0.0))
+    return rgb_to_hsv(where(lit, image, 0.0))
 
 
 def hue_shift(image: torch.Tensor, degrees: Param, hue_vs_hue=None) -> torch.Tensor:

@@ -34,6 +34,7 @@ dither, display) stay live.
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import inspect
 from pathlib import Path
@@ -44,7 +45,8 @@ from torch import nn
 
 from .._moved import OLD_CLASS_PATHS
 from ..base.config import load_config
-from ..base.core import with_alpha
+from ..base.core import nan_free, with_alpha
+from ..runtime import is_tracing
 from ..lut import INTERPOLATIONS, LUT3D, ErrorReport, bake_lut
 from .slots import SLOT, SLOTS, STAGES, build_stage, is_identity_stage
 
@@ -192,16 +194,11 @@ class PostFX(nn.Module):
 
     def _graded(self, image: torch.Tensor, dt) -> torch.Tensor:
         """The stages in order on the colour channels, ``dt`` to those that keep state between frames."""
-        for name, stage in self.stages().items():
-            image = stage(image, dt) if SLOT[name].timed else stage(image)
-        return image
+        return _through(self.stages().items(), image, dt)
 
     def finish(self, image: torch.Tensor) -> torch.Tensor:
         """The stages after exposure (those that keep no state between frames), in order."""
-        for name, stage in self.stages().items():
-            if not SLOT[name].timed:
-                image = stage(image)
-        return image
+        return _through([(name, stage) for name, stage in self.stages().items() if not SLOT[name].timed], image, None)
 
     def frame(self, image: torch.Tensor, adapted: torch.Tensor, dt) -> tuple:
         """The look without state, for serving: ``(image, adapted, dt) -> (output, new adapted)``.
@@ -311,3 +308,17 @@ torchgrade is imported, so ``torch.load(path, weights_only=True)`` reads back a 
 torch.serialization.add_safe_globals(list(SAFE_GLOBALS))
 torch.serialization.add_safe_globals([(cls, old) for cls in SAFE_GLOBALS for old, new in OLD_CLASS_PATHS.items()
                                       if new == f"{cls.__module__}.{cls.__qualname__}"])  # files saved before the move
+
+
+def _through(stages, image: torch.Tensor, dt) -> torch.Tensor:
+    """``image`` through ``(slot name, stage)`` pairs in order, ``dt`` to those that keep state between frames.
+
+    A stage's output holds no NaN (``tests/library/test_extremes.py``), so each stage after the first is told so
+    (:func:`~torchgrade.base.core.nan_free`) and skips its input's NaN pass, one frame pass each. Not while tracing:
+    a compiled look keeps every stage's whole policy (Inductor fuses it), and an export decides it in its graph.
+    """
+    for index, (name, stage) in enumerate(stages):
+        with contextlib.nullcontext() if index == 0 or is_tracing() else nan_free(image):
+            image = stage(image, dt) if SLOT[name].timed else stage(image)
+    return image
+

@@ -25,7 +25,7 @@ import torch
 
 from .recording import is_tracing
 
-__all__ = ["constant", "values_of", "device_cached", "folded", "CACHED_CONSTANTS"]
+__all__ = ["constant", "where", "values_of", "device_cached", "folded", "CACHED_CONSTANTS"]
 
 CACHED_CONSTANTS = 4096
 """Constants kept per kind (least recently used go first): a look holds tens; random controls are tensors, not cached."""
@@ -42,6 +42,23 @@ def constant(values, like: torch.Tensor) -> torch.Tensor:
     if is_tracing():
         return torch.tensor(values, dtype=like.dtype, device=like.device)
     return _unchanged(_made(values, like.dtype, like.device), torch.tensor, values, dtype=like.dtype, device=like.device)
+
+
+def where(condition: torch.Tensor, a, b) -> torch.Tensor:
+    """``torch.where(condition, a, b)`` with a plain number among ``a`` and ``b`` as a :func:`constant` of the
+    other's dtype on its device: as a number, ``torch.where`` makes a new 0-d tensor at every call (a fill kernel on
+    a GPU). While tracing, compiling or exporting, ``torch.where`` itself (the graph records the number).
+
+    Examples:
+        >>> import torch
+        >>> where(torch.tensor([True, False]), 1.0, torch.tensor([5.0, 6.0])).tolist()
+        [1.0, 6.0]
+    """
+    like = a if isinstance(a, torch.Tensor) else b
+    if is_tracing() or not isinstance(like, torch.Tensor) or not like.is_floating_point():
+        return torch.where(condition, a, b)
+    a, b = (constant(float(v), like) if isinstance(v, (int, float)) and not isinstance(v, bool) else v for v in (a, b))
+    return torch.where(condition, a, b)
 
 
 @functools.lru_cache(maxsize=CACHED_CONSTANTS)

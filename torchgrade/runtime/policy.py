@@ -30,7 +30,7 @@ import torch
 
 from .recording import is_tracing
 
-__all__ = ["ExecutionPolicy", "policy_for", "STRIP_PIXELS_PER_THREAD", "PARALLEL_FROM", "LOOKUP_CHUNK"]
+__all__ = ["ExecutionPolicy", "policy_for", "STRIP_PIXELS_PER_THREAD", "PARALLEL_FROM", "LOOKUP_CHUNK", "ONE_KERNEL_BLUR_PIXELS"]
 
 STRIP_PIXELS_PER_THREAD = 1 << 16
 """Pixels of a CPU strip per intra-op thread (batch included). On a 2-core Xeon (2 MiB L2 a core), grade + tone map of
@@ -68,6 +68,10 @@ class ExecutionPolicy:
             ``avg_pool2d``: one library kernel each (cuDNN), where the CPU is faster on sums of shifted slices
             (kornia's ``gaussian_blur2d`` takes them there: a 9-tap blur of 540x960 took 14 ms against 94 ms as a
             oneDNN convolution; four strided views summed about 3 times faster than ``avg_pool2d``).
+        one_kernel_blur_pixels: with ``filters_as_kernels``, a plane of at most this many pixels is blurred by one 2-D
+            convolution (taps² products a pixel, one launch) instead of two 1-D ones (one launch each); ``None``: never.
+        nan_dropping_max: ``max(x, 0)`` with NaN to 0 as one ``torch.fmax`` (one launch) instead of a clamp and a NaN
+            pass; the CPU does not vectorise ``fmax`` (326 against 42 µs for the two passes on a 2^16-pixel strip).
     """
 
     strip_pixels: Optional[int]
@@ -75,9 +79,17 @@ class ExecutionPolicy:
     lookup_chunk: Optional[int]
     reads_values: bool
     filters_as_kernels: bool
+    one_kernel_blur_pixels: Optional[int] = None
+    nan_dropping_max: bool = False
 
 
-WHOLE_FRAMES = ExecutionPolicy(strip_pixels=None, workers=1, lookup_chunk=None, reads_values=False, filters_as_kernels=True)
+ONE_KERNEL_BLUR_PIXELS = 1 << 17
+"""Pixels of a plane up to which a GPU blurs it with one 2-D convolution. A 9-tap blur of 2^17 pixels is 10.6 million
+products a channel, microseconds on a GPU, against a launch's 24 µs (``benchmarks/gpu_proxy.py``): the deep levels of a
+bloom pyramid (from 270x480 at 4K; 8 of its 9 levels) cost their launches, not their arithmetic."""
+
+WHOLE_FRAMES = ExecutionPolicy(strip_pixels=None, workers=1, lookup_chunk=None, reads_values=False, filters_as_kernels=True,
+                               one_kernel_blur_pixels=ONE_KERNEL_BLUR_PIXELS, nan_dropping_max=True)
 
 GRAPH = ExecutionPolicy(strip_pixels=None, workers=1, lookup_chunk=None, reads_values=False, filters_as_kernels=False)
 """While tracing, compiling or exporting: kornia's blur, which picks its own form for the compiler (convolution on the

@@ -7,7 +7,7 @@ import torch
 from ..base.core import apply_matrix, matrix_on_planes, untracked
 from ..color import AP1_LUMINANCE, MATRICES, convert, unity_to_aces
 from ..color.spaces import shared_matrix
-from ..runtime import constant, values_of
+from ..runtime import constant, values_of, where
 from .aces_rrt import (
     AP1_TO_REC709,
     DIM_SURROUND_GAMMA,
@@ -59,7 +59,7 @@ def _dim_surround_planes(big_x: torch.Tensor, big_y: torch.Tensor, big_z: torch.
     elif untracked(new_y):
         new_y = new_y.pow_(DIM_SURROUND_GAMMA)  # the guard only keeps the gradient at 0 finite: 0^0.9811 is 0
     else:
-        new_y = torch.where(new_y > 0, torch.where(new_y > 0, new_y, 1.0) ** DIM_SURROUND_GAMMA, new_y)
+        new_y = where(new_y > 0, where(new_y > 0, new_y, 1.0) ** DIM_SURROUND_GAMMA, new_y)
     m = new_y / y.clamp_min(1e-4)
     return x * m, new_y, (1.0 - x - y) * m
 

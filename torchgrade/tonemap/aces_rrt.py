@@ -21,7 +21,7 @@ from ..color import (
     primaries_to_rec709_matrix,
     safe_sqrt,
 )
-from ..runtime import constant, values_of
+from ..runtime import constant, values_of, where
 
 __all__ = [
     "RRT_SAT_FACTOR",
@@ -89,8 +89,8 @@ def _rgb_yc(rgb: torch.Tensor) -> torch.Tensor:
 
 def _yc(r: torch.Tensor, g: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """ACES ``rgb_2_yc``: ``(r + g + b + 1.75 sqrt(b(b-g) + g(g-r) + r(r-b))) / 3``."""
-    chroma = safe_sqrt(b * (b - g) + g * (g - r) + r * (r - b))
-    return (r + g + b + 1.75 * chroma) / 3.0
+    chroma = safe_sqrt(torch.addcmul(torch.addcmul(b * (b - g), g, g - r), r, r - b))
+    return torch.add(r + g + b, chroma, alpha=1.75) / 3.0
 
 
 def _rgb_hue_degrees(rgb: torch.Tensor) -> torch.Tensor:
@@ -99,20 +99,22 @@ def _rgb_hue_degrees(rgb: torch.Tensor) -> torch.Tensor:
     y = 3.0**0.5 * (g - b)
     x = 2.0 * r - g - b
     neutral_pixel = (x == 0) & (y == 0)
-    hue = torch.atan2(y, torch.where(neutral_pixel, 1.0, x)) * (180.0 / math.pi)  # rad2deg has no ONNX export
-    hue = torch.where(neutral_pixel, 0.0, hue)
+    hue = torch.atan2(y, where(neutral_pixel, 1.0, x)) * (180.0 / math.pi)  # rad2deg has no ONNX export
+    hue = where(neutral_pixel, 0.0, hue)
     return torch.where(hue < 0, hue + 360.0, hue)
 
 
 def _sigmoid_shaper(x: torch.Tensor) -> torch.Tensor:
-    """ACES ``sigmoid_shaper``: a 0..1 sigmoid spanning -2..2."""
-    if torch.onnx.is_in_onnx_export():
-        # The same curve without Sign (benchmarks/results/onnx_ops.md): with c = clamp(x, -2, 2), t = 1 - |c|/2 and
-        # sign(x) (1 - t²) = c (1 - |c|/4).
-        c = x.clamp(-2.0, 2.0)
-        return 0.5 + c * (0.5 - 0.125 * torch.abs(c))
-    t = (1.0 - torch.abs(x / 2.0)).clamp_min(0.0)
-    return (1.0 + torch.sign(x) * (1.0 - t * t)) / 2.0
+    """ACES ``sigmoid_shaper``, a 0..1 sigmoid spanning -2..2: ``(1 + sign(x)(1 - t²)) / 2`` with
+    ``t = max(1 - |x/2|, 0)``, written as ``1/2 + c (1/2 - |c|/8)`` with ``c = clamp(x, -2, 2)`` (the same curve:
+    ``sign(x)(1 - t²) = c - c|c|/4``), without a ``sign`` (no ONNX Sign either: ``benchmarks/results/onnx_ops.md``).
+
+    Examples:
+        >>> _sigmoid_shaper(torch.tensor([-3.0, -1.0, 0.0, 1.0, 2.0])).tolist()
+        [0.0, 0.125, 0.5, 0.875, 1.0]
+    """
+    c = x.clamp(-2.0, 2.0)
+    return 0.5 + c * (0.5 - 0.125 * torch.abs(c))
 
 
 def _glow(yc: torch.Tensor, gain: torch.Tensor, mid: float) -> torch.Tensor:
@@ -121,22 +123,19 @@ def _glow(yc: torch.Tensor, gain: torch.Tensor, mid: float) -> torch.Tensor:
         # yc clamped to the ramp gives gain (to float rounding) below it and exactly 0 above it, without selects.
         return (mid / yc.clamp(2.0 / 3.0 * mid, 2.0 * mid)).sub_(0.5).mul_(gain)
     between = gain * (mid / yc.clamp_min(2.0 / 3.0 * mid) - 0.5)
-    return torch.where(yc <= 2.0 / 3.0 * mid, gain, torch.where(yc >= 2.0 * mid, 0.0, between))
-
-
-def _smoothstep(edge0, edge1, x: torch.Tensor) -> torch.Tensor:
-    t = ((x - edge0) / (edge1 - edge0)).clamp(0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t)
+    return where(yc <= 2.0 / 3.0 * mid, gain, where(yc >= 2.0 * mid, 0.0, between))
 
 
 def smoothstep_hue_weight(centered_hue: torch.Tensor) -> torch.Tensor:
-    """The red modifier's hue weight as Unity and Unreal approximate it: ``smoothstep(0, 1, 1 - |2h / 135|)²``.
+    """The red modifier's hue weight as Unity and Unreal approximate it: ``smoothstep(0, 1, 1 - |2h / 135|)²``, with
+    ``smoothstep(0, 1, t) = t²(3 - 2t)`` on ``t`` clamped to [0, 1].
 
     Examples:
         >>> smoothstep_hue_weight(torch.tensor([0.0, 67.5])).tolist()
         [1.0, 0.0]
     """
-    return _smoothstep(0.0, 1.0, 1.0 - torch.abs(2.0 * centered_hue / _RRT_RED_WIDTH)) ** 2
+    t = (1.0 - torch.abs(centered_hue) * (2.0 / _RRT_RED_WIDTH)).clamp(0.0, 1.0)
+    return (t * t * (3.0 - 2.0 * t)) ** 2
 
 
 def cubic_basis_hue_weight(centered_hue: torch.Tensor) -> torch.Tensor:
@@ -171,14 +170,14 @@ def rrt_glow_and_red_modifier(aces: torch.Tensor, hue_weight, tiny: float = UNIT
         return torch.cat(rrt_glow_and_red_modifier_planes(aces, hue_weight, tiny), dim=-3)
     saturation = _rgb_saturation(aces, tiny)
     s = _sigmoid_shaper((saturation - 0.4) / 0.2)
-    aces = aces * (1.0 + _glow(_rgb_yc(aces), _RRT_GLOW_GAIN * s, _RRT_GLOW_MID))
+    aces = torch.addcmul(aces, aces, _glow(_rgb_yc(aces), _RRT_GLOW_GAIN * s, _RRT_GLOW_MID))
 
     red, green_blue = aces.split((1, 2), dim=-3)
-    change = hue_weight(_red_centered_hue(aces)) * saturation * (_RRT_RED_PIVOT - red) * (1.0 - _RRT_RED_SCALE)
-    if untracked(aces, change):
-        red.add_(change)  # in place: aces is the glow's product, made above
+    weight, toward_pivot = hue_weight(_red_centered_hue(aces)) * saturation, _RRT_RED_PIVOT - red
+    if untracked(aces, weight):
+        red.addcmul_(weight, toward_pivot, value=1.0 - _RRT_RED_SCALE)  # in place: aces is the glow's product, made above
         return aces
-    return torch.cat((red + change, green_blue), dim=-3)
+    return torch.cat((torch.addcmul(red, weight, toward_pivot, value=1.0 - _RRT_RED_SCALE), green_blue), dim=-3)
 
 
 def rrt_glow_and_red_modifier_planes(aces: torch.Tensor, hue_weight, tiny: float = UNITY_TINY) -> tuple:

@@ -20,7 +20,7 @@ import torch
 
 from ...base.core import apply_matrix
 from ...color import rgb_to_xyz_matrix, safe_pow
-from ...runtime import constant, values_of
+from ...runtime import constant, values_of, where
 
 __all__ = ["CAM16_PRIMARIES", "JMhParams", "jmh_params", "rgb_to_aab", "aab_to_jmh", "jmh_to_rgb", "y_to_j", "a_to_y"]
 
@@ -152,9 +152,9 @@ def _safe_hypot_atan2(a: torch.Tensor, b: torch.Tensor):
     """
     r2 = a * a + b * b
     zero = r2 <= torch.finfo(r2.dtype).tiny
-    m = torch.sqrt(torch.where(zero, 1.0, r2))
-    hue = torch.atan2(torch.where(zero, 0.0, b), torch.where(zero, 1.0, a))
-    return torch.where(zero, 0.0, m), hue
+    m = torch.sqrt(where(zero, 1.0, r2))
+    hue = torch.atan2(where(zero, 0.0, b), where(zero, 1.0, a))
+    return where(zero, 0.0, m), hue
 
 
 def aab_to_jmh(aab: torch.Tensor, p: JMhParams, dim: int = -3):
@@ -175,11 +175,11 @@ def aab_to_jmh(aab: torch.Tensor, p: JMhParams, dim: int = -3):
     j = J_SCALE * safe_pow(a_, p.cz)
     m, hue = _safe_hypot_atan2(a, b)
     chromatic = lit & (m > 0)
-    safe_m = torch.where(chromatic, m, 1.0)
-    cos_h = torch.where(chromatic, a / safe_m, 1.0)
-    sin_h = torch.where(chromatic, b / safe_m, 0.0)
-    h = torch.where(lit, torch.remainder(torch.rad2deg(hue), 360.0), 0.0)
-    return j, torch.where(lit, m, 0.0), h, cos_h, sin_h
+    safe_m = where(chromatic, m, 1.0)
+    cos_h = where(chromatic, a / safe_m, 1.0)
+    sin_h = where(chromatic, b / safe_m, 0.0)
+    h = where(lit, torch.remainder(torch.rad2deg(hue), 360.0), 0.0)
+    return j, where(lit, m, 0.0), h, cos_h, sin_h
 
 
 def jmh_to_rgb(j, m, cos_h, sin_h, p: JMhParams, dim: int = -3) -> torch.Tensor:

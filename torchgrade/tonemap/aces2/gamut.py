@@ -15,7 +15,7 @@ from __future__ import annotations
 import torch
 
 from ...color import safe_pow, safe_sqrt
-from ...runtime import constant, values_of
+from ...runtime import constant, is_tracing, values_of, where
 
 __all__ = ["count_below", "GamutParams", "gamut_compress", "focus_gain", "solve_j_intersect", "compression_slope",
            "hull_boundary_m", "focus_j"]
@@ -30,7 +30,7 @@ COMPRESSION_THRESHOLD = 0.75
 
 
 def _nonzero(x: torch.Tensor) -> torch.Tensor:
-    return torch.where(x == 0, 1.0, x)
+    return where(x == 0, 1.0, x)
 
 
 def focus_j(cusp_j, mid_j: float, limit_j_max: float):
@@ -53,7 +53,7 @@ def focus_gain(j, threshold, limit_j_max: float, focus_dist: float):
     """
     above = j > threshold
     ratio = (limit_j_max - threshold) / (limit_j_max - j).clamp_min(0.0001)
-    adjust = torch.log10(torch.where(above, ratio, 1.0))
+    adjust = torch.log10(where(above, ratio, 1.0))
     return limit_j_max * focus_dist * (adjust * adjust + 1.0)
 
 
@@ -116,8 +116,8 @@ def _remap_m(m, gamut_m, reach_m):
     proportion = (gamut_m / reach_m).clamp_min(COMPRESSION_THRESHOLD)
     threshold = proportion * gamut_m
     active = (m > threshold) & (proportion < 1.0)
-    gamut_off = torch.where(active, gamut_m - threshold, 1.0)
-    reach_off = torch.where(active, reach_m - threshold, 2.0)
+    gamut_off = where(active, gamut_m - threshold, 1.0)
+    reach_off = where(active, reach_m - threshold, 2.0)
     scale = reach_off / (reach_off / gamut_off - 1.0)
     nd = (m - threshold) / scale
     return torch.where(active, threshold + scale * nd / (1.0 + nd), m)
@@ -126,8 +126,10 @@ def _remap_m(m, gamut_m, reach_m):
 def count_below(table: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
     """How many entries of the ascending 1-D ``table`` lie below each ``x``: ``torch.searchsorted(table, x)``.
 
-    Written as ``ceil(log2(n))`` branchless halving steps of gathers because ONNX has no search
-    operator: the same indices in eager PyTorch and in an exported graph.
+    Eager, that search itself (one kernel). While tracing, compiling or exporting, ``ceil(log2(n))`` branchless
+    halving steps of gathers, because ONNX has no search operator: the same index for every number (8 operations a
+    step on a GPU, 73 for the hue table, where the search is one; a NaN, which a sanitized frame never gives, counts
+    ``n`` in the search and 0 in the steps).
 
     Examples:
         >>> table = torch.tensor([0.0, 1.0, 2.0, 3.0, 4.0])
@@ -135,6 +137,8 @@ def count_below(table: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
         >>> count_below(table, x).tolist() == torch.searchsorted(table, x).tolist()
         True
     """
+    if not is_tracing():
+        return torch.searchsorted(table, x)
     n = int(table.shape[0])  # a constant table: its size may be frozen into a traced graph
     count = torch.zeros(x.shape, dtype=torch.long, device=x.device)
     step = 1 << (n.bit_length() - 1)
@@ -217,8 +221,8 @@ def gamut_compress(j, m, h, reach_m, p: GamutParams):
     gamut_m = hull_boundary_m(cusp_j, cusp_m, p.limit_j_max, top_inv, p.lower_inv, j_i, slope, j_ic)
     reach_bound = _line_hull_m(j_i, slope, p.model_gamma_inv, p.limit_j_max, reach_m, p.limit_j_max)
     active = (j > 0) & (m > 0) & (j <= p.limit_j_max) & (gamut_m > 0)
-    safe_gamut = torch.where(active, gamut_m, 1.0)
-    safe_reach = torch.where(active, reach_bound, 2.0)
-    m_out = _remap_m(torch.where(active, m, 0.0), safe_gamut, safe_reach)
+    safe_gamut = where(active, gamut_m, 1.0)
+    safe_reach = where(active, reach_bound, 2.0)
+    m_out = _remap_m(where(active, m, 0.0), safe_gamut, safe_reach)
     j_out = torch.where(active, j_i + m_out * slope, j.clamp_min(0.0))
-    return j_out, torch.where(active, m_out, 0.0)
+    return j_out, where(active, m_out, 0.0)

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import torch
 
 from ...color import safe_pow, safe_sqrt
+from ...runtime import where
 
 __all__ = ["ToneScale", "tonescale_params", "daniele_tonescale", "ChromaParams", "chroma_params", "chroma_compress"]
 
@@ -155,8 +156,8 @@ def chroma_compress(j, m, j_ts, norm, reach_m, limit_j_max: float, cz: float, c:
     snj = (1.0 - nj).clamp_min(0.0)
     limit = safe_pow(nj, inv_cz) * reach_m / norm
     lit = j > 0
-    ratio = j_ts / torch.where(lit, j, 1.0)
+    ratio = j_ts / where(lit, j, 1.0)
     mc = m * safe_pow(ratio, inv_cz) / norm
     mc = limit - toe(limit - mc, limit - 0.001, snj * c.sat, torch.sqrt(nj * nj + c.sat_thr))
     mc = toe(mc, limit, nj * c.compr, snj)
-    return torch.where(lit & (m != 0), mc * norm, 0.0)
+    return where(lit & (m != 0), mc * norm, 0.0)

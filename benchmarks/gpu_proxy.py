@@ -1,0 +1,102 @@
+"""What the GPU path would cost, counted without a GPU: each case of bench_gpu.py on the ``meta`` device.
+
+    python benchmarks/gpu_proxy.py [--out DIR]
+
+For each case it counts the kernel launches an eager forward makes (every operation dispatched, views aside) and
+the bytes they move, in *frame passes* (one pass: a copy of a 4K frame, read and written), with
+:class:`torchgrade.testing.dispatch.DispatchCount`. From them it predicts the time on one H200::
+
+    t = sum over launches of max(LAUNCH_MS, PASS_COST * COPY_4K_MS * passes of the launch)
+
+an elementwise kernel runs at the memory's speed, and nothing runs faster than Python and PyTorch dispatch it.
+The two constants were fitted (least squares on log time) to the seven eager no_grad rows of
+``benchmarks/results/gpu.md`` (run B, the code at ``7319b75``, counted there with this script's counter): every
+prediction within 0.84 to 1.13 of its measurement; the training row, outside the fit, is over-predicted 1.31 times.
+A prediction, not a measurement: a GPU run (``benchmarks/gpu_check.sh``) is what confirms it.
+
+Runs in about a minute on 2 cores. Writes ``gpu_proxy.json`` and ``gpu_proxy.md`` to ``--out`` (default
+``benchmarks/out``; the committed ones with ``--out benchmarks/results``).
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import torchgrade as tg  # noqa: E402
+from benchmarks.bench_gpu import SIZES, STAGES, cinematic  # noqa: E402
+from benchmarks.common import argument_parser, write_results  # noqa: E402
+from torchgrade.testing.dispatch import DispatchCount  # noqa: E402
+
+LAUNCH_MS = 0.024
+"""The least a launch costs eager (Python, PyTorch's dispatch, the driver): fitted, see the module's docstring."""
+PASS_COST = 1.055
+"""A frame pass of an elementwise kernel over one copy of the frame's time: fitted, see the module's docstring."""
+COPY_4K_MS = 0.0546
+"""One device-to-device copy of a 3840x2160 float32 RGB frame on an H200 (``benchmarks/results/gpu.md``, run A)."""
+MEASURED_AT_7319B75 = {"cinematic 4K": 11.23, "cinematic 1080p": 7.38, "grade": 3.95, "tonemap aces": 4.04,
+                       "tonemap aces2": 15.34, "bloom scattering": 4.18, "exposure": 0.48, "training 16x512²": 24.90}
+"""Eager ms on the H200 of ``benchmarks/results/gpu.md`` (runs B and C), the code then at ``7319b75``."""
+FOUR_K = torch.Size((1, 3) + SIZES["4K"])
+
+
+def cases() -> dict:
+    """``name -> (stage factory, input shape, training)``: bench_gpu's looks, stages, LUT and training step."""
+    lut = lambda: cinematic().to_lut(33).lut  # noqa: E731
+    return {
+        "cinematic 4K": (cinematic, FOUR_K, False),
+        "cinematic 1080p": (cinematic, (1, 3) + SIZES["1080p"], False),
+        **{name: (make, FOUR_K, False) for name, make in STAGES.items()},
+        "LUT 33³ tetrahedral": (lut, FOUR_K, False),
+        "training 16x512²": (cinematic, (16, 3, 512, 512), True),
+    }
+
+
+def counted(make, shape, training: bool) -> DispatchCount:
+    """What the second forward (and backward, ``training``) of ``make()`` on ``meta`` dispatches."""
+    stage = make().to("meta")
+    for _ in range(2):  # the first builds constants and tables
+        image = torch.empty(shape, device="meta", requires_grad=training)
+        count = DispatchCount(frame=torch.empty(FOUR_K, device="meta"))
+        with torch.set_grad_enabled(training), count:
+            out = stage(image)
+            if training:
+                out.mean().backward()
+    return count
+
+
+def predicted_ms(count: DispatchCount) -> float:
+    """The module docstring's ``t``, in ms."""
+    return sum(max(LAUNCH_MS, PASS_COST * COPY_4K_MS * moved / count.frame_bytes) for moved in count.moved)
+
+
+def main(argv=None) -> int:
+    args = argument_parser(__doc__).parse_args(argv)
+    rows = []
+    for name, (make, shape, training) in cases().items():
+        count = counted(make, shape, training)
+        rows.append({"case": name, "launches": count.launches, "frame_passes": round(count.frame_passes, 1),
+                     "predicted_ms": round(predicted_ms(count), 2), "measured_ms_7319b75": MEASURED_AT_7319B75.get(name)})
+        print(rows[-1], flush=True)
+    lines = ["# The GPU path, counted on the `meta` device", "",
+             f"torch {torch.__version__}, torchgrade {tg.__version__}. Launches and frame passes (bytes moved over one copy "
+             "of a 4K frame, read and written) of one eager frame, and the H200 time they predict "
+             f"(`max({LAUNCH_MS} ms, {PASS_COST} × {COPY_4K_MS} ms × passes)` summed over launches; see "
+             "`benchmarks/gpu_proxy.py`). The last column is the H200's measurement of the code as it was at `7319b75` "
+             "(`gpu.md`), the data of the fit; the look then metered a log-average (the histogram costs 38 more launches, "
+             "most of them on 128 bins) and its bloom had no clamp.", "",
+             "| case | launches | frame passes | predicted H200 ms | measured at 7319b75 |", "| --- | ---: | ---: | ---: | ---: |"]
+    for row in rows:
+        measured = "" if row["measured_ms_7319b75"] is None else f"{row['measured_ms_7319b75']:.2f}"
+        lines.append(f"| {row['case']} | {row['launches']} | {row['frame_passes']} | {row['predicted_ms']:.2f} | {measured} |")
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_results(args.out, "gpu_proxy", {"rows": rows}, lines, "python benchmarks/gpu_proxy.py --out DIR")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,55 @@
+"""The GPU's execution policy (whole frames, library kernels, one 2-D blur for small planes, no reads) gives the CPU
+policy's values: run here on the CPU by handing every module the policy a GPU gets."""
+
+import importlib
+
+import pytest
+import torch
+
+import torchgrade as tg
+from torchgrade.runtime import policy
+
+USERS = ["torchgrade.runtime.strips", "torchgrade.bloom.pyramid", "torchgrade.bloom.layer", "torchgrade.augment.layer",
+         "torchgrade.lut.apply", "torchgrade.base.core", "torchgrade.color.transfer"]
+"""Every module that asks ``policy_for``."""
+
+LOOKS = {
+    "cinematic": {"exposure": {"metering": "histogram", "metering_mask": "center"},
+                  "bloom": {"threshold": 1.0, "knee": 0.5, "intensity": 0.6, "scatter": 0.7, "clamp": 16.0},
+                  "grade": {"aces": True, "contrast": 15, "split_shadows": [0.45, 0.5, 0.56]}, "tonemap": {"mode": "aces"}},
+    "bloom-fireflies-bicubic": {"bloom": {"mode": "additive", "fade_fireflies": True, "bicubic_upsampling": True,
+                                          "karis_average": True, "intensity": 1.5}},
+    "bloom-anamorphic": {"bloom": {"anamorphic_ratio": 0.6, "intensity": 0.8}},
+    "aces2": {"grade": {"contrast": 20, "split_highlights": [0.6, 0.5, 0.4]}, "tonemap": {"mode": "aces2"}},
+}
+
+
+@pytest.fixture
+def gpu_policy(monkeypatch):
+    """``policy_for`` answering with the whole-frames policy for every device, as it does for CUDA."""
+    def whole_frames(device):
+        return policy.GRAPH if policy.is_tracing() else policy.WHOLE_FRAMES
+
+    for name in USERS:
+        monkeypatch.setattr(importlib.import_module(name), "policy_for", whole_frames)
+
+
+@pytest.fixture(scope="module")
+def desk():
+    return tg.io.read_exr("../shared/data/exr/Desk.exr")[:3].unsqueeze(0)
+
+
+def test_only_the_gpu_policy_blurs_small_planes_with_one_kernel_and_drops_nan_with_fmax():
+    assert policy.WHOLE_FRAMES.one_kernel_blur_pixels == policy.ONE_KERNEL_BLUR_PIXELS and policy.WHOLE_FRAMES.nan_dropping_max
+    cpu = policy.policy_for(torch.device("cpu"))
+    assert cpu.one_kernel_blur_pixels is None and not cpu.nan_dropping_max
+
+
+@pytest.mark.parametrize("name", list(LOOKS))
+def test_the_gpu_policy_gives_the_cpu_policys_values(name, desk, gpu_policy, request):
+    look = tg.PostFX.from_config(LOOKS[name]).eval()
+    with torch.no_grad():
+        on_gpu_policy = look(desk)
+        request.getfixturevalue("monkeypatch").undo()
+        on_cpu_policy = look(desk)
+    torch.testing.assert_close(on_gpu_policy, on_cpu_policy, rtol=1e-4, atol=1e-5)

@@ -1,0 +1,90 @@
+"""What a forward would cost a GPU, counted on any device: the operations dispatched and the bytes they move.
+
+On CUDA every operation PyTorch dispatches (views aside) is a kernel launch, a value read back
+(``_local_scalar_dense``: ``.item()``, ``bool()``, ``.tolist()``) waits for the device, and a tensor made from host
+data (``lift_fresh``, a CPU-to-device copy) is a pageable copy. An elementwise kernel on a frame runs at the memory's
+speed, so the bytes its operands and result hold (read and written once) predict its time: counted in *frame
+passes*, the bytes over those of one copy of the frame (read and written). On the ``meta`` device (shapes, no data)
+all of this is counted without computing anything.
+
+Examples:
+    >>> import torch
+    >>> image = torch.empty(1, 3, 8, 8, device="meta")
+    >>> with DispatchCount(frame=image) as counted:
+    ...     _ = (image * 2).clamp_(0, 1)
+    >>> counted.launches, counted.frame_passes
+    (2, 2.0)
+"""
+
+from __future__ import annotations
+
+import collections
+from typing import Optional
+
+import torch
+from torch.utils._python_dispatch import TorchDispatchMode
+from torch.utils._pytree import tree_flatten
+
+__all__ = ["DispatchCount", "VIEWS"]
+
+VIEWS = {"view", "_unsafe_view", "t", "expand", "unsqueeze", "squeeze", "split", "unbind", "slice", "select", "reshape",
+         "alias", "permute", "detach", "as_strided", "transpose", "split_with_sizes", "_reshape_alias"}
+"""Operations that make a view: metadata only, no kernel."""
+
+_HOST_DATA = (torch.ops.aten.lift_fresh.default, torch.ops.aten.lift_fresh_copy.default)
+_COPIES = (torch.ops.aten._to_copy.default, torch.ops.aten.copy_.default)
+
+
+class DispatchCount(TorchDispatchMode):
+    """Counts, while active, the operations dispatched (views aside), the bytes they move, the values read back and
+    the tensors made from host data.
+
+    Args:
+        frame: the image whose copy is one frame pass (``frame_passes``); ``None`` counts bytes only.
+
+    Attributes:
+        moved: the bytes of each launch's tensor operands and results, in the order dispatched.
+        reads, host_data: ``Counter`` of value reads and of tensors made from (or copied from) host data.
+        by_operation: ``Counter`` of launches per operation name.
+    """
+
+    def __init__(self, frame: Optional[torch.Tensor] = None):
+        super().__init__()
+        self.frame_bytes = 2 * frame.numel() * frame.element_size() if frame is not None else None
+        self.moved = []
+        self.reads = collections.Counter()
+        self.host_data = collections.Counter()
+        self.by_operation = collections.Counter()
+
+    @property
+    def launches(self) -> int:
+        """Operations dispatched, views aside: kernel launches on CUDA."""
+        return len(self.moved)
+
+    @property
+    def frame_passes(self) -> float:
+        """The bytes every launch moved over the bytes one copy of the frame reads and writes."""
+        return sum(self.moved) / self.frame_bytes
+
+    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+        kwargs = kwargs or {}
+        name = func.overloadpacket.__name__
+        out = func(*args, **kwargs)
+        if func is torch.ops.aten._local_scalar_dense.default:
+            self.reads[name] += 1
+        elif func in _HOST_DATA:
+            self.host_data[name] += 1
+        elif func in _COPIES and _from_host(args, kwargs):
+            self.host_data[f"{name} from the CPU"] += 1
+        elif name not in VIEWS:
+            tensors = [t for t in tree_flatten((args, kwargs, out))[0] if isinstance(t, torch.Tensor)]
+            self.moved.append(sum(t.numel() * t.element_size() for t in tensors))
+            self.by_operation[name] += 1
+        return out
+
+
+def _from_host(args, kwargs) -> bool:
+    devices = {a.device.type for a in args if isinstance(a, torch.Tensor)}
+    if kwargs.get("device") is not None:
+        devices.add(torch.device(kwargs["device"]).type)
+    return "cpu" in devices and len(devices) > 1
