@@ -146,3 +146,18 @@ def test_per_pixel_input_is_the_first_frame_after_exposure_and_bloom_and_keeps_t
         assert look.exposure.adapted_luminance.numel() == 0  # untouched: no sequence started
         expected = look.bloom(look.exposure(scene))
     torch.testing.assert_close(received, expected)
+
+
+@pytest.mark.parametrize("handed_back", ["bloom on a frame too small for a level", "bloom in the middle"])
+def test_the_nan_pass_runs_once_a_look_and_never_trusts_a_frame_a_stage_handed_back(handed_back):
+    """Each stage after one that made its frame skips the NaN pass (a stage's output holds no NaN); a stage that hands
+    its input back (bloom below its first level) makes nothing, so the next stage still removes the caller's NaN."""
+    image = torch.full((1, 3, 2, 2), float("nan")) if handed_back.startswith("bloom on") else torch.full((1, 3, 2, 2), 0.5)
+    image[..., 0, 0] = float("nan")
+    image[..., 1, 1] = float("inf")
+    slots = {"bloom": {"intensity": 0.5}, "grade": {"contrast": 20}, "tonemap": "aces"}
+    if handed_back == "bloom in the middle":
+        slots = {"exposure": {"fixed_exposure": 0.0}, **slots}
+    with torch.no_grad():
+        out = tg.PostFX.from_config(slots)(image)
+    assert torch.isfinite(out).all() and out.min() >= 0 and out.max() <= 1

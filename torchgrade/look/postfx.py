@@ -46,8 +46,8 @@ from torch import nn
 from .._moved import OLD_CLASS_PATHS
 from ..base.config import load_config
 from ..base.core import nan_free, with_alpha
-from ..runtime import is_tracing
 from ..lut import INTERPOLATIONS, LUT3D, ErrorReport, bake_lut
+from ..runtime import is_tracing
 from .slots import SLOT, SLOTS, STAGES, build_stage, is_identity_stage
 
 __all__ = ["PostFX", "SAFE_GLOBALS"]
@@ -313,12 +313,21 @@ torch.serialization.add_safe_globals([(cls, old) for cls in SAFE_GLOBALS for old
 def _through(stages, image: torch.Tensor, dt) -> torch.Tensor:
     """``image`` through ``(slot name, stage)`` pairs in order, ``dt`` to those that keep state between frames.
 
-    A stage's output holds no NaN (``tests/library/test_extremes.py``), so each stage after the first is told so
-    (:func:`~torchgrade.base.core.nan_free`) and skips its input's NaN pass, one frame pass each. Not while tracing:
-    a compiled look keeps every stage's whole policy (Inductor fuses it), and an export decides it in its graph.
+    A stage's output holds no NaN (``tests/library/test_extremes.py``), so a stage whose input another stage made is
+    told so (:func:`~torchgrade.base.core.nan_free`) and skips its input's NaN pass, one frame pass each. A stage that
+    hands its input back (an identity setting, a frame too small for a bloom level) makes nothing: its output is as
+    trusted as its input was. Not while tracing: a compiled look keeps every stage's whole policy (Inductor fuses it),
+    and an export decides it in its graph.
     """
-    for index, (name, stage) in enumerate(stages):
-        with contextlib.nullcontext() if index == 0 or is_tracing() else nan_free(image):
-            image = stage(image, dt) if SLOT[name].timed else stage(image)
+    made = False
+    for name, stage in stages:
+        with nan_free(image) if made and not is_tracing() else contextlib.nullcontext():
+            out = stage(image, dt) if SLOT[name].timed else stage(image)
+        made = made or not _shares_base(out, image)
+        image = out
     return image
 
+
+def _shares_base(a: torch.Tensor, b: torch.Tensor) -> bool:
+    """Whether ``a`` and ``b`` are the same tensor or views of the same one."""
+    return (a if a._base is None else a._base) is (b if b._base is None else b._base)
