@@ -375,3 +375,23 @@ def test_exported_look_restarts_from_a_nan_or_infinite_state_or_step(tmp_path):
         exposed, new = runner.run(None, tg.onnx.feeds(runner, stage, (image, torch.tensor([state]), torch.tensor(dt))))
         assert np.isfinite(exposed).all()
         np.testing.assert_array_equal(new, fresh[1])
+
+
+EXTREME_REINHARD = {
+    "fixed at the bounds": dict(operator="reinhard", fixed_exposure=32.0, compensation=32.0, middle_grey=100.0, max_luminance=0.01),
+    "metered, darkest limit": dict(operator="reinhard", min_luminance=1e-6, middle_grey=100.0, compensation=32.0, max_luminance=0.01),
+}
+
+
+@pytest.mark.parametrize("controls", list(EXTREME_REINHARD))
+def test_the_reinhard_operator_stays_finite_at_the_controls_bounds_alone_and_in_a_look(controls):
+    """A gain of 2^64 with a white of 0.01: the product of the operator's two gains once overflowed, and a black channel
+    times infinity is NaN (which the next stage of a look, trusting the exposed frame, would not remove)."""
+    image = torch.zeros(1, 3, 8, 8)
+    image[0, 0, 4, 4] = 65504.0
+    image[0, :, 2, 2] = 1e-40
+    with torch.no_grad():
+        exposed = tg.AutoExposure(**EXTREME_REINHARD[controls])(image)
+        looked = tg.PostFX(exposure=EXTREME_REINHARD[controls], grade={"contrast": 10.0}, tonemap="aces")(image)
+    assert torch.isfinite(exposed).all() and exposed.abs().max() <= 65504.0
+    assert torch.isfinite(looked).all()

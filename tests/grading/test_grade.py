@@ -202,3 +202,16 @@ def test_bad_images_raise_clear_errors():
 def test_config_lists_only_what_changed():
     assert tg.ColorGrade(contrast=20, aces=True).to_config() == {"aces": True, "contrast": 20}
     assert tg.ColorGrade().to_config() == {}
+
+
+def test_acescc_contrast_in_half_precision_stays_finite_at_the_top_of_the_range():
+    """The in-place form bounds the power at 65504 after taking it: in float16 log2(65504) rounds to 16, whose power is
+    infinite, and the decode's lerp of an infinity is NaN."""
+    from torchgrade.grading.steps import log_contrast
+
+    x = torch.tensor([1000.0, 5000.0, 65504.0], dtype=torch.float16)
+    with torch.no_grad():
+        out = log_contrast(x, 30.0, "acescc")
+    expected = log_contrast(x.double(), 30.0, "acescc").clamp(max=65504.0)
+    assert out.dtype == torch.float16 and torch.isfinite(out).all()
+    torch.testing.assert_close(out.double(), expected, rtol=1e-2, atol=0.0)  # a float16 log2 and exp2: 0.4 % at 1000

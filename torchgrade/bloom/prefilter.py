@@ -19,7 +19,7 @@ import torch.nn.functional as F
 
 from ..base.core import NEGLIGIBLE_LIGHT, Param, check_image, scalar_param
 from ..color import CHANNEL, luminance, srgb_to_linear
-from ..runtime import folded
+from ..runtime import folded, where
 from .pyramid import shared_block_counts, sum_pool
 
 __all__ = ["SOFT_KNEE_EPSILON", "bloom_threshold", "threshold_fraction", "soft_knee", "cross_sum", "karis_mean", "prefilter"]
@@ -110,19 +110,18 @@ def karis_mean(image: torch.Tensor, means: torch.Tensor) -> torch.Tensor:
 
 
 def _source_share(source: torch.Tensor, means: torch.Tensor) -> torch.Tensor:
-    """``source / mean`` per channel, both at least :data:`~torchgrade.base.core.NEGLIGIBLE_LIGHT`: the share of a
-    block's light its source holds.
+    """``source / mean`` per channel: the share of a block's light its source holds (exactly 1 where they are equal,
+    ``x / x``).
 
-    Exactly 1 where they are equal (``x / x``) and in blocks darker than that floor, which are black at any exposure;
-    dividing by at least the floor keeps the gradient finite (a mean of 1e-40 squared underflows to 0). A source
-    below the floor in a brighter block (a clamp under 1e-10) gives a share of at most ``1e-10 / mean``, of light the
-    threshold does not pass on.
+    Blocks whose mean is below :data:`~torchgrade.base.core.NEGLIGIBLE_LIGHT` are black at any exposure: their share is 1,
+    and the division is by at least that floor, so the branch not taken cannot make an infinite gradient (a mean of
+    1e-40 squared underflows to 0, and 0 times that infinity is NaN).
 
     Examples:
-        >>> _source_share(torch.tensor([0.5, 2.0, 0.0]), torch.tensor([1.0, 2.0, 0.0])).tolist()
-        [0.5, 1.0, 1.0]
+        >>> _source_share(torch.tensor([0.5, 2.0, 0.0, -0.5]), torch.tensor([1.0, 2.0, 0.0, 1.0])).tolist()
+        [0.5, 1.0, 1.0, -0.5]
     """
-    return source.clamp_min(NEGLIGIBLE_LIGHT) / means.clamp_min(NEGLIGIBLE_LIGHT)
+    return where(means < NEGLIGIBLE_LIGHT, 1.0, source / means.clamp_min(NEGLIGIBLE_LIGHT))
 
 
 def prefilter(image: torch.Tensor, threshold, knee, fade_fireflies: bool, karis_average: bool = False, clamp=None):

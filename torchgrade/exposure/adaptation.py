@@ -233,8 +233,10 @@ def exposure_operator(
     * ``"exposure"``: ``rgb * middle_grey / adapted`` (scene-referred, ``rgb * scaled / L``);
     * ``"reinhard"``: ``rgb * compressed / L`` with
       ``compressed = scaled * (1 + scaled / max_luminance²) / (1 + scaled)`` (Reinhard 2002, Eq. 4),
-      computed as ``(middle_grey / adapted) * (1 + scaled / max_luminance²) / (1 + scaled)``, which
-      never divides by ``L``. Negative luminances (out-of-gamut pixels) use the curve's slope at 0.
+      computed as ``(middle_grey / adapted) / (1 + scaled) * (1 + scaled / max_luminance²)``, which
+      never divides by ``L`` and stays finite at every control's bound (the product of the two gains first
+      overflowed, and a black channel times infinity is NaN). Negative luminances (out-of-gamut pixels) use the
+      curve's slope at 0.
 
     Examples:
         >>> exposure_operator(torch.full((3, 1, 1), 0.72), torch.tensor(0.72), 0.18, 16.0).flatten().tolist()
@@ -245,7 +247,7 @@ def exposure_operator(
         return image * gain
     check_choice("operator", operator, OPERATORS)
     scaled = (luminance(image) * gain).clamp_min(0)
-    return image * (gain * (1 + scaled / (max_luminance * max_luminance)) / (1 + scaled))
+    return image * (gain / (1 + scaled) * (1 + scaled / (max_luminance * max_luminance)))
 
 
 def _previous_state(adapted: Param, image: torch.Tensor) -> torch.Tensor:

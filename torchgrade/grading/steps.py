@@ -212,7 +212,7 @@ _ACESCC_PIVOT_STOPS = ACESCC_MIDGRAY * 17.52 - 9.72
 def _acescc_contrast_in_place(image: torch.Tensor, k: torch.Tensor) -> torch.Tensor:
     """ACEScc contrast with the encode, the scaling and the decode folded into one power of two, computed in place.
 
-    ``2^min(k log2(2u) + p - k(1 + p), log2(65504))``, that is ``2^min((log2(u) - p) k + p, log2(65504))``, with ``p``
+    ``min(2^(k log2(2u) + p - k(1 + p)), 65504)``, that is ``2^min((log2(u) - p) k + p, log2(65504))``, with ``p``
     the pivot in stops and ``2u = x + max(x, 2^-15)`` twice the encode's ``u = max(x, 2^-16 + x/2)`` on ``x`` clamped
     to [0, 65504] (its two segments, :func:`~torchgrade.color.aces_to_acescc`); the decode's low segment
     ``(v - 2^-16)·2`` is below ``v`` exactly where ``v < 2^-15``, so the decode is ``2v - max(v, 2^-15)``.
@@ -224,7 +224,8 @@ def _acescc_contrast_in_place(image: torch.Tensor, k: torch.Tensor) -> torch.Ten
     """
     x = image.clamp(0.0, HALF_MAX)
     offset = _ACESCC_PIVOT_STOPS - k * (1.0 + _ACESCC_PIVOT_STOPS)
-    value = x.clamp_min(2.0**-15).add_(x).log2_().mul_(k).add_(offset).clamp_max_(math.log2(HALF_MAX)).exp2_()
+    # bounded after the power: in float16 log2(65504) rounds to 16, whose power is infinite
+    value = x.clamp_min(2.0**-15).add_(x).log2_().mul_(k).add_(offset).exp2_().clamp_max_(HALF_MAX)
     return value.clamp_min(2.0**-15).lerp_(value, 2.0)  # m + 2(v - m) = 2v - m
 
 

@@ -138,7 +138,7 @@ def count_below(table: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
         True
     """
     if not is_tracing():
-        return torch.searchsorted(table, x)
+        return torch.searchsorted(table, x.contiguous())  # warns on a strided input
     n = int(table.shape[0])  # a constant table: its size may be frozen into a traced graph
     count = torch.zeros(x.shape, dtype=torch.long, device=x.device)
     step = 1 << (n.bit_length() - 1)
