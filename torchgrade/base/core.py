@@ -44,6 +44,7 @@ __all__ = [
     "sanitize",
     "nan_free",
     "scalar_param",
+    "is_plain_number",
     "color_param",
     "matrix_param",
     "apply_matrix",
@@ -422,6 +423,17 @@ def readable(value) -> bool:
     if not isinstance(value, torch.Tensor):
         return True
     return not is_tracing() and policy_for(value.device).reads_values
+
+
+def is_plain_number(value) -> bool:
+    """Whether a control is a Python number (not a bool): arithmetic on it runs in Python, launching nothing on a device,
+    where a tensor control (per sample, learnable) needs its operations on the data's device.
+
+    Examples:
+        >>> is_plain_number(0.5), is_plain_number(True), is_plain_number(torch.tensor(0.5))
+        (True, False, False)
+    """
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
 
 def is_constant(value, constant) -> bool:

@@ -38,6 +38,7 @@ from ..base.core import (
     check_image,
     color_param,
     is_constant,
+    is_plain_number,
     is_tracing,
     sanitize,
     scalar_param,
@@ -204,7 +205,7 @@ def bloom_with_settings(image: torch.Tensor, settings: dict, fixed_depth=None) -
         return convert(settings[name], reference, name)
 
     def number_or_param(name):  # a number folds into terms made once (runtime.folded)
-        return settings[name] if isinstance(settings[name], (int, float)) else param(name)
+        return settings[name] if is_plain_number(settings[name]) else param(name)
 
     bound = None if is_constant(settings["clamp"], HALF_MAX) else param("clamp")
     light, fraction = prefilter(
@@ -232,7 +233,7 @@ def _composited(scene, light, fraction, settings: dict, param, depth: int, activ
     strength = param("intensity")
     if composite.lerp:  # a lerp's weight is at most 1; a plain number is bounded before it is a constant (no launch)
         number = settings["intensity"]
-        strength = constant(min(float(number), 1.0), strength) if isinstance(number, (int, float)) else strength.clamp(max=1.0)
+        strength = constant(min(float(number), 1.0), strength) if is_plain_number(number) else strength.clamp(max=1.0)
     sigma = None if is_constant(settings["anamorphic_ratio"], 0.0) else anamorphic_sigma(param("anamorphic_ratio"))
     weight = None if composite.level_weight is None else composite.level_weight(param, active, strength)
     glow = glow_pyramid(light, depth, weight, bicubic, sigma, active if masked else None)

@@ -13,6 +13,7 @@ from ..base.core import (
     check_choice,
     check_image,
     check_range,
+    is_plain_number,
     is_tracing,
     sanitize,
     scalar_param,
@@ -388,16 +389,12 @@ def metered_luminance(scene: torch.Tensor, c: dict, controls: dict) -> torch.Ten
     if controls["metering"] == "histogram":
         low, high = histogram_range(c["min_ev"], c["max_ev"])
         # the percents and middle grey as given where they are plain numbers: arithmetic on them launches nothing
-        low_percent, high_percent, grey = (_number_or(controls[name], c[name]) for name in ("low_percent", "high_percent", "middle_grey"))
+        low_percent, high_percent, grey = (controls[name] if is_plain_number(controls[name]) else c[name]
+                                           for name in ("low_percent", "high_percent", "middle_grey"))
         metered = meter_histogram(scene, weights, low, high, low_percent, high_percent, grey)
     else:
         metered = meter_sanitized(scene, controls["metering"], weights)
     return _limited(metered.reshape(scene.shape[:-3] + (1, 1, 1)), c)
-
-
-def _number_or(value, tensor: torch.Tensor):
-    """``value`` where it is a plain number, else its tensor ``tensor``."""
-    return value if isinstance(value, (int, float)) and not isinstance(value, bool) else tensor
 
 
 def _adapted(scene: torch.Tensor, target: torch.Tensor, adapted: Optional[torch.Tensor], dt: Param, c: dict, limited: bool = True) -> torch.Tensor:

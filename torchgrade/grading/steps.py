@@ -324,7 +324,7 @@ def _soft_light_by_channel(gamma: torch.Tensor, weights: tuple, offsets: tuple) 
                 shift = plane * (1.0 - plane) if exporting else torch.addcmul(plane, plane, plane, value=-1.0)
             else:  # the planes are finite and at least 0 (gamma of a bounded frame; each blend keeps them so)
                 shift = (plane.sqrt() if in_place else safe_sqrt(plane)) - plane
-            if exporting:  # Mul and Add nodes: ``addcmul`` with a value has no ONNX form of its own
+            if exporting:  # the expression's nodes: an addcmul exports its value as a float32 Constant, whatever the graph's dtype
                 plane = plane + 2.0 * offset * weight * shift
             elif in_place:
                 plane = plane.addcmul_(weight, shift, value=2.0 * offset)
