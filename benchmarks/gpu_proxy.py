@@ -2,7 +2,7 @@
 
     python benchmarks/gpu_proxy.py [--out DIR]
 
-For each case it counts the kernel launches an eager forward makes (every operation dispatched, views aside) and
+For each case it counts the kernel launches an eager forward makes (every operation dispatched, views and allocations aside) and
 the bytes they move, in *frame passes* (one pass: a copy of a 4K frame, read and written), with
 :class:`torchgrade.testing.dispatch.DispatchCount`. From them it predicts the time on one H200::
 
@@ -11,7 +11,7 @@ the bytes they move, in *frame passes* (one pass: a copy of a 4K frame, read and
 an elementwise kernel runs at the memory's speed, and nothing runs faster than Python and PyTorch dispatch it.
 The two constants were fitted (least squares on log time) to the seven eager no_grad rows of
 ``benchmarks/results/gpu.md`` (run B, the code at ``7319b75``, counted there with this script's counter): every
-prediction within 0.84 to 1.13 of its measurement; the training row, outside the fit, is over-predicted 1.31 times.
+prediction within 0.84 to 1.13 of its measurement; the training row, outside the fit, is over-predicted 1.30 times.
 A prediction, not a measurement: a GPU run (``benchmarks/gpu_check.sh``) is what confirms it.
 
 Runs in about a minute on 2 cores. Writes ``gpu_proxy.json`` and ``gpu_proxy.md`` to ``--out`` (default

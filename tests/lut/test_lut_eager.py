@@ -2,6 +2,8 @@
 autograd, ``torch.compile`` and exports run: the same values to float rounding over shapers, domains, output
 encodings and clamps, dtypes, lattice sizes and non-finite or huge inputs; its lattice coordinates bit for bit."""
 
+import dataclasses
+
 import pytest
 import torch
 
@@ -142,3 +144,54 @@ def test_strided_and_channels_last_images_give_the_contiguous_result_bit_for_bit
         wide = torch.zeros(2, 3, 23, 62)
         wide[..., ::2] = image
         assert torch.equal(lut(wide[..., ::2]), expected)
+
+
+def hostile_coordinates(size: int) -> torch.Tensor:
+    """Lattice coordinates ``(3, P)``: random, on lattice points, on the top faces, and with ties between fractions."""
+    coords = torch.rand(3, 4000, dtype=torch.float64) * (size - 1)
+    coords[:, :500] = coords[:, :500].round()
+    for k, (a, b) in enumerate(((0, 1), (1, 2), (0, 2)), start=1):
+        coords[b, 500 * k:500 * (k + 1)] = coords[a, 500 * k:500 * (k + 1)]
+    coords[:, 2000:2500] = coords[:, 2000:2500].clamp_min(size - 1.5)
+    coords[torch.rand(3, 4000) < 0.1] = size - 1
+    return coords.float()
+
+
+@pytest.mark.parametrize("size", [2, 3, 33, MAX_SIZE])
+def test_the_whole_frame_form_matches_the_gather_form(size):
+    table = torch.rand(size, size, size, 3) * 2 - 1
+    rows = planar_table(table)
+    coords = hostile_coordinates(size)
+    frame = KERNELS["tetrahedral"].eager.frame(coords, KERNELS["tetrahedral"].eager.tables(rows, size), size)
+    expected = KERNELS["tetrahedral"](coords.double(), rows.double(), size)  # the gather form in float64
+    torch.testing.assert_close(frame.double(), expected, atol=4 * 2.0 ** -24 * 2, rtol=0)
+    on_points = coords.round()
+    assert torch.equal(KERNELS["tetrahedral"].eager.frame(on_points, KERNELS["tetrahedral"].eager.tables(rows, size), size),
+                       KERNELS["tetrahedral"](on_points, rows, size))
+
+
+@pytest.mark.parametrize("shaper, domain, extra", SHAPED + [("logc_hdr", None, {})])
+def test_off_the_cpu_a_frame_goes_through_the_whole_frame_form(shaper, domain, extra, monkeypatch):
+    """The CPU given a GPU's policy: LUT3D's eager no-grad lookup takes the whole-frame form, with the gather form's values."""
+    from torchgrade.lut import apply
+    from torchgrade.runtime.policy import WHOLE_FRAMES
+
+    lut = LUT3D(torch.rand(9, 9, 9, 3) * 3 - 1, shaper=shaper, domain=domain, **extra)
+    image = hostile_image()
+    with torch.no_grad():
+        gather = lookup(image, lut.rows(torch.float32), 9, lut.shaper, lut.domain_min, lut.domain_max, "tetrahedral",
+                        lut.output_range, lut.curve, lut.curve_range, lut.output_encoding)
+        monkeypatch.setattr(apply, "policy_for", lambda device: WHOLE_FRAMES)
+        frames, kernel = [], KERNELS["tetrahedral"]
+        recorded = dataclasses.replace(kernel.eager, frame=_recorded(kernel.eager.frame, frames))
+        monkeypatch.setitem(KERNELS, "tetrahedral", dataclasses.replace(kernel, eager=recorded))
+        got = lut(image)
+    assert len(frames) == 1
+    torch.testing.assert_close(got, gather, atol=8 * 3 * 2.0 ** -24, rtol=0)
+
+
+def _recorded(function, calls: list):
+    def call(*arguments):
+        calls.append(arguments)
+        return function(*arguments)
+    return call

@@ -394,3 +394,14 @@ def test_gpu_proxy_charges_a_frame_pass_its_copy_time_and_a_small_launch_the_lau
         frame[..., :1, :1] + 1.0  # a view (no launch), then a launch that moves 24 bytes
     assert count.launches == 2 and count.frame_passes == pytest.approx(1.0, abs=1e-6)
     assert gpu_proxy.predicted_ms(count) == pytest.approx(gpu_proxy.PASS_COST * gpu_proxy.COPY_4K_MS + gpu_proxy.LAUNCH_MS, rel=1e-6)
+
+
+def test_the_dispatch_count_charges_an_out_result_once_and_an_allocation_nothing():
+    from torchgrade.testing.dispatch import DispatchCount
+
+    frame = torch.empty(1, 3, 2160, 3840, device="meta")
+    with DispatchCount(frame=frame) as count:
+        result = torch.empty_like(frame)  # the caching allocator's work: no kernel
+        torch.floor(frame, out=result)  # reads the frame, writes the result: one pass
+        result.add_(frame)  # reads both, writes one: one and a half
+    assert count.launches == 2 and count.frame_passes == pytest.approx(2.5, abs=1e-6)

@@ -186,7 +186,13 @@ def nan_free(image: torch.Tensor):
         >>> with nan_free(x):
         ...     sanitize(x).tolist()  # trusted: only bounded
         [nan, 65504.0]
+
+    While ``torch.compile`` traces, nothing: a compiled :func:`sanitize` does not look (Dynamo cannot trace a context
+    variable, and the compiler fuses the NaN pass into its neighbours).
     """
+    if torch.compiler.is_compiling():
+        yield
+        return
     token = _NAN_FREE.set(image)
     try:
         yield
@@ -304,26 +310,28 @@ def apply_matrix(matrix: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
         # Exported as three broadcast products summed: onnxruntime's CPU Einsum ran 3 to 5 times slower, and a
         # MatMul runs in bfloat16 at OpenVINO's default precision, coefficients and all (7.1 codes p99.9 on the look).
         return matrix_on_planes(matrix, [image[..., j : j + 1, :, :] for j in range(3)])
-    columns = matrix.mT[..., None, None].unbind(-4)
-    channels = image.split(1, dim=-3)
-    out = columns[0] * channels[0]
-    in_place = untracked(matrix, image)
-    for column, channel in zip(columns[1:], channels[1:]):
-        out = out.addcmul_(column, channel) if in_place else torch.addcmul(out, column, channel)
-    return out
+    return matrix_on_planes(matrix, image.split(1, dim=-3))
 
 
 def matrix_on_planes(matrix: torch.Tensor, planes) -> torch.Tensor:
     """:func:`apply_matrix` on an image given as its three planes ``(..., 1, H, W)``: ``sum_j matrix[..., :, j] planes[j]``.
 
-    The form every exported matrix takes; export forms that already hold an image's planes pass them here instead of
-    joining them into a frame that the matrix would only slice apart again.
+    A product and two ``addcmul`` (in place where nothing records), or, exported, three products summed (the form
+    every exported matrix takes). Forms that already hold an image's planes pass them here instead of joining them into
+    a frame that the matrix would only slice apart again (a concatenation is a pass over the frame).
 
     Examples:
         >>> matrix_on_planes(torch.eye(3), torch.arange(3.0).reshape(3, 1, 1, 1).unbind()).flatten().tolist()
         [0.0, 1.0, 2.0]
     """
-    return sum(matrix[..., :, j, None, None] * plane for j, plane in enumerate(planes))
+    if torch.onnx.is_in_onnx_export():
+        return sum(matrix[..., :, j, None, None] * plane for j, plane in enumerate(planes))
+    columns = matrix.mT[..., None, None].unbind(-4)
+    out = columns[0] * planes[0]
+    in_place = untracked(matrix, *planes)
+    for column, plane in zip(columns[1:], planes[1:]):
+        out = out.addcmul_(column, plane) if in_place else torch.addcmul(out, column, plane)
+    return out
 
 
 def channel_sum(image: torch.Tensor, weights) -> torch.Tensor:

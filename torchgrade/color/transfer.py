@@ -14,7 +14,7 @@ import numbers
 import torch
 
 from ..base.core import untracked
-from ..runtime.constants import constant, where
+from ..runtime.constants import affine, constant, where
 from ..runtime.policy import policy_for
 
 __all__ = [
@@ -93,7 +93,7 @@ def linear_to_logc(image: torch.Tensor) -> torch.Tensor:
         [0.064, 0.391]
     """
     tiny = torch.finfo(image.dtype).tiny
-    return LOGC_C * torch.log10((LOGC_A * image + LOGC_B).clamp_min(tiny)) + LOGC_D
+    return affine(torch.log10(affine(image, LOGC_A, LOGC_B).clamp_min(tiny)), LOGC_C, LOGC_D)
 
 
 def logc_to_linear(image: torch.Tensor) -> torch.Tensor:

@@ -21,9 +21,11 @@ OpenColorIO's CPU processor does: the temporaries stay in cache, and no operatio
 barrier (on a loaded machine each barrier can wait for a descheduled thread; benchmarks/results/lut.md
 measured 131× OpenColorIO with two threads). On many cores the runs are spread over worker threads
 (:class:`~torchgrade.runtime.ExecutionPolicy`); on other devices the frame is one pass. Without autograd, tetrahedral runs its eager form
-(:class:`~torchgrade.lut.kernels.TetrahedralRuns`): 15 in-place operations a run into buffers
-allocated once per call, gathering from value-and-step tables derived once per LUT; 12 one-float
-gathers a pixel are about half its time. benchmarks/bench_lut.py measures both against OpenColorIO.
+from value-and-step tables derived once per LUT: on the CPU :class:`~torchgrade.lut.kernels.TetrahedralRuns`,
+15 in-place operations a run into buffers allocated once per call (12 one-float gathers a pixel are about half
+its time; benchmarks/bench_lut.py measures both against OpenColorIO), elsewhere
+:func:`~torchgrade.lut.kernels.tetrahedral_frame`, 13 operations on the whole frame where the gather form
+makes 71 (each a kernel launch on a GPU; ``benchmarks/gpu_proxy.py`` counts them).
 
 Examples:
     >>> import torch
@@ -55,7 +57,7 @@ from .kernels import KERNELS
 from .lattice import planar_table
 from .shapers import SHAPERS, lattice_unit, shaper_encode
 
-__all__ = [ "OUTPUT_ENCODINGS", "LOOKUP_CHUNK", "apply_lut", "lookup", "chunked_lookup", "compiled_lookup",
+__all__ = [ "OUTPUT_ENCODINGS", "LOOKUP_CHUNK", "apply_lut", "lookup", "chunked_lookup", "untracked_lookup", "compiled_lookup",
            "decode_output", "encode_output", "table_output"]
 
 OUTPUT_ENCODINGS = ("linear", "srgb")
@@ -125,12 +127,14 @@ def apply_lut(image: torch.Tensor, table: torch.Tensor, shaper: str = "linear", 
     return chunked_lookup(image, rows, table.shape[0], shaper, domain_min, domain_max, interpolation, output_range, curve, curve_range, output_encoding)
 
 
-def lookup(image, rows, size: int, shaper, domain_min, domain_max, interpolation, output_range, curve, curve_range, output_encoding) -> torch.Tensor:
+def lookup(image, rows, size: int, shaper, domain_min, domain_max, interpolation, output_range, curve, curve_range, output_encoding,
+           tables: Optional[torch.Tensor] = None) -> torch.Tensor:
     """:func:`apply_lut` on a planar table ``rows`` ``(3, size³)`` already in the image's working dtype.
 
     One pass per pixel from input to output: non-finite policy, shaper, lattice coordinates,
     interpolation, output decoding and clamp. Arguments are not checked (see :func:`apply_lut`);
-    this is the function ``LUT3D(..., compile=True)`` compiles.
+    this is the function ``LUT3D(..., compile=True)`` compiles. With the eager form's ``tables``
+    (:class:`~torchgrade.lut.EagerForm`, without autograd) the interpolation is its whole-frame form.
 
     Examples:
         >>> import torch
@@ -142,8 +146,10 @@ def lookup(image, rows, size: int, shaper, domain_min, domain_max, interpolation
         [0.5, 0.5, 0.5]
     """
     x = sanitize(working_dtype(image)).movedim(-3, 0)  # (3, ..., H, W): a view
-    unit = lattice_unit(x.reshape(3, -1), shaper, domain_min, domain_max, curve, curve_range)
-    y = table_output(KERNELS[interpolation](unit * (size - 1), rows, size), output_encoding, output_range)
+    coords = lattice_unit(x.reshape(3, -1), shaper, domain_min, domain_max, curve, curve_range) * (size - 1)
+    kernel = KERNELS[interpolation]
+    values = kernel(coords, rows, size) if tables is None else kernel.eager.frame(coords, tables, size)
+    y = table_output(values, output_encoding, output_range)
     return to_input_dtype(y.reshape(x.shape).movedim(0, -3), image)
 
 
@@ -153,9 +159,10 @@ def chunked_lookup(image, rows, size: int, *settings, pixels: Optional[int] = No
     Every step is per pixel, so the runs give the one-pass result. Where the interpolation has an
     eager form (:class:`~torchgrade.lut.EagerForm`: tetrahedral up to 65³) the runs go through it,
     into buffers allocated once per call, from its ``tables`` (derived from ``rows`` when not given;
-    :class:`LUT3D` caches them): the same values to float rounding. While gradients flow to the image
-    or the table (autograd keeps every temporary anyway), off the CPU, and while tracing (an export
-    records one pass), the whole image is one pass of :func:`lookup`.
+    :class:`LUT3D` caches them): the same values to float rounding. Off the CPU the whole image is one
+    pass of :func:`lookup`, through the eager form's whole-frame form where there is one; while gradients
+    flow to the image or the table (autograd keeps every temporary anyway) and while tracing (an export
+    records one pass), one pass of its gather form.
 
     Examples:
         >>> import torch
@@ -166,20 +173,24 @@ def chunked_lookup(image, rows, size: int, *settings, pixels: Optional[int] = No
         >>> torch.equal(chunked_lookup(x, *args, pixels=7), lookup(x, *args))
         True
     """
-    height, width = image.shape[-2:]
-    if not in_runs(image, rows):
+    if not untracked_lookup(image, rows):
         return lookup(image, rows, size, *settings)
+    eager = KERNELS[settings[3]].eager
+    if eager is None or size > eager.max_size:
+        eager, tables = None, None
+    elif tables is None:
+        tables = eager.tables(rows, size)
     policy = policy_for(image.device)
+    if policy.lookup_chunk is None:
+        return lookup(image, rows, size, *settings, tables=tables)
+    height, width = image.shape[-2:]
     pixels = pixels or policy.lookup_chunk
     planes = image.reshape(-1, 3, height * width)
     result = torch.empty(planes.shape, dtype=image.dtype)
-    eager = KERNELS[settings[3]].eager
-    if eager is not None and size <= eager.max_size and tables is None:
-        tables = eager.tables(rows, size)
 
     def share(span: tuple) -> None:
         begin, end = span
-        if eager is None or size > eager.max_size:
+        if eager is None:
             for frame, out in zip(planes, result):
                 for start in range(begin, end, pixels):
                     stop = min(start + pixels, end)
@@ -209,11 +220,11 @@ def _shares(count: int, pixels: int, workers: int) -> list:
     return [(begin, min(begin + per_share, count)) for begin in range(0, count, per_share)]
 
 
-def in_runs(image: torch.Tensor, rows: torch.Tensor) -> bool:
-    """Whether :func:`chunked_lookup` splits the image into runs: where the device's policy asks (the CPU),
-    untraced, no gradient flowing."""
+def untracked_lookup(image: torch.Tensor, rows: torch.Tensor) -> bool:
+    """Whether :func:`chunked_lookup` may run an interpolation's eager form: untraced, no gradient flowing to the
+    image or the table."""
     grad = torch.is_grad_enabled() and (image.requires_grad or rows.requires_grad)
-    return not grad and policy_for(image.device).lookup_chunk is not None and not is_tracing()
+    return not grad and not is_tracing()
 
 
 def _eager_lookup(planes, result, rows, size, settings, pixels, eager, tables) -> None:

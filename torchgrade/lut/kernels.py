@@ -5,7 +5,8 @@ integer lattice indices and one 1-D gather per vertex and channel on the planar 
 (:func:`~torchgrade.lut.planar_table`). That is what :class:`~torchgrade.LUT3D` runs under autograd,
 ``torch.compile`` and tracing, and what an ONNX export writes as ``Gather`` nodes. An interpolation
 may also have an **eager form** (:class:`EagerForm`), the same interpolation for the eager no-grad
-CPU lookup: tables derived once per LUT, in-place operations on buffers allocated once per lookup.
+lookup from tables derived once per LUT: on the CPU in-place operations on buffers allocated once per
+lookup, elsewhere few operations on the whole frame.
 And it may have **grid forms**, one per export backend, ``form(unit (N, 3, H, W) in [0, 1], table
 (S, S, S, 3)) -> (N, 3, H, W)`` built on ``grid_sample``, for runtimes that prefer ``GridSample`` (see
 :data:`BACKENDS`).
@@ -30,8 +31,10 @@ from typing import Callable, Optional
 import torch
 import torch.nn.functional as F
 
+from ..runtime import constant, device_cached
+
 __all__ = ["Kernel", "EagerForm", "KERNELS", "INTERPOLATIONS", "BACKENDS", "LUT_BACKENDS", "tetrahedron", "tetrahedral",
-           "tetrahedral_tables", "TetrahedralRuns", "trilinear", "trilinear_grid_sample", "strip_table", "trilinear_strip",
+           "tetrahedral_tables", "TetrahedralRuns", "tetrahedral_frame", "trilinear", "trilinear_grid_sample", "strip_table", "trilinear_strip",
            "trilinear_strip_lookup"]
 
 
@@ -137,6 +140,23 @@ def tetrahedral_tables(rows: torch.Tensor, size: int) -> torch.Tensor:
     return tables
 
 
+def _walk_matrix(size: int) -> list:
+    """The flat indices of :class:`TetrahedralRuns`' 4 gathers as rows of coefficients of the terms ``(corner r, g, b,
+    [f_r >= f_g], [f_g >= f_b], [f_r >= f_b], 1)``: the values at ``c000``, then each axis' steps at ``c000`` plus the
+    steps of the axes ranked above it (a larger fraction; red before green before blue on ties, the order
+    :func:`tetrahedron` picks vertices in), each table of :func:`tetrahedral_tables` ``S³`` entries after the last.
+
+    Examples:
+        >>> _walk_matrix(2)[3]
+        [1, 2, 4, 0, 2, 1, 24]
+    """
+    cells, plane = size ** 3, size * size
+    return [[1, size, plane, 0, 0, 0, 0],
+            [1, size, plane, -size, 0, -plane, cells + size + plane],
+            [1, size, plane, 1, -plane, 0, 2 * cells + plane],
+            [1, size, plane, 0, size, 1, 3 * cells]]
+
+
 class TetrahedralRuns:
     """:func:`tetrahedral` at runs of up to ``n`` lattice coordinates, into given outputs, without autograd.
 
@@ -169,17 +189,10 @@ class TetrahedralRuns:
     """Buffer entries per pixel of a run, besides 4 int32 indices."""
 
     def __init__(self, tables: torch.Tensor, size: int, n: int):
-        cells, plane = size ** 3, size * size
         self.tables, self.views, self.ones = tables, {}, 0
         self.work = tables.new_empty(self.floats * n)
         self.index = torch.empty(4 * n, dtype=torch.int32, device=tables.device)
-        # Row k of the product is the flat index of gather k: the values at c000, then each axis'
-        # steps at c000 plus the steps of the axes ranked above it (a larger fraction; red before
-        # green before blue on ties, the order tetrahedron() picks vertices in).
-        self.matrix = torch.tensor([[1, size, plane, 0, 0, 0, 0],
-                                    [1, size, plane, -size, 0, -plane, cells + size + plane],
-                                    [1, size, plane, 1, -plane, 0, 2 * cells + plane],
-                                    [1, size, plane, 0, size, 1, 3 * cells]], dtype=tables.dtype, device=tables.device)
+        self.matrix = torch.tensor(_walk_matrix(size), dtype=tables.dtype, device=tables.device)
 
     def _views(self, m: int):
         if m not in self.views:
@@ -219,6 +232,51 @@ class TetrahedralRuns:
         out.addcmul_(green, f_g)
         out.addcmul_(blue, f_b)
         return out
+
+
+def tetrahedral_frame(coords: torch.Tensor, tables: torch.Tensor, size: int) -> torch.Tensor:
+    """:class:`TetrahedralRuns`' sum at lattice coordinates ``(3, P)`` of a whole frame -> ``(3, P)``, without autograd:
+    the eager form where a frame is one pass (a GPU), 13 operations.
+
+    The same terms ``v[c000] + f_r Δr[p_r] + f_g Δg[p_g] + f_b Δb[p_b]`` from the same ``tables``, the flat indices
+    formed without a matrix product: one product and one sum give ``c000`` and the order code ``4 [f_r >= f_g] +
+    2 [f_g >= f_b] + [f_r >= f_b]``, which picks the 4 offsets from a table of 8 (:func:`_walk_offsets`). Every value
+    is an integer below 2²⁴, so each step is exact in float32 whatever precision the device gives a matrix product
+    (a GPU's TF32 would round the indices). One gather takes the 12 entries a pixel from the three channels' tables.
+
+    Examples:
+        >>> from torchgrade.lut import identity_table
+        >>> from torchgrade.lut.lattice import planar_table
+        >>> tables = tetrahedral_tables(planar_table(identity_table(3)), 3)
+        >>> tetrahedral_frame(torch.tensor([[1.5], [0.25], [2.0]]), tables, 3).flatten().tolist()
+        [0.75, 0.125, 1.0]
+    """
+    points = coords.shape[-1]
+    terms = coords.new_empty(6, points)  # corner r, g, b; [f_r >= f_g], [f_g >= f_b], [f_r >= f_b]
+    corner = torch.floor(coords, out=terms[:3])
+    fraction = coords - corner
+    torch.ge(fraction[:2], fraction[1:], out=terms[3:5])
+    torch.ge(fraction[0], fraction[2], out=terms[5])
+    weights = constant(((1.0,), (size,), (size * size,), (4.0,), (2.0,), (1.0,)), coords)
+    corner_index, code = (terms * weights).view(2, 3, points).sum(1).to(torch.int32)
+    index = _walk_offsets(size, coords.device).index_select(1, code).add_(corner_index)
+    values, red, green, blue = tables.index_select(1, index.view(-1)).view(3, 4, points).unbind(1)
+    f_r, f_g, f_b = fraction
+    return torch.addcmul(values, red, f_r).addcmul_(green, f_g).addcmul_(blue, f_b)
+
+
+@device_cached
+def _walk_offsets(size: int, device: torch.device) -> torch.Tensor:
+    """``(4, 8)`` int32: by order code (:func:`tetrahedral_frame`), each gather's flat index less ``c000``, from the
+    rows of :func:`_walk_matrix`.
+
+    Examples:
+        >>> _walk_offsets(2, torch.device("cpu"))[:, 7].tolist()  # equal fractions: v at c000, then Δr, Δg, Δb along the walk r, g, b
+        [0, 8, 17, 27]
+    """
+    codes = [((code >> 2) & 1, (code >> 1) & 1, code & 1) for code in range(8)]
+    offsets = [[row[3] * a + row[4] * b + row[5] * c + row[6] for a, b, c in codes] for row in _walk_matrix(size)]
+    return torch.tensor(offsets, dtype=torch.int32, device=device)
 
 
 def trilinear(coords: torch.Tensor, table: torch.Tensor, size: int) -> torch.Tensor:
@@ -324,9 +382,10 @@ def trilinear_strip_lookup(unit: torch.Tensor, table: torch.Tensor) -> torch.Ten
 
 @dataclass(frozen=True)
 class EagerForm:
-    """An interpolation for the eager no-grad CPU lookup, for lattices up to ``max_size``: ``tables(rows, size)``
-    once per table, ``runs(tables, size, n)`` once per lookup (a :class:`TetrahedralRuns`-like object
-    holding its buffers for runs of up to ``n`` pixels).
+    """An interpolation for the eager no-grad lookup, for lattices up to ``max_size``: ``tables(rows, size)``
+    once per table; on the CPU ``runs(tables, size, n)`` once per lookup (a :class:`TetrahedralRuns`-like object
+    holding its buffers for runs of up to ``n`` pixels), elsewhere ``frame(coords, tables, size)`` on the whole
+    frame's lattice coordinates ``(3, P)`` (:func:`tetrahedral_frame`).
 
     Examples:
         >>> KERNELS["tetrahedral"].eager.max_size
@@ -335,6 +394,7 @@ class EagerForm:
 
     tables: Callable[[torch.Tensor, int], torch.Tensor]
     runs: Callable
+    frame: Callable[[torch.Tensor, torch.Tensor, int], torch.Tensor]
     max_size: int
 
 
@@ -363,7 +423,7 @@ class Kernel:
 KERNELS = {
     "trilinear": Kernel(trilinear, {"strip": trilinear_strip_lookup, "volume": trilinear_grid_sample}),
     # Up to 65³: the tables are 4 times the planar table (13 MiB at 65³; 4 S³ < 2²⁴ keeps the index product exact).
-    "tetrahedral": Kernel(tetrahedral, eager=EagerForm(tetrahedral_tables, TetrahedralRuns, max_size=65)),
+    "tetrahedral": Kernel(tetrahedral, eager=EagerForm(tetrahedral_tables, TetrahedralRuns, tetrahedral_frame, max_size=65)),
 }
 """The interpolations by name, what ``LUT3D(...)(image, interpolation)`` takes."""
 

@@ -26,7 +26,7 @@ from .apply import (
     compiled_lookup,
     decode_output,
     encode_output,
-    in_runs,
+    untracked_lookup,
     table_output,
 )
 from .shapers import SHAPERS, lattice_unit
@@ -178,7 +178,7 @@ class LUT3D(Stage):
     def _eager_tables(self, image: torch.Tensor, rows: torch.Tensor, interpolation: str):
         """The eager form's tables of ``rows`` (:meth:`rows`), cached with them; ``None`` where the lookup of ``image`` will not use them."""
         eager = KERNELS[interpolation].eager
-        if eager is None or self.size > eager.max_size or not in_runs(image, rows):
+        if eager is None or self.size > eager.max_size or not untracked_lookup(image, rows):
             return None
         cached_rows, cached_interpolation, tables = self._tables_cache
         if cached_rows is not rows or cached_interpolation != interpolation:

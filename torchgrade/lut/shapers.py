@@ -161,21 +161,23 @@ class LogCHDRShaper(Shaper):
         self.default_domain = (LOGC_BLACK, self.codes[-1])
 
     def encode(self, points, curve=None, curve_range=(0.0, 1.0)):
-        logc = linear_to_logc(points)
-        return logc.clamp(max=1.0) + self._segments(logc, self.knots, self.codes)
+        return self._piecewise(linear_to_logc(points), self.knots, self.codes)
 
     def decode(self, codes, curve=None, curve_range=(0.0, 1.0)):
-        return logc_to_linear(codes.clamp(max=1.0) + self._segments(codes, self.codes, self.knots))
+        return logc_to_linear(self._piecewise(codes, self.codes, self.knots))
 
     @staticmethod
-    def _segments(values: torch.Tensor, start: tuple, end: tuple) -> torch.Tensor:
-        """``sum_i (end_(i+1) - end_i) / (start_(i+1) - start_i) clamp(v - start_i, 0, start_(i+1) - start_i)``: the tail's part
-        of ``v`` (the last segment unbounded, so the shaper keeps its slope at 65504)."""
-        total = torch.zeros_like(values)
+    def _piecewise(values: torch.Tensor, start: tuple, end: tuple) -> torch.Tensor:
+        """The identity up to ``start_0 = end_0``, then the segments joining the points ``(start_i, end_i)``, the last one
+        unbounded (so the shaper keeps its slope at 65504): ``min(v, start_0) + sum_i r_i clamp(v, start_i, start_(i+1))
+        - sum_i r_i start_i`` with ``r_i = (end_(i+1) - end_i) / (start_(i+1) - start_i)``, two operations a segment."""
+        total, offset = values.clamp(max=start[0]), 0.0
         last = len(start) - 2
         for i, (low, high, out_low, out_high) in enumerate(zip(start, start[1:], end, end[1:])):
-            total = total + (values - low).clamp(0.0, None if i == last else high - low) * ((out_high - out_low) / (high - low))
-        return total
+            slope = (out_high - out_low) / (high - low)
+            total = total.add(values.clamp(low, None if i == last else high), alpha=slope)
+            offset += slope * low
+        return total - offset
 
     def logc_table(self, low: float, spacing: float = 0.1) -> tuple:
         """``((low, high), (n, 3) codes)``: the shaper after LogC as a table over LogC codes ``low + k spacing``.
@@ -190,7 +192,7 @@ class LogCHDRShaper(Shaper):
         """
         count = round((self.knots[-1] - low) / spacing + 0.5) + 1
         logc = low + spacing * torch.arange(count, dtype=torch.float64)
-        codes = logc.clamp(max=1.0) + self._segments(logc, self.knots, self.codes)
+        codes = self._piecewise(logc, self.knots, self.codes)
         return (low, float(logc[-1])), codes.unsqueeze(1).expand(count, 3)
 
     def cube_range(self, lut) -> tuple:

@@ -25,7 +25,7 @@ import torch
 
 from .recording import is_tracing
 
-__all__ = ["constant", "where", "values_of", "device_cached", "folded", "CACHED_CONSTANTS"]
+__all__ = ["constant", "where", "affine", "values_of", "device_cached", "folded", "CACHED_CONSTANTS"]
 
 CACHED_CONSTANTS = 4096
 """Constants kept per kind (least recently used go first): a look holds tens; random controls are tensors, not cached."""
@@ -59,6 +59,19 @@ def where(condition: torch.Tensor, a, b) -> torch.Tensor:
         return torch.where(condition, a, b)
     a, b = (constant(float(v), like) if isinstance(v, (int, float)) and not isinstance(v, bool) else v for v in (a, b))
     return torch.where(condition, a, b)
+
+
+def affine(x: torch.Tensor, scale: float, offset: float) -> torch.Tensor:
+    """``scale * x + offset`` of plain numbers as one operation, ``torch.add(offset, x, alpha=scale)`` with the offset a
+    :func:`constant` (a product and a sum are two passes over a frame, each a launch on a GPU). The offset takes
+    ``x``'s dtype: for the working dtypes, float32 and float64.
+
+    Examples:
+        >>> import torch
+        >>> affine(torch.tensor([1.0, 2.0]), 3.0, 0.5).tolist()
+        [3.5, 6.5]
+    """
+    return torch.add(constant(offset, x), x, alpha=scale)
 
 
 @functools.lru_cache(maxsize=CACHED_CONSTANTS)

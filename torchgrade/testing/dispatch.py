@@ -1,6 +1,6 @@
 """What a forward would cost a GPU, counted on any device: the operations dispatched and the bytes they move.
 
-On CUDA every operation PyTorch dispatches (views aside) is a kernel launch, a value read back
+On CUDA every operation PyTorch dispatches (views and allocations aside) is a kernel launch, a value read back
 (``_local_scalar_dense``: ``.item()``, ``bool()``, ``.tolist()``) waits for the device, and a tensor made from host
 data (``lift_fresh``, a CPU-to-device copy) is a pageable copy. An elementwise kernel on a frame runs at the memory's
 speed, so the bytes its operands and result hold (read and written once) predict its time: counted in *frame
@@ -25,18 +25,21 @@ import torch
 from torch.utils._python_dispatch import TorchDispatchMode
 from torch.utils._pytree import tree_flatten
 
-__all__ = ["DispatchCount", "VIEWS"]
+__all__ = ["DispatchCount", "VIEWS", "ALLOCATIONS"]
 
 VIEWS = {"view", "_unsafe_view", "t", "expand", "unsqueeze", "squeeze", "split", "unbind", "slice", "select", "reshape",
          "alias", "permute", "detach", "as_strided", "transpose", "split_with_sizes", "_reshape_alias"}
 """Operations that make a view: metadata only, no kernel."""
+
+ALLOCATIONS = {"empty", "empty_like", "new_empty", "empty_strided", "new_empty_strided"}
+"""Operations that allocate without writing: the caching allocator's work, no kernel."""
 
 _HOST_DATA = (torch.ops.aten.lift_fresh.default, torch.ops.aten.lift_fresh_copy.default)
 _COPIES = (torch.ops.aten._to_copy.default, torch.ops.aten.copy_.default)
 
 
 class DispatchCount(TorchDispatchMode):
-    """Counts, while active, the operations dispatched (views aside), the bytes they move, the values read back and
+    """Counts, while active, the operations dispatched (views and allocations aside), the bytes they move, the values read back and
     the tensors made from host data.
 
     Args:
@@ -58,7 +61,7 @@ class DispatchCount(TorchDispatchMode):
 
     @property
     def launches(self) -> int:
-        """Operations dispatched, views aside: kernel launches on CUDA."""
+        """Operations dispatched, views and allocations aside: kernel launches on CUDA."""
         return len(self.moved)
 
     @property
@@ -76,8 +79,9 @@ class DispatchCount(TorchDispatchMode):
             self.host_data[name] += 1
         elif func in _COPIES and _from_host(args, kwargs):
             self.host_data[f"{name} from the CPU"] += 1
-        elif name not in VIEWS:
-            tensors = [t for t in tree_flatten((args, kwargs, out))[0] if isinstance(t, torch.Tensor)]
+        elif name not in VIEWS and name not in ALLOCATIONS:
+            inputs = {key: value for key, value in kwargs.items() if key != "out"}  # an out= result is counted as the result
+            tensors = [t for t in tree_flatten((args, inputs, out))[0] if isinstance(t, torch.Tensor)]
             self.moved.append(sum(t.numel() * t.element_size() for t in tensors))
             self.by_operation[name] += 1
         return out

@@ -12,7 +12,6 @@ import torch
 
 from .aces2 import aces2_output
 from .aces2.transform import Prepared, peak_number, prepare_output
-from .base import display
 
 __all__ = ["aces2_sdr", "aces2_hdr", "prepare_aces2_sdr", "prepare_aces2_hdr", "ACES2_HDR_RANGES"]
 
@@ -24,14 +23,14 @@ def aces2_sdr(image: torch.Tensor, clip: bool = True) -> torch.Tensor:
     """ACES 2.0 "SDR 100 nits (Rec.709)": display-linear Rec.709 in [0, 1] (1.0 = 100 cd/m²).
 
     Encode with BT.1886 (``x ** (1 / 2.4)``) to get OpenColorIO's "Rec.1886 Rec.709 - Display"
-    values, or with sRGB for an sRGB monitor.
+    values, or with sRGB for an sRGB monitor. ``clip`` changes nothing: the transform's output lies in [0, 1].
 
     Examples:
         >>> grey = torch.full((1, 3, 1, 1), 0.18)
         >>> round(float(aces2_sdr(grey)[0, 0, 0, 0] ** (1 / 2.4)), 3)  # OpenColorIO: 0.3831
         0.383
     """
-    return display(aces2_output(image), clip)
+    return aces2_output(image)  # display-linear in [0, 1] already: clipped or not, the same values
 
 
 def aces2_hdr(image: torch.Tensor, peak_luminance: float = 1000.0, clip: bool = True) -> torch.Tensor:
@@ -46,7 +45,7 @@ def aces2_hdr(image: torch.Tensor, peak_luminance: float = 1000.0, clip: bool = 
         >>> round(float(aces2_hdr(grey)[0, 1, 0, 0]) * 1000.0, 1)  # cd/m²
         14.5
     """
-    return display(aces2_output(image, peak_luminance, "p3_d65", "rec2020"), clip)
+    return aces2_output(image, peak_luminance, "p3_d65", "rec2020")  # in [0, 1] already, as aces2_sdr
 
 
 def prepare_aces2_sdr() -> Prepared:

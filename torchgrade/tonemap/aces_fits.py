@@ -7,7 +7,7 @@ import torch
 from ..base.core import apply_matrix, matrix_on_planes, untracked
 from ..color import AP1_LUMINANCE, MATRICES, convert, unity_to_aces
 from ..color.spaces import shared_matrix
-from ..runtime import constant, values_of, where
+from ..runtime import affine, constant, values_of, where
 from .aces_rrt import (
     AP1_TO_REC709,
     DIM_SURROUND_GAMMA,
@@ -39,14 +39,9 @@ _RRT_DESATURATE_VALUES, _ODT_TAIL_VALUES = values_of(_RRT_DESATURATE), values_of
 
 
 def _fit(x: torch.Tensor) -> torch.Tensor:
-    """The luminance fit :data:`_ACES_FIT`: ``x (a x + b) / (x (c x + d) + e)``."""
+    """The luminance fit :data:`_ACES_FIT`: ``x (a x + b) / (x (c x + d) + e)``, in five operations."""
     k = _ACES_FIT
-    return x * (k["a"] * x + k["b"]) / (x * (k["c"] * x + k["d"]) + k["e"])
-
-
-def _dark_to_dim_surround(xyz: torch.Tensor) -> torch.Tensor:
-    """Unity's ``darkSurround_to_dimSurround`` on the XYZ of AP1 (see :func:`_dim_surround_planes`)."""
-    return torch.cat(_dim_surround_planes(*xyz.split(1, dim=-3)), dim=-3)
+    return x * affine(x, k["a"], k["b"]) / torch.addcmul(constant(k["e"], x), x, affine(x, k["c"], k["d"]))
 
 
 def _dim_surround_planes(big_x: torch.Tensor, big_y: torch.Tensor, big_z: torch.Tensor) -> tuple:
@@ -74,20 +69,15 @@ def aces_fitted(aces: torch.Tensor) -> torch.Tensor:
         0.0
     """
     if torch.onnx.is_in_onnx_export():
-        return _aces_fitted_planes(aces)
-    aces = rrt_glow_and_red_modifier(aces, smoothstep_hue_weight)
-    acescg = apply_matrix(constant(_RRT_DESATURATE_VALUES, aces), convert(aces, "ap0_to_ap1").clamp_min(0.0))
-    fitted = _fit(acescg)
-    return apply_matrix(constant(_ODT_TAIL_VALUES, fitted), _dark_to_dim_surround(convert(fitted, "ap1_to_xyz")))
-
-
-def _aces_fitted_planes(aces: torch.Tensor) -> torch.Tensor:
-    """The export form of :func:`aces_fitted`: the RRT's and the dim surround's planes go into the next matrix as they
-    are (:func:`~torchgrade.base.core.matrix_on_planes`), without a Concat and a Split each (the
-    matrices on planes too, as 9 products by constants and 6 sums, would add 38 nodes)."""
-    planes = rrt_glow_and_red_modifier_planes(aces, smoothstep_hue_weight)
-    acescg = apply_matrix(constant(_RRT_DESATURATE_VALUES, aces), matrix_on_planes(shared_matrix("ap0_to_ap1", aces), planes).clamp_min(0.0))
+        # The RRT's planes go into the next matrix as they are (matrix_on_planes), without a Concat and a Split (the
+        # matrices on planes too, as 9 products by constants and 6 sums, would add 38 nodes).
+        planes = rrt_glow_and_red_modifier_planes(aces, smoothstep_hue_weight)
+        ap1 = matrix_on_planes(shared_matrix("ap0_to_ap1", aces), planes)
+    else:
+        ap1 = convert(rrt_glow_and_red_modifier(aces, smoothstep_hue_weight), "ap0_to_ap1")
+    acescg = apply_matrix(constant(_RRT_DESATURATE_VALUES, ap1), ap1.clamp_min(0.0))
     xyz = convert(_fit(acescg), "ap1_to_xyz")
+    # the dim surround's planes go into the last matrix as they are, without a concatenation
     return matrix_on_planes(constant(_ODT_TAIL_VALUES, xyz), _dim_surround_planes(*xyz.split(1, dim=-3)))
 
 

@@ -21,7 +21,7 @@ from ..color import (
     primaries_to_rec709_matrix,
     safe_sqrt,
 )
-from ..runtime import constant, values_of, where
+from ..runtime import affine, constant, values_of, where
 
 __all__ = [
     "RRT_SAT_FACTOR",
@@ -114,14 +114,14 @@ def _sigmoid_shaper(x: torch.Tensor) -> torch.Tensor:
         [0.0, 0.125, 0.5, 0.875, 1.0]
     """
     c = x.clamp(-2.0, 2.0)
-    return 0.5 + c * (0.5 - 0.125 * torch.abs(c))
+    return 0.5 + c * affine(torch.abs(c), -0.125, 0.5)
 
 
 def _glow(yc: torch.Tensor, gain: torch.Tensor, mid: float) -> torch.Tensor:
     """ACES ``glow_fwd``: full gain below 2/3·mid, none above 2·mid, ``gain (mid / yc - 1/2)`` between."""
     if untracked(yc, gain) or torch.onnx.is_in_onnx_export():
         # yc clamped to the ramp gives gain (to float rounding) below it and exactly 0 above it, without selects.
-        return (mid / yc.clamp(2.0 / 3.0 * mid, 2.0 * mid)).sub_(0.5).mul_(gain)
+        return torch.div(constant(mid, yc), yc.clamp(2.0 / 3.0 * mid, 2.0 * mid)).sub_(0.5).mul_(gain)
     between = gain * (mid / yc.clamp_min(2.0 / 3.0 * mid) - 0.5)
     return where(yc <= 2.0 / 3.0 * mid, gain, where(yc >= 2.0 * mid, 0.0, between))
 
@@ -131,11 +131,11 @@ def smoothstep_hue_weight(centered_hue: torch.Tensor) -> torch.Tensor:
     ``smoothstep(0, 1, t) = t²(3 - 2t)`` on ``t`` clamped to [0, 1].
 
     Examples:
-        >>> smoothstep_hue_weight(torch.tensor([0.0, 67.5])).tolist()
+        >>> [round(w, 12) for w in smoothstep_hue_weight(torch.tensor([0.0, 67.5])).tolist()]  # 0 to float rounding
         [1.0, 0.0]
     """
-    t = (1.0 - torch.abs(centered_hue) * (2.0 / _RRT_RED_WIDTH)).clamp(0.0, 1.0)
-    return (t * t * (3.0 - 2.0 * t)) ** 2
+    t = affine(torch.abs(centered_hue), -2.0 / _RRT_RED_WIDTH, 1.0).clamp(0.0, 1.0)
+    return (t * t * affine(t, -2.0, 3.0)) ** 2
 
 
 def cubic_basis_hue_weight(centered_hue: torch.Tensor) -> torch.Tensor:
@@ -169,7 +169,7 @@ def rrt_glow_and_red_modifier(aces: torch.Tensor, hue_weight, tiny: float = UNIT
     if torch.onnx.is_in_onnx_export():
         return torch.cat(rrt_glow_and_red_modifier_planes(aces, hue_weight, tiny), dim=-3)
     saturation = _rgb_saturation(aces, tiny)
-    s = _sigmoid_shaper((saturation - 0.4) / 0.2)
+    s = _sigmoid_shaper(affine(saturation, 5.0, -2.0))  # (s - 0.4) / 0.2
     aces = torch.addcmul(aces, aces, _glow(_rgb_yc(aces), _RRT_GLOW_GAIN * s, _RRT_GLOW_MID))
 
     red, green_blue = aces.split((1, 2), dim=-3)
@@ -191,7 +191,7 @@ def rrt_glow_and_red_modifier_planes(aces: torch.Tensor, hue_weight, tiny: float
     """
     r, g, b = aces.split(1, dim=-3)
     saturation = _saturation(torch.maximum(torch.maximum(r, g), b), torch.minimum(torch.minimum(r, g), b), tiny)
-    s = _sigmoid_shaper((saturation - 0.4) / 0.2)
+    s = _sigmoid_shaper(affine(saturation, 5.0, -2.0))  # (s - 0.4) / 0.2
     gain = 1.0 + _glow(_yc(r, g, b), _RRT_GLOW_GAIN * s, _RRT_GLOW_MID)
     r, g, b = r * gain, g * gain, b * gain
     change = hue_weight(_red_hue_distance(r, g, b)) * saturation * (_RRT_RED_PIVOT - r) * (1.0 - _RRT_RED_SCALE)

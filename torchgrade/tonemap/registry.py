@@ -12,6 +12,7 @@ from ..base.core import (
     Param,
     check_choice,
     check_image,
+    nan_free,
     sanitize,
     to_input_dtype,
     working_dtype,
@@ -111,4 +112,5 @@ def tonemap(image: torch.Tensor, mode: str = "neutral", clip: bool = True, **par
     if unknown:
         raise ValueError(f"tone mapper {mode!r} takes {list(entry.controls) or 'no parameters'}, got {sorted(unknown)}")
     working = sanitize(working_dtype(image))
-    return to_input_dtype(entry.curve(working, clip=clip, **params), image)
+    with nan_free(working):  # a curve that sanitizes its input again (ACES 2.0's transform) leaves out the NaN pass
+        return to_input_dtype(entry.curve(working, clip=clip, **params), image)

@@ -18,9 +18,9 @@ from dataclasses import dataclass, field
 
 import torch
 
-from ...base.core import apply_matrix
+from ...base.core import apply_matrix, matrix_on_planes, untracked
 from ...color import rgb_to_xyz_matrix, safe_pow
-from ...runtime import constant, values_of, where
+from ...runtime import affine, constant, values_of, where
 
 __all__ = ["CAM16_PRIMARIES", "JMhParams", "jmh_params", "rgb_to_aab", "aab_to_jmh", "jmh_to_rgb", "y_to_j", "a_to_y"]
 
@@ -57,7 +57,7 @@ def cone_compress(v: torch.Tensor) -> torch.Tensor:
         [-0.0355, 0.0, 0.0355, 0.6382]
     """
     p = safe_pow(v.abs(), 0.42)
-    return torch.sign(v) * p / (NL_OFFSET + p)
+    return _signed_as(p / (NL_OFFSET + p), v)
 
 
 def cone_expand(v: torch.Tensor) -> torch.Tensor:
@@ -68,7 +68,15 @@ def cone_expand(v: torch.Tensor) -> torch.Tensor:
         [0.5, 100.0]
     """
     r = v.abs().clamp(max=RA_LIMIT)
-    return torch.sign(v) * safe_pow(NL_OFFSET * r / (1.0 - r), 1.0 / 0.42)
+    return _signed_as(safe_pow(r / affine(r, -1.0 / NL_OFFSET, 1.0 / NL_OFFSET), 1.0 / 0.42), v)  # NL r / (1 - r)
+
+
+def _signed_as(magnitude: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+    """``sign(v) magnitude`` for a magnitude that is 0 where ``v`` is: one ``copysign``, exported as ``Sign`` and ``Mul``
+    (ONNX has no copysign)."""
+    if torch.onnx.is_in_onnx_export():
+        return torch.sign(v) * magnitude
+    return torch.copysign(magnitude, v)
 
 
 @dataclass(frozen=True)
@@ -148,8 +156,11 @@ def _safe_hypot_atan2(a: torch.Tensor, b: torch.Tensor):
     """``sqrt(a²+b²)`` and ``atan2(b, a)`` with finite gradients at the origin (hue 0 there).
 
     Below the smallest normal ``a²+b²`` counts as the origin: atan2's gradient divides by ``a²+b²``,
-    which a denormal turns into 0/0 (a grey pixel of 1e-38 in float32 did).
+    which a denormal turns into 0/0 (a grey pixel of 1e-38 in float32 did). Where nothing records a gradient,
+    ``hypot`` and ``atan2`` themselves (2 operations instead of 10; ``atan2(0, 0)`` is 0).
     """
+    if untracked(a, b):
+        return torch.hypot(a, b), torch.atan2(b, a)
     r2 = a * a + b * b
     zero = r2 <= torch.finfo(r2.dtype).tiny
     m = torch.sqrt(where(zero, 1.0, r2))
@@ -160,7 +171,8 @@ def _safe_hypot_atan2(a: torch.Tensor, b: torch.Tensor):
 def aab_to_jmh(aab: torch.Tensor, p: JMhParams, dim: int = -3):
     """``J = 100 A^cz``, ``M = |(a, b)|``, ``h = atan2(b, a)`` in degrees; ``A <= 0`` is black (0, 0, 0).
 
-    Returns ``(J, M, h, cos h, sin h)``, trigonometry from ``(a, b)`` directly.
+    Returns ``(J, M, h, cos h, sin h)``, trigonometry from ``(a, b)`` directly (where nothing records a gradient,
+    the cosine and sine of the hue: the same to float rounding wherever ``J > 0``, the only pixels they reach).
 
     Examples:
         >>> from torchgrade.color import AP0_CHROMATICITIES
@@ -174,10 +186,13 @@ def aab_to_jmh(aab: torch.Tensor, p: JMhParams, dim: int = -3):
     lit = a_ > 0
     j = J_SCALE * safe_pow(a_, p.cz)
     m, hue = _safe_hypot_atan2(a, b)
-    chromatic = lit & (m > 0)
-    safe_m = where(chromatic, m, 1.0)
-    cos_h = where(chromatic, a / safe_m, 1.0)
-    sin_h = where(chromatic, b / safe_m, 0.0)
+    if untracked(a, b):  # 2 operations instead of 5; at the origin (1, 0), as atan2 gives 0 there
+        cos_h, sin_h = torch.cos(hue), torch.sin(hue)
+    else:
+        chromatic = lit & (m > 0)
+        safe_m = where(chromatic, m, 1.0)
+        cos_h = where(chromatic, a / safe_m, 1.0)
+        sin_h = where(chromatic, b / safe_m, 0.0)
     h = where(lit, torch.remainder(torch.rad2deg(hue), 360.0), 0.0)
     return j, where(lit, m, 0.0), h, cos_h, sin_h
 
@@ -193,9 +208,12 @@ def jmh_to_rgb(j, m, cos_h, sin_h, p: JMhParams, dim: int = -3) -> torch.Tensor:
         >>> [round(v, 6) for v in jmh_to_rgb(j, m, cos_h, sin_h, p).flatten().tolist()]
         [0.5, 0.2, 0.1]
     """
-    a_ = safe_pow(j / J_SCALE, 1.0 / p.cz)
-    aab = torch.stack((a_, m * cos_h, m * sin_h), dim)
-    return _apply(p, "cone_to_rgb", cone_expand(_apply(p, "aab_to_cone", aab, dim)), dim)
+    planes = (safe_pow(j / J_SCALE, 1.0 / p.cz), m * cos_h, m * sin_h)
+    if dim == -3 and j.dim() >= 2:  # an image's planes go into the matrix as they are, without a concatenation
+        cone = matrix_on_planes(constant(p.values["aab_to_cone"], j), [plane.unsqueeze(-3) for plane in planes])
+    else:
+        cone = _apply(p, "aab_to_cone", torch.stack(planes, dim), dim)
+    return _apply(p, "cone_to_rgb", cone_expand(cone), dim)
 
 
 def a_to_y(a: torch.Tensor, p: JMhParams) -> torch.Tensor:
@@ -207,7 +225,10 @@ def a_to_y(a: torch.Tensor, p: JMhParams) -> torch.Tensor:
         >>> round(float(a_to_y(torch.tensor(1.0, dtype=torch.float64), p)), 6)  # scene white
         100.0
     """
-    return cone_expand(p.a_w_j * a.clamp_min(0.0)) / p.f_l_n
+    # cone_expand of a response >= 0, with the division by F_L_n inside its power: ((r / (1 - r)) NL / F_L_n^0.42)^(1/0.42)
+    r = (p.a_w_j * a).clamp(0.0, RA_LIMIT)
+    scale = p.f_l_n**0.42 / NL_OFFSET
+    return safe_pow(r / affine(r, -scale, scale), 1.0 / 0.42)
 
 
 def y_to_j(y: torch.Tensor, p: JMhParams) -> torch.Tensor:
@@ -219,5 +240,8 @@ def y_to_j(y: torch.Tensor, p: JMhParams) -> torch.Tensor:
         >>> [round(v, 6) for v in y_to_j(torch.tensor([100.0, -100.0], dtype=torch.float64), p).tolist()]
         [100.0, -100.0]
     """
-    ra = cone_compress(y.abs() * p.f_l_n)
-    return torch.sign(y) * J_SCALE * safe_pow(ra / p.a_w_j, p.cz)
+    # ra = q / (NL + q) with q = (|y| F_L_n)^0.42, and J = 100 (ra / A_w)^cz = (q / ((NL + q) k))^cz with
+    # k = A_w / 100^(1/cz): the constants folded into one product and sum
+    q = safe_pow(y.abs(), 0.42)
+    k = p.a_w_j / J_SCALE ** (1.0 / p.cz)
+    return _signed_as(safe_pow(q / affine(q, k, k * NL_OFFSET / p.f_l_n**0.42), p.cz), y)

@@ -15,7 +15,7 @@ from __future__ import annotations
 import torch
 
 from ...color import safe_pow, safe_sqrt
-from ...runtime import constant, is_tracing, values_of, where
+from ...runtime import affine, constant, is_tracing, values_of, where
 
 __all__ = ["count_below", "GamutParams", "gamut_compress", "focus_gain", "solve_j_intersect", "compression_slope",
            "hull_boundary_m", "focus_j"]
@@ -69,10 +69,10 @@ def solve_j_intersect(j, m, focus, limit_j_max: float, gain):
     a = ms / focus
     below = j < focus
     b_lo = 1.0 - ms
-    lo = 2.0 * j / _nonzero(b_lo + safe_sqrt(b_lo * b_lo + 4.0 * a * j))
-    b_hi = -(1.0 + ms + limit_j_max * a)
-    c_hi = limit_j_max * ms + j
-    hi = -2.0 * c_hi / _nonzero(b_hi - safe_sqrt(b_hi * b_hi - 4.0 * a * c_hi))
+    lo = 2.0 * j / _nonzero(b_lo + safe_sqrt(torch.addcmul(b_lo * b_lo, a, j, value=4.0)))
+    b_hi = affine(torch.add(ms, a, alpha=limit_j_max), -1.0, -1.0)  # -(1 + ms + J_max a)
+    c_hi = torch.add(j, ms, alpha=limit_j_max)
+    hi = -2.0 * c_hi / _nonzero(b_hi - safe_sqrt(torch.addcmul(b_hi * b_hi, a, c_hi, value=-4.0)))
     return torch.where(below, lo, hi)
 
 
@@ -165,7 +165,9 @@ class GamutParams:
         self.lower_inv, self.model_gamma_inv = lower_inv, model_gamma_inv
         self.hues, self.cusps, self.reach = hues, cusps, reach
         # the tables as tuples of floats: device constants of a compiled graph, not inputs copied at every call
-        self.hue_values, self.cusp_values, self.reach_values = values_of(hues), values_of(cusps), values_of(reach)
+        self.hue_values = values_of(hues)
+        self.cusp_segments = _segment_rows(hues, cusps)
+        self.reach_segments = values_of(torch.stack((reach, reach.roll(-1) - reach), dim=-1))  # value, step to the next degree
 
     def cusp(self, h: torch.Tensor):
         """``(J_cusp, M_cusp, 1/gamma_top)`` at hue ``h``: linear in the non-uniform hue table.
@@ -177,13 +179,10 @@ class GamutParams:
             >>> [round(float(v), 1) for v in p.cusp(torch.tensor([120.0], dtype=torch.float64))]
             [86.8, 57.3, 1.1]
         """
-        hues = constant(self.hue_values, h)
-        table = constant(self.cusp_values, h)
-        hi = count_below(hues, h.detach()).clamp(1, hues.numel() - 1)
-        lo_hue, hi_hue = hues[hi - 1], hues[hi]
-        t = ((h - lo_hue) / (hi_hue - lo_hue)).unsqueeze(-1)
-        row = table[hi - 1] + (table[hi] - table[hi - 1]) * t
-        return row.unbind(-1)
+        hi = count_below(constant(self.hue_values, h), h.detach()).clamp(1, len(self.hue_values) - 1)
+        segment = constant(self.cusp_segments, h)[hi]
+        t = ((h - segment[..., 0]) * segment[..., 1]).unsqueeze(-1)
+        return torch.addcmul(segment[..., 2:5], segment[..., 5:], t).unbind(-1)
 
     def reach_m(self, h: torch.Tensor) -> torch.Tensor:
         """AP1 reach M at ``J_max``, linear between whole degrees.
@@ -193,11 +192,22 @@ class GamutParams:
             >>> round(float(_output(100.0, "rec709").gamut.reach_m(torch.tensor(0.0, dtype=torch.float64))), 1)
             166.8
         """
-        table = constant(self.reach_values, h)
         base = torch.floor(h.detach())
-        t = h - base
-        i = base.long().remainder(360)
-        return table[i] + (table[(i + 1).remainder(360)] - table[i]) * t
+        segment = constant(self.reach_segments, h)[base.long().remainder(360)]
+        return torch.addcmul(segment[..., 0], segment[..., 1], h - base)
+
+
+def _segment_rows(knots: torch.Tensor, values: torch.Tensor) -> tuple:
+    """A piecewise-linear table as one row per interval, gathered at once: row ``k`` (from 1) holds interval ``k - 1``'s
+    ``(knot, 1 / width, values, steps to the next values)``; row 0 repeats row 1. As tuples (:func:`values_of`).
+
+    Examples:
+        >>> _segment_rows(torch.tensor([0.0, 2.0]), torch.tensor([[1.0], [5.0]]))
+        ((0.0, 0.5, 1.0, 4.0), (0.0, 0.5, 1.0, 4.0))
+    """
+    rows = torch.cat(((knots[:-1]).unsqueeze(-1), (1.0 / (knots[1:] - knots[:-1])).unsqueeze(-1), values[:-1],
+                      values[1:] - values[:-1]), dim=-1)
+    return values_of(torch.cat((rows[:1], rows)))
 
 
 def gamut_compress(j, m, h, reach_m, p: GamutParams):

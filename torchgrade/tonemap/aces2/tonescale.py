@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import torch
 
 from ...color import safe_pow, safe_sqrt
-from ...runtime import where
+from ...runtime import affine, constant, where
 
 __all__ = ["ToneScale", "tonescale_params", "daniele_tonescale", "ChromaParams", "chroma_params", "chroma_compress"]
 
@@ -73,8 +73,8 @@ def daniele_tonescale(y: torch.Tensor, t: ToneScale) -> torch.Tensor:
         [0.0, 14.51, 1000.0]
     """
     y = y.clamp_min(0.0)
-    f = t.m_2 * safe_pow(y / (y + t.s_2), t.g)
-    return 100.0 * f * f / (f + t.t_1)
+    p = safe_pow(y / (y + t.s_2), t.g)  # f = m_2 p, so 100 f² / (f + t_1) = p² / (p / (100 m_2) + t_1 / (100 m_2²))
+    return p * p / affine(p, 1.0 / (100.0 * t.m_2), t.t_1 / (100.0 * t.m_2 * t.m_2))
 
 
 @dataclass(frozen=True)
@@ -108,6 +108,12 @@ def chroma_params(t: ToneScale) -> ChromaParams:
     )
 
 
+_CHROMA_NORM_POLYNOMIAL = (77.12896 - 16.46899, 11.34072 - 3.0 * 7.88380, 2.0 * 16.46899, 4.0 * 7.88380,
+                           14.66441 + 3.0 * 9.19364, 4.0 * 9.19364, 2.0 * 6.37224)
+""":func:`chroma_norm`'s series as a polynomial in ``c = cos h`` and ``s = sin h``: the coefficients ``(k, c1, c2, c3, s1,
+s3, cs)`` of ``k + c1 c + c2 c² + c3 c³ + s1 s - s3 s³ - cs c s``."""
+
+
 def chroma_norm(cos_h: torch.Tensor, sin_h: torch.Tensor, c: ChromaParams) -> torch.Tensor:
     """Hue-dependent normaliser of M: a third-order Fourier series in ``h`` fitted by the Academy.
 
@@ -116,11 +122,13 @@ def chroma_norm(cos_h: torch.Tensor, sin_h: torch.Tensor, c: ChromaParams) -> to
         >>> round(float(chroma_norm(torch.tensor(1.0), torch.tensor(0.0), c)), 2)  # h = 0
         112.83
     """
-    cos2, sin2 = 2.0 * cos_h * cos_h - 1.0, 2.0 * cos_h * sin_h
-    cos3, sin3 = 4.0 * cos_h**3 - 3.0 * cos_h, 3.0 * sin_h - 4.0 * sin_h**3
-    series = 11.34072 * cos_h + 16.46899 * cos2 + 7.88380 * cos3
-    series = series + 14.66441 * sin_h - 6.37224 * sin2 + 9.19364 * sin3 + 77.12896
-    return series * c.norm_scale
+    # With cos 2h = 2c² - 1, sin 2h = 2cs, cos 3h = 4c³ - 3c and sin 3h = 3s - 4s³ the series is the polynomial
+    # k + c (c1 + c (c2 + c3 c)) + s (s1 - s3 s² - cs c) of _CHROMA_NORM_POLYNOMIAL: 8 operations where the
+    # harmonics took 20.
+    k, c1, c2, c3, s1, s3, cs = _CHROMA_NORM_POLYNOMIAL
+    cosine_part = cos_h * torch.addcmul(constant(c1, cos_h), cos_h, affine(cos_h, c3, c2))
+    sine_part = torch.add(affine(sin_h * sin_h, -s3, s1), cos_h, alpha=-cs)
+    return affine(torch.addcmul(cosine_part, sin_h, sine_part), c.norm_scale, k * c.norm_scale)
 
 
 def toe(x: torch.Tensor, limit, k1: torch.Tensor, k2: torch.Tensor) -> torch.Tensor:
@@ -133,10 +141,10 @@ def toe(x: torch.Tensor, limit, k1: torch.Tensor, k2: torch.Tensor) -> torch.Ten
         [0.0412, 2.0]
     """
     k2 = k2.clamp_min(0.001)
-    k1 = torch.sqrt(k1 * k1 + k2 * k2)
+    k1 = torch.sqrt(torch.addcmul(k1 * k1, k2, k2))  # hypot, which ONNX lacks
     k3 = (limit + k1) / (limit + k2)
     minus_b = k3 * x - k1
-    y = 0.5 * (minus_b + safe_sqrt(minus_b * minus_b + 4.0 * k2 * k3 * x))
+    y = 0.5 * (minus_b + safe_sqrt(torch.addcmul(minus_b * minus_b, k2 * k3, x, value=4.0)))
     return torch.where(x > limit, x, y)
 
 

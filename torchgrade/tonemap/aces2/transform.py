@@ -63,6 +63,8 @@ class Aces2Output:
         self.aces = jmh_params(color.AP0_CHROMATICITIES)
         self.limit = jmh_params(PRIMARIES[limiting_primaries])
         reach = jmh_params(color.AP1_CHROMATICITIES)
+        # AP0 and AP1 share a white, so the CAM of AP1 is AP0's after the AP1 -> AP0 matrix: only its matrices differ
+        self.inputs = {"ap0": self.aces, "ap1": reach}
         self.tone = tonescale_params(peak)
         self.chroma = chroma_params(self.tone)
         limit_j_max = float(y_to_j(torch.tensor(peak, dtype=torch.float64), self.aces))
@@ -74,16 +76,16 @@ class Aces2Output:
         self.gamut = GamutParams(limit_j_max, mid_j, focus_dist, lower_inv, 1.0 / self.aces.cz, hues,
                                  torch.cat((cusps, top[:, None]), -1), reach_m_table(reach, limit_j_max))
 
-    def render(self, aces: torch.Tensor) -> torch.Tensor:
-        """ACES2065-1 ``(..., 3, H, W)`` -> linear RGB in the limiting primaries, 1.0 = 100 cd/m²,
-        in ``[0, peak/100]``.
+    def render(self, aces: torch.Tensor, primaries: str = "ap0") -> torch.Tensor:
+        """ACES2065-1 ``(..., 3, H, W)`` (or AP1, ``primaries="ap1"``: the AP1 -> AP0 matrix folded into the CAM's
+        first) -> linear RGB in the limiting primaries, 1.0 = 100 cd/m², in ``[0, peak/100]``.
 
         Examples:
             >>> out = _output(100.0, "rec709").render(torch.full((1, 3, 1, 1), 1e4))
             >>> [round(v, 4) for v in out.flatten().tolist()]  # white limited to peak
             [1.0, 1.0, 1.0]
         """
-        aab = rgb_to_aab(aces, self.aces)
+        aab = rgb_to_aab(aces, self.inputs[primaries])
         j, m, h, cos_h, sin_h = aab_to_jmh(aab, self.aces)
         j_ts = y_to_j(daniele_tonescale(a_to_y(aab.select(-3, 0), self.aces), self.tone), self.aces)
         reach_m = self.gamut.reach_m(h)
@@ -161,9 +163,8 @@ def _rgb_to_rgb(source, target) -> torch.Tensor:
 
 _AP0_TO_AP1 = _rgb_to_rgb(color.AP0_CHROMATICITIES, color.AP1_CHROMATICITIES)
 _MATRIX_VALUES = {
-    "rec709_to_ap0": values_of(REC709_TO_AP0),
     "ap0_to_ap1": values_of(_AP0_TO_AP1),
-    "ap1_to_ap0": values_of(torch.linalg.inv(_AP0_TO_AP1)),
+    "rec709_to_ap1": values_of(_AP0_TO_AP1 @ REC709_TO_AP0),
     **{f"{source}_to_{target}": values_of(_rgb_to_rgb(PRIMARIES[source], PRIMARIES[target])) for source in PRIMARIES for target in PRIMARIES},
 }
 """The transform's matrices as tuples of floats (device constants, :func:`~torchgrade.runtime.constant`)."""
@@ -240,11 +241,21 @@ def aces2_output(image: torch.Tensor, peak_luminance: float = 100.0, limiting_pr
 
 
 def _display_linear(x: torch.Tensor, peak: float, limiting: str, display: str, input_space: str) -> torch.Tensor:
-    aces = _apply("rec709_to_ap0", x) if input_space == "rec709" else x
+    """The Output Transform to display-linear RGB, 1.0 = peak: each run of matrices folded into one (into AP1, the AP1
+    -> AP0 matrix and the CAM's first, the display's and the scaling to the peak)."""
     output = _output(peak, limiting)
-    ap1 = _apply("ap0_to_ap1", aces).clamp(0.0, output.tone.forward_limit)
-    rgb = output.render(_apply("ap1_to_ap0", ap1))
-    rgb = _apply(f"{limiting}_to_{display}", rgb)
+    ap1 = _apply("rec709_to_ap1" if input_space == "rec709" else "ap0_to_ap1", x).clamp(0.0, output.tone.forward_limit)
+    rgb = output.render(ap1, "ap1")
+    scale = REFERENCE_LUMINANCE / peak
+    if limiting != display:
+        rgb = apply_matrix(constant(_scaled(_MATRIX_VALUES[f"{limiting}_to_{display}"], scale), rgb), rgb)
+    elif scale != 1.0:
+        rgb = rgb * scale
     # Display values below 0 do not exist: clip where a limiting gamut pokes out of the container
     # (P3's red lies just outside Rec.2020), rather than mirror them through the encoding as OpenColorIO does.
-    return (rgb / (peak / REFERENCE_LUMINANCE)).clamp(0.0, 1.0)
+    return rgb.clamp(0.0, 1.0)
+
+
+def _scaled(matrix: tuple, scale: float) -> tuple:
+    """A matrix of :data:`_MATRIX_VALUES` times ``scale``."""
+    return tuple(tuple(value * scale for value in row) for row in matrix)
