@@ -1,4 +1,5 @@
-"""The eager CPU paths on this machine's threads: the cinematic look, its stages, ACES 2.0 and 33³ LUTs at 1920x1080.
+"""The eager CPU paths on this machine's threads: the cinematic look, its stages, ACES 2.0 and 33³ LUTs at 1920x1080,
+and ``RandomPostFX`` on a 32x3x224x224 batch.
 
     python benchmarks/bench_cpu_paths.py [--runs N] [--threads N] [--clock wall|cpu] [--json FILE]
 
@@ -37,6 +38,8 @@ def cases() -> dict:
     pixels = torch.rand(1, 3, 1080, 1920, generator=torch.Generator().manual_seed(0)) * 1.1 - 0.05
     aces2 = tg.ToneMap("aces2")
     hdr_lut = tg.LUT3D(torch.rand(33, 33, 33, 3, generator=torch.Generator().manual_seed(1)), shaper="logc_hdr")
+    augment = tg.RandomPostFX(contrast=30, saturation=30, hue_shift=20, post_exposure=0.5, input_space="srgb")
+    batch = torch.rand(32, 3, 224, 224, generator=torch.Generator().manual_seed(2))
     return {
         "cinematic look": lambda: look(image),
         "grade": lambda: grade(image),
@@ -45,6 +48,7 @@ def cases() -> dict:
         "bloom scattering": lambda: bloom(image),
         "LUT 33^3 tetrahedral": lambda: lut(pixels, "tetrahedral"),
         "LUT 33^3 logc_hdr": lambda: hdr_lut(image),
+        "RandomPostFX 32x224^2": lambda: augment(batch),
     }
 
 

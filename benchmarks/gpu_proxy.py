@@ -28,7 +28,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import torchgrade as tg  # noqa: E402
-from benchmarks.bench_gpu import SIZES, STAGES, cinematic  # noqa: E402
+from benchmarks.bench_gpu import SIZES, STAGES, augmentations, cinematic  # noqa: E402
 from benchmarks.common import argument_parser, write_results  # noqa: E402
 from torchgrade.testing.dispatch import DispatchCount  # noqa: E402
 
@@ -45,7 +45,8 @@ FOUR_K = torch.Size((1, 3) + SIZES["4K"])
 
 
 def cases() -> dict:
-    """``name -> (stage factory, input shape, training)``: bench_gpu's looks, stages, LUT and training step."""
+    """``name -> (stage factory, input shape, training)``: bench_gpu's looks, stages, LUT, training step and augmentation
+    (kornia's ``ColorJiggle``, its yardstick there, reads values back: it cannot run on ``meta``)."""
     lut = lambda: cinematic().to_lut(33).lut  # noqa: E731
     return {
         "cinematic 4K": (cinematic, FOUR_K, False),
@@ -53,6 +54,7 @@ def cases() -> dict:
         **{name: (make, FOUR_K, False) for name, make in STAGES.items()},
         "LUT 33³ tetrahedral": (lut, FOUR_K, False),
         "training 16x512²": (cinematic, (16, 3, 512, 512), True),
+        "RandomPostFX 256x224²": (lambda: augmentations()[0], (256, 3, 224, 224), False),
     }
 
 

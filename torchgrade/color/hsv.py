@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import torch
 
-from ..runtime import constant, where
+from ..runtime import affine, constant, where
 from .spaces import CHANNEL
 
 __all__ = [
@@ -49,6 +49,7 @@ def hsv_to_rgb(image: torch.Tensor) -> torch.Tensor:
         [2.0, 0.0, 0.0]
     """
     hue, saturation, value = (c.unsqueeze(CHANNEL) for c in image.unbind(CHANNEL))
-    offsets = constant((0.0, 2.0 / 3.0, 1.0 / 3.0), image).reshape(3, 1, 1)
-    ramp = (torch.abs(torch.frac(hue + offsets + 1.0) * 6.0 - 3.0) - 1.0).clamp(0.0, 1.0)
-    return value * (1.0 + saturation * (ramp - 1.0))
+    offsets = constant((1.0, 5.0 / 3.0, 4.0 / 3.0), image).reshape(3, 1, 1)  # k + 1: frac of a positive number
+    # ramp - 1 in one clamp, and V (1 + S (ramp - 1)) as V + (V S)(ramp - 1): exact at S = 0, ramp = 1 and S = 1, ramp = 0
+    ramp_less_one = (torch.abs(affine(torch.frac(hue + offsets), 6.0, -3.0)) - 2.0).clamp(-1.0, 0.0)
+    return torch.addcmul(value, value * saturation, ramp_less_one)

@@ -61,7 +61,7 @@ def linear_to_srgb(image: torch.Tensor) -> torch.Tensor:
         >>> [round(v, 4) for v in linear_to_srgb(torch.tensor([0.0, 0.18, 1.0])).flatten().tolist()]
         [0.0, 0.4614, 1.0]
     """
-    high = 1.055 * image.clamp_min(0.0031308) ** (1.0 / 2.4) - 0.055
+    high = affine(image.clamp_min(0.0031308) ** (1.0 / 2.4), 1.055, -0.055)
     return torch.where(image <= 0.0031308, 12.92 * image, high)
 
 
@@ -72,7 +72,7 @@ def srgb_to_linear(image: torch.Tensor) -> torch.Tensor:
         >>> [round(v, 4) for v in srgb_to_linear(torch.tensor([0.0, 0.5, 1.0])).flatten().tolist()]
         [0.0, 0.214, 1.0]
     """
-    high = ((image.clamp_min(0.04045) + 0.055) / 1.055) ** 2.4
+    high = affine(image.clamp_min(0.04045), 1.0 / 1.055, 0.055 / 1.055) ** 2.4
     return torch.where(image <= 0.04045, image / 12.92, high)
 
 

@@ -47,7 +47,7 @@ from ..color import (
     srgb_to_linear,
 )
 from ..color.spaces import shared_matrix
-from ..runtime import constant, folded, where
+from ..runtime import affine, constant, folded, where
 from .curves import evaluate_curve
 
 __all__ = [
@@ -186,13 +186,13 @@ def log_contrast(image: torch.Tensor, amount: Param, encoding: str = "logc") -> 
         if torch.onnx.is_in_onnx_export():
             return _acescc_contrast_folded(image, k)
         return acescc_to_aces((aces_to_acescc(image) - ACESCC_MIDGRAY) * k + ACESCC_MIDGRAY)
-    base = (LOGC_A * image + LOGC_B).clamp_min(torch.finfo(image.dtype).tiny)
+    base = affine(image, LOGC_A, LOGC_B).clamp_min(torch.finfo(image.dtype).tiny)
     if torch.onnx.is_in_onnx_export():
         # The power as exp(k ln(base) + ln(gain)): a Log and an Exp cost less than half a Pow (benchmarks/results/onnx_ops.md).
         log_gain = math.log(10.0) * (LOGC_D - ACESCC_MIDGRAY) / LOGC_C * (k - 1.0)
         return (torch.exp(torch.log(base) * k + log_gain) - LOGC_B) / LOGC_A
-    gain = torch.pow(10.0, (LOGC_D - ACESCC_MIDGRAY) * (k - 1.0) / LOGC_C)
-    return (base**k * gain - LOGC_B) / LOGC_A
+    gain = torch.pow(10.0, (LOGC_D - ACESCC_MIDGRAY) * (k - 1.0) / LOGC_C) / LOGC_A
+    return affine(base**k * gain, 1.0, -LOGC_B / LOGC_A)
 
 
 def _contrast_slope(amount: Param, *, like: torch.Tensor) -> torch.Tensor:
