@@ -161,13 +161,12 @@ def hostile_coordinates(size: int) -> torch.Tensor:
 def test_the_whole_frame_form_matches_the_gather_form(size):
     table = torch.rand(size, size, size, 3) * 2 - 1
     rows = planar_table(table)
-    coords = hostile_coordinates(size)
-    frame = KERNELS["tetrahedral"].eager.frame(coords, KERNELS["tetrahedral"].eager.tables(rows, size), size)
-    expected = KERNELS["tetrahedral"](coords.double(), rows.double(), size)  # the gather form in float64
-    torch.testing.assert_close(frame.double(), expected, atol=4 * 2.0 ** -24 * 2, rtol=0)
+    kernel, coords = KERNELS["tetrahedral"], hostile_coordinates(size)
+    tables = kernel.eager.tables(rows, size)
+    expected = kernel(coords.double(), rows.double(), size)  # the gather form in float64
+    torch.testing.assert_close(kernel.eager.frame(coords, tables, size).double(), expected, atol=4 * 2.0 ** -24 * 2, rtol=0)
     on_points = coords.round()
-    assert torch.equal(KERNELS["tetrahedral"].eager.frame(on_points, KERNELS["tetrahedral"].eager.tables(rows, size), size),
-                       KERNELS["tetrahedral"](on_points, rows, size))
+    assert torch.equal(kernel.eager.frame(on_points, tables, size), kernel(on_points, rows, size))
 
 
 @pytest.mark.parametrize("shaper, domain, extra", SHAPED + [("logc_hdr", None, {})])

@@ -25,6 +25,9 @@ import torchgrade as tg
 from test_device import CASES
 from torchgrade.testing.dispatch import DispatchCount
 
+FOUR_K = (1, 3, 2160, 3840)
+AUGMENTED = (256, 3, 224, 224)
+
 CINEMATIC = json.loads((Path(__file__).resolve().parents[2] / "export" / "looks" / "cinematic.json").read_text())
 
 LAUNCH_BUDGET = {"cinematic": 291, "exposure": 48, "bloom": 111, "grade": 49, "tonemap": 86}
@@ -63,13 +66,10 @@ def _second_frame(module, image: torch.Tensor, train: bool = False) -> DispatchC
 @pytest.mark.parametrize("name", list(LAUNCH_BUDGET))
 def test_a_4k_frame_of_the_cinematic_look_launches_and_moves_within_its_budget(name):
     module = _cinematic_stages()[name].to("meta")
-    counted = _second_frame(module, torch.empty(1, 3, 2160, 3840, device="meta"))
+    counted = _second_frame(module, torch.empty(FOUR_K, device="meta"))
     assert counted.launches <= LAUNCH_BUDGET[name], f"{name}: {counted.launches} operations a 4K frame"
     assert counted.frame_passes <= FRAME_PASS_BUDGET[name], f"{name}: {counted.frame_passes:.1f} frame passes"
 
-
-FOUR_K = (1, 3, 2160, 3840)
-AUGMENTED = (256, 3, 224, 224)
 
 STAGE_BUDGETS = {
     "ToneMap('aces2')": (lambda: tg.ToneMap("aces2"), FOUR_K, 316, 155.3),

@@ -26,7 +26,7 @@ from typing import Union
 
 import torch
 
-from ..runtime.constants import constant, where
+from ..runtime.constants import constant, is_plain_number, where
 from ..runtime.policy import policy_for
 from ..runtime.recording import is_tracing, untracked
 from ..runtime.strips import named_as
@@ -205,7 +205,7 @@ def _as_tensor(value: Param, image: torch.Tensor, name: str) -> torch.Tensor:
         if value.is_complex() or not (value.is_floating_point() or value.dtype in _INT_DTYPES):
             raise TypeError(f"parameter {name!r} must be a real number tensor, got {value.dtype}")
         return value.to(device=image.device, dtype=image.dtype)
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+    if not is_plain_number(value):
         raise TypeError(f"parameter {name!r} must be a number or a tensor, got {type(value).__name__}")
     return constant(float(value), image)
 
@@ -250,7 +250,7 @@ def color_param(value, image: torch.Tensor, name: str) -> torch.Tensor:
         >>> color_param(0.5, torch.zeros(1, 3, 2, 2), 'tint').flatten().tolist()
         [0.5, 0.5, 0.5]
     """
-    if isinstance(value, numbers.Real) and not isinstance(value, bool):
+    if is_plain_number(value):
         value = (value,) * 3
     t = _as_tensor(value, image, name) if isinstance(value, torch.Tensor) else _sequence(value, image, name)
     if t.shape == (3,):
@@ -287,7 +287,7 @@ def _nested_floats(value):
     """A number or nested sequence of numbers as nested tuples of floats (hashable: a key of the constants' cache)."""
     if isinstance(value, (list, tuple)):
         return tuple(_nested_floats(item) for item in value)
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+    if not is_plain_number(value):
         raise TypeError(f"expected a number, got {type(value).__name__}")
     return float(value)
 
@@ -431,17 +431,6 @@ def readable(value) -> bool:
     if not isinstance(value, torch.Tensor):
         return True
     return not is_tracing() and policy_for(value.device).reads_values
-
-
-def is_plain_number(value) -> bool:
-    """Whether a control is a Python number (not a bool): arithmetic on it runs in Python, launching nothing on a device,
-    where a tensor control (per sample, learnable) needs its operations on the data's device.
-
-    Examples:
-        >>> is_plain_number(0.5), is_plain_number(True), is_plain_number(torch.tensor(0.5))
-        (True, False, False)
-    """
-    return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
 
 def is_constant(value, constant) -> bool:

@@ -39,7 +39,8 @@ import torch
 from torch import nn
 
 from .config import config_value
-from .core import check_choice, check_image, check_range, full_precision, is_constant, is_tracing, warn_if_eight_bit, with_alpha
+from .core import (check_choice, check_image, check_range, full_precision, is_constant, is_plain_number, is_tracing,
+                   warn_if_eight_bit, with_alpha)
 from ..runtime import DeferredCheck, in_strips
 
 __all__ = ["Control", "Stage", "plain", "controls_signature", "in_state_check"]
@@ -472,7 +473,7 @@ def _check_number(value, name: str, allowed) -> None:
 def _as_grey(value, default):
     """``value``, or the grey ``(v, v, v)`` where ``value`` is a plain number ``v`` and ``default`` a colour (three numbers)."""
     colour = isinstance(default, (tuple, list)) and len(default) == 3 and all(isinstance(v, numbers.Real) for v in default)
-    is_number = isinstance(value, numbers.Real) and not isinstance(value, bool)
+    is_number = is_plain_number(value)
     return (value,) * 3 if colour and is_number else value
 
 

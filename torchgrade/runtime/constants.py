@@ -20,12 +20,13 @@ Examples:
 from __future__ import annotations
 
 import functools
+import numbers
 
 import torch
 
 from .recording import is_tracing
 
-__all__ = ["constant", "where", "affine", "values_of", "device_cached", "folded", "CACHED_CONSTANTS"]
+__all__ = ["constant", "where", "is_plain_number", "affine", "values_of", "device_cached", "folded", "CACHED_CONSTANTS"]
 
 CACHED_CONSTANTS = 4096
 """Constants kept per kind (least recently used go first): a look holds tens; random controls are tensors, not cached."""
@@ -57,8 +58,19 @@ def where(condition: torch.Tensor, a, b) -> torch.Tensor:
     like = a if isinstance(a, torch.Tensor) else b
     if is_tracing() or not isinstance(like, torch.Tensor) or not like.is_floating_point():
         return torch.where(condition, a, b)
-    a, b = (constant(float(v), like) if isinstance(v, (int, float)) and not isinstance(v, bool) else v for v in (a, b))
+    a, b = (constant(float(v), like) if is_plain_number(v) else v for v in (a, b))
     return torch.where(condition, a, b)
+
+
+def is_plain_number(value) -> bool:
+    """Whether a control is a Python number (not a bool): arithmetic on it runs in Python, launching nothing on a device,
+    where a tensor control (per sample, learnable) needs its operations on the data's device.
+
+    Examples:
+        >>> is_plain_number(0.5), is_plain_number(True), is_plain_number(torch.tensor(0.5))
+        (True, False, False)
+    """
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
 
 def affine(x: torch.Tensor, scale: float, offset: float) -> torch.Tensor:

@@ -67,8 +67,14 @@ def cone_expand(v: torch.Tensor) -> torch.Tensor:
         >>> [round(v, 4) for v in cone_expand(cone_compress(torch.tensor([0.5, 100.0]))).tolist()]
         [0.5, 100.0]
     """
-    r = v.abs().clamp(max=RA_LIMIT)
-    return _signed_as(safe_pow(r / affine(r, -1.0 / NL_OFFSET, 1.0 / NL_OFFSET), 1.0 / 0.42), v)  # NL r / (1 - r)
+    return _signed_as(_expanded(v.abs().clamp(max=RA_LIMIT)), v)
+
+
+def _expanded(r: torch.Tensor, divisor: float = 1.0) -> torch.Tensor:
+    """The magnitude of :func:`cone_expand` at a response ``r`` in ``[0, 0.99]``, over ``divisor``:
+    ``(NL r / (1 - r))^(1/0.42) / divisor``, with ``divisor^0.42`` inside the power (one product and sum, a division)."""
+    scale = divisor**0.42 / NL_OFFSET
+    return safe_pow(r / affine(r, -scale, scale), 1.0 / 0.42)
 
 
 def _signed_as(magnitude: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
@@ -225,10 +231,7 @@ def a_to_y(a: torch.Tensor, p: JMhParams) -> torch.Tensor:
         >>> round(float(a_to_y(torch.tensor(1.0, dtype=torch.float64), p)), 6)  # scene white
         100.0
     """
-    # cone_expand of a response >= 0, with the division by F_L_n inside its power: ((r / (1 - r)) NL / F_L_n^0.42)^(1/0.42)
-    r = (p.a_w_j * a).clamp(0.0, RA_LIMIT)
-    scale = p.f_l_n**0.42 / NL_OFFSET
-    return safe_pow(r / affine(r, -scale, scale), 1.0 / 0.42)
+    return _expanded((p.a_w_j * a).clamp(0.0, RA_LIMIT), p.f_l_n)  # cone_expand of a response >= 0, over F_L_n
 
 
 def y_to_j(y: torch.Tensor, p: JMhParams) -> torch.Tensor:
