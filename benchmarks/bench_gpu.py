@@ -14,6 +14,8 @@ Sections, each skipped once ``--budget`` seconds have passed (compiles are the s
 * ``augment``: ``RandomPostFX`` against kornia's ``ColorJiggle`` on 256x3x224x224, eager, and its forward+backward;
 * ``training``: the look's forward and backward on 16x3x512x512, eager;
 * ``stages``: grade, ACES and ACES 2.0 tone maps, scattering bloom, exposure at 4K, eager (compiled for three);
+* ``kernels``: the device time of the kernels of a 4K frame of the look and of five stages, eager, and the longest
+  kernels of each (what eager time they leave is the GPU waiting for launches);
 * ``cpu``: the look and the LUT on the host's cores, all of them against 2, and the LUT against OpenColorIO;
 * ``augment_compiled``: both augmentations compiled (kornia's takes over a minute to compile).
 
@@ -233,6 +235,38 @@ def profile_counts(call) -> dict:
     }
 
 
+def kernel_times(call, top: int = 6) -> tuple:
+    """The device time of one call's kernels, in ms, their count, and the ``top`` kernels by device time: (name, count, ms)."""
+    from torch.profiler import ProfilerActivity, profile
+
+    call()
+    torch.cuda.synchronize()
+    with profile(activities=[ProfilerActivity.CUDA]) as recorded:
+        call()
+        torch.cuda.synchronize()
+    kernels = [e for e in recorded.key_averages() if e.device_type == torch.autograd.DeviceType.CUDA]
+    ms = {e.key: e.self_device_time_total / 1000 for e in kernels}
+    ranked = sorted(kernels, key=lambda e: -ms[e.key])[:top]
+    return sum(ms.values()), sum(e.count for e in kernels), [(e.key, e.count, ms[e.key]) for e in ranked]
+
+
+KERNEL_CASES = ("tonemap aces2", "exposure", "grade", "tonemap aces", "bloom scattering")
+
+
+def section_kernels(device):
+    """Where a 4K frame's device time goes: each case's kernel time (the rest of its eager time the GPU waits for
+    launches) and its longest kernels."""
+    image = scene("4K", device)
+    cases = {name: STAGES[name]().to(device) for name in KERNEL_CASES}
+    cases["cinematic"] = cinematic().to(device)
+    with torch.no_grad():
+        for name, module in cases.items():
+            total, count, ranked = kernel_times(lambda: module(image))
+            record("kernels", f"{name} 4K eager: all kernels", kernels=count, kernel_ms=total)
+            for kernel, times, ms in ranked:
+                record("kernels", f"{name} 4K eager: {kernel[:90]}", count=times, ms=ms)
+
+
 def section_profile(device):
     look = cinematic().to(device)
     image = scene("4K", device)
@@ -283,8 +317,8 @@ def section_cpu(device):
 
 
 SECTIONS = {"floor": section_floor, "look": section_look, "profile": section_profile, "lut": section_lut,
-            "augment": section_augment, "training": section_training, "stages": section_stages, "cpu": section_cpu,
-            "augment_compiled": section_augment_compiled}
+            "augment": section_augment, "training": section_training, "stages": section_stages, "kernels": section_kernels,
+            "cpu": section_cpu, "augment_compiled": section_augment_compiled}
 NEEDS_CUDA = set(SECTIONS) - {"cpu"}
 
 

@@ -178,9 +178,12 @@ def test_every_public_module_has_a_case():
 
 class DeviceCheck(TorchDispatchMode):
     """Raise at the first operation whose tensors lie on two devices (CUDA's rule: a 0-d CPU tensor is a
-    scalar and may join any device) and, with ``dtype``, at the first floating tensor of another dtype."""
+    scalar and may join any device, in an operation of two tensors or in ``torch.where``, which copies it to the
+    device; three-operand kernels such as ``addcmul`` refuse it) and, with ``dtype``, at the first floating tensor of
+    another dtype."""
 
     TRANSFERS = (torch.ops.aten._to_copy.default, torch.ops.aten.copy_.default)
+    COPIES_SCALARS = (torch.ops.aten.where.self,)
 
     def __init__(self, dtype: torch.dtype | None = None):
         super().__init__()
@@ -190,7 +193,8 @@ class DeviceCheck(TorchDispatchMode):
         kwargs = kwargs or {}
         out = func(*args, **kwargs)
         tensors = [t for t in tree_leaves((args, kwargs)) if isinstance(t, torch.Tensor)]
-        devices = {str(t.device) for t in tensors if t.dim() > 0 or t.device.type != "cpu"}
+        scalars_join = len(tensors) <= 2 or func in self.COPIES_SCALARS
+        devices = {str(t.device) for t in tensors if t.dim() > 0 or t.device.type != "cpu" or not scalars_join}
         if len(devices) > 1 and func not in self.TRANSFERS:
             raise AssertionError(f"{func} mixes devices {sorted(devices)}")
         if self.dtype is not None:

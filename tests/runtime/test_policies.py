@@ -10,7 +10,7 @@ import torchgrade as tg
 from torchgrade.runtime import policy
 
 USERS = ["torchgrade.runtime.strips", "torchgrade.bloom.pyramid", "torchgrade.bloom.layer", "torchgrade.augment.layer",
-         "torchgrade.lut.apply", "torchgrade.base.core", "torchgrade.color.transfer"]
+         "torchgrade.lut.apply", "torchgrade.base.core", "torchgrade.color.transfer", "torchgrade.exposure.metering"]
 """Every module that asks ``policy_for``."""
 
 LOOKS = {
@@ -43,6 +43,22 @@ def test_only_the_gpu_policy_blurs_small_planes_with_one_kernel_and_drops_nan_wi
     assert policy.WHOLE_FRAMES.one_kernel_blur_pixels == policy.ONE_KERNEL_BLUR_PIXELS and policy.WHOLE_FRAMES.nan_dropping_max
     cpu = policy.policy_for(torch.device("cpu"))
     assert cpu.one_kernel_blur_pixels is None and not cpu.nan_dropping_max
+
+
+def test_only_a_gpu_counts_a_histogram_per_column_compiled_or_not(monkeypatch):
+    assert policy.WHOLE_FRAMES.histogram_per_column and not policy.policy_for(torch.device("cpu")).histogram_per_column
+    monkeypatch.setattr(torch.compiler, "is_compiling", lambda: True)
+    assert policy.policy_for(torch.device("meta")).histogram_per_column
+    assert not policy.policy_for(torch.device("cpu")).histogram_per_column
+
+
+@pytest.mark.parametrize("mask", ["average", "spot"])
+def test_a_histogram_counted_per_column_meters_each_image_of_a_batch_as_one_row_does(mask, desk, gpu_policy, request):
+    frames = torch.cat([desk, desk.flip(-1) * 4, desk.flip(-2) * 0.01])
+    metered = tg.exposure.meter_luminance(frames, "histogram", mask=mask)
+    request.getfixturevalue("monkeypatch").undo()
+    alone = torch.cat([tg.exposure.meter_luminance(frame[None], "histogram", mask=mask) for frame in frames])
+    torch.testing.assert_close(metered, alone, rtol=1e-5, atol=0)
 
 
 @pytest.mark.parametrize("name", list(LOOKS))

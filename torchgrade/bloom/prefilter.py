@@ -54,7 +54,7 @@ def threshold_fraction(image: torch.Tensor, threshold: Param, knee: Param) -> to
         0.75
     """
     brightness = image.amax(dim=CHANNEL, keepdim=True)
-    linear, offset, width, scale = folded(soft_knee, threshold, knee, like=brightness).unbind(-1)
+    linear, offset, width, scale = folded(soft_knee, threshold, knee, like=brightness, host=True).unbind(-1)
     soft = torch.minimum((brightness + offset).clamp_min(0.0), width)
     soft = soft * soft * scale
     return torch.maximum(soft, brightness - linear) / brightness.clamp_min(SOFT_KNEE_EPSILON)

@@ -14,7 +14,7 @@ import numbers
 import torch
 
 from ..base.core import untracked
-from ..runtime.constants import affine, constant, where
+from ..runtime.constants import affine, scalar, where
 from ..runtime.policy import policy_for
 
 __all__ = [
@@ -38,7 +38,7 @@ def safe_pow(x: torch.Tensor, exponent) -> torch.Tensor:
         # Unguarded, the same values in two cheap passes (or one fmax, where the device's policy says) and one power
         # instead of four passes.
         if policy_for(x.device).nan_dropping_max:
-            return torch.fmax(x, constant(0.0, x)).pow_(exponent)
+            return torch.fmax(x, scalar(0.0, x)).pow_(exponent)
         return x.clamp_min(0.0).nan_to_num_(nan=0.0, posinf=math.inf).pow_(exponent)
     positive = x > 0
     return where(positive, where(positive, x, 1.0) ** exponent, 0.0)

@@ -18,7 +18,7 @@ import torch.nn.functional as F
 
 from ..base.core import check_choice, check_image, sanitize
 from ..color import luminance
-from ..runtime import constant, device_cached
+from ..runtime import constant, device_cached, policy_for
 
 __all__ = ["METERING_MODES", "METERING_MASKS", "METERING_SIZE", "LOG_DELTA", "HISTOGRAM_BINS", "HISTOGRAM_RANGE",
            "SPOT_RADIUS", "area_resize", "halving_average", "meter_luminance", "metering_weights", "histogram_band_average"]
@@ -137,6 +137,24 @@ def _per_row(value):
     return value.reshape(-1, 1) if isinstance(value, torch.Tensor) else value
 
 
+@device_cached
+def _column_offsets(width: int, device: torch.device) -> torch.Tensor:
+    """``(1, 1, width)``: the first bin of each column's row of a per-column histogram."""
+    return (torch.arange(width, device=device) * HISTOGRAM_BINS).reshape(1, 1, width)
+
+
+def _counted(bins: torch.Tensor, width: int, *amounts: torch.Tensor) -> tuple:
+    """``(B, HISTOGRAM_BINS)`` for each of ``amounts`` (``(B, N)``): its sum in each of ``bins`` (``(B, N)``, of images
+    ``width`` wide), counted per image column on a GPU (:attr:`~torchgrade.runtime.ExecutionPolicy.histogram_per_column`)."""
+    batch, columns = bins.shape[0], 1
+    if policy_for(bins.device).histogram_per_column:
+        columns = width
+        bins = (bins.reshape(batch, -1, width) + _column_offsets(width, bins.device)).reshape(batch, -1)
+    empty = torch.zeros(batch, columns * HISTOGRAM_BINS, dtype=amounts[0].dtype, device=amounts[0].device)
+    counted = (empty.scatter_add(1, bins, amount) for amount in amounts)
+    return tuple(c if columns == 1 else c.reshape(batch, columns, HISTOGRAM_BINS).sum(dim=1) for c in counted)
+
+
 def histogram_band_average(stops: torch.Tensor, weights: Optional[torch.Tensor], low, high, low_percent, high_percent) -> torch.Tensor:
     """Average of the pixels of ``stops`` (``(B, 1, H, W)``) whose rank lies in ``[low_percent, high_percent]`` %, ``(B,)``.
 
@@ -160,9 +178,7 @@ def histogram_band_average(stops: torch.Tensor, weights: Optional[torch.Tensor],
     # values - low >= 0, so the cast's truncation is the floor
     bins = ((values - low) * (HISTOGRAM_BINS / (high - low))).clamp_max_(HISTOGRAM_BINS - 1).long()
     weight = constant(1.0, values).expand_as(values) if weights is None else weights.reshape(1, -1).expand(batch, -1)
-    empty = torch.zeros(batch, HISTOGRAM_BINS, dtype=values.dtype, device=values.device)
-    weight_in_bin = empty.scatter_add(1, bins, weight)
-    values_in_bin = empty.scatter_add(1, bins, values if weights is None else values * weight)
+    weight_in_bin, values_in_bin = _counted(bins, stops.shape[-1], weight, values if weights is None else values * weight)
     share = weight_in_bin / weight_in_bin.sum(dim=1, keepdim=True)
     end = share.cumsum(dim=1)
     inside = (end.clamp(max=high_percent / 100) - (end - share).clamp(min=low_percent / 100)).clamp_min(0)

@@ -177,7 +177,7 @@ def log_contrast(image: torch.Tensor, amount: Param, encoding: str = "logc") -> 
         >>> [round(v, 3) for v in log_contrast(torch.tensor([0.18, 1.0]), 50.0, "acescc").tolist()]
         [0.18, 2.357]
     """
-    k = folded(_contrast_slope, amount, like=image)
+    k = folded(_contrast_slope, amount, like=image, host=untracked(image))  # the power's backward would copy a CPU exponent to the device
     if encoding == "acescct":
         return acescct_to_linear((linear_to_acescct(image) - ACESCC_MIDGRAY) * k + ACESCC_MIDGRAY)
     if encoding == "acescc":

@@ -158,10 +158,11 @@ class LUT3D(Stage):
         """The table as planar rows ``(3, S³)`` in ``dtype`` (:func:`~torchgrade.lut.planar_table`), what the kernels read.
 
         Cached until the table is replaced, moved or modified in place; computed on every call while
-        gradients flow to the table, so autograd sees the conversion.
+        gradients flow to the table, so autograd sees the conversion, and while compiling, so the graph holds it
+        (the cache's key, the table's address, is no value a graph can hold).
         """
         table = self.table
-        if table.requires_grad and torch.is_grad_enabled():
+        if (table.requires_grad and torch.is_grad_enabled()) or torch.compiler.is_compiling():
             return planar_table(table.to(dtype))
         key = (table.data_ptr(), table._version, dtype)
         cached_table, cached_key, rows = self._rows_cache

@@ -26,7 +26,7 @@ import torch
 
 from .recording import is_tracing
 
-__all__ = ["constant", "where", "is_plain_number", "affine", "values_of", "device_cached", "folded", "CACHED_CONSTANTS"]
+__all__ = ["constant", "scalar", "where", "is_plain_number", "affine", "values_of", "device_cached", "folded", "CACHED_CONSTANTS"]
 
 CACHED_CONSTANTS = 4096
 """Constants kept per kind (least recently used go first): a look holds tens; random controls are tensors, not cached."""
@@ -43,6 +43,31 @@ def constant(values, like: torch.Tensor) -> torch.Tensor:
     if is_tracing():
         return torch.tensor(values, dtype=like.dtype, device=like.device)
     return _unchanged(_made(values, like.dtype, like.device), torch.tensor, values, dtype=like.dtype, device=like.device)
+
+
+def scalar(value, like: torch.Tensor) -> torch.Tensor:
+    """A plain number as the 0-d operand of an elementwise operation on ``like`` (``torch.add``, ``torch.div``,
+    ``torch.fmax``, ... where the operation takes no number): a 0-d CPU tensor in ``like``'s dtype, made once. A tuple
+    of numbers gives a CPU tensor whose elements, unbound, are such operands.
+
+    CUDA passes a 0-d CPU operand to the kernel as an argument (no copy) and keeps the kernel vectorised; a 0-d
+    tensor on the device is an operand broadcast to every element, which PyTorch's CUDA kernels read through
+    per-element offsets (their slower, unvectorised loop). Not for ``torch.where`` and the three-operand kernels
+    (``addcmul``), which take no CPU operand: :func:`constant` there. While tracing, compiling or exporting, a
+    :func:`constant` (a graph keeps its constants on its device).
+
+    Examples:
+        >>> import torch
+        >>> x = torch.tensor([1.0, 4.0])
+        >>> scalar(2.0, x).device.type, torch.div(scalar(2.0, x), x).tolist()
+        ('cpu', [2.0, 0.5])
+    """
+    if is_tracing():
+        return constant(value, like)
+    return _unchanged(_made(value, like.dtype, _CPU), torch.tensor, value, dtype=like.dtype)
+
+
+_CPU = torch.device("cpu")
 
 
 def where(condition: torch.Tensor, a, b) -> torch.Tensor:
@@ -75,7 +100,7 @@ def is_plain_number(value) -> bool:
 
 def affine(x: torch.Tensor, scale: float, offset: float) -> torch.Tensor:
     """``scale * x + offset`` of plain numbers as one operation, ``torch.add(offset, x, alpha=scale)`` with the offset a
-    :func:`constant` (a product and a sum are two passes over a frame, each a launch on a GPU). The offset takes
+    :func:`scalar` (a product and a sum are two passes over a frame, each a launch on a GPU). The offset takes
     ``x``'s dtype: for the working dtypes, float32 and float64.
 
     Examples:
@@ -83,7 +108,7 @@ def affine(x: torch.Tensor, scale: float, offset: float) -> torch.Tensor:
         >>> affine(torch.tensor([1.0, 2.0]), 3.0, 0.5).tolist()
         [3.5, 6.5]
     """
-    return torch.add(constant(offset, x), x, alpha=scale)
+    return torch.add(scalar(offset, x), x, alpha=scale)
 
 
 @functools.lru_cache(maxsize=CACHED_CONSTANTS)
@@ -141,12 +166,14 @@ def device_cached(make):
     return call
 
 
-def folded(function, *arguments, like: torch.Tensor):
+def folded(function, *arguments, like: torch.Tensor, host: bool = False):
     """``function(*arguments, like=like)``, a small tensor of the controls (a colour matrix, gains), made once.
 
     With plain controls (numbers, strings, nested sequences, ``None``) the result is computed once in float64 on
     the CPU and kept, in ``like``'s dtype, on its device (:func:`constant`): a frame then launches nothing for it.
-    A tensor among the arguments (a per-sample or learnable control), or tracing, computes it on ``like`` as called.
+    With ``host``, kept on the CPU instead (:func:`scalar`), for a caller that takes its values as 0-d operands of
+    two-operand operations. A tensor among the arguments (a per-sample or learnable control), or tracing, computes it
+    on ``like`` as called.
 
     Examples:
         >>> import torch
@@ -163,7 +190,7 @@ def folded(function, *arguments, like: torch.Tensor):
     except TypeError:
         return function(*arguments, like=like)
     values = _float64_values(function, key)
-    return None if values is None else constant(values, like)
+    return None if values is None else (scalar if host else constant)(values, like)
 
 
 @functools.lru_cache(maxsize=CACHED_CONSTANTS)

@@ -23,7 +23,7 @@ Examples:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Optional
 
 import torch
@@ -72,6 +72,11 @@ class ExecutionPolicy:
             convolution (taps² products a pixel, one launch) instead of two 1-D ones (one launch each); ``None``: never.
         nan_dropping_max: ``max(x, 0)`` with NaN to 0 as one ``torch.fmax`` (one launch) instead of a clamp and a NaN
             pass; the CPU does not vectorise ``fmax``, which runs several times slower there than the two passes.
+        histogram_per_column: a histogram counted into one row of bins per image column, the rows summed after. A GPU
+            counts with atomic additions, and the 8.3 million pixels of a 4K frame counted into one row of 128 bins
+            wait on each other (``AutoExposure(metering="histogram")`` took 13.2 ms a 4K frame on an H200,
+            ``benchmarks/results/gpu.md``); neighbouring pixels then add to different addresses. The CPU counts a
+            row in order, with no atomics, and would only pay the larger table.
     """
 
     strip_pixels: Optional[int]
@@ -81,6 +86,7 @@ class ExecutionPolicy:
     filters_as_kernels: bool
     one_kernel_blur_pixels: Optional[int] = None
     nan_dropping_max: bool = False
+    histogram_per_column: bool = False
 
 
 ONE_KERNEL_BLUR_PIXELS = 1 << 17
@@ -89,11 +95,14 @@ products a channel, microseconds on a GPU, against a launch's 24 µs (``benchmar
 bloom pyramid (from 270x480 at 4K; 8 of its 9 levels) cost their launches, not their arithmetic."""
 
 WHOLE_FRAMES = ExecutionPolicy(strip_pixels=None, workers=1, lookup_chunk=None, reads_values=False, filters_as_kernels=True,
-                               one_kernel_blur_pixels=ONE_KERNEL_BLUR_PIXELS, nan_dropping_max=True)
+                               one_kernel_blur_pixels=ONE_KERNEL_BLUR_PIXELS, nan_dropping_max=True, histogram_per_column=True)
 
 GRAPH = ExecutionPolicy(strip_pixels=None, workers=1, lookup_chunk=None, reads_values=False, filters_as_kernels=False)
 """While tracing, compiling or exporting: kornia's blur, which picks its own form for the compiler (convolution on the
 CPU, slices that Inductor fuses on CUDA) and exports as before."""
+
+COMPILED_OFF_CPU = replace(GRAPH, histogram_per_column=True)
+"""While compiling for a GPU: a graph too, whose scatters Inductor makes atomic additions."""
 
 
 def policy_for(device: torch.device) -> ExecutionPolicy:
@@ -105,7 +114,7 @@ def policy_for(device: torch.device) -> ExecutionPolicy:
         True
     """
     if is_tracing():
-        return GRAPH
+        return COMPILED_OFF_CPU if torch.compiler.is_compiling() and device.type != "cpu" else GRAPH
     if device.type != "cpu":
         return WHOLE_FRAMES
     threads = torch.get_num_threads()

@@ -21,7 +21,7 @@ from ..color import (
     primaries_to_rec709_matrix,
     safe_sqrt,
 )
-from ..runtime import affine, constant, values_of, where
+from ..runtime import affine, constant, scalar, values_of, where
 
 __all__ = [
     "RRT_SAT_FACTOR",
@@ -121,7 +121,7 @@ def _glow(yc: torch.Tensor, gain: torch.Tensor, mid: float) -> torch.Tensor:
     """ACES ``glow_fwd``: full gain below 2/3·mid, none above 2·mid, ``gain (mid / yc - 1/2)`` between."""
     if untracked(yc, gain) or torch.onnx.is_in_onnx_export():
         # yc clamped to the ramp gives gain (to float rounding) below it and exactly 0 above it, without selects.
-        return torch.div(constant(mid, yc), yc.clamp(2.0 / 3.0 * mid, 2.0 * mid)).sub_(0.5).mul_(gain)
+        return torch.div(scalar(mid, yc), yc.clamp(2.0 / 3.0 * mid, 2.0 * mid)).sub_(0.5).mul_(gain)
     between = gain * (mid / yc.clamp_min(2.0 / 3.0 * mid) - 0.5)
     return where(yc <= 2.0 / 3.0 * mid, gain, where(yc >= 2.0 * mid, 0.0, between))
 

@@ -164,10 +164,11 @@ class GamutParams:
         self.limit_j_max, self.mid_j, self.focus_dist = limit_j_max, mid_j, focus_dist
         self.lower_inv, self.model_gamma_inv = lower_inv, model_gamma_inv
         self.hues, self.cusps, self.reach = hues, cusps, reach
-        # the tables as tuples of floats: device constants of a compiled graph, not inputs copied at every call
+        # the tables as tuples of floats: device constants of a compiled graph, not inputs copied at every call; the
+        # segment tables by column, so that a gather gives each column as a plane (:func:`_gathered_columns`)
         self.hue_values = values_of(hues)
-        self.cusp_segments = _segment_rows(hues, cusps)
-        self.reach_segments = values_of(torch.stack((reach, reach.roll(-1) - reach), dim=-1))  # value, step to the next degree
+        self.cusp_segments = _segment_columns(hues, cusps)
+        self.reach_segments = values_of(torch.stack((reach, reach.roll(-1) - reach)))  # value, step to the next degree
 
     def cusp(self, h: torch.Tensor):
         """``(J_cusp, M_cusp, 1/gamma_top)`` at hue ``h``: linear in the non-uniform hue table.
@@ -180,9 +181,9 @@ class GamutParams:
             [86.8, 57.3, 1.1]
         """
         hi = count_below(constant(self.hue_values, h), h.detach()).clamp(1, len(self.hue_values) - 1)
-        segment = constant(self.cusp_segments, h)[hi]
-        t = ((h - segment[..., 0]) * segment[..., 1]).unsqueeze(-1)
-        return torch.addcmul(segment[..., 2:5], segment[..., 5:], t).unbind(-1)
+        segment = _gathered_columns(constant(self.cusp_segments, h), hi)
+        t = (h - segment[0]) * segment[1]
+        return torch.addcmul(segment[2:5], segment[5:], t).unbind(0)
 
     def reach_m(self, h: torch.Tensor) -> torch.Tensor:
         """AP1 reach M at ``J_max``, linear between whole degrees.
@@ -193,21 +194,36 @@ class GamutParams:
             166.8
         """
         base = torch.floor(h.detach())
-        segment = constant(self.reach_segments, h)[base.long().remainder(360)]
-        return torch.addcmul(segment[..., 0], segment[..., 1], h - base)
+        segment = _gathered_columns(constant(self.reach_segments, h), base.long().remainder(360))
+        return torch.addcmul(segment[0], segment[1], h - base)
 
 
-def _segment_rows(knots: torch.Tensor, values: torch.Tensor) -> tuple:
-    """A piecewise-linear table as one row per interval, gathered at once: row ``k`` (from 1) holds interval ``k - 1``'s
-    ``(knot, 1 / width, values, steps to the next values)``; row 0 repeats row 1. As tuples (:func:`values_of`).
+def _segment_columns(knots: torch.Tensor, values: torch.Tensor) -> tuple:
+    """A piecewise-linear table as one column per interval, gathered at once: column ``k`` (from 1) holds interval
+    ``k - 1``'s ``(knot, 1 / width, values, steps to the next values)``; column 0 repeats column 1. As tuples
+    (:func:`values_of`).
 
     Examples:
-        >>> _segment_rows(torch.tensor([0.0, 2.0]), torch.tensor([[1.0], [5.0]]))
-        ((0.0, 0.5, 1.0, 4.0), (0.0, 0.5, 1.0, 4.0))
+        >>> _segment_columns(torch.tensor([0.0, 2.0]), torch.tensor([[1.0], [5.0]]))
+        ((0.0, 0.0), (0.5, 0.5), (1.0, 1.0), (4.0, 4.0))
     """
     rows = torch.cat(((knots[:-1]).unsqueeze(-1), (1.0 / (knots[1:] - knots[:-1])).unsqueeze(-1), values[:-1],
                       values[1:] - values[:-1]), dim=-1)
-    return values_of(torch.cat((rows[:1], rows)))
+    return values_of(torch.cat((rows[:1], rows)).T)
+
+
+def _gathered_columns(table: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
+    """``(C, *index.shape)``: the columns ``index`` of a ``(C, K)`` table, each row of the table a plane.
+
+    By column, not ``table.T[index]``: CUDA gathers a row of 16 bytes or more (the cusp table's 8 values) with a
+    block of threads per pixel, 4.99 ms of a 4K frame of ACES 2.0's 14.19 ms on an H200 (``benchmarks/results/gpu.md``),
+    and the planes it would give are strided.
+
+    Examples:
+        >>> _gathered_columns(torch.tensor([[0.0, 10.0, 20.0], [1.0, 2.0, 3.0]]), torch.tensor([[2, 0]])).tolist()
+        [[[20.0, 0.0]], [[3.0, 1.0]]]
+    """
+    return table.index_select(1, index.reshape(-1)).view(-1, *index.shape)
 
 
 def gamut_compress(j, m, h, reach_m, p: GamutParams):
