@@ -14,8 +14,11 @@ Sections, each skipped once ``--budget`` seconds have passed (compiles are the s
 * ``augment``: ``RandomPostFX`` against kornia's ``ColorJiggle`` on 256x3x224x224, eager, and its forward+backward;
 * ``training``: the look's forward and backward on 16x3x512x512, eager;
 * ``stages``: grade, ACES and ACES 2.0 tone maps, scattering bloom, exposure at 4K, eager (compiled for three);
-* ``kernels``: the device time of the kernels of a 4K frame of the look and of five stages, eager, and the longest
-  kernels of each (what eager time they leave is the GPU waiting for launches);
+* ``kernels``: the device time of the kernels of a 4K frame of the look, five stages and the LUT, eager, and of
+  ``RandomPostFX`` eager and compiled, and the longest kernels of each (what eager time they leave is the GPU waiting
+  for launches); ``profile`` records the compiled look's too;
+* ``forms``: a 3x3 colour matrix on a 4K frame three ways (the library's broadcast multiply-adds, a channel at a time
+  with numbers, a 1x1 convolution), for the choice of the eager form;
 * ``cpu``: the look and the LUT on the host's cores, all of them against 2, and the LUT against OpenColorIO;
 * ``augment_compiled``: both augmentations compiled (kornia's takes over a minute to compile).
 
@@ -253,18 +256,69 @@ def kernel_times(call, top: int = 6) -> tuple:
 KERNEL_CASES = ("tonemap aces2", "exposure", "grade", "tonemap aces", "bloom scattering")
 
 
+def record_kernels(case: str, call) -> None:
+    """One row of ``call``'s kernel time and count, and one for each of its longest kernels."""
+    total, count, ranked = kernel_times(call)
+    record("kernels", f"{case}: all kernels", kernels=count, kernel_ms=total)
+    for kernel, times, ms in ranked:
+        record("kernels", f"{case}: {kernel[:90]}", count=times, ms=ms)
+
+
 def section_kernels(device):
-    """Where a 4K frame's device time goes: each case's kernel time (the rest of its eager time the GPU waits for
-    launches) and its longest kernels."""
+    """Where the device time goes: each case's kernel time (the rest of its eager time the GPU waits for launches)
+    and its longest kernels; 4K frames of the look, five stages and its 33³ LUT, and ``RandomPostFX`` eager and
+    compiled on its batch."""
     image = scene("4K", device)
     cases = {name: STAGES[name]().to(device) for name in KERNEL_CASES}
     cases["cinematic"] = cinematic().to(device)
+    cases["LUT 33^3 tetrahedral"] = cinematic().to_lut(33).lut.to(device)
+    ours, _ = augmentations()
+    ours = ours.to(device)
+    batch = torch.rand(256, 3, 224, 224, device=device)
     with torch.no_grad():
         for name, module in cases.items():
-            total, count, ranked = kernel_times(lambda: module(image))
-            record("kernels", f"{name} 4K eager: all kernels", kernels=count, kernel_ms=total)
-            for kernel, times, ms in ranked:
-                record("kernels", f"{name} 4K eager: {kernel[:90]}", count=times, ms=ms)
+            record_kernels(f"{name} 4K eager", lambda: module(image))
+        record_kernels("RandomPostFX 256x3x224x224 eager", lambda: ours(batch))
+        fast, _ = compiled(ours, batch)
+        record_kernels("RandomPostFX 256x3x224x224 compiled", lambda: fast(batch))
+
+
+def _matrix_by_channel(values, planes) -> torch.Tensor:
+    """A 3x3 matrix of numbers on three planes one output channel at a time: a product and two sums by numbers each,
+    every operand a whole plane (nine launches, all vectorised)."""
+    out = torch.empty(planes[0].shape[:-3] + (3,) + planes[0].shape[-2:], device=planes[0].device)
+    for row, channel in zip(values, out.split(1, dim=-3)):
+        torch.mul(planes[0], row[0], out=channel).add_(planes[1], alpha=row[1]).add_(planes[2], alpha=row[2])
+    return out
+
+
+def _matrix_as_convolution(matrix: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
+    """A 3x3 matrix as one 1x1 convolution, cuDNN's TF32 off (it would round the products)."""
+    with torch.backends.cudnn.flags(enabled=True, allow_tf32=False):
+        return torch.nn.functional.conv2d(image, matrix.reshape(3, 3, 1, 1))
+
+
+def section_forms(device):
+    """Ways to apply a 3x3 colour matrix to a 4K frame, side by side: the library's (``matrix_on_planes``: a product
+    and two multiply-adds whose coefficient columns broadcast, three launches in CUDA's unvectorised loop), one output
+    channel at a time with numbers (nine vectorised launches), and one 1x1 convolution."""
+    from torchgrade.base.core import matrix_on_planes
+    from torchgrade.color.spaces import MATRIX_VALUES
+
+    values = MATRIX_VALUES["srgb_to_ap1"]
+    matrix = torch.tensor(values, device=device)
+    image = scene("4K", device)
+    planes = image.split(1, dim=-3)
+    floor = floor_ms(image)
+    with torch.no_grad():
+        expected = matrix_on_planes(matrix, planes)
+        forms = {"broadcast columns (the library's)": lambda: matrix_on_planes(matrix, planes),
+                 "a channel at a time, numbers": lambda: _matrix_by_channel(values, planes),
+                 "1x1 convolution, no TF32": lambda: _matrix_as_convolution(matrix, image)}
+        times = cuda_ms(forms)
+        for name, call in forms.items():
+            record("forms", f"3x3 matrix 4K: {name}", ms=times[name], x_floor=times[name] / floor,
+                   max_abs=(call() - expected).abs().max().item())
 
 
 def section_profile(device):
@@ -274,6 +328,7 @@ def section_profile(device):
         record("profile", "cinematic 4K eager, no_grad", **profile_counts(lambda: look(image)))
         fast, _ = compiled(look, image)
         record("profile", "cinematic 4K compiled (CUDA graphs)", **profile_counts(lambda: fast(image)))
+        record_kernels("cinematic 4K compiled", lambda: fast(image))
     batch = torch.rand(16, 3, 512, 512, device=device) * 4
 
     def step():
@@ -318,7 +373,7 @@ def section_cpu(device):
 
 SECTIONS = {"floor": section_floor, "look": section_look, "profile": section_profile, "lut": section_lut,
             "augment": section_augment, "training": section_training, "stages": section_stages, "kernels": section_kernels,
-            "cpu": section_cpu, "augment_compiled": section_augment_compiled}
+            "forms": section_forms, "cpu": section_cpu, "augment_compiled": section_augment_compiled}
 NEEDS_CUDA = set(SECTIONS) - {"cpu"}
 
 

@@ -7,9 +7,10 @@
 # OpenColorIO or colour-science: they are installed from the wheels in WHEELS (default .gpu/wheels: kornia,
 # kornia-rs, openexr, opencolorio, colour-science, pypng for cp312 manylinux), and the tests read the sample EXRs
 # from EXRS (default .gpu/exr, linked as ../shared/data/exr when that is missing). Logs and gpu.md / gpu.json go
-# to OUT, and the meta-device counts of benchmarks/gpu_proxy.py. At most 9.5 minutes (tests 5, onnxruntime's CUDA provider 1, benchmark 3.5; the benchmark skips the
-# sections left after its budget, the slowest last). On an H200 on 2026-11-26 the module tests needed more than
-# 150 s with 12 processes. onnxruntime's CUDA provider is checked where the machine's onnxruntime has it
+# to OUT (device.txt, two test logs, bench_gpu.log, gpu.md/json, gpu_proxy.md/json: 8 files), with the meta-device counts
+# of benchmarks/gpu_proxy.py. At most 9.5 minutes (tests 5, onnxruntime's CUDA provider 1, benchmark 3.5; the benchmark skips the
+# sections left after its budget, the slowest last). On an H200 (run D of benchmarks/results/gpu.md) the whole check
+# took 7 minutes: the device tests 102 s with 8 processes, the module tests 171 s with 12. onnxruntime's CUDA provider is checked where the machine's onnxruntime has it
 # (onnxruntime-gpu is a 243 MiB wheel for cp312: it has to be installed there, it is too large to take along); the
 # tests that compare with OpenVINO are left to CI (its cp312 wheel, 59 MB, is too large to take along too).
 set -u
@@ -35,9 +36,9 @@ TG_TEST_DEVICE=cuda timeout -s INT 180 $PYTEST -n 12 tests/tonemap/test_aces2.py
   tests/lut/test_lut.py tests/look/test_pipeline.py tests/tonemap/test_tonemap.py tests/runtime/test_strips.py -k "not openvino" \
   2>&1 | tee "$OUT/cuda_module_tests.log" | tail -5
 if python3 -c "import onnxruntime, sys; sys.exit('CUDAExecutionProvider' not in onnxruntime.get_available_providers())" 2>/dev/null; then
-  TG_TEST_DEVICE=cuda timeout -s INT 60 $PYTEST tests/project/test_bench_onnx.py 2>&1 | tee "$OUT/onnxruntime_cuda.log" | tail -5
+  TG_TEST_DEVICE=cuda timeout -s INT 60 $PYTEST tests/project/test_bench_onnx.py 2>&1 | tail -5 | tee -a "$OUT/device.txt"
 else
-  echo "onnxruntime's CUDA provider: not on this machine (tg.onnx.session(path, device='cuda') not run)" | tee "$OUT/onnxruntime_cuda.log"
+  echo "onnxruntime's CUDA provider: not on this machine (tg.onnx.session(path, device='cuda') not run)" | tee -a "$OUT/device.txt"
 fi
 timeout -s INT 200 python3 benchmarks/bench_gpu.py --out "$OUT" --budget 130 2>&1 | tee "$OUT/bench_gpu.log" | tail -40
 # the counts and the time they predict, beside the times measured above (gpu_proxy.md: CPU only, about 10 s)

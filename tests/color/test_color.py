@@ -92,6 +92,7 @@ def test_hsv_matches_colorsys():
     rgb = random_rgb(high=3.0)
     rgb[:10] = rgb[:10, :1]  # grey pixels: undefined hue, zero saturation
     rgb[10] = 0.0
+    rgb[11:14] = [[2.0, 2.0, 0.5], [0.3, 1.0, 1.0], [1.0, 0.2, 1.0]]  # two channels at the maximum: the first one's hue
     hsv = rows(color.rgb_to_hsv(pixels(rgb)))
     expected = np.array([colorsys.rgb_to_hsv(*p) for p in rgb])
     np.testing.assert_allclose(hsv, expected, atol=1e-12)

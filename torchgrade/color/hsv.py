@@ -8,7 +8,7 @@ from ..runtime import affine, constant, where
 from .spaces import CHANNEL
 
 __all__ = [
-    "rgb_to_hsv", "hsv_to_rgb",
+    "rgb_to_hsv", "hsv_to_rgb", "hsv_planes", "rgb_from_hsv_planes",
 ]
 
 
@@ -25,19 +25,31 @@ def rgb_to_hsv(image: torch.Tensor) -> torch.Tensor:
         >>> [round(v, 4) for v in rgb_to_hsv(orange).flatten().tolist()]
         [0.0833, 1.0, 1.0]
     """
-    r, g, b = image.unbind(CHANNEL)
-    value, argmax = image.max(dim=CHANNEL)
-    delta = value - image.min(dim=CHANNEL).values
+    return torch.cat(hsv_planes(image), dim=CHANNEL)
+
+
+def hsv_planes(image: torch.Tensor) -> tuple:
+    """:func:`rgb_to_hsv` as its three planes ``(hue, saturation, value)``, each ``(..., 1, H, W)``: for a caller that
+    changes a plane and goes back (:func:`rgb_from_hsv_planes`), with no frame joined or split.
+
+    Examples:
+        >>> [round(float(v), 4) for v in hsv_planes(torch.tensor([1.0, 0.5, 0.0]).reshape(3, 1, 1))]
+        [0.0833, 1.0, 1.0]
+    """
+    r, g, b = image.split(1, dim=CHANNEL)
+    value = image.amax(dim=CHANNEL, keepdim=True)
+    delta = value - image.amin(dim=CHANNEL, keepdim=True)
     chromatic = delta > 0
     safe_delta = where(chromatic, delta, 1.0)
     hue_r = torch.remainder((g - b) / safe_delta, 6.0)
     hue_g = (b - r) / safe_delta + 2.0
     hue_b = (r - g) / safe_delta + 4.0
-    hue = torch.where(argmax == 0, hue_r, torch.where(argmax == 1, hue_g, hue_b)) / 6.0
+    # the first channel at the maximum, as argmax takes it, without argmax's indices (8 bytes a pixel)
+    hue = torch.where(r == value, hue_r, torch.where(g == value, hue_g, hue_b)) / 6.0
     hue = where(chromatic, hue, 0.0)
     lit = value > 0
     saturation = where(lit, delta / where(lit, value, 1.0), 0.0)
-    return torch.stack((hue, saturation, value), dim=CHANNEL)
+    return hue, saturation, value
 
 
 def hsv_to_rgb(image: torch.Tensor) -> torch.Tensor:
@@ -48,8 +60,17 @@ def hsv_to_rgb(image: torch.Tensor) -> torch.Tensor:
         >>> [round(v, 4) for v in hsv_to_rgb(red).flatten().tolist()]
         [2.0, 0.0, 0.0]
     """
-    hue, saturation, value = (c.unsqueeze(CHANNEL) for c in image.unbind(CHANNEL))
-    offsets = constant((1.0, 5.0 / 3.0, 4.0 / 3.0), image).reshape(3, 1, 1)  # k + 1: frac of a positive number
+    return rgb_from_hsv_planes(*image.split(1, dim=CHANNEL))
+
+
+def rgb_from_hsv_planes(hue: torch.Tensor, saturation: torch.Tensor, value: torch.Tensor) -> torch.Tensor:
+    """:func:`hsv_to_rgb` of the three ``(..., 1, H, W)`` planes of :func:`hsv_planes`.
+
+    Examples:
+        >>> rgb_from_hsv_planes(*(torch.tensor([[[v]]]) for v in (0.0, 1.0, 2.0))).flatten().tolist()
+        [2.0, 0.0, 0.0]
+    """
+    offsets = constant((1.0, 5.0 / 3.0, 4.0 / 3.0), value).reshape(3, 1, 1)  # k + 1: frac of a positive number
     # ramp - 1 in one clamp, and V (1 + S (ramp - 1)) as V + (V S)(ramp - 1): exact at S = 0, ramp = 1 and S = 1, ramp = 0
     ramp_less_one = (torch.abs(affine(torch.frac(hue + offsets), 6.0, -3.0)) - 2.0).clamp(-1.0, 0.0)
     return torch.addcmul(value, value * saturation, ramp_less_one)

@@ -38,10 +38,10 @@ from ..color import (
     acescc_to_aces,
     acescct_to_linear,
     convert,
-    hsv_to_rgb,
+    hsv_planes,
     linear_to_acescct,
     luminance,
-    rgb_to_hsv,
+    rgb_from_hsv_planes,
     safe_pow,
     safe_sqrt,
     srgb_to_linear,
@@ -511,10 +511,11 @@ def lift_gamma_gain(image: torch.Tensor, lift=IDENTITY_TRACKBALL, gamma=IDENTITY
     return torch.sign(c) * bounded_pow(c.abs(), inverse_gamma)
 
 
-def _hsv(image: torch.Tensor) -> torch.Tensor:
+def _hsv(image: torch.Tensor) -> tuple:
+    """:func:`~torchgrade.color.hsv_planes` of ``image``, negligible light taken as black."""
     # Hue divides by the chroma (max - min): ACEScg turns a grey 1e-38 into a tinted one, whose hue's gradient overflows.
     lit = image.amax(dim=CHANNEL, keepdim=True) > NEGLIGIBLE_LIGHT
-    return rgb_to_hsv(where(lit, image, 0.0))
+    return hsv_planes(where(lit, image, 0.0))
 
 
 def hue_shift(image: torch.Tensor, degrees: Param, hue_vs_hue=None) -> torch.Tensor:
@@ -527,11 +528,11 @@ def hue_shift(image: torch.Tensor, degrees: Param, hue_vs_hue=None) -> torch.Ten
         >>> [round(v, 4) for v in hue_shift(red, 120.0).flatten().tolist()]
         [0.0, 1.0, 0.0]
     """
-    hue, sat, value = _hsv(image).split(1, dim=-3)
+    hue, sat, value = _hsv(image)
     hue = torch.remainder(hue + scalar_param(degrees, image, "hue_shift") / 360.0, 1.0)
     if hue_vs_hue is not None:
         hue = torch.remainder(hue + evaluate_curve(hue_vs_hue, hue, periodic=True, name="hue_vs_hue") - 0.5, 1.0)
-    return hsv_to_rgb(torch.cat((hue, sat, value), dim=-3))
+    return rgb_from_hsv_planes(hue, sat, value)
 
 
 def saturation_curves(image: torch.Tensor, hue_vs_sat=None, sat_vs_sat=None, lum_vs_sat=None, luminance_weights="rec709") -> torch.Tensor:
@@ -545,7 +546,7 @@ def saturation_curves(image: torch.Tensor, hue_vs_sat=None, sat_vs_sat=None, lum
         >>> saturation_curves(torch.rand(3, 2, 2), hue_vs_sat=flat).unique().tolist()
         [1.0]
     """
-    hue, sat, _ = _hsv(image).split(1, dim=-3)
+    hue, sat, _ = _hsv(image)
     axes = {"hue_vs_sat": (hue_vs_sat, hue, True), "sat_vs_sat": (sat_vs_sat, sat, False)}
     if lum_vs_sat is not None:
         axes["lum_vs_sat"] = (lum_vs_sat, luminance(image, luminance_weights), False)
