@@ -12,8 +12,8 @@ an elementwise kernel runs at the memory's speed, and nothing runs faster than P
 The two constants were fitted (least squares on log time) to the seven eager no_grad rows of
 ``benchmarks/results/gpu.md`` (run B, the code at ``7319b75``, counted there with this script's counter): every
 prediction within 0.84 to 1.13 of its measurement; the training row, outside the fit, is over-predicted 1.30 times.
-Against run D (``59fbb9f``) the rows the count sees whole are within 0.87 to 1.05 (grade, ACES, bloom, RandomPostFX),
-the 1080p look, bound by its launches, is over-predicted 1.29 times (19 µs a launch there, 24 fitted), and what it
+Against run D (``59fbb9f``, counted as it was) the rows the count sees whole are within 0.87 to 1.03 (grade, ACES, bloom, RandomPostFX),
+the 1080p look, bound by its launches, is over-predicted 1.26 times (19 µs a launch there, 24 fitted), and what it
 cannot see is a kernel slower than its bytes: atomic additions that wait on each other, or a gather that
 takes a block of threads a pixel (``DispatchCount.row_gathers``).
 A prediction, not a measurement: a GPU run (``benchmarks/gpu_check.sh``) is what confirms it.

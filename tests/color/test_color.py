@@ -88,11 +88,25 @@ def test_luminance_weights_sum_to_one_so_white_has_luminance_one():
     assert torch.allclose(color.luminance(white, "ap1"), torch.ones(1, 1, 2, 2, dtype=torch.float64), atol=1e-6)
 
 
+def test_hsv_value_and_saturation_gradients_do_not_favour_a_channel_at_a_tie():
+    """At grey (every channel the maximum and the minimum) and at two channels tied, the gradient of value is shared
+    by the tied channels alike, so it is the same whichever channel is which (``max`` over the channels as ``amax``)."""
+    for pixel in ([0.3, 0.3, 0.3], [0.8, 0.8, 0.2]):
+        rgb = torch.tensor(pixel, dtype=torch.float64).reshape(1, 3, 1, 1)
+        grads = []
+        for order in ([0, 1, 2], [1, 0, 2], [2, 1, 0]):
+            permuted = rgb[:, order].clone().requires_grad_()
+            color.rgb_to_hsv(permuted)[:, 1:].sum().backward()
+            grads.append(permuted.grad[:, torch.tensor(order).argsort()].flatten())
+        for grad in grads[1:]:
+            torch.testing.assert_close(grad, grads[0], rtol=0, atol=1e-12)
+
+
 def test_hsv_matches_colorsys():
     rgb = random_rgb(high=3.0)
     rgb[:10] = rgb[:10, :1]  # grey pixels: undefined hue, zero saturation
     rgb[10] = 0.0
-    rgb[11:14] = [[2.0, 2.0, 0.5], [0.3, 1.0, 1.0], [1.0, 0.2, 1.0]]  # two channels at the maximum: the first one's hue
+    rgb[11:14] = [[2.0, 2.0, 0.5], [0.3, 1.0, 1.0], [1.0, 0.2, 1.0]]  # two channels at the maximum: their formulas meet
     hsv = rows(color.rgb_to_hsv(pixels(rgb)))
     expected = np.array([colorsys.rgb_to_hsv(*p) for p in rgb])
     np.testing.assert_allclose(hsv, expected, atol=1e-12)

@@ -177,13 +177,12 @@ def test_every_public_module_has_a_case():
 
 
 class DeviceCheck(TorchDispatchMode):
-    """Raise at the first operation whose tensors lie on two devices (CUDA's rule: a 0-d CPU tensor is a
-    scalar and may join any device, in an operation of two tensors or in ``torch.where``, which copies it to the
-    device; three-operand kernels such as ``addcmul`` refuse it) and, with ``dtype``, at the first floating tensor of
-    another dtype."""
+    """Raise at the first operation whose tensors lie on two devices and, with ``dtype``, at the first floating tensor
+    of another dtype. A 0-d CPU tensor may join a device's tensors in an operation of two operands, where CUDA's
+    kernels take it as an argument; elsewhere CUDA refuses it (``addcmul``'s first operands) or copies it to the device
+    at every call (``torch.where``), and both raise here."""
 
     TRANSFERS = (torch.ops.aten._to_copy.default, torch.ops.aten.copy_.default)
-    COPIES_SCALARS = (torch.ops.aten.where.self,)
 
     def __init__(self, dtype: torch.dtype | None = None):
         super().__init__()
@@ -193,7 +192,8 @@ class DeviceCheck(TorchDispatchMode):
         kwargs = kwargs or {}
         out = func(*args, **kwargs)
         tensors = [t for t in tree_leaves((args, kwargs)) if isinstance(t, torch.Tensor)]
-        scalars_join = len(tensors) <= 2 or func in self.COPIES_SCALARS
+        operands = [t for t in tree_leaves((args, {k: v for k, v in kwargs.items() if k != "out"})) if isinstance(t, torch.Tensor)]
+        scalars_join = len(operands) <= 2
         devices = {str(t.device) for t in tensors if t.dim() > 0 or t.device.type != "cpu" or not scalars_join}
         if len(devices) > 1 and func not in self.TRANSFERS:
             raise AssertionError(f"{func} mixes devices {sorted(devices)}")
@@ -205,12 +205,16 @@ class DeviceCheck(TorchDispatchMode):
 
 
 def _audit(name: str, dtype: torch.dtype) -> None:
+    """The forward and backward of a case, and its forward without autograd (the in-place and untracked forms)."""
     module = CASES[name]().to("meta", dtype)
     image = torch.empty(2, 3, 40, 56, device="meta", dtype=dtype, requires_grad=True)
     with DeviceCheck(dtype if dtype == torch.float64 else None):
         out = module(image)
         out.sum().backward()
+        with torch.no_grad():
+            untracked = module(image)
     assert (out.device.type, out.dtype, image.grad.device.type) == ("meta", dtype, "meta")
+    assert (untracked.device.type, untracked.dtype) == ("meta", dtype)
 
 
 @pytest.mark.parametrize("name", list(CASES))

@@ -50,11 +50,11 @@ def scalar(value, like: torch.Tensor) -> torch.Tensor:
     ``torch.fmax``, ... where the operation takes no number): a 0-d CPU tensor in ``like``'s dtype, made once. A tuple
     of numbers gives a CPU tensor whose elements, unbound, are such operands.
 
-    CUDA passes a 0-d CPU operand to the kernel as an argument (no copy) and keeps the kernel vectorised; a 0-d
-    tensor on the device is an operand broadcast to every element, which PyTorch's CUDA kernels read through
-    per-element offsets (their slower, unvectorised loop). Not for ``torch.where`` and the three-operand kernels
-    (``addcmul``), which take no CPU operand: :func:`constant` there. While tracing, compiling or exporting, a
-    :func:`constant` (a graph keeps its constants on its device).
+    CUDA passes a 0-d CPU operand of a two-operand kernel to it as an argument (no copy) and keeps the kernel
+    vectorised; a 0-d tensor on the device is an operand broadcast to every element, which PyTorch's CUDA kernels read
+    through per-element offsets (their slower, unvectorised loop). Not for ``torch.where``, which copies a CPU operand
+    to the device at every call, nor for the first operands of ``addcmul``, which CUDA refuses: :func:`constant`
+    there. While tracing, compiling or exporting, a :func:`constant` (a graph keeps its constants on its device).
 
     Examples:
         >>> import torch

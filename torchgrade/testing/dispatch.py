@@ -2,8 +2,8 @@
 
 On CUDA every operation PyTorch dispatches (views and allocations aside) is a kernel launch, a value read back
 (``_local_scalar_dense``: ``.item()``, ``bool()``, ``.tolist()``) waits for the device, and a tensor made from host
-data (``lift_fresh``, a CPU-to-device copy) is a pageable copy. A gather of whole rows of :data:`ROW_GATHER_BYTES` or more
-(``table[index]``) runs as CUDA's vectorised gather, a block of threads per index: 4.99 ms for 8.3 million rows of 8
+data (``lift_fresh``, a CPU-to-device copy) is a pageable copy. A gather of whole rows, a multiple of :data:`ROW_GATHER_BYTES`
+each (``table[index]``), runs as CUDA's vectorised gather, a block of threads per index: 4.99 ms for 8.3 million rows of 8
 floats on an H200 (``benchmarks/results/gpu.md``), where gathering each column (``index_select`` on dimension 1) is an
 elementwise pass. PyTorch's CUDA elementwise kernels are vectorised only where every operand is contiguous and of
 the result's size (a 0-d CPU operand is passed as an argument): an operand broadcast to the frame (a 0-d or per-channel
@@ -43,7 +43,8 @@ UNVECTORISED_FROM = 1 << 16
 """Elements of a result from which an elementwise launch is counted as ``unvectorised``: a smaller one costs its launch."""
 
 ROW_GATHER_BYTES = 16
-"""Bytes of a row from which CUDA gathers ``table[index]`` with its vectorised kernel (16-byte loads, one block an index)."""
+"""CUDA gathers ``table[index]`` with its vectorised kernel (16-byte loads, one block an index) where a row is a
+multiple of this many bytes."""
 
 _HOST_DATA = (torch.ops.aten.lift_fresh.default, torch.ops.aten.lift_fresh_copy.default)
 _COPIES = (torch.ops.aten._to_copy.default, torch.ops.aten.copy_.default)
@@ -60,7 +61,8 @@ class DispatchCount(TorchDispatchMode):
         moved: the bytes of each launch's tensor operands and results, in the order dispatched.
         reads, host_data: ``Counter`` of values read back from a device (not the CPU) and of tensors made from (or
             copied from) host data.
-        row_gathers: gathers of whole rows of :data:`ROW_GATHER_BYTES` or more, each index a block of threads on CUDA.
+        row_gathers: gathers of whole rows, a multiple of :data:`ROW_GATHER_BYTES` each: a block of threads an index on
+            CUDA.
         unvectorised: elementwise launches of :data:`UNVECTORISED_FROM` elements or more with an operand on the device
             broadcast to the result or strided: CUDA's unvectorised loop.
         by_operation: ``Counter`` of launches per operation name.
@@ -100,17 +102,24 @@ class DispatchCount(TorchDispatchMode):
         elif name not in VIEWS and name not in ALLOCATIONS:
             inputs = {key: value for key, value in kwargs.items() if key != "out"}  # an out= result is counted as the result
             tensors = [t for t in tree_flatten((args, inputs, out))[0] if isinstance(t, torch.Tensor)]
-            self.row_gathers += func is torch.ops.aten.index.Tensor and _gathers_rows(*args[:2])
+            if all(t.dim() == 0 and t.device.type == "cpu" for t in tensors):
+                return out  # a number's arithmetic in the host's memory: no launch
+            self.row_gathers += _gathers_rows(func, args)
             self.unvectorised += torch.Tag.pointwise in func.tags and _unvectorised(tensors)
             self.moved.append(sum(t.numel() * t.element_size() for t in tensors))
             self.by_operation[name] += 1
         return out
 
 
-def _gathers_rows(source: torch.Tensor, indices) -> bool:
-    """Whether ``source[indices]`` picks whole rows of :data:`ROW_GATHER_BYTES` or more: one index, on dimension 0."""
-    rows_only = len(indices) == 1 and indices[0] is not None and source.dim() > 1
-    return rows_only and source[0].numel() * source.element_size() >= ROW_GATHER_BYTES
+def _gathers_rows(func, args) -> bool:
+    """Whether ``func`` is ``table[index]`` picking whole rows of ``table``, each a multiple of :data:`ROW_GATHER_BYTES`."""
+    if func is not torch.ops.aten.index.Tensor:
+        return False
+    source, indices = args[:2]
+    if len(indices) != 1 or indices[0] is None or source.dim() < 2 or source.shape[0] == 0:
+        return False
+    row = source[0].numel() * source.element_size()
+    return row % ROW_GATHER_BYTES == 0
 
 
 def _unvectorised(operands: list) -> bool:

@@ -223,7 +223,7 @@ def _gathered_columns(table: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
         >>> _gathered_columns(torch.tensor([[0.0, 10.0, 20.0], [1.0, 2.0, 3.0]]), torch.tensor([[2, 0]])).tolist()
         [[[20.0, 0.0]], [[3.0, 1.0]]]
     """
-    return table.index_select(1, index.reshape(-1)).view(-1, *index.shape)
+    return table.index_select(1, index.reshape(-1)).view(table.shape[0], *index.shape)
 
 
 def gamut_compress(j, m, h, reach_m, p: GamutParams):
