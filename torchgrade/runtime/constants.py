@@ -182,6 +182,8 @@ def folded(function, *arguments, like: torch.Tensor, host: bool = False):
         >>> like = torch.zeros(1)
         >>> folded(gain, 2.0, like=like).item(), folded(gain, 2.0, like=like) is folded(gain, 2.0, like=like)
         (4.0, True)
+        >>> folded(gain, 2.0, like=torch.zeros(1, device="meta"), host=True).device.type  # a 0-d operand on the host
+        'cpu'
     """
     if is_tracing():
         return function(*arguments, like=like)

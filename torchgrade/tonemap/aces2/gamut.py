@@ -215,7 +215,7 @@ def _segment_columns(knots: torch.Tensor, values: torch.Tensor) -> tuple:
 def _gathered_columns(table: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
     """``(C, *index.shape)``: the columns ``index`` of a ``(C, K)`` table, each row of the table a plane.
 
-    By column, not ``table.T[index]``: CUDA gathers a row of 16 bytes or more (the cusp table's 8 values) with a
+    By column, not ``table.T[index]``: CUDA gathers rows of a multiple of 16 bytes (the cusp table's 8 values) with a
     block of threads per pixel, 4.99 ms of a 4K frame of ACES 2.0's 14.19 ms on an H200 (``benchmarks/results/gpu.md``),
     and the planes it would give are strided.
 
