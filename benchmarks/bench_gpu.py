@@ -405,6 +405,13 @@ def main(argv=None) -> int:
             "command": "python benchmarks/bench_gpu.py " + " ".join(argv if argv is not None else sys.argv[1:]),
             "date": time.strftime("%Y-%m-%d")}
     started, errors, skipped = time.monotonic(), [], []
+
+    def save(announce: bool) -> None:  # after every section: a run stopped at its time limit keeps what it measured
+        report = {"info": info, "rows": ROWS, "errors": errors, "skipped": skipped}
+        lines = markdown(info) + ([""] + [f"Skipped: {', '.join(skipped)}."] if skipped else []) + \
+            ([""] + [f"Failed: {e['section']}: {e['error']}" for e in errors] if errors else [])
+        write_results(args.out, "gpu", report, lines, info["command"], device.type, announce=announce)
+
     for name in chosen:
         if name in NEEDS_CUDA and not cuda:
             skipped.append(f"{name} (no CUDA)")
@@ -419,10 +426,8 @@ def main(argv=None) -> int:
             errors.append({"section": name, "error": repr(error)[:500], "trace": traceback.format_exc()[-2000:]})
             print(f"!! {name}: {error!r}"[:600], flush=True)
         print(f"-- {name}: {time.monotonic() - begun:.1f} s", flush=True)
-    report = {"info": info, "rows": ROWS, "errors": errors, "skipped": skipped}
-    lines = markdown(info) + ([""] + [f"Skipped: {', '.join(skipped)}."] if skipped else []) + \
-        ([""] + [f"Failed: {e['section']}: {e['error']}" for e in errors] if errors else [])
-    write_results(args.out, "gpu", report, lines, info["command"], device.type)
+        save(announce=False)
+    save(announce=True)
     return 1 if errors else 0
 
 

@@ -31,6 +31,7 @@ import numpy as np
 import torch
 
 import torchgrade as tg
+from torchgrade.io.atomic import atomic_write
 
 ROOT = Path(__file__).resolve().parents[1]
 EXR_DIR = ROOT.parent / "shared" / "data" / "exr"
@@ -71,21 +72,27 @@ def environment_line(env: dict) -> str:
             f"load average {load} (1 / 5 / 15 min, at the end); {versions}.")
 
 
+def _write_text(path: Path, text: str) -> None:
+    """``text`` to ``path`` atomically: a reader, or a run stopped half-way, sees the old file or the whole new one."""
+    atomic_write(path, lambda temporary: Path(temporary).write_text(text, encoding="utf-8"))
+
+
 def write_markdown(out: Path, name: str, lines: list, device: str = "cpu") -> dict:
     """Write ``lines`` and a line of their :func:`environment` to ``out/<name>``; returns the environment."""
     env = environment(device)
     out.mkdir(parents=True, exist_ok=True)
-    (out / name).write_text("\n".join([*lines, "", environment_line(env)]) + "\n", encoding="utf-8")
+    _write_text(out / name, "\n".join([*lines, "", environment_line(env)]) + "\n")
     return env
 
 
-def write_results(out: Path, stem: str, report: dict, lines: list, command: str, device: str = "cpu") -> None:
+def write_results(out: Path, stem: str, report: dict, lines: list, command: str, device: str = "cpu", announce: bool = True) -> None:
     """Write ``lines`` to ``out/<stem>.md`` and ``report`` to ``out/<stem>.json``, each with its
-    :func:`environment`; print the table and ``command``."""
+    :func:`environment`, atomically; with ``announce``, print the table and ``command``."""
     env = write_markdown(out, f"{stem}.md", lines, device)
-    (out / f"{stem}.json").write_text(json.dumps({**report, "environment": env}, indent=2, ensure_ascii=False) + "\n")
-    print("\n".join(lines))
-    print(f"\nwrote {out / stem}.json and .md; reproduce: {command}")
+    _write_text(out / f"{stem}.json", json.dumps({**report, "environment": env}, indent=2, ensure_ascii=False) + "\n")
+    if announce:
+        print("\n".join(lines))
+        print(f"\nwrote {out / stem}.json and .md; reproduce: {command}")
 
 
 def sample_exr(name: str, to_rec709: bool = False) -> torch.Tensor:

@@ -405,3 +405,29 @@ def test_the_dispatch_count_charges_an_out_result_once_and_an_allocation_nothing
         torch.floor(frame, out=result)  # reads the frame, writes the result: one pass
         result.add_(frame)  # reads both, writes one: one and a half
     assert count.launches == 2 and count.frame_passes == pytest.approx(2.5, abs=1e-6)
+
+
+def test_the_dispatch_count_tells_unvectorised_launches_row_gathers_and_host_arithmetic_apart():
+    from torchgrade.runtime import constant, scalar
+    from torchgrade.testing.dispatch import DispatchCount
+
+    frame = torch.empty(1, 3, 512, 512, device="meta")
+    table = torch.empty(363, 8, device="meta")
+    index = torch.zeros(512 * 512, dtype=torch.long, device="meta")
+    with DispatchCount(frame=frame) as count:
+        frame * constant(2.0, frame)  # a 0-d operand on the device: broadcast, unvectorised on CUDA
+        frame * scalar(2.0, frame)  # a 0-d CPU operand: an argument of a vectorised kernel
+        frame[:, :1] * frame[:, 1:2]  # two planes, contiguous: vectorised
+        table[index]  # rows of 32 bytes: CUDA's gather of a block of threads an index
+        table[:, :6][index]  # rows of 24 bytes: not that gather
+        scalar(2.0, frame) * scalar(3.0, frame)  # arithmetic in the host's memory: no launch
+    assert (count.launches, count.unvectorised, count.row_gathers) == (5, 1, 1)
+
+
+def test_the_gpu_benchmark_writes_its_results_without_cuda(tmp_path):
+    from benchmarks import bench_gpu
+
+    assert bench_gpu.main(["--sections", "kernels,forms", "--out", str(tmp_path)]) == 0
+    report = json.loads((tmp_path / "gpu.json").read_text())
+    assert report["skipped"] == ["kernels (no CUDA)", "forms (no CUDA)"] and not report["errors"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["gpu.json", "gpu.md"]  # no temporary file left
