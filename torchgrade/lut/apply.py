@@ -231,7 +231,7 @@ def _eager_lookup(planes, result, rows, size, settings, pixels, eager, tables) -
     """:func:`chunked_lookup` through an eager form: ``planes`` ``(N, 3, P)`` into ``result``, runs of ``pixels``."""
     shaper, domain_min, domain_max, _, output_range, curve, curve_range, output_encoding = settings
     run = max(1, min(pixels, planes.shape[-1]))
-    runs = eager.runs(eager.tables(rows, size) if tables is None else tables, size, run)
+    runs = eager.runs(tables, size, run)
     direct = output_encoding == "linear" and output_range is None and result.dtype == rows.dtype
     values = None if direct else torch.empty(3 * run, dtype=rows.dtype)
     lattice = _LatticeCoordinates(rows.dtype, size, shaper, domain_min, domain_max, curve, curve_range)

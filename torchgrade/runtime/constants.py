@@ -42,7 +42,7 @@ def constant(values, like: torch.Tensor) -> torch.Tensor:
     """
     if is_tracing():
         return torch.tensor(values, dtype=like.dtype, device=like.device)
-    return _unchanged(_made(values, like.dtype, like.device), torch.tensor, values, dtype=like.dtype, device=like.device)
+    return _cached(values, like.dtype, like.device)
 
 
 def scalar(value, like: torch.Tensor) -> torch.Tensor:
@@ -64,10 +64,7 @@ def scalar(value, like: torch.Tensor) -> torch.Tensor:
     """
     if is_tracing():
         return constant(value, like)
-    return _unchanged(_made(value, like.dtype, _CPU), torch.tensor, value, dtype=like.dtype)
-
-
-_CPU = torch.device("cpu")
+    return _cached(value, like.dtype, _CPU)
 
 
 def where(condition: torch.Tensor, a, b) -> torch.Tensor:
@@ -109,6 +106,14 @@ def affine(x: torch.Tensor, scale: float, offset: float) -> torch.Tensor:
         [3.5, 6.5]
     """
     return torch.add(scalar(offset, x), x, alpha=scale)
+
+
+_CPU = torch.device("cpu")
+
+
+def _cached(values, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
+    """``torch.tensor(values)`` in ``dtype`` on ``device``, made once (:func:`_made`) and made again if modified."""
+    return _unchanged(_made(values, dtype, device), torch.tensor, values, dtype=dtype, device=device)
 
 
 @functools.lru_cache(maxsize=CACHED_CONSTANTS)

@@ -8,6 +8,7 @@ Source: Academy aces-output (ACES 2.0 Output Transforms) and OpenColorIO's built
 
 from __future__ import annotations
 
+import functools
 import threading
 import weakref
 
@@ -248,7 +249,7 @@ def _display_linear(x: torch.Tensor, peak: float, limiting: str, display: str, i
     rgb = output.render(ap1, "ap1")
     scale = REFERENCE_LUMINANCE / peak
     if limiting != display:
-        rgb = apply_matrix(constant(_scaled(_MATRIX_VALUES[f"{limiting}_to_{display}"], scale), rgb), rgb)
+        rgb = apply_matrix(constant(_display_matrix(limiting, display, scale), rgb), rgb)
     elif scale != 1.0:
         rgb = rgb * scale
     # Display values below 0 do not exist: clip where a limiting gamut pokes out of the container
@@ -256,6 +257,7 @@ def _display_linear(x: torch.Tensor, peak: float, limiting: str, display: str, i
     return rgb.clamp(0.0, 1.0)
 
 
-def _scaled(matrix: tuple, scale: float) -> tuple:
-    """A matrix of :data:`_MATRIX_VALUES` times ``scale``."""
-    return tuple(tuple(value * scale for value in row) for row in matrix)
+@functools.lru_cache(maxsize=64)
+def _display_matrix(limiting: str, display: str, scale: float) -> tuple:
+    """The limiting primaries' matrix to the display's (:data:`_MATRIX_VALUES`) times ``scale``, made once a peak."""
+    return tuple(tuple(value * scale for value in row) for row in _MATRIX_VALUES[f"{limiting}_to_{display}"])
