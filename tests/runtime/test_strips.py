@@ -74,6 +74,17 @@ def test_lut_runs_on_worker_threads_give_the_serial_runs_values_and_leave_the_ca
         torch.set_num_threads(threads)
 
 
+def test_each_worker_computes_on_one_thread_whatever_the_callers_count():
+    threads = torch.get_num_threads()
+    try:
+        torch.set_num_threads(threads + 3)  # a count no other test gives a pool: a new pool starts here
+        seen = []
+        runtime.run_pieces(lambda piece: seen.append(torch.get_num_threads()), range(8), workers=threads + 3)
+        assert seen == [1] * 8 and torch.get_num_threads() == threads + 3
+    finally:
+        torch.set_num_threads(threads)
+
+
 def test_other_devices_compute_whole_frames():
     assert runtime.policy_for(torch.device("meta")).strip_pixels is None
     calls = []

@@ -39,12 +39,11 @@ STRIP_PIXELS_PER_THREAD = 1 << 16
 output. A strip grows with the thread count: each thread's share stays that size, and a frame on many cores is fewer
 strips, each of the same dozens of operations (Python dispatches every one of them, one at a time)."""
 
-PARALLEL_FROM = 4
+PARALLEL_FROM = 2
 """Intra-op thread count from which a LUT's pixel runs (one thread each, :func:`torchgrade.lut.chunked_lookup`) go to
-as many worker threads. 2 workers on 2 cores took a 4K lookup from 185-198 ms to 141-170 ms here, but on the 16-core
-host of an H200 16 workers gained little over one thread (``benchmarks/results/gpu.md``); below 4 threads the runs
-stay on the calling thread. Strips of a look do not go to workers: on that host 16 of them ran the cinematic look
-at 1080p no faster than one thread's dispatch of its operations allows (250 ms)."""
+as many worker threads; below it they run on the calling thread. ``benchmarks/bench_cpu_paths.py --threads 2 --clock
+wall`` on 2 cores: the 33³ tetrahedral lookup of a 1920x1080 frame on 2 workers took 0.79-0.84 of one thread's time
+(medians of 8, both orders). Strips of a look stay on the calling thread, each operation on every thread."""
 
 LOOKUP_CHUNK = 32768
 """Pixels per pass of the eager CPU LUT lookup. Tetrahedral's eager form holds 20 values a pixel (2.5 MiB a run);

@@ -39,7 +39,7 @@ def worker_pool(workers: int) -> ThreadPoolExecutor:
         pool = _POOLS.get(workers)
         if pool is None:
             threads = torch.get_num_threads()
-            pool = ThreadPoolExecutor(workers, thread_name_prefix="torchgrade-worker", initializer=torch.set_num_threads, initargs=(1,))
+            pool = ThreadPoolExecutor(workers, thread_name_prefix="torchgrade-worker", initializer=_one_intra_op_thread)
             started = threading.Barrier(workers + 1)
             for _ in range(workers):
                 pool.submit(started.wait)
@@ -47,6 +47,18 @@ def worker_pool(workers: int) -> ThreadPoolExecutor:
             torch.set_num_threads(threads)
             _POOLS[workers] = pool
         return pool
+
+
+def _one_intra_op_thread() -> None:
+    """Set the calling thread to one intra-op thread, for good.
+
+    ATen gives a thread its count lazily, from the process-wide count last set, at the thread's first parallel
+    operation or ``get_num_threads``; ``set_num_threads`` does not count as that first use. A worker that only set 1
+    took the caller's count back at its first operation (2 on 2 cores, 16 on 16: every worker then ran every
+    operation on all the cores at once). Reading the count first makes the thread's own count the one set here.
+    """
+    torch.get_num_threads()
+    torch.set_num_threads(1)
 
 
 def run_pieces(work: Callable, pieces: Iterable, workers: int) -> None:
