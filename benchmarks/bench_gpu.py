@@ -20,7 +20,8 @@ Sections, each skipped once ``--budget`` seconds have passed (compiles are the s
 * ``forms``: a 3x3 colour matrix on a 4K frame three ways (the library's broadcast multiply-adds, a channel at a time
   with numbers, a 1x1 convolution), for the choice of the eager form;
 * ``cpu``: the look and the LUT on the host's cores, all of them against 2, and the LUT against OpenColorIO;
-* ``augment_compiled``: both augmentations compiled (kornia's takes over a minute to compile).
+* ``augment_compiled``: both augmentations compiled (kornia's takes over a minute to compile);
+* ``training_compiled``: the look's forward and backward through :func:`torchgrade.compile` against eager.
 
 Writes ``gpu.json`` and ``gpu.md`` to ``--out`` (default ``benchmarks/out``; the committed ones with ``--out benchmarks/results``).
 """
@@ -167,15 +168,32 @@ def section_lut(device):
         record("lut", f"LUT 33^3 tetrahedral 4K {way}", ms=ms, x_floor=ms / floor, **({"compile_s": seconds} if way == "compiled" else {}))
 
 
-def section_training(device):
-    look = cinematic().to(device)
-    batch = torch.rand(16, 3, 512, 512, device=device) * 4
-
+def training_step(call, batch: torch.Tensor):
+    """One forward and backward of ``call`` on a copy of ``batch`` that requires grad."""
     def step():
         image = batch.clone().requires_grad_()
-        look(image).mean().backward()
+        call(image).mean().backward()
+    return step
 
+
+def section_training(device):
+    batch = torch.rand(16, 3, 512, 512, device=device) * 4
+    step = training_step(cinematic().to(device), batch)
     record("training", "cinematic forward+backward 16x3x512x512 eager", ms=cuda_ms({"step": step}, runs=10)["step"])
+
+
+def section_training_compiled(device):
+    """The look's forward and backward through ``tg.compile`` (CUDA graphs of both), against eager, alternating."""
+    look = cinematic().to(device)
+    batch = torch.rand(16, 3, 512, 512, device=device) * 4
+    fast = training_step(tg.compile(look), batch)
+    start = time.perf_counter()
+    fast()  # compiles the forward, then the backward
+    torch.cuda.synchronize()
+    compile_s = time.perf_counter() - start
+    times = cuda_ms({"eager": training_step(look, batch), "compiled": fast}, runs=10)
+    record("training", "cinematic forward+backward 16x3x512x512 compiled (CUDA graphs)", ms=times["compiled"],
+           eager_ms=times["eager"], ratio_to_eager=times["compiled"] / times["eager"], compile_s=compile_s)
 
 
 def augmentations():
@@ -194,11 +212,7 @@ def section_augment(device):
         eager = cuda_ms({"RandomPostFX": lambda: ours(batch), "ColorJiggle": lambda: jiggle(batch)})
         record("augment", "RandomPostFX vs ColorJiggle eager 256x3x224x224", ms=eager["RandomPostFX"], kornia_ms=eager["ColorJiggle"],
                ratio=eager["RandomPostFX"] / eager["ColorJiggle"])
-
-    def step():
-        images = batch.clone().requires_grad_()
-        ours(images).mean().backward()
-
+    step = training_step(ours, batch)
     record("augment", "RandomPostFX forward+backward 256x3x224x224", ms=cuda_ms({"step": step}, runs=10)["step"])
 
 
@@ -330,12 +344,7 @@ def section_profile(device):
         record("profile", "cinematic 4K compiled (CUDA graphs)", **profile_counts(lambda: fast(image)))
         record_kernels("cinematic 4K compiled", lambda: fast(image))
     batch = torch.rand(16, 3, 512, 512, device=device) * 4
-
-    def step():
-        x = batch.clone().requires_grad_()
-        look(x).mean().backward()
-
-    record("profile", "cinematic forward+backward 16x3x512x512", **profile_counts(step))
+    record("profile", "cinematic forward+backward 16x3x512x512", **profile_counts(training_step(look, batch)))
 
 
 def section_cpu(device):
@@ -373,7 +382,8 @@ def section_cpu(device):
 
 SECTIONS = {"floor": section_floor, "look": section_look, "profile": section_profile, "lut": section_lut,
             "augment": section_augment, "training": section_training, "stages": section_stages, "kernels": section_kernels,
-            "forms": section_forms, "cpu": section_cpu, "augment_compiled": section_augment_compiled}
+            "forms": section_forms, "cpu": section_cpu, "augment_compiled": section_augment_compiled,
+            "training_compiled": section_training_compiled}
 NEEDS_CUDA = set(SECTIONS) - {"cpu"}
 
 

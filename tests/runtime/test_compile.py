@@ -61,3 +61,44 @@ def test_a_compiled_stage_checks_its_learnable_controls_at_every_call(monkeypatc
         look.grade.contrast.fill_(500.0)  # what an optimiser step could do
     with pytest.raises(ValueError, match=r"contrast must lie in \[-100.0, 100.0\], got 500.0"):
         compiled(image)
+
+
+@pytest.mark.parametrize("dt", [None, 1 / 24])
+def test_a_compiled_look_with_exposure_compiles_once_and_adapts_as_eager(monkeypatch, dt):
+    """The exposure state is empty before the first frame and takes the batch's shape after it: compiled, the second
+    frame must run the first frame's graph (Dynamo guards the state's shape), with eager's values and state."""
+    from torch._dynamo.testing import CompileCounter
+
+    counter = CompileCounter()
+    real = torch.compile
+    monkeypatch.setattr(torch, "compile", lambda *args, **kwargs: real(*args, **{**kwargs, "backend": counter}))
+    torch._dynamo.reset()
+    config = {"exposure": CINEMATIC["exposure"], "tonemap": {"mode": "reinhard"}}
+    eager, compiled_look = tg.PostFX.from_config(config).eval(), tg.PostFX.from_config(config).eval()
+    compiled = tg.compile(compiled_look)
+    frames = [hdr((2, 3, 16, 24)) * scale for scale in (1.0, 4.0, 0.25)]
+    for frame in frames:
+        with torch.no_grad():
+            torch.testing.assert_close(compiled(frame, dt), eager(frame, dt), atol=TOLERANCE, rtol=TOLERANCE)
+        torch.testing.assert_close(compiled_look.exposure.adapted_luminance, eager.exposure.adapted_luminance)
+    assert counter.frame_count == 1
+
+
+def test_a_compiled_look_trains_as_eager(monkeypatch):
+    """Forward and backward through ``tg.compile`` (AOTAutograd's joint graph; backend "aot_eager" runs it without
+    Inductor): the image's gradient is as close to a float64 eager gradient as float32 eager's is."""
+    real = torch.compile
+    monkeypatch.setattr(torch, "compile", lambda *args, **kwargs: real(*args, **{**kwargs, "backend": "aot_eager"}))
+    torch._dynamo.reset()
+    look = tg.PostFX.from_config(CINEMATIC).eval()
+    frame = hdr((1, 3, 24, 32))
+
+    def gradient(call, dtype=torch.float32):
+        image = frame.to(dtype, copy=True).requires_grad_()
+        call(image).sum().backward()
+        return image.grad.double()
+
+    compiled, eager = gradient(tg.compile(look)), gradient(look)
+    exact = gradient(tg.PostFX.from_config(CINEMATIC).eval().double(), torch.float64)
+    assert exact.abs().max() > 0.1  # a gradient the comparison can see
+    assert (compiled - exact).abs().max() <= 1.5 * (eager - exact).abs().max() + 1e-7

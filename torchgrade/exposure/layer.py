@@ -121,6 +121,22 @@ class AutoExposure(Stage):
         else:
             self.streams.pop(stream, None)
 
+    def prepare_compiled(self, image: torch.Tensor) -> None:
+        """Before a compiled frame (:func:`torchgrade.compile` calls it): an empty :attr:`adapted_luminance` becomes zeros
+        of ``image``'s batch shape. A state that is not positive starts a sequence as an empty one does, so the frame's
+        values are the same; the graph sees the state's shape from the first frame on, instead of compiling the look a
+        second time at the second frame (when the state first takes the batch's shape).
+
+        Examples:
+            >>> layer = AutoExposure()
+            >>> layer.prepare_compiled(torch.ones(2, 3, 4, 4))
+            >>> layer.adapted_luminance.tolist()
+            [0.0, 0.0]
+        """
+        if self.adapted_luminance.numel() == 0:
+            dtype = torch.promote_types(image.dtype, torch.float32)  # the state's dtype after a frame
+            self.adapted_luminance = torch.zeros(image.shape[:-3], dtype=dtype, device=image.device)
+
     def _history(self, state: torch.Tensor, image: torch.Tensor, dt) -> Optional[torch.Tensor]:
         """The state to adapt from, or ``None`` to adapt instantly."""
         if dt is None or state.numel() == 0:

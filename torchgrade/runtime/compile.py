@@ -14,7 +14,9 @@ compiles every size as it comes, and the ninth size stops with ``FailOnRecompile
 ``benchmarks/bench_gpu.py``.
 
 The compiled graph carries no range checks (they read values), so the wrapper checks every stage's learnable
-controls (:meth:`~torchgrade.Stage.check_learnable`) before each call, as an eager forward does.
+controls (:meth:`~torchgrade.Stage.check_learnable`) before each call, as an eager forward does. It also gives an
+exposure stage's empty state the batch's shape before the first frame
+(:meth:`~torchgrade.AutoExposure.prepare_compiled`), so the second frame runs the first frame's graph.
 
 Examples:
     >>> import torch
@@ -59,10 +61,13 @@ class CompiledModule(nn.Module):
         return call
 
     def forward(self, image: torch.Tensor, *args, **kwargs):
-        """Check the learnable controls of every stage (``check_learnable``, which the graph skips), then run the graph."""
+        """Check the learnable controls of every stage (``check_learnable``, which the graph skips), give state its shape
+        (``prepare_compiled``), then run the graph."""
         for stage in self.module.modules():
             if hasattr(stage, "check_learnable"):
                 stage.check_learnable()
+            if hasattr(stage, "prepare_compiled"):
+                stage.prepare_compiled(image)
         return self.compiled_for(image.device)(image, *args, **kwargs)
 
 
