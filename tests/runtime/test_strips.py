@@ -2,6 +2,8 @@
 float32 rounding, and the whole frame whenever autograd records the call or the device is not the CPU; a LUT's pixel
 runs on worker threads give the serial runs' values."""
 
+import multiprocessing
+import os
 import threading
 
 import pytest
@@ -83,6 +85,29 @@ def test_each_worker_computes_on_one_thread_whatever_the_callers_count():
         assert seen == [1] * 8 and torch.get_num_threads() == threads + 3
     finally:
         torch.set_num_threads(threads)
+
+
+def _squares_on_workers(queue=None):
+    out = torch.zeros(4)
+    runtime.run_pieces(lambda i: out.__setitem__(i, i * i), range(4), workers=2)
+    if queue is None:
+        return out.tolist()
+    queue.put(out.tolist())
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="platform-conditional: needs fork")
+def test_a_forked_child_runs_pieces_on_its_own_workers():
+    """A pool made before a fork holds threads that the child does not have: the child must start its own."""
+    assert _squares_on_workers() == [0.0, 1.0, 4.0, 9.0]  # the parent's pool of 2 exists now
+    context = multiprocessing.get_context("fork")
+    queue = context.Queue()
+    child = context.Process(target=_squares_on_workers, args=(queue,))
+    child.start()
+    child.join(60)
+    if child.is_alive():
+        child.kill()
+    assert child.exitcode == 0, "the forked child never finished its pieces"
+    assert queue.get(timeout=5) == [0.0, 1.0, 4.0, 9.0]
 
 
 def test_other_devices_compute_whole_frames():

@@ -17,6 +17,7 @@ Examples:
 
 from __future__ import annotations
 
+import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from typing import Callable, Iterable
@@ -27,6 +28,17 @@ __all__ = ["run_pieces", "worker_pool"]
 
 _POOLS: dict = {}
 _LOCK = threading.Lock()
+
+
+def _forget_pools() -> None:
+    """In a child forked from a process with pools: the parent's worker threads do not exist in the child, so a pool
+    kept from it would queue pieces that no thread ever runs (the child would wait for them forever)."""
+    global _LOCK
+    _POOLS.clear()
+    _LOCK = threading.Lock()
+
+
+os.register_at_fork(after_in_child=_forget_pools)
 
 
 def worker_pool(workers: int) -> ThreadPoolExecutor:
