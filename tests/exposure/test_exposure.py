@@ -157,6 +157,27 @@ def test_zero_state_means_no_history():
         torch.testing.assert_close(a, b)
 
 
+@pytest.mark.parametrize("dt", [math.nan, math.inf, -1.0, 1e6])
+@pytest.mark.parametrize("speed", [0.0, 1.5])
+def test_a_step_that_restarts_the_sequence_gives_the_first_frames_gradients(dt, speed):
+    """A tensor step is not read: outside [0, 65504] it starts the sequence again, in values and in gradients (the
+    branch not taken once carried a NaN step into the image's gradient and a learnable speed's)."""
+    image = torch.rand(2, 3, 6, 6, dtype=torch.float64) + 0.2
+
+    def gradients(state, step):
+        stage = tg.AutoExposure(speed=torch.nn.Parameter(torch.tensor(speed, dtype=torch.float64)))
+        x = image.clone().requires_grad_()
+        exposed, adapted = stage.frame(x, state, step)  # a stage's frame does not read a tensor step
+        (exposed.sum() + adapted.sum()).backward()
+        return exposed, x.grad, stage.speed.grad
+
+    restarted = gradients(torch.tensor([0.3, 2.0], dtype=torch.float64), torch.tensor(dt, dtype=torch.float64))
+    fresh = gradients(None, 0.0)
+    for got, want in zip(restarted[:2], fresh[:2]):
+        torch.testing.assert_close(got, want)
+    assert restarted[2] is None or restarted[2] == 0  # the speed moved nothing
+
+
 # ---------------------------------------------------------------- operators
 
 

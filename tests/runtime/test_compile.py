@@ -33,10 +33,10 @@ def test_a_look_module_is_captured_as_one_graph():
         torch.testing.assert_close(torch.compile(look, fullgraph=True, backend="eager")(image), look(image), atol=TOLERANCE, rtol=TOLERANCE)
 
 
-def _captured_only(monkeypatch):
-    """``tg.compile`` through Dynamo alone (backend "eager"): what these tests check is the capture, not Inductor."""
+def _captured_only(monkeypatch, backend="eager"):
+    """``tg.compile`` through ``backend`` (Dynamo alone by default): what these tests check is the capture, not Inductor."""
     real = torch.compile
-    monkeypatch.setattr(torch, "compile", lambda *args, **kwargs: real(*args, **{**kwargs, "backend": "eager"}))
+    monkeypatch.setattr(torch, "compile", lambda *args, **kwargs: real(*args, **{**kwargs, "backend": backend}))
     torch._dynamo.reset()
 
 
@@ -70,9 +70,7 @@ def test_a_compiled_look_with_exposure_compiles_once_and_adapts_as_eager(monkeyp
     from torch._dynamo.testing import CompileCounter
 
     counter = CompileCounter()
-    real = torch.compile
-    monkeypatch.setattr(torch, "compile", lambda *args, **kwargs: real(*args, **{**kwargs, "backend": counter}))
-    torch._dynamo.reset()
+    _captured_only(monkeypatch, counter)
     config = {"exposure": CINEMATIC["exposure"], "tonemap": {"mode": "reinhard"}}
     eager, compiled_look = tg.PostFX.from_config(config).eval(), tg.PostFX.from_config(config).eval()
     compiled = tg.compile(compiled_look)
@@ -87,9 +85,7 @@ def test_a_compiled_look_with_exposure_compiles_once_and_adapts_as_eager(monkeyp
 def test_a_compiled_look_trains_as_eager(monkeypatch):
     """Forward and backward through ``tg.compile`` (AOTAutograd's joint graph; backend "aot_eager" runs it without
     Inductor): the image's gradient is as close to a float64 eager gradient as float32 eager's is."""
-    real = torch.compile
-    monkeypatch.setattr(torch, "compile", lambda *args, **kwargs: real(*args, **{**kwargs, "backend": "aot_eager"}))
-    torch._dynamo.reset()
+    _captured_only(monkeypatch, "aot_eager")
     look = tg.PostFX.from_config(CINEMATIC).eval()
     frame = hdr((1, 3, 24, 32))
 
@@ -102,3 +98,17 @@ def test_a_compiled_look_trains_as_eager(monkeypatch):
     exact = gradient(tg.PostFX.from_config(CINEMATIC).eval().double(), torch.float64)
     assert exact.abs().max() > 0.1  # a gradient the comparison can see
     assert (compiled - exact).abs().max() <= 1.5 * (eager - exact).abs().max() + 1e-7
+
+
+def test_a_compiled_frame_that_fails_leaves_the_exposure_state_empty_and_a_stream_leaves_it_alone(monkeypatch):
+    _captured_only(monkeypatch)
+    stage = tg.AutoExposure(speed=1.5)
+    compiled = tg.compile(stage)
+    with pytest.raises(Exception, match="dt must lie"):  # Dynamo reports the ValueError it traced
+        compiled(hdr((2, 3, 8, 8)), -1.0)
+    assert stage.adapted_luminance.numel() == 0
+    compiled(hdr((4, 3, 8, 8)), 0.5, stream="cam")
+    assert stage.adapted_luminance.numel() == 0 and stage.streams["cam"].shape == (4,)
+    compiled(hdr((3, 3, 8, 8)), 0.5)  # a first frame of another batch: no sequence to break
+    assert stage.adapted_luminance.shape == (3,)
+

@@ -106,6 +106,7 @@ def test_a_forked_child_runs_pieces_on_its_own_workers():
     child.join(60)
     if child.is_alive():
         child.kill()
+        child.join()
     assert child.exitcode == 0, "the forked child never finished its pieces"
     assert queue.get(timeout=5) == [0.0, 1.0, 4.0, 9.0]
 

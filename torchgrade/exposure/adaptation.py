@@ -402,11 +402,19 @@ def _adapted(scene: torch.Tensor, target: torch.Tensor, adapted: Optional[torch.
     (and bounded by the limits where ``limited``: a fixed exposure is not)."""
     if adapted is None:
         return target
+    # A state that is not a positive number, or a step outside [0, 65504] (NaN too), starts the sequence again. A
+    # tensor step is not read: it is bounded for the branch not taken (a NaN there would make the gradient NaN).
     previous = _previous_state(adapted, scene)
-    dt = scalar_param(dt, scene, "dt")
-    moved = adapt_luminance(previous, target, dt, c["speed"], c["speed_to_light"], c["speed_to_dark"])
-    # a state that is not a positive number, or a step that is not finite or negative, starts the sequence again
-    return torch.where((previous > 0) & (dt >= 0) & moved.isfinite(), _limited(moved, c) if limited else moved, target)
+    if isinstance(dt, torch.Tensor):
+        dt = scalar_param(dt, scene, "dt")
+        step = dt.clamp(0.0, HALF_MAX).nan_to_num(0.0)
+        keeps = (previous > 0) & (step == dt)
+    elif 0.0 <= dt <= HALF_MAX:
+        step, keeps = scalar_param(dt, scene, "dt"), previous > 0
+    else:
+        return target
+    moved = adapt_luminance(previous, target, step, c["speed"], c["speed_to_light"], c["speed_to_dark"])
+    return torch.where(keeps & moved.isfinite(), _limited(moved, c) if limited else moved, target)
 
 
 def _limited(luminance: torch.Tensor, c: dict) -> torch.Tensor:

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
 from typing import Hashable, Optional
 
 import torch
 
-from ..base.core import Param, check_image, scalar_param
+from ..base.core import Param, check_image, scalar_param, working_dtype
 from ..base.stage import Stage
 from .adaptation import (
     BOUNDS,
@@ -121,21 +122,32 @@ class AutoExposure(Stage):
         else:
             self.streams.pop(stream, None)
 
-    def prepare_compiled(self, image: torch.Tensor) -> None:
-        """Before a compiled frame (:func:`torchgrade.compile` calls it): an empty :attr:`adapted_luminance` becomes zeros
-        of ``image``'s batch shape. A state that is not positive starts a sequence as an empty one does, so the frame's
-        values are the same; the graph sees the state's shape from the first frame on, instead of compiling the look a
-        second time at the second frame (when the state first takes the batch's shape).
+    @contextlib.contextmanager
+    def compiled_frame(self, image: torch.Tensor, dt: Optional[Param] = None, stream: Optional[Hashable] = None):
+        """Around a compiled frame (:func:`torchgrade.compile` enters it): an empty :attr:`adapted_luminance` holds zeros
+        of ``image``'s batch shape for the call, kept if the frame runs and emptied again if it raises. A state that
+        is not positive starts a sequence as an empty one does (the same values; a learnable ``speed`` gets a zero
+        gradient where there is none); the graph then sees the state's shape from the first frame on, instead of
+        compiling the look a second time at the second frame, when the state first takes the batch's shape. A
+        ``stream``'s state is left alone.
 
         Examples:
             >>> layer = AutoExposure()
-            >>> layer.prepare_compiled(torch.ones(2, 3, 4, 4))
-            >>> layer.adapted_luminance.tolist()
+            >>> with layer.compiled_frame(torch.ones(2, 3, 4, 4)):
+            ...     layer.adapted_luminance.tolist()
             [0.0, 0.0]
         """
-        if self.adapted_luminance.numel() == 0:
-            dtype = torch.promote_types(image.dtype, torch.float32)  # the state's dtype after a frame
-            self.adapted_luminance = torch.zeros(image.shape[:-3], dtype=dtype, device=image.device)
+        if stream is not None or self.adapted_luminance.numel() != 0:
+            yield
+            return
+        empty = self.adapted_luminance
+        dtype = working_dtype(image.new_empty(0)).dtype  # the state's dtype after a frame
+        self.adapted_luminance = torch.zeros(image.shape[:-3], dtype=dtype, device=image.device)
+        try:
+            yield
+        except BaseException:
+            self.adapted_luminance = empty
+            raise
 
     def _history(self, state: torch.Tensor, image: torch.Tensor, dt) -> Optional[torch.Tensor]:
         """The state to adapt from, or ``None`` to adapt instantly."""

@@ -196,6 +196,11 @@ class PostFX(nn.Module):
         """The stages in order on the colour channels, ``dt`` to those that keep state between frames."""
         return _through(self.stages().items(), image, dt)
 
+    def compiled_frame(self, image: torch.Tensor, dt=None):
+        """Around a compiled frame (:func:`torchgrade.compile` enters it): the exposure stage's
+        :meth:`~torchgrade.AutoExposure.compiled_frame`, so one graph serves the first frame and the next."""
+        return self.exposure.compiled_frame(image, dt) if self.exposure is not None else contextlib.nullcontext()
+
     def finish(self, image: torch.Tensor) -> torch.Tensor:
         """The stages after exposure (those that keep no state between frames), in order."""
         return _through([(name, stage) for name, stage in self.stages().items() if not SLOT[name].timed], image, None)

@@ -19,8 +19,8 @@ with no temporary buffers. The eager default on the CPU (:func:`chunked_lookup`)
 operation over runs of :data:`~torchgrade.runtime.LOOKUP_CHUNK` pixels, each run on one thread, as
 OpenColorIO's CPU processor does: the temporaries stay in cache, and no operation waits at a thread
 barrier (on a loaded machine each barrier can wait for a descheduled thread; benchmarks/results/lut.md
-measured 131× OpenColorIO with two threads). On many cores the runs are spread over worker threads
-(:class:`~torchgrade.runtime.ExecutionPolicy`); on other devices the frame is one pass. Without autograd, tetrahedral runs its eager form
+measured 131× OpenColorIO with two threads). From 2 intra-op threads up the runs are spread over as
+many worker threads (:class:`~torchgrade.runtime.ExecutionPolicy`); on other devices the frame is one pass. Without autograd, tetrahedral runs its eager form
 from value-and-step tables derived once per LUT: on the CPU :class:`~torchgrade.lut.kernels.TetrahedralRuns`,
 15 in-place operations a run into buffers allocated once per call (12 one-float gathers a pixel are about half
 its time; benchmarks/bench_lut.py measures both against OpenColorIO), elsewhere

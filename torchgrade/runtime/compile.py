@@ -14,9 +14,10 @@ compiles every size as it comes, and the ninth size stops with ``FailOnRecompile
 ``benchmarks/bench_gpu.py``.
 
 The compiled graph carries no range checks (they read values), so the wrapper checks every stage's learnable
-controls (:meth:`~torchgrade.Stage.check_learnable`) before each call, as an eager forward does. It also gives an
-exposure stage's empty state the batch's shape before the first frame
-(:meth:`~torchgrade.AutoExposure.prepare_compiled`), so the second frame runs the first frame's graph.
+controls (:meth:`~torchgrade.Stage.check_learnable`) before each call, as an eager forward does. A module with
+state to shape before its first frame (``AutoExposure``, a ``PostFX`` with one) says so with a ``compiled_frame``
+context the wrapper enters around each call (:meth:`~torchgrade.AutoExposure.compiled_frame`), so the second frame
+runs the first frame's graph.
 
 Examples:
     >>> import torch
@@ -28,6 +29,7 @@ Examples:
 
 from __future__ import annotations
 
+import contextlib
 from typing import Optional
 
 import torch
@@ -61,14 +63,14 @@ class CompiledModule(nn.Module):
         return call
 
     def forward(self, image: torch.Tensor, *args, **kwargs):
-        """Check the learnable controls of every stage (``check_learnable``, which the graph skips), give state its shape
-        (``prepare_compiled``), then run the graph."""
+        """Check the learnable controls of every stage (``check_learnable``, which the graph skips), then run the graph
+        inside the module's ``compiled_frame`` where it has one."""
         for stage in self.module.modules():
             if hasattr(stage, "check_learnable"):
                 stage.check_learnable()
-            if hasattr(stage, "prepare_compiled"):
-                stage.prepare_compiled(image)
-        return self.compiled_for(image.device)(image, *args, **kwargs)
+        frame = getattr(self.module, "compiled_frame", None)
+        with frame(image, *args, **kwargs) if frame is not None else contextlib.nullcontext():
+            return self.compiled_for(image.device)(image, *args, **kwargs)
 
 
 def compile(module: nn.Module, *, cuda_graphs: bool = True, dynamic: Optional[bool] = None) -> CompiledModule:

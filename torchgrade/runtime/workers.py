@@ -38,7 +38,8 @@ def _forget_pools() -> None:
     _LOCK = threading.Lock()
 
 
-os.register_at_fork(after_in_child=_forget_pools)
+if hasattr(os, "register_at_fork"):  # where processes fork (not Windows)
+    os.register_at_fork(after_in_child=_forget_pools)
 
 
 def worker_pool(workers: int) -> ThreadPoolExecutor:
