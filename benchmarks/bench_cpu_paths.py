@@ -34,6 +34,7 @@ def cases() -> dict:
     grade = tg.ColorGrade(**CINEMATIC["grade"])
     tonemap = tg.ToneMap("aces")
     bloom = tg.Bloom(**CINEMATIC["bloom"])
+    exposure = tg.AutoExposure(**CINEMATIC["exposure"])  # no dt: every frame meters afresh
     lut = tg.bake_lut(tg.PostFX(grade={"contrast": 20, "saturation": 10}, tonemap="aces"), size=33, report_tolerance=float("inf"))
     pixels = torch.rand(1, 3, 1080, 1920, generator=torch.Generator().manual_seed(0)) * 1.1 - 0.05
     aces2 = tg.ToneMap("aces2")
@@ -46,6 +47,7 @@ def cases() -> dict:
         "tone map aces": lambda: tonemap(image),
         "tone map aces2": lambda: aces2(image),
         "bloom scattering": lambda: bloom(image),
+        "exposure histogram": lambda: exposure(image),
         "LUT 33^3 tetrahedral": lambda: lut(pixels, "tetrahedral"),
         "LUT 33^3 logc_hdr": lambda: hdr_lut(image),
         "RandomPostFX 32x224^2": lambda: augment(batch),

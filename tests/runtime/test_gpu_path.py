@@ -35,7 +35,7 @@ LAUNCH_BUDGET = {"cinematic": 292, "exposure": 51, "bloom": 111, "grade": 47, "t
 """Operations dispatched for one 3840x2160 frame of ``export/looks/cinematic.json`` (no_grad), per stage and whole:
 each a kernel launch on CUDA (arithmetic on 0-d CPU tensors alone launches nothing). Measured 292 (exposure 51, bloom
 111, grade 47, tone map 86); log contrast's slope on the host (``runtime.scalar``) took 2. The histogram counted per
-column (``ExecutionPolicy.histogram_per_column``) took 3 of them and an H200's 4K exposure from 13.2 to 1.7 ms; 300
+column (``ExecutionPolicy.histogram_tables``) took 3 of them and an H200's 4K exposure from 13.2 to 1.7 ms; 300
 before the ACES fit and sigmoid took a product and a sum by numbers as one operation (``runtime.affine``) and the dim
 surround's planes went into the last matrix without a concatenation; 401 before the grade's split toning, the ACES
 fit's sigmoid and the bloom's knee were written in fewer operations, the small pyramid levels blurred by one

@@ -45,11 +45,12 @@ def test_only_the_gpu_policy_blurs_small_planes_with_one_kernel_and_drops_nan_wi
     assert cpu.one_kernel_blur_pixels is None and not cpu.nan_dropping_max
 
 
-def test_only_a_gpu_counts_a_histogram_per_column_compiled_or_not(monkeypatch):
-    assert policy.WHOLE_FRAMES.histogram_per_column and not policy.policy_for(torch.device("cpu")).histogram_per_column
+def test_a_gpu_counts_a_histogram_per_column_compiled_or_not_and_the_cpu_into_a_few_tables(monkeypatch):
+    assert policy.WHOLE_FRAMES.histogram_tables is None
+    assert policy.policy_for(torch.device("cpu")).histogram_tables == policy.CPU_HISTOGRAM_TABLES > 1
     monkeypatch.setattr(torch.compiler, "is_compiling", lambda: True)
-    assert policy.policy_for(torch.device("meta")).histogram_per_column
-    assert not policy.policy_for(torch.device("cpu")).histogram_per_column
+    assert policy.policy_for(torch.device("meta")).histogram_tables is None
+    assert policy.policy_for(torch.device("cpu")).histogram_tables == 1
 
 
 @pytest.mark.parametrize("mask", ["average", "spot"])
@@ -59,6 +60,20 @@ def test_a_histogram_counted_per_column_meters_each_image_of_a_batch_as_one_row_
     request.getfixturevalue("monkeypatch").undo()
     alone = torch.cat([tg.exposure.meter_luminance(frame[None], "histogram", mask=mask) for frame in frames])
     torch.testing.assert_close(metered, alone, rtol=1e-5, atol=0)
+
+
+@pytest.mark.parametrize("tables", [None, 1, 3, 8])
+@pytest.mark.parametrize("width", [5, 8, 13])
+def test_a_histogram_counts_the_same_into_any_number_of_tables(tables, width, monkeypatch):
+    """Integer weights (each pixel's own value, rounded to 1/8) make every sum exact: any order of the additions, and so
+    any split into tables, gives the same histogram, bit for bit. Widths below, at and past the table count."""
+    from torchgrade.exposure import metering
+
+    stops = (torch.randn(2, 1, 7, width, generator=torch.Generator().manual_seed(width)) * 3 * 8).round() / 8
+    monkeypatch.setattr(metering, "policy_for", lambda device: policy.ExecutionPolicy(None, 1, None, False, False, histogram_tables=1))
+    expected = metering.histogram_band_average(stops, None, -8.0, 8.0, 10.0, 90.0)
+    monkeypatch.setattr(metering, "policy_for", lambda device: policy.ExecutionPolicy(None, 1, None, False, False, histogram_tables=tables))
+    assert torch.equal(metering.histogram_band_average(stops, None, -8.0, 8.0, 10.0, 90.0), expected)
 
 
 @pytest.mark.parametrize("name", list(LOOKS))

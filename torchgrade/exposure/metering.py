@@ -138,21 +138,22 @@ def _per_row(value):
 
 
 @device_cached
-def _column_offsets(width: int, device: torch.device) -> torch.Tensor:
-    """``(1, 1, width)``: the first bin of each column's row of a per-column histogram."""
-    return (torch.arange(width, device=device) * HISTOGRAM_BINS).reshape(1, 1, width)
+def _column_offsets(width: int, tables: int, device: torch.device) -> torch.Tensor:
+    """``(1, 1, width)``: the first bin of each image column's table, column ``c`` counted into table ``c mod tables``."""
+    return (torch.arange(width, device=device) % tables * HISTOGRAM_BINS).reshape(1, 1, width)
 
 
 def _counted(bins: torch.Tensor, width: int, *amounts: torch.Tensor) -> tuple:
     """``(B, HISTOGRAM_BINS)`` for each of ``amounts`` (``(B, N)``): its sum in each of ``bins`` (``(B, N)``, of images
-    ``width`` wide), counted per image column on a GPU (:attr:`~torchgrade.runtime.ExecutionPolicy.histogram_per_column`)."""
-    batch, columns = bins.shape[0], 1
-    if policy_for(bins.device).histogram_per_column:
-        columns = width
-        bins = (bins.reshape(batch, -1, width) + _column_offsets(width, bins.device)).reshape(batch, -1)
-    empty = torch.zeros(batch, columns * HISTOGRAM_BINS, dtype=amounts[0].dtype, device=amounts[0].device)
+    ``width`` wide), neighbouring columns counted into different tables, summed after, as the device's policy asks
+    (:attr:`~torchgrade.runtime.ExecutionPolicy.histogram_tables`)."""
+    batch, tables = bins.shape[0], policy_for(bins.device).histogram_tables or width
+    tables = min(tables, width)
+    if tables > 1:
+        bins = (bins.reshape(batch, -1, width) + _column_offsets(width, tables, bins.device)).reshape(batch, -1)
+    empty = torch.zeros(batch, tables * HISTOGRAM_BINS, dtype=amounts[0].dtype, device=amounts[0].device)
     counted = (empty.scatter_add(1, bins, amount) for amount in amounts)
-    return tuple(c if columns == 1 else c.reshape(batch, columns, HISTOGRAM_BINS).sum(dim=1) for c in counted)
+    return tuple(c if tables == 1 else c.reshape(batch, tables, HISTOGRAM_BINS).sum(dim=1) for c in counted)
 
 
 def histogram_band_average(stops: torch.Tensor, weights: Optional[torch.Tensor], low, high, low_percent, high_percent) -> torch.Tensor:

@@ -30,7 +30,8 @@ import torch
 
 from .recording import is_tracing
 
-__all__ = ["ExecutionPolicy", "policy_for", "STRIP_PIXELS_PER_THREAD", "PARALLEL_FROM", "LOOKUP_CHUNK", "ONE_KERNEL_BLUR_PIXELS"]
+__all__ = ["ExecutionPolicy", "policy_for", "STRIP_PIXELS_PER_THREAD", "PARALLEL_FROM", "LOOKUP_CHUNK", "ONE_KERNEL_BLUR_PIXELS",
+           "CPU_HISTOGRAM_TABLES"]
 
 STRIP_PIXELS_PER_THREAD = 1 << 16
 """Pixels of a CPU strip per intra-op thread (batch included). On a 2-core Xeon (2 MiB L2 a core), grade + tone map of
@@ -71,11 +72,12 @@ class ExecutionPolicy:
             convolution (taps² products a pixel, one launch) instead of two 1-D ones (one launch each); ``None``: never.
         nan_dropping_max: ``max(x, 0)`` with NaN to 0 as one ``torch.fmax`` (one launch) instead of a clamp and a NaN
             pass; the CPU does not vectorise ``fmax``, which runs several times slower there than the two passes.
-        histogram_per_column: a histogram counted into one row of bins per image column, the rows summed after. A GPU
-            counts with atomic additions, and the 8.3 million pixels of a 4K frame counted into one row of 128 bins
-            wait on each other (``AutoExposure(metering="histogram")`` took 13.2 ms a 4K frame on an H200,
-            ``benchmarks/results/gpu.md``); neighbouring pixels then add to different addresses. The CPU counts a
-            row in order, with no atomics, and would only pay the larger table.
+        histogram_tables: the tables of bins a histogram is counted into, image column ``c`` into table ``c mod
+            histogram_tables``, the tables summed after; ``None``: one per column. Neighbouring pixels, often of one
+            bin, then add to different addresses instead of each waiting on the one before: on a GPU, atomic
+            additions (the 8.3 million pixels of a 4K frame counted into one table of 128 bins took 13.2 ms on an
+            H200, ``AutoExposure(metering="histogram")``, ``benchmarks/results/gpu.md``); on the CPU, a chain of
+            additions to one address (see :data:`CPU_HISTOGRAM_TABLES`).
     """
 
     strip_pixels: Optional[int]
@@ -85,8 +87,16 @@ class ExecutionPolicy:
     filters_as_kernels: bool
     one_kernel_blur_pixels: Optional[int] = None
     nan_dropping_max: bool = False
-    histogram_per_column: bool = False
+    histogram_tables: Optional[int] = 1
 
+
+CPU_HISTOGRAM_TABLES = 8
+"""Tables a CPU counts a histogram into (:attr:`ExecutionPolicy.histogram_tables`). The CPU adds a pixel to its bin
+after the previous pixel's addition, and neighbouring pixels of a frame mostly fall in one bin: each addition then
+waits for the one before it at the same address. Eight neighbouring columns in eight tables of 128 bins (4 KiB, in
+the core's first-level cache) break that chain: the cinematic look's exposure stage at 1920x1080 took 0.86 and 0.65
+of its time with one table (``benchmarks/results/cpu_paths.md``, one thread, both orders); one table per column
+(1920) left the first-level cache and was slower than one."""
 
 ONE_KERNEL_BLUR_PIXELS = 1 << 17
 """Pixels of a plane up to which a GPU blurs it with one 2-D convolution. A 9-tap blur of 2^17 pixels is 10.6 million
@@ -94,13 +104,13 @@ products a channel, microseconds on a GPU, against a launch's 24 µs (``benchmar
 bloom pyramid (from 270x480 at 4K; 8 of its 9 levels) cost their launches, not their arithmetic."""
 
 WHOLE_FRAMES = ExecutionPolicy(strip_pixels=None, workers=1, lookup_chunk=None, reads_values=False, filters_as_kernels=True,
-                               one_kernel_blur_pixels=ONE_KERNEL_BLUR_PIXELS, nan_dropping_max=True, histogram_per_column=True)
+                               one_kernel_blur_pixels=ONE_KERNEL_BLUR_PIXELS, nan_dropping_max=True, histogram_tables=None)
 
 GRAPH = ExecutionPolicy(strip_pixels=None, workers=1, lookup_chunk=None, reads_values=False, filters_as_kernels=False)
 """While tracing, compiling or exporting: kornia's blur, which picks its own form for the compiler (convolution on the
 CPU, slices that Inductor fuses on CUDA) and exports as before."""
 
-COMPILED_OFF_CPU = replace(GRAPH, histogram_per_column=True)
+COMPILED_OFF_CPU = replace(GRAPH, histogram_tables=None)
 """While compiling for a GPU: a graph too, whose scatters Inductor makes atomic additions."""
 
 
@@ -119,4 +129,4 @@ def policy_for(device: torch.device) -> ExecutionPolicy:
     threads = torch.get_num_threads()
     workers = threads if threads >= PARALLEL_FROM else 1
     return ExecutionPolicy(strip_pixels=STRIP_PIXELS_PER_THREAD * threads, workers=workers, lookup_chunk=LOOKUP_CHUNK,
-                           reads_values=True, filters_as_kernels=False)
+                           reads_values=True, filters_as_kernels=False, histogram_tables=CPU_HISTOGRAM_TABLES)
