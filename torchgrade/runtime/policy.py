@@ -95,8 +95,8 @@ CPU_HISTOGRAM_TABLES = 8
 after the previous pixel's addition, and neighbouring pixels of a frame mostly fall in one bin: each addition then
 waits for the one before it at the same address. Eight neighbouring columns in eight tables of 128 bins (4 KiB, in
 the core's first-level cache) break that chain: the cinematic look's exposure stage at 1920x1080 took 0.86 and 0.65
-of its time with one table (``benchmarks/results/cpu_paths.md``, one thread, both orders); one table per column
-(1920) left the first-level cache and was slower than one."""
+of its time with one table (``benchmarks/results/cpu_paths.md``, one thread, both orders). A table per column, a
+GPU's choice, would not fit that cache (1920 tables of 128 bins at 1080p)."""
 
 ONE_KERNEL_BLUR_PIXELS = 1 << 17
 """Pixels of a plane up to which a GPU blurs it with one 2-D convolution. A 9-tap blur of 2^17 pixels is 10.6 million
