@@ -407,8 +407,8 @@ def _adapted(scene: torch.Tensor, target: torch.Tensor, adapted: Optional[torch.
     previous = _previous_state(adapted, scene)
     if isinstance(dt, torch.Tensor):
         dt = scalar_param(dt, scene, "dt")
-        step = dt.clamp(0.0, HALF_MAX).nan_to_num(0.0)
-        keeps = (previous > 0) & (step == dt)
+        valid = (dt >= 0.0) & (dt <= HALF_MAX)  # false for NaN
+        step, keeps = torch.where(valid, dt, 0.0), (previous > 0) & valid
     elif 0.0 <= dt <= HALF_MAX:
         step, keeps = scalar_param(dt, scene, "dt"), previous > 0
     else:
