@@ -43,8 +43,8 @@ strips, each of the same dozens of operations (Python dispatches every one of th
 PARALLEL_FROM = 2
 """Intra-op thread count from which a LUT's pixel runs (one thread each, :func:`torchgrade.lut.chunked_lookup`) go to
 as many worker threads; below it they run on the calling thread. ``benchmarks/bench_cpu_paths.py --threads 2 --clock
-wall`` on 2 cores: the 33³ tetrahedral lookup of a 1920x1080 frame on 2 workers took 0.79-0.84 of one thread's time
-(medians of 8, both orders). Strips of a look stay on the calling thread, each operation on every thread."""
+wall`` on 2 cores: the 33³ tetrahedral lookup of a 1920x1080 frame on 2 workers took 0.74-0.83 of one thread's time
+(``benchmarks/results/cpu_paths.md``: two comparisons, both orders each). Strips of a look stay on the calling thread, each operation on every thread."""
 
 LOOKUP_CHUNK = 32768
 """Pixels per pass of the eager CPU LUT lookup. Tetrahedral's eager form holds 20 values a pixel (2.5 MiB a run);
