@@ -158,6 +158,62 @@ def test_inductor_compiles_the_cinematic_look_without_matrix_calls_in_few_kernel
     torch.testing.assert_close(out, expected, rtol=1e-4, atol=1e-5)
 
 
+FRAME_BUFFER = re.compile(r"empty_strided_\w+\(\(([\d, ]+)\)")
+
+
+def frame_buffers(source: str, pixels: int) -> int:
+    """The buffers of a frame's size or more that a compiled graph allocates: the frames its kernels write (a frame
+    written by one kernel and read by the next is a pass over memory each way, and on a GPU two kernels)."""
+    sizes = [[int(n) for n in shape.replace(" ", "").split(",") if n] for shape in FRAME_BUFFER.findall(source)]
+    return sum(1 for size in sizes if torch.Size(size).numel() >= pixels)
+
+
+def test_inductor_compiles_the_aces_curve_into_one_pass_that_writes_only_the_output():
+    """``ToneMap("aces")`` as Inductor compiles it on the CPU: one loop over the pixels, the only frame it writes is
+    the output (its chain on planes, ``ExecutionPolicy.pixel_planes``; as frames it wrote 6)."""
+    from torch._inductor.utils import run_and_get_code
+
+    torch._dynamo.reset()
+    image = torch.rand(1, 3, 64, 96) * 8
+    with torch.no_grad():
+        out, code = run_and_get_code(torch.compile(tg.ToneMap("aces"), fullgraph=True), image)
+        expected = tg.ToneMap("aces")(image)
+    assert frame_buffers("\n".join(code), 64 * 96) == 1
+    torch.testing.assert_close(out, expected, rtol=1e-5, atol=1e-6)
+
+
+def captured_graph(module: torch.nn.Module, image: torch.Tensor) -> torch.fx.GraphModule:
+    """The graph Dynamo captures of ``module`` on ``image`` (no compiler runs it)."""
+    graphs = []
+
+    def keep(graph, inputs):
+        graphs.append(graph)
+        return graph.forward
+
+    torch._dynamo.reset()
+    with torch.no_grad():
+        torch.compile(module, fullgraph=True, backend=keep)(image)
+    return graphs[0]
+
+
+@pytest.mark.parametrize("mode", ["aces", "aces2", "aces2_hdr"])
+def test_a_compiled_aces_curve_stays_on_planes_from_its_first_step_on_one_to_its_stack(mode):
+    """The graph Inductor is given (:attr:`ExecutionPolicy.pixel_planes`): once a step computes one value a pixel, no
+    step computes more until the stack that makes the output (a frame's 3 values a pixel, or ACES 2.0's 8 table
+    values, start another loop, and on a GPU another kernel). The compiled form of ``aces``:
+    ``test_inductor_compiles_the_aces_curve_into_one_pass_that_writes_only_the_output``."""
+    image = torch.rand(1, 3, 8, 12)
+    pixels = 8 * 12
+    values_a_pixel = []
+    for node in captured_graph(tg.ToneMap(mode), image).graph.nodes:
+        value = node.meta.get("example_value")
+        if node.op in ("call_function", "call_method") and isinstance(value, torch.Tensor) and value.shape[-2:] == image.shape[-2:]:
+            values_a_pixel.append((value.numel() / pixels, str(node.target)))
+    on_planes = values_a_pixel[[count for count, _ in values_a_pixel].index(1):]
+    assert [count for count, _ in on_planes[:-1]] == [1] * (len(on_planes) - 1), [s for s in on_planes if s[0] != 1]
+    assert on_planes[-1][0] == 3 and "stack" in on_planes[-1][1]
+
+
 GRAPHS = {
     **{f"tonemap-{mode}": (lambda mode=mode: tg.ToneMap(mode)) for mode in tg.TONEMAP_MODES},
     "cinematic": lambda: tg.PostFX.from_config(CINEMATIC).eval(),

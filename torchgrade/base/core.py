@@ -49,6 +49,7 @@ __all__ = [
     "matrix_param",
     "apply_matrix",
     "matrix_on_planes",
+    "rows_on_planes",
     "matrix_product",
     "channel_sum",
     "check_range",
@@ -332,6 +333,22 @@ def matrix_on_planes(matrix: torch.Tensor, planes) -> torch.Tensor:
     for column, plane in zip(columns[1:], planes[1:]):
         out = out.addcmul_(column, plane) if in_place else torch.addcmul(out, column, plane)
     return out
+
+
+def rows_on_planes(rows, planes) -> tuple:
+    """A 3x3 matrix of plain numbers (``rows``, nested tuples as :func:`~torchgrade.runtime.values_of` gives) on an
+    image's three planes, returned as three planes: ``out_i = sum_j rows[i][j] planes[j]``.
+
+    The form of a chain computed on planes (:attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`): every step
+    loops over the pixels once, and the numbers are written into a compiled kernel.
+
+    Examples:
+        >>> swap = ((0.0, 1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, 1.0))
+        >>> [float(p) for p in rows_on_planes(swap, (torch.tensor(1.0), torch.tensor(2.0), torch.tensor(3.0)))]
+        [2.0, 1.0, 3.0]
+    """
+    red, green, blue = planes
+    return tuple(row[0] * red + row[1] * green + row[2] * blue for row in rows)
 
 
 def channel_sum(image: torch.Tensor, weights) -> torch.Tensor:

@@ -11,7 +11,8 @@ maths, so the maths modules keep one differentiable form each and ask :func:`pol
   loop multiplies launches (16,875 a 4K frame of ``export/looks/cinematic.json`` on an H200, against 1,060 whole;
   ``../shared/measurements/gpu-h200``) for no cache to gain; a value read back is a synchronisation, so no eager
   shortcut reads one; blurs and pooling are one library kernel each.
-* **While tracing, compiling or exporting**: one graph of whole frames, no reads.
+* **While tracing, compiling or exporting**: one graph of whole frames, no reads. While compiling, per-pixel chains
+  run on the image's three planes (:attr:`ExecutionPolicy.pixel_planes`), which the compiler fuses into one kernel.
 
 Examples:
     >>> import torch
@@ -78,6 +79,12 @@ class ExecutionPolicy:
             additions (the 8.3 million pixels of a 4K frame counted into one table of 128 bins took 13.2 ms on an
             H200, ``AutoExposure(metering="histogram")``, ``benchmarks/results/gpu.md``); on the CPU, a chain of
             additions to one address (see :data:`CPU_HISTOGRAM_TABLES`).
+        pixel_planes: a per-pixel chain that mixes channels (a colour matrix, a channel's maximum, a luminance) runs
+            on the image's three planes (the channel dimension unbound), stacked once at its end. Inductor fuses steps
+            that loop over the same number of elements: a step on the frame (3 values a pixel) after one on a plane
+            (1 a pixel) starts a new kernel, which writes and reads the frame again, so a chain that alternates them
+            is several kernels (6 for ``ToneMap("aces")``), and on planes one. Eager, a step on planes is three
+            launches instead of one: only while compiling.
     """
 
     strip_pixels: Optional[int]
@@ -88,6 +95,7 @@ class ExecutionPolicy:
     one_kernel_blur_pixels: Optional[int] = None
     nan_dropping_max: bool = False
     histogram_tables: Optional[int] = 1
+    pixel_planes: bool = False
 
 
 CPU_HISTOGRAM_TABLES = 8
@@ -110,8 +118,11 @@ GRAPH = ExecutionPolicy(strip_pixels=None, workers=1, lookup_chunk=None, reads_v
 """While tracing, compiling or exporting: kornia's blur, which picks its own form for the compiler (convolution on the
 CPU, slices that Inductor fuses on CUDA) and exports as before."""
 
-COMPILED_OFF_CPU = replace(GRAPH, histogram_tables=None)
-"""While compiling for a GPU: a graph too, whose scatters Inductor makes atomic additions."""
+COMPILED = replace(GRAPH, pixel_planes=True)
+"""While compiling: a graph whose per-pixel chains run on planes, for Inductor to fuse."""
+
+COMPILED_OFF_CPU = replace(COMPILED, histogram_tables=None)
+"""While compiling for a GPU: its scatters Inductor makes atomic additions."""
 
 
 def policy_for(device: torch.device) -> ExecutionPolicy:
@@ -122,8 +133,10 @@ def policy_for(device: torch.device) -> ExecutionPolicy:
         >>> policy_for(torch.device("cuda", 0)) == WHOLE_FRAMES
         True
     """
+    if torch.compiler.is_compiling():
+        return COMPILED if device.type == "cpu" else COMPILED_OFF_CPU
     if is_tracing():
-        return COMPILED_OFF_CPU if torch.compiler.is_compiling() and device.type != "cpu" else GRAPH
+        return GRAPH
     if device.type != "cpu":
         return WHOLE_FRAMES
     threads = torch.get_num_threads()

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import torch
 
-from ..base.core import apply_matrix, matrix_on_planes, untracked
-from ..color import AP1_LUMINANCE, MATRICES, convert, unity_to_aces
+from ..base.core import apply_matrix, matrix_on_planes, rows_on_planes, untracked
+from ..color import AP1_LUMINANCE, MATRICES, MATRIX_VALUES, convert, unity_to_aces
 from ..color.spaces import shared_matrix
-from ..runtime import affine, constant, values_of, where
+from ..runtime import affine, constant, policy_for, values_of, where
 from .aces_rrt import (
     AP1_TO_REC709,
     DIM_SURROUND_GAMMA,
@@ -71,7 +71,7 @@ def aces_fitted(aces: torch.Tensor) -> torch.Tensor:
     if torch.onnx.is_in_onnx_export():
         # The RRT's planes go into the next matrix as they are (matrix_on_planes), without a Concat and a Split (the
         # matrices on planes too, as 9 products by constants and 6 sums, would add 38 nodes).
-        planes = rrt_glow_and_red_modifier_planes(aces, smoothstep_hue_weight)
+        planes = rrt_glow_and_red_modifier_planes(aces.split(1, dim=-3), smoothstep_hue_weight)
         ap1 = matrix_on_planes(shared_matrix("ap0_to_ap1", aces), planes)
     else:
         ap1 = convert(rrt_glow_and_red_modifier(aces, smoothstep_hue_weight), "ap0_to_ap1")
@@ -81,6 +81,21 @@ def aces_fitted(aces: torch.Tensor) -> torch.Tensor:
     return matrix_on_planes(constant(_ODT_TAIL_VALUES, xyz), _dim_surround_planes(*xyz.split(1, dim=-3)))
 
 
+def aces_fitted_planes(planes) -> tuple:
+    """:func:`aces_fitted` step by step on the three planes of ACES2065-1, returned as the three planes of linear
+    Rec.709: the form a compiler fuses into one kernel (:attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`).
+
+    Examples:
+        >>> image = torch.rand(3, 2, 2) * 4
+        >>> bool(torch.allclose(torch.stack(aces_fitted_planes(image.unbind(-3)), dim=-3), aces_fitted(image), atol=1e-6))
+        True
+    """
+    ap1 = rows_on_planes(MATRIX_VALUES["ap0_to_ap1"], rrt_glow_and_red_modifier_planes(planes, smoothstep_hue_weight))
+    acescg = rows_on_planes(_RRT_DESATURATE_VALUES, [plane.clamp_min(0.0) for plane in ap1])
+    xyz = rows_on_planes(MATRIX_VALUES["ap1_to_xyz"], [_fit(plane) for plane in acescg])
+    return rows_on_planes(_ODT_TAIL_VALUES, _dim_surround_planes(*xyz))
+
+
 def aces(image: torch.Tensor, clip: bool = True) -> torch.Tensor:
     """ACES filmic tone mapping as Unity does it: ``AcesTonemap(unity_to_ACES(min(x, 60)))`` (HDR §3.5).
 
@@ -88,6 +103,9 @@ def aces(image: torch.Tensor, clip: bool = True) -> torch.Tensor:
         >>> [round(v, 3) for v in aces(torch.tensor([0.18, 1.0, 100.0]).expand(3, 1, 3))[0, 0].tolist()]
         [0.108, 0.63, 0.945]
     """
+    if policy_for(image.device).pixel_planes:
+        scene = rows_on_planes(MATRIX_VALUES["srgb_to_ap0"], limited(image).unbind(-3))
+        return torch.stack([display(plane, clip) for plane in aces_fitted_planes(scene)], dim=-3)
     return display(aces_fitted(unity_to_aces(limited(image))), clip)
 
 

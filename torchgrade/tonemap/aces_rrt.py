@@ -167,7 +167,7 @@ def rrt_glow_and_red_modifier(aces: torch.Tensor, hue_weight, tiny: float = UNIT
         True
     """
     if torch.onnx.is_in_onnx_export():
-        return torch.cat(rrt_glow_and_red_modifier_planes(aces, hue_weight, tiny), dim=-3)
+        return torch.cat(rrt_glow_and_red_modifier_planes(aces.split(1, dim=-3), hue_weight, tiny), dim=-3)
     saturation = _rgb_saturation(aces, tiny)
     s = _sigmoid_shaper(affine(saturation, 5.0, -2.0))  # (s - 0.4) / 0.2
     aces = torch.addcmul(aces, aces, _glow(_rgb_yc(aces), _RRT_GLOW_GAIN * s, _RRT_GLOW_MID))
@@ -180,16 +180,16 @@ def rrt_glow_and_red_modifier(aces: torch.Tensor, hue_weight, tiny: float = UNIT
     return torch.cat((torch.addcmul(red, weight, toward_pivot, value=1.0 - _RRT_RED_SCALE), green_blue), dim=-3)
 
 
-def rrt_glow_and_red_modifier_planes(aces: torch.Tensor, hue_weight, tiny: float = UNITY_TINY) -> tuple:
-    """The export form of :func:`rrt_glow_and_red_modifier`: the same modules on the planes of one ``Split``, returned as
-    the three planes ``(..., 1, H, W)``.
+def rrt_glow_and_red_modifier_planes(planes, hue_weight, tiny: float = UNITY_TINY) -> tuple:
+    """The exported and compiled form of :func:`rrt_glow_and_red_modifier`: the same modules on the three planes of
+    ACES2065-1 (exported, of one ``Split``), returned as three planes of the same shape.
 
     Saturation, ``yc`` and hue each split the image in the eager form, and the glow scales it by a plane; in ONNX each
     split is a node, and that broadcast product costs more than the 3 products of planes here. Channel max and min are
     Max and Min of the planes (no reduction over channels, ``benchmarks/results/onnx_ops.md``), and the hue is its distance from red
     (:func:`_red_hue_distance`).
     """
-    r, g, b = aces.split(1, dim=-3)
+    r, g, b = planes
     saturation = _saturation(torch.maximum(torch.maximum(r, g), b), torch.minimum(torch.minimum(r, g), b), tiny)
     s = _sigmoid_shaper(affine(saturation, 5.0, -2.0))  # (s - 0.4) / 0.2
     gain = 1.0 + _glow(_yc(r, g, b), _RRT_GLOW_GAIN * s, _RRT_GLOW_MID)

@@ -18,11 +18,12 @@ from dataclasses import dataclass, field
 
 import torch
 
-from ...base.core import apply_matrix, matrix_on_planes, untracked
+from ...base.core import apply_matrix, matrix_on_planes, rows_on_planes, untracked
 from ...color import rgb_to_xyz_matrix, safe_pow
 from ...runtime import affine, constant, values_of, where
 
-__all__ = ["CAM16_PRIMARIES", "JMhParams", "jmh_params", "rgb_to_aab", "aab_to_jmh", "jmh_to_rgb", "y_to_j", "a_to_y"]
+__all__ = ["CAM16_PRIMARIES", "JMhParams", "jmh_params", "rgb_to_aab", "rgb_to_aab_planes", "aab_to_jmh",
+           "aab_planes_to_jmh", "jmh_to_rgb", "jmh_to_rgb_planes", "y_to_j", "a_to_y"]
 
 CAM16_PRIMARIES = ((0.8336, 0.1735), (2.3854, -1.4659), (0.087, -0.125), (0.333, 0.333))
 """The ACES 2.0 "modified CAM16" cone primaries and white (xy), replacing CAT16."""
@@ -158,6 +159,20 @@ def rgb_to_aab(rgb: torch.Tensor, p: JMhParams, dim: int = -3) -> torch.Tensor:
     return _apply(p, "cone_to_aab", cone_compress(_apply(p, "rgb_to_cone", rgb, dim)), dim)
 
 
+def rgb_to_aab_planes(planes, p: JMhParams) -> tuple:
+    """:func:`rgb_to_aab` on an image's three planes, returned as the planes ``(A, a, b)``: the form a compiler fuses
+    (:attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`).
+
+    Examples:
+        >>> from torchgrade.color import AP0_CHROMATICITIES
+        >>> p, rgb = jmh_params(AP0_CHROMATICITIES), torch.rand(3, 2, 2, dtype=torch.float64)
+        >>> torch.allclose(torch.stack(rgb_to_aab_planes(rgb.unbind(-3), p), dim=-3), rgb_to_aab(rgb, p))
+        True
+    """
+    cone = [cone_compress(plane) for plane in rows_on_planes(p.values["rgb_to_cone"], planes)]
+    return rows_on_planes(p.values["cone_to_aab"], cone)
+
+
 def _safe_hypot_atan2(a: torch.Tensor, b: torch.Tensor):
     """``sqrt(a²+b²)`` and ``atan2(b, a)`` with finite gradients at the origin (hue 0 there).
 
@@ -188,7 +203,11 @@ def aab_to_jmh(aab: torch.Tensor, p: JMhParams, dim: int = -3):
         >>> [round(float(v), 2) for v in (j, m, h)]
         [58.62, 52.42, 26.24]
     """
-    a_, a, b = aab.unbind(dim)
+    return aab_planes_to_jmh(*aab.unbind(dim), p)
+
+
+def aab_planes_to_jmh(a_: torch.Tensor, a: torch.Tensor, b: torch.Tensor, p: JMhParams):
+    """:func:`aab_to_jmh` of the planes ``A``, ``a`` and ``b``."""
     lit = a_ > 0
     j = J_SCALE * safe_pow(a_, p.cz)
     m, hue = _safe_hypot_atan2(a, b)
@@ -214,12 +233,32 @@ def jmh_to_rgb(j, m, cos_h, sin_h, p: JMhParams, dim: int = -3) -> torch.Tensor:
         >>> [round(v, 6) for v in jmh_to_rgb(j, m, cos_h, sin_h, p).flatten().tolist()]
         [0.5, 0.2, 0.1]
     """
-    planes = (safe_pow(j / J_SCALE, 1.0 / p.cz), m * cos_h, m * sin_h)
+    planes = _aab_planes(j, m, cos_h, sin_h, p)
     if dim == -3 and j.dim() >= 2:  # an image's planes go into the matrix as they are, without a concatenation
         cone = matrix_on_planes(constant(p.values["aab_to_cone"], j), [plane.unsqueeze(-3) for plane in planes])
     else:
         cone = _apply(p, "aab_to_cone", torch.stack(planes, dim), dim)
     return _apply(p, "cone_to_rgb", cone_expand(cone), dim)
+
+
+def jmh_to_rgb_planes(j, m, cos_h, sin_h, p: JMhParams) -> tuple:
+    """:func:`jmh_to_rgb` returned as the three planes of RGB: the form a compiler fuses
+    (:attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`).
+
+    Examples:
+        >>> from torchgrade.color import AP0_CHROMATICITIES
+        >>> p = jmh_params(AP0_CHROMATICITIES)
+        >>> j, m, _, cos_h, sin_h = aab_to_jmh(rgb_to_aab(torch.rand(3, 2, 2, dtype=torch.float64), p), p)
+        >>> torch.allclose(torch.stack(jmh_to_rgb_planes(j, m, cos_h, sin_h, p), dim=-3), jmh_to_rgb(j, m, cos_h, sin_h, p))
+        True
+    """
+    cone = [cone_expand(plane) for plane in rows_on_planes(p.values["aab_to_cone"], _aab_planes(j, m, cos_h, sin_h, p))]
+    return rows_on_planes(p.values["cone_to_rgb"], cone)
+
+
+def _aab_planes(j, m, cos_h, sin_h, p: JMhParams) -> tuple:
+    """``(A, a, b)`` of ``(J, M, h)``: ``A = (J / 100)^(1/cz)``, ``(a, b) = M (cos h, sin h)``."""
+    return safe_pow(j / J_SCALE, 1.0 / p.cz), m * cos_h, m * sin_h
 
 
 def a_to_y(a: torch.Tensor, p: JMhParams) -> torch.Tensor:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import torch
 
 from ...color import safe_pow, safe_sqrt
-from ...runtime import affine, constant, is_tracing, values_of, where
+from ...runtime import affine, constant, is_tracing, policy_for, values_of, where
 
 __all__ = ["count_below", "GamutParams", "gamut_compress", "focus_gain", "solve_j_intersect", "compression_slope",
            "hull_boundary_m", "focus_j"]
@@ -183,6 +183,8 @@ class GamutParams:
         hi = count_below(constant(self.hue_values, h), h.detach()).clamp(1, len(self.hue_values) - 1)
         segment = _gathered_columns(constant(self.cusp_segments, h), hi)
         t = (h - segment[0]) * segment[1]
+        if isinstance(segment, tuple):  # compiling: a plane a row (_gathered_columns)
+            return tuple(torch.addcmul(value, step, t) for value, step in zip(segment[2:5], segment[5:]))
         return torch.addcmul(segment[2:5], segment[5:], t).unbind(0)
 
     def reach_m(self, h: torch.Tensor) -> torch.Tensor:
@@ -212,17 +214,21 @@ def _segment_columns(knots: torch.Tensor, values: torch.Tensor) -> tuple:
     return values_of(torch.cat((rows[:1], rows)).T)
 
 
-def _gathered_columns(table: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
+def _gathered_columns(table: torch.Tensor, index: torch.Tensor):
     """``(C, *index.shape)``: the columns ``index`` of a ``(C, K)`` table, each row of the table a plane.
 
     By column, not ``table.T[index]``: CUDA gathers rows of a multiple of 16 bytes (the cusp table's 8 values) with a
     block of threads per pixel, 4.99 ms of a 4K frame of ACES 2.0's 14.19 ms on an H200 (``benchmarks/results/gpu.md``),
-    and the planes it would give are strided.
+    and the planes it would give are strided. While compiling, each row gathered on its own, as a tuple of planes
+    (:attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`): loads of the pixels' loop, where the ``(C, ...)``
+    gather is a loop of its own whose planes the frame's loop then reads back.
 
     Examples:
         >>> _gathered_columns(torch.tensor([[0.0, 10.0, 20.0], [1.0, 2.0, 3.0]]), torch.tensor([[2, 0]])).tolist()
         [[[20.0, 0.0]], [[3.0, 1.0]]]
     """
+    if policy_for(index.device).pixel_planes:
+        return tuple(row[index] for row in table)
     return table.index_select(1, index.reshape(-1)).view(table.shape[0], *index.shape)
 
 

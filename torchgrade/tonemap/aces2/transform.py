@@ -15,16 +15,25 @@ import weakref
 import torch
 
 from ... import color
-from ...base.core import apply_matrix, check_image, full_precision, sanitize
-from ...runtime import constant, values_of
+from ...base.core import (
+    apply_matrix,
+    check_image,
+    full_precision,
+    rows_on_planes,
+    sanitize,
+)
+from ...runtime import constant, policy_for, values_of
 from ..aces_rrt import REC709_TO_AP0
 from .cam import (
     REFERENCE_LUMINANCE,
     a_to_y,
+    aab_planes_to_jmh,
     aab_to_jmh,
     jmh_params,
     jmh_to_rgb,
+    jmh_to_rgb_planes,
     rgb_to_aab,
+    rgb_to_aab_planes,
     y_to_j,
 )
 from .gamut import FOCUS_DISTANCE, FOCUS_DISTANCE_SCALING, GamutParams, gamut_compress
@@ -88,13 +97,32 @@ class Aces2Output:
         """
         aab = rgb_to_aab(aces, self.inputs[primaries])
         j, m, h, cos_h, sin_h = aab_to_jmh(aab, self.aces)
-        j_ts = y_to_j(daniele_tonescale(a_to_y(aab.select(-3, 0), self.aces), self.tone), self.aces)
+        j_out, m_out = self._compressed(aab.select(-3, 0), j, m, h, cos_h, sin_h)
+        rgb = jmh_to_rgb(j_out, m_out, cos_h, sin_h, self.limit)
+        return rgb.clamp(0.0, self.peak / REFERENCE_LUMINANCE)
+
+    def render_planes(self, planes, primaries: str = "ap0") -> tuple:
+        """:meth:`render` on an image's three planes, returned as planes: the form a compiler fuses
+        (:attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`).
+
+        Examples:
+            >>> output, aces = _output(100.0, "rec709"), torch.rand(1, 3, 2, 2) * 4
+            >>> torch.allclose(torch.stack(output.render_planes(aces.unbind(-3)), dim=-3), output.render(aces), atol=1e-6)
+            True
+        """
+        a_, a, b = rgb_to_aab_planes(planes, self.inputs[primaries])
+        j, m, h, cos_h, sin_h = aab_planes_to_jmh(a_, a, b, self.aces)
+        j_out, m_out = self._compressed(a_, j, m, h, cos_h, sin_h)
+        rgb = jmh_to_rgb_planes(j_out, m_out, cos_h, sin_h, self.limit)
+        return tuple(plane.clamp(0.0, self.peak / REFERENCE_LUMINANCE) for plane in rgb)
+
+    def _compressed(self, a_, j, m, h, cos_h, sin_h) -> tuple:
+        """The tone scale, chroma compression and gamut compression of ``(J, M, h)``: ``(J, M)`` of the display."""
+        j_ts = y_to_j(daniele_tonescale(a_to_y(a_, self.aces), self.tone), self.aces)
         reach_m = self.gamut.reach_m(h)
         norm = chroma_norm(cos_h, sin_h, self.chroma)
         m_ts = chroma_compress(j, m, j_ts, norm, reach_m, self.gamut.limit_j_max, self.aces.cz, self.chroma)
-        j_out, m_out = gamut_compress(j_ts, m_ts, h, reach_m, self.gamut)
-        rgb = jmh_to_rgb(j_out, m_out, cos_h, sin_h, self.limit)
-        return rgb.clamp(0.0, self.peak / REFERENCE_LUMINANCE)
+        return gamut_compress(j_ts, m_ts, h, reach_m, self.gamut)
 
 
 class Prepared:
@@ -171,8 +199,14 @@ _MATRIX_VALUES = {
 """The transform's matrices as tuples of floats (device constants, :func:`~torchgrade.runtime.constant`)."""
 
 
-def _apply(name: str, image: torch.Tensor) -> torch.Tensor:
-    return apply_matrix(constant(_MATRIX_VALUES[name], image), image)
+def _matrix(values: tuple, x):
+    """A matrix of plain numbers on an image, or on its three planes given as a tuple (returned as planes)."""
+    return rows_on_planes(values, x) if isinstance(x, tuple) else apply_matrix(constant(values, x), x)
+
+
+def _each(function, x):
+    """``function`` of an image, or of each of its three planes given as a tuple."""
+    return tuple(function(plane) for plane in x) if isinstance(x, tuple) else function(x)
 
 
 def peak_number(peak_luminance) -> float:
@@ -233,28 +267,39 @@ def aces2_output(image: torch.Tensor, peak_luminance: float = 100.0, limiting_pr
         raise TypeError(f"aces2_output needs float32 or float64 input (its CAM overflows {image.dtype})")
     # The CAM's powers and the table lookups need float32 or better, whatever autocast is active.
     with full_precision():
-        linear = _display_linear(sanitize(image), peak, limiting_primaries, display_primaries, input_space)
-        if encoding == "bt1886":
-            return color.safe_pow(linear, 1.0 / 2.4)
-        if encoding == "pq":
-            return color.linear_to_pq(linear, reference=peak)
-        return linear
+        image = sanitize(image)
+        on_planes = policy_for(image.device).pixel_planes  # compiling: the chain on planes, fused into one kernel
+        linear = _display_linear(image.unbind(-3) if on_planes else image, peak, limiting_primaries,
+                                 display_primaries, input_space)
+        encoded = _each(lambda plane: _encoded(plane, encoding, peak), linear)
+        return torch.stack(encoded, dim=-3) if on_planes else encoded
 
 
-def _display_linear(x: torch.Tensor, peak: float, limiting: str, display: str, input_space: str) -> torch.Tensor:
+def _encoded(linear: torch.Tensor, encoding: str, peak: float) -> torch.Tensor:
+    """Display-linear values in the display's ``encoding`` (see :func:`aces2_output`)."""
+    if encoding == "bt1886":
+        return color.safe_pow(linear, 1.0 / 2.4)
+    if encoding == "pq":
+        return color.linear_to_pq(linear, reference=peak)
+    return linear
+
+
+def _display_linear(x, peak: float, limiting: str, display: str, input_space: str):
     """The Output Transform to display-linear RGB, 1.0 = peak: each run of matrices folded into one (into AP1, the AP1
-    -> AP0 matrix and the CAM's first, the display's and the scaling to the peak)."""
+    -> AP0 matrix and the CAM's first, the display's and the scaling to the peak). ``x`` is an image, or its three
+    planes as a tuple (:attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`), and the result takes its form."""
     output = _output(peak, limiting)
-    ap1 = _apply("rec709_to_ap1" if input_space == "rec709" else "ap0_to_ap1", x).clamp(0.0, output.tone.forward_limit)
-    rgb = output.render(ap1, "ap1")
+    into_ap1 = _matrix(_MATRIX_VALUES["rec709_to_ap1" if input_space == "rec709" else "ap0_to_ap1"], x)
+    ap1 = _each(lambda v: v.clamp(0.0, output.tone.forward_limit), into_ap1)
+    rgb = output.render_planes(ap1, "ap1") if isinstance(ap1, tuple) else output.render(ap1, "ap1")
     scale = REFERENCE_LUMINANCE / peak
     if limiting != display:
-        rgb = apply_matrix(constant(_display_matrix(limiting, display, scale), rgb), rgb)
+        rgb = _matrix(_display_matrix(limiting, display, scale), rgb)
     elif scale != 1.0:
-        rgb = rgb * scale
+        rgb = _each(lambda v: v * scale, rgb)
     # Display values below 0 do not exist: clip where a limiting gamut pokes out of the container
     # (P3's red lies just outside Rec.2020), rather than mirror them through the encoding as OpenColorIO does.
-    return rgb.clamp(0.0, 1.0)
+    return _each(lambda v: v.clamp(0.0, 1.0), rgb)
 
 
 @functools.lru_cache(maxsize=64)

@@ -1,0 +1,83 @@
+"""The forms a compiler is given, run eagerly: per-pixel chains on planes (``ExecutionPolicy.pixel_planes``), the
+ACES 2.0 tables gathered a row at a time. Against the float64 reference and OpenColorIO, and against the eager forms on
+hostile values, in outputs and gradients. (That Inductor fuses them: ``tests/runtime/test_gpu_path.py``.)"""
+
+import numpy as np
+import pytest
+import torch
+
+from torchgrade.functional import tonemap
+from torchgrade.runtime import policy_for
+from torchgrade.tonemap.aces2 import aces2_output
+
+from reference.pixels import EXTREMES, pixels, rows
+from reference.tonemap import REFERENCES, hdr_samples
+
+HOSTILE = [float("nan"), float("inf"), -float("inf"), -1e30, -1.0, -1e-30, 1e-40, *EXTREMES]
+ACES2_TARGETS = {"sdr": dict(encoding="bt1886"), "hdr_p3": dict(peak_luminance=1000.0, limiting_primaries="p3_d65",
+                                                                  display_primaries="rec2020", encoding="pq")}
+
+
+def as_compiled(monkeypatch):
+    """What a module computes while ``torch.compile`` traces it: its graph's forms, run eagerly."""
+    monkeypatch.setattr(torch.compiler, "is_compiling", lambda: True)
+    assert policy_for(torch.device("cpu")).pixel_planes
+
+
+def hostile_pixels(dtype=torch.float64):
+    """Every pair of the hostile values as red and green, blue at 0.18."""
+    return pixels(np.array([(r, g, 0.18) for r in HOSTILE for g in HOSTILE]), dtype=dtype)
+
+
+def outputs_and_gradients(function, image):
+    image = image.detach().requires_grad_()
+    weights = torch.rand(image.shape, dtype=image.dtype, generator=torch.Generator().manual_seed(0))
+    out = function(image)
+    (gradient,) = torch.autograd.grad((out * weights).sum(), image)
+    return out.detach(), gradient
+
+
+def test_aces_as_compiled_matches_the_independent_float64_formula(monkeypatch):
+    as_compiled(monkeypatch)
+    rgb = hdr_samples()
+    np.testing.assert_allclose(rows(tonemap(pixels(rgb), "aces")), REFERENCES["aces"](rgb), atol=1e-9)
+
+
+@pytest.mark.parametrize("name", ["aces", *ACES2_TARGETS])
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_as_compiled_equals_eager_on_hostile_values_in_outputs_and_gradients(monkeypatch, name, dtype):
+    """float64 to rounding; float32 to its rounding, which the steep curves near black amplify in gradients (ACES 2.0's
+    reach 30 there). A neutral pixel's gradient is left out of the comparison: ACES 2.0 is not differentiable there (its
+    chroma is a cone, ``M = |(a, b)|``, and each form picks the hue its own rounding leaves), only finite."""
+    function = (lambda x: tonemap(x, "aces")) if name == "aces" else (lambda x: aces2_output(x, **ACES2_TARGETS[name]))
+    image = hostile_pixels(dtype)
+    eager_out, eager_gradient = outputs_and_gradients(function, image)
+    as_compiled(monkeypatch)
+    out, gradient = outputs_and_gradients(function, image)
+    assert torch.isfinite(out).all() and torch.isfinite(gradient).all()
+    chromatic = (image != image[:, :1]).any(dim=1, keepdim=True).expand_as(image)
+    single = dtype == torch.float32
+    torch.testing.assert_close(out, eager_out, rtol=1e-4 if single else 1e-9, atol=1e-5 if single else 1e-12)
+    torch.testing.assert_close(gradient[chromatic], eager_gradient[chromatic], rtol=1e-3 if single else 1e-9,
+                               atol=1e-5 if single else 1e-12)
+
+
+@pytest.mark.parametrize("name", ["aces", "aces2"])
+def test_as_compiled_keeps_batches_and_unbatched_images(monkeypatch, name):
+    as_compiled(monkeypatch)
+    batch = torch.rand(2, 3, 4, 5, dtype=torch.float64) * 8
+    assert tonemap(batch, name).shape == batch.shape
+    torch.testing.assert_close(tonemap(batch[1], name), tonemap(batch, name)[1])
+
+
+def test_aces2_as_compiled_matches_opencolorio_out_of_gamut(monkeypatch):
+    from test_aces2 import TARGETS, _display, _ocio, _ours, _random_aces
+
+    pytest.importorskip("PyOpenColorIO")
+    as_compiled(monkeypatch)
+    for display, view, kwargs, codes in TARGETS.values():
+        aces = _random_aces(2000, 5)
+        reference = _display(_ocio("ACES2065-1", display, view, aces))
+        ours = _ours(aces, input_space="aces", encoding="bt1886" if codes == 255 else "pq", **kwargs)
+        distance = np.abs(ours - reference) * codes
+        assert np.percentile(distance, 99.9) <= 0.5 and distance.max() <= 2.0, view
