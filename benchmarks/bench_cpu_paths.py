@@ -1,7 +1,8 @@
 """The eager CPU paths on this machine's threads: the cinematic look, its stages, ACES 2.0 and 33³ LUTs at 1920x1080,
-and ``RandomPostFX`` on a 32x3x224x224 batch.
+and ``RandomPostFX`` on a 32x3x224x224 batch; with ``--compiled``, the look and its per-pixel stages through
+``tg.compile`` (each compiles in the first, untimed round).
 
-    python benchmarks/bench_cpu_paths.py [--runs N] [--threads N] [--clock wall|cpu] [--json FILE]
+    python benchmarks/bench_cpu_paths.py [--runs N] [--threads N] [--clock wall|cpu] [--compiled] [--json FILE]
 
 Prints the median ms of each case (every round runs each case once: A B C A B C ...). It uses only the public API, so
 two versions of torchgrade can be compared by running it under each (``PYTHONPATH=<checkout>``) in turn; the
@@ -27,8 +28,12 @@ ROOT = Path(__file__).resolve().parents[1]
 CINEMATIC = json.loads((ROOT / "export" / "looks" / "cinematic.json").read_text())
 
 
-def cases() -> dict:
-    """Every case: a call on a 1920x1080 frame, its inputs made once."""
+COMPILED = ("cinematic look", "grade", "tone map aces", "tone map aces2")
+"""The cases ``--compiled`` times, each module through ``tg.compile``."""
+
+
+def cases(compiled: bool = False) -> dict:
+    """Every case: a call on a 1920x1080 frame, its inputs made once; ``compiled``: the :data:`COMPILED` ones, compiled."""
     image = tg.scene.demo_scene(1080, 1920)
     look = tg.PostFX.from_config(CINEMATIC).eval()
     grade = tg.ColorGrade(**CINEMATIC["grade"])
@@ -41,7 +46,9 @@ def cases() -> dict:
     hdr_lut = tg.LUT3D(torch.rand(33, 33, 33, 3, generator=torch.Generator().manual_seed(1)), shaper="logc_hdr")
     augment = tg.RandomPostFX(contrast=30, saturation=30, hue_shift=20, post_exposure=0.5, input_space="srgb")
     batch = torch.rand(32, 3, 224, 224, generator=torch.Generator().manual_seed(2))
-    return {
+    if compiled:
+        look, grade, tonemap, aces2 = (tg.compile(module) for module in (look, grade, tonemap, aces2))
+    calls = {
         "cinematic look": lambda: look(image),
         "grade": lambda: grade(image),
         "tone map aces": lambda: tonemap(image),
@@ -52,6 +59,7 @@ def cases() -> dict:
         "LUT 33^3 logc_hdr": lambda: hdr_lut(image),
         "RandomPostFX 32x224^2": lambda: augment(batch),
     }
+    return {name: calls[name] for name in COMPILED} if compiled else calls
 
 
 def main(argv=None) -> None:
@@ -60,11 +68,12 @@ def main(argv=None) -> None:
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--threads", type=int, default=None, help="torch threads (default: torch's)")
     parser.add_argument("--clock", choices=("wall", "cpu"), default="wall")
+    parser.add_argument("--compiled", action="store_true", help="the look and its per-pixel stages through tg.compile")
     args = parser.parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)
     clock = time.perf_counter if args.clock == "wall" else time.process_time
-    calls = cases()
+    calls = cases(args.compiled)
     times = {name: [] for name in calls}
     with torch.no_grad():
         for attempt in range(args.runs + 1):
@@ -74,7 +83,7 @@ def main(argv=None) -> None:
                 if attempt:  # the first round warms up
                     times[name].append((clock() - start) * 1e3)
     medians = {name: round(statistics.median(values), 2) for name, values in times.items()}
-    print(json.dumps({"threads": torch.get_num_threads(), "clock": args.clock, "torchgrade": str(Path(tg.__file__).parent),
+    print(json.dumps({"threads": torch.get_num_threads(), "clock": args.clock, "compiled": args.compiled, "torchgrade": str(Path(tg.__file__).parent),
                       "ms": medians}))
     if args.json:
         args.json.write_text(json.dumps(medians, indent=2) + "\n")

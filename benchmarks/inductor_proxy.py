@@ -1,0 +1,86 @@
+"""What a compiled frame would cost a GPU, read from the code Inductor generates for the CPU.
+
+    python benchmarks/inductor_proxy.py [--out DIR] [--cases NAME ...]
+
+Each case of ``bench_gpu.py`` that it compiles (the look, its stages, ACES 2.0) is compiled with
+``torch.compile(fullgraph=True)`` on a small CPU frame, and the generated code is read (``run_and_get_code``):
+
+* **loops over the frame**: each loop nest Inductor writes is, on CUDA, a Triton kernel of its own (steps with the same
+  number of elements fuse into one loop, and into one kernel; a step on the frame's 3 values a pixel after one on a
+  plane's 1 starts another);
+* **frames written**: the buffers of a plane's size or more that the graph allocates, in frames (3 planes each): each
+  is written by one kernel and read back by a later one, memory traffic that a fused chain keeps in registers. The
+  output is one of them.
+
+A count of structure, not a time: the GPU run (``benchmarks/gpu_check.sh``) measures. Compile seconds are the CPU's
+(a C++ compiler; Triton's differ) with Inductor's caches off. About 3 minutes on 2 cores, most of it ACES 2.0.
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import torchgrade as tg  # noqa: E402
+from benchmarks.bench_gpu import STAGES, cinematic  # noqa: E402
+from benchmarks.common import argument_parser, write_results  # noqa: E402
+
+FRAME = (1, 3, 64, 96)
+CASES = {"cinematic look": cinematic, **{name: STAGES[name] for name in ("grade", "tonemap aces", "tonemap aces2", "bloom scattering", "exposure")}}
+LOOP_NEST = re.compile(r"for\(int64_t x0=")
+BUFFER = re.compile(r"empty_strided_cpu\(\(([\d, ]+)\)")
+
+
+def generated_code(module: torch.nn.Module) -> tuple:
+    """Inductor's code for one no_grad frame of ``module`` on the CPU, and the seconds it took to compile."""
+    from torch._inductor.utils import run_and_get_code
+
+    torch._dynamo.reset()
+    image = tg.scene.demo_scene(*FRAME[2:])[None].contiguous()
+    start = time.perf_counter()
+    with torch.no_grad(), torch._inductor.config.patch(force_disable_caches=True):
+        _, code = run_and_get_code(torch.compile(module.eval(), fullgraph=True), image)
+    return "\n".join(code), time.perf_counter() - start
+
+
+def structure(source: str) -> dict:
+    """Loop nests over the frame, and the frames the graph writes (buffers of a plane or more, in frames)."""
+    plane = FRAME[2] * FRAME[3]
+    sizes = [torch.Size(int(n) for n in shape.replace(" ", "").split(",") if n).numel() for shape in BUFFER.findall(source)]
+    written = [size for size in sizes if size >= plane]
+    return {"loops": len(LOOP_NEST.findall(source)), "frame_buffers": len(written),
+            "frames_written": round(sum(written) / (3 * plane), 2)}
+
+
+def main(argv=None) -> int:
+    parser = argument_parser(__doc__)
+    parser.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES))
+    args = parser.parse_args(argv)
+    torch.set_num_threads(1)
+    warnings.simplefilter("ignore")  # the look's baked-LUT accuracy notes
+    rows = []
+    for name in args.cases:
+        source, seconds = generated_code(CASES[name]())
+        rows.append({"case": name, **structure(source), "compile_s": round(seconds, 1)})
+        print(rows[-1], flush=True)
+    lines = ["# Compiled frames, read from Inductor's CPU code", "",
+             f"torch {torch.__version__}, torchgrade {tg.__version__}, a {FRAME[2]}x{FRAME[3]} frame, one thread. Loops: the "
+             "loop nests over the frame (on CUDA, a kernel each); frames written: the buffers of a plane's size or more, in "
+             "frames (each written by one kernel, read back by another; the output among them). See "
+             "`benchmarks/inductor_proxy.py`.", "",
+             "| case | loops | buffers | frames written | compile s (CPU) |", "| --- | ---: | ---: | ---: | ---: |"]
+    lines += [f"| {r['case']} | {r['loops']} | {r['frame_buffers']} | {r['frames_written']} | {r['compile_s']} |" for r in rows]
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_results(args.out, "inductor_proxy", {"frame": list(FRAME), "rows": rows}, lines, "python benchmarks/inductor_proxy.py --out DIR")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
