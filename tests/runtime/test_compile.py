@@ -104,7 +104,7 @@ def test_a_compiled_frame_that_fails_leaves_the_exposure_state_empty_and_a_strea
     _captured_only(monkeypatch)
     stage = tg.AutoExposure(speed=1.5)
     compiled = tg.compile(stage)
-    with pytest.raises(Exception, match="dt must lie"):  # Dynamo reports the ValueError it traced
+    with pytest.raises(ValueError, match="dt must lie"):
         compiled(hdr((2, 3, 8, 8)), -1.0)
     assert stage.adapted_luminance.numel() == 0
     compiled(hdr((4, 3, 8, 8)), 0.5, stream="cam")
@@ -112,3 +112,20 @@ def test_a_compiled_frame_that_fails_leaves_the_exposure_state_empty_and_a_strea
     compiled(hdr((3, 3, 8, 8)), 0.5)  # a first frame of another batch: no sequence to break
     assert stage.adapted_luminance.shape == (3,)
 
+
+
+@pytest.mark.parametrize("name", ["stage", "look", "lut", "augmentation"])
+@pytest.mark.parametrize("frame, error, message", [
+    (torch.rand(1, 2, 8, 8), ValueError, "3 colour channels"),
+    (torch.randint(0, 255, (1, 3, 8, 8), dtype=torch.uint8), TypeError, "floating-point"),
+], ids=["two-channels", "eight-bit"])
+def test_a_compiled_module_refuses_a_frame_with_the_error_eager_mode_gives(monkeypatch, name, frame, error, message):
+    """Dynamo reports an exception raised while tracing as its own ``Unsupported``; ``tg.compile`` raises the module's."""
+    _captured_only(monkeypatch)
+    module = {"stage": lambda: tg.ToneMap("aces"), "look": lambda: tg.PostFX.from_config(CINEMATIC).eval(),
+              "lut": lambda: tg.LUT3D(tg.lut.identity_table(5)), "augmentation": lambda: tg.RandomPostFX(contrast=20)}[name]()
+    with pytest.raises(error, match=message) as eager:
+        module(frame)
+    with pytest.raises(error, match=message) as compiled:
+        tg.compile(module)(frame)
+    assert str(compiled.value) == str(eager.value) and compiled.value.__context__ is None

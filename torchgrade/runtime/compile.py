@@ -64,13 +64,35 @@ class CompiledModule(nn.Module):
 
     def forward(self, image: torch.Tensor, *args, **kwargs):
         """Check the learnable controls of every stage (``check_learnable``, which the graph skips), then run the graph
-        inside the module's ``compiled_frame`` where it has one."""
+        inside the module's ``compiled_frame`` where it has one.
+
+        A frame the module refuses (an image of 2 channels, integer values, ...) raises while Dynamo traces it, which
+        reports that as an ``Unsupported`` error of its own; the module is then called eagerly on the frame, to raise
+        its own error, as an uncompiled module would."""
         for stage in self.module.modules():
             if hasattr(stage, "check_learnable"):
                 stage.check_learnable()
+        try:
+            return self._graph_call(image, *args, **kwargs)
+        except Exception as error:
+            if not _raised_while_traced(error):
+                raise
+            refused = error
+        self.module(image, *args, **kwargs)  # raises the module's own error (outside the handler: that error alone)
+        raise refused
+
+    def _graph_call(self, image: torch.Tensor, *args, **kwargs):
         frame = getattr(self.module, "compiled_frame", None)
         with frame(image, *args, **kwargs) if frame is not None else contextlib.nullcontext():
             return self.compiled_for(image.device)(image, *args, **kwargs)
+
+
+def _raised_while_traced(error: Exception) -> bool:
+    """Whether ``error`` is Dynamo's report of an exception that the traced code raised (its cause: an exception Dynamo
+    observed). ``torch._dynamo`` is loaded by then (a compiled call ran); ``import torchgrade`` does not load it."""
+    from torch._dynamo import exc
+
+    return isinstance(error, exc.Unsupported) and isinstance(error.__cause__, getattr(exc, "ObservedException", ()))
 
 
 def compile(module: nn.Module, *, cuda_graphs: bool = True, dynamic: Optional[bool] = None) -> CompiledModule:
