@@ -7,21 +7,15 @@ import pytest
 import torch
 
 from torchgrade.functional import tonemap
-from torchgrade.runtime import policy_for
 from torchgrade.tonemap.aces2 import aces2_output
 
+from reference.compiled import as_compiled
 from reference.pixels import EXTREMES, pixels, rows
 from reference.tonemap import REFERENCES, hdr_samples
 
 HOSTILE = [float("nan"), float("inf"), -float("inf"), -1e30, -1.0, -1e-30, 1e-40, *EXTREMES]
 ACES2_TARGETS = {"sdr": dict(encoding="bt1886"), "hdr_p3": dict(peak_luminance=1000.0, limiting_primaries="p3_d65",
                                                                   display_primaries="rec2020", encoding="pq")}
-
-
-def as_compiled(monkeypatch):
-    """What a module computes while ``torch.compile`` traces it: its graph's forms, run eagerly."""
-    monkeypatch.setattr(torch.compiler, "is_compiling", lambda: True)
-    assert policy_for(torch.device("cpu")).pixel_planes
 
 
 def hostile_pixels(dtype=torch.float64):

@@ -50,6 +50,9 @@ __all__ = [
     "apply_matrix",
     "matrix_on_planes",
     "rows_on_planes",
+    "each_plane",
+    "matrix_on",
+    "joined",
     "matrix_product",
     "channel_sum",
     "check_range",
@@ -351,6 +354,42 @@ def rows_on_planes(rows, planes) -> tuple:
     return tuple(row[0] * red + row[1] * green + row[2] * blue for row in rows)
 
 
+def each_plane(function, x):
+    """``function`` of an image, or of each of its three planes given as a tuple
+    (:attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`), returned in the same form.
+
+    Examples:
+        >>> each_plane(torch.neg, (torch.tensor(1.0), torch.tensor(2.0), torch.tensor(3.0)))
+        (tensor(-1.), tensor(-2.), tensor(-3.))
+    """
+    return tuple(function(plane) for plane in x) if isinstance(x, tuple) else function(x)
+
+
+def matrix_on(matrix: torch.Tensor, x):
+    """:func:`apply_matrix` of a ``(3, 3)`` or ``(B, 3, 3)`` matrix on an image, or on its three planes ``(..., 1, H, W)``
+    given as a tuple, returned as planes: ``out_i = sum_j matrix[..., i, j] planes[j]``.
+
+    Examples:
+        >>> swap = torch.tensor([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+        >>> [p.item() for p in matrix_on(swap, torch.arange(3.0).reshape(3, 1, 1, 1).unbind())]
+        [1.0, 0.0, 2.0]
+    """
+    if not isinstance(x, tuple):
+        return apply_matrix(matrix, x)
+    entries = matrix[..., None, None, None]  # a sample's entry broadcast over its plane
+    return tuple(sum(entries[..., i, j, :, :, :] * plane for j, plane in enumerate(x)) for i in range(3))
+
+
+def joined(x) -> torch.Tensor:
+    """An image given as its three planes ``(..., 1, H, W)`` (a tuple) as one image; an image as it is.
+
+    Examples:
+        >>> joined(torch.arange(3.0).reshape(3, 1, 1, 1).unbind()).shape
+        torch.Size([3, 1, 1])
+    """
+    return torch.stack([plane.squeeze(-3) for plane in x], dim=-3) if isinstance(x, tuple) else x
+
+
 def channel_sum(image: torch.Tensor, weights) -> torch.Tensor:
     """``sum_j weights[j] * image[..., j, :, :]`` as ``(..., 1, H, W)``, for three Python-number ``weights``.
 
@@ -361,9 +400,9 @@ def channel_sum(image: torch.Tensor, weights) -> torch.Tensor:
         >>> channel_sum(torch.tensor([1.0, 2.0, 3.0]).reshape(3, 1, 1), (0.5, 0.25, 0.0)).flatten().tolist()
         [1.0]
     """
-    red, green, blue = image.split(1, dim=-3)
+    red, green, blue = image if isinstance(image, tuple) else image.split(1, dim=-3)  # or its planes, as a tuple
     out = red * weights[0]
-    if torch.onnx.is_in_onnx_export() or not untracked(image):
+    if torch.onnx.is_in_onnx_export() or not untracked(red, green, blue):
         # exported as three products and two sums (a ReduceSum over channels costs onnxruntime's CPU several of them,
         # benchmarks/results/onnx_ops.md)
         return out + green * weights[1] + blue * weights[2]

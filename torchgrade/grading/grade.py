@@ -37,10 +37,12 @@ import torch
 
 from ..base.core import (
     HALF_MAX,
-    apply_matrix,
     check_image,
     color_param,
+    each_plane,
     is_constant,
+    joined,
+    matrix_on,
     matrix_product,
     sanitize,
     scalar_param,
@@ -49,9 +51,9 @@ from ..base.core import (
     working_dtype,
 )
 from ..base.stage import Control
-from ..color import aces_to_unity, srgb_to_linear
+from ..color import srgb_to_linear
 from ..color.spaces import shared_matrix
-from ..runtime import folded
+from ..runtime import folded, policy_for
 from .curves import CurveControl, curve_is_identity
 from .steps import (
     IDENTITY_MATRIX,
@@ -182,7 +184,9 @@ def color_grade(image: torch.Tensor, aces: bool = False, log_space: str = "acesc
     if not steps:
         return image
     weights = "ap1" if aces else "rec709"
-    x = sanitize(working_dtype(image))
+    x = like = sanitize(working_dtype(image))
+    if policy_for(x.device).pixel_planes:  # compiling: the steps that mix channels on planes, for Inductor to fuse
+        x = x.split(1, dim=-3)
     # The linear steps between two non-linear ones are folded into one matrix, so each pixel sees one 3x3: post
     # exposure, white balance and the way into contrast's primaries; the way out of them and the colour filter.
     # Of plain-number controls the matrix is a constant, made once (runtime.folded).
@@ -191,29 +195,30 @@ def color_grade(image: torch.Tensor, aces: bool = False, log_space: str = "acesc
     tint = p["color_filter"] if "color_filter" in steps else None
     if "contrast" in steps:
         encoding, into, out_of = contrast_space(aces, log_space)
-        x = _applied(folded(grade_matrix, exposure, balance, into, None, like=x), x)
-        x = log_contrast(x, p["contrast"], encoding)
-        linear = folded(grade_matrix, None, None, out_of, tint, like=x)
+        x = _applied(folded(grade_matrix, exposure, balance, into, None, like=like), x)
+        x = each_plane(lambda plane: log_contrast(plane, p["contrast"], encoding), x)
+        linear = folded(grade_matrix, None, None, out_of, tint, like=like)
     else:
-        linear = folded(grade_matrix, exposure, balance, "srgb_to_ap1" if aces else None, tint, like=x)
+        linear = folded(grade_matrix, exposure, balance, "srgb_to_ap1" if aces else None, tint, like=like)
     # Bounding to the non-finite policy's range after each group of gains keeps the whole documented
     # range finite: post exposure 20, contrast 100 and a filter of 100 reach 1e26, and the next squares overflow.
-    x = _applied(linear, x).clamp(0.0, HALF_MAX)
+    x = _bounded(_applied(linear, x))
     if "split_toning" in steps:
         x = split_toning(x, p["split_shadows"], p["split_highlights"], p["split_balance"], weights)
     if "channel_mixer" in steps:
-        x = channel_mixer(x, p["channel_mixer"])
-    x = x.clamp(0.0, HALF_MAX)
+        x = channel_mixer(joined(x), p["channel_mixer"])
+    x = _bounded(x)
     if "shadows_midtones_highlights" in steps:
         zones = [p[name] for name in ("shadows_start", "shadows_end", "highlights_start", "highlights_end")]
-        x = shadows_midtones_highlights(x, p["shadows"], p["midtones"], p["highlights"], *zones, weights)
+        x = shadows_midtones_highlights(joined(x), p["shadows"], p["midtones"], p["highlights"], *zones, weights)
     if "lift_gamma_gain" in steps:
-        x = lift_gamma_gain(x, p["lift"], p["gamma"], p["gain"]).clamp_min(0.0)
+        x = lift_gamma_gain(joined(x), p["lift"], p["gamma"], p["gain"]).clamp_min(0.0)
     factor = None
     if "saturation_curves" in steps:
+        x = joined(x)
         factor = saturation_curves(x, p["hue_vs_sat"], p["sat_vs_sat"], p["lum_vs_sat"], weights)
     if "hue_shift" in steps:
-        x = hue_shift(x, p["hue_shift"], p["hue_vs_hue"])
+        x = hue_shift(joined(x), p["hue_shift"], p["hue_vs_hue"])
     # Saturation without curves is a matrix too, folded with the way out of ACEScg.
     amount = None
     if factor is None and "saturation" in steps and _saturation_folds(x, p["saturation"]):
@@ -221,11 +226,13 @@ def color_grade(image: torch.Tensor, aces: bool = False, log_space: str = "acesc
     elif "saturation" in steps or factor is not None:
         x = saturation(x, p["saturation"], weights, factor)
     if "yrgb_curves" in steps:
-        x = _applied(folded(output_matrix, amount, weights, False, like=x), x)
+        x = _applied(folded(output_matrix, amount, weights, False, like=like), joined(x))
         x = yrgb_curves(x, p["curve_master"], p["curve_red"], p["curve_green"], p["curve_blue"])
         amount = None
-    x = _applied(folded(output_matrix, amount, weights, aces, like=x), x).clamp_min(0.0)
-    return to_input_dtype(aces_to_unity(x) if aces else x, image)
+    x = each_plane(lambda plane: plane.clamp_min(0.0), _applied(folded(output_matrix, amount, weights, aces, like=like), x))
+    if aces:
+        x = matrix_on(shared_matrix("ap0_to_srgb", like), x)  # aces_to_unity
+    return to_input_dtype(joined(x), image)
 
 
 def grade_matrix(exposure, balance, space, tint, *, like: torch.Tensor):
@@ -277,14 +284,20 @@ def _then(first, second: torch.Tensor) -> torch.Tensor:
     return second if first is None else matrix_product(second, first)
 
 
-def _applied(linear, image: torch.Tensor) -> torch.Tensor:
-    """``image`` through the folded matrix ``linear`` (None: unchanged)."""
-    return image if linear is None else apply_matrix(linear, image)
+def _applied(linear, x):
+    """An image, or its three planes as a tuple, through the folded matrix ``linear`` (None: unchanged)."""
+    return x if linear is None else matrix_on(linear, x)
 
 
-def _saturation_folds(image: torch.Tensor, amount) -> bool:
+def _bounded(x):
+    """An image, or its three planes as a tuple, bounded to ``[0, 65504]``."""
+    return each_plane(lambda plane: plane.clamp(0.0, HALF_MAX), x)
+
+
+def _saturation_folds(x, amount) -> bool:
     """Whether saturation is applied as a matrix: eager when nothing records gradients; in an export when ``amount`` is a
-    number, folded into the constant matrices (a graph input's would be a MatMul, which OpenVINO runs in bfloat16)."""
+    number, folded into the constant matrices (a graph input's would be a MatMul, which OpenVINO runs in bfloat16).
+    ``x`` is the image, or its planes as a tuple."""
     if torch.onnx.is_in_onnx_export():
         return not isinstance(amount, torch.Tensor)
-    return untracked(image, amount)
+    return untracked(*(x if isinstance(x, tuple) else (x,)), amount)

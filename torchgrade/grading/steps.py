@@ -19,7 +19,9 @@ from ..base.core import (
     apply_matrix,
     bounded_pow,
     color_param,
+    each_plane,
     is_constant,
+    joined,
     matrix_param,
     matrix_product,
     scalar_param,
@@ -313,10 +315,11 @@ def _soft_light_by_channel(gamma: torch.Tensor, weights: tuple, offsets: tuple) 
         >>> bool(torch.allclose(_soft_light_by_channel(base.clone(), (t,), ((-0.2, 0.0, 0.3),)), soft_light(base, tint), atol=1e-6))
         True
     """
-    in_place = untracked(gamma, *weights)
+    on_planes = isinstance(gamma, tuple)  # the image's planes (ExecutionPolicy.pixel_planes): returned as planes
+    in_place = not on_planes and untracked(gamma, *weights)
     exporting = torch.onnx.is_in_onnx_export()
     planes = []
-    for c, plane in enumerate(gamma.split(1, dim=-3)):
+    for c, plane in enumerate(gamma if on_planes else gamma.split(1, dim=-3)):
         for weight, offset in zip(weights, (per_channel[c] for per_channel in offsets)):
             if offset == 0.0:
                 continue
@@ -331,6 +334,8 @@ def _soft_light_by_channel(gamma: torch.Tensor, weights: tuple, offsets: tuple) 
             else:
                 plane = torch.addcmul(plane, weight, shift, value=2.0 * offset)
         planes.append(plane)
+    if on_planes:
+        return tuple(planes)
     return gamma if in_place else torch.cat(planes, dim=-3)
 
 
@@ -358,21 +363,25 @@ def split_toning(
     """Split toning in gamma 2.2 space (Unity ``ColorGradeSplitToning``).
 
     ``t = saturate(Y(saturate(c)) + balance/100)``; the shadow tint ``lerp(0.5, shadows, 1 - t)`` and the
-    highlight tint ``lerp(0.5, highlights, t)`` are soft-light blended in turn. Grey 0.5 tints are neutral.
+    highlight tint ``lerp(0.5, highlights, t)`` are soft-light blended in turn. Grey 0.5 tints are neutral. An image
+    given as its three planes (a tuple, :attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`) is toned as planes
+    where the tints are numbers, and joined into one image where they are tensors.
 
     Examples:
         >>> image = torch.rand(3, 2, 2)
         >>> bool(torch.allclose(split_toning(image), image, atol=1e-5))  # grey tints: neutral
         True
     """
-    gamma = safe_pow(image, 1.0 / 2.2)
-    t = luminance(gamma.clamp(0.0, 1.0), luminance_weights)
-    if not is_constant(balance, 0.0):
-        t = t + scalar_param(balance, image, "split_balance") * 0.01
-    t = t.clamp(0.0, 1.0)
     plain = _plain_offsets(shadows), _plain_offsets(highlights)
+    if None in plain:
+        image = joined(image)  # tensor colours blend the frame
+    gamma = each_plane(lambda plane: safe_pow(plane, 1.0 / 2.2), image)
+    t = luminance(each_plane(lambda plane: plane.clamp(0.0, 1.0), gamma), luminance_weights)
+    if not is_constant(balance, 0.0):
+        t = t + scalar_param(balance, t, "split_balance") * 0.01
+    t = t.clamp(0.0, 1.0)
     if None not in plain:
-        return safe_pow(_soft_light_by_channel(gamma, (1.0 - t, t), plain), 2.2)
+        return each_plane(lambda plane: safe_pow(plane, 2.2), _soft_light_by_channel(gamma, (1.0 - t, t), plain))
     offsets = (color_param(shadows, image, "split_shadows") - 0.5, color_param(highlights, image, "split_highlights") - 0.5)
     if torch.onnx.is_in_onnx_export():
         return safe_pow(_soft_light_masked(_soft_light_masked(gamma, 1.0 - t, offsets[0]), t, offsets[1]), 2.2)
@@ -560,7 +569,8 @@ def saturation_curves(image: torch.Tensor, hue_vs_sat=None, sat_vs_sat=None, lum
 def saturation(image: torch.Tensor, amount: Param, luminance_weights="rec709", factor=None) -> torch.Tensor:
     """Saturation about luminance: ``Y + (rgb - Y)(1 + amount/100)``; -100 gives grey ``Y``.
 
-    ``factor`` (from :func:`saturation_curves`) multiplies ``1 + amount/100``, as URP does.
+    ``factor`` (from :func:`saturation_curves`) multiplies ``1 + amount/100``, as URP does. An image given as its three
+    planes (a tuple, :attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`) is returned as planes.
 
     Examples:
         >>> grey = saturation(torch.tensor([1.0, 0.0, 0.0]).reshape(3, 1, 1), -100.0).flatten()
@@ -568,8 +578,9 @@ def saturation(image: torch.Tensor, amount: Param, luminance_weights="rec709", f
         True
     """
     lum = luminance(image, luminance_weights)
-    scale = 1.0 + scalar_param(amount, image, "saturation") * 0.01
-    return lum + (image - lum) * (scale if factor is None else scale * factor)
+    scale = 1.0 + scalar_param(amount, lum, "saturation") * 0.01
+    scale = scale if factor is None else scale * factor
+    return each_plane(lambda plane: lum + (plane - lum) * scale, image)
 
 
 def saturation_matrix(image: torch.Tensor, amount: Param, luminance_weights="rec709") -> torch.Tensor:
