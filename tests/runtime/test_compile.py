@@ -4,6 +4,7 @@ pixels as eager. Identity shortcuts that read a control's value are decided in P
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
@@ -34,9 +35,10 @@ def test_a_look_module_is_captured_as_one_graph():
 
 
 def _captured_only(monkeypatch, backend="eager"):
-    """``tg.compile`` through ``backend`` (Dynamo alone by default): what these tests check is the capture, not Inductor."""
+    """``tg.compile`` through ``backend`` (Dynamo alone by default): what these tests check is the capture, not Inductor
+    (whose ``options`` are left out)."""
     real = torch.compile
-    monkeypatch.setattr(torch, "compile", lambda *args, **kwargs: real(*args, **{**kwargs, "backend": backend}))
+    monkeypatch.setattr(torch, "compile", lambda *args, options=None, **kwargs: real(*args, **{**kwargs, "backend": backend}))
     torch._dynamo.reset()
 
 
@@ -129,3 +131,36 @@ def test_a_compiled_module_refuses_a_frame_with_the_error_eager_mode_gives(monke
     with pytest.raises(error, match=message) as compiled:
         tg.compile(module)(frame)
     assert str(compiled.value) == str(eager.value) and compiled.value.__context__ is None
+
+
+def test_a_compiled_module_refuses_a_frame_that_is_not_a_tensor_as_eager_mode_does(monkeypatch):
+    _captured_only(monkeypatch)
+    with pytest.raises(TypeError, match="torch.Tensor") as eager:
+        tg.ToneMap("aces")(np.zeros((1, 3, 4, 4), dtype=np.float32))
+    with pytest.raises(TypeError, match="torch.Tensor") as compiled:
+        tg.compile(tg.ToneMap("aces"))(np.zeros((1, 3, 4, 4), dtype=np.float32))
+    assert str(compiled.value) == str(eager.value)
+
+
+class _RefusesOnlyWhileTraced(torch.nn.Module):
+    """Raises while Dynamo traces it, not eagerly: a frame the compiled graph cannot run."""
+
+    def forward(self, image):
+        if torch.compiler.is_compiling():
+            raise ValueError("only while traced")
+        return image * 2.0
+
+
+def test_a_frame_only_the_trace_refuses_runs_once_eagerly_with_a_warning(monkeypatch):
+    _captured_only(monkeypatch)
+    image = torch.ones(1, 3, 2, 2)
+    with pytest.warns(RuntimeWarning, match="ran eagerly"):
+        out = tg.compile(_RefusesOnlyWhileTraced())(image)
+    torch.testing.assert_close(out, image * 2.0)
+
+
+def test_cpu_frames_compile_without_inductors_layout_optimisation(monkeypatch):
+    settings = {}
+    monkeypatch.setattr(torch, "compile", lambda module, **kwargs: settings.update(kwargs) or module)
+    tg.compile(tg.ToneMap("aces"))(torch.rand(1, 3, 4, 4))
+    assert settings["options"] == {"layout_optimization": False} and "mode" not in settings and settings["fullgraph"]

@@ -174,8 +174,8 @@ PLANES_CHAINS = {"tonemap-aces": lambda: tg.ToneMap("aces"), "grade": lambda: tg
 
 @pytest.mark.parametrize("name", list(PLANES_CHAINS))
 def test_inductor_compiles_a_chain_on_planes_into_one_pass_that_writes_only_the_output(name):
-    """As Inductor compiles it on the CPU: one loop over the pixels, the only frame it writes is the output (on
-    frames, ``ToneMap("aces")`` wrote 6 and the grade 5: ``benchmarks/results/inductor_proxy.md``)."""
+    """As Inductor compiles it on the CPU: the only frame it writes is its output, each value read once and written
+    once (on frames, ``ToneMap("aces")`` wrote 6 and the grade 5: ``benchmarks/results/inductor_proxy.md``)."""
     from torch._inductor.utils import run_and_get_code
 
     torch._dynamo.reset()

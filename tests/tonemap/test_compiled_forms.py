@@ -14,8 +14,13 @@ from reference.pixels import EXTREMES, pixels, rows
 from reference.tonemap import REFERENCES, hdr_samples
 
 HOSTILE = [float("nan"), float("inf"), -float("inf"), -1e30, -1.0, -1e-30, 1e-40, *EXTREMES]
-ACES2_TARGETS = {"sdr": dict(encoding="bt1886"), "hdr_p3": dict(peak_luminance=1000.0, limiting_primaries="p3_d65",
-                                                                  display_primaries="rec2020", encoding="pq")}
+ACES2_TARGETS = {
+    "sdr": {"encoding": "bt1886"},
+    "hdr_p3": {"peak_luminance": 1000.0, "limiting_primaries": "p3_d65", "display_primaries": "rec2020", "encoding": "pq"},
+    "hdr_2020_from_aces": {"peak_luminance": 1000.0, "limiting_primaries": "rec2020", "input_space": "aces"},
+}
+"""The branches of the transform: SDR, a limiting gamut in another container (its matrix), a peak's scaling on
+display-linear values, ACES2065-1 input."""
 
 
 def hostile_pixels(dtype=torch.float64):
@@ -40,9 +45,11 @@ def test_aces_as_compiled_matches_the_independent_float64_formula(monkeypatch):
 @pytest.mark.parametrize("name", ["aces", *ACES2_TARGETS])
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
 def test_as_compiled_equals_eager_on_hostile_values_in_outputs_and_gradients(monkeypatch, name, dtype):
-    """float64 to rounding; float32 to its rounding, which the steep curves near black amplify in gradients (ACES 2.0's
-    reach 30 there). A neutral pixel's gradient is left out of the comparison: ACES 2.0 is not differentiable there (its
-    chroma is a cone, ``M = |(a, b)|``, and each form picks the hue its own rounding leaves), only finite."""
+    """float64 to rounding; float32 to its rounding: outputs within 2e-5 (0.005 8-bit codes of a display value; 7e-6
+    measured), gradients within 2e-3 relative, which the steep curves near black reach (ACES 2.0's gradients reach 30
+    there; 6.4e-4 measured). A neutral pixel's gradient is left out of the comparison: ACES 2.0 is not differentiable
+    there (its chroma is a cone, ``M = |(a, b)|``, and each form picks the hue its own rounding leaves; float64 forms
+    differ by 1.4e-2 there), only finite."""
     function = (lambda x: tonemap(x, "aces")) if name == "aces" else (lambda x: aces2_output(x, **ACES2_TARGETS[name]))
     image = hostile_pixels(dtype)
     eager_out, eager_gradient = outputs_and_gradients(function, image)
@@ -51,23 +58,23 @@ def test_as_compiled_equals_eager_on_hostile_values_in_outputs_and_gradients(mon
     assert torch.isfinite(out).all() and torch.isfinite(gradient).all()
     chromatic = (image != image[:, :1]).any(dim=1, keepdim=True).expand_as(image)
     single = dtype == torch.float32
-    torch.testing.assert_close(out, eager_out, rtol=1e-4 if single else 1e-9, atol=1e-5 if single else 1e-12)
-    torch.testing.assert_close(gradient[chromatic], eager_gradient[chromatic], rtol=1e-3 if single else 1e-9,
+    torch.testing.assert_close(out, eager_out, rtol=1e-4 if single else 1e-9, atol=2e-5 if single else 1e-12)
+    torch.testing.assert_close(gradient[chromatic], eager_gradient[chromatic], rtol=2e-3 if single else 1e-9,
                                atol=1e-5 if single else 1e-12)
 
 
 @pytest.mark.parametrize("name", ["aces", "aces2"])
 def test_as_compiled_keeps_batches_and_unbatched_images(monkeypatch, name):
+    batch = torch.rand(2, 3, 4, 5, dtype=torch.float64, generator=torch.Generator().manual_seed(2)) * 8
+    eager_batch, eager_image = tonemap(batch, name), tonemap(batch[1], name)
     as_compiled(monkeypatch)
-    batch = torch.rand(2, 3, 4, 5, dtype=torch.float64) * 8
-    assert tonemap(batch, name).shape == batch.shape
-    torch.testing.assert_close(tonemap(batch[1], name), tonemap(batch, name)[1])
+    torch.testing.assert_close(tonemap(batch, name), eager_batch, rtol=1e-9, atol=1e-12)
+    torch.testing.assert_close(tonemap(batch[1], name), eager_image, rtol=1e-9, atol=1e-12)
 
 
 def test_aces2_as_compiled_matches_opencolorio_out_of_gamut(monkeypatch):
-    from test_aces2 import TARGETS, _display, _ocio, _ours, _random_aces
+    from test_aces2 import TARGETS, _display, _ocio, _ours, _random_aces  # skips without OpenColorIO
 
-    pytest.importorskip("PyOpenColorIO")
     as_compiled(monkeypatch)
     for display, view, kwargs, codes in TARGETS.values():
         aces = _random_aces(2000, 5)

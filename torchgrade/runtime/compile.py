@@ -4,7 +4,9 @@ device of the frames it gets.
 * **CUDA**: ``mode="reduce-overhead"``: Inductor's fused kernels replayed as a CUDA graph, one launch per frame
   size instead of one per kernel. A graph's outputs are its own buffers, overwritten by the next call of the
   same size: clone an output you keep across calls.
-* **CPU and other devices**: Inductor's default mode (fused C++ loops over the pixels).
+* **CPU**: Inductor's default mode (fused C++ loops over the pixels) without its layout optimisation
+  (:data:`CPU_OPTIONS`).
+* **Other devices**: Inductor's default mode.
 
 ``fullgraph=True`` always: a look is one graph, so a graph break is an error here rather than a silent slowdown.
 Each device type compiles at its first frame; the first new frame size compiles again, with the sizes that changed
@@ -30,12 +32,20 @@ Examples:
 from __future__ import annotations
 
 import contextlib
+import warnings
 from typing import Optional
 
 import torch
 from torch import nn
 
-__all__ = ["compile", "compile_mode", "CompiledModule"]
+__all__ = ["compile", "compile_mode", "CompiledModule", "CPU_OPTIONS"]
+
+
+CPU_OPTIONS = {"layout_optimization": False}
+"""Inductor's settings on the CPU. Its layout optimisation gives the outputs of a graph's convolutions (the bloom
+pyramid's blurs) channels-last buffers; a per-pixel loop that reads such a frame as planes is then not vectorised
+(``benchmarks/results/cpu_paths.md``: with the grade on planes, the compiled cinematic look at 1920x1080 on one thread
+took 1.22 times as long as before with it, 0.69-0.72 without it)."""
 
 
 def compile_mode(device: torch.device, cuda_graphs: bool = True) -> str:
@@ -58,7 +68,9 @@ class CompiledModule(nn.Module):
         """The compiled callable for frames on ``device`` (compiled lazily: the first frame pays the compile time)."""
         call = self._compiled.get(device.type)
         if call is None:
-            call = torch.compile(self.module, mode=compile_mode(device, self.cuda_graphs), fullgraph=True, dynamic=self.dynamic)
+            # torch.compile takes a mode or options: on the CPU, the options of the default mode (CPU_OPTIONS)
+            settings = {"options": CPU_OPTIONS} if device.type == "cpu" else {"mode": compile_mode(device, self.cuda_graphs)}
+            call = torch.compile(self.module, fullgraph=True, dynamic=self.dynamic, **settings)
             self._compiled[device.type] = call
         return call
 
@@ -66,9 +78,12 @@ class CompiledModule(nn.Module):
         """Check the learnable controls of every stage (``check_learnable``, which the graph skips), then run the graph
         inside the module's ``compiled_frame`` where it has one.
 
-        A frame the module refuses (an image of 2 channels, integer values, ...) raises while Dynamo traces it, which
-        reports that as an ``Unsupported`` error of its own; the module is then called eagerly on the frame, to raise
-        its own error, as an uncompiled module would."""
+        A frame the module refuses (an image of 2 channels, integer values, not a tensor) raises while Dynamo traces
+        it, which reports that as an ``Unsupported`` error of its own; the module is then called eagerly on the frame,
+        to raise its own error, as an uncompiled module would (should the eager call not raise, its output is returned,
+        with a ``RuntimeWarning``: the frame ran once, eagerly)."""
+        if not isinstance(image, torch.Tensor):
+            return self.module(image, *args, **kwargs)  # the module's own TypeError
         for stage in self.module.modules():
             if hasattr(stage, "check_learnable"):
                 stage.check_learnable()
@@ -78,8 +93,10 @@ class CompiledModule(nn.Module):
             if not _raised_while_traced(error):
                 raise
             refused = error
-        self.module(image, *args, **kwargs)  # raises the module's own error (outside the handler: that error alone)
-        raise refused
+        out = self.module(image, *args, **kwargs)  # raises the module's own error (outside the handler: that error alone)
+        warnings.warn(f"the compiled graph of {type(self.module).__name__} raised where eager mode does not: this frame "
+                      f"ran eagerly ({str(refused).splitlines()[0]})", RuntimeWarning, stacklevel=2)
+        return out
 
     def _graph_call(self, image: torch.Tensor, *args, **kwargs):
         frame = getattr(self.module, "compiled_frame", None)
@@ -89,7 +106,7 @@ class CompiledModule(nn.Module):
 
 def _raised_while_traced(error: Exception) -> bool:
     """Whether ``error`` is Dynamo's report of an exception that the traced code raised (its cause: an exception Dynamo
-    observed). ``torch._dynamo`` is loaded by then (a compiled call ran); ``import torchgrade`` does not load it."""
+    observed). Imported here: ``import torchgrade`` does not load ``torch._dynamo``."""
     from torch._dynamo import exc
 
     return isinstance(error, exc.Unsupported) and isinstance(error.__cause__, getattr(exc, "ObservedException", ()))

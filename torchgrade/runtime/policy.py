@@ -84,7 +84,8 @@ class ExecutionPolicy:
             that loop over the same number of elements: a step on the frame (3 values a pixel) after one on a plane
             (1 a pixel) starts a new kernel, which writes and reads the frame again, so a chain that alternates them
             is several kernels (6 for ``ToneMap("aces")``), and on planes one. Eager, a step on planes is three
-            launches instead of one: only while compiling.
+            launches instead of one: only while compiling. Read by the ACES curves (``aces``, ACES 2.0 and its table
+            gathers) and ``ColorGrade``.
     """
 
     strip_pixels: Optional[int]

@@ -19,7 +19,7 @@ from .aces_rrt import (
 )
 from .base import apply_rows, display, limited
 
-__all__ = ["aces_fitted", "aces", "aces_hill", "aces_narkowicz"]
+__all__ = ["aces_fitted", "aces_fitted_planes", "aces", "aces_hill", "aces_narkowicz"]
 
 _ACES_FIT = dict(a=2.785085, b=0.107772, c=2.936045, d=0.887122, e=0.806889)
 """Luminance fit of RRT 1.0.3 + ODT RGBmonitor_100nits_dim (Unity AcesTonemap; RMSE 0.0013)."""

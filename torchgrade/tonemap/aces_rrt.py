@@ -189,6 +189,8 @@ def rrt_glow_and_red_modifier_planes(planes, hue_weight, tiny: float = UNITY_TIN
     Max and Min of the planes (no reduction over channels, ``benchmarks/results/onnx_ops.md``), and the hue is its distance from red
     (:func:`_red_hue_distance`).
     """
+    if isinstance(planes, torch.Tensor):
+        raise TypeError("rrt_glow_and_red_modifier_planes takes an image's three planes as a tuple (image.split(1, dim=-3))")
     r, g, b = planes
     saturation = _saturation(torch.maximum(torch.maximum(r, g), b), torch.minimum(torch.minimum(r, g), b), tiny)
     s = _sigmoid_shaper(affine(saturation, 5.0, -2.0))  # (s - 0.4) / 0.2

@@ -215,7 +215,8 @@ def _segment_columns(knots: torch.Tensor, values: torch.Tensor) -> tuple:
 
 
 def _gathered_columns(table: torch.Tensor, index: torch.Tensor):
-    """``(C, *index.shape)``: the columns ``index`` of a ``(C, K)`` table, each row of the table a plane.
+    """``(C, *index.shape)``: the columns ``index`` of a ``(C, K)`` table, each row of the table a plane (while
+    compiling, a tuple of the ``C`` planes).
 
     By column, not ``table.T[index]``: CUDA gathers rows of a multiple of 16 bytes (the cusp table's 8 values) with a
     block of threads per pixel, 4.99 ms of a 4K frame of ACES 2.0's 14.19 ms on an H200 (``benchmarks/results/gpu.md``),
