@@ -5,9 +5,9 @@
 Each case of ``bench_gpu.py`` that it compiles (the look, its stages, ACES 2.0) is compiled with
 ``torch.compile(fullgraph=True)`` on a small CPU frame, and the generated code is read (``run_and_get_code``):
 
-* **loops over the frame**: each loop nest Inductor writes is, on CUDA, a Triton kernel of its own (steps with the same
-  number of elements fuse into one loop, and into one kernel; a step on the frame's 3 values a pixel after one on a
-  plane's 1 starts another);
+* **loops**: each loop nest Inductor writes (over the frame, or over something small: a 3x3 matrix, a pyramid level) is,
+  on CUDA, a Triton kernel of its own (steps with the same number of elements fuse into one loop, and into one kernel;
+  a step on the frame's 3 values a pixel after one on a plane's 1 starts another);
 * **frames written**: the buffers of a plane's size or more that the graph allocates, in frames (3 planes each): each
   is written by one kernel and read back by a later one, memory traffic that a fused chain keeps in registers. The
   output is one of them.
@@ -51,7 +51,7 @@ def generated_code(module: torch.nn.Module) -> tuple:
 
 
 def structure(source: str) -> dict:
-    """Loop nests over the frame, and the frames the graph writes (buffers of a plane or more, in frames)."""
+    """Loop nests, and the frames the graph writes (buffers of a plane or more, in frames)."""
     plane = FRAME[2] * FRAME[3]
     sizes = [torch.Size(int(n) for n in shape.replace(" ", "").split(",") if n).numel() for shape in BUFFER.findall(source)]
     written = [size for size in sizes if size >= plane]
@@ -72,7 +72,7 @@ def main(argv=None) -> int:
         print(rows[-1], flush=True)
     lines = ["# Compiled frames, read from Inductor's CPU code", "",
              f"torch {torch.__version__}, torchgrade {tg.__version__}, a {FRAME[2]}x{FRAME[3]} frame, one thread. Loops: the "
-             "loop nests over the frame (on CUDA, a kernel each); frames written: the buffers of a plane's size or more, in "
+             "loop nests of the generated code (on CUDA, a kernel each); frames written: the buffers of a plane's size or more, in "
              "frames (each written by one kernel, read back by another; the output among them). See "
              "`benchmarks/inductor_proxy.py`.", "",
              "| case | loops | buffers | frames written | compile s (CPU) |", "| --- | ---: | ---: | ---: | ---: |"]
