@@ -8,7 +8,7 @@ import torch
 
 import torchgrade as tg
 
-from reference.compiled import as_compiled
+from reference.compiled import as_compiled, outputs_and_gradients
 from reference.grade import sample_pixels, unity_grade
 from reference.pixels import pixels, rows
 from test_grade import LOOKS, extremes_image
@@ -21,14 +21,6 @@ def test_as_compiled_matches_unity_color_grade_reference(monkeypatch, look, aces
     rgb = sample_pixels()
     ours = rows(tg.ColorGrade(aces=aces, **LOOKS[look])(pixels(rgb)))
     np.testing.assert_allclose(ours, unity_grade(rgb, aces, **LOOKS[look]), rtol=1e-9, atol=1e-9)
-
-
-def outputs_and_gradients(grade, image):
-    image = image.detach().requires_grad_()
-    weights = torch.rand(image.shape, dtype=image.dtype, generator=torch.Generator().manual_seed(0))
-    out = grade(image)
-    (gradient,) = torch.autograd.grad((out * weights).sum(), image)
-    return out.detach(), gradient
 
 
 @pytest.mark.parametrize("look", ["everything", "split", "saturation"])

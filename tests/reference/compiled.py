@@ -1,4 +1,4 @@
-"""What a module computes while ``torch.compile`` traces it, run eagerly."""
+"""What a module computes while ``torch.compile`` traces it, run eagerly, and what to compare it by."""
 
 import torch
 
@@ -10,3 +10,12 @@ def as_compiled(monkeypatch):
     policy is a compiler's (:attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`) and nothing takes eager shortcuts."""
     monkeypatch.setattr(torch.compiler, "is_compiling", lambda: True)
     assert policy_for(torch.device("cpu")).pixel_planes
+
+
+def outputs_and_gradients(function, image: torch.Tensor) -> tuple:
+    """``function(image)`` and the gradient of a fixed random weighting of it with respect to ``image``."""
+    image = image.detach().requires_grad_()
+    weights = torch.rand(image.shape, dtype=image.dtype, generator=torch.Generator().manual_seed(0))
+    out = function(image)
+    (gradient,) = torch.autograd.grad((out * weights).sum(), image)
+    return out.detach(), gradient

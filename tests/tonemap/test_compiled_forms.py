@@ -9,7 +9,7 @@ import torch
 from torchgrade.functional import tonemap
 from torchgrade.tonemap.aces2 import aces2_output
 
-from reference.compiled import as_compiled
+from reference.compiled import as_compiled, outputs_and_gradients
 from reference.pixels import EXTREMES, pixels, rows
 from reference.tonemap import REFERENCES, hdr_samples
 
@@ -26,14 +26,6 @@ display-linear values, ACES2065-1 input."""
 def hostile_pixels(dtype=torch.float64):
     """Every pair of the hostile values as red and green, blue at 0.18."""
     return pixels(np.array([(r, g, 0.18) for r in HOSTILE for g in HOSTILE]), dtype=dtype)
-
-
-def outputs_and_gradients(function, image):
-    image = image.detach().requires_grad_()
-    weights = torch.rand(image.shape, dtype=image.dtype, generator=torch.Generator().manual_seed(0))
-    out = function(image)
-    (gradient,) = torch.autograd.grad((out * weights).sum(), image)
-    return out.detach(), gradient
 
 
 def test_aces_as_compiled_matches_the_independent_float64_formula(monkeypatch):
