@@ -365,15 +365,21 @@ def each_plane(function, x):
     return tuple(function(plane) for plane in x) if isinstance(x, tuple) else function(x)
 
 
-def matrix_on(matrix: torch.Tensor, x):
+def matrix_on(matrix, x):
     """:func:`apply_matrix` of a ``(3, 3)`` or ``(B, 3, 3)`` matrix on an image, or on its three planes ``(..., 1, H, W)``
-    given as a tuple, returned as planes: ``out_i = sum_j matrix[..., i, j] planes[j]``.
+    given as a tuple, returned as planes: ``out_i = sum_j matrix[..., i, j] planes[j]``. A matrix of plain numbers
+    (nested tuples, :func:`~torchgrade.runtime.values_of`) is a device constant on an image and :func:`rows_on_planes`
+    on planes.
 
     Examples:
         >>> swap = torch.tensor([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
         >>> [p.item() for p in matrix_on(swap, torch.arange(3.0).reshape(3, 1, 1, 1).unbind())]
         [1.0, 0.0, 2.0]
+        >>> matrix_on(((0.0, 1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, 1.0)), torch.arange(3.0).reshape(3, 1, 1)).flatten().tolist()
+        [1.0, 0.0, 2.0]
     """
+    if not isinstance(matrix, torch.Tensor):
+        return rows_on_planes(matrix, x) if isinstance(x, tuple) else apply_matrix(constant(matrix, x), x)
     if not isinstance(x, tuple):
         return apply_matrix(matrix, x)
     entries = matrix[..., None, None, None]  # a sample's entry broadcast over its plane

@@ -15,14 +15,8 @@ import weakref
 import torch
 
 from ... import color
-from ...base.core import (
-    apply_matrix,
-    check_image,
-    full_precision,
-    rows_on_planes,
-    sanitize,
-)
-from ...runtime import constant, policy_for, values_of
+from ...base.core import check_image, each_plane, full_precision, matrix_on, sanitize
+from ...runtime import policy_for, values_of
 from ..aces_rrt import REC709_TO_AP0
 from .cam import (
     REFERENCE_LUMINANCE,
@@ -199,16 +193,6 @@ _MATRIX_VALUES = {
 """The transform's matrices as tuples of floats (device constants, :func:`~torchgrade.runtime.constant`)."""
 
 
-def _matrix(values: tuple, x):
-    """A matrix of plain numbers on an image, or on its three planes given as a tuple (returned as planes)."""
-    return rows_on_planes(values, x) if isinstance(x, tuple) else apply_matrix(constant(values, x), x)
-
-
-def _each(function, x):
-    """``function`` of an image, or of each of its three planes given as a tuple."""
-    return tuple(function(plane) for plane in x) if isinstance(x, tuple) else function(x)
-
-
 def peak_number(peak_luminance) -> float:
     """The peak as a float: a number or a 0-d tensor without gradient (the tables are searched per value)."""
     if isinstance(peak_luminance, torch.Tensor) and peak_luminance.numel() == 1 and not peak_luminance.requires_grad:
@@ -271,7 +255,7 @@ def aces2_output(image: torch.Tensor, peak_luminance: float = 100.0, limiting_pr
         on_planes = policy_for(image.device).pixel_planes  # compiling: the chain on planes, fused into one kernel
         linear = _display_linear(image.unbind(-3) if on_planes else image, peak, limiting_primaries,
                                  display_primaries, input_space)
-        encoded = _each(lambda plane: _encoded(plane, encoding, peak), linear)
+        encoded = each_plane(lambda plane: _encoded(plane, encoding, peak), linear)
         return torch.stack(encoded, dim=-3) if on_planes else encoded
 
 
@@ -289,17 +273,17 @@ def _display_linear(x, peak: float, limiting: str, display: str, input_space: st
     -> AP0 matrix and the CAM's first, the display's and the scaling to the peak). ``x`` is an image, or its three
     planes as a tuple (:attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`), and the result takes its form."""
     output = _output(peak, limiting)
-    into_ap1 = _matrix(_MATRIX_VALUES["rec709_to_ap1" if input_space == "rec709" else "ap0_to_ap1"], x)
-    ap1 = _each(lambda v: v.clamp(0.0, output.tone.forward_limit), into_ap1)
+    into_ap1 = matrix_on(_MATRIX_VALUES["rec709_to_ap1" if input_space == "rec709" else "ap0_to_ap1"], x)
+    ap1 = each_plane(lambda v: v.clamp(0.0, output.tone.forward_limit), into_ap1)
     rgb = output.render_planes(ap1, "ap1") if isinstance(ap1, tuple) else output.render(ap1, "ap1")
     scale = REFERENCE_LUMINANCE / peak
     if limiting != display:
-        rgb = _matrix(_display_matrix(limiting, display, scale), rgb)
+        rgb = matrix_on(_display_matrix(limiting, display, scale), rgb)
     elif scale != 1.0:
-        rgb = _each(lambda v: v * scale, rgb)
+        rgb = each_plane(lambda v: v * scale, rgb)
     # Display values below 0 do not exist: clip where a limiting gamut pokes out of the container
     # (P3's red lies just outside Rec.2020), rather than mirror them through the encoding as OpenColorIO does.
-    return _each(lambda v: v.clamp(0.0, 1.0), rgb)
+    return each_plane(lambda v: v.clamp(0.0, 1.0), rgb)
 
 
 @functools.lru_cache(maxsize=64)
