@@ -74,3 +74,21 @@ def test_aces2_as_compiled_matches_opencolorio_out_of_gamut(monkeypatch):
         ours = _ours(aces, input_space="aces", encoding="bt1886" if codes == 255 else "pq", **kwargs)
         distance = np.abs(ours - reference) * codes
         assert np.percentile(distance, 99.9) <= 0.5 and distance.max() <= 2.0, view
+
+
+@pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16])
+@pytest.mark.parametrize("name", ["aces", "grade"])
+def test_as_compiled_half_precision_frames_are_computed_in_float32_as_eager(monkeypatch, name, dtype):
+    """Both forms compute a float16/bfloat16 frame in float32 and round it back once: the same values to one step of
+    the frame's dtype (the dtype's own tolerances), at its extremes too (65504 is float16's largest)."""
+    import torchgrade as tg
+
+    values = torch.tensor([0.0, 1e-4, 0.18, 1.0, 60.0, 65504.0]).to(dtype)
+    image = torch.stack((values, values.roll(1), values.roll(3)))[None, :, :, None]
+    stage = tg.ToneMap("aces") if name == "aces" else tg.ColorGrade(aces=True, contrast=30, saturation=20,
+                                                                     split_shadows=(0.4, 0.5, 0.6))
+    eager = stage(image)
+    as_compiled(monkeypatch)
+    compiled = stage(image)
+    assert compiled.dtype == dtype and torch.isfinite(compiled).all()
+    torch.testing.assert_close(compiled, eager)
