@@ -91,3 +91,30 @@ def test_grade_and_aces_under_cuda_float16_autocast_match_float32(desk):
         out = look(image)
     assert out.dtype == torch.float32
     assert (out - reference).abs().max() <= FLOAT16_DISPLAY_BOUND
+
+
+@pytest.mark.parametrize("name", list(_modules()))
+def test_every_stage_is_captured_whole_under_autocast(desk, name):
+    """Under an active autocast the whole forward is one graph (``fullgraph=True``; Dynamo alone, the capture is what
+    can break) that gives what it gives without autocast (the compiled forms differ from eager in float32 rounding)."""
+    torch._dynamo.reset()
+    module = torch.compile(_modules()[name].eval(), fullgraph=True, backend="eager")
+    image = desk.clamp(0.0, 1.0) if name == "lut" else desk
+    with torch.no_grad():
+        reference = module(image)
+        with torch.autocast("cpu", dtype=torch.bfloat16):
+            out = module(image)
+    assert out.dtype == torch.float32
+    torch.testing.assert_close(out, reference, rtol=1e-6, atol=1e-6)
+
+
+def test_a_compiled_look_under_autocast_matches_float32(desk):
+    """``tg.compile`` (Inductor) of a grade and ACES under CPU bfloat16 autocast: the float32 result."""
+    torch._dynamo.reset()
+    look = tg.compile(_look().eval())
+    with torch.no_grad():
+        reference = look(desk)
+        with torch.autocast("cpu", dtype=torch.bfloat16):
+            out = look(desk)
+    assert out.dtype == torch.float32
+    torch.testing.assert_close(out, reference, rtol=1e-6, atol=1e-6)

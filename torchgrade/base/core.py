@@ -568,10 +568,12 @@ def full_precision():
         ...     (torch.ones(2, 2) @ torch.ones(2, 2)).dtype
         torch.float32
     """
-    with contextlib.ExitStack() as stack:
-        for device in _AUTOCAST_DEVICES:
-            if torch.is_autocast_enabled(device):
-                stack.enter_context(torch.autocast(device, enabled=False))
+    # One device a level, as plain ``with`` blocks: torch.compile traces those (an ExitStack's enter_context it refuses).
+    device = next((device for device in _AUTOCAST_DEVICES if torch.is_autocast_enabled(device)), None)
+    if device is None:
+        yield
+        return
+    with torch.autocast(device, enabled=False), full_precision():
         yield
 
 
