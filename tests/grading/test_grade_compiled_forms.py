@@ -1,5 +1,5 @@
-"""ColorGrade as a compiler is given it, run eagerly: the steps that mix channels on the image's planes
-(``ExecutionPolicy.pixel_planes``), the others on the joined image. Against the float64 re-implementation of Unity's
+"""ColorGrade as a compiler is given it, run eagerly: its steps on the image's planes (``ExecutionPolicy.pixel_planes``),
+its curves and tensor split-toning colours on the joined image. Against the float64 re-implementation of Unity's
 ColorGrade and against the eager forms, in outputs and gradients. (That Inductor fuses it: ``tests/runtime/test_gpu_path.py``.)"""
 
 import numpy as np
@@ -9,9 +9,10 @@ import torch
 import torchgrade as tg
 
 from reference.compiled import as_compiled, outputs_and_gradients
-from reference.grade import sample_pixels, unity_grade
+from reference.grade import sample_pixels, unity_grade, unity_grade_pixel
 from reference.pixels import pixels, rows
 from test_grade import LOOKS, extremes_image
+from test_grade_parity import EARLY, TAIL_LOOKS, unity_tail_pixel
 
 
 @pytest.mark.parametrize("aces", [False, True], ids=["linear", "aces"])
@@ -53,3 +54,25 @@ def test_as_compiled_takes_per_sample_and_tensor_controls(monkeypatch):
     as_compiled(monkeypatch)
     for ours, theirs in zip(graded(), eager):
         torch.testing.assert_close(ours.detach(), theirs.detach(), rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("look", sorted(TAIL_LOOKS))
+def test_as_compiled_matches_unity_lift_gamma_gain_and_curves_reference(monkeypatch, look):
+    """Lift/gamma/gain, zones and hue shift on planes, curves on the joined image, after the early steps."""
+    as_compiled(monkeypatch)
+    rgb = sample_pixels()
+    ours = rows(tg.ColorGrade(**EARLY, **TAIL_LOOKS[look])(pixels(rgb)))
+    expected = [unity_tail_pixel(unity_grade_pixel(c, **EARLY), **TAIL_LOOKS[look]) for c in rgb]
+    np.testing.assert_allclose(ours, expected, rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("look", ["lift_gamma_gain", "everything"])
+def test_as_compiled_tail_equals_eager_on_extremes_in_outputs_and_gradients(monkeypatch, look):
+    grade = tg.ColorGrade(**EARLY, **TAIL_LOOKS[look])
+    image = extremes_image(torch.float64)
+    eager = outputs_and_gradients(grade, image)
+    as_compiled(monkeypatch)
+    compiled = outputs_and_gradients(grade, image)
+    for ours, theirs in zip(compiled, eager):
+        assert torch.isfinite(ours).all()
+        torch.testing.assert_close(ours, theirs, rtol=1e-9, atol=1e-9)

@@ -168,8 +168,14 @@ def frame_buffers(source: str, pixels: int) -> int:
     return sum(1 for size in sizes if torch.Size(size).numel() >= pixels)
 
 
-PLANES_CHAINS = {"tonemap-aces": lambda: tg.ToneMap("aces"), "grade": lambda: tg.ColorGrade(**CINEMATIC["grade"])}
-"""Per-pixel chains a compiler gets on planes (:attr:`ExecutionPolicy.pixel_planes`): the ACES curve, the look's grade."""
+EVERY_PLANE_STEP = dict(post_exposure=0.4, temperature=20, contrast=30, split_shadows=(0.4, 0.5, 0.6), channel_mixer=((1.0, 0.05, 0.0), (0.0, 1.0, 0.05), (0.05, 0.0, 1.0)),
+                        midtones=(1.05, 1.0, 0.95), lift=(0.95, 1.0, 1.0, 0.01), gamma=(1.0, 1.0, 0.9, 0.05), gain=(1.0, 0.95, 1.0, 0.1),
+                        hue_shift=-30.0, saturation=-20.0)
+"""Every step of the grade a compiler gets on planes (its curves and tensor split-toning colours it gets joined)."""
+PLANES_CHAINS = {"tonemap-aces": lambda: tg.ToneMap("aces"), "grade": lambda: tg.ColorGrade(**CINEMATIC["grade"]),
+                 "grade-every-plane-step": lambda: tg.ColorGrade(**EVERY_PLANE_STEP)}
+"""Per-pixel chains a compiler gets on planes (:attr:`ExecutionPolicy.pixel_planes`): the ACES curve, the look's grade, every
+step of the grade that runs on planes."""
 
 
 @pytest.mark.parametrize("name", list(PLANES_CHAINS))
@@ -202,7 +208,7 @@ def captured_graph(module: torch.nn.Module, image: torch.Tensor) -> torch.fx.Gra
     return graphs[0]
 
 
-@pytest.mark.parametrize("name", ["tonemap-aces", "tonemap-aces2", "tonemap-aces2_hdr", "grade"])
+@pytest.mark.parametrize("name", ["tonemap-aces", "tonemap-aces2", "tonemap-aces2_hdr", "grade", "grade-every-plane-step"])
 def test_a_compiled_chain_stays_on_planes_from_its_first_step_on_one_to_its_stack(name):
     """The graph Inductor is given (:attr:`ExecutionPolicy.pixel_planes`): once a step computes one value a pixel, no
     step computes more until the stack that makes the output (a frame's 3 values a pixel, or ACES 2.0's 8 table

@@ -51,6 +51,8 @@ __all__ = [
     "matrix_on_planes",
     "rows_on_planes",
     "each_plane",
+    "per_channel",
+    "like_image",
     "matrix_on",
     "joined",
     "matrix_product",
@@ -363,6 +365,32 @@ def each_plane(function, x):
         (tensor(-1.), tensor(-2.), tensor(-3.))
     """
     return tuple(function(plane) for plane in x) if isinstance(x, tuple) else function(x)
+
+
+def per_channel(function, x, *coefficients):
+    """``function(image, *coefficients)`` of an image and per-channel coefficients ``(..., 3, 1, 1)``; of an image given
+    as its three planes (a tuple, :attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`), ``function`` of each plane
+    and of its channel's coefficients ``(..., 1, 1, 1)``, returned as planes.
+
+    Examples:
+        >>> gains = torch.tensor([1.0, 2.0, 3.0]).reshape(3, 1, 1)
+        >>> [p.item() for p in per_channel(torch.mul, (torch.ones(1, 1, 1),) * 3, gains)]
+        [1.0, 2.0, 3.0]
+    """
+    if not isinstance(x, tuple):
+        return function(x, *coefficients)
+    return tuple(function(plane, *(c[..., i : i + 1, :, :] for c in coefficients)) for i, plane in enumerate(x))
+
+
+def like_image(x) -> torch.Tensor:
+    """An image, or the first of its three planes (a tuple): a tensor with the image's batch, dtype and device, to make
+    controls for it (:func:`color_param`, :func:`scalar_param`).
+
+    Examples:
+        >>> like_image((torch.zeros(2, 1, 4, 4),) * 3).shape
+        torch.Size([2, 1, 4, 4])
+    """
+    return x[0] if isinstance(x, tuple) else x
 
 
 def matrix_on(matrix, x):

@@ -8,8 +8,11 @@ from ..runtime import affine, constant, where
 from .spaces import CHANNEL
 
 __all__ = [
-    "rgb_to_hsv", "hsv_to_rgb", "hsv_planes", "rgb_from_hsv_planes",
+    "rgb_to_hsv", "hsv_to_rgb", "hsv_planes", "rgb_from_hsv_planes", "rgb_planes_from_hsv",
 ]
+
+_HUE_OFFSETS = (1.0, 5.0 / 3.0, 4.0 / 3.0)
+"""Unity ``HsvToRgb``'s ``K.xyz`` (0, 2/3, 1/3) plus 1, one a channel: ``frac`` of a positive number."""
 
 
 def rgb_to_hsv(image: torch.Tensor) -> torch.Tensor:
@@ -30,15 +33,20 @@ def rgb_to_hsv(image: torch.Tensor) -> torch.Tensor:
 
 def hsv_planes(image: torch.Tensor) -> tuple:
     """:func:`rgb_to_hsv` as its three planes ``(hue, saturation, value)``, each ``(..., 1, H, W)``: for a caller that
-    changes a plane and goes back (:func:`rgb_from_hsv_planes`), with no frame joined or split.
+    changes a plane and goes back (:func:`rgb_from_hsv_planes`), with no frame joined or split. ``image`` may be given
+    as its three planes (a tuple).
 
     Examples:
         >>> [round(float(v), 4) for v in hsv_planes(torch.tensor([1.0, 0.5, 0.0]).reshape(3, 1, 1))]
         [0.0833, 1.0, 1.0]
     """
-    r, g, b = image.split(1, dim=CHANNEL)
-    value = image.amax(dim=CHANNEL, keepdim=True)
-    delta = value - image.amin(dim=CHANNEL, keepdim=True)
+    if isinstance(image, tuple):
+        r, g, b = image
+        value, smallest = torch.maximum(torch.maximum(r, g), b), torch.minimum(torch.minimum(r, g), b)
+    else:
+        r, g, b = image.split(1, dim=CHANNEL)
+        value, smallest = image.amax(dim=CHANNEL, keepdim=True), image.amin(dim=CHANNEL, keepdim=True)
+    delta = value - smallest
     chromatic = delta > 0
     safe_delta = where(chromatic, delta, 1.0)
     hue_r = torch.remainder((g - b) / safe_delta, 6.0)
@@ -70,7 +78,25 @@ def rgb_from_hsv_planes(hue: torch.Tensor, saturation: torch.Tensor, value: torc
         >>> rgb_from_hsv_planes(*(torch.tensor([[[v]]]) for v in (0.0, 1.0, 2.0))).flatten().tolist()
         [2.0, 0.0, 0.0]
     """
-    offsets = constant((1.0, 5.0 / 3.0, 4.0 / 3.0), value).reshape(3, 1, 1)  # k + 1: frac of a positive number
-    # ramp - 1 in one clamp, and V (1 + S (ramp - 1)) as V + (V S)(ramp - 1): exact at S = 0, ramp = 1 and S = 1, ramp = 0
-    ramp_less_one = (torch.abs(affine(torch.frac(hue + offsets), 6.0, -3.0)) - 2.0).clamp(-1.0, 0.0)
+    return _from_ramp(value, saturation, _ramp_less_one(hue, constant(_HUE_OFFSETS, value).reshape(3, 1, 1)))
+
+
+def rgb_planes_from_hsv(hue: torch.Tensor, saturation: torch.Tensor, value: torch.Tensor) -> tuple:
+    """:func:`rgb_from_hsv_planes` returned as the three planes ``(r, g, b)``: the form of a chain computed on planes
+    (:attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`), each channel's offset a number in the kernel.
+
+    Examples:
+        >>> [float(p) for p in rgb_planes_from_hsv(*(torch.tensor(v) for v in (0.0, 1.0, 2.0)))]
+        [2.0, 0.0, 0.0]
+    """
+    return tuple(_from_ramp(value, saturation, _ramp_less_one(hue, offset)) for offset in _HUE_OFFSETS)
+
+
+def _ramp_less_one(hue: torch.Tensor, offset) -> torch.Tensor:
+    """Unity's ``saturate(|frac(H + K) · 6 - 3| - 1)`` less one, in one clamp: ``clamp(|6 frac(H + k) - 3| - 2, -1, 0)``."""
+    return (torch.abs(affine(torch.frac(hue + offset), 6.0, -3.0)) - 2.0).clamp(-1.0, 0.0)
+
+
+def _from_ramp(value: torch.Tensor, saturation: torch.Tensor, ramp_less_one: torch.Tensor) -> torch.Tensor:
+    """``V lerp(1, ramp, S)`` as ``V + (V S)(ramp - 1)``: exact at S = 0, ramp = 1 and S = 1, ramp = 0."""
     return torch.addcmul(value, value * saturation, ramp_less_one)

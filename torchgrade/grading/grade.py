@@ -206,19 +206,19 @@ def color_grade(image: torch.Tensor, aces: bool = False, log_space: str = "acesc
     if "split_toning" in steps:
         x = split_toning(x, p["split_shadows"], p["split_highlights"], p["split_balance"], weights)
     if "channel_mixer" in steps:
-        x = channel_mixer(joined(x), p["channel_mixer"])
+        x = channel_mixer(x, p["channel_mixer"])
     x = _bounded(x)
     if "shadows_midtones_highlights" in steps:
         zones = [p[name] for name in ("shadows_start", "shadows_end", "highlights_start", "highlights_end")]
-        x = shadows_midtones_highlights(joined(x), p["shadows"], p["midtones"], p["highlights"], *zones, weights)
+        x = shadows_midtones_highlights(x, p["shadows"], p["midtones"], p["highlights"], *zones, weights)
     if "lift_gamma_gain" in steps:
-        x = lift_gamma_gain(joined(x), p["lift"], p["gamma"], p["gain"]).clamp_min(0.0)
+        x = each_plane(lambda plane: plane.clamp_min(0.0), lift_gamma_gain(x, p["lift"], p["gamma"], p["gain"]))
     factor = None
     if "saturation_curves" in steps:
         x = joined(x)
         factor = saturation_curves(x, p["hue_vs_sat"], p["sat_vs_sat"], p["lum_vs_sat"], weights)
     if "hue_shift" in steps:
-        x = hue_shift(joined(x), p["hue_shift"], p["hue_vs_hue"])
+        x = hue_shift(x, p["hue_shift"], p["hue_vs_hue"])
     # Saturation without curves is a matrix too, folded with the way out of ACEScg.
     amount = None
     if factor is None and "saturation" in steps and _saturation_folds(x, p["saturation"]):

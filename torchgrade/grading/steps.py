@@ -22,8 +22,11 @@ from ..base.core import (
     each_plane,
     is_constant,
     joined,
+    like_image,
+    matrix_on,
     matrix_param,
     matrix_product,
+    per_channel,
     scalar_param,
     untracked,
 )
@@ -44,6 +47,7 @@ from ..color import (
     linear_to_acescct,
     luminance,
     rgb_from_hsv_planes,
+    rgb_planes_from_hsv,
     safe_pow,
     safe_sqrt,
     srgb_to_linear,
@@ -320,7 +324,7 @@ def _soft_light_by_channel(gamma: torch.Tensor, weights: tuple, offsets: tuple) 
     exporting = torch.onnx.is_in_onnx_export()
     planes = []
     for c, plane in enumerate(gamma if on_planes else gamma.split(1, dim=-3)):
-        for weight, offset in zip(weights, (per_channel[c] for per_channel in offsets)):
+        for weight, offset in zip(weights, (channel_offsets[c] for channel_offsets in offsets)):
             if offset == 0.0:
                 continue
             if offset < 0.0:  # a(1 - a), as a - a² in one pass where not exported
@@ -404,14 +408,15 @@ def _plain_offsets(color):
 
 
 def channel_mixer(image: torch.Tensor, mixer=IDENTITY_MATRIX) -> torch.Tensor:
-    """Channel mixer: ``rgb' = M · rgb``, rows are the output channels (1.0 = Unity's 100%).
+    """Channel mixer: ``rgb' = M · rgb``, rows are the output channels (1.0 = Unity's 100%). An image given as its three
+    planes (a tuple, :attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`) is returned as planes.
 
     Examples:
         >>> swap = ((0.0, 1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, 1.0))
         >>> channel_mixer(torch.tensor([1.0, 2.0, 3.0]).reshape(3, 1, 1), swap).flatten().tolist()
         [2.0, 1.0, 3.0]
     """
-    return apply_matrix(matrix_param(mixer, image, "channel_mixer"), image)
+    return matrix_on(matrix_param(mixer, like_image(image), "channel_mixer"), image)
 
 
 def smoothstep(edge0, edge1, x: torch.Tensor) -> torch.Tensor:
@@ -439,7 +444,8 @@ def shadows_midtones_highlights(
     """Zone tints (Unity ``ColorGradingShadowsMidtonesHighlights``), colours sRGB-encoded as in Unity.
 
     ``ws = 1 - smoothstep(s0, s1, Y)``, ``wh = smoothstep(h0, h1, Y)``, ``wm = 1 - ws - wh``;
-    ``rgb' = rgb · (S ws + M wm + H wh)``.
+    ``rgb' = rgb · (S ws + M wm + H wh)``. An image given as its three planes (a tuple,
+    :attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`) is returned as planes.
 
     Examples:
         >>> image = torch.rand(3, 2, 2)
@@ -448,17 +454,14 @@ def shadows_midtones_highlights(
     """
     lum = luminance(image, luminance_weights)
     shadow_weight = 1.0 - smoothstep(
-        scalar_param(shadows_start, image, "shadows_start"), scalar_param(shadows_end, image, "shadows_end"), lum
+        scalar_param(shadows_start, lum, "shadows_start"), scalar_param(shadows_end, lum, "shadows_end"), lum
     )
     highlight_weight = smoothstep(
-        scalar_param(highlights_start, image, "highlights_start"), scalar_param(highlights_end, image, "highlights_end"), lum
+        scalar_param(highlights_start, lum, "highlights_start"), scalar_param(highlights_end, lum, "highlights_end"), lum
     )
-    tint = (
-        srgb_to_linear(color_param(shadows, image, "shadows")) * shadow_weight
-        + srgb_to_linear(color_param(midtones, image, "midtones")) * (1.0 - shadow_weight - highlight_weight)
-        + srgb_to_linear(color_param(highlights, image, "highlights")) * highlight_weight
-    )
-    return image * tint
+    midtone_weight = 1.0 - shadow_weight - highlight_weight
+    tints = (srgb_to_linear(color_param(color, lum, name)) for color, name in zip((shadows, midtones, highlights), ("shadows", "midtones", "highlights")))
+    return per_channel(lambda x, s, m, h: x * (s * shadow_weight + m * midtone_weight + h * highlight_weight), image, *tints)
 
 
 def _trackball(value, image: torch.Tensor, name: str) -> tuple:
@@ -511,26 +514,38 @@ def lift_gamma_gain(image: torch.Tensor, lift=IDENTITY_TRACKBALL, gamma=IDENTITY
     negative values (ACEScg can be negative) and saturates at ±65504 (:func:`~torchgrade.base.core.bounded_pow`):
     Unity's own minimum gamma is a power of 1000, which overflows float32 from 1.1 up.
 
+    An image given as its three planes (a tuple, :attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`) is returned
+    as planes.
+
     Examples:
         >>> lift_gamma_gain(torch.full((3, 1, 1), 0.5), gain=(1.0, 1.0, 1.0, 1.0)).flatten().tolist()  # offset 1: double
         [1.0, 1.0, 1.0]
     """
-    lift_t, inverse_gamma, gain_t = lift_gamma_gain_coefficients(lift, gamma, gain, image)
-    c = image * gain_t + lift_t
+    return per_channel(_lift_gamma_gain_of, image, *lift_gamma_gain_coefficients(lift, gamma, gain, like_image(image)))
+
+
+def _lift_gamma_gain_of(x: torch.Tensor, lift: torch.Tensor, inverse_gamma: torch.Tensor, gain: torch.Tensor) -> torch.Tensor:
+    """``sign(c) |c|^(1/gamma)`` of ``c = x · gain + lift``, for coefficients that broadcast against ``x``."""
+    c = x * gain + lift
     return torch.sign(c) * bounded_pow(c.abs(), inverse_gamma)
 
 
 def _hsv(image: torch.Tensor) -> tuple:
-    """:func:`~torchgrade.color.hsv_planes` of ``image``, negligible light taken as black."""
+    """:func:`~torchgrade.color.hsv_planes` of ``image`` (or of its three planes, a tuple), negligible light taken as black."""
     # Hue divides by the chroma (max - min): ACEScg turns a grey 1e-38 into a tinted one, whose hue's gradient overflows.
-    lit = image.amax(dim=CHANNEL, keepdim=True) > NEGLIGIBLE_LIGHT
-    return hsv_planes(where(lit, image, 0.0))
+    if isinstance(image, tuple):
+        lit = torch.maximum(torch.maximum(image[0], image[1]), image[2]) > NEGLIGIBLE_LIGHT
+    else:
+        lit = image.amax(dim=CHANNEL, keepdim=True) > NEGLIGIBLE_LIGHT
+    return hsv_planes(each_plane(lambda plane: where(lit, plane, 0.0), image))
 
 
 def hue_shift(image: torch.Tensor, degrees: Param, hue_vs_hue=None) -> torch.Tensor:
     """Hue shift in HSV, wrapping around the colour wheel (Unity ``ColorGradingHueShift``); RGB ≥ 0.
 
     With a ``hue_vs_hue`` curve the shifted hue ``h`` moves on by ``curve(h) - 0.5`` turns (URP ``LutBuilderHdr``).
+    An image given as its three planes (a tuple, :attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`) is returned
+    as planes.
 
     Examples:
         >>> red = torch.tensor([1.0, 0.0, 0.0]).reshape(3, 1, 1)
@@ -538,10 +553,10 @@ def hue_shift(image: torch.Tensor, degrees: Param, hue_vs_hue=None) -> torch.Ten
         [0.0, 1.0, 0.0]
     """
     hue, sat, value = _hsv(image)
-    hue = torch.remainder(hue + scalar_param(degrees, image, "hue_shift") / 360.0, 1.0)
+    hue = torch.remainder(hue + scalar_param(degrees, hue, "hue_shift") / 360.0, 1.0)
     if hue_vs_hue is not None:
         hue = torch.remainder(hue + evaluate_curve(hue_vs_hue, hue, periodic=True, name="hue_vs_hue") - 0.5, 1.0)
-    return rgb_from_hsv_planes(hue, sat, value)
+    return (rgb_planes_from_hsv if isinstance(image, tuple) else rgb_from_hsv_planes)(hue, sat, value)
 
 
 def saturation_curves(image: torch.Tensor, hue_vs_sat=None, sat_vs_sat=None, lum_vs_sat=None, luminance_weights="rec709") -> torch.Tensor:
