@@ -194,6 +194,24 @@ def test_inductor_compiles_a_chain_on_planes_into_one_pass_that_writes_only_the_
     assert (out.double() - exact).abs().max() <= 3 * (eager.double() - exact).abs().max() + 1e-6
 
 
+def test_inductor_compiles_the_augmentation_into_one_pass_that_writes_only_the_output():
+    """``RandomPostFX`` as ``bench_gpu.py`` races it against kornia's ``ColorJiggle`` (sRGB in and out, a grade with a hue
+    shift), with skipped samples: its grade's planes are finished plane by plane into the output, the one frame written
+    (it wrote 2.33 frames an image when the grade joined its planes and the output was encoded as one frame)."""
+    from torch._inductor.utils import run_and_get_code
+
+    torch._dynamo.reset()
+    layer = tg.RandomPostFX(contrast=30, saturation=30, hue_shift=20, post_exposure=0.5, input_space="srgb", p=0.5)
+    images = torch.rand(4, 3, 64, 96, generator=torch.Generator().manual_seed(0))
+    layer(images, generator=torch.Generator().manual_seed(1))
+    params = layer.last_params
+    with torch.no_grad():
+        out, code = run_and_get_code(torch.compile(lambda x: layer(x, params=params), fullgraph=True), images)
+        eager = layer(images, params=params)
+    assert frame_buffers("\n".join(code), 64 * 96) == 1
+    torch.testing.assert_close(out, eager, rtol=1e-5, atol=1e-5)
+
+
 def captured_graph(module: torch.nn.Module, image: torch.Tensor) -> torch.fx.GraphModule:
     """The graph Dynamo captures of ``module`` on ``image`` (no compiler runs it)."""
     graphs = []

@@ -50,10 +50,10 @@ import torch
 from kornia.augmentation import IntensityAugmentationBase2D
 from torch import nn
 
-from ..base.core import check_image, is_tracing, to_input_dtype, working_dtype
+from ..base.core import check_image, is_tracing, joined, to_input_dtype, working_dtype
 from ..bloom import BLOOM_MODES, bloom_settings, bloom_with_settings
 from ..color import linear_to_srgb, srgb_to_linear
-from ..grading.grade import color_grade
+from ..grading.grade import color_grade_planes
 from ..grading.layer import ColorGrade
 from ..look.slots import SLOTS
 from ..output.layer import LookLUT
@@ -331,19 +331,25 @@ class RandomPostFX(IntensityAugmentationBase2D):
             if random and held is None and applied is not None:
                 held = x
             if not random and held is not None:
-                x, held = torch.where(applied, x, held), None
-            x = getattr(self, f"_{slot}")(x, params, applied)
-        if self.input_space == "srgb":
-            x = linear_to_srgb(x).clamp(0.0, 1.0)
-        x = to_input_dtype(x, images)
-        return x if held is None else torch.where(applied, x, images)  # only random controls: skipped samples exact
+                x, held = torch.where(applied, joined(x), joined(held)), None
+            # the grade may return planes (while compiling); the other slots take an image
+            x = getattr(self, f"_{slot}")(x if slot == "grade" else joined(x), params, applied)
+
+        def finished(x, images):  # encoded, in the input's dtype; only random controls: skipped samples exact
+            x = to_input_dtype(linear_to_srgb(x).clamp(0.0, 1.0) if self.input_space == "srgb" else x, images)
+            return x if held is None else torch.where(applied, x, images)
+
+        if isinstance(x, tuple):  # the grade's planes (compiling): finished plane by plane into the output's stack
+            return joined(tuple(finished(*planes) for planes in zip(x, images.split(1, dim=-3))))
+        return finished(x, images)
 
     def _bloom(self, x: torch.Tensor, params: dict, applied) -> torch.Tensor:
         controls = {BLOOM_CONTROLS[name][0]: params[name] for name in self.bloom_ranges}
         return bloom_with_settings(x, bloom_settings({"mode": self.bloom_mode, **controls}))  # drawn inside their ranges
 
-    def _grade(self, x: torch.Tensor, params: dict, applied) -> torch.Tensor:
-        return color_grade(x, aces=self.aces, **{name: params[name] for name in self.grade_ranges})
+    def _grade(self, x: torch.Tensor, params: dict, applied):
+        """The graded image, or its planes while compiling (:func:`~torchgrade.grading.grade.color_grade_planes`)."""
+        return color_grade_planes(x, aces=self.aces, **{name: params[name] for name in self.grade_ranges})
 
     def _tonemap(self, x: torch.Tensor, params: dict, applied) -> torch.Tensor:
         return tonemap_per_sample(x, params["tonemap"], self.tonemap)

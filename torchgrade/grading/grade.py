@@ -72,7 +72,7 @@ from .steps import (
     yrgb_curves,
 )
 
-__all__ = ["COLOR_GRADE_CONTROLS", "GRADE_SETTINGS", "color_grade", "active_steps", "is_identity_control", "grade_matrix", "output_matrix"]
+__all__ = ["COLOR_GRADE_CONTROLS", "GRADE_SETTINGS", "color_grade", "color_grade_planes", "active_steps", "is_identity_control", "grade_matrix", "output_matrix"]
 
 COLOR_GRADE_CONTROLS = {
     "aces": Control(False),
@@ -178,6 +178,20 @@ def color_grade(image: torch.Tensor, aces: bool = False, log_space: str = "acesc
         >>> color_grade(image, saturation=-100.0).std(dim=1).max().item() < 1e-6
         True
     """
+    graded = color_grade_planes(image, aces, log_space, **params)
+    return graded if graded is image else to_input_dtype(joined(graded), image)
+
+
+def color_grade_planes(image: torch.Tensor, aces: bool = False, log_space: str = "acescc", **params):
+    """:func:`color_grade` in the working dtype (float32 or wider), as the graded image's three planes (a tuple) where the
+    steps run on planes (while compiling, :attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`): for a chain that
+    goes on computing on planes, so no frame is joined only to be split again. An all-identity grade returns ``image``.
+
+    Examples:
+        >>> image = torch.rand(1, 3, 2, 2)
+        >>> torch.equal(color_grade_planes(image, contrast=20.0), color_grade(image, contrast=20.0))  # eager: an image
+        True
+    """
     check_image(image)
     p = _grade_inputs(params)
     steps = active_steps(params)
@@ -185,7 +199,7 @@ def color_grade(image: torch.Tensor, aces: bool = False, log_space: str = "acesc
         return image
     weights = "ap1" if aces else "rec709"
     x = like = sanitize(working_dtype(image))
-    if policy_for(x.device).pixel_planes:  # compiling: the steps that mix channels on planes, for Inductor to fuse
+    if policy_for(x.device).pixel_planes:  # compiling: the steps on planes, for Inductor to fuse
         x = x.split(1, dim=-3)
     # The linear steps between two non-linear ones are folded into one matrix, so each pixel sees one 3x3: post
     # exposure, white balance and the way into contrast's primaries; the way out of them and the colour filter.
@@ -232,7 +246,7 @@ def color_grade(image: torch.Tensor, aces: bool = False, log_space: str = "acesc
     x = each_plane(lambda plane: plane.clamp_min(0.0), _applied(folded(output_matrix, amount, weights, aces, like=like), x))
     if aces:
         x = matrix_on(shared_matrix("ap0_to_srgb", like), x)  # aces_to_unity
-    return to_input_dtype(joined(x), image)
+    return x
 
 
 def grade_matrix(exposure, balance, space, tint, *, like: torch.Tensor):
