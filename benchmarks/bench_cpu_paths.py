@@ -1,8 +1,8 @@
 """The eager CPU paths on this machine's threads: the cinematic look, its stages, ACES 2.0 and 33³ LUTs at 1920x1080,
-and ``RandomPostFX`` on a 32x3x224x224 batch; with ``--compiled``, the look and its per-pixel stages through
-``tg.compile`` (each compiles in the first, untimed round).
+and ``RandomPostFX`` on a 32x3x224x224 batch; with ``--compiled``, the look, its per-pixel stages and ``RandomPostFX``
+through ``tg.compile`` (each compiles in the first, untimed round). ``--cases`` times only the cases named.
 
-    python benchmarks/bench_cpu_paths.py [--runs N] [--threads N] [--clock wall|cpu] [--compiled] [--json FILE]
+    python benchmarks/bench_cpu_paths.py [--runs N] [--threads N] [--clock wall|cpu] [--compiled] [--cases NAME ...] [--json FILE]
 
 Prints the median ms of each case (every round runs each case once: A B C A B C ...). It uses only the public API, so
 two versions of torchgrade can be compared by running it under each (``PYTHONPATH=<checkout>``) in turn; the
@@ -28,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 CINEMATIC = json.loads((ROOT / "export" / "looks" / "cinematic.json").read_text())
 
 
-COMPILED = ("cinematic look", "grade", "tone map aces", "tone map aces2")
+COMPILED = ("cinematic look", "grade", "tone map aces", "tone map aces2", "RandomPostFX 32x224^2")
 """The cases ``--compiled`` times, each module through ``tg.compile``."""
 
 
@@ -47,7 +47,7 @@ def cases(compiled: bool = False) -> dict:
     augment = tg.RandomPostFX(contrast=30, saturation=30, hue_shift=20, post_exposure=0.5, input_space="srgb")
     batch = torch.rand(32, 3, 224, 224, generator=torch.Generator().manual_seed(2))
     if compiled:
-        look, grade, tonemap, aces2 = (tg.compile(module) for module in (look, grade, tonemap, aces2))
+        look, grade, tonemap, aces2, augment = (tg.compile(module) for module in (look, grade, tonemap, aces2, augment))
     calls = {
         "cinematic look": lambda: look(image),
         "grade": lambda: grade(image),
@@ -68,12 +68,17 @@ def main(argv=None) -> None:
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--threads", type=int, default=None, help="torch threads (default: torch's)")
     parser.add_argument("--clock", choices=("wall", "cpu"), default="wall")
-    parser.add_argument("--compiled", action="store_true", help="the look and its per-pixel stages through tg.compile")
+    parser.add_argument("--compiled", action="store_true", help="the look, its per-pixel stages and RandomPostFX through tg.compile")
+    parser.add_argument("--cases", nargs="+", metavar="NAME", help="only these cases (default: every one)")
     args = parser.parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)
     clock = time.perf_counter if args.clock == "wall" else time.process_time
     calls = cases(args.compiled)
+    unknown = set(args.cases or ()) - set(calls)
+    if unknown:
+        parser.error(f"unknown case(s) {sorted(unknown)}; the cases: {', '.join(calls)}")
+    calls = {name: call for name, call in calls.items() if not args.cases or name in args.cases}
     times = {name: [] for name in calls}
     with torch.no_grad():
         for attempt in range(args.runs + 1):
