@@ -2,7 +2,7 @@
 
     python benchmarks/inductor_proxy.py [--out DIR] [--cases NAME ...]
 
-Each case of ``bench_gpu.py`` that it compiles (the look, its stages, ACES 2.0) is compiled with
+Each case of ``bench_gpu.py`` that it compiles (the look, its stages, ACES 2.0, ``RandomPostFX``) is compiled with
 ``torch.compile(fullgraph=True)`` on a small CPU frame, and the generated code is read (``run_and_get_code``):
 
 * **loops**: each loop nest Inductor writes (over the frame, or over something small: a 3x3 matrix, a pyramid level) is,
@@ -29,11 +29,12 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import torchgrade as tg  # noqa: E402
-from benchmarks.bench_gpu import STAGES, cinematic  # noqa: E402
+from benchmarks.bench_gpu import STAGES, augmentations, cinematic  # noqa: E402
 from benchmarks.common import argument_parser, write_results  # noqa: E402
 
 FRAME = (1, 3, 64, 96)
-CASES = {"cinematic look": cinematic, **{name: STAGES[name] for name in ("grade", "tonemap aces", "tonemap aces2", "bloom scattering", "exposure")}}
+CASES = {"cinematic look": cinematic, **{name: STAGES[name] for name in ("grade", "tonemap aces", "tonemap aces2", "bloom scattering", "exposure")},
+         "RandomPostFX": lambda: augmentations()[0]}
 LOOP_NEST = re.compile(r"for\(int64_t x0=")
 BUFFER = re.compile(r"empty_strided_cpu\(\(([\d, ]+)\)")
 
