@@ -98,23 +98,21 @@ def test_every_stage_is_captured_whole_under_autocast(desk, name):
     """Under an active autocast the whole forward is one graph (``fullgraph=True``; Dynamo alone, the capture is what
     can break) that gives what it gives without autocast (the compiled forms differ from eager in float32 rounding)."""
     torch._dynamo.reset()
-    module = torch.compile(_modules()[name].eval(), fullgraph=True, backend="eager")
-    image = desk.clamp(0.0, 1.0) if name == "lut" else desk
-    with torch.no_grad():
-        reference = module(image)
-        with torch.autocast("cpu", dtype=torch.bfloat16):
-            out = module(image)
-    assert out.dtype == torch.float32
-    torch.testing.assert_close(out, reference, rtol=1e-6, atol=1e-6)
+    _assert_autocast_changes_nothing(torch.compile(_modules()[name].eval(), fullgraph=True, backend="eager"),
+                                     desk.clamp(0.0, 1.0) if name == "lut" else desk)
 
 
 def test_a_compiled_look_under_autocast_matches_float32(desk):
     """``tg.compile`` (Inductor) of a grade and ACES under CPU bfloat16 autocast: the float32 result."""
     torch._dynamo.reset()
-    look = tg.compile(_look().eval())
+    _assert_autocast_changes_nothing(tg.compile(_look().eval()), desk)
+
+
+def _assert_autocast_changes_nothing(compiled, image):
+    """``compiled`` gives, under CPU bfloat16 autocast, the float32 result it gives without."""
     with torch.no_grad():
-        reference = look(desk)
+        reference = compiled(image)
         with torch.autocast("cpu", dtype=torch.bfloat16):
-            out = look(desk)
+            out = compiled(image)
     assert out.dtype == torch.float32
     torch.testing.assert_close(out, reference, rtol=1e-6, atol=1e-6)
