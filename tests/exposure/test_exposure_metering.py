@@ -92,6 +92,23 @@ def test_histogram_metering_matches_the_float64_references(name, mask):
     assert abs(stops - engine_histogram_stops(stops_of(image), weights)) <= 0.5 * 16 / HISTOGRAM_BINS
 
 
+@pytest.mark.parametrize("threads", [1, 3, 16])
+@pytest.mark.parametrize("mask", ["average", "center"])
+def test_histogram_metering_counted_by_groups_of_rows_matches_the_float64_reference(threads, mask):
+    """The CPU counts a group of image rows a thread (``ExecutionPolicy.histogram_row_groups``): 1, 3 and, for a frame
+    120 rows high, 15 groups give the reference's band average, each to 1e-6 stops."""
+    image = sample("Desk")[..., :120, :]
+    weights = np.ones(image.shape[-2:]) if mask == "average" else metering_weights(mask, image).double().numpy()
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        assert tg.runtime.policy_for(image.device).histogram_row_groups == threads
+        metered = meter_luminance(image, "histogram", mask=mask)
+    finally:
+        torch.set_num_threads(before)
+    assert abs(math.log2(float(metered) / GREY) - pixel_histogram_stops(stops_of(image), weights)) < 1e-6
+
+
 def test_histogram_percent_band_and_range_are_the_controls():
     image = sample("Desk")
     weights = np.ones(image.shape[-2:])

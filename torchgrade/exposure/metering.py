@@ -145,15 +145,27 @@ def _column_offsets(width: int, tables: int, device: torch.device) -> torch.Tens
 
 def _counted(bins: torch.Tensor, width: int, *amounts: torch.Tensor) -> tuple:
     """``(B, HISTOGRAM_BINS)`` for each of ``amounts`` (``(B, N)``): its sum in each of ``bins`` (``(B, N)``, of images
-    ``width`` wide), neighbouring columns counted into different tables, summed after, as the device's policy asks
-    (:attr:`~torchgrade.runtime.ExecutionPolicy.histogram_tables`)."""
-    batch, tables = bins.shape[0], policy_for(bins.device).histogram_tables or width
-    tables = min(tables, width)
+    ``width`` wide), neighbouring columns counted into different tables and groups of rows apart, all summed after, as
+    the device's policy asks (:attr:`~torchgrade.runtime.ExecutionPolicy.histogram_tables` and ``histogram_row_groups``)."""
+    policy = policy_for(bins.device)
+    batch, tables = bins.shape[0], min(policy.histogram_tables or width, width)
+    groups = _largest_divisor(bins.shape[1] // width, policy.histogram_row_groups)
     if tables > 1:
         bins = (bins.reshape(batch, -1, width) + _column_offsets(width, tables, bins.device)).reshape(batch, -1)
-    empty = torch.zeros(batch, tables * HISTOGRAM_BINS, dtype=amounts[0].dtype, device=amounts[0].device)
-    counted = (empty.scatter_add(1, bins, amount) for amount in amounts)
-    return tuple(c if tables == 1 else c.reshape(batch, tables, HISTOGRAM_BINS).sum(dim=1) for c in counted)
+    rows = batch * groups  # a row of the scatter's output for each image's group of rows: one thread each
+    empty = torch.zeros(rows, tables * HISTOGRAM_BINS, dtype=amounts[0].dtype, device=amounts[0].device)
+    counted = (empty.scatter_add(1, bins.reshape(rows, -1), amount.reshape(rows, -1)) for amount in amounts)
+    return tuple(c if groups * tables == 1 else c.reshape(batch, groups * tables, HISTOGRAM_BINS).sum(dim=1) for c in counted)
+
+
+def _largest_divisor(number: int, limit: int) -> int:
+    """The largest divisor of ``number`` up to ``limit`` (at least 1).
+
+    Examples:
+        >>> _largest_divisor(1080, 16), _largest_divisor(7, 4)
+        (15, 1)
+    """
+    return max(d for d in range(1, max(1, min(number, limit)) + 1) if number % d == 0)
 
 
 def histogram_band_average(stops: torch.Tensor, weights: Optional[torch.Tensor], low, high, low_percent, high_percent) -> torch.Tensor:

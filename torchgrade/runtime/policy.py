@@ -79,6 +79,11 @@ class ExecutionPolicy:
             additions (the 8.3 million pixels of a 4K frame counted into one table of 128 bins took 13.2 ms on an
             H200, ``AutoExposure(metering="histogram")``, ``benchmarks/results/gpu.md``); on the CPU, a chain of
             additions to one address (see :data:`CPU_HISTOGRAM_TABLES`).
+        histogram_row_groups: the groups of image rows a histogram is counted by, each into its own tables, the
+            groups summed after (the largest number up to this that divides the image's height): ATen's CPU scatter
+            runs the rows of its output on threads, one row each, so one row for the whole frame runs on one thread.
+            The CPU policy has one group a thread: the cinematic look's exposure stage at 1920x1080 on 2 threads took
+            0.89 and 0.96 of its time with one group (``benchmarks/results/cpu_paths.md``, both orders).
         pixel_planes: a per-pixel chain that mixes channels (a colour matrix, a channel's maximum, a luminance) runs
             on the image's three planes (the channel dimension unbound), stacked once at its end. Inductor fuses steps
             that loop over the same number of elements: a step on the frame (3 values a pixel) after one on a plane
@@ -96,6 +101,7 @@ class ExecutionPolicy:
     one_kernel_blur_pixels: Optional[int] = None
     nan_dropping_max: bool = False
     histogram_tables: Optional[int] = 1
+    histogram_row_groups: int = 1
     pixel_planes: bool = False
 
 
@@ -143,4 +149,5 @@ def policy_for(device: torch.device) -> ExecutionPolicy:
     threads = torch.get_num_threads()
     workers = threads if threads >= PARALLEL_FROM else 1
     return ExecutionPolicy(strip_pixels=STRIP_PIXELS_PER_THREAD * threads, workers=workers, lookup_chunk=LOOKUP_CHUNK,
-                           reads_values=True, filters_as_kernels=False, histogram_tables=CPU_HISTOGRAM_TABLES)
+                           reads_values=True, filters_as_kernels=False, histogram_tables=CPU_HISTOGRAM_TABLES,
+                           histogram_row_groups=threads)
