@@ -48,3 +48,30 @@ def test_as_compiled_equals_eager_on_the_same_draw(monkeypatch, name):
     assert grey.any()
     torch.testing.assert_close(compiled[1][~grey], eager[1][~grey], rtol=1e-9, atol=1e-9)
     torch.testing.assert_close(compiled[1].sum(dim=1), eager[1].sum(dim=1), rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16])
+def test_as_compiled_equals_eager_in_low_precision(monkeypatch, dtype):
+    """Linear input, the finish casting each plane back to the input's dtype: eager's values to one step of the dtype."""
+    layer = tg.RandomPostFX(contrast=30, saturation=30, hue_shift=20, post_exposure=0.5, p=0.5)
+    images = _images("jiggle").to(dtype)
+    eager = layer(images, generator=seeded(3))
+    params = layer.last_params
+    as_compiled(monkeypatch)
+    compiled = layer(images, params=params)
+    assert compiled.dtype == dtype
+    # a skipped sample is its input exactly, 1e30 cast to float16 (inf) included: equal there, as assert_close takes inf
+    step = torch.finfo(dtype).eps
+    torch.testing.assert_close(compiled.float(), eager.float(), rtol=step, atol=step)
+
+
+def test_as_compiled_equals_eager_on_clips(monkeypatch):
+    """Clips ``(B, T, 3, H, W)``, one draw a clip: the frames come back in the clip's shape, as eager's."""
+    layer = tg.RandomPostFX(**LAYERS["jiggle-srgb"])
+    clips = _images("jiggle-srgb").reshape(4, 2, 3, 16, 16)
+    eager = layer(clips, generator=seeded(5))
+    params = layer.last_params
+    as_compiled(monkeypatch)
+    compiled = layer(clips, params=params)
+    assert compiled.shape == clips.shape
+    torch.testing.assert_close(compiled, eager, rtol=1e-9, atol=1e-9)

@@ -335,9 +335,9 @@ class RandomPostFX(IntensityAugmentationBase2D):
             # the grade may return planes (while compiling); the other slots take an image
             x = getattr(self, f"_{slot}")(x if slot == "grade" else joined(x), params, applied)
 
-        def finished(x, images):  # encoded, in the input's dtype; only random controls: skipped samples exact
-            x = to_input_dtype(linear_to_srgb(x).clamp(0.0, 1.0) if self.input_space == "srgb" else x, images)
-            return x if held is None else torch.where(applied, x, images)
+        def finished(graded, source):  # encoded, in the input's dtype; only random controls: skipped samples exact
+            graded = to_input_dtype(linear_to_srgb(graded).clamp(0.0, 1.0) if self.input_space == "srgb" else graded, source)
+            return graded if held is None else torch.where(applied, graded, source)
 
         if isinstance(x, tuple):  # the grade's planes (compiling): finished plane by plane into the output's stack
             return joined(tuple(finished(*planes) for planes in zip(x, images.split(1, dim=-3))))

@@ -183,9 +183,10 @@ def color_grade(image: torch.Tensor, aces: bool = False, log_space: str = "acesc
 
 
 def color_grade_planes(image: torch.Tensor, aces: bool = False, log_space: str = "acescc", **params):
-    """:func:`color_grade` in the working dtype (float32 or wider), as the graded image's three planes (a tuple) where the
-    steps run on planes (while compiling, :attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`): for a chain that
-    goes on computing on planes, so no frame is joined only to be split again. An all-identity grade returns ``image``.
+    """:func:`color_grade` without the cast back to the input's dtype, as the graded image's three planes (a tuple) where
+    its last steps ran on planes (while compiling, :attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`): for a
+    chain that goes on computing on planes, so no frame is joined only to be split again. A graded result is in the
+    working dtype (float32 or wider); an all-identity grade returns ``image`` itself, in its own dtype.
 
     Examples:
         >>> image = torch.rand(1, 3, 2, 2)
