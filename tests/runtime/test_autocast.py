@@ -93,26 +93,28 @@ def test_grade_and_aces_under_cuda_float16_autocast_match_float32(desk):
     assert (out - reference).abs().max() <= FLOAT16_DISPLAY_BOUND
 
 
+@pytest.mark.parametrize("device, dtype", AUTOCASTS)
 @pytest.mark.parametrize("name", list(_modules()))
-def test_every_stage_is_captured_whole_under_autocast(desk, name):
+def test_every_stage_is_captured_whole_under_autocast(desk, name, device, dtype):
     """Under an active autocast the whole forward is one graph (``fullgraph=True``; Dynamo alone, the capture is what
     can break) that gives what it gives without autocast (the compiled forms differ from eager in float32 rounding)."""
     torch._dynamo.reset()
-    _assert_autocast_changes_nothing(torch.compile(_modules()[name].eval(), fullgraph=True, backend="eager"),
-                                     desk.clamp(0.0, 1.0) if name == "lut" else desk)
+    module = torch.compile(_modules()[name].eval().to(device), fullgraph=True, backend="eager")
+    _assert_autocast_changes_nothing(module, (desk.clamp(0.0, 1.0) if name == "lut" else desk).to(device), dtype)
 
 
-def test_a_compiled_look_under_autocast_matches_float32(desk):
-    """``tg.compile`` (Inductor) of a grade and ACES under CPU bfloat16 autocast: the float32 result."""
+@pytest.mark.parametrize("device, dtype", AUTOCASTS)
+def test_a_compiled_look_under_autocast_matches_float32(desk, device, dtype):
+    """``tg.compile`` (Inductor; CUDA graphs on CUDA) of a grade and ACES under autocast: the float32 result."""
     torch._dynamo.reset()
-    _assert_autocast_changes_nothing(tg.compile(_look().eval()), desk)
+    _assert_autocast_changes_nothing(tg.compile(_look().eval().to(device)), desk.to(device), dtype)
 
 
-def _assert_autocast_changes_nothing(compiled, image):
-    """``compiled`` gives, under CPU bfloat16 autocast, the float32 result it gives without."""
+def _assert_autocast_changes_nothing(compiled, image, dtype):
+    """``compiled`` gives, under ``dtype`` autocast on the image's device, the float32 result it gives without."""
     with torch.no_grad():
-        reference = compiled(image)
-        with torch.autocast("cpu", dtype=torch.bfloat16):
+        reference = compiled(image).clone()  # a CUDA graph's output is overwritten by its next call
+        with torch.autocast(image.device.type, dtype=dtype):
             out = compiled(image)
     assert out.dtype == torch.float32
     torch.testing.assert_close(out, reference, rtol=1e-6, atol=1e-6)
