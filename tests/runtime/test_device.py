@@ -133,6 +133,10 @@ def _cases() -> dict:
         "grade": lambda: tg.ColorGrade(**GRADE),
         "grade-aces": lambda: tg.ColorGrade(aces=True, **GRADE),
         "grade-learnable": lambda: tg.ColorGrade(contrast=nn.Parameter(torch.tensor(20.0)), saturation=10),
+        "grade-curves": lambda: tg.ColorGrade(
+            hue_vs_hue=((0.0, 0.5), (0.3, 0.6), (0.7, 0.45)), hue_vs_sat=((0.1, 0.55), (0.6, 0.4)), sat_vs_sat=((0.0, 0.5), (1.0, 0.6)),
+            lum_vs_sat=((0.0, 0.45), (0.5, 0.55), (1.0, 0.5)), curve_master=((0.0, 0.0), (0.5, 0.6), (1.0, 1.0)),
+            curve_red=((0.0, 0.05), (1.0, 0.95)), curve_blue=torch.tensor([[0.0, 0.0], [0.6, 0.55], [1.0, 1.0]])),
         "grade-per-sample": lambda: tg.ColorGrade(contrast=torch.tensor([10.0, 30.0]), color_filter=torch.tensor([[1.0, 0.9, 0.8], [0.8, 0.9, 1.0]]),
                                                   channel_mixer=torch.eye(3).expand(2, 3, 3) * 0.9, aces=True),
         "bloom-per-sample": lambda: tg.Bloom(intensity=torch.tensor([0.3, 0.6]), tint=torch.tensor([[1.0, 0.9, 0.8], [0.8, 0.9, 1.0]]),

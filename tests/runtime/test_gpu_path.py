@@ -170,8 +170,9 @@ def frame_buffers(source: str, pixels: int) -> int:
 
 EVERY_PLANE_STEP = dict(post_exposure=0.4, temperature=20, contrast=30, split_shadows=(0.4, 0.5, 0.6), channel_mixer=((1.0, 0.05, 0.0), (0.0, 1.0, 0.05), (0.05, 0.0, 1.0)),
                         midtones=(1.05, 1.0, 0.95), lift=(0.95, 1.0, 1.0, 0.01), gamma=(1.0, 1.0, 0.9, 0.05), gain=(1.0, 0.95, 1.0, 0.1),
-                        hue_shift=-30.0, saturation=-20.0)
-"""Every step of the grade a compiler gets on planes (its curves and tensor split-toning colours it gets joined)."""
+                        hue_shift=-30.0, saturation=-20.0, hue_vs_sat=((0.0, 0.5), (0.4, 0.6), (0.8, 0.45)),
+                        lum_vs_sat=((0.0, 0.5), (0.5, 0.55), (1.0, 0.4)))
+"""Every step of the grade a compiler gets on planes (its YRGB curves and tensor split-toning colours it gets joined)."""
 PLANES_CHAINS = {"tonemap-aces": lambda: tg.ToneMap("aces"), "grade": lambda: tg.ColorGrade(**CINEMATIC["grade"]),
                  "grade-every-plane-step": lambda: tg.ColorGrade(**EVERY_PLANE_STEP)}
 """Per-pixel chains a compiler gets on planes (:attr:`ExecutionPolicy.pixel_planes`): the ACES curve, the look's grade, every
@@ -250,6 +251,7 @@ GRAPHS = {
     "cinematic": lambda: tg.PostFX.from_config(CINEMATIC).eval(),
     "random-postfx": lambda: tg.RandomPostFX(contrast=30, saturation=20, bloom_intensity=(0.2, 0.6), tonemap="aces"),
     "lut": lambda: tg.LUT3D(tg.lut.identity_table(9) ** 1.5, shaper="logc"),
+    "grade-curves": CASES["grade-curves"],
 }
 
 

@@ -26,6 +26,7 @@ from typing import Any, Optional
 import torch
 
 from ..base.core import check_range
+from ..runtime import constant, policy_for
 from ..base.stage import Control
 
 __all__ = [
@@ -77,18 +78,42 @@ def curve_points(points, like: torch.Tensor, name: str = "curve") -> tuple:
     """
     if isinstance(points, torch.Tensor):
         table = points.to(device=like.device, dtype=like.dtype)
-    else:
-        try:
-            table = torch.as_tensor(points, dtype=like.dtype, device=like.device)
-        except (TypeError, ValueError, RuntimeError) as error:
-            raise ValueError(f"{name} must be a sequence of (x, y) points: {error}") from None
+    else:  # checked in Python and made once on the device (runtime.constant): nothing is read back or copied per call
+        table = constant(_plain_points(points, name), like)
     if table.dim() != 2 or table.shape[1] != 2 or table.shape[0] < 2:
         raise ValueError(f"{name} must be at least two (x, y) points, shape (N, 2), got shape {tuple(table.shape)}")
     x, y = table.unbind(1)
     x = x.detach()
-    if not bool((x[1:] > x[:-1]).all()):
+    # a tensor's points are read to check them where reading is free (a stage checks its curves at assignment)
+    if isinstance(points, torch.Tensor) and _reads_values(x) and not bool((x[1:] > x[:-1]).all()):
         raise ValueError(f"{name} x values must be strictly increasing, got {x.tolist()}")
     return x, y
+
+
+def _spans_a_turn(points, x: torch.Tensor) -> bool:
+    """Whether a periodic curve's ``x`` values span a turn or more: in Python for points given as numbers, by a read of
+    a tensor's where reading is free (a stage checks its curves at assignment)."""
+    if not isinstance(points, torch.Tensor):
+        return float(points[-1][0]) >= float(points[0][0]) + 1.0
+    return _reads_values(x) and bool(x[-1] >= x[0] + 1.0)
+
+
+def _reads_values(x: torch.Tensor) -> bool:
+    """Whether ``x``'s device policy reads values back (the CPU, eager): not a GPU (a synchronisation), nor a graph."""
+    return policy_for(x.device).reads_values
+
+
+def _plain_points(points, name: str) -> tuple:
+    """Points given as numbers, as a tuple of ``(x, y)`` float pairs, checked: at least two, ``x`` strictly increasing."""
+    try:
+        pairs = tuple((float(x), float(y)) for x, y in points)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{name} must be a sequence of (x, y) points: {error}") from None
+    if len(pairs) < 2:
+        raise ValueError(f"{name} must be at least two (x, y) points, shape (N, 2), got shape ({len(pairs)}, 2)")
+    if any(later[0] <= earlier[0] for earlier, later in zip(pairs, pairs[1:])):
+        raise ValueError(f"{name} x values must be strictly increasing, got {[x for x, _ in pairs]}")
+    return pairs
 
 
 def monotone_tangents(x: torch.Tensor, y: torch.Tensor, periodic: bool = False) -> torch.Tensor:
@@ -156,19 +181,20 @@ def evaluate_curve(points, t: torch.Tensor, periodic: bool = False, name: str = 
         [0.800000011920929, 1.0]
     """
     x, y = curve_points(points, t, name)
-    if periodic and x[-1] >= x[0] + 1.0:
+    if periodic and _spans_a_turn(points, x):
         raise ValueError(f"{name} is periodic: its x values must lie within one turn, got {x.tolist()}")
     tangents = monotone_tangents(x, y, periodic)
     if periodic:
         x, y, tangents = torch.cat((x, x[:1] + 1.0)), torch.cat((y, y[:1])), torch.cat((tangents, tangents[:1]))
         return hermite(x, y, tangents, x[0] + torch.remainder(t - x[0], 1.0))
-    return hermite(x, y, tangents, t.clamp(x[0].item(), x[-1].item()))
+    return hermite(x, y, tangents, t.clamp(x[0], x[-1]))  # tensor bounds: no value read back
 
 
 def curve_is_identity(points, flat: Optional[float]) -> bool:
     """True for a curve that changes nothing: None, no points, all ``y == flat``, or (``flat`` None) the diagonal.
 
-    Learnable curves (``requires_grad``) are never identity.
+    Points given as numbers are compared in Python; a curve given as a tensor (learnable or not) is never identity:
+    deciding would read its values back from the device at every call, or from a compiler's graph input.
 
     Examples:
         >>> curve_is_identity(((0.0, 0.5), (0.5, 0.5)), flat=0.5), curve_is_identity(((0.0, 0.0), (1.0, 1.0)), None)
@@ -178,15 +204,14 @@ def curve_is_identity(points, flat: Optional[float]) -> bool:
     """
     if points is None:
         return True
-    if isinstance(points, torch.Tensor) and points.requires_grad:
+    if isinstance(points, torch.Tensor):
         return False
-    table = torch.as_tensor(points, dtype=torch.float64).reshape(-1, 2)
-    if table.numel() == 0:
+    pairs = [(float(x), float(y)) for x, y in points]
+    if not pairs:
         return True
-    x, y = table.unbind(1)
     if flat is not None:
-        return bool((y == flat).all())
-    return bool(x[0] == 0.0 and x[-1] == 1.0 and (y == x).all())
+        return all(y == flat for _, y in pairs)
+    return pairs[0][0] == 0.0 and pairs[-1][0] == 1.0 and all(y == x for x, y in pairs)
 
 
 def check_curve(name: str, points, periodic: bool = False) -> None:

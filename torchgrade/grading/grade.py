@@ -230,7 +230,6 @@ def color_grade_planes(image: torch.Tensor, aces: bool = False, log_space: str =
         x = each_plane(lambda plane: plane.clamp_min(0.0), lift_gamma_gain(x, p["lift"], p["gamma"], p["gain"]))
     factor = None
     if "saturation_curves" in steps:
-        x = joined(x)
         factor = saturation_curves(x, p["hue_vs_sat"], p["sat_vs_sat"], p["lum_vs_sat"], weights)
     if "hue_shift" in steps:
         x = hue_shift(x, p["hue_shift"], p["hue_vs_hue"])

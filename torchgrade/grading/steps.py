@@ -560,7 +560,8 @@ def hue_shift(image: torch.Tensor, degrees: Param, hue_vs_hue=None) -> torch.Ten
 
 
 def saturation_curves(image: torch.Tensor, hue_vs_sat=None, sat_vs_sat=None, lum_vs_sat=None, luminance_weights="rec709") -> torch.Tensor:
-    """The saturation factor of the curves (URP ``LutBuilderHdr``), ``(..., 1, H, W)``; RGB ≥ 0.
+    """The saturation factor of the curves (URP ``LutBuilderHdr``), ``(..., 1, H, W)``; RGB ≥ 0, an image or its three
+    planes (a tuple, :attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`).
 
     ``2 HueVsSat(h) · 2 SatVsSat(s) · 2 LumVsSat(Y)`` of the pixel's HSV hue, HSV saturation and
     luminance; curves not given count as 1.
