@@ -17,8 +17,8 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
-from ..base.core import NEGLIGIBLE_LIGHT, Param, check_image, scalar_param
-from ..color import CHANNEL, luminance, srgb_to_linear
+from ..base.core import NEGLIGIBLE_LIGHT, Param, channel_max, check_image, scalar_param
+from ..color import luminance, srgb_to_linear
 from ..runtime import folded, where
 from .pyramid import shared_block_counts, sum_pool
 
@@ -53,7 +53,7 @@ def threshold_fraction(image: torch.Tensor, threshold: Param, knee: Param) -> to
         >>> threshold_fraction(torch.full((1, 3, 1, 1), 4.0), 1.0, 0.5).item()
         0.75
     """
-    brightness = image.amax(dim=CHANNEL, keepdim=True)
+    brightness = channel_max(image)
     linear, offset, width, scale = folded(soft_knee, threshold, knee, like=brightness, host=True).unbind(-1)
     soft = torch.minimum((brightness + offset).clamp_min(0.0), width)
     soft = soft * soft * scale

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import torch
 
+from ..base.core import channel_max, channel_min
 from ..runtime import affine, constant, where
 from .spaces import CHANNEL
 
@@ -40,13 +41,9 @@ def hsv_planes(image: torch.Tensor) -> tuple:
         >>> [round(float(v), 4) for v in hsv_planes(torch.tensor([1.0, 0.5, 0.0]).reshape(3, 1, 1))]
         [0.0833, 1.0, 1.0]
     """
-    if isinstance(image, tuple):
-        r, g, b = image
-        value, smallest = torch.maximum(torch.maximum(r, g), b), torch.minimum(torch.minimum(r, g), b)
-    else:
-        r, g, b = image.split(1, dim=CHANNEL)
-        value, smallest = image.amax(dim=CHANNEL, keepdim=True), image.amin(dim=CHANNEL, keepdim=True)
-    delta = value - smallest
+    r, g, b = image if isinstance(image, tuple) else image.split(1, dim=CHANNEL)
+    value = channel_max(image)
+    delta = value - channel_min(image)
     chromatic = delta > 0
     safe_delta = where(chromatic, delta, 1.0)
     hue_r = torch.remainder((g - b) / safe_delta, 6.0)

@@ -18,6 +18,7 @@ from ..base.core import (
     Param,
     apply_matrix,
     bounded_pow,
+    channel_max,
     color_param,
     each_plane,
     is_constant,
@@ -533,10 +534,7 @@ def _lift_gamma_gain_of(x: torch.Tensor, lift: torch.Tensor, inverse_gamma: torc
 def _hsv(image: torch.Tensor) -> tuple:
     """:func:`~torchgrade.color.hsv_planes` of ``image`` (or of its three planes, a tuple), negligible light taken as black."""
     # Hue divides by the chroma (max - min): ACEScg turns a grey 1e-38 into a tinted one, whose hue's gradient overflows.
-    if isinstance(image, tuple):
-        lit = torch.maximum(torch.maximum(image[0], image[1]), image[2]) > NEGLIGIBLE_LIGHT
-    else:
-        lit = image.amax(dim=CHANNEL, keepdim=True) > NEGLIGIBLE_LIGHT
+    lit = channel_max(image) > NEGLIGIBLE_LIGHT
     return hsv_planes(each_plane(lambda plane: where(lit, plane, 0.0), image))
 
 
@@ -622,7 +620,7 @@ def fast_tonemap(image: torch.Tensor) -> torch.Tensor:
         >>> fast_tonemap(torch.tensor([3.0, 1.0, 0.0]).reshape(3, 1, 1)).flatten().tolist()
         [0.75, 0.25, 0.0]
     """
-    return image / (1.0 + image.amax(dim=CHANNEL, keepdim=True).clamp_min(0.0))
+    return image / (1.0 + channel_max(image).clamp_min(0.0))
 
 
 def fast_tonemap_inverse(image: torch.Tensor) -> torch.Tensor:
@@ -632,7 +630,7 @@ def fast_tonemap_inverse(image: torch.Tensor) -> torch.Tensor:
         >>> fast_tonemap_inverse(torch.tensor([0.75, 0.25, 0.0]).reshape(3, 1, 1)).flatten().tolist()
         [3.0, 1.0, 0.0]
     """
-    return image / (1.0 - image.amax(dim=CHANNEL, keepdim=True)).clamp_min(1.0 / (1.0 + HALF_MAX))
+    return image / (1.0 - channel_max(image)).clamp_min(1.0 / (1.0 + HALF_MAX))
 
 
 def yrgb_curves(image: torch.Tensor, master=None, red=None, green=None, blue=None) -> torch.Tensor:

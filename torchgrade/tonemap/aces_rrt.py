@@ -13,7 +13,7 @@ import math
 
 import torch
 
-from ..base.core import apply_matrix, channel_sum, untracked
+from ..base.core import apply_matrix, channel_max, channel_min, channel_sum, untracked
 from ..color import (
     AP0_CHROMATICITIES,
     MATRICES,
@@ -74,7 +74,7 @@ def rec709_to_aces(image: torch.Tensor) -> torch.Tensor:
 
 def _rgb_saturation(rgb: torch.Tensor, tiny: float) -> torch.Tensor:
     """ACES ``rgb_2_saturation`` of an image (see :func:`_saturation`)."""
-    return _saturation(rgb.amax(dim=-3, keepdim=True), rgb.amin(dim=-3, keepdim=True), tiny)
+    return _saturation(channel_max(rgb), channel_min(rgb), tiny)
 
 
 def _saturation(high: torch.Tensor, low: torch.Tensor, tiny: float) -> torch.Tensor:
@@ -192,7 +192,7 @@ def rrt_glow_and_red_modifier_planes(planes, hue_weight, tiny: float = UNITY_TIN
     if isinstance(planes, torch.Tensor):
         raise TypeError("rrt_glow_and_red_modifier_planes takes an image's three planes as a tuple (image.split(1, dim=-3))")
     r, g, b = planes
-    saturation = _saturation(torch.maximum(torch.maximum(r, g), b), torch.minimum(torch.minimum(r, g), b), tiny)
+    saturation = _saturation(channel_max((r, g, b)), channel_min((r, g, b)), tiny)
     s = _sigmoid_shaper(affine(saturation, 5.0, -2.0))  # (s - 0.4) / 0.2
     gain = 1.0 + _glow(_yc(r, g, b), _RRT_GLOW_GAIN * s, _RRT_GLOW_MID)
     r, g, b = r * gain, g * gain, b * gain

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import torch
 
+from ..base.core import channel_max, channel_min
 from .base import display, limited
 
 __all__ = ["khronos_pbr_neutral"]
@@ -26,9 +27,9 @@ def khronos_pbr_neutral(image: torch.Tensor, clip: bool = True) -> torch.Tensor:
         [0.46, 0.46, 0.46]
     """
     c = limited(image)
-    low = c.amin(dim=-3, keepdim=True)
+    low = channel_min(c)
     c = c - torch.where(low < 0.08, low - 6.25 * low * low, _KHRONOS_F90)
-    peak = c.amax(dim=-3, keepdim=True)
+    peak = channel_max(c)
     compressing = peak.clamp_min(_KHRONOS_START_COMPRESSION)
     d = 1.0 - _KHRONOS_START_COMPRESSION
     new_peak = 1.0 - d * d / (compressing + d - _KHRONOS_START_COMPRESSION)
