@@ -1,8 +1,11 @@
 """The eager CPU paths on this machine's threads: the cinematic look, its stages, ACES 2.0 and 33³ LUTs at 1920x1080,
-and ``RandomPostFX`` on a 32x3x224x224 batch; with ``--compiled``, the look, its per-pixel stages and ``RandomPostFX``
-through ``tg.compile`` (each compiles in the first, untimed round). ``--cases`` times only the cases named.
+``RandomPostFX`` on a 32x3x224x224 batch and the look's training step (forward and backward) on 4x3x256x384; with
+``--compiled``, the look, its per-pixel stages, ``RandomPostFX`` and the training step through ``tg.compile`` (each
+compiles in the first, untimed round; ``--activation-memory-budget`` is passed to it). ``--cases`` times only the
+cases named.
 
-    python benchmarks/bench_cpu_paths.py [--runs N] [--threads N] [--clock wall|cpu] [--compiled] [--cases NAME ...] [--json FILE]
+    python benchmarks/bench_cpu_paths.py [--runs N] [--threads N] [--clock wall|cpu] [--compiled]
+        [--activation-memory-budget B] [--cases NAME ...] [--json FILE]
 
 Prints the median ms of each case (every round runs each case once: A B C A B C ...). It uses only the public API, so
 two versions of torchgrade can be compared by running it under each (``PYTHONPATH=<checkout>``) in turn; the
@@ -28,12 +31,24 @@ ROOT = Path(__file__).resolve().parents[1]
 CINEMATIC = json.loads((ROOT / "export" / "looks" / "cinematic.json").read_text())
 
 
-COMPILED = ("cinematic look", "grade", "tone map aces", "tone map aces2", "RandomPostFX 32x224^2")
+COMPILED = ("cinematic look", "grade", "tone map aces", "tone map aces2", "RandomPostFX 32x224^2", "cinematic training 4x256x384")
 """The cases ``--compiled`` times, each module through ``tg.compile``."""
 
 
-def cases(compiled: bool = False) -> dict:
-    """Every case: a call on a 1920x1080 frame, its inputs made once; ``compiled``: the :data:`COMPILED` ones, compiled."""
+def training_step(look, batch: torch.Tensor):
+    """One forward and backward of ``look`` on a copy of ``batch`` that requires grad (gradients on, whatever the caller's
+    mode)."""
+    def step():
+        with torch.enable_grad():
+            image = batch.clone().requires_grad_()
+            look(image).mean().backward()
+    return step
+
+
+def cases(compiled: bool = False, activation_memory_budget: float | None = None) -> dict:
+    """Every case: a call on a 1920x1080 frame (or a batch), its inputs made once; ``compiled``: the :data:`COMPILED`
+    ones, through ``tg.compile`` (with ``activation_memory_budget`` where one is given; ``None``: its default, so that
+    a checkout without the setting runs too)."""
     image = tg.scene.demo_scene(1080, 1920)
     look = tg.PostFX.from_config(CINEMATIC).eval()
     grade = tg.ColorGrade(**CINEMATIC["grade"])
@@ -46,8 +61,10 @@ def cases(compiled: bool = False) -> dict:
     hdr_lut = tg.LUT3D(torch.rand(33, 33, 33, 3, generator=torch.Generator().manual_seed(1)), shaper="logc_hdr")
     augment = tg.RandomPostFX(contrast=30, saturation=30, hue_shift=20, post_exposure=0.5, input_space="srgb")
     batch = torch.rand(32, 3, 224, 224, generator=torch.Generator().manual_seed(2))
+    training_batch = torch.rand(4, 3, 256, 384, generator=torch.Generator().manual_seed(3)) * 4
     if compiled:
-        look, grade, tonemap, aces2, augment = (tg.compile(module) for module in (look, grade, tonemap, aces2, augment))
+        settings = {} if activation_memory_budget is None else {"activation_memory_budget": activation_memory_budget}
+        look, grade, tonemap, aces2, augment = (tg.compile(module, **settings) for module in (look, grade, tonemap, aces2, augment))
     calls = {
         "cinematic look": lambda: look(image),
         "grade": lambda: grade(image),
@@ -58,6 +75,7 @@ def cases(compiled: bool = False) -> dict:
         "LUT 33^3 tetrahedral": lambda: lut(pixels, "tetrahedral"),
         "LUT 33^3 logc_hdr": lambda: hdr_lut(image),
         "RandomPostFX 32x224^2": lambda: augment(batch),
+        "cinematic training 4x256x384": training_step(look, training_batch),
     }
     return {name: calls[name] for name in COMPILED} if compiled else calls
 
@@ -68,13 +86,15 @@ def main(argv=None) -> None:
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--threads", type=int, default=None, help="torch threads (default: torch's)")
     parser.add_argument("--clock", choices=("wall", "cpu"), default="wall")
-    parser.add_argument("--compiled", action="store_true", help="the look, its per-pixel stages and RandomPostFX through tg.compile")
+    parser.add_argument("--compiled", action="store_true", help="the look, its per-pixel stages, RandomPostFX and the training step through tg.compile")
+    parser.add_argument("--activation-memory-budget", type=float, default=None,
+                        help="passed to tg.compile, with --compiled (default: tg.compile's)")
     parser.add_argument("--cases", nargs="+", metavar="NAME", help="only these cases (default: every one)")
     args = parser.parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)
     clock = time.perf_counter if args.clock == "wall" else time.process_time
-    calls = cases(args.compiled)
+    calls = cases(args.compiled, args.activation_memory_budget)
     unknown = set(args.cases or ()) - set(calls)
     if unknown:
         parser.error(f"unknown case(s) {sorted(unknown)}; the cases: {', '.join(calls)}")
@@ -88,7 +108,9 @@ def main(argv=None) -> None:
                 if attempt:  # the first round warms up
                     times[name].append((clock() - start) * 1e3)
     medians = {name: round(statistics.median(values), 2) for name, values in times.items()}
-    print(json.dumps({"threads": torch.get_num_threads(), "clock": args.clock, "compiled": args.compiled, "torchgrade": str(Path(tg.__file__).parent),
+    print(json.dumps({"threads": torch.get_num_threads(), "clock": args.clock, "compiled": args.compiled,
+                      **({"activation_memory_budget": args.activation_memory_budget} if args.activation_memory_budget is not None else {}),
+                      "torchgrade": str(Path(tg.__file__).parent),
                       "ms": medians}))
     if args.json:
         args.json.write_text(json.dumps(medians, indent=2) + "\n")

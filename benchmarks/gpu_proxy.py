@@ -46,7 +46,8 @@ MEASURED = {
     "7319b75": {"cinematic 4K": 11.23, "cinematic 1080p": 7.38, "grade": 3.95, "tonemap aces": 4.04, "tonemap aces2": 15.34,
                 "bloom scattering": 4.18, "exposure": 0.48, "training 16x512²": 24.90},
     "59fbb9f": {"cinematic 4K": 21.32, "cinematic 1080p": 5.40, "grade": 2.76, "tonemap aces": 3.49, "tonemap aces2": 14.72,
-                "bloom scattering": 2.78, "exposure": 13.19, "training 16x512²": 22.01, "RandomPostFX 256x224²": 5.94},
+                "bloom scattering": 2.78, "exposure": 13.19, "training 16x512²": 22.01, "RandomPostFX 256x224²": 5.94,
+                "kornia ColorJiggle 256x224²": 5.09},
 }
 """Eager ms on the H200 of ``benchmarks/results/gpu.md``, by the code measured: runs B and C (``7319b75``: the data of
 the fit) and run D (``59fbb9f``)."""
@@ -65,6 +66,29 @@ def cases() -> dict:
         "training 16x512²": (cinematic, (16, 3, 512, 512), True),
         "RandomPostFX 256x224²": (lambda: augmentations()[0], (256, 3, 224, 224), False),
     }
+
+
+JIGGLE_SHAPE, JIGGLE_COUNTED = (256, 3, 224, 224), 8
+"""bench_gpu's batch for ``RandomPostFX`` and kornia's ``ColorJiggle``, and the images of it ``ColorJiggle`` is counted on."""
+
+
+def counted_colorjiggle() -> DispatchCount:
+    """What kornia's ``ColorJiggle`` (``RandomPostFX``'s yardstick in bench_gpu) dispatches on the image, counted on a
+    CPU batch of :data:`JIGGLE_COUNTED` images (it reads values back: it cannot run on ``meta``), its bytes scaled to
+    bench_gpu's batch. Only the launches on a plane of the batch or more are kept: its random controls are drawn on the
+    host, which a CPU count cannot tell from the device."""
+    jiggle = augmentations()[1]
+    batch = torch.rand((JIGGLE_COUNTED,) + JIGGLE_SHAPE[1:])
+    plane_bytes = batch[:, 0].numel() * batch.element_size()
+    count = DispatchCount()
+    with torch.no_grad():
+        jiggle(batch)
+        with count:
+            jiggle(batch)
+    scaled = DispatchCount(frame=torch.empty(FOUR_K, device="meta"))
+    scaled.moved = [moved * JIGGLE_SHAPE[0] // JIGGLE_COUNTED for moved in count.moved if moved >= plane_bytes]
+    scaled.unvectorised = count.unvectorised
+    return scaled
 
 
 def counted(make, shape, training: bool) -> DispatchCount:
@@ -88,8 +112,9 @@ def predicted_ms(count: DispatchCount) -> float:
 def main(argv=None) -> int:
     args = argument_parser(__doc__).parse_args(argv)
     rows = []
-    for name, (make, shape, training) in cases().items():
-        count = counted(make, shape, training)
+    counts = {name: counted(make, shape, training) for name, (make, shape, training) in cases().items()}
+    counts["kornia ColorJiggle 256x224²"] = counted_colorjiggle()
+    for name, count in counts.items():
         rows.append({"case": name, "launches": count.launches, "frame_passes": round(count.frame_passes, 1), "unvectorised": count.unvectorised,
                      "predicted_ms": round(predicted_ms(count), 2), **{f"measured_ms_{code}": MEASURED[code].get(name) for code in MEASURED}})
         print(rows[-1], flush=True)
@@ -100,7 +125,9 @@ def main(argv=None) -> int:
              "`benchmarks/gpu_proxy.py`). The last columns are the H200's measurements (`gpu.md`) of the code as it was: at "
              "`7319b75`, the data of the fit, the look metered a log-average and its bloom had no clamp; at `59fbb9f` (run D) "
              "the histogram was counted into one row of bins (13.19 ms at 4K; 1.68 ms per column, run E) and ACES 2.0 gathered "
-             "its cusp table a row a pixel (4.99 ms of its 14.72 ms): neither is in the count.", "",
+             "its cusp table a row a pixel (4.99 ms of its 14.72 ms): neither is in the count. kornia's `ColorJiggle` reads values "
+             "back and is counted on the CPU instead, on 8 images, scaled to 256, its launches on the images only "
+             "(`counted_colorjiggle`).", "",
              "Unvectorised: the launches among them that CUDA runs in its unvectorised loop (an operand broadcast or strided, "
              "`DispatchCount.unvectorised`); the model charges them as the others.", "",
              "| case | launches | frame passes | unvectorised | predicted H200 ms | " + " | ".join(f"measured at {code}" for code in MEASURED) + " |",

@@ -1,19 +1,24 @@
 """What a compiled frame would cost a GPU, read from the code Inductor generates for the CPU.
 
-    python benchmarks/inductor_proxy.py [--out DIR] [--cases NAME ...]
+    python benchmarks/inductor_proxy.py [--out DIR] [--cases NAME ...] [--activation-memory-budget B]
 
-Each case of ``bench_gpu.py`` that it compiles (the look, its stages, ACES 2.0, ``RandomPostFX``) is compiled with
-``torch.compile(fullgraph=True)`` on a small CPU frame, and the generated code is read (``run_and_get_code``):
+Each case of ``bench_gpu.py`` that it compiles (the look, its stages, ACES 2.0, ``RandomPostFX``, the look's training
+step) is compiled with ``torch.compile(fullgraph=True)`` on a small CPU frame, and the generated code is read
+(``run_and_get_code``):
 
 * **loops**: each loop nest Inductor writes (over the frame, or over something small: a 3x3 matrix, a pyramid level) is,
   on CUDA, a Triton kernel of its own (steps with the same number of elements fuse into one loop, and into one kernel;
   a step on the frame's 3 values a pixel after one on a plane's 1 starts another);
 * **frames written**: the buffers of a plane's size or more that the graph allocates, in frames (3 planes each): each
   is written by one kernel and read back by a later one, memory traffic that a fused chain keeps in registers. The
-  output is one of them.
+  output is one of them. A training step compiles two graphs, the forward and the backward: the forward's frames
+  are its output and what it saves for the backward (which reads them back); the backward's, the image's gradient
+  and what it writes on the way. It is compiled with ``tg.compile``'s activation memory budget
+  (:data:`torchgrade.runtime.ACTIVATION_MEMORY_BUDGET`; ``--activation-memory-budget 1.0``: PyTorch's default).
 
 A count of structure, not a time: the GPU run (``benchmarks/gpu_check.sh``) measures. Compile seconds are the CPU's
-(a C++ compiler; Triton's differ) with Inductor's caches off. About 3 minutes on 2 cores, most of it ACES 2.0.
+(a C++ compiler; Triton's differ) with Inductor's caches off. About 5 minutes on 2 cores, most of it ACES 2.0 and
+the training step.
 """
 
 from __future__ import annotations
@@ -35,20 +40,33 @@ from benchmarks.common import argument_parser, write_results  # noqa: E402
 FRAME = (1, 3, 64, 96)
 CASES = {"cinematic look": cinematic, **{name: STAGES[name] for name in ("grade", "tonemap aces", "tonemap aces2", "bloom scattering", "exposure")},
          "RandomPostFX": lambda: augmentations()[0]}
+TRAINING = {"cinematic look, training": cinematic}
+"""Cases compiled as ``bench_gpu``'s training step: the look's forward and backward (of the output's mean) on an
+image that requires grad."""
 LOOP_NEST = re.compile(r"for\(int64_t x0=")
 BUFFER = re.compile(r"empty_strided_cpu\(\(([\d, ]+)\)")
 
 
-def generated_code(module: torch.nn.Module) -> tuple:
-    """Inductor's code for one no_grad frame of ``module`` on the CPU, and the seconds it took to compile."""
+def generated_code(module: torch.nn.Module, training: bool = False, budget: float = tg.runtime.ACTIVATION_MEMORY_BUDGET) -> tuple:
+    """Inductor's code for one frame of ``module`` on the CPU (no_grad; ``training``: its forward and backward, the
+    forward keeping ``budget`` of what it would by default), one source a graph, and the seconds it took to compile."""
+    from torch._functorch import config
     from torch._inductor.utils import run_and_get_code
 
     torch._dynamo.reset()
-    image = tg.scene.demo_scene(*FRAME[2:])[None].contiguous()
+    image = tg.scene.demo_scene(*FRAME[2:])[None].contiguous().requires_grad_(training)
+    compiled = torch.compile(module if training else module.eval(), fullgraph=True)
+
+    def step():
+        out = compiled(image)
+        if training:
+            out.mean().backward()
+
     start = time.perf_counter()
-    with torch.no_grad(), torch._inductor.config.patch(force_disable_caches=True):
-        _, code = run_and_get_code(torch.compile(module.eval(), fullgraph=True), image)
-    return "\n".join(code), time.perf_counter() - start
+    with (torch.set_grad_enabled(training), torch._inductor.config.patch(force_disable_caches=True),
+          config.patch(activation_memory_budget=budget)):
+        _, code = run_and_get_code(step)
+    return code, time.perf_counter() - start
 
 
 def structure(source: str) -> dict:
@@ -62,24 +80,32 @@ def structure(source: str) -> dict:
 
 def main(argv=None) -> int:
     parser = argument_parser(__doc__)
-    parser.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES))
+    parser.add_argument("--cases", nargs="+", choices=[*CASES, *TRAINING], default=[*CASES, *TRAINING])
+    parser.add_argument("--activation-memory-budget", type=float, default=tg.runtime.ACTIVATION_MEMORY_BUDGET,
+                        help="of the training cases (default: tg.compile's)")
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
     warnings.simplefilter("ignore")  # the look's baked-LUT accuracy notes
     rows = []
     for name in args.cases:
-        source, seconds = generated_code(CASES[name]())
-        rows.append({"case": name, **structure(source), "compile_s": round(seconds, 1)})
-        print(rows[-1], flush=True)
+        training = name in TRAINING
+        sources, seconds = generated_code({**CASES, **TRAINING}[name](), training, args.activation_memory_budget)
+        graphs = ("forward", "backward") if training else ("",)
+        for graph, source in zip(graphs, sources, strict=True):
+            rows.append({"case": f"{name} {graph}".strip(), **structure(source), "compile_s": round(seconds, 1)})
+            print(rows[-1], flush=True)
     lines = ["# Compiled frames, read from Inductor's CPU code", "",
              f"torch {torch.__version__}, torchgrade {tg.__version__}, a {FRAME[2]}x{FRAME[3]} frame, one thread. Loops: the "
              "loop nests of the generated code (on CUDA, a kernel each); frames written: the buffers of a plane's size or more, in "
-             "frames (each written by one kernel, read back by another; the output among them). See "
-             "`benchmarks/inductor_proxy.py`.", "",
+             "frames (each written by one kernel, read back by another; the output among them; in training the forward's "
+             "are what it saves for the backward and its output; activation memory budget "
+             f"{args.activation_memory_budget}). Compile seconds of a training step: its two graphs together. "
+             "See `benchmarks/inductor_proxy.py`.", "",
              "| case | loops | buffers | frames written | compile s (CPU) |", "| --- | ---: | ---: | ---: | ---: |"]
     lines += [f"| {r['case']} | {r['loops']} | {r['frame_buffers']} | {r['frames_written']} | {r['compile_s']} |" for r in rows]
     args.out.mkdir(parents=True, exist_ok=True)
-    write_results(args.out, "inductor_proxy", {"frame": list(FRAME), "rows": rows}, lines, "python benchmarks/inductor_proxy.py --out DIR")
+    write_results(args.out, "inductor_proxy", {"frame": list(FRAME), "activation_memory_budget": args.activation_memory_budget, "rows": rows},
+                  lines, "python benchmarks/inductor_proxy.py --out DIR")
     return 0
 
 

@@ -102,6 +102,39 @@ def test_a_compiled_look_trains_as_eager(monkeypatch):
     assert (compiled - exact).abs().max() <= 1.5 * (eager - exact).abs().max() + 1e-7
 
 
+def test_a_compiled_training_forward_keeps_at_most_its_budget_for_the_backward(monkeypatch):
+    """``tg.compile``'s activation memory budget (0.5) against PyTorch's default (1.0), through AOTAutograd's min-cut
+    partitioner without Inductor (backend "aot_eager_decomp_partition"): the bytes the forward saves for the backward
+    (counted by a saved-tensors hook) at most halve, and the image's gradient stays as close to a float64 eager one
+    as float32 eager's is."""
+    frame = hdr((1, 3, 24, 32))
+
+    def saved_bytes_and_gradient(**settings):
+        _captured_only(monkeypatch, "aot_eager_decomp_partition")  # resets Dynamo: a fresh graph for each budget
+        compiled = tg.compile(tg.PostFX.from_config(CINEMATIC).eval(), **settings)
+        saved = []
+        image = frame.clone().requires_grad_()
+        with torch.autograd.graph.saved_tensors_hooks(lambda t: saved.append(t.numel() * t.element_size()) or t, lambda t: t):
+            out = compiled(image)
+        out.sum().backward()
+        return sum(saved), image.grad.double()
+
+    default_bytes, _ = saved_bytes_and_gradient(activation_memory_budget=1.0)
+    budget_bytes, compiled = saved_bytes_and_gradient()
+    assert budget_bytes <= tg.runtime.ACTIVATION_MEMORY_BUDGET * default_bytes, (budget_bytes, default_bytes)
+    image = frame.clone().requires_grad_()
+    tg.PostFX.from_config(CINEMATIC).eval()(image).sum().backward()
+    exact = frame.double().requires_grad_()
+    tg.PostFX.from_config(CINEMATIC).eval().double()(exact).sum().backward()
+    assert (compiled - exact.grad).abs().max() <= 1.5 * (image.grad.double() - exact.grad).abs().max() + 1e-7
+
+
+@pytest.mark.parametrize("budget", [-0.1, 1.5, True, "half"])
+def test_compile_refuses_an_activation_memory_budget_outside_0_to_1(budget):
+    with pytest.raises(ValueError, match="activation_memory_budget must be a number in"):
+        tg.compile(tg.ToneMap("aces"), activation_memory_budget=budget)
+
+
 def test_a_compiled_frame_that_fails_leaves_the_exposure_state_empty_and_a_stream_leaves_it_alone(monkeypatch):
     _captured_only(monkeypatch)
     stage = tg.AutoExposure(speed=1.5)

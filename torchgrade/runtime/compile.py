@@ -15,6 +15,10 @@ compiles every size as it comes, and the ninth size stops with ``FailOnRecompile
 ``recompile_limit`` is 8 and ``fullgraph=True`` makes hitting it an error.) Compile times measured by
 ``benchmarks/bench_gpu.py``.
 
+In training the forward keeps for the backward half of what it would by default (PyTorch's activation memory budget,
+:data:`ACTIVATION_MEMORY_BUDGET`) and the backward recomputes the rest: a look's steps are per-pixel arithmetic, cheaper
+to compute again than to write to memory and read back.
+
 The compiled graph carries no range checks (they read values), so the wrapper checks every stage's learnable
 controls (:meth:`~torchgrade.Stage.check_learnable`) before each call, as an eager forward does. A module with
 state to shape before its first frame (``AutoExposure``, a ``PostFX`` with one) says so with a ``compiled_frame``
@@ -38,7 +42,7 @@ from typing import Optional
 import torch
 from torch import nn
 
-__all__ = ["compile", "compile_mode", "CompiledModule", "CPU_OPTIONS"]
+__all__ = ["compile", "compile_mode", "CompiledModule", "CPU_OPTIONS", "ACTIVATION_MEMORY_BUDGET"]
 
 
 CPU_OPTIONS = {"layout_optimization": False}
@@ -46,6 +50,15 @@ CPU_OPTIONS = {"layout_optimization": False}
 pyramid's blurs) channels-last buffers; a per-pixel loop that reads such a frame as planes is then not vectorised
 (``benchmarks/results/cpu_paths.md``: with the grade on planes, the compiled cinematic look at 1920x1080 on one thread
 took 1.22 times as long as before with it, 0.69-0.72 without it)."""
+
+
+ACTIVATION_MEMORY_BUDGET = 0.5
+"""What a compiled training forward keeps for its backward, as a fraction of what AOTAutograd's min-cut partitioner
+keeps by default (``torch._functorch.config.activation_memory_budget``; 1.0: that default). At 0.5 the look's forward
+compiled by Inductor writes 6 frames, its output and what it saves, instead of 25.3, in 66 loops instead of 106, and
+its backward writes 3.67 frames either way (``benchmarks/results/inductor_proxy.md``). On the CPU the look's training
+step (4x3x256x384) at 0.5 took 0.64 of its time at 1.0 on one thread and 0.78 on two; at 0.25, 1.09
+(``benchmarks/results/cpu_paths.md``); a GPU's figures are ``benchmarks/bench_gpu.py``'s to measure."""
 
 
 def compile_mode(device: torch.device, cuda_graphs: bool = True) -> str:
@@ -57,11 +70,13 @@ class CompiledModule(nn.Module):
     """``module`` compiled per device type at its first frame there (see :func:`compile`); ``module`` is
     :attr:`module`, so its controls, state and ``to_config`` stay reachable."""
 
-    def __init__(self, module: nn.Module, cuda_graphs: bool = True, dynamic: Optional[bool] = None):
+    def __init__(self, module: nn.Module, cuda_graphs: bool = True, dynamic: Optional[bool] = None,
+                 activation_memory_budget: float = ACTIVATION_MEMORY_BUDGET):
         super().__init__()
         self.module = module
         self.cuda_graphs = cuda_graphs
         self.dynamic = dynamic
+        self.activation_memory_budget = activation_memory_budget
         self._compiled: dict = {}
 
     def compiled_for(self, device: torch.device):
@@ -99,8 +114,11 @@ class CompiledModule(nn.Module):
         return out
 
     def _graph_call(self, image: torch.Tensor, *args, **kwargs):
+        from torch._functorch import config  # the budget is read where the first training frame compiles
+
         frame = getattr(self.module, "compiled_frame", None)
-        with frame(image, *args, **kwargs) if frame is not None else contextlib.nullcontext():
+        with (frame(image, *args, **kwargs) if frame is not None else contextlib.nullcontext(),
+              config.patch(activation_memory_budget=self.activation_memory_budget)):
             return self.compiled_for(image.device)(image, *args, **kwargs)
 
 
@@ -112,16 +130,24 @@ def _raised_while_traced(error: Exception) -> bool:
     return isinstance(error, exc.Unsupported) and isinstance(error.__cause__, getattr(exc, "ObservedException", ()))
 
 
-def compile(module: nn.Module, *, cuda_graphs: bool = True, dynamic: Optional[bool] = None) -> CompiledModule:
+def compile(module: nn.Module, *, cuda_graphs: bool = True, dynamic: Optional[bool] = None,
+            activation_memory_budget: float = ACTIVATION_MEMORY_BUDGET) -> CompiledModule:
     """``module`` (a stage, a :class:`~torchgrade.PostFX`, a :class:`~torchgrade.RandomPostFX`, a LUT) through
     ``torch.compile`` with one graph and the device's mode (:func:`compile_mode`).
 
     ``dynamic`` is passed to ``torch.compile``: ``None`` (default) compiles the first size with fixed sizes and, at
     the first new size, one graph with the changed sizes symbolic, which every later size runs; ``True`` symbolic
     sizes from the start; ``False`` one graph per size, at most eight sizes (Dynamo's ``recompile_limit``: the
-    ninth raises ``FailOnRecompileLimitHit``).
+    ninth raises ``FailOnRecompileLimitHit``). ``activation_memory_budget`` (0 to 1): what a training forward keeps
+    for the backward, as a fraction of PyTorch's default (:data:`ACTIVATION_MEMORY_BUDGET`; 1.0 keeps the default).
+    It is read where a training graph compiles, and Dynamo does not guard on it: a module of the same structure
+    compiled earlier in the process runs the graph compiled then, with the budget it had (``torch._dynamo.reset()``
+    forgets it).
     """
     if not isinstance(module, nn.Module):
         raise TypeError(f"compile takes an nn.Module, got {type(module).__name__}")
-    return CompiledModule(module, cuda_graphs=cuda_graphs, dynamic=dynamic)
+    if isinstance(activation_memory_budget, bool) or not isinstance(activation_memory_budget, (int, float)) \
+            or not 0.0 <= activation_memory_budget <= 1.0:
+        raise ValueError(f"activation_memory_budget must be a number in [0, 1], got {activation_memory_budget!r}")
+    return CompiledModule(module, cuda_graphs=cuda_graphs, dynamic=dynamic, activation_memory_budget=float(activation_memory_budget))
 
