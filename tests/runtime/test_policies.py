@@ -2,12 +2,15 @@
 policy's values: run here on the CPU by handing every module the policy a GPU gets."""
 
 import importlib
+from pathlib import Path
 
 import pytest
 import torch
 
 import torchgrade as tg
 from torchgrade.runtime import policy
+
+ROOT = Path(__file__).resolve().parents[2]
 
 USERS = ["torchgrade.runtime.strips", "torchgrade.bloom.pyramid", "torchgrade.bloom.layer", "torchgrade.augment.layer",
          "torchgrade.lut.apply", "torchgrade.base.core", "torchgrade.color.transfer", "torchgrade.exposure.metering"]
@@ -114,3 +117,14 @@ def test_the_gpu_policy_gives_the_cpu_policys_values_at_the_extremes(name, famil
         return tg.color.linear_to_srgb((out if kind.display_referred else tg.functional.tonemap(out, "neutral")).clamp(0.0, 1.0)) * 255.0
 
     assert (seen(on_gpu_policy) - seen(on_cpu_policy)).abs().max() <= 0.5
+
+
+
+def test_import_torchgrade_leaves_the_exporter_the_compiler_and_the_optional_packages_unloaded():
+    """In a fresh process (this one has loaded them all), after ``import torch``: ONNX's exporter (``torch.onnx`` took
+    0.1 s of the import when module constants computed with the library's functions asked whether an export was
+    running), the compiler and the optional packages load at their first use. The import time's share that can grow
+    unseen, counted instead of timed (``benchmarks/bench_import.py`` times it)."""
+    from benchmarks.bench_import import import_once
+
+    assert import_once(ROOT)["loaded"] == []

@@ -5,6 +5,8 @@ Eager-only forms (computed in place, strips, shortcuts that read a value) run on
 
 from __future__ import annotations
 
+import sys
+
 import torch
 
 __all__ = ["is_tracing", "untracked"]
@@ -17,7 +19,15 @@ def is_tracing() -> bool:
         >>> is_tracing()
         False
     """
-    return torch.jit.is_tracing() or torch.compiler.is_compiling() or torch.onnx.is_in_onnx_export()
+    return torch.jit.is_tracing() or torch.compiler.is_compiling() or _exporting()
+
+
+def _exporting() -> bool:
+    """``torch.onnx.is_in_onnx_export()`` without importing ``torch.onnx`` where nothing has: an export imports it
+    first, and its exporter takes about 0.15 s to import (which ``import torchgrade`` would pay: module constants are
+    computed with the library's functions)."""
+    onnx = sys.modules.get("torch.onnx")
+    return onnx is not None and onnx.is_in_onnx_export()
 
 
 def untracked(*tensors) -> bool:
