@@ -42,6 +42,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import torchgrade as tg  # noqa: E402
+from benchmarks.bench_cpu_paths import training_step  # noqa: E402
 from benchmarks.common import ROOT, argument_parser, ocio_processor, packed_rgb, write_results  # noqa: E402
 
 CINEMATIC = json.loads((ROOT / "export" / "looks" / "cinematic.json").read_text())
@@ -173,14 +174,6 @@ def section_lut(device):
         record("lut", f"LUT 33^3 tetrahedral 4K {way}", ms=ms, x_floor=ms / floor, **({"compile_s": seconds} if way == "compiled" else {}))
 
 
-def training_step(call, batch: torch.Tensor):
-    """One forward and backward of ``call`` on a copy of ``batch`` that requires grad."""
-    def step():
-        image = batch.clone().requires_grad_()
-        call(image).mean().backward()
-    return step
-
-
 def section_training(device):
     batch = torch.rand(16, 3, 512, 512, device=device) * 4
     step = training_step(cinematic().to(device), batch)
@@ -191,7 +184,7 @@ def section_training_compiled(device):
     """The look's forward and backward through ``tg.compile`` (CUDA graphs of both), against eager, alternating."""
     look = cinematic().to(device)
     batch = torch.rand(16, 3, 512, 512, device=device) * 4
-    fast = training_step(tg.compile(look), batch)
+    fast = training_step(tg.compile(look, dynamic=False), batch)  # fixed sizes: the look section compiled PostFX at others
     compile_s = first_call_s(fast)  # compiles the forward, then the backward
     times = cuda_ms({"eager": training_step(look, batch), "compiled": fast}, runs=10)
     record("training", "cinematic forward+backward 16x3x512x512 compiled (CUDA graphs)", ms=times["compiled"],

@@ -39,9 +39,10 @@ print(json.dumps({{"seconds": seconds, "file": torchgrade.__file__,
 """
 
 
-def import_once(checkout: Path) -> dict:
-    """``import torchgrade`` of ``checkout`` in a fresh process that writes its bytecode: seconds and what it loaded."""
-    env = {key: value for key, value in os.environ.items() if key != "PYTHONDONTWRITEBYTECODE"}
+def import_once(checkout: Path, write_bytecode: bool = True) -> dict:
+    """``import torchgrade`` of ``checkout`` in a fresh process (that writes its bytecode, unless ``write_bytecode`` is
+    False: the environment's setting then holds): seconds and what it loaded."""
+    env = {key: value for key, value in os.environ.items() if write_bytecode is False or key != "PYTHONDONTWRITEBYTECODE"}
     env["PYTHONPATH"] = str(checkout)
     result = subprocess.run([sys.executable, "-c", _IMPORT.format(names=LOADED_AT_FIRST_USE)], capture_output=True, text=True,
                             env=env, cwd=checkout, timeout=300, check=True)
@@ -64,7 +65,7 @@ def main(argv=None) -> int:
     parser.add_argument("--runs", type=int, default=9)
     parser.add_argument("--vs", type=Path, default=None, help="another checkout, imported alternately with this one")
     args = parser.parse_args(argv)
-    checkouts = {"this checkout": ROOT, **({f"{args.vs}": args.vs.resolve()} if args.vs else {})}
+    checkouts = {"this checkout": ROOT, **({"--vs checkout": args.vs.resolve()} if args.vs else {})}
     for checkout in checkouts.values():
         import_once(checkout)  # writes the bytecode
     seconds = {name: [] for name in checkouts}
@@ -87,7 +88,7 @@ def main(argv=None) -> int:
               for r in rows]
     args.out.mkdir(parents=True, exist_ok=True)
     write_results(args.out, "import", {"runs": args.runs, "rows": rows}, lines,
-                  "python benchmarks/bench_import.py --out DIR" + (f" --vs {args.vs}" if args.vs else ""))
+                  "python benchmarks/bench_import.py --out DIR" + (" --vs CHECKOUT" if args.vs else ""))
     return 0
 
 

@@ -13,7 +13,7 @@ step) is compiled with ``torch.compile(fullgraph=True)`` on a small CPU frame, a
   is written by one kernel and read back by a later one, memory traffic that a fused chain keeps in registers. The
   output is one of them. A training step compiles two graphs, the forward and the backward: the forward's frames
   are its output and what it saves for the backward (which reads them back); the backward's, the image's gradient
-  and what it writes on the way. It is compiled with ``tg.compile``'s activation memory budget
+  and what it writes on the way. It is compiled by ``tg.compile``, with its activation memory budget
   (:data:`torchgrade.runtime.ACTIVATION_MEMORY_BUDGET`; ``--activation-memory-budget 1.0``: PyTorch's default).
 
 A count of structure, not a time: the GPU run (``benchmarks/gpu_check.sh``) measures. Compile seconds are the CPU's
@@ -48,14 +48,17 @@ BUFFER = re.compile(r"empty_strided_cpu\(\(([\d, ]+)\)")
 
 
 def generated_code(module: torch.nn.Module, training: bool = False, budget: float = tg.runtime.ACTIVATION_MEMORY_BUDGET) -> tuple:
-    """Inductor's code for one frame of ``module`` on the CPU (no_grad; ``training``: its forward and backward, the
-    forward keeping ``budget`` of what it would by default), one source a graph, and the seconds it took to compile."""
-    from torch._functorch import config
+    """Inductor's code for one frame of ``module`` on the CPU, one source a graph, and the seconds it took to compile:
+    no_grad through ``torch.compile(fullgraph=True)``; ``training``, its forward and backward through ``tg.compile``
+    with the activation memory ``budget``."""
     from torch._inductor.utils import run_and_get_code
 
     torch._dynamo.reset()
     image = tg.scene.demo_scene(*FRAME[2:])[None].contiguous().requires_grad_(training)
-    compiled = torch.compile(module if training else module.eval(), fullgraph=True)
+    if training:
+        compiled = tg.compile(module, dynamic=False, activation_memory_budget=budget)
+    else:
+        compiled = torch.compile(module.eval(), fullgraph=True)
 
     def step():
         out = compiled(image)
@@ -63,8 +66,7 @@ def generated_code(module: torch.nn.Module, training: bool = False, budget: floa
             out.mean().backward()
 
     start = time.perf_counter()
-    with (torch.set_grad_enabled(training), torch._inductor.config.patch(force_disable_caches=True),
-          config.patch(activation_memory_budget=budget)):
+    with torch.set_grad_enabled(training), torch._inductor.config.patch(force_disable_caches=True):
         _, code = run_and_get_code(step)
     return code, time.perf_counter() - start
 

@@ -103,10 +103,11 @@ def test_a_compiled_look_trains_as_eager(monkeypatch):
 
 
 def test_a_compiled_training_forward_keeps_at_most_its_budget_for_the_backward(monkeypatch):
-    """``tg.compile``'s activation memory budget (0.5) against PyTorch's default (1.0), through AOTAutograd's min-cut
-    partitioner without Inductor (backend "aot_eager_decomp_partition"): the bytes the forward saves for the backward
-    (counted by a saved-tensors hook) at most halve, and the image's gradient stays as close to a float64 eager one
-    as float32 eager's is."""
+    """``tg.compile``'s activation memory budget (0.5) against PyTorch's default (1.0) and full recomputation (0.0),
+    through AOTAutograd's min-cut partitioner without Inductor (backend "aot_eager_decomp_partition"): the bytes the
+    forward saves for the backward (counted by a saved-tensors hook) lie at most halfway from what recomputing
+    everything keeps to the default's, and the image's gradient stays as close to a float64 eager one as float32
+    eager's is."""
     frame = hdr((1, 3, 24, 32))
 
     def saved_bytes_and_gradient(**settings):
@@ -120,8 +121,10 @@ def test_a_compiled_training_forward_keeps_at_most_its_budget_for_the_backward(m
         return sum(saved), image.grad.double()
 
     default_bytes, _ = saved_bytes_and_gradient(activation_memory_budget=1.0)
+    least_bytes, _ = saved_bytes_and_gradient(activation_memory_budget=0.0)
     budget_bytes, compiled = saved_bytes_and_gradient()
-    assert budget_bytes <= tg.runtime.ACTIVATION_MEMORY_BUDGET * default_bytes, (budget_bytes, default_bytes)
+    assert least_bytes < default_bytes
+    assert budget_bytes <= least_bytes + tg.runtime.ACTIVATION_MEMORY_BUDGET * (default_bytes - least_bytes), (least_bytes, budget_bytes, default_bytes)
     image = frame.clone().requires_grad_()
     tg.PostFX.from_config(CINEMATIC).eval()(image).sum().backward()
     exact = frame.double().requires_grad_()
@@ -129,10 +132,25 @@ def test_a_compiled_training_forward_keeps_at_most_its_budget_for_the_backward(m
     assert (compiled - exact.grad).abs().max() <= 1.5 * (image.grad.double() - exact.grad).abs().max() + 1e-7
 
 
-@pytest.mark.parametrize("budget", [-0.1, 1.5, True, "half"])
-def test_compile_refuses_an_activation_memory_budget_outside_0_to_1(budget):
-    with pytest.raises(ValueError, match="activation_memory_budget must be a number in"):
+@pytest.mark.parametrize("budget, error", [(-0.1, ValueError), (1.5, ValueError), (float("nan"), ValueError),
+                                           (True, TypeError), ("half", TypeError)])
+def test_compile_refuses_an_activation_memory_budget_that_is_not_a_number_in_0_to_1(budget, error):
+    with pytest.raises(error, match="activation_memory_budget must"):
         tg.compile(tg.ToneMap("aces"), activation_memory_budget=budget)
+
+
+def test_the_activation_memory_budget_is_set_only_for_a_call_that_records_gradients(monkeypatch):
+    """Inference compiles no backward, and leaves PyTorch's process-wide setting alone."""
+    from torch._functorch import config
+
+    seen = []
+    compiled = tg.compile(tg.ToneMap("reinhard"), activation_memory_budget=0.25)
+    monkeypatch.setattr(compiled, "compiled_for", lambda device: lambda image: seen.append(config.activation_memory_budget) or image)
+    image = hdr((1, 3, 4, 4))
+    with torch.no_grad():
+        compiled(image)
+    compiled(image.requires_grad_())
+    assert seen == [config.activation_memory_budget, 0.25] and config.activation_memory_budget != 0.25
 
 
 def test_a_compiled_frame_that_fails_leaves_the_exposure_state_empty_and_a_stream_leaves_it_alone(monkeypatch):

@@ -28,7 +28,7 @@ import torch
 
 from ..runtime.constants import constant, is_plain_number, where
 from ..runtime.policy import policy_for
-from ..runtime.recording import is_tracing, untracked
+from ..runtime.recording import is_exporting, is_tracing, untracked
 from ..runtime.strips import named_as
 
 Param = Union[float, int, torch.Tensor]
@@ -171,7 +171,7 @@ def sanitize(image: torch.Tensor) -> torch.Tensor:
         [0.0, 65504.0, -1.0]
     """
     bounded = image.clamp(-HALF_MAX, HALF_MAX)
-    exporting = torch.onnx.is_in_onnx_export()
+    exporting = is_exporting()
     if (exporting or not is_tracing()) and _NAN_FREE.get() is image:  # a compiler would break its graph to read it
         return bounded
     if not exporting:
@@ -314,7 +314,7 @@ def apply_matrix(matrix: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
         >>> apply_matrix(swap, torch.tensor([1.0, 2.0, 3.0]).reshape(3, 1, 1)).flatten().tolist()
         [2.0, 1.0, 3.0]
     """
-    if torch.onnx.is_in_onnx_export():
+    if is_exporting():
         # Exported as three broadcast products summed: onnxruntime's CPU Einsum ran 3 to 5 times slower, and a
         # MatMul runs in bfloat16 at OpenVINO's default precision, coefficients and all (7.1 codes p99.9 on the look).
         return matrix_on_planes(matrix, [image[..., j : j + 1, :, :] for j in range(3)])
@@ -332,7 +332,7 @@ def matrix_on_planes(matrix: torch.Tensor, planes) -> torch.Tensor:
         >>> matrix_on_planes(torch.eye(3), torch.arange(3.0).reshape(3, 1, 1, 1).unbind()).flatten().tolist()
         [0.0, 1.0, 2.0]
     """
-    if torch.onnx.is_in_onnx_export():
+    if is_exporting():
         return sum(matrix[..., :, j, None, None] * plane for j, plane in enumerate(planes))
     columns = matrix.mT[..., None, None].unbind(-4)
     out = columns[0] * planes[0]
@@ -464,7 +464,7 @@ def channel_sum(image: torch.Tensor, weights) -> torch.Tensor:
     """
     red, green, blue = image if isinstance(image, tuple) else image.split(1, dim=-3)  # or its planes, as a tuple
     out = red * weights[0]
-    if torch.onnx.is_in_onnx_export() or not untracked(red, green, blue):
+    if is_exporting() or not untracked(red, green, blue):
         # exported as three products and two sums (a ReduceSum over channels costs onnxruntime's CPU several of them,
         # benchmarks/results/onnx_ops.md)
         return out + green * weights[1] + blue * weights[2]
@@ -670,7 +670,7 @@ def bounded_pow(x: torch.Tensor, exponent) -> torch.Tensor:
         [0.0, 0.0, 16.0, 65504.0]
     """
     exponent = torch.as_tensor(exponent, dtype=x.dtype, device=x.device)
-    if torch.onnx.is_in_onnx_export():
+    if is_exporting():
         # Without the gradient guard's two Where nodes (see benchmarks/results/onnx_ops.md); the same values for
         # exponent > 0 (at exponent 0, 1 where x <= 0: both callers multiply by sign(x)).
         return (x.clamp_min(0.0) ** exponent).clamp_max(HALF_MAX)

@@ -23,7 +23,7 @@ import torch
 import torch.nn.functional as F
 
 from ..base.core import is_tracing
-from ..runtime import device_cached, policy_for
+from ..runtime import device_cached, is_exporting, policy_for
 
 __all__ = [
     "BLUR_SIGMA", "BLUR_TAPS", "ANAMORPHIC_TAPS", "BSPLINE_AFTER_BILINEAR", "pyramid_depth", "active_levels",
@@ -111,7 +111,7 @@ def sum_pool(light: torch.Tensor) -> torch.Tensor:
         tensor([[[[4., 4.],
                   [2., 2.]]]])
     """
-    if torch.onnx.is_in_onnx_export() or (not is_tracing() and policy_for(light.device).filters_as_kernels):
+    if is_exporting() or (not is_tracing() and policy_for(light.device).filters_as_kernels):
         return F.avg_pool2d(light, 2, ceil_mode=True, divisor_override=1)
     odd_height, odd_width = light.shape[-2] % 2, light.shape[-1] % 2
     if odd_height or odd_width or is_tracing():  # F.pad copies the frame even when it adds nothing

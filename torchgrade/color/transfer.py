@@ -16,6 +16,7 @@ import torch
 from ..base.core import untracked
 from ..runtime.constants import affine, scalar, where
 from ..runtime.policy import policy_for
+from ..runtime.recording import is_exporting
 
 __all__ = [
     "safe_pow", "safe_sqrt", "linear_to_srgb", "srgb_to_linear", "linear_to_logc", "logc_to_linear", "aces_to_acescc", "acescc_to_aces", "linear_to_pq", "pq_to_linear", "hlg_oetf", "hlg_inverse_oetf", "linear_to_acescct", "acescct_to_linear", "LOGC_CUT", "LOGC_E", "ACESCC_MIDGRAY", "ACESCC_MAX", "PQ_M1", "PQ_C1", "PQ_PEAK", "HLG_A", "HLG_B", "HLG_C", "ACESCCT_CUT_LINEAR", "ACESCCT_CUT_LOG", "ACESCCT_A", "LOGC_A", "LOGC_B", "LOGC_C", "LOGC_D", "LOGC_F", "PQ_M2", "PQ_C2", "PQ_C3", "ACESCCT_B",
@@ -29,7 +30,7 @@ def safe_pow(x: torch.Tensor, exponent) -> torch.Tensor:
         >>> safe_pow(torch.tensor([-1.0, 0.0, 4.0]), 0.5).tolist()
         [0.0, 0.0, 2.0]
     """
-    if torch.onnx.is_in_onnx_export() and isinstance(exponent, (int, float)) and exponent > 0:
+    if is_exporting() and isinstance(exponent, (int, float)) and exponent > 0:
         # Exported without the gradient guard's two Where nodes, and as exp(e log x) (0 at x = 0, to a few ulps
         # of the power): their costs on onnxruntime's CPU are in benchmarks/results/onnx_ops.md.
         x = x.clamp_min(0.0)
@@ -124,7 +125,7 @@ def aces_to_acescc(image: torch.Tensor) -> torch.Tensor:
     if untracked(x):
         # 2^-16 + x/2 < x exactly from 2^-15 up: the larger one is each segment's argument, one log for both.
         return torch.maximum(x, x * 0.5 + 2.0**-16).log2_().add_(9.72).div_(17.52)
-    if torch.onnx.is_in_onnx_export():
+    if is_exporting():
         # The same maximum out of place: no comparison or Where (benchmarks/results/onnx_ops.md).
         return (torch.log2(torch.maximum(x, x * 0.5 + 2.0**-16)) + 9.72) / 17.52
     low = (torch.log2(2.0**-16 + x * 0.5) + 9.72) / 17.52
@@ -145,7 +146,7 @@ def acescc_to_aces(image: torch.Tensor) -> torch.Tensor:
     if untracked(value):
         # (v - 2^-16)·2 < v exactly below the knee (v < 2^-15): the smaller one is the segment's value.
         return torch.minimum(value, (value - 2.0**-16).mul_(2.0), out=value)
-    if torch.onnx.is_in_onnx_export():
+    if is_exporting():
         return torch.minimum(value, (value - 2.0**-16) * 2.0)  # the same minimum, without a comparison and Where
     return torch.where(x < _ACESCC_LOW_KNEE, (value - 2.0**-16) * 2.0, value)
 
@@ -230,7 +231,7 @@ def linear_to_acescct(image: torch.Tensor) -> torch.Tensor:
         [0.0729, 0.4136]
     """
     log = (torch.log2(image.clamp_min(ACESCCT_CUT_LINEAR)) + 9.72) / 17.52
-    if torch.onnx.is_in_onnx_export():
+    if is_exporting():
         # The segments meet at the cut: each on its own side of it, added, less their common value there; no comparison
         # or Where (benchmarks/results/onnx_ops.md).
         return log + (ACESCCT_A * image.clamp_max(ACESCCT_CUT_LINEAR) + (ACESCCT_B - ACESCCT_CUT_LOG))
@@ -246,6 +247,6 @@ def acescct_to_linear(code: torch.Tensor) -> torch.Tensor:
     """
     top = (math.log2(_HALF_MAX) + 9.72) / 17.52
     log = torch.exp2(code.clamp(ACESCCT_CUT_LOG, top) * 17.52 - 9.72)
-    if torch.onnx.is_in_onnx_export():
+    if is_exporting():
         return log + ((code.clamp_max(ACESCCT_CUT_LOG) - ACESCCT_B) / ACESCCT_A - ACESCCT_CUT_LINEAR)  # as in linear_to_acescct
     return torch.where(code <= ACESCCT_CUT_LOG, (code - ACESCCT_B) / ACESCCT_A, log)

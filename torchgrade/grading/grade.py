@@ -53,7 +53,7 @@ from ..base.core import (
 from ..base.stage import Control
 from ..color import srgb_to_linear
 from ..color.spaces import shared_matrix
-from ..runtime import folded, policy_for
+from ..runtime import folded, is_exporting, policy_for
 from .curves import CurveControl, curve_is_identity
 from .steps import (
     IDENTITY_MATRIX,
@@ -312,6 +312,6 @@ def _saturation_folds(x, amount) -> bool:
     """Whether saturation is applied as a matrix: eager when nothing records gradients; in an export when ``amount`` is a
     number, folded into the constant matrices (a graph input's would be a MatMul, which OpenVINO runs in bfloat16).
     ``x`` is the image, or its planes as a tuple."""
-    if torch.onnx.is_in_onnx_export():
+    if is_exporting():
         return not isinstance(amount, torch.Tensor)
     return untracked(*(x if isinstance(x, tuple) else (x,)), amount)

@@ -54,7 +54,7 @@ from ..color import (
     srgb_to_linear,
 )
 from ..color.spaces import shared_matrix
-from ..runtime import affine, constant, folded, where
+from ..runtime import affine, constant, folded, is_exporting, where
 from .curves import evaluate_curve
 
 __all__ = [
@@ -190,11 +190,11 @@ def log_contrast(image: torch.Tensor, amount: Param, encoding: str = "logc") -> 
     if encoding == "acescc":
         if untracked(image, k):
             return _acescc_contrast_in_place(image, k)
-        if torch.onnx.is_in_onnx_export():
+        if is_exporting():
             return _acescc_contrast_folded(image, k)
         return acescc_to_aces((aces_to_acescc(image) - ACESCC_MIDGRAY) * k + ACESCC_MIDGRAY)
     base = affine(image, LOGC_A, LOGC_B).clamp_min(torch.finfo(image.dtype).tiny)
-    if torch.onnx.is_in_onnx_export():
+    if is_exporting():
         # The power as exp(k ln(base) + ln(gain)): a Log and an Exp cost less than half a Pow (benchmarks/results/onnx_ops.md).
         log_gain = math.log(10.0) * (LOGC_D - ACESCC_MIDGRAY) / LOGC_C * (k - 1.0)
         return (torch.exp(torch.log(base) * k + log_gain) - LOGC_B) / LOGC_A
@@ -322,7 +322,7 @@ def _soft_light_by_channel(gamma: torch.Tensor, weights: tuple, offsets: tuple) 
     """
     on_planes = isinstance(gamma, tuple)  # the image's planes (ExecutionPolicy.pixel_planes): returned as planes
     in_place = not on_planes and untracked(gamma, *weights)
-    exporting = torch.onnx.is_in_onnx_export()
+    exporting = is_exporting()
     planes = []
     for c, plane in enumerate(gamma if on_planes else gamma.split(1, dim=-3)):
         for weight, offset in zip(weights, (channel_offsets[c] for channel_offsets in offsets)):
@@ -388,7 +388,7 @@ def split_toning(
     if None not in plain:
         return each_plane(lambda plane: safe_pow(plane, 2.2), _soft_light_by_channel(gamma, (1.0 - t, t), plain))
     offsets = (color_param(shadows, image, "split_shadows") - 0.5, color_param(highlights, image, "split_highlights") - 0.5)
-    if torch.onnx.is_in_onnx_export():
+    if is_exporting():
         return safe_pow(_soft_light_masked(_soft_light_masked(gamma, 1.0 - t, offsets[0]), t, offsets[1]), 2.2)
     shadow_tint = 0.5 + offsets[0] * (1.0 - t)
     highlight_tint = 0.5 + offsets[1] * t

@@ -15,9 +15,9 @@ compiles every size as it comes, and the ninth size stops with ``FailOnRecompile
 ``recompile_limit`` is 8 and ``fullgraph=True`` makes hitting it an error.) Compile times measured by
 ``benchmarks/bench_gpu.py``.
 
-In training the forward keeps for the backward half of what it would by default (PyTorch's activation memory budget,
-:data:`ACTIVATION_MEMORY_BUDGET`) and the backward recomputes the rest: a look's steps are per-pixel arithmetic, cheaper
-to compute again than to write to memory and read back.
+In training the forward keeps less for the backward than PyTorch would by default (its activation memory budget,
+:data:`ACTIVATION_MEMORY_BUDGET`) and the backward recomputes the rest: a look's steps are per-pixel arithmetic, which
+on the CPU cost less to compute again than to write to memory and read back (not yet measured on a GPU).
 
 The compiled graph carries no range checks (they read values), so the wrapper checks every stage's learnable
 controls (:meth:`~torchgrade.Stage.check_learnable`) before each call, as an eager forward does. A module with
@@ -36,6 +36,7 @@ Examples:
 from __future__ import annotations
 
 import contextlib
+import numbers
 import warnings
 from typing import Optional
 
@@ -53,12 +54,15 @@ took 1.22 times as long as before with it, 0.69-0.72 without it)."""
 
 
 ACTIVATION_MEMORY_BUDGET = 0.5
-"""What a compiled training forward keeps for its backward, as a fraction of what AOTAutograd's min-cut partitioner
-keeps by default (``torch._functorch.config.activation_memory_budget``; 1.0: that default). At 0.5 the look's forward
-compiled by Inductor writes 6 frames, its output and what it saves, instead of 25.3, in 66 loops instead of 106, and
-its backward writes 3.67 frames either way (``benchmarks/results/inductor_proxy.md``). On the CPU the look's training
-step (4x3x256x384) at 0.5 took 0.64 of its time at 1.0 on one thread and 0.78 on two; at 0.25, 1.09
-(``benchmarks/results/cpu_paths.md``); a GPU's figures are ``benchmarks/bench_gpu.py``'s to measure."""
+"""PyTorch's activation memory budget for a compiled training forward (``torch._functorch.config.activation_memory_budget``):
+between 0, what recomputing everything in the backward keeps (the inputs), and 1, what AOTAutograd's min-cut
+partitioner keeps by default; the partitioner recomputes the least that holds its estimate of the saved memory there.
+At 0.5 the look's forward compiled by Inductor writes 5 frames (its output and what it saves) instead of 25.3, in 65
+loops instead of 106, and its backward writes 3.67 frames either way, in 90 loops instead of 83
+(``benchmarks/results/inductor_proxy.md``). On
+the CPU its training step (4x3x256x384) at 0.5 took 0.64 of its time at 1.0 on one thread and 0.78 on two; at 0.25,
+1.09 (``benchmarks/results/cpu_paths.md``). Not yet timed on a GPU (``benchmarks/bench_gpu.py``'s
+``training_compiled`` section times the compiled step)."""
 
 
 def compile_mode(device: torch.device, cuda_graphs: bool = True) -> str:
@@ -73,10 +77,14 @@ class CompiledModule(nn.Module):
     def __init__(self, module: nn.Module, cuda_graphs: bool = True, dynamic: Optional[bool] = None,
                  activation_memory_budget: float = ACTIVATION_MEMORY_BUDGET):
         super().__init__()
+        if isinstance(activation_memory_budget, bool) or not isinstance(activation_memory_budget, numbers.Real):
+            raise TypeError(f"activation_memory_budget must be a number, got {type(activation_memory_budget).__name__}")
+        if not 0.0 <= activation_memory_budget <= 1.0:
+            raise ValueError(f"activation_memory_budget must lie in [0, 1], got {activation_memory_budget}")
         self.module = module
         self.cuda_graphs = cuda_graphs
         self.dynamic = dynamic
-        self.activation_memory_budget = activation_memory_budget
+        self.activation_memory_budget = float(activation_memory_budget)
         self._compiled: dict = {}
 
     def compiled_for(self, device: torch.device):
@@ -114,12 +122,18 @@ class CompiledModule(nn.Module):
         return out
 
     def _graph_call(self, image: torch.Tensor, *args, **kwargs):
-        from torch._functorch import config  # the budget is read where the first training frame compiles
-
         frame = getattr(self.module, "compiled_frame", None)
-        with (frame(image, *args, **kwargs) if frame is not None else contextlib.nullcontext(),
-              config.patch(activation_memory_budget=self.activation_memory_budget)):
+        with frame(image, *args, **kwargs) if frame is not None else contextlib.nullcontext(), self._budget():
             return self.compiled_for(image.device)(image, *args, **kwargs)
+
+    def _budget(self):
+        """The activation memory budget, set for a call that records gradients (where a training graph may compile; the
+        partitioner reads it then). PyTorch's setting is the process's: another thread's compile meanwhile sees it too."""
+        if not torch.is_grad_enabled():
+            return contextlib.nullcontext()
+        from torch._functorch import config
+
+        return config.patch(activation_memory_budget=self.activation_memory_budget)
 
 
 def _raised_while_traced(error: Exception) -> bool:
@@ -139,15 +153,12 @@ def compile(module: nn.Module, *, cuda_graphs: bool = True, dynamic: Optional[bo
     the first new size, one graph with the changed sizes symbolic, which every later size runs; ``True`` symbolic
     sizes from the start; ``False`` one graph per size, at most eight sizes (Dynamo's ``recompile_limit``: the
     ninth raises ``FailOnRecompileLimitHit``). ``activation_memory_budget`` (0 to 1): what a training forward keeps
-    for the backward, as a fraction of PyTorch's default (:data:`ACTIVATION_MEMORY_BUDGET`; 1.0 keeps the default).
+    for the backward, between recomputing everything (0) and PyTorch's default (1; :data:`ACTIVATION_MEMORY_BUDGET`).
     It is read where a training graph compiles, and Dynamo does not guard on it: a module of the same structure
     compiled earlier in the process runs the graph compiled then, with the budget it had (``torch._dynamo.reset()``
     forgets it).
     """
     if not isinstance(module, nn.Module):
         raise TypeError(f"compile takes an nn.Module, got {type(module).__name__}")
-    if isinstance(activation_memory_budget, bool) or not isinstance(activation_memory_budget, (int, float)) \
-            or not 0.0 <= activation_memory_budget <= 1.0:
-        raise ValueError(f"activation_memory_budget must be a number in [0, 1], got {activation_memory_budget!r}")
-    return CompiledModule(module, cuda_graphs=cuda_graphs, dynamic=dynamic, activation_memory_budget=float(activation_memory_budget))
+    return CompiledModule(module, cuda_graphs=cuda_graphs, dynamic=dynamic, activation_memory_budget=activation_memory_budget)
 

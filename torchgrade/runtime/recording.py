@@ -9,7 +9,7 @@ import sys
 
 import torch
 
-__all__ = ["is_tracing", "untracked"]
+__all__ = ["is_tracing", "is_exporting", "untracked"]
 
 
 def is_tracing() -> bool:
@@ -19,13 +19,21 @@ def is_tracing() -> bool:
         >>> is_tracing()
         False
     """
-    return torch.jit.is_tracing() or torch.compiler.is_compiling() or _exporting()
+    return torch.jit.is_tracing() or torch.compiler.is_compiling() or is_exporting()
 
 
-def _exporting() -> bool:
-    """``torch.onnx.is_in_onnx_export()`` without importing ``torch.onnx`` where nothing has: an export imports it
-    first, and its exporter takes about 0.15 s to import (which ``import torchgrade`` would pay: module constants are
-    computed with the library's functions)."""
+def is_exporting() -> bool:
+    """``torch.onnx.is_in_onnx_export()``, without loading ``torch.onnx`` where nothing has: an export loads it first,
+    and ONNX's exporter takes about 0.1 s to import (``import torchgrade``, whose constants are computed with the
+    library's functions, and the first frame would pay it). While compiling it is asked directly: Dynamo folds the
+    call, and would trace the lookup in ``sys.modules``.
+
+    Examples:
+        >>> is_exporting()
+        False
+    """
+    if torch.compiler.is_compiling():
+        return torch.onnx.is_in_onnx_export()
     onnx = sys.modules.get("torch.onnx")
     return onnx is not None and onnx.is_in_onnx_export()
 

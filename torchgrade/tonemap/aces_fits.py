@@ -7,7 +7,7 @@ import torch
 from ..base.core import apply_matrix, matrix_on_planes, rows_on_planes, untracked
 from ..color import AP1_LUMINANCE, MATRICES, MATRIX_VALUES, convert, unity_to_aces
 from ..color.spaces import shared_matrix
-from ..runtime import affine, constant, policy_for, values_of, where
+from ..runtime import affine, constant, is_exporting, policy_for, values_of, where
 from .aces_rrt import (
     AP1_TO_REC709,
     DIM_SURROUND_GAMMA,
@@ -49,7 +49,7 @@ def _dim_surround_planes(big_x: torch.Tensor, big_y: torch.Tensor, big_z: torch.
     total = (big_x + big_y + big_z).clamp_min(1e-4)
     x, y = big_x / total, big_y / total
     new_y = big_y.clamp(0.0, 65504.0)
-    if torch.onnx.is_in_onnx_export():
+    if is_exporting():
         new_y = torch.exp(torch.log(new_y) * DIM_SURROUND_GAMMA)  # Y is clamped: safe_pow's form without its clamp (no Where, no Pow)
     elif untracked(new_y):
         new_y = new_y.pow_(DIM_SURROUND_GAMMA)  # the guard only keeps the gradient at 0 finite: 0^0.9811 is 0
@@ -68,7 +68,7 @@ def aces_fitted(aces: torch.Tensor) -> torch.Tensor:
         >>> round(float(aces_fitted(torch.zeros(3, 1, 1)).max()), 6)
         0.0
     """
-    if torch.onnx.is_in_onnx_export():
+    if is_exporting():
         # The RRT's planes go into the next matrix as they are (matrix_on_planes), without a Concat and a Split (the
         # matrices on planes too, as 9 products by constants and 6 sums, would add 38 nodes).
         planes = rrt_glow_and_red_modifier_planes(aces.split(1, dim=-3), smoothstep_hue_weight)

@@ -21,7 +21,7 @@ from ..color import (
     primaries_to_rec709_matrix,
     safe_sqrt,
 )
-from ..runtime import affine, constant, scalar, values_of, where
+from ..runtime import affine, constant, is_exporting, scalar, values_of, where
 
 __all__ = [
     "RRT_SAT_FACTOR",
@@ -119,7 +119,7 @@ def _sigmoid_shaper(x: torch.Tensor) -> torch.Tensor:
 
 def _glow(yc: torch.Tensor, gain: torch.Tensor, mid: float) -> torch.Tensor:
     """ACES ``glow_fwd``: full gain below 2/3·mid, none above 2·mid, ``gain (mid / yc - 1/2)`` between."""
-    if untracked(yc, gain) or torch.onnx.is_in_onnx_export():
+    if untracked(yc, gain) or is_exporting():
         # yc clamped to the ramp gives gain (to float rounding) below it and exactly 0 above it, without selects.
         return torch.div(scalar(mid, yc), yc.clamp(2.0 / 3.0 * mid, 2.0 * mid)).sub_(0.5).mul_(gain)
     between = gain * (mid / yc.clamp_min(2.0 / 3.0 * mid) - 0.5)
@@ -166,7 +166,7 @@ def rrt_glow_and_red_modifier(aces: torch.Tensor, hue_weight, tiny: float = UNIT
         >>> torch.equal(rrt_glow_and_red_modifier(grey, smoothstep_hue_weight), grey)  # no saturation: no glow
         True
     """
-    if torch.onnx.is_in_onnx_export():
+    if is_exporting():
         return torch.cat(rrt_glow_and_red_modifier_planes(aces.split(1, dim=-3), hue_weight, tiny), dim=-3)
     saturation = _rgb_saturation(aces, tiny)
     s = _sigmoid_shaper(affine(saturation, 5.0, -2.0))  # (s - 0.4) / 0.2

@@ -14,6 +14,7 @@ from typing import Callable, NamedTuple, Optional
 import torch
 
 from ..base.core import apply_matrix, untracked
+from ..runtime import is_exporting
 from ..base.stage import Control
 
 __all__ = ["TONEMAP_INPUT_LIMIT", "WHITE_POINT_RANGE", "ToneMapper", "limited", "display", "apply_rows", "no_tonemap"]
@@ -64,7 +65,7 @@ def limited(image: torch.Tensor, limit=TONEMAP_INPUT_LIMIT) -> torch.Tensor:
         >>> limited(torch.tensor([-1.0, 0.5, 100.0])).tolist()
         [0.0, 0.5, 60.0]
     """
-    if isinstance(limit, numbers.Real) and (untracked(image) or torch.onnx.is_in_onnx_export()):
+    if isinstance(limit, numbers.Real) and (untracked(image) or is_exporting()):
         return image.clamp(0.0, limit)  # exported, one Clip where the other form is a Clip and a Min
     return torch.minimum(image.clamp_min(0.0), torch.as_tensor(limit, dtype=image.dtype, device=image.device))
 

@@ -20,7 +20,7 @@ import torch
 
 from ...base.core import apply_matrix, matrix_on_planes, rows_on_planes, untracked
 from ...color import rgb_to_xyz_matrix, safe_pow
-from ...runtime import affine, constant, values_of, where
+from ...runtime import affine, constant, is_exporting, values_of, where
 
 __all__ = ["CAM16_PRIMARIES", "JMhParams", "jmh_params", "rgb_to_aab", "rgb_to_aab_planes", "aab_to_jmh",
            "aab_planes_to_jmh", "jmh_to_rgb", "jmh_to_rgb_planes", "y_to_j", "a_to_y"]
@@ -81,7 +81,7 @@ def _expanded(r: torch.Tensor, divisor: float = 1.0) -> torch.Tensor:
 def _signed_as(magnitude: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
     """``sign(v) magnitude`` for a magnitude that is 0 where ``v`` is: one ``copysign``, exported as ``Sign`` and ``Mul``
     (ONNX has no copysign)."""
-    if torch.onnx.is_in_onnx_export():
+    if is_exporting():
         return torch.sign(v) * magnitude
     return torch.copysign(magnitude, v)
 
