@@ -43,7 +43,7 @@ fi
 # the sections whose targets no device run has timed yet first (the compiled look, stages, training and augmentation),
 # then those measured before (runs D and E of benchmarks/results/gpu.md): what the budget leaves out is what is known
 timeout -s INT 200 python3 benchmarks/bench_gpu.py --out "$OUT" --budget 130 \
-  --sections floor,look,stages,training_compiled,augment,augment_compiled,cpu,lut,training,profile,kernels,forms \
+  --sections floor,look,stages,training_compiled,augment,augment_compiled,cpu,training_budget,lut,training,profile,kernels,forms \
   2>&1 | tee "$OUT/bench_gpu.log" | tail -40
 # the counts and the time they predict, beside the times measured above (gpu_proxy.md: CPU only, about 10 s)
 timeout -s INT 60 python3 benchmarks/gpu_proxy.py --out "$OUT" 2>&1 | tail -14

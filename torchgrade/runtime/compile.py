@@ -62,7 +62,7 @@ loops instead of 106, and its backward writes 3.67 frames either way, in 90 loop
 (``benchmarks/results/inductor_proxy.md``). On
 the CPU its training step (4x3x256x384) at 0.5 took 0.64 of its time at 1.0 on one thread and 0.78 on two; at 0.25,
 1.09 (``benchmarks/results/cpu_paths.md``). Not yet timed on a GPU (``benchmarks/bench_gpu.py``'s
-``training_compiled`` section times the compiled step)."""
+``training_budget`` section times it against 1.0)."""
 
 
 def compile_mode(device: torch.device, cuda_graphs: bool = True) -> str:
