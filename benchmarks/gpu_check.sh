@@ -41,8 +41,9 @@ if python3 -c "import onnxruntime, sys; sys.exit('CUDAExecutionProvider' not in 
 else
   echo "onnxruntime's CUDA provider: not on this machine (tg.onnx.session(path, device='cuda') not run)" | tee -a "$OUT/device.txt"
 fi
-# the sections whose targets no device run has timed yet first (the compiled look, stages, training and augmentation),
-# then those measured before (runs D and E of benchmarks/results/gpu.md): what the budget leaves out is what is known
+# the issue's targets first, those no device run has timed before the others (the compiled look, stages, training and
+# augmentation; the host's cores since the worker fix), then the budget's comparison and what runs D and E measured
+# (benchmarks/results/gpu.md): what the budget leaves out is what is known or not a target
 timeout -s INT 260 python3 benchmarks/bench_gpu.py --out "$OUT" --budget 170 \
   --sections floor,look,stages,training_compiled,augment,augment_compiled,cpu,training_budget,lut,training,profile,kernels,forms \
   2>&1 | tee "$OUT/bench_gpu.log" | tail -40

@@ -153,6 +153,16 @@ def test_the_activation_memory_budget_is_set_only_for_a_call_that_records_gradie
     assert seen == [config.activation_memory_budget, 0.25] and config.activation_memory_budget != 0.25
 
 
+def test_a_torch_without_the_activation_memory_budget_trains_with_its_default_and_says_so(monkeypatch):
+    import types
+
+    compiled = tg.compile(tg.ToneMap("reinhard"))
+    monkeypatch.setattr(compiled, "compiled_for", lambda device: lambda image: image)
+    monkeypatch.setattr(torch._functorch, "config", types.SimpleNamespace())  # a functorch config without the budget
+    with pytest.warns(RuntimeWarning, match="no activation memory budget"):
+        compiled(hdr((1, 3, 4, 4)).requires_grad_())
+
+
 def test_a_compiled_frame_that_fails_leaves_the_exposure_state_empty_and_a_stream_leaves_it_alone(monkeypatch):
     _captured_only(monkeypatch)
     stage = tg.AutoExposure(speed=1.5)

@@ -129,9 +129,13 @@ class CompiledModule(nn.Module):
     def _budget(self):
         """The activation memory budget, set for a call that records gradients (where a training graph may compile; the
         partitioner reads it then). PyTorch's setting is the process's: another thread's compile meanwhile sees it too."""
+        if not torch.is_grad_enabled():
+            return contextlib.nullcontext()
         from torch._functorch import config
 
-        if not torch.is_grad_enabled() or not hasattr(config, "activation_memory_budget"):  # a torch before the budget
+        if not hasattr(config, "activation_memory_budget"):
+            warnings.warn("this torch has no activation memory budget: a compiled training forward keeps what PyTorch "
+                          "keeps by default", RuntimeWarning, stacklevel=4)
             return contextlib.nullcontext()
         return config.patch(activation_memory_budget=self.activation_memory_budget)
 
