@@ -35,15 +35,16 @@ start = time.perf_counter()
 import torchgrade
 seconds = time.perf_counter() - start
 print(json.dumps({{"seconds": seconds, "file": torchgrade.__file__,
-                  "loaded": sorted(m for m in sys.modules if any(m == n or m.startswith(n + ".") for n in names))}}))
+                  "loaded": [n for n in names if any(m == n or m.startswith(n + ".") for m in sys.modules)]}}))
 """
 
 
 def import_once(checkout: Path, write_bytecode: bool = True) -> dict:
     """``import torchgrade`` of ``checkout`` in a fresh process (that writes its bytecode, unless ``write_bytecode`` is
-    False: the environment's setting then holds): seconds and what it loaded."""
-    env = {key: value for key, value in os.environ.items() if write_bytecode is False or key != "PYTHONDONTWRITEBYTECODE"}
-    env["PYTHONPATH"] = str(checkout)
+    False: the environment's setting then holds): seconds, and which of :data:`LOADED_AT_FIRST_USE` it loaded."""
+    env = {**os.environ, "PYTHONPATH": str(checkout)}
+    if write_bytecode:
+        env.pop("PYTHONDONTWRITEBYTECODE", None)
     result = subprocess.run([sys.executable, "-c", _IMPORT.format(names=LOADED_AT_FIRST_USE)], capture_output=True, text=True,
                             env=env, cwd=checkout, timeout=300, check=True)
     once = json.loads(result.stdout.strip().splitlines()[-1])
@@ -78,7 +79,7 @@ def main(argv=None) -> int:
             loaded[name] = once["loaded"]
     rows = [{"checkout": f"{name} ({revision(checkouts[name])})", "median_s": round(statistics.median(values), 3),
              "min_s": round(min(values), 3), "max_s": round(max(values), 3),
-             "loaded_at_import": [n for n in LOADED_AT_FIRST_USE if any(m == n or m.startswith(n + ".") for m in loaded[name])]}
+             "loaded_at_import": loaded[name]}
             for name, values in seconds.items()]
     lines = ["# `import torchgrade` after `import torch`", "",
              f"Fresh processes with cached bytecode, {args.runs} a checkout, alternating; loaded at import: the modules of "

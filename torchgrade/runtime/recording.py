@@ -19,7 +19,7 @@ def is_tracing() -> bool:
         >>> is_tracing()
         False
     """
-    return torch.jit.is_tracing() or torch.compiler.is_compiling() or is_exporting()
+    return torch.jit.is_tracing() or torch.compiler.is_compiling() or _exporting_eagerly()
 
 
 def is_exporting() -> bool:
@@ -34,6 +34,11 @@ def is_exporting() -> bool:
     """
     if torch.compiler.is_compiling():
         return torch.onnx.is_in_onnx_export()
+    return _exporting_eagerly()
+
+
+def _exporting_eagerly() -> bool:
+    """:func:`is_exporting` outside a compiler: asked of ``torch.onnx`` only where it is loaded."""
     onnx = sys.modules.get("torch.onnx")
     return onnx is not None and onnx.is_in_onnx_export()
 

@@ -14,8 +14,8 @@ from typing import Callable, NamedTuple, Optional
 import torch
 
 from ..base.core import apply_matrix, untracked
-from ..runtime import is_exporting
 from ..base.stage import Control
+from ..runtime import is_exporting
 
 __all__ = ["TONEMAP_INPUT_LIMIT", "WHITE_POINT_RANGE", "ToneMapper", "limited", "display", "apply_rows", "no_tonemap"]
 
