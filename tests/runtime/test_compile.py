@@ -1,6 +1,7 @@
 """``torch.compile(..., fullgraph=True)`` of whole looks on fixed-size frames: one graph (no breaks), the same
 pixels as eager. Identity shortcuts that read a control's value are decided in Python while compiling."""
 
+import itertools
 import json
 from pathlib import Path
 
@@ -130,6 +131,32 @@ def test_a_compiled_training_forward_keeps_at_most_its_budget_for_the_backward(m
     exact = frame.double().requires_grad_()
     tg.PostFX.from_config(CINEMATIC).eval().double()(exact).sum().backward()
     assert (compiled - exact.grad).abs().max() <= 1.5 * (image.grad.double() - exact.grad).abs().max() + 1e-7
+
+
+def test_a_compiled_training_step_at_the_budget_keeps_its_gradient_at_the_extremes(monkeypatch):
+    """What the backward recomputes under the activation memory budget changes no image gradient, on every combination
+    of three extreme values (0, denormals, grey, 60, 65504, 1e30, 3e38) and on NaN, ±Inf and negative pixels: the same
+    as at PyTorch's default to float32 rounding, finite, and as close to the float64 eager gradient as float32 eager's."""
+    from torchgrade.testing.extremes import EXTREME_VALUES
+
+    grid = torch.tensor(list(itertools.product(EXTREME_VALUES, repeat=3))).T.reshape(1, 3, 36, 48)
+    grid[0, :, 0, :4] = torch.tensor([[float("nan"), float("inf"), -float("inf"), -2.0]] * 3)
+
+    def gradient(call, dtype=torch.float32):
+        image = grid.to(dtype, copy=True).requires_grad_()
+        call(image).sum().backward()
+        return image.grad.double()
+
+    def compiled(**settings):
+        _captured_only(monkeypatch, "aot_eager_decomp_partition")  # resets Dynamo: a fresh graph for each budget
+        return gradient(tg.compile(tg.PostFX.from_config(CINEMATIC).eval(), **settings))
+
+    at_budget, at_default = compiled(), compiled(activation_memory_budget=1.0)
+    eager = gradient(tg.PostFX.from_config(CINEMATIC).eval())
+    exact = gradient(tg.PostFX.from_config(CINEMATIC).eval().double(), torch.float64)
+    torch.testing.assert_close(at_budget, at_default, rtol=1e-6, atol=1e-12)
+    assert at_budget.isfinite().all() and exact.abs().max() > 1e-3
+    assert (at_budget - exact).abs().max() <= 1.5 * (eager - exact).abs().max() + 1e-9
 
 
 @pytest.mark.parametrize("budget, error", [(-0.1, ValueError), (1.5, ValueError), (float("nan"), ValueError),
