@@ -115,19 +115,30 @@ def test_godot_blend_modes_match_per_pixel_references(mode):
 # --- Karis average and clamp ----------------------------------------------------------------------
 
 
-def test_karis_mean_matches_a_per_block_reference():
-    image = hdr((1, 3, 7, 9), dtype=torch.float64)
-    counts = F.avg_pool2d(F.pad(torch.ones(1, 1, 7, 9, dtype=torch.float64), (0, 1, 0, 1)), 2) * 4
-    means = F.avg_pool2d(F.pad(image, (0, 1, 0, 1)), 2) * 4 / counts
-    result = karis_mean(image, means)
+def overlaps(side: int) -> np.ndarray:
+    """``(ceil(side / 2), side)``: the length of fine pixel ``j`` inside coarse pixel ``i`` when ``ceil(side / 2)``
+    equal pixels span the side (interval arithmetic in fractions of a fine pixel)."""
+    half = -(-side // 2)
+    start = np.arange(half)[:, None] * side / half
+    stop = start + side / half
+    j = np.arange(side)[None, :]
+    return np.clip(np.minimum(stop, j + 1) - np.maximum(start, j), 0.0, None)
+
+
+@pytest.mark.parametrize("height, width", [(7, 9), (8, 6)])
+def test_karis_mean_matches_a_per_block_reference(height, width):
+    """Karis' 1/(1+Y)-weighted mean over each half-resolution pixel's footprint (whole pixels at even sides,
+    parts of pixels at odd ones, by the area they share), capped at the plain mean."""
+    image = hdr((1, 3, height, width), dtype=torch.float64)
     pixels = image[0].numpy()
-    for i in range(4):
-        for j in range(5):
-            block = pixels[:, 2 * i : 2 * i + 2, 2 * j : 2 * j + 2].reshape(3, -1)
-            luma = 0.2126729 * block[0] + 0.7151522 * block[1] + 0.0721750 * block[2]
-            weights = 1.0 / (1.0 + luma)
-            expected = np.minimum((block * weights).sum(1) / weights.sum(), block.mean(1))
-            np.testing.assert_allclose(result[0, :, i, j].numpy(), expected, rtol=1e-12)
+    rows, columns = overlaps(height), overlaps(width)
+    area = rows[:, :, None, None] * columns[None, None, :, :]  # (i, y, j, x)
+    luma = 0.2126729 * pixels[0] + 0.7151522 * pixels[1] + 0.0721750 * pixels[2]
+    weights = 1.0 / (1.0 + luma)
+    weighted = np.einsum("iyjx,cyx->cij", area, pixels * weights) / np.einsum("iyjx,yx->ij", area, weights)
+    means = np.einsum("iyjx,cyx->cij", area, pixels) / area.sum(axis=(1, 3))
+    result = karis_mean(image, torch.from_numpy(means)[None])
+    np.testing.assert_allclose(result[0].numpy(), np.minimum(weighted, means), rtol=1e-12)
 
 
 def test_karis_average_dims_a_lone_hot_pixel_and_keeps_light_exact():
@@ -215,14 +226,16 @@ def test_anamorphic_ratio_stretches_the_glow_along_the_chosen_axis():
 # --- FFT convolution bloom ---------------------------------------------------------------------------
 
 
-def test_fft_convolution_bloom_matches_direct_conv2d():
+def test_fft_convolution_bloom_matches_direct_conv2d_over_the_mirrored_frame():
+    """The thresholded frame extended by its mirror image about the edge (NumPy's ``symmetric`` padding), convolved."""
     generator = torch.Generator().manual_seed(5)
     image = hdr((2, 3, 13, 17), dtype=torch.float64)
     kernel = torch.rand(3, 7, 5, dtype=torch.float64, generator=generator)
     out = tg.functional.convolution_bloom(image, kernel, threshold=0.8, knee=0.3, intensity=torch.tensor([0.5, 2.0], dtype=torch.float64))
     normalised = kernel / kernel.sum(dim=(-2, -1), keepdim=True)
     bright = tg.functional.bloom_threshold(image, threshold=0.8, knee=0.3)
-    direct = F.conv2d(bright, normalised.flip(-2, -1).unsqueeze(1), padding=(3, 2), groups=3)
+    mirrored = torch.from_numpy(np.pad(bright.numpy(), ((0, 0), (0, 0), (3, 3), (2, 2)), mode="symmetric"))
+    direct = F.conv2d(mirrored, normalised.flip(-2, -1).unsqueeze(1), groups=3)
     expected = image + torch.tensor([0.5, 2.0], dtype=torch.float64).view(2, 1, 1, 1) * direct
     torch.testing.assert_close(out, expected, rtol=1e-10, atol=1e-10)
 

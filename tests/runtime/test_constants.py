@@ -6,7 +6,6 @@ import math
 import torch
 
 import torchgrade as tg
-from torchgrade.bloom.pyramid import block_counts
 from torchgrade.color import MATRICES
 from torchgrade.base.core import color_param, scalar_param
 
@@ -17,12 +16,6 @@ def test_changing_a_colour_matrix_in_place_leaves_later_conversions_alone():
     tg.color.matrix("srgb_to_ap1", image).mul_(2.0)
     torch.testing.assert_close(tg.color.convert(image, "srgb_to_ap1"), expected)
     torch.testing.assert_close(tg.color.matrix("srgb_to_ap1", image), MATRICES["srgb_to_ap1"])
-
-
-def test_changing_block_counts_in_place_leaves_later_counts_alone():
-    block_counts(3, 4, torch.zeros(1)).zero_()
-    # a 3x4 level pooled 2x2: the first row of blocks covers 2x2 pixels, the last (odd) row 1x2
-    assert block_counts(3, 4, torch.zeros(1)).flatten().tolist() == [4.0, 4.0, 2.0, 2.0]
 
 
 def test_changing_a_broadcast_control_in_place_leaves_later_grades_alone():

@@ -31,10 +31,11 @@ AUGMENTED = (256, 3, 224, 224)
 
 CINEMATIC = json.loads((Path(__file__).resolve().parents[2] / "export" / "looks" / "cinematic.json").read_text())
 
-LAUNCH_BUDGET = {"cinematic": 292, "exposure": 51, "bloom": 111, "grade": 47, "tonemap": 86}
+LAUNCH_BUDGET = {"cinematic": 287, "exposure": 51, "bloom": 106, "grade": 47, "tonemap": 86}
 """Operations dispatched for one 3840x2160 frame of ``export/looks/cinematic.json`` (no_grad), per stage and whole:
-each a kernel launch on CUDA (arithmetic on 0-d CPU tensors alone launches nothing). Measured 292 (exposure 51, bloom
-111, grade 47, tone map 86); log contrast's slope on the host (``runtime.scalar``) took 2. The histogram counted per
+each a kernel launch on CUDA (arithmetic on 0-d CPU tensors alone launches nothing). Measured 287 (exposure 51, bloom
+106, grade 47, tone map 86); 292 (bloom 111) before bloom's levels held means (no division by a block's pixel count)
+and its odd levels (135x240, 17x30, 9x15, 5x8) were resampled by a matrix a side; log contrast's slope on the host (``runtime.scalar``) took 2. The histogram counted per
 column (``ExecutionPolicy.histogram_tables``) took 3 of them and an H200's 4K exposure from 13.2 to 1.7 ms; 300
 before the ACES fit and sigmoid took a product and a sum by numbers as one operation (``runtime.affine``) and the dim
 surround's planes went into the last matrix without a concatenation; 401 before the grade's split toning, the ACES
@@ -43,15 +44,17 @@ convolution, constants of plain-number controls folded and each stage after the 
 NaN. An H200 counted 303 launches for 291 of them and 370 for 351 (``benchmarks/results/gpu.md``), where the look made
 16,875 in strips and 1,060 in whole frames before (``../shared/measurements/gpu-h200``)."""
 
-FRAME_PASS_BUDGET = {"cinematic": 118.3, "exposure": 10.5, "bloom": 16.1, "grade": 40.7, "tonemap": 54.2}
+FRAME_PASS_BUDGET = {"cinematic": 116.8, "exposure": 10.5, "bloom": 14.6, "grade": 40.7, "tonemap": 54.2}
 """Bytes those operations move, in copies of the frame (read and written): what an eager frame's time on a GPU follows
-(``benchmarks/gpu_proxy.py``). Measured 118.2 (exposure 10.4, bloom 16.0, grade 40.7, tone map 54.2); 117.5 (exposure
+(``benchmarks/gpu_proxy.py``). Measured 116.8 (exposure 10.4, bloom 14.5, grade 40.7, tone map 54.2); 118.2 (bloom 16.0)
+before bloom's pyramid spanned the frame at every size; 117.5 (exposure
 9.7) before the histogram per column, 123.2 and 149.0 before the changes of the two sentences above."""
 
-UNVECTORISED_BUDGET = {"cinematic": 54, "exposure": 2, "bloom": 23, "grade": 12, "tonemap": 17}
+UNVECTORISED_BUDGET = {"cinematic": 48, "exposure": 2, "bloom": 17, "grade": 12, "tonemap": 17}
 """Those of the operations that CUDA runs in its unvectorised loop (``DispatchCount.unvectorised``: an operand
 broadcast to the frame or strided), a third of the look's kernel time on an H200 (53 launches, 3.2 of 8.3 ms,
-``benchmarks/results/gpu.md``). Measured 54 (exposure 2, bloom 23, grade 12, tone map 17); 69 (1, 27, 16, 25) before
+``benchmarks/results/gpu.md``). Measured 48 (exposure 2, bloom 17, grade 12, tone map 17); 54 (bloom 23) before bloom's
+levels held means; 69 (1, 27, 16, 25) before
 plain numbers went to two-operand kernels as 0-d CPU operands (``runtime.scalar``): ``runtime.affine``, the soft knee,
 log contrast's slope, ``safe_pow``'s floor and the ACES glow's division."""
 

@@ -35,7 +35,7 @@ from typing import Callable, Optional
 
 import torch
 
-from .pyramid import nearest_upsample
+from .pyramid import expand
 
 __all__ = [
     "Composite", "COMPOSITES", "BLOOM_MODES", "LERP_MODES", "bevy_blend_factor", "scatter_weight", "bevy_weight",
@@ -127,7 +127,7 @@ def scattering_blend(image, glow, strength, fraction):
         tensor([[[[1., 1.],
                   [1., 1.]]]])
     """
-    kept = nearest_upsample(1.0 - strength * fraction, image.shape[-2:])
+    kept = expand(1.0 - strength * fraction, image.shape[-2:])
     return glow.addcmul_(image, kept)
 
 

@@ -1,7 +1,9 @@
 """Convolution bloom (Unreal's): the thresholded image convolved with a user kernel, by FFT or directly.
 
-The kernel is the glow of a point light; the frame is zero-padded so nothing wraps around, and light
-beyond the frame is lost. ONNX has no FFT at opset 17, so :meth:`ConvolutionBloom.export_form` gives a
+The kernel is the glow of a point light. The thresholded frame is extended by its mirror image about the edge
+(:func:`~torchgrade.bloom.pyramid.mirror_pad`, the pyramid bloom's edge rule) before it is convolved: a uniform
+frame blooms uniformly, and a frame turned or mirrored blooms turned or mirrored (with a kernel symmetric the same
+way). The convolution itself is zero-padded, so nothing wraps around. ONNX has no FFT at opset 17, so :meth:`ConvolutionBloom.export_form` gives a
 module that convolves directly (:func:`direct_convolve`): the same result, slower for large kernels.
 """
 
@@ -25,6 +27,7 @@ from ..base.core import (
 from ..base.stage import Control, Stage
 from .layer import CONTROLS
 from .prefilter import threshold_fraction
+from .pyramid import mirror_pad
 from .texture import as_texture, check_texture
 
 __all__ = ["fft_convolve", "direct_convolve", "check_kernel", "convolution_bloom", "ConvolutionBloom", "DirectConvolutionBloom"]
@@ -87,13 +90,17 @@ def convolution_bloom(
 
     ``T`` is :func:`~torchgrade.bloom.bloom_threshold` at full resolution; ``kernel`` ``(1 or 3, kh, kw)``
     with odd sides is the glow of a point light (centred, normalised to sum 1 per channel), so a
-    point's light reappears as the kernel image around it. Light beyond the frame is lost (zero padding).
+    point's light reappears as the kernel image around it. Beyond the frame the convolution sees the frame's mirror
+    image, so a uniform frame gains a uniform glow.
 
     Examples:
         >>> image = torch.zeros(1, 3, 5, 5); image[..., 2, 2] = 10.0
         >>> out = convolution_bloom(image, torch.ones(1, 3, 3), threshold=0.0, knee=0.0)
         >>> round(float(out[0, 0, 1, 1]), 4), round(float(out.sum() / image.sum()), 4)
         (1.1111, 2.0)
+        >>> uniform = convolution_bloom(torch.full((1, 3, 4, 6), 2.0), torch.ones(1, 5, 3), threshold=0.0, knee=0.0)
+        >>> round(float(uniform.min()), 4), round(float(uniform.max()), 4)
+        (4.0, 4.0)
     """
     check_image(image)
     check_kernel(kernel)
@@ -113,7 +120,10 @@ def _convolved(image, kernel, threshold, knee, intensity, convolve) -> torch.Ten
         scalar_param(value, reference, name) for name, value in zip(PREFILTER_CONTROLS, (threshold, knee, intensity))
     )
     kernel = kernel.to(scene.dtype)
-    glow = convolve(scene * threshold_fraction(scene, threshold, knee), kernel / kernel.sum(dim=(-2, -1), keepdim=True))
+    radius = (kernel.shape[-2] // 2, kernel.shape[-1] // 2)
+    extended = mirror_pad(scene * threshold_fraction(scene, threshold, knee), radius)
+    glow = convolve(extended, kernel / kernel.sum(dim=(-2, -1), keepdim=True))
+    glow = glow.narrow(-2, radius[0], height).narrow(-1, radius[1], width)
     return to_input_dtype((scene + intensity * glow).reshape(image.shape), image)
 
 

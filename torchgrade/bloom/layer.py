@@ -50,13 +50,7 @@ from ..color import srgb_to_linear
 from ..runtime import constant, policy_for
 from .composite import BLOOM_MODES, COMPOSITES
 from .prefilter import prefilter
-from .pyramid import (
-    active_levels,
-    anamorphic_sigma,
-    glow_pyramid,
-    pyramid_depth,
-    upsample,
-)
+from .pyramid import active_levels, anamorphic_sigma, glow_pyramid, pyramid_depth, upsample
 from .texture import as_texture, check_texture, resampled
 
 __all__ = ["CONTROLS", "UNITY_SETTINGS", "OPTION_DEFAULTS", "MAX_FRAME_SIDE", "check_settings", "bloom_settings", "bloom", "bloom_with_settings", "Bloom",
@@ -241,7 +235,7 @@ def _composited(scene, light, fraction, settings: dict, param, depth: int, activ
         # A frame too small for any level is not bloomed: intensity 0 leaves it as it is in every mode whose
         # ``zero_is_identity`` holds, for the cost of a scalar product instead of a frame-sized select.
         strength = strength * (active > 0)
-    glow = upsample(strength * glow, scene.shape[-2:], bicubic)
+    glow = upsample(strength * glow, [light.shape[-2:], scene.shape[-2:]], bicubic)
     if not is_constant(settings["tint"], 1.0):
         glow = glow * srgb_to_linear(param("tint"))
     lens = None

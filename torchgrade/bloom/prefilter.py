@@ -1,7 +1,8 @@
 """The bloom prefilter: Unity's soft-knee threshold, firefly fading, Karis' average and the source clamp.
 
-The prefilter runs at half resolution: each 2x2 block's source (its mean, or its Karis average, at
-most ``clamp``) is thresholded, optionally faded over a 5-tap diagonal cross (Unity
+The prefilter runs at half resolution (:func:`~torchgrade.bloom.pyramid.halve`: the area mean of the pixels each
+half-resolution pixel covers, the 2x2 mean at even sides): each such block's source (its mean, or its Karis
+average, at most ``clamp``) is thresholded, optionally faded over a 5-tap diagonal cross (Unity
 ``BloomPrefilterFireflies``). Besides the light entering the pyramid it returns the exact fraction of
 each block's light it took, so scattering can remove from the image the light it passes on: the
 threshold scales a block's source by ``r`` in [0, 1] and so takes ``r * source / mean`` of each
@@ -20,7 +21,7 @@ import torch.nn.functional as F
 from ..base.core import NEGLIGIBLE_LIGHT, Param, channel_max, check_image, scalar_param
 from ..color import luminance, srgb_to_linear
 from ..runtime import folded, where
-from .pyramid import shared_block_counts, sum_pool
+from .pyramid import halve
 
 __all__ = ["SOFT_KNEE_EPSILON", "bloom_threshold", "threshold_fraction", "soft_knee", "cross_sum", "karis_mean", "prefilter"]
 
@@ -75,20 +76,23 @@ def soft_knee(threshold: Param, knee: Param, *, like: torch.Tensor) -> torch.Ten
 
 
 def cross_sum(values: torch.Tensor) -> torch.Tensor:
-    """Sum over the firefly prefilter's 5 taps, those outside the frame left out.
+    """Sum over the firefly prefilter's 5 taps: the centre and its 4 diagonal neighbours, those outside the frame
+    taken from the edge (clamped, as Unity's ``sampler_linear_clamp`` takes them; at one pixel from the edge that is
+    also the mirror image the blurs use).
 
-    The taps are the centre and the 4 diagonal neighbours at half resolution: the shader's offsets
-    of 2 source texels, each a bilinear tap that averages a 2x2 block. Sums of shifted views of
-    the zero-padded tensor, the two neighbours of each row first: on CPU about 100 times faster than a
-    3x3 convolution (``kornia.filters.filter2d``), which oneDNN runs slowly.
+    The taps are the shader's offsets of 2 source texels, each a bilinear tap that averages a 2x2 block.
+    With clamped taps the cross is a symmetric operator whose rows (and so columns) all sum to 5: a uniform frame
+    stays uniform, and the light each block passes on is known exactly (:func:`prefilter`). Sums of shifted views
+    of the padded tensor, the two neighbours of each row first: on CPU about 100 times faster than a 3x3
+    convolution (``kornia.filters.filter2d``), which oneDNN runs slowly.
 
     Examples:
         >>> cross_sum(torch.ones(1, 1, 3, 3))[0, 0]
-        tensor([[2., 3., 2.],
-                [3., 5., 3.],
-                [2., 3., 2.]])
+        tensor([[5., 5., 5.],
+                [5., 5., 5.],
+                [5., 5., 5.]])
     """
-    padded = F.pad(values, (1, 1, 1, 1))
+    padded = F.pad(values, (1, 1, 1, 1), mode="replicate")
     beside = padded[..., :, :-2] + padded[..., :, 2:]
     return values + (beside[..., :-2, :] + beside[..., 2:, :])
 
@@ -102,11 +106,11 @@ def karis_mean(image: torch.Tensor, means: torch.Tensor) -> torch.Tensor:
 
     Examples:
         >>> image = torch.zeros(1, 3, 2, 2); image[..., 0, 0] = 9.0
-        >>> karis_mean(image, sum_pool(image) / 4).flatten()  # the plain mean is 2.25
+        >>> karis_mean(image, halve(image)).flatten()  # the plain mean is 2.25
         tensor([0.2903, 0.2903, 0.2903])
     """
     weight = 1.0 / (1.0 + luminance(image).clamp_min(0.0))
-    return torch.minimum(sum_pool(image * weight) / sum_pool(weight), means)
+    return torch.minimum(halve(image * weight) / halve(weight), means)
 
 
 def _source_share(source: torch.Tensor, means: torch.Tensor) -> torch.Tensor:
@@ -125,24 +129,24 @@ def _source_share(source: torch.Tensor, means: torch.Tensor) -> torch.Tensor:
 
 
 def prefilter(image: torch.Tensor, threshold, knee, fade_fireflies: bool, karis_average: bool = False, clamp=None):
-    """Half-resolution light sums entering the pyramid, and the fraction of each block's light they took.
+    """Half-resolution light entering the pyramid (means, :func:`~torchgrade.bloom.pyramid.halve`), and the fraction
+    of each block's light it took.
 
     Each block's source is its mean, or its :func:`karis_mean`, then at most ``clamp``; the block
     passes on ``c = T(source)`` and so ``r * source / mean`` of its light. With fireflies (Unity
-    ``BloomPrefilterFireflies``): ``p_j = sum_k w'_k c_k / W_j`` over the cross of ``j``, with
+    ``BloomPrefilterFireflies``): ``p_j = sum_k w'_k c_k / W_j`` over the cross of ``j`` (:func:`cross_sum`), with
     ``w = 1 / (1 + Y(c))`` (``Y`` Rec.709 luminance, clamped at 0 so weights stay in (0, 1]) and
-    ``W_j = sum_k w_k``. Block ``k`` then passes on ``w'_k A_k`` of its thresholded light, where
-    ``A_k = sum_{j in cross(k)} count_j / W_j / count_k`` (the cross is its own adjoint). The weight
-    is capped, ``w' = min(w, 1 / A)``, so that no block passes on more light than it has: the cap
-    binds only for a dim block among much brighter ones (``w A = 1`` exactly in a uniform region).
+    ``W_j = sum_k w_k``. Every block covers the same area, and the cross is its own adjoint, so block ``k`` passes on
+    ``w'_k A_k`` of its thresholded light, with ``A_k = sum_{j in cross(k)} 1 / W_j``. The weight is capped,
+    ``w' = min(w, 1 / A)``, so that no block passes on more light than it has: the cap binds only for a block dimmer
+    than the blocks around it (``w A = 1`` exactly in a uniform region, the frame's edges included).
 
     Examples:
         >>> light, fraction = prefilter(torch.full((1, 3, 4, 4), 4.0), torch.tensor(1.0), torch.tensor(0.5), True)
-        >>> light.shape, round(float(light.sum() / 48 / 4), 4), round(float(fraction.mean()), 4)
-        (torch.Size([1, 3, 2, 2]), 0.75, 0.75)
+        >>> light.shape, round(float(light.mean()), 4), round(float(fraction.mean()), 4)
+        (torch.Size([1, 3, 2, 2]), 3.0, 0.75)
     """
-    counts = shared_block_counts(image.shape[-2], image.shape[-1], image)
-    means = sum_pool(image) / counts
+    means = halve(image)
     source = karis_mean(image, means) if karis_average else means
     if clamp is not None:
         source = torch.minimum(source, clamp)
@@ -151,10 +155,10 @@ def prefilter(image: torch.Tensor, threshold, knee, fade_fireflies: bool, karis_
     if source is not means:
         fraction = fraction * _source_share(source, means)
     if not fade_fireflies:
-        return bright * counts, fraction
+        return bright, fraction
     weight = 1.0 / (1.0 + luminance(bright).clamp_min(0.0))
     total_weight = cross_sum(weight)
-    reach = cross_sum(counts / total_weight) / counts
+    reach = cross_sum(1.0 / total_weight)
     capped = torch.minimum(weight, 1.0 / reach)
     faded = cross_sum(bright * capped) / total_weight
-    return faded * counts, fraction * capped * reach
+    return faded, fraction * capped * reach

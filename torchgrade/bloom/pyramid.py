@@ -1,20 +1,27 @@
-"""The bloom pyramid: depth, 2x2 sum pooling, mirror padding, Gaussian blur, upsampling, B-spline refinement.
+"""The bloom pyramid: level sizes, area resampling between levels, the mirrored blur and upsampling.
 
-**Light is conserved, borders included.** The pyramid works on light *sums* (each pixel holds the
-light of the full-resolution pixels it covers) and every resampling step keeps the sum:
+**Every level spans the whole frame**, as the textures of Unity's pyramid do when sampled at normalised
+coordinates: a level side is half the one above, rounded up (``m = ceil(n / 2)``), and pixel ``i`` of it covers
+``[i n / m, (i + 1) n / m)`` of the ``n`` pixels above. A frame and its mirror image therefore have mirrored
+pyramids at every size, odd and one-pixel sides included, and a uniform frame has uniform levels.
 
-* pooling is a 2x2 sum (blocks at odd edges sum fewer pixels);
-* blurs run over the frame extended by its mirror image about the edge (half-sample symmetric):
-  with a symmetric kernel that operator is symmetric and its rows sum to 1, so its columns do too,
-  and every pixel's light stays in the frame; clamped edges (the usual texture sampling) magnify
-  edge pixels instead, and zero padding loses their light;
-* bilinear 2x upsampling with ``align_corners=False`` and clamped edges gives every coarse pixel
-  weights summing to the number of fine pixels it was pooled from (the crop of an odd last row or
-  column included), so upsampling the block means ``m / count`` keeps the sum.
+**Light is conserved, borders included.** Levels hold means (radiance); every pixel of a level covers the same
+area of the frame, so a level's light is its sum times that area, and every step keeps it:
+
+* halving (:func:`halve`) takes exact area means: each coarse pixel the mean of the parts of the pixels it covers.
+  At an even side that is the 2x2 mean; at an odd side a coarse pixel also takes the shares ``i / m`` and
+  ``(m - 1 - i) / m`` of its outer neighbours;
+* blurs run over the frame extended by its mirror image about the edge (half-sample symmetric, :func:`mirror_pad`):
+  with a symmetric kernel that operator is symmetric and its rows sum to 1, so its columns do too, and every pixel's
+  light stays in the frame; clamped edges (the usual texture sampling) magnify edge pixels instead, and zero
+  padding loses their light;
+* upsampling (:func:`upsample`) gives each fine pixel the coarse pixels it overlaps, by their overlap (the adjoint of
+  the area mean, :func:`expand`), then smooths over the mirrored frame: ``[1, 2, 1] / 4`` for 2x, ``[1, 2, 2, 2, 1]
+  / 8`` for 4x. At even sides that is exactly bilinear sampling with ``align_corners=False`` and clamped edges
+  (Unity's ``sampler_linear_clamp``); at every side both steps keep a uniform frame uniform and the light sum.
 
 Sizes come from tensor shapes, so a traced graph keeps working at every frame size, except
-:func:`pyramid_depth` (Python ints, as in kornia's pyramid functions) and :func:`mirror_pad`'s count
-of reflections for levels narrower than the blur radius.
+:func:`pyramid_depth` (Python ints, as in kornia's pyramid functions).
 """
 
 from __future__ import annotations
@@ -22,36 +29,44 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
-from ..base.core import is_tracing
-from ..runtime import device_cached, is_exporting, policy_for
+from ..runtime import device_cached, is_tracing, policy_for
 
 __all__ = [
-    "BLUR_SIGMA", "BLUR_TAPS", "ANAMORPHIC_TAPS", "BSPLINE_AFTER_BILINEAR", "pyramid_depth", "active_levels",
-    "sum_pool", "block_counts", "mirror_pad", "pyramid_blur", "anamorphic_sigma", "bspline_refine", "upsample",
-    "nearest_upsample", "glow_pyramid",
+    "UNITY_BLUR_WEIGHTS", "BLUR_TAPS", "BLUR_SIGMA", "ANAMORPHIC_TAPS", "SMOOTHING", "BSPLINE_AFTER_BILINEAR",
+    "pyramid_depth", "active_levels", "halve", "expand", "mirror_pad", "mirror_filter", "pyramid_blur",
+    "anamorphic_sigma", "upsample", "glow_pyramid",
 ]
 
+UNITY_BLUR_WEIGHTS = tuple(c / 4070 for c in (66, 220, 495, 792, 924, 792, 495, 220, 66))
+"""The pyramid blur per axis: the weights of Unity's ``BloomHorizontalPassFragment`` (0.01621622, 0.05405405,
+0.12162162, 0.19459459, 0.22702703, ...), binomial coefficients ``C(12, k)`` for ``k = 2 .. 10`` over their sum 4070.
+Its ``BloomVerticalPassFragment`` takes the same 9 taps as 5 bilinear samples."""
+BLUR_TAPS = len(UNITY_BLUR_WEIGHTS)
 BLUR_SIGMA = 1.69
-"""Standard deviation (in level pixels) of the pyramid blur: that of Unity's 9-tap kernel (binomial
-coefficients of order 12, the outer three dropped), whose variance is ``2 * 5808 / 4070 = 2.854``."""
-BLUR_TAPS = 9
+"""Standard deviation (in level pixels) of :data:`UNITY_BLUR_WEIGHTS` (variance ``2 * 5808 / 4070 = 2.854``): the
+Gaussian the anamorphic blur stretches."""
 ANAMORPHIC_TAPS = 23
 """Taps of the stretched blur: radius 11 covers 3 sigma at the widest stretch (``2 * 1.69``)."""
 
-BSPLINE_AFTER_BILINEAR = (1.0 / 96, 24.0 / 96, 46.0 / 96, 24.0 / 96, 1.0 / 96)
-"""Cubic B-spline 2x upsampling is bilinear 2x upsampling followed by this filter (per axis).
+SMOOTHING = {2: (1 / 4, 2 / 4, 1 / 4), 4: (1 / 8, 2 / 8, 2 / 8, 2 / 8, 1 / 8)}
+"""The filter that turns :func:`expand` into bilinear upsampling, by factor: bilinear ``f``-times upsampling is
+nearest upsampling followed by a box of ``f`` taps convolved with a box of 2, over ``2 f``."""
 
-At 2x with half-pixel centres the B-spline weights are ``[1, 27, 121, 235, 235, 121, 27, 1] / 192``
-on the zero-stuffed signal, which factors as bilinear ``[1, 3, 3, 1] / 4`` times this kernel. The
-B-spline (Unity's ``SampleTexture2DBicubic``) is non-negative, so unlike Keys' bicubic (PyTorch's
-``bicubic``) it never makes negative light from non-negative light, and needs no clamp."""
+BSPLINE_AFTER_BILINEAR = {2: (1, 24, 46, 24, 1), 4: (1, 24, 48, 72, 94, 72, 48, 24, 1)}
+"""Cubic B-spline upsampling is bilinear upsampling followed by this filter (per axis; weights over their sum).
+
+At ``f``-times upsampling with half-pixel centres the B-spline weights on the zero-stuffed signal are
+``B3((k + 0.5) / f - 0.5)``; for ``f = 2``, ``[1, 27, 121, 235, 235, 121, 27, 1] / 192``, which factors exactly as
+bilinear ``[1, 3, 3, 1] / 4`` times ``[1, 24, 46, 24, 1] / 96``, and for ``f = 4`` as ``[1, 3, 5, 7, 7, 5, 3, 1] / 8``
+times these 9 taps over 384. The B-spline (Unity's ``SampleTexture2DBicubic``) is non-negative, so unlike Keys'
+bicubic (PyTorch's ``bicubic``) it never makes negative light from non-negative light, and needs no clamp."""
 
 
 def pyramid_depth(height: int, width: int, max_iterations: int, downscale_limit: int) -> int:
     """Number of blurred levels below the half-resolution prefilter (Unity ``DoBloom``'s loop).
 
     As in Unity, level ``n`` counts while both ``floor(side / 2^(n+1))`` are at least
-    ``downscale_limit``; the level tensors themselves round sizes up (:func:`sum_pool`) so that no
+    ``downscale_limit``; the level tensors themselves round sizes up (:func:`halve`) so that no
     edge pixel is dropped. Depth 0 (a side under ``4 * downscale_limit`` pixels, or
     ``max_iterations = 0``) means no bloom.
 
@@ -97,65 +112,129 @@ def _levels_on(height: int, width: int, max_iterations: int, downscale_limit: in
     return torch.tensor(pyramid_depth(height, width, max_iterations, downscale_limit), device=device)
 
 
-def sum_pool(light: torch.Tensor) -> torch.Tensor:
-    """2x2 sums, rounding the size up: blocks at odd edges sum the pixels they have.
-
-    Four strided views added together: on CPU about 3 times faster than ``F.avg_pool2d``. Where the device's
-    policy takes library kernels (CUDA: one launch instead of four) ``F.avg_pool2d`` with ``divisor_override=1``
-    is used instead, and for export: it exports as one ``AveragePool`` of the frame padded to even sides
-    (:mod:`torchgrade.onnx.symbolics`) instead of four strided slices and three sums (bench_onnx's bloom row),
-    and OpenVINO accepts it on a 1-pixel side, where it refuses a ceil-mode pool.
-
-    Examples:
-        >>> sum_pool(torch.ones(1, 1, 3, 4))
-        tensor([[[[4., 4.],
-                  [2., 2.]]]])
-    """
-    if is_exporting() or (not is_tracing() and policy_for(light.device).filters_as_kernels):
-        return F.avg_pool2d(light, 2, ceil_mode=True, divisor_override=1)
-    odd_height, odd_width = light.shape[-2] % 2, light.shape[-1] % 2
-    if odd_height or odd_width or is_tracing():  # F.pad copies the frame even when it adds nothing
-        light = F.pad(light, (0, odd_width, 0, odd_height))
-    return light[..., ::2, ::2] + light[..., 1::2, ::2] + light[..., ::2, 1::2] + light[..., 1::2, 1::2]
+def _doubles(small, large) -> bool:
+    """Whether every side of ``large`` is exactly twice that of ``small``: the case bilinear resampling by 2 is."""
+    return all(2 * s == l for s, l in zip(small, large))
 
 
-def block_counts(height: int, width: int, like: torch.Tensor) -> torch.Tensor:
-    """How many pixels of a ``height x width`` level each pixel of the 2x2-pooled level covers (1, 2 or 4): a copy,
-    which the caller may change.
+def halve(light: torch.Tensor) -> torch.Tensor:
+    """Exact area means on sides of ``ceil(side / 2)`` pixels spanning the frame (the module's first rule).
+
+    Pixel ``i`` of ``m = ceil(n / 2)`` is ``(m / n) (a_i x_{2i-1} + x_{2i} + b_i x_{2i+1})`` with ``a_i = i d / m``,
+    ``b_i = 1 - (i + 1) d / m`` and ``d = 2 m - n`` (1 at an odd side, where the ``m`` pixels share the ``n``; 0 at an
+    even one, the 2x2 mean). Eager frames with even sides take the mean of four strided views (on the CPU about 3
+    times faster than ``F.avg_pool2d``), or ``F.avg_pool2d`` where the device's policy takes library kernels; other
+    sides go a side at a time (:func:`_along_sides`).
 
     Examples:
-        >>> block_counts(3, 4, torch.zeros(1))
-        tensor([[[[4., 4.],
-                  [2., 2.]]]])
+        >>> halve(torch.tensor([[[[1.0, 2.0, 3.0, 4.0]]]]))
+        tensor([[[[1.5000, 3.5000]]]])
+        >>> halve(torch.tensor([[[[3.0, 0.0, 3.0]]]]))  # each half takes 1.5 pixels: (3 + 0.5 * 0) / 1.5
+        tensor([[[[2., 2.]]]])
     """
-    return shared_block_counts(height, width, like).clone()
+    if not is_tracing() and light.shape[-2] % 2 == 0 and light.shape[-1] % 2 == 0:
+        if policy_for(light.device).filters_as_kernels:
+            return F.avg_pool2d(light, 2)
+        return 0.25 * (light[..., ::2, ::2] + light[..., 1::2, ::2] + light[..., ::2, 1::2] + light[..., 1::2, 1::2])
+    return _along_sides(light, _halve_along, ((), ()))
 
 
-def shared_block_counts(height: int, width: int, like: torch.Tensor) -> torch.Tensor:
-    """:func:`block_counts` as the device constant every pooling shares (made once per size, dtype and device), never
-    to be modified in place.
-
-    Examples:
-        >>> shared_block_counts(3, 4, torch.zeros(1)) is shared_block_counts(3, 4, torch.zeros(1))
-        True
-    """
-    return _block_counts(height, width, like.device, like.dtype)
+def _halve_along(light: torch.Tensor, axis: int) -> torch.Tensor:
+    """:func:`halve` along one ``axis`` (-2 or -1): the side padded with a zero at both ends, then pixels ``2i - 1``,
+    ``2i`` and ``2i + 1`` as three strided views (bounds fixed relative to the ends, so a traced graph serves every
+    size), weighted and summed."""
+    padded = F.pad(light, (1, 1) if axis == -1 else (0, 0, 1, 1))
+    before, own, after = (_sliced(padded, axis, slice(start, stop, 2)) for start, stop in ((0, -2), (1, -1), (2, None)))
+    shape = (-1,) + (1,) * (-axis - 1)
+    a, middle, b = (w.reshape(shape) for w in _halving_weight(light.shape[axis], light.dtype, light.device).unbind(-1))
+    return torch.addcmul(torch.addcmul(own * middle, before, a), after, b)
 
 
 @device_cached
-def _block_counts(height: int, width: int, device: torch.device, dtype: torch.dtype) -> torch.Tensor:
-    def per_axis(side):
-        # Integer arithmetic, cast once: an exported graph run at reduced precision (OpenVINO's bf16
-        # default) cannot represent sizes above 256 exactly, and a float count of 0 divides by zero.
-        start = 2 * torch.arange(-(-side // 2), device=device)
-        return (side - start).clamp(max=2)
+def _halving_weight(side: int, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
+    """The weights ``(m / n) (a_i, 1, b_i)`` of pixels ``2i - 1``, ``2i`` and ``2i + 1`` in pixel ``i`` of the halved
+    side, ``(m, 3)`` (:func:`halve`)."""
+    half = (side + 1) // 2
+    odd = 2 * half - side
+    i = torch.arange(half, dtype=dtype, device=device)
+    before, after = i * odd / half, 1.0 - (i + 1) * odd / half
+    return torch.stack((before, torch.ones_like(before), after), dim=-1) * (half / side)
 
-    counts = per_axis(height)[:, None] * per_axis(width)[None, :]
-    return counts.to(dtype).expand(1, 1, -1, -1)
+
+def _sliced(light: torch.Tensor, axis: int, part: slice) -> torch.Tensor:
+    """``light`` sliced by ``part`` along ``axis``."""
+    index = [slice(None)] * light.dim()
+    index[axis] = part
+    return light[tuple(index)]
 
 
-def mirror_pad(light: torch.Tensor, radius: int) -> torch.Tensor:
-    """Extend the frame by ``radius`` pixels on every side with its mirror image about the edge.
+def expand(values: torch.Tensor, size) -> torch.Tensor:
+    """Each pixel of the ``size`` level (sides ``n``) given the pixels of the halved level it overlaps (sides
+    ``ceil(n / 2)``), weighted by overlap: the adjoint of :func:`halve`'s area mean, so ``sum`` times area is kept.
+
+    Pixel ``2i`` takes coarse pixel ``i``; pixel ``2i + 1`` takes ``b_i`` of ``i`` and ``1 - b_i`` of ``i + 1``
+    (:func:`halve`'s shares). At even sides this is nearest-neighbour upsampling.
+
+    Examples:
+        >>> expand(torch.tensor([[[[1.0, 2.0]]]]), (1, 3))  # the middle pixel lies half in each
+        tensor([[[[1.0000, 1.5000, 2.0000]]]])
+    """
+    if not is_tracing() and _doubles(values.shape[-2:], size):
+        return F.interpolate(values, scale_factor=2.0, mode="nearest")
+    return _along_sides(values, _expand_along, ((size[0],), (size[1],)))
+
+
+def _expand_along(values: torch.Tensor, axis: int, side: int) -> torch.Tensor:
+    """:func:`expand` along one ``axis`` to ``side`` pixels: each coarse pixel twice, the second of each pair moved
+    towards the next coarse pixel by its share, cropped to ``side``."""
+    following = torch.cat((_sliced(values, axis, slice(1, None)), _sliced(values, axis, slice(-1, None))), dim=axis)
+    share = _expanding_share(values.shape[axis], side, values.dtype, values.device).reshape((-1,) + (1,) * (-axis - 1))
+    pairs = torch.stack((values, torch.lerp(values, following, share)), dim=axis)
+    return _sliced(pairs.flatten(axis - 1, axis), axis, slice(0, side))
+
+
+@device_cached
+def _expanding_share(half: int, side: int, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
+    """The share ``(i + 1) d / m`` of coarse pixel ``i + 1`` in fine pixel ``2i + 1`` (``d = 2 m - side``: 0 at an even
+    side), ``(m,)`` for the ``m = half`` coarse pixels (:func:`expand`)."""
+    return torch.arange(1, half + 1, dtype=dtype, device=device) * (2 * half - side) / half
+
+
+def _smooth_along(light: torch.Tensor, axis: int, weights: tuple) -> torch.Tensor:
+    """``light`` filtered along ``axis`` by the symmetric ``weights`` (numbers summing to 1) over the mirrored side
+    (:func:`mirror_pad`, :func:`_symmetric_filter`)."""
+    return _symmetric_filter(_mirrored(light, axis, len(weights) // 2), weights, axis)
+
+
+def _along_sides(light: torch.Tensor, step, arguments) -> torch.Tensor:
+    """``step(light, axis, *arguments[k])`` along the rows (``axis=-2``) and then the columns (``-1``).
+
+    Each step is linear along its axis. Eager, where the device's policy says a side is small enough
+    (:attr:`~torchgrade.runtime.ExecutionPolicy.resampling_matrix_side`), that linear map is applied as its matrix,
+    made once per size by ``step`` of the identity: one matrix product (one launch) instead of a gather, a product and
+    a sum (and, for an upsampling, a second such step).
+    """
+    largest = None if is_tracing() else policy_for(light.device).resampling_matrix_side
+    for axis, args in zip((-2, -1), arguments):
+        if largest is not None and light.shape[axis] <= largest:
+            matrix = _step_matrix(step, light.shape[axis], tuple(args), light.dtype, light.device)
+            light = torch.matmul(matrix, light) if axis == -2 else torch.matmul(light, matrix.mT)
+        else:
+            light = step(light, axis, *args)
+    return light
+
+
+@device_cached
+def _step_matrix(step, side: int, arguments: tuple, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
+    """The matrix of the linear ``step`` along a side of ``side`` pixels (:func:`_along_sides`): ``step`` of the
+    identity, made in float64."""
+    identity = torch.eye(side, dtype=torch.float64)
+    return step(identity, -2, *arguments).to(dtype=dtype, device=device)
+
+
+def mirror_pad(light: torch.Tensor, radius) -> torch.Tensor:
+    """Extend the frame by ``radius`` pixels (a number, or ``(rows, columns)``) on every side with its mirror image
+    about the edge.
 
     Half-sample symmetric extension (``c b a | a b c | c b a``), periodic with period ``2 · side``
     so it repeats when the frame is narrower than ``radius``. A symmetric kernel applied to it is a
@@ -168,13 +247,27 @@ def mirror_pad(light: torch.Tensor, radius: int) -> torch.Tensor:
         >>> mirror_pad(torch.tensor([[[[1.0, 2.0, 3.0]]]]), 2)[0, 0, 0]
         tensor([2., 1., 1., 2., 3., 3., 2.])
     """
+    radii = (radius, radius) if isinstance(radius, int) else tuple(radius)
     height, width = light.shape[-2:]
     if not is_tracing() and policy_for(light.device).filters_as_kernels:
-        index = _mirror_plane_index(height, width, radius, light.device)
-        return light.flatten(-2).index_select(-1, index).unflatten(-1, (height + 2 * radius, width + 2 * radius))
-    for axis in (-2, -1):
-        light = light.index_select(axis, _mirror_index(light.shape[axis], radius, light.device))
+        index = _mirror_plane_index(height, width, *radii, light.device)
+        return light.flatten(-2).index_select(-1, index).unflatten(-1, (height + 2 * radii[0], width + 2 * radii[1]))
+    for axis, side_radius in zip((-2, -1), radii):
+        light = _mirrored(light, axis, side_radius)
     return light
+
+
+def _mirrored(light: torch.Tensor, axis: int, radius: int) -> torch.Tensor:
+    """``light`` extended by ``radius`` pixels at both ends of ``axis`` (:func:`mirror_pad`): eager, where the side is
+    at least ``radius``, its edge slices flipped and joined (a gather along the last axis is several times slower on
+    the CPU); otherwise a gather of :func:`_mirror_index`."""
+    side = light.shape[axis]
+    if is_tracing() or side < radius:
+        return light.index_select(axis, _mirror_index(side, radius, light.device))
+    if radius == 0:
+        return light
+    edges = _sliced(light, axis, slice(0, radius)).flip(axis), _sliced(light, axis, slice(side - radius, side)).flip(axis)
+    return torch.cat((edges[0], light, edges[1]), dim=axis)
 
 
 @device_cached
@@ -185,80 +278,27 @@ def _mirror_index(side: int, radius: int, device: torch.device) -> torch.Tensor:
 
 
 @device_cached
-def _mirror_plane_index(height: int, width: int, radius: int, device: torch.device) -> torch.Tensor:
+def _mirror_plane_index(height: int, width: int, row_radius: int, column_radius: int, device: torch.device) -> torch.Tensor:
     """The source of each pixel of the extended plane in the flattened ``height x width`` plane (:func:`mirror_pad`)."""
-    rows, columns = _mirror_index(height, radius, device), _mirror_index(width, radius, device)
+    rows, columns = _mirror_index(height, row_radius, device), _mirror_index(width, column_radius, device)
     return (rows[:, None] * width + columns[None, :]).flatten()
 
 
-def pyramid_blur(light: torch.Tensor, sigma=None) -> torch.Tensor:
-    """The pyramid blur: ``kornia.filters.gaussian_blur2d`` over the mirrored frame (so it keeps the light).
-
-    ``sigma`` ``(N or 1, 2)`` as ``(sigma_y, sigma_x)`` selects the 23-tap stretched blur; ``None`` the 9-tap one.
-
-    Examples:
-        >>> light = torch.zeros(1, 3, 6, 6); light[..., 0, 0] = 1.0
-        >>> round(float(pyramid_blur(light).sum()), 4)
-        3.0
-    """
-    taps = BLUR_TAPS if sigma is None else ANAMORPHIC_TAPS
-    radius = taps // 2
-    padded = mirror_pad(light, radius)
-    import kornia.filters  # imported at the first blur: kornia takes longer to import than torchgrade itself
-
-    policy = policy_for(light.device)
-    if policy.filters_as_kernels:
-        small = policy.one_kernel_blur_pixels is not None and light.shape[-2] * light.shape[-1] <= policy.one_kernel_blur_pixels
-        if sigma is None and small:
-            planes = padded.reshape((-1, 1) + padded.shape[-2:])
-            return F.conv2d(planes, _gaussian_kernel_2d(taps, BLUR_SIGMA, light.device, light.dtype)).reshape(light.shape)
-        if sigma is None:
-            kernel_y = kernel_x = _gaussian_kernel(taps, BLUR_SIGMA, light.device, light.dtype)
-        else:  # kornia's gaussian_blur2d would read the sigmas back to check them: they are positive by construction
-            kernel_y, kernel_x = (kornia.filters.get_gaussian_kernel1d(taps, s.unsqueeze(-1)) for s in sigma.to(light).unbind(-1))
-        return kornia.filters.filter2d_separable(padded, kernel_x, kernel_y, padding="valid")
-    blurred = kornia.filters.gaussian_blur2d(padded, taps, (BLUR_SIGMA, BLUR_SIGMA) if sigma is None else sigma)
-    return blurred[..., radius:-radius, radius:-radius]
-
-
-@device_cached
-def _gaussian_kernel(taps: int, sigma: float, device: torch.device, dtype: torch.dtype) -> torch.Tensor:
-    """kornia's Gaussian kernel ``(1, taps)``, as ``gaussian_blur2d`` builds it at each call."""
-    import kornia.filters
-
-    return kornia.filters.get_gaussian_kernel1d(taps, torch.tensor([[sigma]], dtype=dtype, device=device))
-
-
-@device_cached
-def _gaussian_kernel_2d(taps: int, sigma: float, device: torch.device, dtype: torch.dtype) -> torch.Tensor:
-    """:func:`_gaussian_kernel` times itself, ``(1, 1, taps, taps)``: the separable blur as one convolution's weight."""
-    kernel = _gaussian_kernel(taps, sigma, device, dtype)
-    return (kernel.mT * kernel).reshape(1, 1, taps, taps)
-
-
-def anamorphic_sigma(ratio: torch.Tensor) -> torch.Tensor:
-    """Per-axis blur widths ``(sigma_y, sigma_x) = 1.69 * (2^-ratio, 2^ratio)`` as ``(B or 1, 2)``.
-
-    Examples:
-        >>> anamorphic_sigma(torch.tensor(1.0))
-        tensor([[0.8450, 3.3800]])
-    """
-    stretch = torch.pow(2.0, ratio.reshape(-1, 1))
-    return BLUR_SIGMA * torch.cat((1.0 / stretch, stretch), dim=1)
-
-
-def bspline_refine(light: torch.Tensor) -> torch.Tensor:
-    """The filter turning bilinear into cubic B-spline upsampling, over the mirrored frame, one axis at a time.
+def mirror_filter(light: torch.Tensor, weights) -> torch.Tensor:
+    """``light`` filtered along both axes by the symmetric ``weights`` (numbers, normalised here) over the mirrored
+    frame: keeps a uniform frame uniform and every pixel's light in the frame.
 
     Sums of shifted views (:func:`_symmetric_filter`): on CPU about 7 times faster than
     ``kornia.filters.filter2d_separable``, whose depthwise convolution oneDNN runs slowly.
 
     Examples:
-        >>> bool(torch.allclose(bspline_refine(torch.ones(1, 1, 2, 3)), torch.ones(1, 1, 2, 3)))
-        True
+        >>> mirror_filter(torch.tensor([[[[0.0, 4.0, 0.0]]]]), (1, 2, 1))
+        tensor([[[[1., 2., 1.]]]])
     """
-    padded = mirror_pad(light, len(BSPLINE_AFTER_BILINEAR) // 2)
-    return _symmetric_filter(_symmetric_filter(padded, BSPLINE_AFTER_BILINEAR, -1), BSPLINE_AFTER_BILINEAR, -2)
+    total = sum(weights)
+    weights = tuple(w / total for w in weights)
+    padded = mirror_pad(light, len(weights) // 2)
+    return _symmetric_filter(_symmetric_filter(padded, weights, -1), weights, -2)
 
 
 def _symmetric_filter(padded: torch.Tensor, weights, axis: int) -> torch.Tensor:
@@ -274,57 +314,132 @@ def _symmetric_filter(padded: torch.Tensor, weights, axis: int) -> torch.Tensor:
         index[axis] = slice(radius + offset, (offset - radius) or None)
         return padded[tuple(index)]
 
-    out = weights[radius] * shifted(0)
+    out = weights[radius] * shifted(0)  # a new tensor: the additions below may go into it (autograd keeps nothing of it)
     for j in range(1, radius + 1):
-        out = out + weights[radius + j] * (shifted(-j) + shifted(j))
+        out.add_(shifted(-j), alpha=weights[radius + j]).add_(shifted(j), alpha=weights[radius + j])
     return out
 
 
-def upsample(light: torch.Tensor, size, bicubic: bool) -> torch.Tensor:
-    """Upsample light sums 2x to ``size`` keeping their total: bilinear (optionally B-spline) of block means.
+def pyramid_blur(light: torch.Tensor, sigma=None) -> torch.Tensor:
+    """The pyramid blur over the mirrored frame (so it keeps the light): Unity's 9 taps
+    (:data:`UNITY_BLUR_WEIGHTS`), or with ``sigma`` ``(N or 1, 2)`` as ``(sigma_y, sigma_x)`` a 23-tap stretched
+    Gaussian (kornia's kernel).
+
+    The 9 taps run as sums of shifted views on the CPU, and as convolutions with a kernel made once where the
+    device's policy takes library kernels, or while tracing (an ONNX ``Conv``).
 
     Examples:
-        >>> upsample(torch.tensor([[[[4.0, 2.0]]]]), (2, 3), bicubic=False).sum()
-        tensor(6.)
+        >>> light = torch.zeros(1, 3, 6, 6); light[..., 0, 0] = 1.0
+        >>> round(float(pyramid_blur(light).sum()), 4)
+        3.0
     """
-    height, width = size
-    means = light / shared_block_counts(height, width, light)
-    # channels folded into the batch: PyTorch's CPU kernel is about 3 times faster on one channel
-    fine = F.interpolate(means.reshape((-1, 1) + means.shape[-2:]), scale_factor=2.0, mode="bilinear", align_corners=False)
-    fine = fine.reshape(means.shape[:-2] + fine.shape[-2:])[..., :height, :width]
-    return bspline_refine(fine) if bicubic else fine
+    import kornia.filters  # imported at the first blur: kornia takes longer to import than torchgrade itself
+
+    if sigma is not None:  # kornia's gaussian_blur2d would read the sigmas back to check them: they are positive
+        kernel_y, kernel_x = (kornia.filters.get_gaussian_kernel1d(ANAMORPHIC_TAPS, s.unsqueeze(-1)) for s in sigma.to(light).unbind(-1))
+        return kornia.filters.filter2d_separable(mirror_pad(light, ANAMORPHIC_TAPS // 2), kernel_x, kernel_y, padding="valid")
+    policy = policy_for(light.device)
+    if not is_tracing() and not policy.filters_as_kernels:
+        return mirror_filter(light, UNITY_BLUR_WEIGHTS)
+    padded = mirror_pad(light, BLUR_TAPS // 2)
+    small = policy.one_kernel_blur_pixels is not None and light.shape[-2] * light.shape[-1] <= policy.one_kernel_blur_pixels
+    if small:
+        planes = padded.reshape((-1, 1) + padded.shape[-2:])
+        return F.conv2d(planes, _blur_kernel_2d(light.device, light.dtype)).reshape(light.shape)
+    kernel = _blur_kernel(light.device, light.dtype)
+    return kornia.filters.filter2d_separable(padded, kernel, kernel, padding="valid")
 
 
-def nearest_upsample(values: torch.Tensor, size) -> torch.Tensor:
-    """Give every pixel of a 2x2 block its block's value, cropped to ``size``.
+@device_cached
+def _blur_kernel(device: torch.device, dtype: torch.dtype) -> torch.Tensor:
+    """:data:`UNITY_BLUR_WEIGHTS` as kornia's ``(1, taps)`` kernel."""
+    return torch.tensor([UNITY_BLUR_WEIGHTS], dtype=dtype, device=device)
+
+
+@device_cached
+def _blur_kernel_2d(device: torch.device, dtype: torch.dtype) -> torch.Tensor:
+    """:func:`_blur_kernel` times itself, ``(1, 1, taps, taps)``: the separable blur as one convolution's weight."""
+    kernel = _blur_kernel(device, dtype)
+    return (kernel.mT * kernel).reshape(1, 1, BLUR_TAPS, BLUR_TAPS)
+
+
+def anamorphic_sigma(ratio: torch.Tensor) -> torch.Tensor:
+    """Per-axis blur widths ``(sigma_y, sigma_x) = 1.69 * (2^-ratio, 2^ratio)`` as ``(B or 1, 2)``.
 
     Examples:
-        >>> nearest_upsample(torch.tensor([[[[1.0, 2.0]]]]), (1, 3))
-        tensor([[[[1., 1., 2.]]]])
+        >>> anamorphic_sigma(torch.tensor(1.0))
+        tensor([[0.8450, 3.3800]])
     """
-    return F.interpolate(values, scale_factor=2.0, mode="nearest")[..., : size[0], : size[1]]
+    stretch = torch.pow(2.0, ratio.reshape(-1, 1))
+    return BLUR_SIGMA * torch.cat((1.0 / stretch, stretch), dim=1)
+
+
+def upsample(light: torch.Tensor, sizes, bicubic: bool) -> torch.Tensor:
+    """Upsample a level through ``sizes``, each the level above the one before (one step: 2x; two: 4x), keeping a
+    uniform frame uniform and the light: :func:`expand` to each size, then :data:`SMOOTHING` (bilinear) and, with
+    ``bicubic``, :data:`BSPLINE_AFTER_BILINEAR` (cubic B-spline), over the mirrored frame, a side at a time.
+
+    Where every size is exactly twice the one before (eager), the same maths as one bilinear ``F.interpolate``.
+
+    Examples:
+        >>> upsample(torch.tensor([[[[4.0, 2.0]]]]), [(2, 4)], bicubic=False)
+        tensor([[[[4.0000, 3.5000, 2.5000, 2.0000],
+                  [4.0000, 3.5000, 2.5000, 2.0000]]]])
+        >>> out = upsample(torch.full((1, 1, 3, 5), 2.0), [(5, 9), (9, 17)], bicubic=True)  # 4x to odd sides
+        >>> out.shape, bool(torch.allclose(out, torch.tensor(2.0)))
+        (torch.Size([1, 1, 9, 17]), True)
+    """
+    factor = 2 ** len(sizes)
+    if not is_tracing() and all(_doubles(small, large) for small, large in zip([light.shape[-2:], *sizes], sizes)):
+        # channels folded into the batch: PyTorch's CPU kernel is about 3 times faster on one channel
+        fine = F.interpolate(light.reshape((-1, 1) + light.shape[-2:]), scale_factor=float(factor), mode="bilinear", align_corners=False)
+        fine = fine.reshape(light.shape[:-2] + fine.shape[-2:])
+        return mirror_filter(fine, BSPLINE_AFTER_BILINEAR[factor]) if bicubic else fine
+    smoothing = _convolved(SMOOTHING[factor], BSPLINE_AFTER_BILINEAR[factor]) if bicubic else SMOOTHING[factor]
+    total = sum(smoothing)
+    smoothing = tuple(w / total for w in smoothing)
+    return _along_sides(light, _upsample_along, tuple((tuple(size[k] for size in sizes), smoothing) for k in range(2)))
+
+
+def _upsample_along(light: torch.Tensor, axis: int, sides: tuple, smoothing: tuple) -> torch.Tensor:
+    """:func:`upsample` along one ``axis``: :func:`expand` to each of ``sides``, then ``smoothing``."""
+    for side in sides:
+        light = _expand_along(light, axis, side)
+    return _smooth_along(light, axis, smoothing)
+
+
+def _convolved(a, b) -> tuple:
+    """The full discrete convolution of two sequences of numbers.
+
+    Examples:
+        >>> _convolved((1, 1), (1, 2, 1))
+        (1, 3, 3, 1)
+    """
+    return tuple(sum(a[i] * b[k - i] for i in range(len(a)) if 0 <= k - i < len(b)) for k in range(len(a) + len(b) - 1))
 
 
 def glow_pyramid(prefiltered: torch.Tensor, depth: int, level_weight, bicubic: bool, sigma=None, active=None) -> torch.Tensor:
-    """Build ``depth`` blurred levels from the prefilter and combine them back up to its resolution.
+    """Build ``depth`` blurred levels below the prefilter and combine them up to the first (a quarter of the frame).
 
     Level ``k`` joins level ``k - 1`` as ``level + low`` (``level_weight`` None) or
-    ``lerp(level, low, level_weight(k))``. With ``active`` (a 0-d tensor, see :func:`active_levels`)
-    only the first ``active`` levels take part: deeper ones are built but masked out.
+    ``lerp(level, low, level_weight(k))``, ``low`` the combined levels below upsampled 2x. With ``active`` (a 0-d
+    tensor, see :func:`active_levels`) only the first ``active`` levels take part: deeper ones are built but masked
+    out. Unity's final pass then samples the result at the frame's resolution (:func:`upsample` by 4).
 
     Examples:
         >>> light = torch.zeros(1, 3, 8, 8); light[..., 3, 4] = 1.0
-        >>> round(float(glow_pyramid(light, 2, None, bicubic=False).sum()), 4)  # each level adds the light once
-        6.0
+        >>> glow = glow_pyramid(light, 2, None, bicubic=False)   # each level holds the light once, at 1/4 the area
+        >>> glow.shape[-2:], round(float(glow.sum() * 4), 4)
+        (torch.Size([4, 4]), 6.0)
     """
     levels, light = [], prefiltered
     for _ in range(depth):
-        light = pyramid_blur(sum_pool(light), sigma)
+        light = pyramid_blur(halve(light), sigma)
         levels.append(light)
     glow = levels[-1]
     for k in range(depth - 1, 0, -1):
         level = levels[k - 1]
-        low = upsample(glow, level.shape[-2:], bicubic)
+        low = upsample(glow, [level.shape[-2:]], bicubic)
         joined = level + low if level_weight is None else torch.lerp(level, low, level_weight(k))
         glow = joined if active is None else torch.where(k < active, joined, level)
-    return upsample(glow, prefiltered.shape[-2:], bicubic)
+    return glow

@@ -32,7 +32,7 @@ import torch
 from .recording import is_tracing
 
 __all__ = ["ExecutionPolicy", "policy_for", "STRIP_PIXELS_PER_THREAD", "PARALLEL_FROM", "LOOKUP_CHUNK", "ONE_KERNEL_BLUR_PIXELS",
-           "CPU_HISTOGRAM_TABLES"]
+           "CPU_HISTOGRAM_TABLES", "RESAMPLING_MATRIX_SIDE"]
 
 STRIP_PIXELS_PER_THREAD = 1 << 16
 """Pixels of a CPU strip per intra-op thread (batch included). On a 2-core Xeon (2 MiB L2 a core), grade + tone map of
@@ -84,6 +84,10 @@ class ExecutionPolicy:
             runs the rows of its output on threads, one row each, so one row for the whole frame runs on one thread.
             The CPU policy has one group a thread: the cinematic look's exposure stage at 1920x1080 on 2 threads took
             0.89 and 0.96 of its time with one group (``benchmarks/results/cpu_paths.md``, both orders).
+        resampling_matrix_side: a side of at most this many pixels that bloom resamples to a size other than half or
+            twice its own (an odd side) is resampled by its matrix, made once a size (one matrix product), instead of
+            by gathers (a gather, a product and a sum a step); ``None``: never (while tracing, compiling or exporting,
+            whose sizes are symbolic and whose compilers fuse the gathers).
         pixel_planes: a per-pixel chain that mixes channels (a colour matrix, a channel's maximum, a luminance) runs
             on the image's three planes (the channel dimension unbound), stacked once at its end. Inductor fuses steps
             that loop over the same number of elements: a step on the frame (3 values a pixel) after one on a plane
@@ -102,6 +106,7 @@ class ExecutionPolicy:
     nan_dropping_max: bool = False
     histogram_tables: Optional[int] = 1
     histogram_row_groups: int = 1
+    resampling_matrix_side: Optional[int] = None
     pixel_planes: bool = False
 
 
@@ -118,8 +123,14 @@ ONE_KERNEL_BLUR_PIXELS = 1 << 17
 products a channel, microseconds on a GPU, against a launch's 24 µs (``benchmarks/gpu_proxy.py``): the deep levels of a
 bloom pyramid (from 270x480 at 4K; 8 of its 9 levels) cost their launches, not their arithmetic."""
 
+RESAMPLING_MATRIX_SIDE = {"cpu": 128, "other": 1024}
+"""Sides up to which bloom resamples an odd side by its matrix (:attr:`ExecutionPolicy.resampling_matrix_side`). A
+matrix product costs ``n · m`` products a row where the gathers cost a few passes: on a GPU, where the deep levels of a
+pyramid cost their launches, up to 1024 (every odd level of a 4K frame's pyramid); on the CPU up to 128."""
+
 WHOLE_FRAMES = ExecutionPolicy(strip_pixels=None, workers=1, lookup_chunk=None, reads_values=False, filters_as_kernels=True,
-                               one_kernel_blur_pixels=ONE_KERNEL_BLUR_PIXELS, nan_dropping_max=True, histogram_tables=None)
+                               one_kernel_blur_pixels=ONE_KERNEL_BLUR_PIXELS, nan_dropping_max=True, histogram_tables=None,
+                               resampling_matrix_side=RESAMPLING_MATRIX_SIDE["other"])
 
 GRAPH = ExecutionPolicy(strip_pixels=None, workers=1, lookup_chunk=None, reads_values=False, filters_as_kernels=False)
 """While tracing, compiling or exporting: kornia's blur, which picks its own form for the compiler (convolution on the
@@ -150,4 +161,4 @@ def policy_for(device: torch.device) -> ExecutionPolicy:
     workers = threads if threads >= PARALLEL_FROM else 1
     return ExecutionPolicy(strip_pixels=STRIP_PIXELS_PER_THREAD * threads, workers=workers, lookup_chunk=LOOKUP_CHUNK,
                            reads_values=True, filters_as_kernels=False, histogram_tables=CPU_HISTOGRAM_TABLES,
-                           histogram_row_groups=threads)
+                           histogram_row_groups=threads, resampling_matrix_side=RESAMPLING_MATRIX_SIDE["cpu"])
