@@ -9,6 +9,10 @@ give Rec.2020 light for a brighter display than a JPEG shows) and one per look (
 Rec.709 luminance is 0.18, as ``benchmarks/plot_tonemap.py`` measures them; a look takes the file as read, its own
 eye adaptation exposing it (adapted at once, as a still). The linear light is averaged down to twice the tile width
 before the look (a tile is ``--tile`` pixels wide, 320 by default), then the display image is resampled to the tile.
+
+Every frame is checked whole before its sheet is written (:func:`torchgrade.testing.frames.edge_band_codes`): a frame
+whose 16-pixel edge band differs from the same frame rendered turned by 180° and turned back by more than
+:data:`EDGE_CODES` 8-bit codes (a glowing or darkened border) stops the script, and no sheet is written.
 """
 
 from __future__ import annotations
@@ -22,12 +26,15 @@ import torch.nn.functional as F
 
 import torchgrade as tg
 from torchgrade.cli.common import display_codes
+from torchgrade.testing.frames import edge_band_codes
 
 ROOT = Path(__file__).resolve().parents[1]
 IMAGES = ("Desk", "CandleGlass", "GoldenGate")
 SDR_MODES = tuple(mode for mode in tg.TONEMAP_MODES if mode not in tg.tonemap.HDR_MODES)
 LOOKS = tuple(sorted(path.stem for path in (ROOT / "export" / "looks").glob("*.json")))
 COLUMNS = 4
+EDGE_CODES = 2.0
+"""Largest difference, in 8-bit codes, between a frame's edge band and the turned render's that a sheet may show."""
 LABEL = 14
 BACKGROUND = (24, 24, 24)
 TEXT = (220, 220, 220)
@@ -76,6 +83,24 @@ def contact_sheet(title: str, tiles: list, path: Path, quality: int) -> None:
     sheet.save(path, format="JPEG", quality=quality, optimize=True)
 
 
+class EdgeCheckError(SystemExit):
+    """A frame of a sheet failed the edge check: the message names it and its bands."""
+
+
+def checked(render, image: torch.Tensor, label: str) -> torch.Tensor:
+    """``render(image)``, after checking that its edge bands match the turned render's within :data:`EDGE_CODES`.
+
+    Raises :class:`EdgeCheckError` (exit status 1, the bands in codes) for a frame that fails.
+    """
+    bands = edge_band_codes(render, image)
+    worst = max(bands, key=lambda band: abs(bands[band]))
+    if abs(bands[worst]) > EDGE_CODES:
+        codes = ", ".join(f"{band} {value:+.1f}" for band, value in bands.items())
+        raise EdgeCheckError(f"{label}: the {worst} edge differs from the frame rendered turned by 180° by "
+                             f"{bands[worst]:+.1f} 8-bit codes ({codes}; at most {EDGE_CODES:g}); no sheet written")
+    return render(image)
+
+
 def through_look(look: tg.PostFX, image: torch.Tensor) -> torch.Tensor:
     """The look's display frame of a still: its eye adaptation, if any, adapted at once."""
     if look.exposure is None:
@@ -96,20 +121,21 @@ def main(argv=None) -> list:
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     images = {name: read(args.exr_dir, name, 2 * args.tile) for name in args.images}
-    written = []
+    sheets = []  # (title, tiles, path): every frame is rendered and checked before any sheet is written
     with torch.no_grad():
         for name, image in images.items():
             scene = exposed(image)
-            tiles = [(mode, tile(tg.ToneMap(mode)(scene), args.tile)) for mode in args.modes]
-            path = args.out / f"tonemappers-{name}.jpg"
-            contact_sheet(f"{name}, exposed to a median of 0.18, through each SDR tone mapper", tiles, path, args.quality)
-            written.append(path)
+            tiles = [(mode, tile(checked(tg.ToneMap(mode), scene, f"{name} through {mode}"), args.tile)) for mode in args.modes]
+            sheets.append((f"{name}, exposed to a median of 0.18, through each SDR tone mapper", tiles, args.out / f"tonemappers-{name}.jpg"))
         for look_name in LOOKS:
             look = tg.PostFX.from_config(ROOT / "export" / "looks" / f"{look_name}.json")
-            tiles = [(name, tile(through_look(look, image), args.tile)) for name, image in images.items()]
-            path = args.out / f"look-{look_name}.jpg"
-            contact_sheet(f"export/looks/{look_name}.json", tiles, path, args.quality)
-            written.append(path)
+            render = lambda image, look=look: through_look(look, image)  # noqa: E731
+            tiles = [(name, tile(checked(render, image, f"{look_name} on {name}"), args.tile)) for name, image in images.items()]
+            sheets.append((f"export/looks/{look_name}.json", tiles, args.out / f"look-{look_name}.jpg"))
+    written = []
+    for title, tiles, path in sheets:
+        contact_sheet(title, tiles, path, args.quality)
+        written.append(path)
     for path in written:
         print(f"{path}  {path.stat().st_size / 1024:.0f} KiB")
     return written

@@ -138,6 +138,17 @@ def test_each_sample_of_a_batch_is_what_it_is_alone(name):
     torch.testing.assert_close(together, alone, rtol=1e-5, atol=1e-6)
 
 
+@pytest.mark.parametrize("name", [name for name in SPATIAL if name.startswith(("bloom", "convolution"))])
+def test_each_frame_of_a_clip_is_what_it_is_alone(name):
+    """Clips ``(B, T, 3, H, W)``: each frame of each clip bloomed as itself, at an odd size."""
+    stage = _stage(name)
+    clip = torch.stack([torch.cat([scene((1, 3, 37, 53), 2 * b + t) for t in range(2)]) for b in range(2)])
+    with torch.no_grad():
+        together = stage(clip)
+        alone = torch.stack([torch.cat([stage(frame[None]) for frame in frames]) for frames in clip])
+    torch.testing.assert_close(together, alone, rtol=1e-5, atol=1e-6)
+
+
 @pytest.mark.parametrize("name", ["bloom-scattering", "bloom-options", "convolution-bloom", "autoexposure-histogram", "cinematic"])
 def test_the_captured_graph_agrees_with_eager_at_odd_sizes(name):
     """Dynamo's capture runs the traced forms (sizes as they come, no eager shortcut): the same pixels."""

@@ -55,6 +55,28 @@ def test_gallery_pictures_are_the_scripts(tmp_path):
     assert all(path.stat().st_size > 0 for path in written)
 
 
+def test_the_gallery_writes_no_sheet_whose_frame_glows_at_an_edge(tmp_path, monkeypatch):
+    """A look whose frames are brighter along one edge than the turned render (today's bloom fixed, a stand-in for a
+    regression) stops the script before any sheet is written, naming the frame and the edge."""
+    sys.path.insert(0, str(DOCS))
+    try:
+        import gallery
+    finally:
+        sys.path.remove(str(DOCS))
+    real = gallery.through_look
+
+    def glowing(look, image):
+        frame = real(look, image).clone()
+        frame[..., -16:] += 0.05
+        return frame
+
+    monkeypatch.setattr(gallery, "through_look", glowing)
+    with pytest.raises(gallery.EdgeCheckError, match=r"cinematic on CandleGlass: the right edge differs .* by \+"):
+        gallery.main(["--out", str(tmp_path), "--images", "CandleGlass", "--tile", "24", "--modes", "none",
+                      "--exr-dir", str(ROOT.parent / "shared" / "data" / "exr")])
+    assert not list(tmp_path.iterdir())
+
+
 def test_docs_build_strict(tmp_path):
     """``mkdocs build --strict``: a broken link or anchor, a page outside the nav or a docstring the API pages cannot
     read is a warning, and a warning fails the build."""

@@ -1,29 +1,35 @@
-"""Bloom: soft-knee threshold, firefly fading, a Gaussian pyramid, additive, scattering and engine composites.
+"""Bloom: soft-knee threshold, firefly fading, a blur pyramid, additive, scattering and engine composites.
 
 The passes follow Unity's custom-pipeline bloom (``DoBloom`` and the ``Bloom*`` shader passes):
 
 1. **Prefilter** at half resolution (:mod:`.prefilter`): each 2x2 block's mean, then the soft-knee
    threshold (:func:`bloom_threshold`), optionally faded by a luminance-weighted average over a
    5-tap diagonal cross (``fade_fireflies``).
-2. **Pyramid** (:mod:`.pyramid`): each level is the previous one pooled 2x2 and blurred by a 9-tap
-   Gaussian (``kornia.filters.gaussian_blur2d``), down to ``downscale_limit`` pixels, at most
-   ``max_iterations`` levels.
-3. **Combine** from the smallest level up, bilinear (or cubic B-spline) upsampling 2x at a time, and
-   the **final** blend, both as the mode's composite (:mod:`.composite`, a registry: a new mode is
-   one blend function and one line of :data:`COMPOSITES`).
+2. **Pyramid** (:mod:`.pyramid`): each level is the one above halved and blurred by Unity's 9 taps,
+   down to ``downscale_limit`` pixels, at most ``max_iterations`` levels.
+3. **Combine** from the smallest level up, bilinear (or cubic B-spline) upsampling 2x at a time, and the
+   **final** pass, which samples the first level (a quarter of the frame) at the frame's resolution and
+   blends it in, both as the mode's composite (:mod:`.composite`, a registry: a new mode is one blend
+   function and one line of :data:`COMPOSITES`).
 
-**Light is conserved exactly in scattering mode, borders included**: the pyramid keeps light sums
-through every resampling step, and the prefilter reports the exact light it passed on, which
-scattering removes from the image. So ``sum(output) = sum(image)`` up to rounding for any threshold,
-knee, scatter and image size; in additive mode the added light is exactly
-``intensity * levels * sum(prefiltered light)``.
+**Every frame size, and the edge.** Each level spans the whole frame, as a texture sampled at normalised
+coordinates does: sides halve rounding up, each level pixel the exact area mean of what it covers. Taps
+beyond the frame read its mirror image (for the taps one pixel out, the edge pixel itself, as Unity's
+clamped sampler does). So a uniform frame blooms uniformly and a turned or mirrored frame blooms turned or
+mirrored, at every size: 1x1, odd, prime, 1080p. Where the sides halve exactly down the pyramid the passes
+are Unity's to rounding (``tests/bloom/test_bloom_reference.py``, against the shader passes in float64).
+
+**Light is conserved exactly in scattering mode, borders included**: every resampling step keeps the
+light (levels hold means over equal areas), the mirrored blurs keep each pixel's light in the frame, and
+the prefilter reports the exact light it passed on, which scattering removes from the image. So
+``sum(output) = sum(image)`` up to rounding for any threshold, knee, scatter and image size.
 
 **Non-finite policy** (:func:`torchgrade.base.core.sanitize`, the library-wide rule): before anything
 mixes pixels, NaN becomes 0 and values are bounded to ±65504, so +Inf blooms like a 65504 pixel and a
 NaN pixel like a black one; no NaN or Inf reaches the output.
 
 :class:`ConvolutionBloom` (:mod:`.convolution`) is Unreal's convolution bloom: the thresholded image
-convolved with a user kernel by FFT (``torch.fft.rfft2``), zero-padded so nothing wraps around.
+convolved with a user kernel by FFT (``torch.fft.rfft2``) over the frame extended by its mirror image.
 
 **Precision**: float16 and bfloat16 images are computed in float32 and returned in their own dtype,
 bounded to ±65504 (:func:`torchgrade.base.core.to_input_dtype`). Scene-referred values are never clamped otherwise.

@@ -1,11 +1,11 @@
 """Pyramid bloom: the :func:`bloom` functional, the :class:`Bloom` stage and its export form.
 
 The passes follow Unity's custom-pipeline bloom (``DoBloom`` and the ``Bloom*`` shader passes):
-prefilter at half resolution (:mod:`~torchgrade.bloom.prefilter`), a Gaussian pyramid down to
-``downscale_limit`` pixels, at most ``max_iterations`` levels (:mod:`~torchgrade.bloom.pyramid`), and
-the mode's composite (:mod:`~torchgrade.bloom.composite`).
+prefilter at half resolution (:mod:`~torchgrade.bloom.prefilter`), a pyramid of levels blurred by Unity's 9 taps
+down to ``downscale_limit`` pixels, at most ``max_iterations`` levels (:mod:`~torchgrade.bloom.pyramid`: every level
+spans the frame, at every size), and the mode's composite (:mod:`~torchgrade.bloom.composite`).
 
-**Engine options** (all off by default; at their defaults the output is bit-identical to Unity's passes):
+**Engine options** (all off by default; at their defaults the output is bit-identical to Unity's settings alone):
 
 * ``mode``: Bevy's ``"energy_conserving"`` and Godot's ``"screen"``, ``"softlight"``, ``"replace"``,
   ``"mix"`` besides Unity's ``"additive"`` and ``"scattering"`` (:data:`~torchgrade.bloom.COMPOSITES`);
@@ -15,8 +15,8 @@ the mode's composite (:mod:`~torchgrade.bloom.composite`).
 * ``clamp`` (Unity's Bloom Clamp, default 65472 there): the block source is ``min(source, clamp)``
   per channel before the threshold. The default here, 65504, is the non-finite policy's bound: no clamp.
   Both keep the light accounting exact.
-* ``anamorphic_ratio`` in [-1, 1]: each level's Gaussian has ``sigma_x = 1.69 * 2^ratio`` and
-  ``sigma_y = 1.69 * 2^-ratio`` (23 taps; positive stretches the glow horizontally, negative
+* ``anamorphic_ratio`` in [-1, 1]: each level is blurred by a Gaussian with ``sigma_x = 1.69 * 2^ratio`` and
+  ``sigma_y = 1.69 * 2^-ratio`` (23 taps; 1.69 is the standard deviation of Unity's 9 taps; positive stretches the glow horizontally, negative
   vertically; HDRP's sign is the opposite). Blurs stay mirror-padded, so scattering still conserves light.
 * ``tint`` (Unity's Bloom Tint): the glow is multiplied by ``srgb_to_linear(tint)``, given
   sRGB-encoded like Unity's colour picker. Scattering conserves light only at white.

@@ -211,8 +211,8 @@ def _along_sides(light: torch.Tensor, step, arguments) -> torch.Tensor:
 
     Each step is linear along its axis. Eager, where the device's policy says a side is small enough
     (:attr:`~torchgrade.runtime.ExecutionPolicy.resampling_matrix_side`), that linear map is applied as its matrix,
-    made once per size by ``step`` of the identity: one matrix product (one launch) instead of a gather, a product and
-    a sum (and, for an upsampling, a second such step).
+    made once per size by ``step`` of the identity: one matrix product (one launch on a GPU) instead of the step's
+    slices, products and sums (a dozen launches for an upsampling).
     """
     largest = None if is_tracing() else policy_for(light.device).resampling_matrix_side
     for axis, args in zip((-2, -1), arguments):

@@ -2,12 +2,11 @@
 
 :func:`symbolics` registers them for the duration of one export: ``exp2``, ``expm1``, ``rad2deg``,
 ``frac``, Python's ``//`` on sizes (the stock symbolic truncates), ``pow`` by 2, 3 and 0.5 (without ``Pow``), ``movedim`` with negative
-dimensions, ``nan_to_num`` (the stock symbolic casts the frame to float64 to find infinities), and
-``avg_pool2d`` with ``divisor_override`` (bloom's 2x2 sums, which the stock symbolic silently exports as means).
+dimensions and ``nan_to_num`` (the stock symbolic casts the frame to float64 to find infinities).
 
 Examples:
     >>> sorted(SYMBOLICS)[:3]
-    ['aten::avg_pool2d', 'aten::exp2', 'aten::expm1']
+    ['aten::exp2', 'aten::expm1', 'aten::floor_divide']
 """
 
 from __future__ import annotations
@@ -91,41 +90,6 @@ def _nan_to_num(g, x, nan, posinf, neginf):
     return g.op("Where", g.op("IsNaN", x), value(nan, 0.0), finite)
 
 
-def _avg_pool2d(g, x, kernel_size, stride, padding, ceil_mode, count_include_pad, divisor_override):
-    """``avg_pool2d``; with ``divisor_override`` (non-overlapping windows, no padding) a zero-padded sum.
-
-    Sums pad the bottom and right edges to a multiple of the window (as ``ceil_mode`` does), average
-    with ``AveragePool`` and scale by ``window / divisor``.
-    """
-    from torch.onnx import symbolic_helper
-
-    kernel = symbolic_helper._maybe_get_const(kernel_size, "is")
-    kernel = list(kernel) * 2 if len(kernel) == 1 else list(kernel)
-    strides = symbolic_helper._maybe_get_const(stride, "is") or kernel
-    strides = list(strides) * 2 if len(strides) == 1 else list(strides)
-    pads = symbolic_helper._maybe_get_const(padding, "is")
-    pads = list(pads) * 2 if len(pads) == 1 else list(pads)
-    ceil = int(symbolic_helper._maybe_get_const(ceil_mode, "b"))
-    include_pad = int(symbolic_helper._maybe_get_const(count_include_pad, "b"))
-    divisor = None if symbolic_helper._is_none(divisor_override) else symbolic_helper._maybe_get_const(divisor_override, "i")
-    if divisor is None:
-        return g.op("AveragePool", x, kernel_shape_i=kernel, strides_i=strides, pads_i=pads + pads,
-                    ceil_mode_i=ceil, count_include_pad_i=include_pad)
-    if kernel != strides or any(pads):
-        raise torch.onnx.errors.SymbolicValueError("avg_pool2d with divisor_override: only non-overlapping windows", x)
-    window = torch.tensor(kernel, dtype=torch.int64)
-    spatial = g.op("Slice", g.op("Shape", x), g.op("Constant", value_t=torch.tensor([2])),
-                   g.op("Constant", value_t=torch.tensor([4])))
-    window_t = g.op("Constant", value_t=window)
-    remainder = g.op("Mod", g.op("Sub", window_t, g.op("Mod", spatial, window_t)), window_t)
-    if not ceil:
-        remainder = g.op("Mul", remainder, g.op("Constant", value_t=torch.tensor([0, 0])))
-    pad_amounts = g.op("Concat", g.op("Constant", value_t=torch.zeros(6, dtype=torch.int64)), remainder, axis_i=0)
-    padded = g.op("Pad", x, pad_amounts)
-    mean = g.op("AveragePool", padded, kernel_shape_i=kernel, strides_i=strides)
-    return g.op("Mul", mean, _constant(g, float(kernel[0] * kernel[1]) / divisor))
-
-
 def _pow(g, x, exponent):
     """``x ** exponent``; a constant exponent 2 or 3 as products, 0.5 as ``Sqrt`` (each correctly rounded, as
     ``Pow`` is): onnxruntime's CPU runs a ``Pow`` many times as long as a ``Mul`` or a ``Sqrt`` (``benchmarks/results/onnx_ops.md``)."""
@@ -152,7 +116,6 @@ SYMBOLICS = {
     "aten::movedim": _movedim,
     "aten::floor_divide": _floor_divide,
     "aten::floordiv": _floor_divide,
-    "aten::avg_pool2d": _avg_pool2d,
     "aten::nan_to_num": _nan_to_num,
 }
 

@@ -65,10 +65,10 @@ class ExecutionPolicy:
         lookup_chunk: pixels per pass of the eager LUT lookup, or ``None`` for one pass over the frame.
         reads_values: eager shortcuts may read a value of the data (bloom skips its pyramid when no pixel
             passes the threshold): free on the CPU, a synchronisation of the device elsewhere.
-        filters_as_kernels: a separable blur as two convolutions with kernels made once, and a 2x2 sum as one
-            ``avg_pool2d``: one library kernel each (cuDNN), where the CPU is faster on sums of shifted slices
-            (kornia's ``gaussian_blur2d`` takes them there: a 9-tap blur of 540x960 took 14 ms against 94 ms as a
-            oneDNN convolution; four strided views summed about 3 times faster than ``avg_pool2d``).
+        filters_as_kernels: a separable blur as two convolutions with kernels made once, and a 2x2 mean as one
+            ``avg_pool2d``: one library kernel each (cuDNN), where the CPU is faster on sums of shifted slices (a
+            9-tap blur of 540x960 took 14 ms as slices against 94 ms as a oneDNN convolution; four strided views
+            summed about 3 times faster than ``avg_pool2d``).
         one_kernel_blur_pixels: with ``filters_as_kernels``, a plane of at most this many pixels is blurred by one 2-D
             convolution (taps² products a pixel, one launch) instead of two 1-D ones (one launch each); ``None``: never.
         nan_dropping_max: ``max(x, 0)`` with NaN to 0 as one ``torch.fmax`` (one launch) instead of a clamp and a NaN
