@@ -1,6 +1,6 @@
 """Speed of bloom on CPU, as a ratio to a plain copy of the same frame (the memory floor).
 
-Measures float32 bloom at 1920x1080 in each mode, how the time grows with resolution (512^2 to 4K)
+Measures float32 bloom at 1920x1080 in each mode, how the time grows with resolution (512^2 to 4K, odd sides too)
 and with ``max_iterations``; each timing is the median (and minimum) of several runs, with the copy
 timed alternately with it (:func:`benchmarks.common.interleaved_ms`) so that both see the same machine load. Results go to
 ``bloom.json`` and ``bloom.md`` in ``--out`` (default benchmarks/out; the committed ones with ``--out benchmarks/results``).
@@ -27,7 +27,8 @@ from benchmarks.common import argument_parser, interleaved_ms, write_results  # 
 
 COMMAND = ".venv/bin/python benchmarks/bench_bloom.py"
 FULL_HD = (1080, 1920)
-RESOLUTIONS = [(512, 512), (1024, 1024), FULL_HD, (1440, 2560), (2160, 3840)]
+RESOLUTIONS = [(512, 512), (333, 517), (1024, 1024), FULL_HD, (1081, 1921), (1440, 2560), (2160, 3840)]
+"""Powers of two and the usual video sizes, and odd sides (whose levels are resampled a side at a time)."""
 ITERATIONS = [1, 2, 4, 8, 16]
 VARIANTS = {
     "additive": {},

@@ -118,3 +118,51 @@ def _assert_autocast_changes_nothing(compiled, image, dtype):
             out = compiled(image)
     assert out.dtype == torch.float32
     torch.testing.assert_close(out, reference, rtol=1e-6, atol=1e-6)
+
+
+DEEP_BATCH = (16, 3, 131, 197)
+"""A batch of 16 at odd sides whose bloom pyramid is 5 levels deep: a sum over a level of this size would pass
+float16's range (65504) at the scene values below, where a mean does not."""
+
+
+def _deep_batch() -> torch.Tensor:
+    generator = torch.Generator().manual_seed(3)
+    batch = torch.rand(DEEP_BATCH, generator=generator) ** 3 * 60.0
+    batch[..., ::17, ::19] = 5000.0
+    return batch
+
+
+def _catalogue():
+    from torchgrade.testing.catalog import STAGE_KINDS
+
+    kinds = {name: kind.example for name, kind in STAGE_KINDS.items()}
+    kinds["randompostfx"] = lambda: tg.RandomPostFX(post_exposure=(-1, 1), contrast=(-30, 30), saturation=(-30, 30),
+                                                    hue_shift=(-20, 20), bloom_intensity=(0, 0.5), tonemap=["aces", "neutral"],
+                                                    p=0.8)
+    kinds["randompostfx-no-tonemap"] = lambda: tg.RandomPostFX(bloom_intensity=(0, 1), contrast=(-30, 30), p=0.8)
+    return kinds
+
+
+AUTOCASTS_BOTH = [("cpu", torch.float16), ("cpu", torch.bfloat16), pytest.param("cuda", torch.float16, marks=NEEDS_CUDA),
+                  pytest.param("cuda", torch.bfloat16, marks=NEEDS_CUDA)]
+
+
+@pytest.mark.parametrize("device, dtype", AUTOCASTS_BOTH, ids=lambda v: str(v).replace("torch.", ""))
+@pytest.mark.parametrize("name", list(_catalogue()))
+def test_every_stage_of_the_catalogue_ignores_autocast_on_a_deep_batch(name, device, dtype):
+    """Every stage kind (each mode of each stage), a whole look and ``RandomPostFX`` (one draw replayed) give under
+    float16 and bfloat16 autocast what they give in float32, on a batch of 16 with scene values up to 5000 and a
+    5-level pyramid (before bloom's levels held means, a look's float16 pyramid overflowed at 128²)."""
+    module = _catalogue()[name]().eval().to(device)
+    batch = _deep_batch().to(device)
+    if name.startswith(("lut", "look-lut", "dither")):
+        batch = batch.clamp(0.0, 1.0)
+    arguments = {}
+    if name.startswith("randompostfx"):
+        arguments["params"] = module.sample_params(batch.shape[0], torch.Generator().manual_seed(4), device)
+    with torch.no_grad():
+        reference = module(batch, **arguments)
+        with torch.autocast(device, dtype=dtype):
+            out = module(batch, **arguments)
+    assert out.dtype == torch.float32 and out.isfinite().all()
+    torch.testing.assert_close(out, reference, rtol=1e-6, atol=1e-6)

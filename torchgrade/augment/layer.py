@@ -50,7 +50,7 @@ import torch
 from kornia.augmentation import IntensityAugmentationBase2D
 from torch import nn
 
-from ..base.core import check_image, is_tracing, joined, to_input_dtype, working_dtype
+from ..base.core import check_image, full_precision, is_tracing, joined, to_input_dtype, working_dtype
 from ..bloom import BLOOM_MODES, bloom_settings, bloom_with_settings
 from ..color import linear_to_srgb, srgb_to_linear
 from ..grading.grade import color_grade_planes
@@ -373,21 +373,20 @@ class RandomPostFX(IntensityAugmentationBase2D):
             check({"peak": images.detach().amax()}, _check_peak)
 
     def _graded(self, images: torch.Tensor, params: dict) -> torch.Tensor:
+        """The batch graded by ``params``, with autocast off (:func:`~torchgrade.base.core.full_precision`): the
+        stages' maths keeps float32 or better whatever autocast a training loop runs, as each stage's call does."""
         if self.is_identity or (self.p == 0 and not self.tonemap):
             return images
         self._check_display_range(images)
-        return self.transform(images, params, params["batch_prob"].bool().reshape(-1, 1, 1, 1))
+        with full_precision():
+            return self.transform(images, params, params["batch_prob"].bool().reshape(-1, 1, 1, 1))
 
     def forward(self, x: torch.Tensor, generator: torch.Generator | None = None, params: dict | None = None,
                 **container_args) -> torch.Tensor:
         """Grade ``x`` with a new draw (or ``params``). ``container_args`` (``data_keys`` ...) are what
         kornia's containers pass along with an image; an intensity layer needs none of them."""
         check_image(x)
-        if x.dim() not in (3, 4, 5):
-            raise ValueError(f"RandomPostFX takes (3, H, W), (B, 3, H, W) or (B, T, 3, H, W) images, got shape {tuple(x.shape)}")
-        images = x if x.dim() == 4 else x.reshape(-1, *x.shape[-3:])
-        clips, frames = (x.shape[0], x.shape[1]) if x.dim() == 5 else (images.shape[0], 1)
-        rows = clips if self.same_on_frame else images.shape[0]
+        images, rows, frames = self._batch(x)
         if params is None:
             params = self.sample_params(rows, generator, images.device)
         else:
@@ -399,6 +398,31 @@ class RandomPostFX(IntensityAugmentationBase2D):
         if x.dim() == 5 or (self.keepdim and x.dim() == 3):
             return out.reshape(x.shape)
         return out
+
+    def _batch(self, x: torch.Tensor) -> tuple:
+        """``x`` as a batch of images ``(N, 3, H, W)``, the number of draws it takes (one a clip when ``same_on_frame``)
+        and the frames a draw serves."""
+        if x.dim() not in (3, 4, 5):
+            raise ValueError(f"RandomPostFX takes (3, H, W), (B, 3, H, W) or (B, T, 3, H, W) images, got shape {tuple(x.shape)}")
+        images = x if x.dim() == 4 else x.reshape(-1, *x.shape[-3:])
+        clips, frames = (x.shape[0], x.shape[1]) if x.dim() == 5 else (images.shape[0], 1)
+        return images, clips if self.same_on_frame else images.shape[0], frames
+
+    def compiled_arguments(self, x: torch.Tensor, generator: torch.Generator | None = None, params: dict | None = None,
+                           **container_args) -> tuple:
+        """The arguments of a compiled call (:func:`torchgrade.compile`): the draw made here, before the graph, from
+        ``generator`` as an eager call makes it, and passed in as ``params`` (a generator cannot enter a compiled graph).
+
+        Examples:
+            >>> layer = RandomPostFX(contrast=(-20, 20))
+            >>> args, kwargs = layer.compiled_arguments(torch.rand(2, 3, 4, 4), generator=torch.Generator().manual_seed(0))
+            >>> sorted(kwargs["params"])
+            ['batch_prob', 'contrast']
+        """
+        if params is None and isinstance(x, torch.Tensor):
+            images, rows, _ = self._batch(x)
+            params = self.sample_params(rows, generator, images.device)
+        return (x,), {"params": params, **container_args}
 
     def to_config(self) -> dict:
         """The layer's arguments that differ from their defaults, as plain values (JSON-ready).

@@ -23,7 +23,9 @@ The compiled graph carries no range checks (they read values), so the wrapper ch
 controls (:meth:`~torchgrade.Stage.check_learnable`) before each call, as an eager forward does. A module with
 state to shape before its first frame (``AutoExposure``, a ``PostFX`` with one) says so with a ``compiled_frame``
 context the wrapper enters around each call (:meth:`~torchgrade.AutoExposure.compiled_frame`), so the second frame
-runs the first frame's graph.
+runs the first frame's graph; a module with work to do before the graph (``RandomPostFX``'s draw from a
+``generator=``, which cannot enter a graph) says so with ``compiled_arguments``, which turns a call's arguments into
+the graph's (:meth:`~torchgrade.RandomPostFX.compiled_arguments`).
 
 Examples:
     >>> import torch
@@ -122,6 +124,9 @@ class CompiledModule(nn.Module):
         return out
 
     def _graph_call(self, image: torch.Tensor, *args, **kwargs):
+        prepare = getattr(self.module, "compiled_arguments", None)
+        if prepare is not None:  # what must happen before the graph: a random draw from a generator
+            (image, *args), kwargs = prepare(image, *args, **kwargs)
         frame = getattr(self.module, "compiled_frame", None)
         with frame(image, *args, **kwargs) if frame is not None else contextlib.nullcontext(), self._budget():
             return self.compiled_for(image.device)(image, *args, **kwargs)
