@@ -3,7 +3,9 @@
 Three layers on the same batch (default 32x3x224x224 float32, CPU, torch's default thread count):
 
 * ``ColorJiggle``: brightness, contrast, saturation and hue (kornia's colour augmentation);
-* ``RandomPostFX``, comparable controls: post exposure, contrast, saturation and hue shift;
+* ``RandomPostFX``, comparable controls: post exposure, contrast, saturation and hue shift, on linear light;
+* the same controls on sRGB-encoded images (``input_space="srgb"``: decoded, graded, encoded), as LDR training sets
+  hold them (the batch divided by 4, into [0, 1));
 * ``RandomPostFX``, full set: every grading control, bloom, and a per-sample tone mapper.
 
 The ranges are in the JSON. Runs are interleaved (one of each layer per round), so a busy machine slows all of them alike; the
@@ -55,6 +57,7 @@ def layers() -> dict:
     return {
         "ColorJiggle(brightness, contrast, saturation, hue)": ColorJiggle(**JIGGLE, p=1.0),
         "RandomPostFX(post_exposure, contrast, saturation, hue_shift)": tg.RandomPostFX(**COMPARABLE),
+        'RandomPostFX(same, input_space="srgb")': tg.RandomPostFX(**COMPARABLE, input_space="srgb"),
         "RandomPostFX(full set + bloom + tone mapper choice)": tg.RandomPostFX(**FULL),
     }
 
@@ -67,7 +70,9 @@ def batch(size: int, resolution: int, device: str) -> torch.Tensor:
 
 def measure(images: torch.Tensor, rounds: int, warmup: int) -> dict:
     """Median ms per batch of each layer, rounds interleaved across layers."""
-    calls = {label: functools.partial(layer, images) for label, layer in layers().items()}
+    display = images / 4.0  # sRGB codes in [0, 1) for the sRGB layer
+    calls = {label: functools.partial(layer, display if getattr(layer, "input_space", None) == "srgb" else images)
+             for label, layer in layers().items()}
     return median_ms(calls, rounds, warmup, sync=synchronizer(images.device))
 
 

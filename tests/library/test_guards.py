@@ -98,6 +98,15 @@ def _eight_bit(shape=(1, 3, 270, 480)) -> torch.Tensor:
     return torch.randint(0, 256, shape, generator=torch.Generator().manual_seed(1)).float()
 
 
+def _whole_number_lamps() -> torch.Tensor:
+    """A synthetic HDR frame in whole numbers: black with lamps of 8 and 60 and a strip of 2 (warned before)."""
+    image = torch.zeros(1, 3, 270, 480)
+    image[..., ::9, ::7] = 8.0
+    image[..., ::30, ::11] = 60.0
+    image[..., :, 100:110] = 2.0
+    return image
+
+
 @pytest.mark.parametrize("module", [tg.ToneMap("neutral"), tg.ColorGrade(contrast=10), tg.PostFX(exposure={}, tonemap="aces")],
                          ids=["tonemap", "grade", "look"])
 def test_0_to_255_floats_warn_once_with_the_fix(module):
@@ -120,7 +129,8 @@ def test_0_to_255_floats_warn_once_with_the_fix(module):
     torch.full((1, 3, 270, 480), 8.0),  # one grey, whole
     _eight_bit() * 2.0,  # whole numbers beyond 255
     _eight_bit() - 128.0,  # whole numbers below 0
-], ids=["hdr", "unit", "divided", "one-grey", "beyond-255", "negative"])
+    _whole_number_lamps(),  # synthetic HDR: a few whole levels (black, lamps of 8 and 60)
+], ids=["hdr", "unit", "divided", "one-grey", "beyond-255", "negative", "whole-lamps"])
 def test_frames_that_are_not_0_to_255_data_do_not_warn(image):
     assert _caught(lambda: tg.ToneMap("neutral")(image)) == []
 

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from shape_comments import check_shape_comments
 
 ROOT = Path(__file__).resolve().parents[2]
 DOCS = ROOT / "docs"
@@ -27,7 +28,9 @@ def test_docs_have_python_examples():
 @pytest.mark.parametrize("page, index, block", BLOCKS, ids=[f"{p.relative_to(DOCS)}-{i + 1}" for p, i, _ in BLOCKS])
 def test_docs_python_examples_run(page, index, block, monkeypatch):
     monkeypatch.chdir(ROOT)  # blocks read export/looks/ and ../shared from the repository's root
-    exec(compile(block, f"{page.relative_to(ROOT)}, Python block {index + 1}", "exec"), {})
+    namespace = {}
+    exec(compile(block, f"{page.relative_to(ROOT)}, Python block {index + 1}", "exec"), namespace)
+    check_shape_comments(block, namespace)
 
 
 def test_blocks_left_out_say_why():
@@ -84,3 +87,9 @@ def test_docs_build_strict(tmp_path):
                          cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert run.returncode == 0 and "WARNING" not in run.stderr, run.stderr[-4000:]
     assert (tmp_path / "site" / "api" / "grading" / "index.html").read_text().count("ColorGrade") > 1
+    # the docstrings' Sphinx roles render as links or code (docs/griffe_roles.py), never as ":class:`X`" text
+    raw = {page.parent.name: re.findall(r":(?:class|func|meth|mod|data|attr|exc|obj|const):`?[\w.~]+", page.read_text())
+           for page in (tmp_path / "site" / "api").rglob("index.html")}
+    assert not any(raw.values()), {name: roles[:3] for name, roles in raw.items() if roles}
+    bloom = (tmp_path / "site" / "api" / "bloom" / "index.html").read_text()
+    assert 'href="#torchgrade.bloom.bloom"><code>bloom</code></a>' in bloom  # a role became a link to its entry

@@ -5,6 +5,7 @@ import shlex
 from pathlib import Path
 
 import pytest
+from shape_comments import check_shape_comments, shape_claims
 
 ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / "README.md"
@@ -21,7 +22,16 @@ def test_readme_has_python_examples_and_commands():
 @pytest.mark.parametrize("index", range(len(PYTHON_BLOCKS)))
 def test_readme_python_examples_run(index, monkeypatch):
     monkeypatch.chdir(ROOT)  # blocks read export/looks/ and ../shared as the README's reader does, from the root
-    exec(compile(PYTHON_BLOCKS[index], f"README.md, Python block {index + 1}", "exec"), {})
+    namespace = {}
+    exec(compile(PYTHON_BLOCKS[index], f"README.md, Python block {index + 1}", "exec"), namespace)
+    check_shape_comments(PYTHON_BLOCKS[index], namespace)
+
+
+def test_the_shape_comments_are_checked():
+    """The README states shapes in its comments (the serving example's frames and output among them); each is
+    compared with what the example returns."""
+    claims = [claim for block in PYTHON_BLOCKS for claim in shape_claims(block)]
+    assert any(name == "codes" for name, _, _ in claims) and len(claims) >= 2
 
 
 @pytest.mark.parametrize("line", COMMANDS)

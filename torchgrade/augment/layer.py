@@ -58,7 +58,7 @@ from ..grading.layer import ColorGrade
 from ..look.slots import SLOTS
 from ..output.layer import LookLUT
 from ..output.look import look_lut
-from ..runtime import DeferredCheck, policy_for
+from ..runtime import DeferredCheck, in_strips, policy_for
 from ..tonemap import tonemap
 from .ranges import (
     BLOOM_CONTROLS,
@@ -374,12 +374,18 @@ class RandomPostFX(IntensityAugmentationBase2D):
 
     def _graded(self, images: torch.Tensor, params: dict) -> torch.Tensor:
         """The batch graded by ``params``, with autocast off (:func:`~torchgrade.base.core.full_precision`): the
-        stages' maths keeps float32 or better whatever autocast a training loop runs, as each stage's call does."""
+        stages' maths keeps float32 or better whatever autocast a training loop runs, as each stage's call does.
+
+        Without bloom every slot is per-pixel, so the batch runs on strips of rows where the device's policy asks
+        (:func:`~torchgrade.runtime.in_strips`: on the CPU, eager, each strip's intermediates stay in cache)."""
         if self.is_identity or (self.p == 0 and not self.tonemap):
             return images
         self._check_display_range(images)
+        applied = params["batch_prob"].bool().reshape(-1, 1, 1, 1)
         with full_precision():
-            return self.transform(images, params, params["batch_prob"].bool().reshape(-1, 1, 1, 1))
+            if "bloom" in self.slots():
+                return self.transform(images, params, applied)
+            return in_strips(lambda part: self.transform(part, params, applied), images, tuple(params.values()))
 
     def forward(self, x: torch.Tensor, generator: torch.Generator | None = None, params: dict | None = None,
                 **container_args) -> torch.Tensor:

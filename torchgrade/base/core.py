@@ -131,11 +131,17 @@ of a batch: whole rows, read in order. In the cinematic look at 1920x1080 (CPU t
 a stage call, 0.3 % of the frame; 64x64 values spread over the frame took 0.39 ms (a cache line fetched per value)."""
 
 
+EIGHT_BIT_LEVELS = 16
+"""Different whole numbers from which a sample reads as an 8-bit picture: a photograph's 8 rows hold far more (the
+sample pictures of the suite: every one above 60), a synthetic HDR frame of whole-number lamps on black a handful."""
+
+
 def warn_if_eight_bit(image: torch.Tensor) -> None:
-    """Warn when a linear ``image`` looks like 0..255 data: a sample of it holds whole numbers only, not all the same,
-    none negative, the largest in (1, 255]. Such floats taken as light come out nearly white; an HDR frame holds
-    fractions, and a frame of one grey is no 8-bit picture. Only where the device's policy reads values (the CPU,
-    :func:`readable`): on a GPU the read would wait for the device at every frame.
+    """Warn when a linear ``image`` looks like 0..255 data: a sample of it holds whole numbers only, at least
+    :data:`EIGHT_BIT_LEVELS` different ones, none negative, the largest in (1, 255]. Such floats taken as light come out
+    nearly white; an HDR frame holds fractions, and a frame of a few whole levels (a test pattern of lamps of 8 and
+    60 on black) is no 8-bit picture. Only where the device's policy reads values (the CPU, :func:`readable`): on a
+    GPU the read would wait for the device at every frame.
 
     Examples:
         >>> import warnings
@@ -150,7 +156,8 @@ def warn_if_eight_bit(image: torch.Tensor) -> None:
     first = image.detach()[(0,) * (image.dim() - 3)][:3]  # colour, without an alpha
     sample = first[:, :: max(1, first.shape[-2] // EIGHT_BIT_ROWS)]
     low, high = torch.stack(sample.aminmax()).tolist()  # one read
-    if 0.0 <= low < high and 1.0 < high <= 255.0 and torch.equal(sample, sample.round()):
+    if (0.0 <= low < high and 1.0 < high <= 255.0 and torch.equal(sample, sample.round())
+            and sample.unique().numel() >= EIGHT_BIT_LEVELS):  # counted only where the rest holds: almost never
         warnings.warn(
             f"the image looks like 0..255 data (whole numbers up to {high:g}), but stages take linear light: divide "
             "by 255, and decode sRGB-encoded pictures (PNG, JPEG) with tg.color.srgb_to_linear or grade them with "
