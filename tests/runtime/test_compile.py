@@ -3,11 +3,16 @@ pixels as eager. Identity shortcuts that read a control's value are decided in P
 
 import itertools
 import json
+import os
+import re
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
+import torch._dynamo.testing
 
 import torchgrade as tg
 
@@ -261,3 +266,66 @@ def test_cpu_frames_compile_without_inductors_layout_optimisation(monkeypatch):
     monkeypatch.setattr(torch, "compile", lambda module, **kwargs: settings.update(kwargs) or module)
     tg.compile(tg.ToneMap("aces"))(torch.rand(1, 3, 4, 4))
     assert settings["options"] == {"layout_optimization": False} and "mode" not in settings and settings["fullgraph"]
+
+
+def test_a_last_smaller_batch_runs_the_first_graph_and_each_compile_is_logged(monkeypatch, caplog):
+    """The batch's size is symbolic from the first frame: batches of 4, 3 and 2 compile once (a batch of 1, which
+    PyTorch specialises as it does every size 1, would compile its own graph); the compile is announced
+    on the ``torchgrade.compile`` logger, naming the module, the frame and the gradients, and then how long it took."""
+    counter = torch._dynamo.testing.CompileCounter()
+    _captured_only(monkeypatch, counter)
+    compiled = tg.compile(tg.PostFX(grade={"contrast": 20}, tonemap="aces"))
+    with caplog.at_level("INFO", logger="torchgrade.compile"), torch.no_grad():
+        for batch in (4, 3, 2, 4):
+            image = hdr((batch, 3, 16, 24))
+            torch.testing.assert_close(compiled(image), compiled.module(image), atol=TOLERANCE, rtol=TOLERANCE)
+    assert counter.frame_count == 1
+    started, ended = (record.getMessage() for record in caplog.records)
+    assert started.startswith("compiling the forward of PostFX for a (4, 3, 16, 24) float32 frame on cpu, gradients off")
+    assert re.fullmatch(r"compiled the forward of PostFX .* in \d+\.\d s", ended)
+
+
+def test_warm_up_compiles_before_the_first_frame(monkeypatch):
+    counter = torch._dynamo.testing.CompileCounter()
+    _captured_only(monkeypatch, counter)
+    compiled = tg.compile(tg.ToneMap("aces"))
+    seconds = compiled.warm_up(hdr((2, 3, 8, 8)), training=True)
+    assert seconds > 0 and counter.frame_count == 1
+    image = hdr((5, 3, 8, 8)).requires_grad_()
+    compiled(image).sum().backward()
+    assert counter.frame_count == 1 and image.grad.isfinite().all()
+
+
+def test_a_saved_compile_cache_loads_in_another_process(tmp_path):
+    """``tg.io.save_compile_cache`` after a compile, ``tg.io.load_compile_cache`` in a fresh process with an empty
+    Inductor cache: PyTorch takes the file, and the compiled stage gives the eager pixels."""
+    script = """
+import sys, torch, torchgrade as tg
+path, role = sys.argv[1], sys.argv[2]
+if role == "load":
+    assert tg.io.load_compile_cache(path)
+stage = tg.ToneMap("reinhard")
+image = torch.rand(1, 3, 8, 8)
+with torch.no_grad():
+    assert torch.allclose(tg.compile(stage)(image), stage(image), atol=1e-6)
+if role == "save":
+    assert tg.io.save_compile_cache(path)
+"""
+    path = tmp_path / "reinhard.compiled"
+    for role in ("save", "load"):
+        environment = {**os.environ, "TORCHINDUCTOR_CACHE_DIR": str(tmp_path / f"inductor-{role}")}
+        run = subprocess.run([sys.executable, "-c", script, str(path), role], env=environment, capture_output=True,
+                             text=True, timeout=300)
+        assert run.returncode == 0, run.stderr[-2000:]
+    assert path.stat().st_size > 0
+
+
+def test_a_compile_cache_is_checked_before_it_is_read(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        tg.io.load_compile_cache(tmp_path / "missing.compiled")
+    os.mkfifo(tmp_path / "pipe")
+    with pytest.raises(ValueError, match="not a regular file"):
+        tg.io.load_compile_cache(tmp_path / "pipe")
+    (tmp_path / "junk.compiled").write_bytes(b"not a cache")
+    with pytest.warns(RuntimeWarning, match="could not load the compile cache"):
+        assert tg.io.load_compile_cache(tmp_path / "junk.compiled") is False

@@ -9,11 +9,18 @@ device of the frames it gets.
 * **Other devices**: Inductor's default mode.
 
 ``fullgraph=True`` always: a look is one graph, so a graph break is an error here rather than a silent slowdown.
-Each device type compiles at its first frame; the first new frame size compiles again, with the sizes that changed
-made symbolic (``dynamic=None``, PyTorch's default), so every later size runs that graph. (``dynamic=False``
+Each device type compiles at its first frame, with the batch's size symbolic from the start (a last, smaller batch of
+an epoch runs the same graph; a batch of 1, a size PyTorch specialises, compiles its own); the first new frame size compiles again, with the sizes that changed made symbolic
+(``dynamic=None``, PyTorch's default), so every later size runs that graph. (``dynamic=False``
 compiles every size as it comes, and the ninth size stops with ``FailOnRecompileLimitHit``: Dynamo's
-``recompile_limit`` is 8 and ``fullgraph=True`` makes hitting it an error.) Compile times measured by
-``benchmarks/bench_gpu.py``.
+``recompile_limit`` is 8 and ``fullgraph=True`` makes hitting it an error.)
+
+**Compiling takes time**, paid at the first frame of each kind (shape, gradients, autocast), and said on the
+``torchgrade.compile`` logger (:data:`LOG`, INFO): "compiling the forward of PostFX for a (1, 3, 1080, 1920) float32
+frame on cpu, gradients off" and how long it took. ``benchmarks/bench_compile.py`` measures it cold (an empty Inductor
+cache), warm (Inductor's on-disk cache from an earlier process) and with saved cache artifacts
+(:func:`torchgrade.io.save_compile_cache`, :func:`torchgrade.io.load_compile_cache`: a file to carry to another machine
+or container), and the frames a compile takes to repay. :meth:`CompiledModule.warm_up` pays it before a run starts.
 
 In training the forward keeps less for the backward than PyTorch would by default (its activation memory budget,
 :data:`ACTIVATION_MEMORY_BUDGET`) and the backward recomputes the rest: a look's steps are per-pixel arithmetic, which
@@ -38,14 +45,21 @@ Examples:
 from __future__ import annotations
 
 import contextlib
+import logging
 import numbers
+import threading
+import time
 import warnings
 from typing import Optional
 
 import torch
 from torch import nn
 
-__all__ = ["compile", "compile_mode", "CompiledModule", "CPU_OPTIONS", "ACTIVATION_MEMORY_BUDGET"]
+__all__ = ["compile", "compile_mode", "CompiledModule", "CPU_OPTIONS", "ACTIVATION_MEMORY_BUDGET", "LOG"]
+
+LOG = logging.getLogger("torchgrade.compile")
+"""Where a compile of a :func:`compile`'d module says that it starts and how long it took (level INFO):
+``logging.basicConfig(level=logging.INFO)`` shows it."""
 
 
 CPU_OPTIONS = {"layout_optimization": False}
@@ -65,6 +79,49 @@ loops instead of 106, and its backward writes 3.67 frames either way, in 90 loop
 the CPU its training step (4x3x256x384) at 0.5 took 0.64 of its time at 1.0 on one thread and 0.78 on two; at 0.25,
 1.09 (``benchmarks/results/cpu_paths.md``). Not yet timed on a GPU (``benchmarks/bench_gpu.py``'s
 ``training_budget`` section times it against 1.0)."""
+
+
+_calling = threading.local()
+"""``.label``: what the compiled module running on this thread compiles (:func:`_describe`), while its call runs."""
+_compiles: dict = {}
+"""Compile id -> ``[label, start time]``: a forward's label names its backward, which compiles later with the same id."""
+
+
+def _describe(module: nn.Module, image: torch.Tensor) -> str:
+    """What a call compiles: the module, the frame and how it is called (gradients, autocast)."""
+    autocast = [f"{device} {torch.get_autocast_dtype(device)}".replace("torch.", "") for device in ("cpu", "cuda")
+                if torch.is_autocast_enabled(device)]
+    return (f"{type(module).__name__} for a {tuple(image.shape)} {str(image.dtype).replace('torch.', '')} frame on "
+            f"{image.device.type}, gradients {'on' if torch.is_grad_enabled() else 'off'}"
+            + (f", autocast {' and '.join(autocast)}" if autocast else ""))
+
+
+def _compile_started(event) -> None:
+    backward = event.callback_trigger.name == "LAZY_BACKWARD"
+    label = _compiles.get(event.compile_id, [None])[0] if backward else getattr(_calling, "label", None)
+    if label is None or event.callback_trigger.name not in ("DYNAMO", "LAZY_BACKWARD"):
+        return
+    _compiles[event.compile_id] = [label, time.perf_counter()]
+    LOG.info("compiling the %s of %s (tens of seconds on a cold cache, less from Inductor's or a loaded cache)",
+             "backward" if backward else "forward", label)
+
+
+def _compile_ended(event) -> None:
+    if event.callback_trigger.name not in ("DYNAMO", "LAZY_BACKWARD") or event.compile_id not in _compiles:
+        return
+    label, started = _compiles[event.compile_id]
+    LOG.info("compiled the %s of %s in %.1f s", "backward" if event.callback_trigger.name == "LAZY_BACKWARD" else "forward",
+             label, time.perf_counter() - started)
+
+
+def _watch_compiles() -> None:
+    """Follow Dynamo's compile events: :func:`_compile_started` and :func:`_compile_ended`, registered once and again
+    after ``torch._dynamo.reset()``, which forgets them."""
+    from torch._dynamo import callback
+
+    if _compile_started not in callback.callback_handler.start_callbacks:
+        callback.on_compile_start(_compile_started)
+        callback.on_compile_end(_compile_ended)
 
 
 def compile_mode(device: torch.device, cuda_graphs: bool = True) -> str:
@@ -127,9 +184,33 @@ class CompiledModule(nn.Module):
         prepare = getattr(self.module, "compiled_arguments", None)
         if prepare is not None:  # what must happen before the graph: a random draw from a generator
             (image, *args), kwargs = prepare(image, *args, **kwargs)
+        if self.dynamic is None:
+            _batch_may_change(image, *args, *kwargs.values())
+        _watch_compiles()
+        _calling.label = _describe(self.module, image)
         frame = getattr(self.module, "compiled_frame", None)
-        with frame(image, *args, **kwargs) if frame is not None else contextlib.nullcontext(), self._budget():
-            return self.compiled_for(image.device)(image, *args, **kwargs)
+        try:
+            with frame(image, *args, **kwargs) if frame is not None else contextlib.nullcontext(), self._budget():
+                return self.compiled_for(image.device)(image, *args, **kwargs)
+        finally:
+            _calling.label = None
+
+    def warm_up(self, example: torch.Tensor, *args, training: bool = False, **kwargs) -> float:
+        """Compile for frames like ``example`` now (one call, and its backward with ``training``), not at the first
+        frame of a run: the seconds it took. Later frames of other batch sizes run the same graph.
+
+        Examples:
+            >>> import torch
+            >>> import torchgrade as tg
+            >>> seconds = tg.compile(tg.ToneMap("reinhard")).warm_up(torch.rand(2, 3, 8, 8))  # doctest: +SKIP
+        """
+        started = time.perf_counter()
+        with torch.set_grad_enabled(training):
+            example = example.detach().requires_grad_(training)
+            out = self(example, *args, **kwargs)
+            if training:
+                out.sum().backward()
+        return time.perf_counter() - started
 
     def _budget(self):
         """The activation memory budget, set for a call that records gradients (where a training graph may compile; the
@@ -143,6 +224,18 @@ class CompiledModule(nn.Module):
                           "keeps by default", RuntimeWarning, stacklevel=4)
             return contextlib.nullcontext()
         return config.patch(activation_memory_budget=self.activation_memory_budget)
+
+
+def _batch_may_change(*values) -> None:
+    """Tell Dynamo that the first size of every tensor given (the batch, and a batch of drawn parameters) may change
+    from call to call, so that the first graph already serves every batch size; a batch of 1 it may still specialise."""
+    from torch._dynamo import maybe_mark_dynamic
+
+    for value in values:
+        tensors = value.values() if isinstance(value, dict) else (value,)
+        for tensor in tensors:
+            if isinstance(tensor, torch.Tensor) and tensor.dim() > 0:
+                maybe_mark_dynamic(tensor, 0)
 
 
 def _raised_while_traced(error: Exception) -> bool:
