@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import torch
 
+from .base.budget import check_pixels
+
 from .color import srgb_to_linear
 
 __all__ = ["CHART_SRGB", "demo_scene"]
@@ -68,6 +70,7 @@ def demo_scene(height: int = 360, width: int = 640, dtype: torch.dtype = torch.f
     """
     if height < 8 or width < 8:
         raise ValueError(f"demo scene needs at least 8x8 pixels, got {height}x{width}")
+    check_pixels(height, width, "the demo scene")
     like = torch.empty(0, dtype=dtype)
     v, u = torch.meshgrid(
         (torch.arange(height, dtype=dtype) + 0.5) / height,

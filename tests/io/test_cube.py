@@ -195,7 +195,10 @@ def test_absurdly_large_file_is_refused_before_reading(tmp_path):
     with open(path, "wb") as handle:
         handle.write(b"LUT_3D_SIZE 2\n0 0 0\n")
         handle.truncate(8 << 30)  # a sparse 8 GiB file: reading it would exhaust memory
-    with pytest.raises(ValueError, match="far more"):
+    with pytest.raises(ValueError, match="larger than"):  # than the largest table's file, before it is opened
+        read_cube(path)
+    path.write_bytes(b"LUT_3D_SIZE 2\n" + b"0 0 0\n" * 8 + b"# a comment\n" * (1 << 18))  # 3 MiB: within that
+    with pytest.raises(ValueError, match="far more"):  # bound, far more than its own 2³ rows need
         read_cube(path)
 
 

@@ -13,13 +13,12 @@ wrote as a list (a list nested deeper than the control's default, as ``[10, 20]`
 from __future__ import annotations
 
 import json
-import os
-import re
-import stat
 from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
+
+from .files import read_regular
 
 if TYPE_CHECKING:  # the stage module reads configs with config_value: a type only, so no import circle
     from .stage import Control
@@ -32,7 +31,6 @@ MAX_CONFIG_BYTES = 16 << 20
 MAX_CONFIG_DEPTH = 32
 """Deepest nesting of arrays and objects: a look needs 4 (stage, control, sample, matrix row)."""
 
-_STRING = re.compile(rb'"(?:[^"\\]|\\.)*"')
 
 
 def load_config(path) -> dict:
@@ -44,15 +42,7 @@ def load_config(path) -> dict:
         ...
         ValueError: config /dev/zero is not a regular file
     """
-    # Checked before opening too: opening a FIFO would wait for a writer, a directory raises a bare OSError.
-    if not stat.S_ISREG(os.stat(path).st_mode):
-        raise ValueError(f"config {path} is not a regular file")
-    with open(path, "rb") as handle:
-        if not stat.S_ISREG(os.fstat(handle.fileno()).st_mode):
-            raise ValueError(f"config {path} is not a regular file")
-        data = handle.read(MAX_CONFIG_BYTES + 1)
-    if len(data) > MAX_CONFIG_BYTES:
-        raise ValueError(f"config {path} is larger than {MAX_CONFIG_BYTES} bytes")
+    data = read_regular(path, MAX_CONFIG_BYTES, "config")
     depth = json_depth(data)
     if depth > MAX_CONFIG_DEPTH:
         raise ValueError(f"config {path} nests {depth} levels deep; at most {MAX_CONFIG_DEPTH}")
@@ -66,15 +56,26 @@ def load_config(path) -> dict:
 
 
 def json_depth(data: bytes) -> int:
-    """The deepest nesting of ``[`` and ``{`` in JSON text, strings skipped, without recursing.
+    r"""The deepest nesting of ``[`` and ``{`` in JSON text, strings skipped, without recursing, in time linear in
+    the text: a quote opens or closes a string unless an odd run of backslashes comes just before it.
 
     Examples:
-        >>> json_depth(b'{"a": [[1], "]]]["]}')
+        >>> json_depth(rb'{"a": [[1], "]]]\"[["]}')
         3
     """
-    brackets = np.frombuffer(_STRING.sub(b'""', data), dtype=np.uint8)
-    steps = np.isin(brackets, (ord("["), ord("{"))).astype(np.int64) - np.isin(brackets, (ord("]"), ord("}")))
-    return int(np.cumsum(steps).max(initial=0))
+    text = np.frombuffer(data, dtype=np.uint8)
+    quotes = np.flatnonzero(text == ord('"'))
+    others = np.flatnonzero(text != ord("\\"))  # the bytes that are not backslashes
+    last_other = others[np.searchsorted(others, quotes) - 1] if others.size else np.full_like(quotes, -1)
+    escaped = (quotes - 1 - np.where(np.searchsorted(others, quotes) > 0, last_other, -1)) % 2 == 1
+    quotes = quotes[~escaped]
+    opening = np.flatnonzero((text == ord("[")) | (text == ord("{")))
+    closing = np.flatnonzero((text == ord("]")) | (text == ord("}")))
+    brackets = np.concatenate((opening, closing))
+    steps = np.concatenate((np.ones(opening.size, np.int64), -np.ones(closing.size, np.int64)))
+    outside = np.searchsorted(quotes, brackets) % 2 == 0  # an even number of quotes before: not in a string
+    order = np.argsort(brackets[outside], kind="stable")
+    return int(np.cumsum(steps[outside][order]).max(initial=0))
 
 
 def _refuse_constant(name: str):

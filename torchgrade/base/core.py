@@ -670,7 +670,9 @@ def bounded_pow(x: torch.Tensor, exponent) -> torch.Tensor:
     A documented control may raise an HDR value to a large power (OpenColorIO's gamma 0.01 is a
     power of 100, Unity's gamma trackball at its minimum a power of 1000): the result saturates at
     the non-finite policy's bound instead of overflowing to Inf, where a gradient would be NaN.
-    Below the bound the value is ``x ** exponent`` exactly.
+    Below the bound the value is ``x ** exponent`` exactly, down to the smallest normal number: a positive ``x`` below it
+    (a denormal) is taken as it, since the slope ``e x^(e-1)`` of a power below 1 overflows there (a linear contrast of
+    0.12, a power of 0.12, gave infinite gradients at 1e-45).
 
     Examples:
         >>> bounded_pow(torch.tensor([-1.0, 0.0, 4.0, 1e3]), 2.0).tolist()
@@ -683,5 +685,5 @@ def bounded_pow(x: torch.Tensor, exponent) -> torch.Tensor:
         return (x.clamp_min(0.0) ** exponent).clamp_max(HALF_MAX)
     limit = torch.exp2(_LOG2_HALF_MAX / exponent.detach())
     inside = (x > 0) & (x < limit)
-    powered = where(inside, x, 1.0) ** exponent
+    powered = where(inside, x.clamp_min(torch.finfo(x.dtype).tiny), 1.0) ** exponent
     return torch.where(inside, powered, (x > 0).to(x.dtype) * HALF_MAX)

@@ -10,7 +10,10 @@ Examples:
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
 import sys
+import threading
 
 from .. import __version__
 from .bake import add_bake
@@ -21,6 +24,9 @@ from .grade import add_grade
 from .match import add_match
 
 __all__ = ["main"]
+
+TERMINATED = 128 + signal.SIGTERM
+"""The exit status of a command stopped by SIGTERM, as a shell reports it."""
 
 SUBCOMMANDS = (add_demo, add_grade, add_bake, add_export, add_match)
 """Each subcommand's parser builder, in the order ``--help`` lists them."""
@@ -46,7 +52,8 @@ def main(argv: list[str] | None = None) -> int:
     """
     args = _parser().parse_args(argv)
     try:
-        print(args.run(args))
+        with _terminated_as_an_exit():
+            print(args.run(args))
     except (ValueError, TypeError, OSError) as error:
         print(f"torchgrade {args.command}: error: {error}", file=sys.stderr)
         return 2
@@ -55,3 +62,22 @@ def main(argv: list[str] | None = None) -> int:
         return OVER_TOLERANCE
     return 0
 
+
+
+@contextlib.contextmanager
+def _terminated_as_an_exit():
+    """SIGTERM (a ``kill``, a scheduler's stop) ends the command as an exception does, so that every write in flight
+    removes its temporary file (:func:`torchgrade.io.atomic.atomic_write`) before the process ends with
+    :data:`TERMINATED`; SIGINT (Ctrl-C) does so already. Only in the main thread, where Python delivers signals."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(number, frame):
+        raise SystemExit(TERMINATED)
+
+    previous = signal.signal(signal.SIGTERM, stop)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)

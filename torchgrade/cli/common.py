@@ -49,8 +49,9 @@ EXPOSURE_FLAGS = {
 
 def refuse_overwriting(outputs, inputs, allowed: bool = False) -> None:
     """Raise ``ValueError`` when a file a command would write is one it reads, or two outputs are one file: the same
-    path, or the same file through a symbolic or hard link (same device and inode). ``allowed`` lets an output replace
-    an input (``grade --overwrite-input``), never another output.
+    path, or the same file through a symbolic or hard link (same device and inode). ``allowed`` lets output ``k``
+    replace input ``k`` (``grade --overwrite-input``: a frame graded in place), never another input, which another
+    frame may not have read yet, and never another output.
 
     Examples:
         >>> import tempfile
@@ -70,10 +71,11 @@ def refuse_overwriting(outputs, inputs, allowed: bool = False) -> None:
             return None
         return status.st_dev, status.st_ino
 
+    inputs = list(inputs)
     read = {identity(path): path for path in inputs if path is not None}
     read.pop(None, None)
     written = {}
-    for path in outputs:
+    for index, path in enumerate(outputs):
         if path is None:
             continue
         key = identity(path)
@@ -84,6 +86,10 @@ def refuse_overwriting(outputs, inputs, allowed: bool = False) -> None:
         written[key] = path
         if key in read and not allowed:
             raise ValueError(f"{path} would replace the input {read[key]}: pass --overwrite-input to grade in place")
+        own = inputs[index] if index < len(inputs) and inputs[index] is not None else None
+        if key in read and allowed and (own is None or identity(own) != key):
+            raise ValueError(f"{path} would replace the input {read[key]}, which is not its own frame's: "
+                             "--overwrite-input grades each frame in place only")
 
 
 def read_rec709(path, to_rec709: bool = True, adaptation: str = "auto", **options) -> torch.Tensor:

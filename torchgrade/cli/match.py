@@ -26,6 +26,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ..base.budget import check_pixels
+from ..base.files import open_regular
 from ..color import srgb_to_linear
 from ..grading.layer import ColorGrade
 from ..io.atomic import atomic_write
@@ -34,7 +36,10 @@ from ..match import GRADE_CONTROLS, LUT_FILES, match_look
 from ..tonemap import TONEMAP_MODES
 from .common import read_rec709, refuse_overwriting, report_line
 
-__all__ = ["run_match", "add_match", "read_target"]
+__all__ = ["run_match", "add_match", "read_target", "MAX_PNG_BYTES"]
+
+MAX_PNG_BYTES = 1 << 30
+"""Largest PNG file read as a target (its pixels pass the pixel budget, :data:`torchgrade.base.budget.MAX_PIXELS`)."""
 
 
 def read_target(path: Path) -> torch.Tensor:
@@ -52,13 +57,12 @@ def read_target(path: Path) -> torch.Tensor:
         return read_rec709(path)
     if path.suffix.lower() != ".png":
         raise ValueError(f"target must be an .exr or .png file, got {path}")
-    if not path.is_file():
-        raise ValueError(f"target {path} does not exist")
     from PIL import Image
 
-    with Image.open(path) as image:
-        codes = np.asarray(image.convert("RGB"), dtype=np.float64)
-    return srgb_to_linear(torch.from_numpy(codes / 255.0).permute(2, 0, 1).contiguous())
+    with open_regular(path, MAX_PNG_BYTES, "target") as handle, Image.open(handle) as image:
+        check_pixels(image.height, image.width, f"target {path}")  # from its header: nothing decoded yet
+        codes = np.asarray(image.convert("RGB"), dtype=np.float32)
+    return srgb_to_linear(torch.from_numpy(codes / 255.0).permute(2, 0, 1).contiguous()).double()
 
 
 def _controls(text: str) -> tuple:

@@ -24,12 +24,29 @@ from pathlib import Path
 import torch
 from tqdm import tqdm
 
+from ..base.budget import MAX_FRAME_DIGITS
 from ..look.postfx import PostFX
 
 __all__ = ["shot_frames", "frame_number", "output_paths", "render_frame", "grade_shot"]
 
 PRINTF_FRAME = re.compile(r"%(0?\d*)d")
-"""A frame number in a file name, as ffmpeg, Nuke and OpenImageIO write it: ``%04d``, ``%d``."""
+"""A frame number in a file name, as ffmpeg, Nuke and OpenImageIO write it: ``%04d``, ``%d``; at most
+:data:`~torchgrade.base.budget.MAX_FRAME_DIGITS` wide (:func:`frame_width`)."""
+
+
+def frame_width(name: str) -> int:
+    """The width a file name's frame pattern asks for (0 for ``%d``), or ``ValueError`` past
+    :data:`~torchgrade.base.budget.MAX_FRAME_DIGITS` (``%0900000000d`` named a 900-million-character file).
+
+    Examples:
+        >>> frame_width("plate.%04d.exr"), frame_width("plate.%d.exr")
+        (4, 0)
+    """
+    digits = PRINTF_FRAME.search(name).group(1)
+    width = int(digits) if digits.lstrip("0") else 0
+    if len(digits) > 4 or width > MAX_FRAME_DIGITS:
+        raise ValueError(f"{name}: a frame number of {digits[:12]} digits; at most {MAX_FRAME_DIGITS}")
+    return width
 
 
 def _frame_key(path: Path) -> tuple:
@@ -44,8 +61,8 @@ def _frame_key(path: Path) -> tuple:
 
 
 def _pattern_frames(path: Path) -> list:
-    width = PRINTF_FRAME.search(path.name).group(1)
-    digits = rf"\d{{{int(width)}}}" if width.startswith("0") else r"\d+"
+    width = frame_width(path.name)
+    digits = rf"\d{{{width}}}" if PRINTF_FRAME.search(path.name).group(1).startswith("0") else r"\d+"
     parts = PRINTF_FRAME.split(path.name)
     name = re.compile("".join(re.escape(part) if i % 2 == 0 else digits for i, part in enumerate(parts)) + "$")
     folder = path.parent
@@ -59,8 +76,9 @@ def _expand(text: str) -> list:
     path = Path(text)
     if PRINTF_FRAME.search(path.name):
         return sorted(_pattern_frames(path), key=_frame_key)
-    if path.is_dir():
-        found = [child for child in path.iterdir() if child.suffix.lower() == ".exr" and child.is_file()]
+    if path.is_dir():  # hidden files left out: an interrupted write's temporary (".name.1a2b3c4d.exr") among them
+        found = [child for child in path.iterdir()
+                 if child.suffix.lower() == ".exr" and not child.name.startswith(".") and child.is_file()]
         if not found:
             raise FileNotFoundError(f"no EXR files in folder {path}")
         return sorted(found, key=_frame_key)
@@ -111,6 +129,7 @@ def output_paths(output: str, frames: list) -> list:
             raise ValueError(f"{len(frames)} frames need an output pattern with a frame number, such as out.%04d.png; got {output}")
         return [Path(output)]
     folder, name = Path(output).parent, Path(output).name
+    frame_width(name)
     paths = [folder / PRINTF_FRAME.sub(lambda match: f"%{match.group(1)}d" % frame_number(frame, i), name, count=1)
              for i, frame in enumerate(frames)]
     if len(set(paths)) < len(paths):

@@ -96,7 +96,8 @@ def metering_weights(mask, like: torch.Tensor) -> Optional[torch.Tensor]:
 
     * ``"center"``: ``1 - saturate(d / s)``, weight 1 at the centre falling to 0 at the corners' distance;
     * ``"spot"``: ``1 - saturate(d - SPOT_RADIUS * s)``, a disc of radius 7.5 % of ``s`` with a one-pixel edge;
-    * a 2-D tensor of non-negative weights: resampled to the frame (bilinear, as a texture is sampled). Where it
+    * a 2-D tensor of non-negative weights: resampled to the frame (bilinear, as a texture is sampled) and divided by
+      its largest weight, so that weights of any finite size (1e37 made every output NaN) sum within range. Where it
       leaves the frame no weight at all, the frame is metered as ``"average"`` (every weight 1).
 
     Examples:
@@ -109,6 +110,7 @@ def metering_weights(mask, like: torch.Tensor) -> Optional[torch.Tensor]:
     if isinstance(mask, torch.Tensor):
         resampled = F.interpolate(mask.to(like)[None, None], size=like.shape[-2:], mode="bilinear", align_corners=False)[0, 0]
         weights = resampled.clamp_min(0)
+        weights = weights / weights.amax().clamp_min(torch.finfo(weights.dtype).tiny)
         return weights + (weights.sum() <= 0).to(weights)
     check_choice("metering_mask", mask, METERING_MASKS)
     return _shaped_weights(mask, like.shape[-2], like.shape[-1], like.dtype, like.device)
@@ -187,7 +189,7 @@ def histogram_band_average(stops: torch.Tensor, weights: Optional[torch.Tensor],
     """
     batch = stops.shape[0]
     low, high, low_percent, high_percent = (_per_row(v) for v in (low, high, low_percent, high_percent))
-    values = stops.reshape(batch, -1).clamp(low, high)
+    values = stops.reshape(batch, -1).clamp(min=low).clamp(max=high)  # apart: one may be a tensor, the other a number
     # values - low >= 0, so the cast's truncation is the floor
     bins = ((values - low) * (HISTOGRAM_BINS / (high - low))).clamp_max_(HISTOGRAM_BINS - 1).long()
     weight = constant(1.0, values).expand_as(values) if weights is None else weights.reshape(1, -1).expand(batch, -1)

@@ -46,6 +46,7 @@ from torch import nn
 from .._moved import OLD_CLASS_PATHS
 from ..base.config import load_config
 from ..base.core import nan_free, with_alpha
+from ..bloom import ConvolutionBloom
 from ..lut import INTERPOLATIONS, LUT3D, ErrorReport, bake_lut
 from ..runtime import is_tracing
 from .slots import SLOT, SLOTS, STAGES, build_stage, is_identity_stage
@@ -306,7 +307,7 @@ def _checked_extra_state(extra) -> dict:
     return extra
 
 
-SAFE_GLOBALS = (PostFX, LUT3D, ErrorReport, *STAGES.values())
+SAFE_GLOBALS = (PostFX, LUT3D, ErrorReport, ConvolutionBloom, *STAGES.values())
 """The classes a saved look is made of. Registered with ``torch.serialization.add_safe_globals`` when
 torchgrade is imported, so ``torch.load(path, weights_only=True)`` reads back a ``torch.save(look)``."""
 

@@ -69,8 +69,19 @@ def planar_table(table: torch.Tensor) -> torch.Tensor:
     return table.reshape(-1, 3).t().contiguous()
 
 
+MAX_CODE = 1e6
+"""Largest magnitude of a lattice code value: a domain bound or a shaper curve's entry. A linear lattice of scene light
+reaches 65504 (the non-finite policy's bound); beyond 1e6, float32 arithmetic on the lattice loses it (a domain of
+±3e38 spans more than float32 holds, and every lookup came out 0)."""
+
+MIN_DOMAIN_WIDTH = 1e-6
+"""Narrowest lattice domain, relative to its bounds' size (at least 1): a narrower one divides by nearly nothing (a
+domain of [0, 1e-45] gave infinite gradients)."""
+
+
 def checked_domain(domain) -> tuple:
-    """A lattice domain ``(min, max)`` as two float32 RGB triples, or ``ValueError`` unless finite with max > min per channel.
+    """A lattice domain ``(min, max)`` as two float32 RGB triples, or ``ValueError`` unless finite, within
+    ±:data:`MAX_CODE`, with max > min per channel by at least :data:`MIN_DOMAIN_WIDTH` of the bounds' size.
 
     Examples:
         >>> low, high = checked_domain((0.0, (1.0, 2.0, 4.0)))
@@ -84,6 +95,12 @@ def checked_domain(domain) -> tuple:
     low, high = _rgb(low, "domain min"), _rgb(high, "domain max")
     if bool((high <= low).any()):
         raise ValueError(f"LUT domain max must exceed min, got {low.tolist()} and {high.tolist()}")
+    if bool((torch.maximum(low.abs(), high.abs()) > MAX_CODE).any()):
+        raise ValueError(f"LUT domain bounds must lie within ±{MAX_CODE:g}, got {low.tolist()} and {high.tolist()}")
+    size = torch.maximum(torch.maximum(low.abs(), high.abs()), torch.ones(3))
+    if bool(((high.double() - low.double()) < MIN_DOMAIN_WIDTH * size).any()):
+        raise ValueError(f"LUT domain must be at least {MIN_DOMAIN_WIDTH:g} wide (relative to its bounds), got "
+                         f"{low.tolist()} and {high.tolist()}")
     return low, high
 
 

@@ -18,7 +18,7 @@ from ..base.core import (
 )
 from ..base.stage import Control, Stage, in_state_check
 from .kernels import BACKENDS, KERNELS
-from .lattice import check_size, checked_domain, planar_table
+from .lattice import MAX_CODE, check_size, checked_domain, planar_table
 from .apply import (
     OUTPUT_ENCODINGS,
     check_lookup_arguments,
@@ -129,6 +129,8 @@ class LUT3D(Stage):
         super().check_state()
         if in_state_check(self.table):
             _check_table(self.table, self.output_encoding)
+        if self.size != self.table.shape[0]:
+            raise ValueError(f"a LUT of size {self.size} holds a table of {tuple(self.table.shape)}: the two disagree")
         if in_state_check(self.domain_min):
             checked_domain((self.domain_min, self.domain_max))
         if SHAPERS[self.shaper].takes_curve != (self.curve is not None):
@@ -302,8 +304,13 @@ def _check_table(table, output_encoding: str = "linear") -> None:
 
 
 def _check_curve(curve: torch.Tensor) -> torch.Tensor:
+    if not isinstance(curve, torch.Tensor) or not curve.is_floating_point():
+        raise TypeError(f"shaper curve must be a floating-point tensor, got {getattr(curve, 'dtype', type(curve).__name__)}")
     if curve.dim() != 2 or curve.shape[1] != 3 or curve.shape[0] < 2:
         raise ValueError(f"shaper curve must have shape (n >= 2, 3), got {tuple(curve.shape)}")
+    high, low = _extremes(curve.detach()).tolist()
+    if not (abs(low) <= MAX_CODE and abs(high) <= MAX_CODE):  # NaN fails both
+        raise ValueError(f"shaper curve entries must be finite and within ±{MAX_CODE:g}, got {low} to {high}")
     return curve
 
 

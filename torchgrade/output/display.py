@@ -12,16 +12,26 @@ from __future__ import annotations
 import torch
 
 from .. import color
-from ..base.core import Param, check_image, scalar_param
+from ..base.core import Param, check_image, check_range, scalar_param
 from ..tonemap import HDR_MODES
 
-__all__ = [ "encode_display", "display_settings", "DISPLAY_ENCODINGS", "DISPLAY_PRIMARIES",
-           "DISPLAY_PRESETS", "hlg_inverse_eotf"]
+__all__ = ["encode_display", "display_settings", "DISPLAY_ENCODINGS", "DISPLAY_PRIMARIES", "DISPLAY_PRESETS",
+           "HLG_PEAK_RANGE", "HLG_BLACK", "hlg_inverse_eotf"]
 
 DISPLAY_ENCODINGS = ("srgb", "bt1886", "pq", "hlg", "linear")
 DISPLAY_PRIMARIES = ("rec709", "rec2020")
 _LUMINANCE_ROWS = {"rec709": (0.2126, 0.7152, 0.0722), "rec2020": (0.2627, 0.6780, 0.0593)}
 """Luminance weights of each container (ITU-R BT.709 and BT.2100), for HLG's OOTF."""
+
+HLG_PEAK_RANGE = (100.0, 10000.0)
+"""Nominal peaks (cd/m²) an HLG display may have here. BT.2100's system gamma ``1.2 + 0.42 log10(Lw / 1000)`` falls
+to 0.78 at 100 cd/m² and to 0 near 1.4 cd/m², where undoing the OOTF (a power ``(1 - γ) / γ``) diverges: at 1 cd/m²
+every pixel came out 1.0, at 1.4 black."""
+
+HLG_BLACK = 1e-10
+"""Display luminance (over the peak) below which undoing the OOTF takes the luminance as this: the power
+``(1 - γ) / γ`` of a luminance near 0 has an infinite slope (a gradient of -inf at 1e-45 before); below it every
+signal is under 1e-5 of a code."""
 
 
 DISPLAY_PRESETS = {
@@ -57,15 +67,19 @@ def hlg_inverse_eotf(display_linear: torch.Tensor, peak_luminance: Param = 1000.
     """BT.2100 HLG signal of display light (1.0 = ``peak_luminance`` = the HLG display's nominal peak, black 0).
 
     Undoes the OOTF ``F = Lw Ys^(γ-1) E`` with ``γ = 1.2 + 0.42 log10(Lw / 1000)``: ``E = F Yd^((1-γ)/γ)``
-    (``Yd`` the display luminance over ``Lw``), then applies the HLG OETF.
+    (``Yd`` the display luminance over ``Lw``, at least :data:`HLG_BLACK`), then applies the HLG OETF. ``Lw`` is
+    taken within :data:`HLG_PEAK_RANGE` (the stage and :func:`encode_display` refuse a peak outside it; a learnable one
+    is held inside).
 
     Examples:
         >>> round(float(hlg_inverse_eotf(torch.ones(3, 1, 1))[0, 0, 0]), 4)  # peak white: code 1
         1.0
     """
-    gamma = 1.2 + 0.42 * torch.log10(torch.as_tensor(peak_luminance / 1000.0))
-    y = sum(w * c for w, c in zip(weights, display_linear.clamp_min(0.0).split(1, dim=-3)))
-    scene = display_linear.clamp_min(0.0) * color.safe_pow(y, (1.0 - gamma) / gamma)
+    peak = torch.as_tensor(peak_luminance, dtype=display_linear.dtype, device=display_linear.device)
+    gamma = 1.2 + 0.42 * torch.log10(peak.clamp(*HLG_PEAK_RANGE) / 1000.0)
+    light = display_linear.clamp_min(0.0)
+    y = sum(w * c for w, c in zip(weights, light.split(1, dim=-3)))
+    scene = light * y.clamp_min(HLG_BLACK) ** ((1.0 - gamma) / gamma)
     return color.hlg_oetf(scene.clamp(max=1.0))
 
 
@@ -75,7 +89,8 @@ def encode_display(image: torch.Tensor, encoding: str = "srgb", primaries: str =
 
     Values are clipped to the display range [0, 1] first (the container's gamut and peak); ``"pq"``
     encodes ``x * peak_luminance`` cd/m², ``"hlg"`` treats ``peak_luminance`` as the display's nominal
-    peak, ``"bt1886"`` is ``x^(1/2.4)`` (black 0), ``"linear"`` returns the clipped display light.
+    peak (within :data:`HLG_PEAK_RANGE`), ``"bt1886"`` is ``x^(1/2.4)`` (black 0), ``"linear"`` returns the clipped
+    display light.
 
     Examples:
         >>> white = torch.ones(1, 3, 1, 1)
@@ -85,6 +100,8 @@ def encode_display(image: torch.Tensor, encoding: str = "srgb", primaries: str =
         0.4614
     """
     check_image(image)
+    if encoding == "hlg":
+        check_range(peak_luminance, "an HLG display's peak_luminance", *HLG_PEAK_RANGE)
     if primaries != input_primaries:
         image = color.convert(image, f"{input_primaries}_to_{primaries}")
     linear = image.clamp(0.0, 1.0)

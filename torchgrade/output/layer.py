@@ -8,11 +8,11 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from ..base.core import Param, is_constant
-from ..base.stage import Control, Stage, plain
+from ..base.core import Param, check_range, is_constant
+from ..base.stage import Control, Stage, in_state_check, plain
 from ..lut import LUT3D, identity_table
 from ..runtime import in_strips
-from .display import DISPLAY_ENCODINGS, DISPLAY_PRIMARIES, encode_display
+from .display import DISPLAY_ENCODINGS, DISPLAY_PRIMARIES, HLG_PEAK_RANGE, encode_display
 from .dither import DEFAULT_AMPLITUDE, dither, dither_pattern
 from .look import LOOK_ENCODINGS, look_lut, read_lut_file
 
@@ -192,6 +192,12 @@ class Dither(Stage):
         if name in ("seed", "size"):
             self.draw_pattern()
 
+    def check_state(self) -> None:
+        """Also draw the tile again from the checked ``seed`` and ``size``: a loaded file's tile is not trusted (a tile
+        of NaN made every pixel NaN), and the seed alone defines it."""
+        super().check_state()
+        self.draw_pattern()
+
     @property
     def is_identity(self) -> bool:
         """True at amplitude 0 (then skipped by ``PostFX`` and not exported)."""
@@ -229,6 +235,12 @@ class Display(Stage):
     def __init__(self, encoding: str = "srgb", primaries: str = "rec709", peak_luminance: Param = 100.0, input_primaries: str = "rec709"):
         super().__init__()
         self.init_controls(encoding=encoding, primaries=primaries, peak_luminance=peak_luminance, input_primaries=input_primaries)
+
+    def check_together(self) -> None:
+        """An HLG display's peak within :data:`~torchgrade.output.display.HLG_PEAK_RANGE` (a learnable one is held
+        there by the encoding)."""
+        if self.encoding == "hlg" and not isinstance(self.peak_luminance, nn.Parameter) and in_state_check(self.peak_luminance):
+            check_range(self.peak_luminance, "an HLG display's peak_luminance", *HLG_PEAK_RANGE)
 
     @property
     def is_identity(self) -> bool:

@@ -11,14 +11,19 @@ import warnings
 import numpy as np
 import torch
 
+from ...base.files import open_regular
 from ...lut import LUT3D, MAX_SIZE, MIN_SIZE, identity_table
 from ..lines import MAX_LINE_BYTES, line_blocks
 from .limits import MAX_SHAPER_SIZE
 
-__all__ = ["read_cube"]
+__all__ = ["read_cube", "MAX_CUBE_BYTES"]
 
 _MAX_BYTES_PER_VALUE = 64
 """Data size limit: a file may hold at most this many bytes per expected number (plus a header)."""
+
+MAX_CUBE_BYTES = (MAX_SHAPER_SIZE + MAX_SIZE**3) * 3 * _MAX_BYTES_PER_VALUE + MAX_LINE_BYTES
+"""Largest .cube file opened: the largest shaper and table at :data:`_MAX_BYTES_PER_VALUE` a number; a regular file
+only (a pipe or a device is refused unread). Its header then bounds it to what its own sizes need."""
 
 
 def read_cube(path) -> LUT3D:
@@ -39,7 +44,7 @@ def read_cube(path) -> LUT3D:
         ...     read_cube(path)(torch.full((1, 3, 1, 1), 0.5)).flatten().tolist()
         [1.0, 0.5, 0.25]
     """
-    with open(path, "rb") as handle:
+    with open_regular(path, MAX_CUBE_BYTES, ".cube file") as handle:
         blocks = line_blocks(handle, path)
         header, first_data = _read_header(blocks, path)
         sizes = _check_header(header, path)

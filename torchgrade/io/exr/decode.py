@@ -34,10 +34,13 @@ from .chunks import chunk_table
 from .layout import ExrPart
 from .single_part import write_single_part
 
+from ...base.budget import MAX_PIXELS as BUDGET_PIXELS
+
 __all__ = ["MAX_BYTES", "MAX_PIXELS", "STRIP_BYTES", "check_budget", "decode", "decode_strips", "selective"]
 
-MAX_PIXELS = 1 << 28
-"""Largest window (268 megapixels) read_exr accepts by default."""
+MAX_PIXELS = BUDGET_PIXELS
+"""Largest window read_exr accepts by default: the library's one pixel budget (:data:`torchgrade.base.budget.MAX_PIXELS`,
+8192x8192), which every decoded image passes."""
 
 MAX_BYTES = 1 << 31
 """Default bound (2 GiB) on the memory a read may take: every sample the bindings decode (2 bytes

@@ -20,7 +20,7 @@ import mmap
 import struct
 from dataclasses import dataclass
 
-__all__ = ["MAGIC", "MULTIPART", "Attribute", "Headers", "PartBytes", "channel_list", "check_headers", "check_required", "part_bytes",
+__all__ = ["MAGIC", "MULTIPART", "MAX_ATTRIBUTES", "MAX_PARTS", "MAX_HEADER_BYTES", "HeaderBudgetError", "Attribute", "Headers", "PartBytes", "channel_list", "check_headers", "check_required", "part_bytes",
            "read_headers", "value"]
 
 MAGIC = 20000630
@@ -31,6 +31,16 @@ _BYTES = {0: 4, 1: 2, 2: 4}
 
 MULTIPART = 1 << 12
 """The version field's multi-part bit."""
+
+MAX_ATTRIBUTES = 1024
+"""Most attributes a header may hold (the sample files hold at most 40): OpenEXR's own header parser takes time that
+grows with the square of their number (200,000 empty ones, 3 MB, took 198 s), so more are refused before it runs."""
+
+MAX_PARTS = 1024
+"""Most parts a file may hold."""
+
+MAX_HEADER_BYTES = 64 << 20
+"""Most bytes the headers may span (a preview image and an ICC profile fit many times over)."""
 _TILED, _DEEP = 1 << 9, 1 << 11
 """The version field's single-part tiled bit and its non-image (deep data) bit."""
 
@@ -45,6 +55,11 @@ _REQUIRED_TILED = {"tiles": "tiledesc"}
 _REQUIRED_PARTS = {"name": "string", "type": "string", "chunkCount": "int"}
 """What a tiled part's header holds too, and each header of a multi-part or deep file (file layout
 document, "Tile Header Attribute" and "Multi-Part and Deep Data Header Attributes")."""
+
+
+class HeaderBudgetError(ValueError):
+    """Headers past :data:`MAX_ATTRIBUTES`, :data:`MAX_PARTS` or :data:`MAX_HEADER_BYTES`: refused before OpenEXR's
+    own parser sees them, whatever else a caller tolerates in a damaged header."""
 
 
 @dataclass(frozen=True)
@@ -105,6 +120,10 @@ def channel_list(data, attribute: Attribute) -> dict[str, int]:
 def _attributes(data, at: int) -> tuple[list[Attribute], int]:
     attributes = []
     while data[at] != 0:
+        if len(attributes) == MAX_ATTRIBUTES:
+            raise HeaderBudgetError(f"a header holds more than {MAX_ATTRIBUTES} attributes")
+        if at > MAX_HEADER_BYTES:
+            raise HeaderBudgetError(f"the headers span more than {MAX_HEADER_BYTES} bytes")
         start = at
         name, at = _name(data, at)
         kind, at = _name(data, at)
@@ -133,6 +152,8 @@ def read_headers(data) -> Headers:
         raise ValueError(f"no OpenEXR magic number (the file starts with {bytes(data[:4])!r})")
     parts, at = [], 8
     while True:
+        if len(parts) == MAX_PARTS:
+            raise HeaderBudgetError(f"the file holds more than {MAX_PARTS} parts")
         attributes, at = _attributes(data, at)
         parts.append(attributes)
         if not version & MULTIPART or data[at] == 0:
@@ -229,5 +250,7 @@ def part_bytes(path) -> list[PartBytes] | None:
                 parts.append(PartBytes(channel_list(data, channels) if channels else {},
                                        value(data, tiles)[:2] if tiles is not None and tiles.kind == "tiledesc" else None))
             return parts
+    except HeaderBudgetError:
+        raise
     except (OSError, ValueError, IndexError, struct.error):  # mmap refuses an empty file with ValueError
         return None

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import OpenEXR
 
+from ...base.files import check_regular
 from .header_bytes import PartBytes, part_bytes
 
 __all__ = ["ExrPart", "exr_info", "split_channel_name"]
@@ -137,9 +138,10 @@ def exr_info(path) -> list[ExrPart]:
         >>> part.kind, part.size(), part.layers
         ('scanlineimage', (2, 4), {(None, ''): ['B', 'G', 'R']})
     """
+    check_regular(path, "EXR file")
     try:
+        raw = part_bytes(path) or []  # first: it refuses headers past their budgets before OpenEXR's parser runs
         opened = OpenEXR.File(str(path), header_only=True)
-        raw = part_bytes(path) or []
         return [_describe(index, part, raw[index] if index < len(raw) else None) for index, part in enumerate(opened.parts)]
     except Exception as error:  # the bindings raise RuntimeError/OSError/ValueError/UnicodeError for damaged headers
         raise ValueError(f"{path}: not a readable OpenEXR file ({error})") from None

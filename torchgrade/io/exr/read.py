@@ -8,6 +8,7 @@ import numpy as np
 import torch
 
 from ...base.core import check_choice
+from ...base.files import check_regular
 from ...color import REC709_CHROMATICITIES
 from .chromaticities import ADAPTATIONS, to_rec709_matrix
 from .decode import (
@@ -183,8 +184,7 @@ def read_exr(path, to_rec709: bool = False, *, adaptation: str = "auto", layer: 
         (torch.Size([4, 2, 3]), torch.Size([4, 2, 3]))
     """
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"no such EXR file: {path}")
+    check_regular(path, "EXR file")
     check_choice("window", window, WINDOWS)
     check_choice("adaptation", adaptation, ADAPTATIONS)
     check_headers(path)  # first: the bindings stand in defaults for some missing attributes, refuse others unnamed

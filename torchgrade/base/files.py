@@ -1,0 +1,72 @@
+"""Untrusted files opened safely: regular files only, their size bounded before a byte is read.
+
+Opening a FIFO waits for a writer (for ever, when none comes), a character device such as ``/dev/zero`` never ends,
+and neither has a size to check beforehand. :func:`open_regular` refuses both before opening (``os.stat``), opens
+without blocking and checks the descriptor again (the path may have changed in between), and checks the size against
+the caller's budget; :func:`read_regular` reads the whole file within that budget.
+
+Examples:
+    >>> read_regular("/dev/zero", 10, "LUT")
+    Traceback (most recent call last):
+    ...
+    ValueError: LUT /dev/zero is not a regular file
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+from typing import BinaryIO
+
+__all__ = ["check_regular", "open_regular", "read_regular"]
+
+
+def check_regular(path, what: str) -> None:
+    """``FileNotFoundError`` where ``path`` names nothing, ``ValueError`` where it names no regular file (a pipe, a
+    device, a folder), for a reader that opens the file itself (a library's, by its path).
+
+    Examples:
+        >>> check_regular("/dev/null", "EXR file")
+        Traceback (most recent call last):
+        ...
+        ValueError: EXR file /dev/null is not a regular file
+    """
+    try:
+        info = os.stat(path)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"no such {what}: {path}") from None
+    if not stat.S_ISREG(info.st_mode):
+        raise ValueError(f"{what} {path} is not a regular file")
+
+
+def open_regular(path, max_bytes: int, what: str) -> BinaryIO:
+    """``path`` opened for binary reading, if it is a regular file of at most ``max_bytes`` bytes; ``ValueError``
+    naming ``what`` it was to be otherwise (``FileNotFoundError`` where there is no file)."""
+    _check(os.stat(path), path, max_bytes, what)
+    descriptor = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0))
+    handle = os.fdopen(descriptor, "rb")
+    try:
+        _check(os.fstat(handle.fileno()), path, max_bytes, what)
+        if hasattr(os, "set_blocking"):
+            os.set_blocking(handle.fileno(), True)
+    except BaseException:
+        handle.close()
+        raise
+    return handle
+
+
+def read_regular(path, max_bytes: int, what: str) -> bytes:
+    """The bytes of ``path``, a regular file of at most ``max_bytes`` bytes (:func:`open_regular`); a file that grew
+    past the budget while it was read is refused too."""
+    with open_regular(path, max_bytes, what) as handle:
+        data = handle.read(max_bytes + 1)
+    if len(data) > max_bytes:
+        raise ValueError(f"{what} {path} is larger than {max_bytes} bytes")
+    return data
+
+
+def _check(info: os.stat_result, path, max_bytes: int, what: str) -> None:
+    if not stat.S_ISREG(info.st_mode):
+        raise ValueError(f"{what} {path} is not a regular file")
+    if info.st_size > max_bytes:
+        raise ValueError(f"{what} {path} is larger than {max_bytes} bytes ({info.st_size})")
