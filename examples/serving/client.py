@@ -19,7 +19,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from server import pack_frame  # noqa: E402
+from frames import pack_frame  # noqa: E402
 
 
 def post(url: str, body: bytes, timeout: float = 60.0) -> tuple:

@@ -1,0 +1,90 @@
+"""What the serving example's server and client share: the raw frame format and the decoding of image files.
+
+**Frame format** (little-endian): a 16-byte header, ``b"TGF1"``, ``uint32`` height, ``uint32`` width, the numpy
+dtype string of the samples (``"|u1"``, ``"<u2"``, ``"<f2"``, ``"<f4"``) NUL-padded to 4 bytes; then
+``height * width * 3`` samples, RGB interleaved, rows top first: one ``(height, width, 3)`` array, as decoders
+and render targets give frames.
+"""
+
+from __future__ import annotations
+
+import io
+import struct
+import tempfile
+
+import numpy as np
+import torch
+
+import torchgrade as tg
+from torchgrade.base.budget import MAX_PIXELS, check_pixels
+
+HEADER = struct.Struct("<4sII4s")
+MAGIC = b"TGF1"
+DTYPES = {np.dtype(name).str: np.dtype(name) for name in ("uint8", "uint16", "float16", "float32")}
+
+
+def pack_frame(frame: np.ndarray) -> bytes:
+    """A ``(height, width, 3)`` array in the frame format.
+
+    Examples:
+        >>> body = pack_frame(np.zeros((2, 3, 3), np.uint8))
+        >>> len(body), unpack_frame(body).shape
+        (34, (2, 3, 3))
+    """
+    frame = np.ascontiguousarray(frame)
+    if frame.ndim != 3 or frame.shape[2] != 3 or frame.dtype.newbyteorder("<").str not in DTYPES:
+        raise ValueError(f"a frame is a (height, width, 3) array of {sorted(DTYPES)}, got {frame.shape} {frame.dtype}")
+    frame = frame.astype(frame.dtype.newbyteorder("<"), copy=False)
+    return HEADER.pack(MAGIC, frame.shape[0], frame.shape[1], frame.dtype.str.encode()) + frame.tobytes()
+
+
+def frame_header(head: bytes, max_pixels: int) -> tuple:
+    """``(height, width, dtype, body bytes)`` from a frame's 16-byte header, its pixels checked against the budget:
+    what a server knows before it reads the samples.
+
+    Examples:
+        >>> frame_header(b"TGF1" + bytes(12), 1 << 20)
+        Traceback (most recent call last):
+        ...
+        ValueError: a frame must be at least 1x1 pixels, got 0x0
+    """
+    if len(head) < HEADER.size:
+        raise ValueError(f"a frame starts with a {HEADER.size}-byte header, got {len(head)} bytes")
+    magic, height, width, dtype = HEADER.unpack_from(head)
+    if magic != MAGIC:
+        raise ValueError(f"a frame starts with {MAGIC!r}, got {magic!r}")
+    check_pixels(height, width, "a frame", max_pixels)
+    dtype = DTYPES.get(dtype.rstrip(b"\0").decode("ascii", "replace"))
+    if dtype is None:
+        raise ValueError(f"frame dtype must be one of {sorted(DTYPES)}")
+    return height, width, dtype, HEADER.size + height * width * 3 * dtype.itemsize
+
+
+def unpack_frame(body: bytes, max_pixels: int = MAX_PIXELS) -> np.ndarray:
+    """The ``(height, width, 3)`` array of a frame-format body; ``ValueError`` naming what is wrong."""
+    height, width, dtype, expected = frame_header(body[: HEADER.size], max_pixels)
+    if len(body) != expected:
+        raise ValueError(f"a {height}x{width} {dtype} frame is {expected} bytes, got {len(body)}")
+    return np.frombuffer(body, dtype, offset=HEADER.size).reshape(height, width, 3)
+
+
+def decode_image(body: bytes, fmt, max_pixels: int) -> np.ndarray:
+    """A PNG or OpenEXR file's bytes as the ``(height, width, 3)`` frame a model of format ``fmt`` takes; its size
+    checked from its header against ``max_pixels`` before a pixel is decoded."""
+    if body.startswith(b"\x89PNG\r\n\x1a\n"):
+        from PIL import Image
+
+        with Image.open(io.BytesIO(body)) as png:
+            check_pixels(png.height, png.width, "an image", max_pixels)
+            if png.mode not in ("RGB", "RGBA"):
+                raise ValueError(f"PNG must be 8-bit RGB or RGBA, got mode {png.mode}")
+            codes = np.array(png.convert("RGB"))  # a copy: writable, as torch wants it
+        linear = tg.color.srgb_to_linear(torch.from_numpy(codes).permute(2, 0, 1) / 255.0)
+    elif body.startswith(b"\x76\x2f\x31\x01"):
+        with tempfile.NamedTemporaryFile(suffix=".exr") as file:  # the EXR reader reads files, its budget from the header
+            file.write(body)
+            file.flush()
+            linear = tg.io.read_exr(file.name, to_rec709=True, max_pixels=max_pixels)[:3]
+    else:
+        raise ValueError("an image is a PNG or an OpenEXR file")
+    return tg.onnx.model_input(linear[None], fmt._replace(layout="NHWC"))[0].numpy()
