@@ -115,18 +115,28 @@ def main(argv=None) -> None:
     for name in args.cases:
         with tempfile.TemporaryDirectory() as folder:
             report[name] = run_case(name, Path(folder))
+    write_results(args.out, "compile", report, render(report), COMMAND)
+
+
+def render(report: dict) -> list:
+    """The results table: first calls by cache, the median eager and compiled call over the three processes, and the
+    calls the cold compile takes to repay at those medians."""
     lines = ["# What tg.compile costs and saves (CPU)", "",
-             f"`{COMMAND}`: fresh processes, 2 threads. First call: the compile (and the call); then median seconds "
-             "of the eager and the compiled call; calls to repay: first call / (eager - compiled).", "",
+             f"`{COMMAND}`: fresh processes, 2 threads. First call: the compile (and the call), with an empty Inductor "
+             "cache (cold), the cold run's cache (warm), or an empty one and the cold run's saved cache artifacts; "
+             "then the median of the eager and the compiled call over the three processes; calls to repay: the cold "
+             "first call over what a compiled call saves.", "",
              "| case | cold first call | warm first call | from artifacts | eager ms | compiled ms | calls to repay (cold) |",
              "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for name, runs in report.items():
-        cold = runs["cold"]
-        repaid = cold["repaid_after_calls"] if cold["repaid_after_calls"] is not None else "never (not faster)"
-        lines.append(f"| {name} | {cold['first_call_s']:.1f} s | {runs['warm']['first_call_s']:.1f} s | "
-                     f"{runs['artifacts']['first_call_s']:.1f} s | {1e3 * statistics.median(r['eager_s'] for r in runs.values()):.1f} | "
-                     f"{1e3 * statistics.median(r['compiled_s'] for r in runs.values()):.1f} | {repaid} |")
-    write_results(args.out, "compile", report, lines, COMMAND)
+        eager, compiled = (statistics.median(run[key] for run in runs.values()) for key in ("eager_s", "compiled_s"))
+        saving = eager - compiled
+        repaid = f"{round(runs['cold']['first_call_s'] / saving):,}" if saving > 0 else "never (not faster)"
+        lines.append(f"| {name} | {runs['cold']['first_call_s']:.1f} s | {runs['warm']['first_call_s']:.1f} s | "
+                     f"{runs['artifacts']['first_call_s']:.1f} s | {1e3 * eager:.1f} | {1e3 * compiled:.1f} | {repaid} |")
+    return lines
+
+
 
 
 if __name__ == "__main__":

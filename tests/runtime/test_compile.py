@@ -296,6 +296,18 @@ def test_warm_up_compiles_before_the_first_frame(monkeypatch):
     assert counter.frame_count == 1 and image.grad.isfinite().all()
 
 
+@pytest.mark.parametrize("gradients", [False, True])
+def test_warm_up_for_inference_compiles_for_the_callers_gradient_mode(monkeypatch, gradients):
+    """Dynamo guards on the gradient mode: a warm-up in another mode than the frames' would compile twice."""
+    counter = torch._dynamo.testing.CompileCounter()
+    _captured_only(monkeypatch, counter)
+    compiled = tg.compile(tg.ToneMap("aces"))
+    with torch.set_grad_enabled(gradients):
+        compiled.warm_up(hdr((2, 3, 8, 8)))
+        compiled(hdr((5, 3, 8, 8)))
+    assert counter.frame_count == 1
+
+
 def test_a_saved_compile_cache_loads_in_another_process(tmp_path):
     """``tg.io.save_compile_cache`` after a compile, ``tg.io.load_compile_cache`` in a fresh process with an empty
     Inductor cache: PyTorch takes the file, and the compiled stage gives the eager pixels."""

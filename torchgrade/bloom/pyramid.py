@@ -29,7 +29,7 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
-from ..runtime import device_cached, is_tracing, policy_for
+from ..runtime import device_cached, is_exporting, is_tracing, policy_for
 
 __all__ = [
     "UNITY_BLUR_WEIGHTS", "BLUR_TAPS", "BLUR_SIGMA", "ANAMORPHIC_TAPS", "SMOOTHING", "BSPLINE_AFTER_BILINEAR",
@@ -112,6 +112,12 @@ def _levels_on(height: int, width: int, max_iterations: int, downscale_limit: in
     return torch.tensor(pyramid_depth(height, width, max_iterations, downscale_limit), device=device)
 
 
+def _sizes_unknown() -> bool:
+    """Whether sizes are symbolic to Python: while a graph is traced for ONNX (``torch.jit`` or an export), every size
+    takes the general forms. A compiler's sizes are ints or guarded symbols: it takes the even sides' fast forms too."""
+    return torch.jit.is_tracing() or is_exporting()
+
+
 def _doubles(small, large) -> bool:
     """Whether every side of ``large`` is exactly twice that of ``small``: the case bilinear resampling by 2 is."""
     return all(2 * s == l for s, l in zip(small, large))
@@ -122,9 +128,9 @@ def halve(light: torch.Tensor) -> torch.Tensor:
 
     Pixel ``i`` of ``m = ceil(n / 2)`` is ``(m / n) (a_i x_{2i-1} + x_{2i} + b_i x_{2i+1})`` with ``a_i = i d / m``,
     ``b_i = 1 - (i + 1) d / m`` and ``d = 2 m - n`` (1 at an odd side, where the ``m`` pixels share the ``n``; 0 at an
-    even one, the 2x2 mean). Eager frames with even sides take the mean of four strided views (on the CPU about 3
-    times faster than ``F.avg_pool2d``), or ``F.avg_pool2d`` where the device's policy takes library kernels; other
-    sides go a side at a time (:func:`_along_sides`).
+    even one, the 2x2 mean). Even sides (unless traced for ONNX, where sizes are symbolic) take the mean of four
+    strided views (on the CPU about 3 times faster than ``F.avg_pool2d``), or ``F.avg_pool2d`` where the device's
+    policy takes library kernels; other sides go a side at a time (:func:`_along_sides`).
 
     Examples:
         >>> halve(torch.tensor([[[[1.0, 2.0, 3.0, 4.0]]]]))
@@ -132,7 +138,7 @@ def halve(light: torch.Tensor) -> torch.Tensor:
         >>> halve(torch.tensor([[[[3.0, 0.0, 3.0]]]]))  # each half takes 1.5 pixels: (3 + 0.5 * 0) / 1.5
         tensor([[[[2., 2.]]]])
     """
-    if not is_tracing() and light.shape[-2] % 2 == 0 and light.shape[-1] % 2 == 0:
+    if not _sizes_unknown() and light.shape[-2] % 2 == 0 and light.shape[-1] % 2 == 0:
         if policy_for(light.device).filters_as_kernels:
             return F.avg_pool2d(light, 2)
         return 0.25 * (light[..., ::2, ::2] + light[..., 1::2, ::2] + light[..., ::2, 1::2] + light[..., 1::2, 1::2])
@@ -179,7 +185,7 @@ def expand(values: torch.Tensor, size) -> torch.Tensor:
         >>> expand(torch.tensor([[[[1.0, 2.0]]]]), (1, 3))  # the middle pixel lies half in each
         tensor([[[[1.0000, 1.5000, 2.0000]]]])
     """
-    if not is_tracing() and _doubles(values.shape[-2:], size):
+    if not _sizes_unknown() and _doubles(values.shape[-2:], size):
         return F.interpolate(values, scale_factor=2.0, mode="nearest")
     return _along_sides(values, _expand_along, ((size[0],), (size[1],)))
 
@@ -258,11 +264,11 @@ def mirror_pad(light: torch.Tensor, radius) -> torch.Tensor:
 
 
 def _mirrored(light: torch.Tensor, axis: int, radius: int) -> torch.Tensor:
-    """``light`` extended by ``radius`` pixels at both ends of ``axis`` (:func:`mirror_pad`): eager, where the side is
-    at least ``radius``, its edge slices flipped and joined (a gather along the last axis is several times slower on
-    the CPU); otherwise a gather of :func:`_mirror_index`."""
+    """``light`` extended by ``radius`` pixels at both ends of ``axis`` (:func:`mirror_pad`): where the side is at least
+    ``radius`` (and sizes are not symbolic), its edge slices flipped and joined (a gather along the last axis is several
+    times slower on the CPU); otherwise a gather of :func:`_mirror_index`."""
     side = light.shape[axis]
-    if is_tracing() or side < radius:
+    if _sizes_unknown() or side < radius:
         return light.index_select(axis, _mirror_index(side, radius, light.device))
     if radius == 0:
         return light
@@ -379,7 +385,8 @@ def upsample(light: torch.Tensor, sizes, bicubic: bool) -> torch.Tensor:
     uniform frame uniform and the light: :func:`expand` to each size, then :data:`SMOOTHING` (bilinear) and, with
     ``bicubic``, :data:`BSPLINE_AFTER_BILINEAR` (cubic B-spline), over the mirrored frame, a side at a time.
 
-    Where every size is exactly twice the one before (eager), the same maths as one bilinear ``F.interpolate``.
+    Where every size is exactly twice the one before (unless traced for ONNX), the same maths as one bilinear
+    ``F.interpolate``.
 
     Examples:
         >>> upsample(torch.tensor([[[[4.0, 2.0]]]]), [(2, 4)], bicubic=False)
@@ -390,7 +397,7 @@ def upsample(light: torch.Tensor, sizes, bicubic: bool) -> torch.Tensor:
         (torch.Size([1, 1, 9, 17]), True)
     """
     factor = 2 ** len(sizes)
-    if not is_tracing() and all(_doubles(small, large) for small, large in zip([light.shape[-2:], *sizes], sizes)):
+    if not _sizes_unknown() and all(_doubles(small, large) for small, large in zip([light.shape[-2:], *sizes], sizes)):
         # channels folded into the batch: PyTorch's CPU kernel is about 3 times faster on one channel
         fine = F.interpolate(light.reshape((-1, 1) + light.shape[-2:]), scale_factor=float(factor), mode="bilinear", align_corners=False)
         fine = fine.reshape(light.shape[:-2] + fine.shape[-2:])

@@ -189,7 +189,10 @@ def histogram_band_average(stops: torch.Tensor, weights: Optional[torch.Tensor],
     """
     batch = stops.shape[0]
     low, high, low_percent, high_percent = (_per_row(v) for v in (low, high, low_percent, high_percent))
-    values = stops.reshape(batch, -1).clamp(min=low).clamp(max=high)  # apart: one may be a tensor, the other a number
+    values = stops.reshape(batch, -1)
+    # torch.clamp takes two numbers or two tensors: a tensor limit with a number beside it takes two passes
+    same = isinstance(low, torch.Tensor) == isinstance(high, torch.Tensor)
+    values = values.clamp(low, high) if same else values.clamp(min=low).clamp(max=high)
     # values - low >= 0, so the cast's truncation is the floor
     bins = ((values - low) * (HISTOGRAM_BINS / (high - low))).clamp_max_(HISTOGRAM_BINS - 1).long()
     weight = constant(1.0, values).expand_as(values) if weights is None else weights.reshape(1, -1).expand(batch, -1)

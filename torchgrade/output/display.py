@@ -12,7 +12,7 @@ from __future__ import annotations
 import torch
 
 from .. import color
-from ..base.core import Param, check_image, check_range, scalar_param
+from ..base.core import Param, check_image, is_plain_number, scalar_param
 from ..tonemap import HDR_MODES
 
 __all__ = ["encode_display", "display_settings", "DISPLAY_ENCODINGS", "DISPLAY_PRIMARIES", "DISPLAY_PRESETS",
@@ -100,8 +100,10 @@ def encode_display(image: torch.Tensor, encoding: str = "srgb", primaries: str =
         0.4614
     """
     check_image(image)
-    if encoding == "hlg":
-        check_range(peak_luminance, "an HLG display's peak_luminance", *HLG_PEAK_RANGE)
+    if encoding == "hlg" and is_plain_number(peak_luminance) and not HLG_PEAK_RANGE[0] <= peak_luminance <= HLG_PEAK_RANGE[1]:
+        # a number compared in Python (no tensor a frame); a tensor is checked by the stage, and held in range
+        raise ValueError(f"an HLG display's peak_luminance must lie in [{HLG_PEAK_RANGE[0]}, {HLG_PEAK_RANGE[1]}], "
+                         f"got {peak_luminance}")
     if primaries != input_primaries:
         image = color.convert(image, f"{input_primaries}_to_{primaries}")
     linear = image.clamp(0.0, 1.0)

@@ -197,7 +197,9 @@ class CompiledModule(nn.Module):
 
     def warm_up(self, example: torch.Tensor, *args, training: bool = False, **kwargs) -> float:
         """Compile for frames like ``example`` now (one call, and its backward with ``training``), not at the first
-        frame of a run: the seconds it took. Later frames of other batch sizes run the same graph.
+        frame of a run: the seconds it took. Later frames of other batch sizes run the same graph. Without ``training``
+        the call keeps the caller's gradient mode, which the graph is compiled for: warm up inside ``torch.no_grad()``
+        what will run inside it.
 
         Examples:
             >>> import torch
@@ -205,7 +207,7 @@ class CompiledModule(nn.Module):
             >>> seconds = tg.compile(tg.ToneMap("reinhard")).warm_up(torch.rand(2, 3, 8, 8))  # doctest: +SKIP
         """
         started = time.perf_counter()
-        with torch.set_grad_enabled(training):
+        with torch.set_grad_enabled(training or torch.is_grad_enabled()):
             example = example.detach().requires_grad_(training)
             out = self(example, *args, **kwargs)
             if training:
