@@ -5,8 +5,9 @@ Four families, each a function ``verdicts(count, seed) -> Counter``:
 * ``exr``: sample EXRs (small ones) with bytes of their headers and chunk tables changed, inserted or cut, read
   by :func:`torchgrade.io.read_exr` in a child process (a crash or a hang there is a verdict, not the end of the
   run);
-* ``cube``: a valid ``.cube`` with a random cut, insertion, token swap or truncation, read by
-  :func:`torchgrade.io.read_cube`, and an accepted LUT looked up on extreme pixels;
+* ``cube``: a small valid ``.cube`` (a 17-entry shaper and a 3³ table) with a random cut, insertion, truncation
+  or one number swapped for an extreme one, read by :func:`torchgrade.io.read_cube`, and an accepted LUT looked
+  up on extreme pixels;
 * ``clf``: a LUT written by :func:`torchgrade.io.write_clf` with a random title and entries, parsed as XML;
 * ``config``: ``export/looks/cinematic.json`` with a value replaced, removed or added at a random place, built by
   :meth:`torchgrade.PostFX.from_config` and run on extreme pixels.
@@ -27,6 +28,7 @@ from __future__ import annotations
 import collections
 import json
 import random
+import re
 import subprocess
 import sys
 import tempfile
@@ -110,16 +112,29 @@ _CUBE_TOKENS = (b"LUT_3D_SIZE", b"LUT_1D_SIZE", b"DOMAIN_MIN", b"DOMAIN_MAX", b"
                 b"3.4e38", b"-3e38", b"\x00", b"\n", b"\r", b"x", b"\xef\xbb\xbf", b"\xc3\xa9", b"9" * 30)
 
 
+_CUBE_NUMBERS = (b"0", b"-0", b"1e-45", b"0.18", b"-1", b"60", b"65504", b"1e6", b"1.5e6", b"2.5e9", b"1e30", b"3.4e38",
+                 b"-3.4e38", b"1e39", b"nan", b"-inf", b"3", b"65", b"1e-9")
+
+
+def number_swapped(rng: random.Random, valid: bytes, numbers) -> bytes:
+    """``valid`` with one of its whitespace-separated fields (a number, mostly) replaced by one of ``numbers``."""
+    pieces = re.split(rb"(\s+)", valid)  # fields at even places, the spaces between them at odd ones
+    pieces[2 * rng.randrange((len(pieces) + 1) // 2)] = rng.choice(numbers)
+    return b"".join(pieces)
+
+
 def cube_verdicts(count: int, seed: int = 0) -> collections.Counter:
     """Verdicts on ``count`` mutated ``.cube`` files; an accepted LUT must look up extreme pixels to finite values."""
     rng = random.Random(seed)
     verdicts = collections.Counter()
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "valid.cube"
-        tg.io.write_cube(path, tg.bake_lut(lambda x: x * 0.5, size=3, shaper="logc", report_tolerance=float("inf")))
+        lut = tg.bake_lut(lambda x: x * 0.5, size=3, shaper="logc", report_tolerance=float("inf"))
+        tg.io.write_cube(path, lut, shaper_size=17)
         valid = path.read_bytes()
         for _ in range(count):
-            path.write_bytes(mutated(rng, valid, _CUBE_TOKENS, len(valid)))
+            swap = rng.random() < 0.5
+            path.write_bytes(number_swapped(rng, valid, _CUBE_NUMBERS) if swap else mutated(rng, valid, _CUBE_TOKENS, len(valid)))
             verdicts[_verdict(lambda: _finite(tg.io.read_cube(path)(EXTREME_PIXELS, rng.choice(tg.lut.INTERPOLATIONS))))] += 1
     return verdicts
 

@@ -309,11 +309,15 @@ def test_ranges_a_float32_lookup_cannot_divide_by_are_refused_at_read(tmp_path, 
 
 
 def test_extreme_shaper_entries_give_finite_lookups_or_are_refused(tmp_path):
-    """Shaper entries are lattice coordinates: a finite one clamps to the lattice's edge, unless two are
-    so far apart that interpolating between them overflows float32 (-3e38 to 3e38), which is refused."""
+    """Shaper entries are lattice coordinates: one within ±1e6 (MAX_CODE) clamps to the lattice's edge, one beyond
+    is refused, and entries so far apart that interpolating between them overflows float32 are refused as they
+    are read."""
     path = tmp_path / "shaper.cube"
-    path.write_text("LUT_1D_SIZE 3\nLUT_3D_SIZE 2\n-1e38 -1e38 -1e38\n0 0 0\n2e38 2e38 2e38\n" + _table_rows(2))
+    path.write_text("LUT_1D_SIZE 3\nLUT_3D_SIZE 2\n-1e6 -1e6 -1e6\n0 0 0\n1e6 1e6 1e6\n" + _table_rows(2))
     assert torch.isfinite(read_cube(path)(torch.rand(1, 3, 4, 4) * 2 - 0.5)).all()
+    path.write_text("LUT_1D_SIZE 3\nLUT_3D_SIZE 2\n-1e38 -1e38 -1e38\n0 0 0\n2e38 2e38 2e38\n" + _table_rows(2))
+    with pytest.raises(ValueError, match=r"shaper curve entries must be finite and within ±1e\+06"):
+        read_cube(path)
     path.write_text("LUT_1D_SIZE 3\nLUT_3D_SIZE 2\n-3e38 -3e38 -3e38\n0 0 0\n3e38 3e38 3e38\n" + _table_rows(2))
     with pytest.raises(ValueError, match="line 5: .*span"):
         read_cube(path)
