@@ -103,7 +103,7 @@ def test_known_look_is_matched_and_its_controls_recovered(exr_dir):
                  lift=(0.9, 1.0, 0.95, 0.03), gamma=(1.0, 1.0, 1.0, -0.1), gain=(1.0, 0.95, 0.9, 0.1),
                  split_shadows=(0.4, 0.5, 0.6), split_highlights=(0.6, 0.5, 0.4))
     target = tg.PostFX(grade=truth, tonemap="aces")(source[None])[0]
-    result = tg.match_look(source, target, controls=tuple(truth), tonemaps="aces", steps=30, lbfgs_steps=300,
+    result = tg.match_look(source, target, controls=tuple(truth), tonemaps="aces", steps=30, lm_steps=300,
                            max_pixels=2048, progress=False)
     assert result.errors["controls"]["p99.9"] <= 0.5, result.errors
     fitted = result.look.to_config()["grade"]
@@ -114,6 +114,20 @@ def test_known_look_is_matched_and_its_controls_recovered(exr_dir):
     assert fitted["hue_shift"] == pytest.approx(10.0, abs=0.5)
     assert fitted["temperature"] == pytest.approx(15.0, abs=5.0)
     assert result.history[-1] < result.history[0] / 100
+
+
+def test_a_known_look_fitted_with_every_default_is_within_half_a_code_on_held_out_pixels(exr_dir):
+    # the colourist's check: fit the left half of a photograph, look at the right half. Every control and tone
+    # mapper a default fit tries; before the Levenberg-Marquardt refinement L-BFGS stopped 0.66 codes p99.9 away
+    # here (1.53 at twice the resolution), crawling along controls that do nearly the same thing
+    source = scene(exr_dir, "CandleGlass.exr", step=8)
+    half = source.shape[-1] // 2
+    target = tg.PostFX(grade=dict(contrast=25.0, saturation=-15.0, temperature=18.0, hue_shift=8.0), tonemap="aces")(source[None])[0]
+    result = tg.match_look(source[..., :half], target[..., :half], progress=False)
+    held_out = result.look(source[None, ..., half:])[0].detach()
+    errors = match_errors(target[..., half:].reshape(3, -1), held_out.reshape(3, -1))
+    assert errors["p99.9"] <= 0.5, errors
+    assert result.look.to_config()["tonemap"] == {"mode": "aces"}
 
 
 KNOWN_LOOKS = {
@@ -136,7 +150,7 @@ def test_each_known_look_is_matched_and_its_controls_recovered(exr_dir, name):
     source = scene(exr_dir)
     target = tg.PostFX(grade=grade, tonemap=tonemap)(source[None])[0]
     mode = tonemap if isinstance(tonemap, str) else tonemap["mode"]
-    result = tg.match_look(source, target, controls=tuple(grade), tonemaps=mode, steps=30, lbfgs_steps=200,
+    result = tg.match_look(source, target, controls=tuple(grade), tonemaps=mode, steps=30, lm_steps=200,
                            max_pixels=2048, progress=False)
     assert result.errors["controls"]["p99.9"] <= 0.5, result.errors
     config = result.look.to_config()
@@ -154,7 +168,7 @@ def test_tone_mapper_is_chosen_and_identifiable_controls_recovered_closely(exr_d
     truth = dict(post_exposure=0.5, temperature=-20.0, contrast=15.0, saturation=25.0)
     target = tg.PostFX(grade=truth, tonemap="agx")(source[None])[0]
     result = tg.match_look(source, target, controls=tuple(truth), tonemaps=("neutral", "agx", "aces"), screen_steps=40,
-                           steps=20, lbfgs_steps=60, max_pixels=1024, progress=False)
+                           steps=20, lm_steps=60, max_pixels=1024, progress=False)
     assert result.look.to_config()["tonemap"] == {"mode": "agx"}
     assert min(result.candidates, key=result.candidates.get) == "agx"
     fitted = result.look.to_config()["grade"]
@@ -191,16 +205,20 @@ def test_progress_bars_and_loss_history_by_phase(monkeypatch):
     source = torch.rand(3, 24, 24, dtype=torch.float64, generator=torch.Generator().manual_seed(4)) * 4
     target = tg.PostFX(grade={"contrast": 20}, tonemap="neutral")(source[None])[0]
     result = tg.match_look(source, target, controls=("contrast",), tonemaps=("neutral", "aces"), screen_steps=5, steps=7,
-                           lbfgs_steps=4, residual=True, residual_size=5, residual_steps=6)
-    assert [(bar.desc, bar.total, bar.done, bar.disable) for bar in RecordedBar.bars] == [
-        ("screen neutral", 5, 5, None), ("screen aces", 5, 5, None), ("match neutral", 11, 11, None), ("residual 5³", 6, 6, None)]
-    assert all(float(bar.postfix) > 0 for bar in RecordedBar.bars)  # the latest loss is shown
+                           lm_steps=4, residual=True, residual_size=5, residual_steps=6)
+    bars = [(bar.desc, bar.total, bar.disable) for bar in RecordedBar.bars]
+    assert bars == [("screen neutral", 5, None), ("screen aces", 5, None), ("match neutral", 7, None),
+                    ("refine neutral", 4, None), ("residual 5³", 6, None)]
+    assert [bar.done for bar in RecordedBar.bars[:3] + RecordedBar.bars[4:]] == [5, 5, 7, 6]
+    assert 1 <= RecordedBar.bars[3].done <= 4  # Levenberg-Marquardt stops once the controls no longer move
+    assert all(float(bar.postfix) >= 0 for bar in RecordedBar.bars)  # the latest loss is shown
     phases = dict(result.phases)
-    assert list(phases) == ["screening", "Adam", "L-BFGS", "residual Adam", "residual L-BFGS"]
+    assert list(phases) == ["screening", "Adam", "Levenberg-Marquardt", "residual Adam", "residual L-BFGS"]
     assert phases["screening"] == 5 and phases["Adam"] == 7 and phases["residual Adam"] == 3
+    assert phases["Levenberg-Marquardt"] == RecordedBar.bars[3].done + 1  # the loss where it starts, then each trial
     assert sum(phases.values()) == len(result.history) and result.candidates["neutral"] == result.history[4]
     RecordedBar.bars = []
-    tg.match_look(source, target, controls=("contrast",), tonemaps="neutral", steps=2, lbfgs_steps=0, progress=False)
+    tg.match_look(source, target, controls=("contrast",), tonemaps="neutral", steps=2, lm_steps=0, progress=False)
     assert [bar.disable for bar in RecordedBar.bars] == [True]
 
 
@@ -212,7 +230,7 @@ def test_scene_referred_target_from_two_pairs_with_masks(exr_dir, device):
     half = source.shape[2] // 2
     sources, targets = [source[..., :half], source[..., half:]], [target[..., :half], target[..., half:]]
     result = tg.match_look(sources, targets, stages=("grade",), mask=[mask[:, :half], mask[:, half:]],
-                           controls=("contrast", "saturation"), steps=20, lbfgs_steps=60, max_pixels=1024, progress=False)
+                           controls=("contrast", "saturation"), steps=20, lm_steps=60, max_pixels=1024, progress=False)
     assert result.look.to_config() == {"grade": {"contrast": pytest.approx(-20.0, abs=0.01), "saturation": pytest.approx(30.0, abs=0.01)}}
     assert result.errors["controls"]["p99.9"] <= 0.1
 
@@ -221,7 +239,7 @@ def test_opencolorio_look_is_matched_by_controls_and_a_residual_lut(exr_dir, tmp
     source = scene(exr_dir, step=8)
     target = ocio_look(source)
     result = tg.match_look(source, target, controls=("post_exposure", "color_filter", "contrast", "saturation"),
-                           tonemaps="aces_reference", steps=0, lbfgs_steps=60, max_pixels=2048, residual=True,
+                           tonemaps="aces_reference", steps=0, lm_steps=60, max_pixels=2048, residual=True,
                            residual_steps=100, progress=False)
     assert result.errors["residual"]["p99.9"] <= 1.0, result.errors
     assert result.errors["residual"]["p99.9"] < result.errors["controls"]["p99.9"]
@@ -270,7 +288,7 @@ def test_cli_match_writes_a_readable_look_and_a_cube(tmp_path, capsys):
     tg.cli.common.write_png(tmp_path / "after.png", target)
     status = main(["match", str(tmp_path / "before.exr"), str(tmp_path / "after.png"), "-o", str(tmp_path / "look.json"),
                    "--cube", str(tmp_path / "look.cube"), "--cube-size", "9", "--tonemap", "neutral", "--tonemap", "aces",
-                   "--controls", "contrast,saturation", "--residual", "--steps", "20", "--lbfgs-steps", "30"])
+                   "--controls", "contrast,saturation", "--residual", "--steps", "20", "--lm-steps", "30"])
     assert status == 0
     config = json.loads((tmp_path / "look.json").read_text())
     assert config["tonemap"] == {"mode": "neutral"} and config["grade"]["contrast"] == pytest.approx(20.0, abs=2.0)

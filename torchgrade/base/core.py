@@ -28,7 +28,7 @@ import torch
 
 from ..runtime.constants import constant, is_plain_number, where
 from ..runtime.policy import policy_for
-from ..runtime.recording import is_exporting, is_tracing, untracked
+from ..runtime.recording import is_differentiated, is_exporting, is_tracing, untracked
 from ..runtime.strips import named_as
 
 Param = Union[float, int, torch.Tensor]
@@ -561,14 +561,15 @@ def readable(value) -> bool:
 def is_constant(value, constant) -> bool:
     """True when ``value`` is a plain (non-learnable) value equal to ``constant`` everywhere.
 
-    Learnable parameters (``requires_grad``) are never constant: they may move during training; nor are
-    tensors while ``torch.compile`` traces, nor tensors off the CPU (reading one back would wait for the device).
+    Learnable parameters (``requires_grad``) are never constant: they may move during training; nor are tensors
+    differentiated another way (:func:`~torchgrade.runtime.recording.is_differentiated`), tensors while ``torch.compile`` traces, or tensors off the
+    CPU (reading one back would wait for the device).
 
     Examples:
         >>> is_constant((0.5, 0.5, 0.5), 0.5), is_constant(torch.nn.Parameter(torch.tensor(0.5)), 0.5)
         (True, False)
     """
-    if isinstance(value, torch.Tensor) and value.requires_grad:
+    if isinstance(value, torch.Tensor) and (value.requires_grad or is_differentiated(value)):
         return False
     if isinstance(value, (numbers.Real, list, tuple)):
         # Plain values are compared in Python: a tensor made here would be traced while compiling (reading its

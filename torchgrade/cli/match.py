@@ -103,7 +103,7 @@ def run_match(args: argparse.Namespace) -> str:
     stages = ("grade",) if args.scene_referred else ("grade", "tonemap")
     start = time.perf_counter()
     result = match_look(source, target, stages, controls=args.controls, tonemaps=args.tonemap, steps=args.steps,
-                        lbfgs_steps=args.lbfgs_steps, residual=args.residual, max_pixels=args.max_pixels)
+                        lm_steps=args.lm_steps, residual=args.residual, max_pixels=args.max_pixels)
     elapsed = time.perf_counter() - start
     config = result.look.to_config()
     text = json.dumps(config, indent=2) + "\n"
@@ -128,7 +128,7 @@ def add_match(commands) -> None:
         >>> parser = argparse.ArgumentParser()
         >>> add_match(parser.add_subparsers())
         >>> args = parser.parse_args(["match", "before.exr", "after.png", "-o", "look.json", "--tonemap", "agx"])
-        >>> args.tonemap, args.steps, args.lbfgs_steps, len(args.controls)
+        >>> args.tonemap, args.steps, args.lm_steps, len(args.controls)
         (['agx'], 200, 100, 12)
     """
     match = commands.add_parser("match", help="learn a look's controls (and a residual LUT) from a before/after pair")
@@ -144,6 +144,6 @@ def add_match(commands) -> None:
     match.add_argument("--residual", action="store_true", help="fit a 17³ residual LUT on top of the controls")
     match.add_argument("--scene-referred", action="store_true", help="the target is a graded EXR without tone mapping")
     match.add_argument("--steps", type=int, default=200, help="Adam steps (default 200)")
-    match.add_argument("--lbfgs-steps", type=int, default=100, help="L-BFGS iterations after Adam (default 100)")
+    match.add_argument("--lm-steps", type=int, default=100, help="Levenberg-Marquardt trials after Adam (default 100)")
     match.add_argument("--max-pixels", type=int, default=8192, help="pixels the controls are fitted on (default 8192)")
     match.set_defaults(run=run_match)

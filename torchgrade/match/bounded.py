@@ -2,7 +2,7 @@
 
 Each fitted control is stored as an unconstrained tensor ``raw`` and read as
 ``low + (high - low) * sigmoid(raw)``, with ``low, high`` taken from the stage's control table, so
-every step of Adam or L-BFGS lands inside the range the stage promises to handle. Ranges spanning
+every step of an optimiser lands inside the range the stage promises to handle. Ranges spanning
 more than three decades above zero (a tone mapper's white point, 0.001..10000) are mapped in log
 space instead, so the optimiser moves them by ratios rather than by steps of thousands.
 

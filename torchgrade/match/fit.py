@@ -31,8 +31,9 @@ from .metrics import display_codes, match_errors
 from .pixels import PixelPairs
 from .residual import ResidualLUT, lookup_matrix, monotonicity, smoothness
 
-__all__ = ["GRADE_CONTROLS", "TONEMAP_CANDIDATES", "TRACKBALLS", "canonical_trackball", "MatchedControls", "optimise", "every_loss",
-           "pixel_loss", "ControlsFit", "fit_controls", "fit_residual", "evaluate"]
+__all__ = ["GRADE_CONTROLS", "TONEMAP_CANDIDATES", "TRACKBALLS", "canonical_trackball", "MatchedControls", "optimise",
+           "levenberg_marquardt", "every_loss", "pixel_residuals", "ControlsFit", "fit_controls",
+           "fit_residual", "evaluate"]
 
 GRADE_CONTROLS = ("post_exposure", "temperature", "tint", "contrast", "split_shadows", "split_highlights",
                   "split_balance", "lift", "gamma", "gain", "hue_shift", "saturation")
@@ -94,7 +95,8 @@ def optimise(module: nn.Module, loss_fn, steps: int, lbfgs_steps: int, lr: float
     """Adam for ``steps``, then up to ``lbfgs_steps`` L-BFGS iterations (strong Wolfe line search).
 
     Returns the loss at every evaluation, in order, by optimiser: ``{"Adam": [one per step], "L-BFGS": [...]}``
-    (L-BFGS evaluates a few times per iteration); a module with nothing to fit gives ``{"fixed": [its loss]}``.
+    (L-BFGS evaluates a few times per iteration; no ``"L-BFGS"`` without iterations); a module with nothing to fit
+    gives ``{"fixed": [its loss]}``.
     ``progress`` shows a tqdm bar (on stderr, when it is a terminal) with the latest loss.
     """
     parameters = [p for p in module.parameters() if p.requires_grad]
@@ -122,7 +124,81 @@ def optimise(module: nn.Module, loss_fn, steps: int, lbfgs_steps: int, lr: float
                                           tolerance_grad=1e-12, tolerance_change=1e-14, line_search_fn="strong_wolfe")
             optimiser.step(closure)
             bar.update(lbfgs_steps)
-    return {"Adam": history[:steps], "L-BFGS": history[steps:]}
+    return {"Adam": history[:steps], **({"L-BFGS": history[steps:]} if lbfgs_steps else {})}
+
+
+def levenberg_marquardt(module: nn.Module, residuals, iterations: int, progress: bool, desc: str) -> list:
+    """Up to ``iterations`` Levenberg-Marquardt trials on ``module``'s trainable parameters, minimising the mean of
+    ``residuals(parameters)²`` (``parameters``: ``{name: tensor}`` for :func:`torch.func.functional_call`); the loss
+    at every evaluation.
+
+    Each trial solves ``(JᵀJ + μ D) h = -Jᵀr`` with the residuals' Jacobian ``J`` (forward-mode, one pass per
+    parameter: :func:`torch.func.jacfwd`) and ``D`` the largest diagonal of ``JᵀJ`` met so far (Moré's scaling, so a
+    control that stops mattering, as split balance does when both split-toning colours turn grey, keeps its damping);
+    a step that lowers the loss is taken and ``μ`` shrinks by ``max(1/3, 1 - (2ρ - 1)³)``, ``ρ`` the actual over the
+    predicted decrease, otherwise ``μ`` grows by ``ν`` (2, doubling while refused): Madsen, Nielsen & Tingleff,
+    *Methods for non-linear least squares problems* (2004), §3.2; Moré, *The Levenberg-Marquardt algorithm:
+    implementation and theory* (1978). It stops when a taken step lowers the loss by less than 1e-12 of it, or a step
+    would move the parameters by less than 1e-12 of their norm.
+    On a target the controls can reach exactly, the steps become Gauss-Newton's and converge quadratically, where
+    first-order methods crawl along the directions in which controls say nearly the same.
+
+    Examples:
+        >>> import torch
+        >>> line = torch.nn.Linear(1, 1, dtype=torch.float64)
+        >>> x = torch.tensor([[0.0], [1.0], [2.0]], dtype=torch.float64)
+        >>> losses = levenberg_marquardt(line, lambda p: torch.func.functional_call(line, p, (x,)).flatten()
+        ...                              - torch.tensor([1.0, 3.0, 5.0], dtype=torch.float64), 10, False, "line")
+        >>> round(line.weight.item(), 6), round(line.bias.item(), 6), losses[-1] < 1e-20
+        (2.0, 1.0, True)
+    """
+    names = [name for name, parameter in module.named_parameters() if parameter.requires_grad]
+    parameters = [module.get_parameter(name) for name in names]
+    sizes = [parameter.numel() for parameter in parameters]
+
+    def residuals_at(theta: torch.Tensor) -> torch.Tensor:
+        pieces = theta.split(sizes)
+        return residuals({name: piece.view_as(p) for name, piece, p in zip(names, pieces, parameters)})
+
+    with torch.no_grad():
+        theta = torch.cat([parameter.detach().flatten() for parameter in parameters])
+        r = residuals_at(theta)
+    loss = float(r.square().mean())
+    history = [loss]
+    damping, growth, jacobian_due, scale = 1e-3, 2.0, True, None
+    with tqdm(total=iterations, desc=desc, disable=None if progress else True, leave=False) as bar:
+        for _ in range(iterations):
+            if jacobian_due:
+                jacobian = torch.func.jacfwd(residuals_at)(theta)
+                gradient, curvature = jacobian.T @ r, jacobian.T @ jacobian
+                diagonal = curvature.diagonal()
+                scale = diagonal if scale is None else torch.maximum(scale, diagonal)
+                scale = scale.clamp_min(1e-12 * float(scale.max()) + 1e-300)
+                jacobian_due = False
+            with torch.no_grad():
+                step = torch.linalg.solve(curvature + torch.diag(damping * scale), -gradient)
+                if float(step.norm()) <= 1e-12 * (float(theta.norm()) + 1e-12):
+                    break  # the parameters no longer move: converged, or the loss is down to rounding
+                trial = residuals_at(theta + step)
+            bar.update()
+            trial_loss = float(trial.square().mean())
+            history.append(trial_loss)
+            bar.set_postfix(loss=f"{trial_loss:.4g}", refresh=False)
+            predicted = float(step @ (damping * scale * step - gradient)) / r.numel()
+            if math.isfinite(trial_loss) and trial_loss < loss and predicted > 0:
+                ratio, decrease = (loss - trial_loss) / predicted, loss - trial_loss
+                theta, r, loss, jacobian_due = theta + step, trial, trial_loss, True
+                damping, growth = damping * max(1.0 / 3.0, 1.0 - (2.0 * ratio - 1.0) ** 3), 2.0
+                if decrease <= 1e-12 * (loss + decrease):
+                    break
+            else:
+                damping, growth = damping * growth, growth * 2.0
+                if not math.isfinite(damping * growth):
+                    break
+    with torch.no_grad():
+        for parameter, piece in zip(parameters, theta.split(sizes)):
+            parameter.copy_(piece.view_as(parameter))
+    return history
 
 
 def every_loss(phases: dict) -> list:
@@ -135,15 +211,17 @@ def every_loss(phases: dict) -> list:
     return [loss for losses in phases.values() for loss in losses]
 
 
-def pixel_loss(display: bool):
-    """Mean squared error in 8-bit sRGB codes (display targets) or in LogC codes ×255 (scene-referred targets).
+def pixel_residuals(display: bool):
+    """The differences a fit of controls minimises the mean square of: in 8-bit sRGB codes (display targets) or in
+    LogC codes ×255 (scene-referred targets), flattened.
 
     The residual LUT's fit uses Huber instead (squared within one code, linear beyond), so pixels no smooth
     correction can reach (several sources shown as one clipped display colour, each with its own target) do
     not bend it elsewhere.
     """
     encode = display_codes if display else (lambda x: 255.0 * linear_to_logc(x.clamp_min(0.0)))
-    return lambda fitted, target: (encode(fitted) - encode(target)).square().mean()
+    return lambda fitted, target: (encode(fitted) - encode(target)).flatten()
+
 
 
 @dataclass
@@ -155,17 +233,18 @@ class ControlsFit:
     loss: float = float("inf")
 
 
-def fit_controls(pairs: PixelPairs, names, modes, aces: bool, steps: int, lbfgs_steps: int, screen_steps: int,
+def fit_controls(pairs: PixelPairs, names, modes, aces: bool, steps: int, lm_steps: int, screen_steps: int,
                  lr: float, progress: bool, max_pixels: int) -> tuple:
-    """Screen every tone mapper in ``modes`` with ``screen_steps`` Adam steps, finish the best; ``(fit, {mode: loss})``.
+    """Screen every tone mapper in ``modes`` with ``screen_steps`` Adam steps, finish the best with ``steps`` more and
+    up to ``lm_steps`` Levenberg-Marquardt trials (:func:`levenberg_marquardt`); ``(fit, {mode: loss})``.
 
     Fits on the first ``max_pixels`` fitting pixels (they are shuffled).
     """
-    loss_of = pixel_loss(display=modes != (None,))
+    residuals_of = pixel_residuals(display=modes != (None,))
     source, target = pairs.train_source[:, :, :max_pixels], pairs.train_target[:, :, :max_pixels]
 
     def loss_fn(model):
-        return lambda: loss_of(model(source), target)
+        return lambda: residuals_of(model(source), target).square().mean()
 
     fits = {mode: ControlsFit(MatchedControls(names, mode, aces).to(source.device)) for mode in modes}
     if len(modes) > 1:
@@ -174,8 +253,12 @@ def fit_controls(pairs: PixelPairs, names, modes, aces: bool, steps: int, lbfgs_
             fit.phases["screening"] = screening
             fit.loss = float("inf") if math.isnan(screening[-1]) else screening[-1]
     best = min(fits.values(), key=lambda f: f.loss)
-    best.phases.update(optimise(best.model, loss_fn(best.model), steps, lbfgs_steps, lr, progress,
-                                f"match {best.model.mode or 'scene-referred'}"))
+    desc = f"match {best.model.mode or 'scene-referred'}"
+    best.phases.update(optimise(best.model, loss_fn(best.model), steps, 0, lr, progress, desc))
+    if lm_steps and "fixed" not in best.phases:
+        best.phases["Levenberg-Marquardt"] = levenberg_marquardt(
+            best.model, lambda values: residuals_of(torch.func.functional_call(best.model, values, (source,)), target),
+            lm_steps, progress, f"refine {best.model.mode or 'scene-referred'}")
     if len(modes) == 1:
         best.loss = every_loss(best.phases)[-1]
     return best, {mode: fit.loss for mode, fit in fits.items()}
@@ -185,7 +268,7 @@ def fit_residual(display: torch.Tensor, target: torch.Tensor, size: int, steps: 
                  progress: bool) -> tuple:
     """Fit a :class:`ResidualLUT` from the look's display output to the target; ``(residual, losses by optimiser)``.
 
-    The data term is Huber in 8-bit codes (see :func:`pixel_loss`); the lookup runs as :func:`lookup_matrix`.
+    The data term is Huber in 8-bit codes (see :func:`pixel_residuals`); the lookup runs as :func:`lookup_matrix`.
     """
     residual = ResidualLUT(size).to(display.device)
     weights = lookup_matrix(display, size)

@@ -52,9 +52,9 @@ class MatchResult:
     * ``residual``: the :class:`~torchgrade.match.ResidualLUT` fitted on top (``residual=True``), else ``None``.
     * ``errors``: ``{"controls": ..., "residual": ...}``, each ``{"p99.9", "max"}`` in 8-bit sRGB codes and
       ``"delta_e_2000"`` (mean), on held-out pixels.
-    * ``history``: the fitting loss at every evaluation (screening, Adam, L-BFGS; then the residual's).
+    * ``history``: the fitting loss at every evaluation (screening, Adam, Levenberg-Marquardt; then the residual's).
     * ``phases``: ``[(phase, evaluations)]`` in order, how ``history`` divides: ``"screening"``, ``"Adam"``,
-      ``"L-BFGS"``, ``"residual Adam"``, ``"residual L-BFGS"`` (those that ran).
+      ``"Levenberg-Marquardt"``, ``"residual Adam"``, ``"residual L-BFGS"`` (those that ran).
     * ``candidates``: each tone mapper tried and its loss after screening.
     """
 
@@ -121,7 +121,7 @@ def _modes(stages, tonemaps) -> tuple:
 
 
 def match_look(source, target, stages=STAGES, mask=None, *, controls=GRADE_CONTROLS, tonemaps=None, aces: bool = False,
-               steps: int = 200, lbfgs_steps: int = 100, screen_steps: int = 60, lr: float = 0.05,
+               steps: int = 200, lm_steps: int = 100, screen_steps: int = 60, lr: float = 0.05,
                residual: bool = False, residual_size: int = 17, residual_steps: int = 300, smooth: float = 0.05,
                monotone: float = 1.0, max_pixels: int = 8192, residual_pixels: int = 65536, holdout: float = 0.25, seed: int = 0,
                progress: bool = True) -> MatchResult:
@@ -131,7 +131,8 @@ def match_look(source, target, stages=STAGES, mask=None, *, controls=GRADE_CONTR
     ``target``: the same pictures after the look, display-referred linear [0, 1] when ``"tonemap"`` is in
     ``stages``, else scene-referred; ``mask``: which pixels count (one per pair). The ``controls`` of the
     grade (names in :class:`~torchgrade.ColorGrade`'s table) are fitted within their documented ranges
-    (a sigmoid onto each range), ``steps`` of Adam then ``lbfgs_steps`` of L-BFGS on at most ``max_pixels``
+    (a sigmoid onto each range), ``steps`` of Adam then up to ``lm_steps`` Levenberg-Marquardt trials (a
+    Gauss-Newton step damped until it lowers the loss) on at most ``max_pixels``
     pixels, in float64 (the residual LUT, cheaper to evaluate, on up to ``residual_pixels``). ``tonemaps``: a mode, several, or ``None`` for :data:`TONEMAP_CANDIDATES`; with more
     than one each is fitted for ``screen_steps`` and the best finished. ``residual=True`` (display targets) then
     fits a ``residual_size``³ :class:`~torchgrade.match.ResidualLUT` with weights ``smooth`` and ``monotone``.
@@ -144,7 +145,7 @@ def match_look(source, target, stages=STAGES, mask=None, *, controls=GRADE_CONTR
         raise ValueError("residual=True needs a display-referred target: include 'tonemap' in stages")
     generator = torch.Generator().manual_seed(seed)
     pixels = sample_pairs(source, target, mask, max(max_pixels, residual_pixels if residual else 0), holdout, generator)
-    fit, candidates = fit_controls(pixels, names, modes, aces, steps, lbfgs_steps, screen_steps, lr, progress, max_pixels)
+    fit, candidates = fit_controls(pixels, names, modes, aces, steps, lm_steps, screen_steps, lr, progress, max_pixels)
     look = fit.model.look()
     display = modes != (None,)
     errors = {"controls": evaluate(look.per_pixel_stages() if look.stages() else nn.Identity(), pixels, display)}

@@ -8,8 +8,9 @@ from __future__ import annotations
 import sys
 
 import torch
+from torch.autograd import forward_ad
 
-__all__ = ["is_tracing", "is_exporting", "untracked"]
+__all__ = ["is_tracing", "is_exporting", "is_differentiated", "untracked"]
 
 
 def is_tracing() -> bool:
@@ -44,8 +45,9 @@ def _exporting_eagerly() -> bool:
 
 
 def untracked(*tensors) -> bool:
-    """True when nothing records how ``tensors`` are used: no autograd (grad disabled, or none requires grad),
-    no tracing, compiling or exporting. Eager forms that compute in place or skip a guard need this.
+    """True when nothing records how ``tensors`` are used: no autograd (grad disabled, or none requires grad), no
+    ``torch.func`` transform or forward-mode derivative (:func:`is_differentiated`), no tracing, compiling or
+    exporting. Eager forms that compute in place or skip a guard need this.
 
     Examples:
         >>> x = torch.ones(2)
@@ -55,5 +57,21 @@ def untracked(*tensors) -> bool:
         ...     untracked(x)
         True
     """
-    recorded = torch.is_grad_enabled() and any(isinstance(t, torch.Tensor) and t.requires_grad for t in tensors)
-    return not recorded and not is_tracing()
+    tensors = [t for t in tensors if isinstance(t, torch.Tensor)]
+    recorded = torch.is_grad_enabled() and any(t.requires_grad for t in tensors)
+    return not recorded and not any(map(is_differentiated, tensors)) and not is_tracing()
+
+
+def is_differentiated(value: torch.Tensor) -> bool:
+    """Whether ``value`` carries a derivative that ``requires_grad`` does not show: a tensor inside a ``torch.func``
+    transform (``grad``, ``jacfwd``, ``jvp``, ``vmap``) or a forward-mode dual tensor. A step skipped at its control's
+    identity, or a guard skipped, would lose it (``jacfwd`` of a grade at contrast 0 gave 0; of split toning, NaN).
+
+    Examples:
+        >>> is_differentiated(torch.tensor(0.0)), torch.func.grad(lambda x: x * is_differentiated(x))(torch.tensor(0.0))
+        (False, tensor(1.))
+    """
+    if torch._C._functorch.is_functorch_wrapped_tensor(value):
+        return True
+    # a dual tensor exists only inside forward_ad.dual_level(): outside one, no unpacking (it costs a microsecond)
+    return forward_ad._current_level >= 0 and forward_ad.unpack_dual(value).tangent is not None
