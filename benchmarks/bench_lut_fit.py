@@ -40,6 +40,9 @@ COMMAND = ".venv/bin/python benchmarks/bench_lut_fit.py"
 LATTICES = {"LogC to 65504 (default)": {"shaper": "logc_hdr"}, "LogC to 58.86": {"shaper": "logc"}, "fitted to the look": {"shaper": "fitted"},
             "fitted to the scene": {"shaper": "fitted", "scene": True}}
 """``bake_lut`` arguments of each lattice (``scene: True`` passes the seen pixels)."""
+LOGC_TOP = 58.86
+"""The linear top of the LogC lattice: a seen pixel with a channel above it is clamped there by a LogC table
+(``seen_above_logc_top``: how many, and the largest error on them)."""
 SCENE_WEIGHTS = (SCENE_WEIGHT, 64.0, SCENE_FIT_WEIGHT, 1e6)
 """Scene-pixel weights swept on the scene-fitted lattice (1e6: the scene alone, as the floor counts it)."""
 
@@ -77,10 +80,15 @@ def image_rows(name: str) -> list:
         direct = {part: srgb_codes(look(pixels.double())).reshape(3, -1).numpy() for part, pixels in (("seen", seen), ("unseen", unseen))}
     rows = []
 
+    above = (seen.amax(1, keepdim=True) > LOGC_TOP).expand_as(seen).reshape(3, -1).numpy()
+
     def row(lattice: str, entries: str, lut, seconds: float, **extra) -> dict:
         result = {"image": name, "lattice": lattice, "entries": entries, "seconds": seconds, **extra,
                   "report": {"p99_9": lut.error_report.p99_9, "max": lut.error_report.max} if lut.error_report else None}
-        result.update({part: summary(errors(lut, pixels, direct[part])) for part, pixels in (("seen", seen), ("unseen", unseen))})
+        measured = {part: errors(lut, pixels, direct[part]) for part, pixels in (("seen", seen), ("unseen", unseen))}
+        result.update({part: summary(error) for part, error in measured.items()})
+        result["seen_above_logc_top"] = {"pixels": int(above[0].sum()),
+                                         "max": float(measured["seen"][above].max()) if above.any() else None}
         return result
 
     for lattice, arguments in LATTICES.items():

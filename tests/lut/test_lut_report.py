@@ -186,43 +186,83 @@ def test_bake_command_prints_the_report_and_refuses_a_lut_over_its_tolerance_unl
     assert (tmp_path / "accepted.cube").exists() and lines[-1].startswith("error: OVER TOLERANCE: p99.9 ")
 
 
+def test_a_report_on_given_frames_is_the_error_on_their_pixels_and_says_so():
+    transform = torch.nn.Sequential(tg.ColorGrade(contrast=30.0, saturation=20.0), tg.ToneMap("aces"))
+    frames = tg.scene.demo_scene(60, 80)  # (1, 3, 60, 80): 4800 pixels, every one measured
+    lut = quiet_bake(transform, size=9, frames=frames)
+    with torch.no_grad():
+        errors = np.abs(srgb_codes(lut(frames).double().numpy()) - srgb_codes(transform(frames.double()).numpy()))
+    report = lut.error_report
+    assert report.colour_set == "pixels of the given frames" and report.colours == 4800
+    assert report.p99_9 == pytest.approx(np.quantile(errors, 0.999, method="inverted_cdf"), abs=1e-6)
+    assert report.max == pytest.approx(errors.max(), abs=1e-6)
+    assert report.p99_9 != quiet_bake(transform, size=9).error_report.p99_9  # not the realistic colours' figure
+    with pytest.raises(ValueError, match="frames must have shape"):
+        bake_lut(transform, size=9, frames=torch.zeros(1, 4, 2, 2))
+
+
+def test_a_warm_scene_reported_on_its_own_frames_is_within_twice_its_real_error(exr_dir, recwarn):
+    # the realistic colours hold few saturated oranges: on CandleGlass the shipped look's default bake reports a
+    # figure below what the photograph really gets; given the photograph, the report is what it gets
+    from pathlib import Path
+
+    from torchgrade.io import read_exr
+
+    look = tg.PostFX.from_config(Path(__file__).resolve().parents[2] / "export/looks/cinematic.json").eval()
+    photograph = read_exr(exr_dir / "CandleGlass.exr")[:3].unsqueeze(0)
+    baked = look.to_lut(frames=photograph).lut
+    with torch.no_grad():
+        received = look.per_pixel_input(photograph)
+        direct, looked_up = look.per_pixel_stages()(received.double()), baked(received).double()
+    real = np.quantile(np.abs(srgb_codes(looked_up.numpy()) - srgb_codes(direct.numpy())), 0.999)
+    assert baked.error_report.colour_set == "pixels of the given frames"
+    assert real / 2 <= baked.error_report.p99_9 <= 2 * real, (baked.error_report.p99_9, real)
+
+
+def test_bake_command_reports_on_the_frames_it_is_given(tmp_path, capsys, exr_dir):
+    from torchgrade.cli import main
+
+    status = main(["bake", "-o", str(tmp_path / "look.cube"), "--contrast", "10", "--accept-error",
+                   "--frames", str(exr_dir / "Garden.exr"), "--frames", str(exr_dir / "Carrots.exr")])
+    assert status == 0
+    assert "pixels of the given frames" in capsys.readouterr().out
+
+
 # ---------------------------------------------------------------- the bar on real images
 
 STRONG_LOOK = dict(contrast=30.0, saturation=20.0, temperature=20.0)
 
 
-LOGC_FLOOR = {"Desk": 3.50, "CandleGlass": 0.50, "GoldenGate": 0.81}
+CANDLEGLASS_LOGC_FLOOR = 0.50
 """The lowest lower bound on the max error any 33³ LogC table (sRGB entries, any entries) reaches on every 4th pixel of
-each image under the strong look, over every LogC lattice and both interpolations: benchmarks/results/lut_floor.md
-(HiGHS linear programs; Desk's from a lattice whose bottom is at linear 0.02)."""
+CandleGlass under the strong look, over every LogC lattice and both interpolations: benchmarks/results/lut_floor.md
+(HiGHS linear programs)."""
 
 
-@pytest.mark.parametrize("name", ["Desk", "CandleGlass", "GoldenGate"])
-def test_a_33_table_on_a_shaper_fitted_to_the_scene_misses_it_by_less_than_any_logc_table_can(exr_dir, name):
+def test_a_33_table_on_a_shaper_fitted_to_the_scene_misses_it_by_less_than_any_logc_table_can(exr_dir):
     """33³, ``shaper="fitted"`` with the scene, fitted entries, sRGB entries, strong look; 8-bit sRGB codes against
-    float64 direct evaluation. Fitted on every 4th pixel (offset 0), the pixels the floor bounds; checked there, on
-    the every-4th pixels at offset 2 that the fit did not see (their p99.9 below the default LUT's), on Desk's pixels
-    above the logc lattice's top (58.86), which the fitted lattice looks up instead of clamping (logc: 17.5 codes),
-    and in the report, which must say that the lattice serves the scene and not the other validation colours."""
+    float64 direct evaluation, on CandleGlass. Fitted on every 4th pixel (offset 0), the pixels the floor bounds;
+    checked there, on the every-4th pixels at offset 2 that the fit did not see (their p99.9 below the default LUT's),
+    and in the report, which must say that the lattice serves the scene and not the other validation colours.
+
+    One photograph here (a minute on a loaded machine); ``benchmarks/bench_lut_fit.py`` runs Desk and GoldenGate too,
+    and ``tests/project/test_benchmarks.py`` holds its committed results to the same claims and to Desk's pixels
+    above the logc lattice's top (58.86), which the fitted lattice looks up instead of clamping."""
     from torchgrade.io import read_exr
 
     look = torch.nn.Sequential(tg.ColorGrade(**STRONG_LOOK), tg.ToneMap("aces"))
-    image = read_exr(exr_dir / f"{name}.exr")[:3].unsqueeze(0)
+    image = read_exr(exr_dir / "CandleGlass.exr")[:3].unsqueeze(0)
     seen, unseen = image[..., ::4, ::4], image[..., 2::4, 2::4]
     fitted = quiet_bake(look, size=33, shaper="fitted", scene=seen, output_encoding="srgb", entries="fitted")
-    default, logc = (bake_lut(look, size=33, shaper=shaper, output_encoding="srgb", report_tolerance=float("inf"))
-                     for shaper in ("auto", "logc"))
+    default = bake_lut(look, size=33, output_encoding="srgb", report_tolerance=float("inf"))
     errors = {}
     for part, pixels in (("seen", seen), ("unseen", unseen)):
         direct = srgb_codes(look(pixels.double()).numpy())
         with torch.no_grad():
-            for key, lut in (("fitted", fitted), ("default", default), ("logc", logc)):
+            for key, lut in (("fitted", fitted), ("default", default)):
                 errors[key, part] = np.abs(srgb_codes(lut(pixels, "tetrahedral").double().numpy()) - direct)
-    assert errors["fitted", "seen"].max() < LOGC_FLOOR[name], float(errors["fitted", "seen"].max())
+    assert errors["fitted", "seen"].max() < CANDLEGLASS_LOGC_FLOOR, float(errors["fitted", "seen"].max())
     assert np.quantile(errors["fitted", "unseen"], 0.999) < np.quantile(errors["default", "unseen"], 0.999)
-    if name == "Desk":  # 1583 of its pixels have a channel above the logc lattice's top, which clamps them
-        above = np.broadcast_to((seen.amax(1, keepdim=True) > 58.86).numpy(), errors["fitted", "seen"].shape)
-        assert errors["fitted", "seen"][above].max() < errors["logc", "seen"][above].max() / 4
     report = fitted.error_report
     scene_max, others_p99_9 = re.search(r"lattice fitted to the scene \(p99.9 [\d.]+, max ([\d.]+) on its \d+ pixels; "
                                         r"p99.9 ([\d.]+),", report.cause).groups()

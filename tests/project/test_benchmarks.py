@@ -374,6 +374,22 @@ def test_no_33_logc_table_on_the_scene_lattice_keeps_every_desk_pixel_within_4_c
     assert 255.0 * violation > 0.3  # in codes: far beyond HiGHS tolerances (1e-7 table units), so the verdict does not hang on them
 
 
+def test_committed_scene_fitted_tables_miss_every_photograph_by_less_than_any_logc_table_can():
+    """The claims tests/lut/test_lut_report.py checks on CandleGlass, on bench_lut_fit.py's committed results for all
+    three photographs: the scene-fitted 33³ table with fitted entries below the LogC floor on the seen pixels, below the
+    default table on the unseen ones, and on Desk's pixels above the logc lattice's top under a quarter of logc's error."""
+    results = json.loads((common.RESULTS / "lut_fit.json").read_text())
+    rows = {(row["image"], row["lattice"], row["entries"]): row for row in results["rows"]}
+    for image, floor in results["logc_floor"].items():
+        fitted, default = rows[image, "fitted to the scene", "fitted"], rows[image, "LogC to 65504 (default)", "sampled"]
+        assert fitted["seen"]["max"] < floor, image
+        assert fitted["unseen"]["p99_9"] < default["unseen"]["p99_9"], image
+    above = {lattice: rows["Desk", lattice, entries]["seen_above_logc_top"] for lattice, entries in
+             (("fitted to the scene", "fitted"), ("LogC to 58.86", "sampled"))}
+    assert above["LogC to 58.86"]["pixels"] > 1000
+    assert above["fitted to the scene"]["max"] < above["LogC to 58.86"]["max"] / 4, above
+
+
 def test_every_operator_pattern_of_the_onnx_cost_benchmark_builds_and_keeps_the_strip():
     pytest.importorskip("onnxruntime")
     from benchmarks import bench_onnx_ops

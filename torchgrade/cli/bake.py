@@ -92,7 +92,7 @@ def run_bake(args: argparse.Namespace) -> str:
     ``--report-tolerance`` is not written without ``--accept-error``
     (:class:`~torchgrade.cli.common.LUTOverTolerance`)."""
     _check_bake_arguments(args)
-    refuse_overwriting([args.output], [args.config, args.scene])
+    refuse_overwriting([args.output], [args.config, args.scene, *(args.frames or ())])
     look = look_from_args(args)
     transform = look.per_pixel_stages()
     live = [name for name in look.stages() if name not in ("grade", "primary", "tonemap")]
@@ -100,12 +100,16 @@ def run_bake(args: argparse.Namespace) -> str:
     if args.scene is not None:
         with torch.no_grad():
             scene = look.per_pixel_input(read_rec709(args.scene).unsqueeze(0))
+    frames = None
+    if args.frames:
+        with torch.no_grad():
+            frames = torch.cat([look.per_pixel_input(read_rec709(path).unsqueeze(0)).reshape(3, 1, -1) for path in args.frames], dim=-1)
     tolerance = 0.5 if args.tolerance is None else args.tolerance
     start = time.perf_counter()
     with warnings.catch_warnings():  # the report is printed below, with its cause and advice
         warnings.simplefilter("ignore", LUTAccuracyWarning)
         lut = bake_lut(transform, size=args.size, shaper=_cube_shaper(args.shaper, transform), scene=scene, tolerance=tolerance, progress=True,
-                       report_tolerance=args.report_tolerance, entries=args.entries)
+                       report_tolerance=args.report_tolerance, entries=args.entries, frames=frames)
     elapsed = time.perf_counter() - start
     refuse_lut_over_tolerance(lut.error_report, args.accept_error, REMEDIES.format(size=lut.size))
     title = Path(args.output).stem.replace('"', "")
@@ -138,6 +142,9 @@ def add_bake(commands) -> None:
                       help="default auto: logc (LogC to 58.86, what a .cube 1D section holds) when the look tone maps; fitted: per-channel shaper fitted to the look (and --scene)")
     bake.add_argument("--scene", help="EXR the look will grade: the lattice covers its range after the look's exposure and bloom, "
                       "and the error is reported on it")
+    bake.add_argument("--frames", action="append", metavar="EXR",
+                      help="an EXR of the footage the LUT is for (repeat for several): the report is measured on its pixels "
+                      "instead of the realistic colours")
     bake.add_argument("--tolerance", type=float, help="with --size auto: 8-bit sRGB codes at p99.9 (default 0.5)")
     bake.add_argument("--report-tolerance", type=float, default=1.0,
                       help="8-bit sRGB codes at p99.9 on realistic colours (and --scene) above which the report names a cause "

@@ -45,7 +45,7 @@ from torch import nn
 
 from .._moved import OLD_CLASS_PATHS
 from ..base.config import load_config
-from ..base.core import nan_free, with_alpha
+from ..base.core import check_image, nan_free, with_alpha
 from ..bloom import ConvolutionBloom
 from ..lut import INTERPOLATIONS, LUT3D, ErrorReport, bake_lut
 from ..runtime import is_tracing
@@ -238,7 +238,7 @@ class PostFX(nn.Module):
         return transform
 
     def to_lut(self, size: int = 33, interpolation: Optional[str] = None, output_encoding: str = "linear",
-               entries: str = "sampled") -> "PostFX":
+               entries: str = "sampled", frames: Optional[torch.Tensor] = None) -> "PostFX":
         """An equivalent look with grade, primary grade and tone mapping baked into a ``size``³ ``"logc_hdr"`` LUT.
 
         The other slots stay live (copied, so the new look keeps its own adaptation state). The
@@ -247,10 +247,16 @@ class PostFX(nn.Module):
         output to [0, 1] after the lookup. ``interpolation`` is the LUT's (tetrahedral by default).
         ``output_encoding`` and ``entries`` (``"fitted"``: :func:`~torchgrade.lut.fit_entries`) are passed to
         :func:`~torchgrade.bake_lut`; the new LUT keeps the encoding and the
-        bake's error report (``look.to_lut().lut.error_report``; a bake over 1 code warns).
+        bake's error report (``look.to_lut().lut.error_report``; a bake over 1 code warns). With ``frames``
+        (``(..., 3, H, W)`` scene-referred, as the look takes them) the report is measured on those frames as the LUT
+        receives them (after the stages before it) rather than on the realistic colours.
         """
         transform = self.per_pixel_stages()
-        lut = bake_lut(transform, size=size, shaper="logc_hdr", output_encoding=output_encoding, entries=entries)
+        if frames is not None:
+            check_image(frames, "frames")
+            with torch.no_grad():
+                frames = self.per_pixel_input(frames.reshape(-1, *frames.shape[-3:]))
+        lut = bake_lut(transform, size=size, shaper="logc_hdr", output_encoding=output_encoding, entries=entries, frames=frames)
         report = lut.error_report
         lut = LUT3D(lut.table.detach().float(), shaper=lut.shaper, domain=(lut.domain_min, lut.domain_max),
                     output_range=lut.output_range, output_encoding=lut.output_encoding,

@@ -32,7 +32,7 @@ from .fit import SCENE_FIT_WEIGHT, SCENE_MIN_SIZE, fit_scene_shaper, fit_shaper,
 from .lattice import MIN_SIZE, check_size, checked_domain, lattice
 from .layer import LUT3D
 from .apply import OUTPUT_ENCODINGS, encode_output
-from .report import REALISTIC, code_errors, diagnose, enforce, measure, measured_colours, worst_case
+from .report import FRAMES, REALISTIC, code_errors, diagnose, enforce, measure, measured_colours, worst_case
 from .shapers import DEFAULT_DOMAINS, SHAPERS
 from .validation import realistic_colours, validation_colours
 
@@ -76,7 +76,8 @@ def expects_hdr(transform) -> bool:
 def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper: str = "auto",
              scene: Optional[torch.Tensor] = None, tolerance: float = 0.5, chunk: int = 1 << 21,
              output_encoding: str = "linear", progress: bool = False, domain: Optional[tuple] = None,
-             report_tolerance: float = 1.0, strict: bool = False, entries: str = "sampled") -> LUT3D:
+             report_tolerance: float = 1.0, strict: bool = False, entries: str = "sampled",
+             frames: Optional[torch.Tensor] = None) -> LUT3D:
     """Bake a per-pixel ``transform`` on ``(N, 3, H, W)`` tensors into a :class:`~torchgrade.LUT3D`.
 
     The transform is evaluated once on the lattice, in float64 and in shaper space, and the float64
@@ -95,6 +96,11 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper:
       (benchmarks/results/lut_fit.md); its report says by how much.
     * ``scene``: an image the LUT is for. The lattice domain then follows its dynamic range: the
       top is the scene's largest value (after the non-finite policy), the bottom stays at black.
+    * ``frames``: frames the LUT will grade, ``(..., 3, H, W)`` as the transform receives them. The report is then
+      measured on their pixels (at most :data:`~torchgrade.lut.report.SCENE_PIXELS`, evenly strided) instead of the
+      realistic colours, and says so; nothing else changes. The realistic colours stand for footage in general
+      and can miss a grade's weak spot in one kind of scene (a candle-lit room's saturated oranges): a LUT
+      for known footage is best judged on it.
     * ``domain``: ``(min, max)`` of the lattice in shaper code values (numbers or RGB triples, as
       :class:`~torchgrade.LUT3D` takes them), overriding the shaper's default and the scene's range
       (a ``scene`` then only serves ``size="auto"``).
@@ -113,12 +119,12 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper:
     * ``entries``: ``"sampled"`` (the transform at the lattice points) or ``"fitted"``: then refined by
       :func:`~torchgrade.lut.fit_entries` for tetrahedral lookup on other validation colours and the
       scene's pixels, for the smallest largest error (detached from the transform's parameters; seconds
-      at 33³). On the strong look and a lattice fitted to the scene it cuts the max error on the scene 5-30x, to
-      1.48 / 0.25 / 0.56 codes on Desk / CandleGlass / GoldenGate (benchmarks/results/lut_fit.md).
+      at 33³). On the strong look and a lattice fitted to the scene it cuts the max error on the scene 7-24x, to
+      1.59 / 0.26 / 0.51 codes on Desk / CandleGlass / GoldenGate (benchmarks/results/lut_fit.md).
       A scene pixel weighs :data:`~torchgrade.lut.SCENE_WEIGHT` in the fit, or
       :data:`~torchgrade.lut.fit.SCENE_FIT_WEIGHT` on a scene-fitted lattice.
     * The LUT's error on realistic colours (:func:`~torchgrade.lut.realistic_colours`, plus the scene's
-      pixels) is measured and kept as ``lut.error_report`` (:class:`~torchgrade.lut.ErrorReport`), with the
+      pixels), or on the ``frames``, is measured and kept as ``lut.error_report`` (:class:`~torchgrade.lut.ErrorReport`), with the
       worst case, on the validation colours over the whole domain, as its ``worst_case``. Above
       ``report_tolerance`` 8-bit codes at p99.9 on the realistic colours the report names the cause and a bake
       that meets it, and the bake warns (:class:`~torchgrade.lut.LUTAccuracyWarning`), or raises ``ValueError``
@@ -152,15 +158,20 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper:
         domain = checked_domain(domain)
     hdr = shaper != "linear" or expects_hdr(transform)
     realistic = realistic_colours(hdr)
-    measured = measured_colours(transform, realistic, scene)
+    if frames is None:
+        measured = measured_colours(transform, realistic, scene)
+        scene_colours = measured[0].shape[-1] - realistic.shape[1]
+        colour_set = REALISTIC if scene is None else f"{REALISTIC} and scene pixels"
+    else:
+        check_image(frames, "frames")
+        measured, colour_set, scene_colours = measured_colours(transform, realistic[:, :0], frames), FRAMES, 0
     worst = measured_colours(transform, validation_colours(hdr), None)
     bake = _baker(transform, domain, scene, chunk, output_encoding, progress, worst, hdr)
     lut = bake(shaper, size) if size != "auto" else _smallest_within(lambda n: bake(shaper, n), transform, scene, tolerance)
     if entries == "fitted":
         lut = fit_entries(lut, transform, scene, hdr, scene_weight=_scene_weight(lut, scene))
-    report = measure(lut, measured, report_tolerance, REALISTIC if scene is None else f"{REALISTIC} and scene pixels")
+    report = measure(lut, measured, report_tolerance, colour_set)
     if not report.within:
-        scene_colours = measured[0].shape[-1] - realistic.shape[1]
         report = diagnose(report, lut, transform, measured, _rebaker(bake, lut), scene_colours)
     report = replace(report, worst_case=worst_case(lut, transform, worst, report_tolerance))
     enforce(report, strict)

@@ -4,8 +4,8 @@
 float64, in what a viewer sees: 8-bit sRGB display codes, p99.9 and max over every channel value, on
 two sets of colours (:mod:`~torchgrade.lut.validation`):
 
-* the **realistic colours**, what frames hold, and the scene's pixels when given: the headline figure, which
-  the tolerance judges
+* the **realistic colours**, what frames hold, and the scene's pixels when given, or the pixels of the user's own
+  frames when given (``bake_lut(frames=)``): the headline figure, which the tolerance judges
   (``benchmarks/results/lut_realistic.md``: within 1.5x of the p99.9 pooled over the sample images);
 * the **validation colours** over the whole domain (up to 65504, out of gamut, the gamut's corners):
   the worst case, shown beside it (``ErrorReport.worst_case``).
@@ -41,11 +41,14 @@ from ..color import linear_to_srgb
 from .shapers import SHAPERS
 
 __all__ = ["ErrorReport", "LUTAccuracyWarning", "code_errors", "measured_colours", "measure", "diagnose", "enforce",
-           "SCENE_PIXELS", "KINK_RATIO", "CANDIDATES", "ADVICE_MAX_SIZE", "REALISTIC", "WORST_CASE",
+           "SCENE_PIXELS", "KINK_RATIO", "CANDIDATES", "ADVICE_MAX_SIZE", "REALISTIC", "FRAMES", "WORST_CASE",
            "worst_case"]
 
 REALISTIC = "realistic colours"
 """How a report names :func:`~torchgrade.lut.validation.realistic_colours`."""
+
+FRAMES = "pixels of the given frames"
+"""How a report names the frames given to :func:`~torchgrade.bake_lut` (``frames=``)."""
 
 WORST_CASE = "validation colours over the whole domain"
 """How a report names :func:`~torchgrade.lut.validation.validation_colours`."""

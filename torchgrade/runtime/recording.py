@@ -71,6 +71,8 @@ def is_differentiated(value: torch.Tensor) -> bool:
         >>> is_differentiated(torch.tensor(0.0)), torch.func.grad(lambda x: x * is_differentiated(x))(torch.tensor(0.0))
         (False, tensor(1.))
     """
+    if torch.compiler.is_compiling():
+        return False  # Dynamo cannot trace the check; the compiled graph keeps every step and guard anyway
     if torch._C._functorch.is_functorch_wrapped_tensor(value):
         return True
     # a dual tensor exists only inside forward_ad.dual_level(): outside one, no unpacking (it costs a microsecond)
