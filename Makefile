@@ -21,8 +21,9 @@ setup: $(VENV)/.installed
 demo: setup
 	$(BIN)/torchgrade demo --output demo.png
 
+# One worker per core (at most 4), each test's name and outcome as it ends, the 20 slowest at the end.
 test: setup
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -n auto --maxprocesses 4 --dist loadgroup -v --durations 20
 
 # The documentation site (docs/, mkdocs.yml) into build/site; `$(BIN)/mkdocs serve` shows it while editing.
 docs: setup

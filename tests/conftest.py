@@ -26,6 +26,9 @@ def chosen_device() -> torch.device:
 
 def pytest_configure(config):
     chosen_device()  # a wrong TG_TEST_DEVICE stops the run before any test
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    if workers > 1:  # pytest-xdist (`make test`): the cores shared among the workers, not each worker taking them all
+        torch.set_num_threads(max(1, torch.get_num_threads() // workers))
 
 
 def pytest_report_header(config):

@@ -10,6 +10,8 @@ import torchgrade as tg
 from torchgrade.cli import main
 from torchgrade.integrations.ray import grade_shot_on_ray
 
+pytestmark = pytest.mark.xdist_group("ray")  # one Ray cluster at a time: these run in one worker, in turn
+
 
 LOOKS = {
     "flat": {"grade": {"contrast": 20}, "tonemap": "neutral"},

@@ -25,6 +25,8 @@ import torch
 
 import torchgrade as tg
 
+pytestmark = pytest.mark.xdist_group("ray")  # one Ray cluster at a time: these run in one worker, in turn
+
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "examples" / "serving"))
 
