@@ -13,7 +13,6 @@ from __future__ import annotations
 import torch
 
 from .base.budget import check_pixels
-
 from .color import srgb_to_linear
 
 __all__ = ["CHART_SRGB", "demo_scene"]

@@ -65,9 +65,10 @@ def json_depth(data: bytes) -> int:
     """
     text = np.frombuffer(data, dtype=np.uint8)
     quotes = np.flatnonzero(text == ord('"'))
-    others = np.flatnonzero(text != ord("\\"))  # the bytes that are not backslashes
-    last_other = others[np.searchsorted(others, quotes) - 1] if others.size else np.full_like(quotes, -1)
-    escaped = (quotes - 1 - np.where(np.searchsorted(others, quotes) > 0, last_other, -1)) % 2 == 1
+    others = np.flatnonzero(text != ord("\\"))  # the bytes that are not backslashes (every quote among them)
+    before = np.searchsorted(others, quotes)  # how many of them come before each quote
+    last_other = np.where(before > 0, others[np.maximum(before - 1, 0)], -1)
+    escaped = (quotes - 1 - last_other) % 2 == 1
     quotes = quotes[~escaped]
     opening = np.flatnonzero((text == ord("[")) | (text == ord("{")))
     closing = np.flatnonzero((text == ord("]")) | (text == ord("}")))

@@ -63,7 +63,6 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-
 @contextlib.contextmanager
 def _terminated_as_an_exit():
     """SIGTERM (a ``kill``, a scheduler's stop) ends the command as an exception does, so that every write in flight

@@ -15,12 +15,12 @@ Examples:
 
 from __future__ import annotations
 
-import stat
 import warnings
 from pathlib import Path
 
 import torch
 
+from ..base.files import read_regular
 from .atomic import atomic_write
 
 __all__ = ["save_compile_cache", "load_compile_cache", "MAX_CACHE_BYTES"]
@@ -45,14 +45,9 @@ def load_compile_cache(path) -> bool:
     A missing file, a pipe or a file over :data:`MAX_CACHE_BYTES` is refused (``FileNotFoundError``, ``ValueError``);
     artifacts PyTorch cannot use (another torch, a damaged file) warn and load nothing: the compile then runs cold.
     """
-    path = Path(path)
-    info = path.stat()
-    if not stat.S_ISREG(info.st_mode):
-        raise ValueError(f"{path} is not a regular file")
-    if info.st_size > MAX_CACHE_BYTES:
-        raise ValueError(f"{path} holds {info.st_size} bytes, more than a compile cache's {MAX_CACHE_BYTES}")
+    data = read_regular(path, MAX_CACHE_BYTES, "compile cache")
     try:
-        loaded = torch.compiler.load_cache_artifacts(path.read_bytes())
+        loaded = torch.compiler.load_cache_artifacts(data)
     except Exception as error:  # torch's own checks of the artifacts (versions, format), where it raises them
         loaded, reason = None, f" ({error})"
     else:

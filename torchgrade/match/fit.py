@@ -223,7 +223,6 @@ def pixel_residuals(display: bool):
     return lambda fitted, target: (encode(fitted) - encode(target)).flatten()
 
 
-
 @dataclass
 class ControlsFit:
     """One candidate's fitted controls, its losses by phase (``{"screening": [...], "Adam": [...], ...}``) and final fitting loss."""
@@ -253,12 +252,12 @@ def fit_controls(pairs: PixelPairs, names, modes, aces: bool, steps: int, lm_ste
             fit.phases["screening"] = screening
             fit.loss = float("inf") if math.isnan(screening[-1]) else screening[-1]
     best = min(fits.values(), key=lambda f: f.loss)
-    desc = f"match {best.model.mode or 'scene-referred'}"
-    best.phases.update(optimise(best.model, loss_fn(best.model), steps, 0, lr, progress, desc))
+    target_kind = best.model.mode or "scene-referred"
+    best.phases.update(optimise(best.model, loss_fn(best.model), steps, 0, lr, progress, f"match {target_kind}"))
     if lm_steps and "fixed" not in best.phases:
         best.phases["Levenberg-Marquardt"] = levenberg_marquardt(
             best.model, lambda values: residuals_of(torch.func.functional_call(best.model, values, (source,)), target),
-            lm_steps, progress, f"refine {best.model.mode or 'scene-referred'}")
+            lm_steps, progress, f"refine {target_kind}")
     if len(modes) == 1:
         best.loss = every_loss(best.phases)[-1]
     return best, {mode: fit.loss for mode, fit in fits.items()}
