@@ -1,6 +1,7 @@
-"""The eager no-grad CPU lookup (tetrahedral's eager form, ``TetrahedralRuns``) against the gather form that
-autograd, ``torch.compile`` and exports run: the same values to float rounding over shapers, domains, output
-encodings and clamps, dtypes, lattice sizes and non-finite or huge inputs; its lattice coordinates bit for bit."""
+"""The eager no-grad CPU lookup against the gather form that autograd, ``torch.compile`` and exports run, in both of
+tetrahedral's CPU forms (the compiled loop of ``tetrahedral.c`` and the torch form ``TetrahedralRuns``): the same
+values to float rounding over shapers, domains, output encodings and clamps, dtypes, lattice sizes and non-finite or
+huge inputs; the torch form's lattice coordinates bit for bit."""
 
 import dataclasses
 
@@ -8,13 +9,32 @@ import pytest
 import torch
 
 from torchgrade.base.core import sanitize
-from torchgrade.lut import KERNELS, LUT3D, identity_table, lattice
+from torchgrade.lut import KERNELS, LUT3D, apply, identity_table, lattice
 from torchgrade.lut.apply import chunked_lookup, lookup
+from torchgrade.lut.native import compiled_tetrahedral
 from torchgrade.lut.shapers import lattice_unit
 from torchgrade.lut.lattice import planar_table
 from torchgrade.lut.apply import _LatticeCoordinates
 
 MAX_SIZE = KERNELS["tetrahedral"].eager.max_size
+
+
+@pytest.fixture(params=["compiled", "torch"])
+def cpu_form(request, monkeypatch):
+    """Each CPU form of the eager tetrahedral lookup in turn: the compiled loop (which must compile here: CI has the
+    C compiler ``torch.compile`` needs) or, with the compiled loop taken away, the torch form."""
+    if request.param == "compiled":
+        assert compiled_tetrahedral(torch.float32) is not None and compiled_tetrahedral(torch.float64) is not None
+    else:
+        monkeypatch.setitem(KERNELS, "tetrahedral", dataclasses.replace(KERNELS["tetrahedral"], compiled=None))
+    return request.param
+
+
+def coordinate_rounding(size: int, dtype: torch.dtype, table_step: float) -> float:
+    """The output error one rounding of a lattice coordinate can make: the compiled loop forms ``(x - low) * ((S - 1) /
+    span)`` where the gather form divides, so a coordinate may differ by an ulp of ``S - 1``, which moves the output by
+    that much times the table's largest step between neighbours."""
+    return torch.finfo(dtype).eps * (size - 1) * table_step
 
 
 def hostile_image(dtype=torch.float32) -> torch.Tensor:
@@ -41,6 +61,7 @@ SHAPED = [
     ("linear", (-0.25, (1.0, 2.0, 4.0)), {}),  # per-channel domain: shifted and scaled
     ("linear", (0.0, 1e6), {}),  # a domain past the half-float range: sanitize's clamp matters
     ("logc", None, {}),
+    ("logc_hdr", None, {}),
     ("curve", None, curve_settings()),
 ]
 
@@ -61,7 +82,7 @@ def test_lattice_coordinates_are_those_of_lookup_bit_for_bit(shaper, domain, ext
 @pytest.mark.parametrize("shaper, domain, extra", SHAPED)
 @pytest.mark.parametrize("encoding, output_range", [("linear", None), ("srgb", None), ("linear", (0.0, 0.9))])
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64, torch.float16])
-def test_eager_tetrahedral_matches_the_gather_form(shaper, domain, extra, encoding, output_range, dtype):
+def test_eager_tetrahedral_matches_the_gather_form(shaper, domain, extra, encoding, output_range, dtype, cpu_form):
     size = 9
     table = torch.rand(size, size, size, 3, dtype=torch.float64) * 3 - 1
     lut = LUT3D(table.to(torch.float64 if dtype == torch.float64 else torch.float32), shaper=shaper, domain=domain,
@@ -72,14 +93,17 @@ def test_eager_tetrahedral_matches_the_gather_form(shaper, domain, extra, encodi
         one_pass = lookup(image, lut.rows(lut.table.dtype), size, lut.shaper, lut.domain_min, lut.domain_max, "tetrahedral",
                           lut.output_range, lut.curve, lut.curve_range, lut.output_encoding)
     assert eager.dtype == one_pass.dtype == dtype and torch.isfinite(eager).all()
-    # a few roundings of values up to 2 (sRGB decoding has slope up to ~2.4 over these entries)
-    eps = torch.finfo(torch.float32 if dtype == torch.float16 else dtype).eps
-    atol = max(8 * 2.4 * 2 * eps, torch.finfo(dtype).eps * 2 if dtype == torch.float16 else 0.0)
+    # a few roundings of values up to 2, and the compiled loop's coordinate rounding (entries in [-1, 2]: steps up
+    # to 3); sRGB decoding has slope up to ~2.4 over these entries
+    work = torch.float32 if dtype == torch.float16 else dtype
+    eps = torch.finfo(work).eps
+    coordinate = coordinate_rounding(size, work, 3.0) if cpu_form == "compiled" else 0.0
+    atol = max(2.4 * (8 * 2 * eps + coordinate), torch.finfo(dtype).eps * 2 if dtype == torch.float16 else 0.0)
     torch.testing.assert_close(eager, one_pass, atol=atol, rtol=0)
 
 
 @pytest.mark.parametrize("size", [2, 3, 33, MAX_SIZE])
-def test_eager_tetrahedral_is_exact_on_lattice_points_and_close_to_the_gather_form_at_every_size(size):
+def test_eager_tetrahedral_is_exact_on_lattice_points_and_close_to_the_gather_form_at_every_size(size, cpu_form):
     points = lattice(size, torch.float32).reshape(1, -1, 1, 3).permute(0, 3, 1, 2)
     assert torch.equal(LUT3D(identity_table(size))(points), points)
     table = torch.rand(size, size, size, 3) * 2 - 1
@@ -93,23 +117,38 @@ def test_eager_tetrahedral_is_exact_on_lattice_points_and_close_to_the_gather_fo
     assert torch.equal(LUT3D(table)(points), planar_table(table).t().reshape(1, -1, 1, 3).permute(0, 3, 1, 2))
 
 
-def test_lattices_above_the_eager_forms_largest_run_the_gather_form_bit_for_bit():
+def test_lattices_above_the_torch_forms_largest_run_the_compiled_loop_or_else_the_gather_form(cpu_form):
     size = MAX_SIZE + 1
     rows = planar_table(torch.rand(size, size, size, 3))
     image = hostile_image()
     settings = (size, "linear", 0.0, 1.0, "tetrahedral", None, None, (0.0, 1.0), "linear")
     with torch.no_grad():
-        assert torch.equal(chunked_lookup(image, rows, *settings, pixels=1000), lookup(image, rows, *settings))
+        got, expected = chunked_lookup(image, rows, *settings, pixels=1000), lookup(image, rows, *settings)
+    if cpu_form == "torch":
+        assert torch.equal(got, expected)
+    else:
+        torch.testing.assert_close(got, expected, atol=8 * 2.0 ** -24 + coordinate_rounding(size, torch.float32, 1.0), rtol=0)
+        assert not torch.equal(got, expected)  # the compiled loop ran: it rounds differently somewhere
 
 
-def test_a_constant_table_gives_its_constant_exactly():
+def test_lattices_above_the_compiled_loops_largest_run_the_gather_form_bit_for_bit(monkeypatch):
+    size = 5
+    monkeypatch.setattr(apply, "COMPILED_MAX_SIZE", size - 1)
+    monkeypatch.setitem(KERNELS, "tetrahedral", dataclasses.replace(KERNELS["tetrahedral"], eager=None))
+    rows, image = planar_table(torch.rand(size, size, size, 3)), hostile_image()
+    settings = (size, "linear", 0.0, 1.0, "tetrahedral", None, None, (0.0, 1.0), "linear")
+    with torch.no_grad():
+        assert torch.equal(chunked_lookup(image, rows, *settings, pixels=100), lookup(image, rows, *settings))
+
+
+def test_a_constant_table_gives_its_constant_exactly(cpu_form):
     lut = LUT3D(torch.full((5, 5, 5, 3), 0.3))
     with torch.no_grad():
         assert torch.equal(lut(hostile_image()), torch.full((2, 3, 23, 31), 0.3))
 
 
 @pytest.mark.parametrize("requires_grad", ["image", "table"])
-def test_the_autograd_path_and_the_eager_path_give_the_same_values(requires_grad):
+def test_the_autograd_path_and_the_eager_path_give_the_same_values(requires_grad, cpu_form):
     table = torch.rand(9, 9, 9, 3)
     lut = LUT3D(table.clone(), learnable=requires_grad == "table")
     image = hostile_image().requires_grad_(requires_grad == "image")
@@ -135,7 +174,7 @@ def test_eager_tables_are_cached_and_follow_the_table():
     assert lut._tables_cache[2] is not tables
 
 
-def test_strided_and_channels_last_images_give_the_contiguous_result_bit_for_bit():
+def test_strided_and_channels_last_images_give_the_contiguous_result_bit_for_bit(cpu_form):
     lut = LUT3D(torch.rand(9, 9, 9, 3))
     image = hostile_image()
     with torch.no_grad():
@@ -169,7 +208,7 @@ def test_the_whole_frame_form_matches_the_gather_form(size):
     assert torch.equal(kernel.eager.frame(on_points, tables, size), kernel(on_points, rows, size))
 
 
-@pytest.mark.parametrize("shaper, domain, extra", SHAPED + [("logc_hdr", None, {})])
+@pytest.mark.parametrize("shaper, domain, extra", SHAPED)
 def test_off_the_cpu_a_frame_goes_through_the_whole_frame_form(shaper, domain, extra, monkeypatch):
     """The CPU given a GPU's policy: LUT3D's eager no-grad lookup takes the whole-frame form, with the gather form's values."""
     from torchgrade.lut import apply

@@ -37,6 +37,7 @@ Examples:
 
 from __future__ import annotations
 
+import functools
 from typing import Callable, Optional
 
 import torch
@@ -55,13 +56,43 @@ from ..color import linear_to_srgb, srgb_to_linear
 from ..runtime import LOOKUP_CHUNK, policy_for, run_pieces
 from .kernels import KERNELS
 from .lattice import planar_table
+from .native import MAX_SIZE as COMPILED_MAX_SIZE, compiled_tetrahedral
 from .shapers import SHAPERS, lattice_unit, shaper_encode
 
-__all__ = [ "OUTPUT_ENCODINGS", "LOOKUP_CHUNK", "apply_lut", "lookup", "chunked_lookup", "untracked_lookup", "compiled_lookup",
-           "decode_output", "encode_output", "table_output"]
+__all__ = [ "OUTPUT_ENCODINGS", "LOOKUP_CHUNK", "SHARES_PER_WORKER", "EagerTables", "apply_lut", "lookup", "chunked_lookup",
+           "untracked_lookup", "compiled_lookup", "decode_output", "encode_output", "table_output"]
 
 OUTPUT_ENCODINGS = ("linear", "srgb")
 """How table entries are stored: linear values, or sRGB-encoded values decoded after the lookup."""
+
+SHARES_PER_WORKER = 4
+"""A CPU frame is cut into this many shares per worker thread, taken in turn by whichever worker is free: a worker
+whose core another process holds takes fewer of them, instead of holding the frame up with a fixed half."""
+
+
+class EagerTables:
+    """What the eager forms of one planar table ``rows`` ``(3, S³)`` read, each derived on first use and kept:
+    :attr:`steps` (:attr:`EagerForm.tables <torchgrade.lut.kernels.EagerForm>`) and :attr:`packed` (``(S³, 3)``, the
+    compiled loop's, :mod:`torchgrade.lut.native`).
+
+    Examples:
+        >>> import torch
+        >>> tables = EagerTables(torch.arange(6.0).view(3, 2), 1, "tetrahedral")
+        >>> tables.packed.tolist()
+        [[0.0, 2.0, 4.0], [1.0, 3.0, 5.0]]
+    """
+
+    def __init__(self, rows: torch.Tensor, size: int, interpolation: str):
+        self.rows, self.size, self.form = rows, size, KERNELS[interpolation].eager
+
+    @functools.cached_property
+    def steps(self) -> torch.Tensor:
+        with torch.no_grad():
+            return self.form.tables(self.rows, self.size)
+
+    @functools.cached_property
+    def packed(self) -> torch.Tensor:
+        return self.rows.detach().t().contiguous()
 
 
 def decode_output(values: torch.Tensor, encoding: str) -> torch.Tensor:
@@ -134,7 +165,7 @@ def lookup(image, rows, size: int, shaper, domain_min, domain_max, interpolation
     One pass per pixel from input to output: non-finite policy, shaper, lattice coordinates,
     interpolation, output decoding and clamp. Arguments are not checked (see :func:`apply_lut`);
     this is the function ``LUT3D(..., compile=True)`` compiles. With the eager form's ``tables``
-    (:class:`~torchgrade.lut.EagerForm`, without autograd) the interpolation is its whole-frame form.
+    (:class:`EagerTables`, without autograd) the interpolation is its whole-frame form.
 
     Examples:
         >>> import torch
@@ -148,7 +179,7 @@ def lookup(image, rows, size: int, shaper, domain_min, domain_max, interpolation
     x = sanitize(working_dtype(image)).movedim(-3, 0)  # (3, ..., H, W): a view
     coords = lattice_unit(x.reshape(3, -1), shaper, domain_min, domain_max, curve, curve_range) * (size - 1)
     kernel = KERNELS[interpolation]
-    values = kernel(coords, rows, size) if tables is None else kernel.eager.frame(coords, tables, size)
+    values = kernel(coords, rows, size) if tables is None else kernel.eager.frame(coords, tables.steps, size)
     y = table_output(values, output_encoding, output_range)
     return to_input_dtype(y.reshape(x.shape).movedim(0, -3), image)
 
@@ -156,10 +187,13 @@ def lookup(image, rows, size: int, shaper, domain_min, domain_max, interpolation
 def chunked_lookup(image, rows, size: int, *settings, pixels: Optional[int] = None, tables=None) -> torch.Tensor:
     """:func:`lookup` (same arguments after ``size``) over ``pixels``-sized runs of each CPU image's pixels, each on one thread.
 
-    Every step is per pixel, so the runs give the one-pass result. Where the interpolation has an
-    eager form (:class:`~torchgrade.lut.EagerForm`: tetrahedral up to 65³) the runs go through it,
-    into buffers allocated once per call, from its ``tables`` (derived from ``rows`` when not given;
-    :class:`LUT3D` caches them): the same values to float rounding. Off the CPU the whole image is one
+    Every step is per pixel, so the runs give the one-pass result. On the CPU the runs go through the
+    interpolation's compiled loop where it has one and it compiled here (:mod:`torchgrade.lut.native`: tetrahedral up
+    to 812³), else through its eager form (:class:`~torchgrade.lut.EagerForm`: tetrahedral up to 65³), else through
+    its gather form; the first two read ``tables`` (:class:`EagerTables`, made here when not given; :class:`LUT3D`
+    caches them) and give the gather form's values to float rounding. The compiled loop
+    takes whole frames and spreads chunks of ``pixels`` over torch's intra-op threads; the other forms' runs go to
+    worker threads in :data:`SHARES_PER_WORKER` shares per worker, taken by whichever worker is free. Off the CPU the whole image is one
     pass of :func:`lookup`, through the eager form's whole-frame form where there is one; while gradients
     flow to the image or the table (autograd keeps every temporary anyway) and while tracing (an export
     records one pass), one pass of its gather form.
@@ -175,31 +209,34 @@ def chunked_lookup(image, rows, size: int, *settings, pixels: Optional[int] = No
     """
     if not untracked_lookup(image, rows):
         return lookup(image, rows, size, *settings)
-    eager = KERNELS[settings[3]].eager
-    if eager is None or size > eager.max_size:
-        eager, tables = None, None
-    elif tables is None:
-        tables = eager.tables(rows, size)
+    kernel = KERNELS[settings[3]]
+    eager = kernel.eager if kernel.eager is not None and size <= kernel.eager.max_size else None
     policy = policy_for(image.device)
+    compiled = kernel.compiled(rows.dtype) if kernel.compiled and policy.lookup_chunk and size <= COMPILED_MAX_SIZE else None
+    if tables is None and (eager or compiled):
+        tables = EagerTables(rows, size, settings[3])
     if policy.lookup_chunk is None:
-        return lookup(image, rows, size, *settings, tables=tables)
-    height, width = image.shape[-2:]
+        return lookup(image, rows, size, *settings, tables=tables if eager else None)
     pixels = pixels or policy.lookup_chunk
+    if compiled:
+        return _compiled_lookup(image, tables.packed, size, settings, compiled, pixels)
+    height, width = image.shape[-2:]
     planes = image.reshape(-1, 3, height * width)
     result = torch.empty(planes.shape, dtype=image.dtype)
+    if eager:
+        steps = tables.steps  # derived here, once, not in every worker
+
+        def runs(part, out):
+            _eager_lookup(part, out, rows, size, settings, pixels, eager, steps)
+    else:
+        def runs(part, out):
+            _gather_runs(part, out, rows, size, settings, pixels)
 
     def share(span: tuple) -> None:
         begin, end = span
-        if eager is None:
-            for frame, out in zip(planes, result):
-                for start in range(begin, end, pixels):
-                    stop = min(start + pixels, end)
-                    run = frame[:, start:stop].unsqueeze(-1)  # (3, run, 1): an image of one column
-                    out[:, start:stop] = lookup(run, rows, size, *settings).squeeze(-1)
-        else:
-            _eager_lookup(planes[..., begin:end], result[..., begin:end], rows, size, settings, pixels, eager, tables)
+        runs(planes[..., begin:end], result[..., begin:end])
 
-    shares = _shares(height * width, pixels, policy.workers)
+    shares = _shares(height * width, pixels, policy.workers * SHARES_PER_WORKER if policy.workers > 1 else 1)
     if policy.workers > 1:
         run_pieces(share, shares, policy.workers)
     else:
@@ -208,16 +245,52 @@ def chunked_lookup(image, rows, size: int, *settings, pixels: Optional[int] = No
     return result.reshape(image.shape)
 
 
-def _shares(count: int, pixels: int, workers: int) -> list:
-    """``[(begin, end), ...]``: ``count`` pixels cut into at most ``workers`` contiguous shares of whole runs.
+def _shares(count: int, pixels: int, shares: int) -> list:
+    """``[(begin, end), ...]``: ``count`` pixels cut into at most ``shares`` contiguous shares of whole runs.
 
     Examples:
         >>> _shares(10, 3, 2), _shares(10, 3, 1)
         ([(0, 6), (6, 10)], [(0, 10)])
     """
     runs = -(-count // pixels)
-    per_share = -(-runs // max(1, workers)) * pixels
+    per_share = -(-runs // max(1, shares)) * pixels
     return [(begin, min(begin + per_share, count)) for begin in range(0, count, per_share)]
+
+
+def _gather_runs(planes, result, rows, size, settings, pixels) -> None:
+    """:func:`chunked_lookup` through the gather form: ``planes`` ``(N, 3, P)`` into ``result``, runs of ``pixels``."""
+    for frame, out in zip(planes, result):
+        for start in range(0, frame.shape[-1], pixels):
+            run = frame[:, start:start + pixels].unsqueeze(-1)  # (3, run, 1): an image of one column
+            out[:, start:start + run.shape[1]] = lookup(run, rows, size, *settings).squeeze(-1)
+
+
+def _compiled_lookup(image, packed, size, settings, interpolate, pixels) -> torch.Tensor:
+    """:func:`chunked_lookup` through a compiled loop (:mod:`torchgrade.lut.native`), on whole frames in chunks of
+    ``pixels`` over torch's intra-op threads. The loop sanitizes and maps the domain itself, so linear pixels of the
+    table's dtype go in as they are (no temporary at all with a linear output); for another shaper, dtype or layout
+    the frames' shaper codes are formed first (:func:`lookup`'s steps), and a decoding or clamp follows."""
+    shaper, domain_min, domain_max, _, output_range, curve, curve_range, output_encoding = settings
+    dtype = packed.dtype
+    low, scale = _domain_columns(domain_min, domain_max, size, dtype)
+    planes = image.reshape(-1, 3, image.shape[-2] * image.shape[-1])
+    if shaper == "linear" and planes.dtype == dtype and planes.stride(-1) == 1:
+        codes = planes
+    else:  # (1, 3, N H W): every frame's pixels in one row per channel
+        x = sanitize(working_dtype(image).to(dtype)).movedim(-3, 0).reshape(3, -1)
+        codes = shaper_encode(x, shaper, curve, curve_range).contiguous().unsqueeze(0)
+    values = interpolate(codes, torch.empty(codes.shape, dtype=dtype), low, scale, packed, size, pixels)
+    y = table_output(values, output_encoding, output_range)
+    if codes is not planes:
+        y = y.reshape(3, *image.shape[:-3], *image.shape[-2:]).movedim(0, -3)
+    return to_input_dtype(y.reshape(image.shape), image)
+
+
+def _domain_columns(domain_min, domain_max, size: int, dtype) -> tuple:
+    """The domain's low end and ``(size - 1) / span`` ``(3,)`` in ``dtype``: lattice coordinates are ``(code - low) * scale``."""
+    low = torch.as_tensor(domain_min, dtype=dtype).reshape(-1).expand(3).contiguous()
+    span = torch.as_tensor(domain_max, dtype=dtype).reshape(-1).expand(3) - low
+    return low, ((size - 1) / span).contiguous()
 
 
 def untracked_lookup(image: torch.Tensor, rows: torch.Tensor) -> bool:
@@ -228,7 +301,8 @@ def untracked_lookup(image: torch.Tensor, rows: torch.Tensor) -> bool:
 
 
 def _eager_lookup(planes, result, rows, size, settings, pixels, eager, tables) -> None:
-    """:func:`chunked_lookup` through an eager form: ``planes`` ``(N, 3, P)`` into ``result``, runs of ``pixels``."""
+    """:func:`chunked_lookup` through an eager form from its ``tables``: ``planes`` ``(N, 3, P)`` into ``result``, runs
+    of ``pixels``."""
     shaper, domain_min, domain_max, _, output_range, curve, curve_range, output_encoding = settings
     run = max(1, min(pixels, planes.shape[-1]))
     runs = eager.runs(tables, size, run)

@@ -32,6 +32,7 @@ import torch
 import torch.nn.functional as F
 
 from ..runtime import constant, device_cached
+from .native import compiled_tetrahedral
 
 __all__ = ["Kernel", "EagerForm", "KERNELS", "INTERPOLATIONS", "BACKENDS", "LUT_BACKENDS", "tetrahedron", "tetrahedral",
            "tetrahedral_tables", "TetrahedralRuns", "tetrahedral_frame", "trilinear", "trilinear_grid_sample", "strip_table", "trilinear_strip",
@@ -401,7 +402,8 @@ class EagerForm:
 @dataclass(frozen=True)
 class Kernel:
     """One interpolation: its ``gather`` form (called by ``kernel(coords, rows, size)``), its ``grids`` by
-    backend and its ``eager`` form (or ``None``: the eager lookup runs the gather form).
+    backend, its ``eager`` form (or ``None``: the eager lookup runs the gather form) and its ``compiled`` CPU loop
+    (``compiled(dtype)`` gives it, or ``None`` where it did not compile: :mod:`torchgrade.lut.native`).
 
     Examples:
         >>> KERNELS["tetrahedral"].graph_form("strip") is None
@@ -411,6 +413,7 @@ class Kernel:
     gather: Callable[[torch.Tensor, torch.Tensor, int], torch.Tensor]
     grids: dict = field(default_factory=dict)
     eager: Optional[EagerForm] = None
+    compiled: Optional[Callable[[torch.dtype], Optional[Callable]]] = None
 
     def __call__(self, coords: torch.Tensor, rows: torch.Tensor, size: int) -> torch.Tensor:
         return self.gather(coords, rows, size)
@@ -423,7 +426,8 @@ class Kernel:
 KERNELS = {
     "trilinear": Kernel(trilinear, {"strip": trilinear_strip_lookup, "volume": trilinear_grid_sample}),
     # Up to 65³: the tables are 4 times the planar table (13 MiB at 65³; 4 S³ < 2²⁴ keeps the index product exact).
-    "tetrahedral": Kernel(tetrahedral, eager=EagerForm(tetrahedral_tables, TetrahedralRuns, tetrahedral_frame, max_size=65)),
+    "tetrahedral": Kernel(tetrahedral, eager=EagerForm(tetrahedral_tables, TetrahedralRuns, tetrahedral_frame, max_size=65),
+                          compiled=compiled_tetrahedral),
 }
 """The interpolations by name, what ``LUT3D(...)(image, interpolation)`` takes."""
 

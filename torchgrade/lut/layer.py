@@ -22,6 +22,7 @@ from .lattice import MAX_CODE, check_size, checked_domain, planar_table
 from .apply import (
     OUTPUT_ENCODINGS,
     check_lookup_arguments,
+    EagerTables,
     chunked_lookup,
     compiled_lookup,
     decode_output,
@@ -178,15 +179,14 @@ class LUT3D(Stage):
         self._tables_cache = (None, None, None)
         return super()._apply(fn, *args, **kwargs)
 
-    def _eager_tables(self, image: torch.Tensor, rows: torch.Tensor, interpolation: str):
-        """The eager form's tables of ``rows`` (:meth:`rows`), cached with them; ``None`` where the lookup of ``image`` will not use them."""
-        eager = KERNELS[interpolation].eager
-        if eager is None or self.size > eager.max_size or not untracked_lookup(image, rows):
+    def _eager_tables(self, image: torch.Tensor, rows: torch.Tensor, interpolation: str) -> Optional[EagerTables]:
+        """The eager forms' tables of ``rows`` (:meth:`rows`), cached with them (each derived on first use); ``None``
+        while the lookup of ``image`` runs the gather form (gradients, tracing)."""
+        if not untracked_lookup(image, rows):
             return None
         cached_rows, cached_interpolation, tables = self._tables_cache
         if cached_rows is not rows or cached_interpolation != interpolation:
-            with torch.no_grad():
-                tables = eager.tables(rows, self.size)
+            tables = EagerTables(rows, self.size, interpolation)
             self._tables_cache = (rows, interpolation, tables)
         return tables
 
