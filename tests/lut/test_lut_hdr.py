@@ -1,5 +1,6 @@
-"""The default HDR lattice (``"logc_hdr"``): LogC to 58.86, then a tail to 65504 on the last lattice planes; its
-shape, its bake, and what it keeps on real highlights that the ``"logc"`` lattice clamps."""
+"""The HDR lattices with a tail to 65504: ``"logc_hdr"`` (LogC to 58.86 on 27 of 32 intervals, a tail on 5) and the
+default, ``"logc_extended"`` (the ``"logc"`` lattice to 58.86, a tail on 12 more planes); their shape, their bakes, and
+what they keep on real highlights that the ``"logc"`` lattice clamps."""
 
 import warnings
 
@@ -11,6 +12,7 @@ import torchgrade as tg
 from torchgrade.lut import SHAPERS, LUT3D, LUTAccuracyWarning, bake_lut, lattice
 
 SHAPER = SHAPERS["logc_hdr"]
+EXTENDED = SHAPERS["logc_extended"]
 A, B, C, D = 5.555556, 0.047996, 0.244161, 0.386036  # Unity's LinearToLogC constants (ColorGrading.hlsl)
 LOGC_TOP = (10.0 ** ((1.0 - D) / C) - B) / A  # linear value of LogC code 1
 KNEE = (10.0 ** ((1.3 - D) / C) - B) / A  # linear value of LogC code 1.3 (≈ 997)
@@ -36,6 +38,28 @@ def test_the_knots_sit_on_lattice_planes_27_31_32_of_a_33_lattice_and_on_planes_
     """Black to 58.86 keeps 27 of 32 intervals, 58.86 to LogC 1.3 gets 4, the rest up to 65504 gets 1."""
     for size, planes in ((33, [0, 27, 31, 32]), (65, [0, 54, 62, 64]), (129, [0, 108, 124, 128]), (17, [0, 13.5, 15.5, 16])):
         np.testing.assert_allclose(lattice_coordinate([0.0, LOGC_TOP, KNEE, 65504.0], size), planes, rtol=0, atol=1e-9)
+
+
+def test_the_default_lattice_is_the_logc_lattice_to_58_86_and_its_knots_sit_on_planes_32_38_44_of_45():
+    low, high = EXTENDED.default_domain
+    for size, planes in ((45, [0, 32, 38, 44]), (89, [0, 64, 76, 88])):
+        codes = EXTENDED.encode(torch.tensor([0.0, LOGC_TOP, KNEE, 65504.0], dtype=torch.float64))
+        np.testing.assert_allclose(((codes - low) / (high - low)).numpy() * (size - 1), planes, rtol=0, atol=1e-9)
+    x = np.concatenate(([0.0, 1e-6, 0.18, 1.0, 16.0], np.linspace(50.0, LOGC_TOP, 7)))
+    np.testing.assert_allclose(EXTENDED.encode(torch.from_numpy(x)).numpy(), logc(x), rtol=0, atol=1e-12)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", LUTAccuracyWarning)
+        lut = bake_lut(tg.ToneMap("aces"))
+    assert (lut.shaper, lut.size) == ("logc_extended", 45)
+
+
+def test_the_clis_logc_cube_holds_the_default_lattice_plane_for_plane_up_to_58_86():
+    """``torchgrade bake`` writes ``"logc"`` 33³ .cube files: the default 45³ lattice's first 33 planes on each axis."""
+    look = torch.nn.Sequential(tg.ColorGrade(contrast=20.0, saturation=10.0), tg.ToneMap("aces"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", LUTAccuracyWarning)
+        default, cube = bake_lut(look), bake_lut(look, size=33, shaper="logc")
+    torch.testing.assert_close(default.table[:33, :33, :33], cube.table, atol=1e-6, rtol=0)  # the grade's float32 maths
 
 
 def test_the_tail_spaces_the_lattice_evenly_in_stops():
@@ -71,9 +95,9 @@ def test_the_bake_reproduces_the_transform_on_its_lattice_up_to_65504():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LUTAccuracyWarning)
         lut = bake_lut(look, size=9)
-    assert lut.shaper == "logc_hdr"
-    low, high = SHAPER.default_domain
-    inputs = SHAPER.decode(low + lattice(9).reshape(-1, 3).t() * (high - low))
+    assert lut.shaper == "logc_extended"
+    low, high = EXTENDED.default_domain
+    inputs = EXTENDED.decode(low + lattice(9).reshape(-1, 3).t() * (high - low))
     assert float(inputs.max()) == pytest.approx(65504.0, rel=1e-9)  # no highlight is clamped
     image = inputs.reshape(1, 3, 1, -1)
     with torch.no_grad():
@@ -84,7 +108,7 @@ def test_the_default_bake_names_no_lattice_range_while_the_logc_lattice_does():
     look = torch.nn.Sequential(tg.ColorGrade(contrast=30.0, saturation=20.0, temperature=20.0), tg.ToneMap("aces"))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LUTAccuracyWarning)
-        default, logc = bake_lut(look, size=33), bake_lut(look, size=33, shaper="logc")
+        default, logc = bake_lut(look), bake_lut(look, size=33, shaper="logc")
     default, logc = default.error_report.worst_case, logc.error_report.worst_case  # over the whole domain, to 65504
     assert "lattice range" not in (default.cause or "")
     assert "lattice range" in logc.cause and "58.86" in logc.cause
@@ -93,15 +117,9 @@ def test_the_default_bake_names_no_lattice_range_while_the_logc_lattice_does():
 
 # ---------------------------------------------------------------- real highlights
 
-HIGHLIGHT_MAX = 5.0
-"""Codes a default 33³ bake of the strong look may miss by on pixels with a channel above 58.86 (tetrahedral; measured
-4.4 / 0 / 1.1 on Desk / CandleGlass / GoldenGate with sRGB entries, 4.5 / 0 / 1.1 with linear ones; the ``"logc"``
-lattice: 17.5 / 2.9 / 0, benchmarks/results/lut.md)."""
-
-MIDTONE_P999 = {"srgb": {"Desk": 6.5, "CandleGlass": 1.0, "GoldenGate": 2.0},
-                "linear": {"Desk": 7.8, "CandleGlass": 2.1, "GoldenGate": 3.2}}
-"""The p99.9 the tail costs (measured 5.87 / 0.85 / 1.60 sRGB, 7.10 / 1.82 / 2.84 linear; on the ``"logc"`` lattice
-4.66 / 0.65 / 1.14 and 5.52 / 1.33 / 2.07), with a margin."""
+QUANTILE_JITTER = 0.05
+"""Codes by which a p99.9 or max may differ between lattices that share every plane up to 58.86: a handful of pixels
+above it (GoldenGate has 2) move the 99.9th percentile by a rank."""
 
 
 def srgb_codes(values: np.ndarray) -> np.ndarray:
@@ -112,17 +130,28 @@ def srgb_codes(values: np.ndarray) -> np.ndarray:
 
 @pytest.mark.parametrize("name", ["Desk", "CandleGlass", "GoldenGate"])
 @pytest.mark.parametrize("encoding", ["srgb", "linear"])
-def test_default_33_bake_keeps_real_highlights_within_a_few_codes(exr_dir, name, encoding):
-    """Every 4th pixel, tetrahedral, 8-bit sRGB codes against float64 direct evaluation of the strong ACES look."""
+def test_the_default_bake_misses_real_photographs_less_than_the_33_lattices_it_replaced(exr_dir, name, encoding):
+    """Every 4th pixel, tetrahedral, 8-bit sRGB codes against float64 direct evaluation of the strong ACES look: the
+    default lattice leaves fewer values more than 1 code off than ``"logc"`` and ``"logc_hdr"`` at 33³, and its p99.9
+    and max are within :data:`QUANTILE_JITTER` of ``"logc"``'s (whose planes it shares up to 58.86; ``"logc"`` clamps
+    above: Desk's max 17.5). ``"logc_hdr"``'s max can be lower (Desk: 12.6 against 13.7 with linear entries, on a
+    mid-tone between the planes both other lattices share: benchmarks/results/lut_lattices.md)."""
     from torchgrade.io import read_exr
 
     look = torch.nn.Sequential(tg.ColorGrade(contrast=30.0, saturation=20.0, temperature=20.0), tg.ToneMap("aces"))
     image = read_exr(exr_dir / f"{name}.exr")[:3, ::4, ::4].unsqueeze(0)
-    lut = bake_lut(look, size=33, output_encoding=encoding, report_tolerance=float("inf"))
     with torch.no_grad():
-        error = np.abs(srgb_codes(lut(image).double().numpy()) - srgb_codes(look(image.double()).numpy()))
-    above = np.broadcast_to((image.amax(1, keepdim=True) > LOGC_TOP).numpy(), error.shape)
+        direct = srgb_codes(look(image.double()).numpy())
+    figures = {}
+    for shaper, size in (("auto", None), ("logc", 33), ("logc_hdr", 33)):
+        lut = bake_lut(look, size=size, shaper=shaper, output_encoding=encoding, report_tolerance=float("inf"))
+        with torch.no_grad():
+            error = np.abs(srgb_codes(lut(image).double().numpy()) - direct)
+        figures[shaper] = (float(np.quantile(error, 0.999)), float(error.max()), float((error > 1.0).mean()))
+    above = int((image.amax(1) > LOGC_TOP).sum())
     if name == "Desk":
-        assert above.any(axis=1).sum() > 1000  # 1583 such pixels
-    assert error[above].max(initial=0.0) <= HIGHLIGHT_MAX, (name, float(error[above].max(initial=0.0)))
-    assert np.quantile(error, 0.999) <= MIDTONE_P999[encoding][name], (name, float(np.quantile(error, 0.999)))
+        assert above > 1000  # 1583 pixels above the "logc" lattice
+    # below 58.86 the default and "logc" share their planes: they differ on the values of pixels above it
+    assert figures["auto"][2] <= min(figures["logc"][2] + 3 * above / image.numel(), figures["logc_hdr"][2]), (name, figures)
+    for figure in range(2):
+        assert figures["auto"][figure] <= figures["logc"][figure] + QUANTILE_JITTER, (name, figures)

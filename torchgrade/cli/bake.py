@@ -75,9 +75,9 @@ def _check_bake_arguments(args: argparse.Namespace) -> None:
 
 
 def _cube_shaper(shaper: str, transform) -> str:
-    """``--shaper``: ``auto`` is ``logc`` for a look taking HDR input, as a ``.cube`` 1D section stops at 58.86 anyway.
-
-    (``bake_lut``'s ``logc_hdr`` default spends 5 of 32 intervals on a tail to 65504 that a ``.cube`` file cannot hold.)
+    """``--shaper``: ``auto`` is ``logc`` for a look taking HDR input: the default lattice (``"logc_extended"``) as a
+    ``.cube`` file can hold it. Its planes up to 58.86 are the ``"logc"`` 33³ lattice's, plane for plane, and a
+    ``.cube`` 1D section stops there; the tail above it lives on in ``bake_lut`` and CLF files.
 
     Examples:
         >>> from torchgrade import ToneMap

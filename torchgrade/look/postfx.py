@@ -237,13 +237,14 @@ class PostFX(nn.Module):
             raise ValueError("nothing to bake: the look has neither a grade nor a tone mapper")
         return transform
 
-    def to_lut(self, size: int = 33, interpolation: Optional[str] = None, output_encoding: str = "linear",
+    def to_lut(self, size: Optional[int] = None, interpolation: Optional[str] = None, output_encoding: str = "linear",
                entries: str = "sampled", frames: Optional[torch.Tensor] = None) -> "PostFX":
-        """An equivalent look with grade, primary grade and tone mapping baked into a ``size``³ ``"logc_hdr"`` LUT.
+        """An equivalent look with grade, primary grade and tone mapping baked into a ``"logc_extended"`` LUT (45³ by
+        default, or ``size``³).
 
         The other slots stay live (copied, so the new look keeps its own adaptation state). The
-        LUT's lattice is LogC up to linear 58.86, then a compressed tail up to 65504
-        (:class:`~torchgrade.lut.LogCHDRShaper`), so no channel is clamped; a tone-mapped look clamps its
+        LUT's lattice is LogC up to linear 58.86, then a tail in stops up to 65504
+        (:class:`~torchgrade.lut.shapers.LogCExtendedShaper`), so no channel is clamped; a tone-mapped look clamps its
         output to [0, 1] after the lookup. ``interpolation`` is the LUT's (tetrahedral by default).
         ``output_encoding`` and ``entries`` (``"fitted"``: :func:`~torchgrade.lut.fit_entries`) are passed to
         :func:`~torchgrade.bake_lut`; the new LUT keeps the encoding and the
@@ -256,7 +257,8 @@ class PostFX(nn.Module):
             check_image(frames, "frames")
             with torch.no_grad():
                 frames = self.per_pixel_input(frames.reshape(-1, *frames.shape[-3:]))
-        lut = bake_lut(transform, size=size, shaper="logc_hdr", output_encoding=output_encoding, entries=entries, frames=frames)
+        lut = bake_lut(transform, size=size, shaper="logc_extended", output_encoding=output_encoding, entries=entries,
+                       frames=frames)
         report = lut.error_report
         lut = LUT3D(lut.table.detach().float(), shaper=lut.shaper, domain=(lut.domain_min, lut.domain_max),
                     output_range=lut.output_range, output_encoding=lut.output_encoding,

@@ -3,8 +3,8 @@
 The package holds one family per file:
 
 * :mod:`~torchgrade.lut.shapers`: the 1D shapers before the lattice (:data:`SHAPERS`), each with
-  its encoding, default domain and ``.cube`` form (the default for HDR looks, ``"logc_hdr"``, is LogC
-  to linear 58.86 and a tail to 65504 on the last lattice planes);
+  its encoding, default domain and ``.cube`` form (the default for HDR looks, ``"logc_extended"``, is the
+  ``"logc"`` lattice to linear 58.86 and a tail to 65504 on 12 more planes);
 * :mod:`~torchgrade.lut.kernels`: the interpolations (:data:`KERNELS`), each with its gather form
   and its ``GridSample`` graph forms by export backend;
 * :mod:`~torchgrade.lut.lattice`: sizes, lattice coordinates, table layouts, domains;

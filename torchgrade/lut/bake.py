@@ -32,8 +32,8 @@ from .fit import SCENE_FIT_WEIGHT, SCENE_MIN_SIZE, fit_scene_shaper, fit_shaper,
 from .lattice import MIN_SIZE, check_size, checked_domain, lattice
 from .layer import LUT3D
 from .apply import OUTPUT_ENCODINGS, encode_output
-from .report import FRAMES, REALISTIC, code_errors, diagnose, enforce, measure, measured_colours, worst_case
-from .shapers import DEFAULT_DOMAINS, SHAPERS
+from .report import FRAMES, REALISTIC, code_errors, diagnose, enforce, highlights_report, measure, measured_colours, worst_case
+from .shapers import DEFAULT_DOMAINS, DEFAULT_SIZES, SHAPERS
 from .validation import realistic_colours, validation_colours
 
 __all__ = ["AUTO_SIZES", "bake_lut", "expects_hdr", "is_display_referred", "scene_domain", "srgb_code_error"]
@@ -73,7 +73,7 @@ def expects_hdr(transform) -> bool:
     return any(getattr(m, "expects_hdr", False) for m in _modules(transform))
 
 
-def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper: str = "auto",
+def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=None, shaper: str = "auto",
              scene: Optional[torch.Tensor] = None, tolerance: float = 0.5, chunk: int = 1 << 21,
              output_encoding: str = "linear", progress: bool = False, domain: Optional[tuple] = None,
              report_tolerance: float = 1.0, strict: bool = False, entries: str = "sampled",
@@ -85,9 +85,10 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper:
     a time. The table stays connected to the transform's parameters, so a LUT can be fitted by
     gradient descent.
 
-    * ``shaper``: ``"linear"``, ``"logc"`` (black to linear 58.86), ``"logc_hdr"`` (LogC to 58.86, then a
-      compressed tail to 65504: :class:`~torchgrade.lut.LogCHDRShaper`), ``"fitted"`` or ``"auto"``
-      (``"logc_hdr"`` when :func:`expects_hdr`); the choice is stored as ``lut.shaper`` and shown in ``repr(lut)``.
+    * ``shaper``: ``"linear"``, ``"logc"`` (black to linear 58.86), ``"logc_extended"`` (the ``"logc"`` lattice, then
+      12 more intervals even in stops to 65504: :class:`~torchgrade.lut.shapers.LogCExtendedShaper`), ``"logc_hdr"``
+      (the former default: LogC to 58.86 on 27 intervals, a tail on 5), ``"fitted"`` or ``"auto"``
+      (``"logc_extended"`` when :func:`expects_hdr`); the choice is stored as ``lut.shaper`` and shown in ``repr(lut)``.
       ``"fitted"`` fits a per-channel shaper from black to 65504 (its lattice domain is [0, 1]): to the
       transform's bends (:func:`~torchgrade.lut.fit_shaper`), or, given a ``scene``, to where tables with
       fitted entries miss the scene's pixels (:func:`~torchgrade.lut.fit.fit_scene_shaper`: a few bake-and-fit
@@ -104,7 +105,8 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper:
     * ``domain``: ``(min, max)`` of the lattice in shaper code values (numbers or RGB triples, as
       :class:`~torchgrade.LUT3D` takes them), overriding the shaper's default and the scene's range
       (a ``scene`` then only serves ``size="auto"``).
-    * ``size``: 2..256, or ``"auto"`` with a ``scene``: the smallest size whose error on the scene is
+    * ``size``: 2..256 (by default the shaper's, :data:`~torchgrade.lut.shapers.DEFAULT_SIZES`: 45 for
+      ``"logc_extended"``, 33 for the others), or ``"auto"`` with a ``scene``: the smallest size whose error on the scene is
       at most ``tolerance`` 8-bit sRGB code values at the 99.9th percentile (:func:`srgb_code_error`,
       against direct float64 evaluation). Sizes :data:`AUTO_SIZES` are tried in order, then the gap
       below the first that passes is bisected (error is assumed to fall as the size grows); if none
@@ -125,10 +127,12 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper:
       :data:`~torchgrade.lut.fit.SCENE_FIT_WEIGHT` on a scene-fitted lattice.
     * The LUT's error on realistic colours (:func:`~torchgrade.lut.realistic_colours`, plus the scene's
       pixels), or on the ``frames``, is measured and kept as ``lut.error_report`` (:class:`~torchgrade.lut.ErrorReport`), with the
-      worst case, on the validation colours over the whole domain, as its ``worst_case``. Above
-      ``report_tolerance`` 8-bit codes at p99.9 on the realistic colours the report names the cause and a bake
-      that meets it, and the bake warns (:class:`~torchgrade.lut.LUTAccuracyWarning`), or raises ``ValueError``
-      with ``strict=True``.
+      worst case, on the validation colours over the whole domain, as its ``worst_case``, and for a lattice that
+      reaches 65504 its max error on bright saturated colours as its ``highlights``
+      (:func:`~torchgrade.lut.report.highlights_report`). Above ``report_tolerance`` 8-bit codes at p99.9 on the
+      realistic colours, or with highlights off by more than :data:`~torchgrade.lut.report.HIGHLIGHT_TOLERANCE`,
+      the report names the cause and a bake that meets it, and the bake warns
+      (:class:`~torchgrade.lut.LUTAccuracyWarning`), or raises ``ValueError`` with ``strict=True``.
 
     Examples:
         >>> bake_lut(lambda image: image, size=5, shaper="logc").shaper
@@ -136,8 +140,9 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper:
     """
     check_on_cpu(transform, "bake_lut")
     if shaper == "auto":
-        shaper = "logc_hdr" if expects_hdr(transform) else "linear"
+        shaper = "logc_extended" if expects_hdr(transform) else "linear"
     check_choice("bake shaper", shaper, DEFAULT_DOMAINS)
+    size = DEFAULT_SIZES[shaper] if size is None else size
     check_choice("output encoding", output_encoding, OUTPUT_ENCODINGS)
     check_choice("entries", entries, ENTRY_CHOICES)
     if size == "auto" and scene is None:
@@ -173,7 +178,8 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=33, shaper:
     report = measure(lut, measured, report_tolerance, colour_set)
     if not report.within:
         report = diagnose(report, lut, transform, measured, _rebaker(bake, lut), scene_colours)
-    report = replace(report, worst_case=worst_case(lut, transform, worst, report_tolerance))
+    report = replace(report, worst_case=worst_case(lut, transform, worst, report_tolerance),
+                     highlights=highlights_report(lut, transform, lambda n: bake(lut.shaper, n)))
     enforce(report, strict)
     lut.error_report = report
     return lut

@@ -8,7 +8,9 @@ two sets of colours (:mod:`~torchgrade.lut.validation`):
   frames when given (``bake_lut(frames=)``): the headline figure, which the tolerance judges
   (``benchmarks/results/lut_realistic.md``: within 1.5x of the p99.9 pooled over the sample images);
 * the **validation colours** over the whole domain (up to 65504, out of gamut, the gamut's corners):
-  the worst case, shown beside it (``ErrorReport.worst_case``).
+  the worst case, shown beside it (``ErrorReport.worst_case``);
+* for a lattice that reaches 65504, the **bright saturated colours** (``ErrorReport.highlights``): their max
+  error must stay within :data:`HIGHLIGHT_TOLERANCE` too, or the report is over its tolerance and says why.
 
 Above the tolerance the report names the cause it found on the realistic colours:
 
@@ -36,13 +38,15 @@ from typing import Callable, Optional
 
 import torch
 
-from ..base.core import sanitize
+from ..base.core import HALF_MAX, sanitize
 from ..color import linear_to_srgb
+from .lattice import MAX_SIZE
 from .shapers import SHAPERS
+from .validation import bright_saturated_colours
 
 __all__ = ["ErrorReport", "LUTAccuracyWarning", "code_errors", "measured_colours", "measure", "diagnose", "enforce",
            "SCENE_PIXELS", "KINK_RATIO", "CANDIDATES", "ADVICE_MAX_SIZE", "REALISTIC", "FRAMES", "WORST_CASE",
-           "worst_case"]
+           "HIGHLIGHT_TOLERANCE", "worst_case", "highlights_report"]
 
 REALISTIC = "realistic colours"
 """How a report names :func:`~torchgrade.lut.validation.realistic_colours`."""
@@ -58,6 +62,11 @@ SCENE_PIXELS = 65536
 
 KINK_RATIO = 2.5
 """Error ratio from ``S³`` to ``(2S-1)³`` below which the cause is a kink (a smooth transform gives about 4)."""
+
+
+HIGHLIGHT_TOLERANCE = 2.0
+"""The most a lattice reaching 65504 may miss a bright saturated colour by (8-bit codes, max): above it the report
+is over its tolerance, and says so (:func:`highlights_report`)."""
 
 
 class LUTAccuracyWarning(UserWarning):
@@ -83,11 +92,13 @@ class ErrorReport:
     advice: Optional[str] = None
     worst_case: Optional["ErrorReport"] = None
     colour_set: str = "validation colours"
+    highlights: Optional["ErrorReport"] = None
+    """The max error on bright saturated colours (:func:`highlights_report`), for a lattice that reaches 65504."""
 
     @property
     def within(self) -> bool:
-        """Whether the p99.9 error is within the tolerance."""
-        return self.p99_9 <= self.tolerance
+        """Whether the p99.9 error is within the tolerance, and the highlights' max within theirs."""
+        return self.p99_9 <= self.tolerance and (self.highlights is None or self.highlights.max <= self.highlights.tolerance)
 
     def __str__(self) -> str:
         text = (f"p99.9 {self.p99_9:.2f}, max {self.max:.2f} 8-bit codes on {self.colours} {self.colour_set} "
@@ -96,6 +107,10 @@ class ErrorReport:
             worst = self.worst_case
             text += f"; worst case: p99.9 {worst.p99_9:.2f}, max {worst.max:.2f} on {worst.colours} {worst.colour_set}"
             text += f" ({worst.cause})" if worst.cause else ""
+        if self.highlights is not None:
+            high = self.highlights
+            text += f"; highlights: max {high.max:.2f} on {high.colours} {high.colour_set} (tolerance {high.tolerance:g})"
+            text += f" ({high.cause})" if high.cause else ""
         if self.cause:
             text += f"; cause: {self.cause}"
         if self.advice:
@@ -209,6 +224,32 @@ def worst_case(lut, transform, measured: tuple, tolerance: float) -> ErrorReport
     if report.within:
         return report
     return replace(report, cause=_range_cause(lut, _within_lattice(lut, transform, measured)[0], tolerance))
+
+
+def highlights_report(lut, transform, rebake: Callable[[int], object]) -> Optional[ErrorReport]:
+    """The :class:`ErrorReport` of ``lut`` on :func:`~torchgrade.lut.validation.bright_saturated_colours`, when its
+    lattice reaches 65504 (``None`` otherwise: a lattice that stops lower clamps highlights by design, and its
+    report says where). Above :data:`HIGHLIGHT_TOLERANCE` it names the cause and whether the lattice of twice the
+    intervals (``rebake(size)``) holds them.
+
+    Examples:
+        >>> import torch
+        >>> from torchgrade.lut import bake_lut
+        >>> lut = bake_lut(lambda image: image / (1 + image), shaper="logc_extended", size=9)
+        >>> lut.error_report.highlights.max < 0.5
+        True
+    """
+    if SHAPERS[lut.shaper].linear_range(lut.domain_min, lut.domain_max, lut.curve_range)[1] < HALF_MAX / 2:
+        return None
+    measured = measured_colours(transform, bright_saturated_colours(), None)
+    report = measure(lut, measured, HIGHLIGHT_TOLERANCE, "bright saturated colours")
+    if report.max <= HIGHLIGHT_TOLERANCE:
+        return report
+    size = min(2 * (lut.size - 1) + 1, MAX_SIZE)
+    finer = measure(rebake(size), measured, HIGHLIGHT_TOLERANCE) if size > lut.size else None
+    advice = (f"size={size} holds them (max {finer.max:.2f})" if finer is not None and finer.max <= HIGHLIGHT_TOLERANCE
+              else "apply the transform directly")
+    return replace(report, cause=f"the transform bends between the lattice's highlight planes; {advice}")
 
 
 def _scene_fitted_cause(lut, measured: tuple, scene_colours: int) -> str:

@@ -24,6 +24,10 @@ float64 linear Rec.709 values:
 
 An LDR transform (one that takes [0, 1] input) is measured on the same constructions with the top at 1.
 
+**Bright saturated colours** (:func:`bright_saturated_colours`): the highlights a lattice reaching 65504 must keep
+(lamps, the sun, speculars, saturated emissives): one channel from the LogC top (58.86) to 65504 in
+``HIGHLIGHT_STEPS`` log-spaced levels, each of the other two a fraction of it (0, 1e-4, ... 0.3), in every order.
+
 Examples:
     >>> colours = validation_colours()
     >>> colours.shape[0], float(colours.max()) == 65504.0
@@ -40,8 +44,14 @@ from ..base.core import HALF_MAX
 from ..color import linear_to_logc, logc_to_linear
 from ..color.spaces import REC709_LUMINANCE
 
-__all__ = ["validation_colours", "realistic_colours", "FOOTAGE_COLOURS", "GRID_LEVELS", "REALISTIC_COLOURS",
-           "REALISTIC_STOPS", "CHROMA_SIGMA"]
+__all__ = ["validation_colours", "realistic_colours", "bright_saturated_colours", "FOOTAGE_COLOURS", "GRID_LEVELS",
+           "REALISTIC_COLOURS", "REALISTIC_STOPS", "CHROMA_SIGMA", "HIGHLIGHT_STEPS", "HIGHLIGHT_FRACTIONS"]
+
+HIGHLIGHT_STEPS = 64
+"""Levels of the bright channel of :func:`bright_saturated_colours`, log-spaced from 58.86 to 65504."""
+
+HIGHLIGHT_FRACTIONS = (0.0, 1e-4, 1e-3, 3e-3, 0.01, 0.03, 0.1, 0.3)
+"""The other channels of a bright saturated colour, as fractions of its bright channel."""
 
 FOOTAGE_COLOURS = 16384
 """Footage-like colours in the validation set (the gamut grid adds ``GRID_LEVELS ** 3``)."""
@@ -74,6 +84,25 @@ def validation_colours(hdr: bool = True, seed: int = 0) -> torch.Tensor:
     negative = -0.2 * torch.rand(FOOTAGE_COLOURS, generator=generator, dtype=torch.float64) * footage.mean(0)
     footage[channel[flipped], flipped.nonzero().flatten()] = negative[flipped]
     return torch.cat((footage, _gamut_grid(top)), dim=1)
+
+
+def bright_saturated_colours() -> torch.Tensor:
+    """Bright saturated colours, ``(3, N)`` float64: see the module docstring.
+
+    Examples:
+        >>> colours = bright_saturated_colours()
+        >>> colours.shape, float(colours.max()) == 65504.0, float(colours.min())
+        (torch.Size([3, 24576]), True, 0.0)
+    """
+    top = float(logc_to_linear(torch.tensor(1.0, dtype=torch.float64)))
+    bright = torch.logspace(math.log10(top), math.log10(HALF_MAX), HIGHLIGHT_STEPS, dtype=torch.float64)
+    bright[0], bright[-1] = top, HALF_MAX  # the ends exactly
+    fractions = torch.tensor(HIGHLIGHT_FRACTIONS, dtype=torch.float64)
+    second, third = torch.meshgrid(fractions, fractions, indexing="ij")
+    colours = torch.stack(torch.broadcast_tensors(bright[:, None], bright[:, None] * second.flatten(), bright[:, None] * third.flatten()))
+    colours = colours.reshape(3, -1)
+    orders = ((0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0))
+    return torch.cat([colours[list(order)] for order in orders], dim=1)
 
 
 def realistic_colours(hdr: bool = True, seed: int = 0) -> torch.Tensor:

@@ -3,7 +3,7 @@
 Unlike ``.cube``, CLF states a shaper exactly: a LogC shaper is a ``Log`` node (``linToLog``,
 ``c log10(a x + b) + d``, Unity's constants), the lattice domain a ``Range`` node (which clamps, as
 the lookup does), a fitted shaper's curve a ``LUT1D`` after a ``Range`` onto its LogC span, the
-``"logc_hdr"`` tail the same way (piecewise linear in LogC codes, its knots on the table's points, so
+tail of ``"logc_extended"`` and ``"logc_hdr"`` the same way (piecewise linear in LogC codes, its knots on the table's points, so
 linear interpolation in the ``LUT1D`` is exact), and a
 display-referred LUT's clamp a final ``Range`` to [0, 1]. The 3D table is written with linear
 entries in CLF's order (blue fastest) and the interpolation the LUT is meant for.
@@ -24,6 +24,7 @@ import torch
 
 from ...color.transfer import LOGC_A, LOGC_B, LOGC_C, LOGC_D
 from ...lut import LUT3D, SHAPERS
+from ...lut.shapers import LogCHDRShaper
 from ..atomic import atomic_write
 from ..cube.write import check_title
 
@@ -75,14 +76,15 @@ def _shaper_nodes(lut: LUT3D) -> list:
     if lut.shaper == "linear":
         return []
     lines = []
-    if lut.shaper in ("logc", "logc_hdr", "fitted"):
+    tail = isinstance(SHAPERS[lut.shaper], LogCHDRShaper)
+    if lut.shaper in ("logc", "fitted") or tail:
         lines += [f'  <Log {_DEPTHS} style="linToLog">',
                   f'    <LogParams base="10" linSideSlope="{LOGC_A!r}" linSideOffset="{LOGC_B!r}" '
                   f'logSideSlope="{LOGC_C!r}" logSideOffset="{LOGC_D!r}"/>', "  </Log>"]
     curve, curve_range = lut.curve, lut.curve_range
-    if lut.shaper == "logc_hdr":  # the tail after LogC: piecewise linear with its knots on table points, so exact
+    if tail:  # the tail after LogC: piecewise linear with its knots on table points, so exact
         bottom = min(0.0, math.floor(float(lut.domain_min.min()) * 10.0) / 10.0)
-        curve_range, curve = SHAPERS["logc_hdr"].logc_table(bottom)
+        curve_range, curve = SHAPERS[lut.shaper].logc_table(bottom)
     if curve is not None:  # a fitted curve over LogC codes, the tail, or a .cube 1D section over linear values
         low, high = curve_range
         lines += _range(torch.tensor(low, dtype=torch.float64), torch.tensor(high, dtype=torch.float64), 0.0, 1.0)
