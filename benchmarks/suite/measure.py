@@ -18,7 +18,7 @@ from tqdm import tqdm
 import torchgrade as tg
 from benchmarks import common, metrics
 from benchmarks.suite import workload
-from benchmarks.suite.methods import DEFAULT_SHAPER, PEER, Method, lut_name, method_rows
+from benchmarks.suite.methods import DEFAULT_SHAPER, DEFAULT_SIZE, PEER, Method, lut_name, method_rows
 from benchmarks.suite.workload import Workload, as_strip
 
 
@@ -124,8 +124,8 @@ def record_peak_memory(work: Workload, methods: dict, records: list) -> None:
 
 def scaling(work: Workload) -> list:
     """ms and ms per megapixel of the direct float32 and 33³ default-lattice tetrahedral stages by resolution and by batch."""
-    lut = work.lut(33, DEFAULT_SHAPER)
-    paths = {"direct float32": work.per_pixel, lut_name(33, DEFAULT_SHAPER, "tetrahedral"): lambda x: lut(x, "tetrahedral")}
+    lut = work.lut(DEFAULT_SIZE, DEFAULT_SHAPER)
+    paths = {"direct float32": work.per_pixel, lut_name(DEFAULT_SIZE, DEFAULT_SHAPER, "tetrahedral"): lambda x: lut(x, "tetrahedral")}
     shapes = [("resolution", 1, h, w) for h, w in work.plan.resolutions]
     shapes += [("batch", b, workload.BATCH_SIDE, workload.BATCH_SIDE) for b in workload.BATCHES]
     sync = common.synchronizer(work.plan.device)

@@ -21,8 +21,10 @@ import torchgrade as tg
 from benchmarks.common import ocio_apply, ocio_in_place, ocio_processor
 from benchmarks.suite.workload import LOOK, Workload, float32_lut
 
-DEFAULT_SHAPER = "logc_hdr"
+DEFAULT_SHAPER = "logc_extended"
 """The lattice ``PostFX.to_lut`` and ``bake_lut(shaper="auto")`` give an HDR look (LogC, then a tail to 65504)."""
+DEFAULT_SIZE = 45
+"""Its size when none is given: its rows are measured whatever the plan's sizes and shapers."""
 HDR_UNUSABLE = "linear"
 """The shaper whose lattice clips everything above 1: its rows are kept in the table, never offered for HDR."""
 INTERPOLATIONS = ("trilinear", "tetrahedral")
@@ -89,7 +91,8 @@ def lut_rows(work: Workload) -> list:
         info = {"lut_size": size, "shaper": "logc", "interpolation": "tetrahedral", "domain_top_linear": round(top, 1)}
         return Method(fitted_lut_name(size), "lut", lambda x: lut(x, "tetrahedral"), info=info)
 
-    rows = [(lut_name(*key), functools.partial(build, *key)) for key in lut_keys(work.plan.lut_sizes, work.plan.shapers)]
+    keys = lut_keys(work.plan.lut_sizes, work.plan.shapers) + lut_keys((DEFAULT_SIZE,), (DEFAULT_SHAPER,))
+    rows = [(lut_name(*key), functools.partial(build, *key)) for key in dict.fromkeys(keys)]
     return rows + [(fitted_lut_name(size), functools.partial(build_fitted, size)) for size in FITTED_SIZES]
 
 
@@ -107,9 +110,9 @@ def compile_rows(work: Workload) -> list:
 
     rows = [("torch.compile direct float32", lambda: build("torch.compile direct float32", torch.compile(work.per_pixel)))]
     for interpolation in INTERPOLATIONS:
-        name = f"torch.compile {lut_name(33, DEFAULT_SHAPER, interpolation)}"
+        name = f"torch.compile {lut_name(DEFAULT_SIZE, DEFAULT_SHAPER, interpolation)}"
         rows.append((name, functools.partial(
-            lambda n, i: build(n, float32_lut(work.lut(33, DEFAULT_SHAPER), compile=True), i), name, interpolation)))
+            lambda n, i: build(n, float32_lut(work.lut(DEFAULT_SIZE, DEFAULT_SHAPER), compile=True), i), name, interpolation)))
     return rows
 
 
@@ -153,9 +156,9 @@ def onnx_rows(work: Workload) -> list:
         ("onnxruntime whole look", lambda: onnx_method("onnxruntime whole look", look, folder / "look.onnx", whole_look=True)),
     ]
     for interpolation in work.plan.onnx_lut_interpolations:
-        name = f"onnxruntime {lut_name(33, DEFAULT_SHAPER, interpolation)}"
+        name = f"onnxruntime {lut_name(DEFAULT_SIZE, DEFAULT_SHAPER, interpolation)}"
         rows.append((name, functools.partial(
-            lambda n, i: onnx_method(n, tg.PostFX(lut=work.lut(33, DEFAULT_SHAPER), interpolation=i), folder / f"lut_{i}.onnx"),
+            lambda n, i: onnx_method(n, tg.PostFX(lut=work.lut(DEFAULT_SIZE, DEFAULT_SHAPER), interpolation=i), folder / f"lut_{i}.onnx"),
             name, interpolation)))
     return rows
 

@@ -11,7 +11,7 @@ from collections import Counter
 from pathlib import Path
 
 from benchmarks.suite import workload
-from benchmarks.suite.methods import DEFAULT_SHAPER, HDR_UNUSABLE, PEER, lut_name
+from benchmarks.suite.methods import DEFAULT_SHAPER, DEFAULT_SIZE, HDR_UNUSABLE, PEER, lut_name
 
 ERROR_FLOOR = 1e-3
 """Errors below this (the float64 reference's 0) are drawn at it on the log axis."""
@@ -100,10 +100,10 @@ def baking_advice(records: list) -> str:
     if not luts:
         return "Baking a LUT: no LUT row was measured."
     best = min(luts, key=lambda r: (r["p999_error_8bit"], r["ms"]))
-    default = next((r for r in luts if r["method"] == lut_name(33, DEFAULT_SHAPER, "tetrahedral")), None)
+    default = next((r for r in luts if r["method"] == lut_name(DEFAULT_SIZE, DEFAULT_SHAPER, "tetrahedral")), None)
     line = f"Baking a LUT: {summary(best)}"
     if default is not None and default is not best:
-        line += f"; the default ({DEFAULT_SHAPER}, 33³ tetrahedral): p99.9 {default['p999_error_8bit']:.2f}, max {default['max_error_8bit']:.2f} codes"
+        line += f"; the default ({DEFAULT_SHAPER}, {DEFAULT_SIZE}³ tetrahedral): p99.9 {default['p999_error_8bit']:.2f}, max {default['max_error_8bit']:.2f} codes"
     return line + "."
 
 

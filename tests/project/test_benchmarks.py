@@ -133,7 +133,7 @@ def test_report_and_plots(tiny_work, tmp_path):
     report.plot_pareto(records, tmp_path / "pareto.png")
     points = measure.scaling(tiny_work)
     report.plot_scaling(points, tmp_path / "scaling.png")
-    assert {p["path"] for p in points} == {"direct float32", methods.lut_name(33, methods.DEFAULT_SHAPER, "tetrahedral")}
+    assert {p["path"] for p in points} == {"direct float32", methods.lut_name(methods.DEFAULT_SIZE, methods.DEFAULT_SHAPER, "tetrahedral")}
     for name in ("pareto.png", "scaling.png"):
         assert 0 < (tmp_path / name).stat().st_size < 200_000
 
@@ -171,7 +171,7 @@ def record_of(method, family, ms, p999, largest, shaper=None, timed="per-pixel s
 
 
 def test_advice_follows_the_measured_numbers():
-    default = methods.lut_name(33, methods.DEFAULT_SHAPER, "tetrahedral")
+    default = methods.lut_name(methods.DEFAULT_SIZE, methods.DEFAULT_SHAPER, "tetrahedral")
     records = [record_of("direct float32", "direct", 100.0, 0.0, 0.2), record_of("direct float16", "direct", 60.0, 0.1, 9.0),
                record_of("LUT 9³ linear tetrahedral", "lut", 5.0, 40.0, 150.0, shaper="linear"),
                record_of(default, "lut", 20.0, 6.0, 12.0, shaper=methods.DEFAULT_SHAPER),

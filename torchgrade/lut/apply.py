@@ -13,19 +13,18 @@ after the lookup, sign-preserving): the interpolation error is then spread evenl
 values instead of piling up in the shadows.
 
 **Speed.** The lookup is gather-based on a planar ``(3, size³)`` table that :meth:`LUT3D.rows`
-converts once and caches. Every step is per pixel, so ``LUT3D(..., compile=True)`` runs non-finite
-policy, shaper, index math, gathers, weights, decoding and clamp as one ``torch.compile``d pass
-with no temporary buffers. The eager default on the CPU (:func:`chunked_lookup`) makes one pass per
-operation over runs of :data:`~torchgrade.runtime.LOOKUP_CHUNK` pixels, each run on one thread, as
-OpenColorIO's CPU processor does: the temporaries stay in cache, and no operation waits at a thread
-barrier (on a loaded machine each barrier can wait for a descheduled thread; benchmarks/results/lut.md
-measured 131× OpenColorIO with two threads). From 2 intra-op threads up the runs are spread over as
-many worker threads (:class:`~torchgrade.runtime.ExecutionPolicy`); on other devices the frame is one pass. Without autograd, tetrahedral runs its eager form
-from value-and-step tables derived once per LUT: on the CPU :class:`~torchgrade.lut.kernels.TetrahedralRuns`,
-15 in-place operations a run into buffers allocated once per call (12 one-float gathers a pixel are about half
-its time; benchmarks/bench_lut.py measures both against OpenColorIO), elsewhere
-:func:`~torchgrade.lut.kernels.tetrahedral_frame`, 13 operations on the whole frame where the gather form
-makes 71 (each a kernel launch on a GPU; ``benchmarks/gpu_proxy.py`` counts them).
+converts once and caches. On the CPU, without autograd, tetrahedral runs a loop compiled from C on first use
+(:mod:`torchgrade.lut.native`): sanitize, domain, tetrahedron and interpolation in one vectorised pass per pixel on
+a packed table, over whole frames in chunks of :data:`~torchgrade.runtime.LOOKUP_CHUNK` pixels spread over torch's
+own OpenMP threads (``benchmarks/bench_lut_cpu.py`` times it against OpenColorIO). Where it does not compile, and
+for trilinear, the eager form runs (:func:`chunked_lookup`): one pass per operation over runs of
+:data:`~torchgrade.runtime.LOOKUP_CHUNK` pixels, each run on one thread, from 2 intra-op threads up on as many worker
+threads taking shares as they come free; tetrahedral there goes through
+:class:`~torchgrade.lut.kernels.TetrahedralRuns`, 15 in-place operations a run from value-and-step tables derived
+once per LUT. Off the CPU a frame is one pass, :func:`~torchgrade.lut.kernels.tetrahedral_frame`'s 13 operations
+where the gather form makes 71 (each a kernel launch on a GPU; ``benchmarks/gpu_proxy.py`` counts them).
+``LUT3D(..., compile=True)`` runs non-finite policy, shaper, index math, gathers, weights, decoding and clamp as
+one ``torch.compile``d pass with no temporary buffers (for GPUs; on a CPU the compiled loop is faster).
 
 Examples:
     >>> import torch

@@ -235,7 +235,7 @@ def highlights_report(lut, transform, rebake: Callable[[int], object]) -> Option
     Examples:
         >>> import torch
         >>> from torchgrade.lut import bake_lut
-        >>> lut = bake_lut(lambda image: image / (1 + image), shaper="logc_extended", size=9)
+        >>> lut = bake_lut(lambda image: image / (1 + image), shaper="logc_extended")
         >>> lut.error_report.highlights.max < 0.5
         True
     """

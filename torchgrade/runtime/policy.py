@@ -42,10 +42,10 @@ output. A strip grows with the thread count: each thread's share stays that size
 strips, each of the same dozens of operations (Python dispatches every one of them, one at a time)."""
 
 PARALLEL_FROM = 2
-"""Intra-op thread count from which a LUT's pixel runs (one thread each, :func:`torchgrade.lut.chunked_lookup`) go to
-as many worker threads; below it they run on the calling thread. ``benchmarks/bench_cpu_paths.py --threads 2 --clock
-wall`` on 2 cores: the 33³ tetrahedral lookup of a 1920x1080 frame on 2 workers took 0.74-0.83 of one thread's time
-(``benchmarks/results/cpu_paths.md``: two comparisons, both orders each). Strips of a look stay on the calling thread, each operation on every thread."""
+"""Intra-op thread count from which the torch form of a LUT's pixel runs (one thread each,
+:func:`torchgrade.lut.apply.chunked_lookup`) goes to as many worker threads; below it they run on the calling thread.
+(The compiled tetrahedral loop spreads its chunks over torch's own threads instead.) Strips of a look stay on the
+calling thread, each operation on every thread."""
 
 LOOKUP_CHUNK = 32768
 """Pixels per pass of the eager CPU LUT lookup. Tetrahedral's eager form holds 20 values a pixel (2.5 MiB a run);
