@@ -155,9 +155,11 @@ def warn_if_eight_bit(image: torch.Tensor) -> None:
         return
     first = image.detach()[(0,) * (image.dim() - 3)][:3]  # colour, without an alpha
     sample = first[:, :: max(1, first.shape[-2] // EIGHT_BIT_ROWS)]
-    low, high = torch.stack(sample.aminmax()).tolist()  # one read
-    if (0.0 <= low < high and 1.0 < high <= 255.0 and torch.equal(sample, sample.round())
-            and sample.unique().numel() >= EIGHT_BIT_LEVELS):  # counted only where the rest holds: almost never
+    with one_thread():  # tens of thousands of values: a parallel region's barrier would cost more on a loaded machine
+        low, high = torch.stack(sample.aminmax()).tolist()  # one read
+        eight_bit = (0.0 <= low < high and 1.0 < high <= 255.0 and torch.equal(sample, sample.round())
+                     and sample.unique().numel() >= EIGHT_BIT_LEVELS)  # counted only where the rest holds: almost never
+    if eight_bit:
         warnings.warn(
             f"the image looks like 0..255 data (whole numbers up to {high:g}), but stages take linear light: divide "
             "by 255, and decode sRGB-encoded pictures (PNG, JPEG) with tg.color.srgb_to_linear or grade them with "
