@@ -7,8 +7,8 @@
 # OpenColorIO or colour-science: they are installed from the wheels in WHEELS (default .gpu/wheels: kornia,
 # kornia-rs, openexr, opencolorio, colour-science, pypng for cp312 manylinux), and the tests read the sample EXRs
 # from EXRS (default .gpu/exr, linked as ../shared/data/exr when that is missing). Logs and gpu.md / gpu.json go
-# to OUT (device.txt, two test logs, bench_gpu.log, gpu.md/json, gpu_proxy.md/json: 8 files), with the meta-device counts
-# of benchmarks/gpu_proxy.py. At most 10.8 minutes (tests 4.5, onnxruntime's CUDA provider 1 where it is there, benchmark
+# to OUT (device.txt, two test logs, bench_gpu.log, gpu.md/json, gpu_proxy.md/json, lut_cpu.md/json: 10 files), with the
+# meta-device counts of benchmarks/gpu_proxy.py and the host CPU's LUT lookup against OpenColorIO. At most 11.8 minutes (tests 4.5, onnxruntime's CUDA provider 1 where it is there, benchmark
 # 4.3, counts 1; the benchmark starts no section after 170 s, and its compiles of the look, its training step and the
 # augmentations take most of that). On an H200 (run D of benchmarks/results/gpu.md) the whole check
 # took 7 minutes: the device tests 102 s with 8 processes, the module tests 171 s with 12 (16 now, stopped at 150 s). onnxruntime's CUDA provider is checked where the machine's onnxruntime has it
@@ -49,3 +49,5 @@ timeout -s INT 260 python3 benchmarks/bench_gpu.py --out "$OUT" --budget 170 \
   2>&1 | tee "$OUT/bench_gpu.log" | tail -40
 # the counts and the time they predict, beside the times measured above (gpu_proxy.md: CPU only, about 10 s)
 timeout -s INT 60 python3 benchmarks/gpu_proxy.py --out "$OUT" 2>&1 | tail -14
+# the host's CPU: the compiled LUT loop against OpenColorIO on 1, 2 and all its cores, quiet and loaded (lut_cpu.md)
+timeout -s INT 60 python3 -m benchmarks.bench_lut_cpu --rounds 5 --out "$OUT" 2>&1 | tail -20

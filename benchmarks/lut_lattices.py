@@ -11,7 +11,7 @@ a tail on 5: the former Python default).
    values more than 1 code off.
 2. Highlights: every tone mapper the bake takes, alone, baked with every default, on
    :func:`~torchgrade.lut.validation.bright_saturated_colours` (one channel from 58.86 to 65504, the others a fraction
-   of it): the max error, which the bake's report holds to 2 codes.
+   of it): the max error, which the bake's report holds to 2 codes where a lattice twice as fine would.
 
 Run: ``.venv/bin/python -m benchmarks.lut_lattices [--out DIR]`` (writes lut_lattices.json and .md; the committed
 ones with ``--out benchmarks/results``).
@@ -107,7 +107,7 @@ def markdown(report: dict) -> str:
                 cells.append(f"{r['p99_9']:.2f} / {r['max']:.1f} / {100 * r['over_1_code']:.1f} %")
             lines.append(f"| {look} | {image} | {' | '.join(cells)} |")
     lines += ["", f"## Bright saturated colours through each tone mapper alone (max codes; the report's tolerance "
-              f"{report['highlight_tolerance']:g})", "", f"| tone mapper | {' | '.join(f'{s} {sizes[s]}³' for s in shapers)} |",
+              f"{report['highlight_tolerance']:g} where a lattice twice as fine holds them)", "", f"| tone mapper | {' | '.join(f'{s} {sizes[s]}³' for s in shapers)} |",
               "| --- |" + " ---: |" * len(shapers)]
     highlights = report["highlights"]
     for mode in dict.fromkeys(r["tonemap"] for r in highlights):

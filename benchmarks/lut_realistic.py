@@ -5,7 +5,7 @@ Usage::
     PYTHONPATH=. .venv/bin/python benchmarks/lut_realistic.py
 
 For each look and lattice size, bakes the look's per-pixel stages as the commands do (``torchgrade bake``: ``logc``
-for a look given by flags; ``look.to_lut`` and ``export --lut``: ``logc_hdr``; tetrahedral, linear entries) and
+for a look given by flags; ``look.to_lut`` and ``export --lut``: ``logc_extended``; tetrahedral, linear entries) and
 compares the report's figure on realistic colours (`tg.lut.realistic_colours`) with the p99.9
 error measured on the five natural sample images (CandleGlass, Carrots, Desk, Garden, GoldenGate), every
 4th pixel of each (`STRIDE`) as the LUT receives it (after the look's exposure and bloom), in 8-bit sRGB codes
@@ -14,7 +14,7 @@ image (every image weighs the same). Ratio: report / pooled. The worst case (val
 domain) is shown beside it. Writes ``lut_realistic.{md,json}`` to ``--out`` (default benchmarks/out; the committed ones
 with ``--out benchmarks/results``); about two minutes on 2 cores.
 
-A second table is the shipped look as ``look.to_lut()`` bakes it (33³) on every sample image, every pixel: the
+A second table is the shipped look as ``look.to_lut()`` bakes it (45³) on every sample image, every pixel: the
 report's figure on the realistic colours and, with the image given as ``frames=``, on the image's own pixels,
 each against the p99.9 the LUT really gets there.
 """
@@ -55,12 +55,12 @@ TOLERANCE = 1.0
 LOOKS = {
     "README bake: ACES grade, contrast 20, ACES": ({"grade": {"aces": True, "contrast": 20.0}, "tonemap": "aces"}, "logc"),
     "README Python: contrast 20, saturation 10, ACES": ({"grade": {"contrast": 20.0, "saturation": 10.0}, "tonemap": "aces"},
-                                                         "logc_hdr"),
-    "cinematic (export/looks/cinematic.json)": (ROOT / "export" / "looks" / "cinematic.json", "logc_hdr"),
+                                                         "logc_extended"),
+    "cinematic (export/looks/cinematic.json)": (ROOT / "export" / "looks" / "cinematic.json", "logc_extended"),
     "strong: contrast 30, saturation 20, temperature 20, ACES": (
-        {"grade": {"contrast": 30.0, "saturation": 20.0, "temperature": 20.0}, "tonemap": "aces"}, "logc_hdr"),
+        {"grade": {"contrast": 30.0, "saturation": 20.0, "temperature": 20.0}, "tonemap": "aces"}, "logc_extended"),
     "strong, Reinhard": ({"grade": {"contrast": 30.0, "saturation": 20.0, "temperature": 20.0}, "tonemap": "reinhard"},
-                         "logc_hdr"),
+                         "logc_extended"),
 }
 """Each look's config and the shaper its command bakes."""
 
@@ -120,7 +120,7 @@ def framed_rows(look: tg.PostFX) -> list:
 
 def framed_lines(rows: list) -> list:
     """The ``frames=`` table and its summary line."""
-    lines = ["", "## The shipped look's `to_lut()` (33³, logc_hdr), reported on realistic colours or on the image as `frames=`", "",
+    lines = ["", "## The shipped look's `to_lut()` (45³, logc_extended), reported on realistic colours or on the image as `frames=`", "",
              "| image | pixels | report: realistic p99.9 | real p99.9 | real / report | report: `frames=` p99.9 | real p99.9 | real / report |",
              "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for row in rows:

@@ -65,8 +65,8 @@ KINK_RATIO = 2.5
 
 
 HIGHLIGHT_TOLERANCE = 2.0
-"""The most a lattice reaching 65504 may miss a bright saturated colour by (8-bit codes, max): above it the report
-is over its tolerance, and says so (:func:`highlights_report`)."""
+"""The most a lattice reaching 65504 may miss a bright saturated colour by (8-bit codes, max) where a finer lattice
+would hold them: the report is then over its tolerance, and says so (:func:`highlights_report`)."""
 
 
 class LUTAccuracyWarning(UserWarning):
@@ -94,11 +94,14 @@ class ErrorReport:
     colour_set: str = "validation colours"
     highlights: Optional["ErrorReport"] = None
     """The max error on bright saturated colours (:func:`highlights_report`), for a lattice that reaches 65504."""
+    binding: bool = True
+    """Whether this report's tolerance judges the bake (a highlights report is not where no finer lattice helps)."""
 
     @property
     def within(self) -> bool:
-        """Whether the p99.9 error is within the tolerance, and the highlights' max within theirs."""
-        return self.p99_9 <= self.tolerance and (self.highlights is None or self.highlights.max <= self.highlights.tolerance)
+        """Whether the p99.9 error is within the tolerance, and the highlights' max within theirs where that binds."""
+        high = self.highlights
+        return self.p99_9 <= self.tolerance and (high is None or not high.binding or high.max <= high.tolerance)
 
     def __str__(self) -> str:
         text = (f"p99.9 {self.p99_9:.2f}, max {self.max:.2f} 8-bit codes on {self.colours} {self.colour_set} "
@@ -247,9 +250,10 @@ def highlights_report(lut, transform, rebake: Callable[[int], object]) -> Option
         return report
     size = min(2 * (lut.size - 1) + 1, MAX_SIZE)
     finer = measure(rebake(size), measured, HIGHLIGHT_TOLERANCE) if size > lut.size else None
-    advice = (f"size={size} holds them (max {finer.max:.2f})" if finer is not None and finer.max <= HIGHLIGHT_TOLERANCE
-              else "apply the transform directly")
-    return replace(report, cause=f"the transform bends between the lattice's highlight planes; {advice}")
+    if finer is not None and finer.max <= HIGHLIGHT_TOLERANCE:
+        return replace(report, cause=f"the lattice is too coarse there: size={size} holds them (max {finer.max:.2f})")
+    still = f"a lattice twice as fine ({size}³) still misses them by {finer.max:.2f}" if finer else "no finer lattice to try"
+    return replace(report, binding=False, cause=f"the transform bends there: {still}; the bake is not judged on them")
 
 
 def _scene_fitted_cause(lut, measured: tuple, scene_colours: int) -> str:
