@@ -191,8 +191,10 @@ def chunked_lookup(image, rows, size: int, *settings, pixels: Optional[int] = No
     to 812³), else through its eager form (:class:`~torchgrade.lut.EagerForm`: tetrahedral up to 65³), else through
     its gather form; the first two read ``tables`` (:class:`EagerTables`, made here when not given; :class:`LUT3D`
     caches them) and give the gather form's values to float rounding. The compiled loop
-    takes whole frames and spreads chunks of ``pixels`` over torch's intra-op threads; the other forms' runs go to
-    worker threads in :data:`SHARES_PER_WORKER` shares per worker, taken by whichever worker is free. Off the CPU the whole image is one
+    takes whole frames where nothing comes before or after it (a linear shaper and output) and spreads chunks of
+    ``pixels`` over torch's intra-op threads; otherwise, as the other forms, it runs on runs of ``pixels`` (a shaper's
+    passes stay in cache), which go to worker threads in :data:`SHARES_PER_WORKER` shares per worker, taken by
+    whichever worker is free. Off the CPU the whole image is one
     pass of :func:`lookup`, through the eager form's whole-frame form where there is one; while gradients
     flow to the image or the table (autograd keeps every temporary anyway) and while tracing (an export
     records one pass), one pass of its gather form.
@@ -217,13 +219,18 @@ def chunked_lookup(image, rows, size: int, *settings, pixels: Optional[int] = No
     if policy.lookup_chunk is None:
         return lookup(image, rows, size, *settings, tables=tables if eager else None)
     pixels = pixels or policy.lookup_chunk
-    if compiled:
-        return _compiled_lookup(image, tables.packed, size, settings, compiled, pixels)
     height, width = image.shape[-2:]
     planes = image.reshape(-1, 3, height * width)
+    if compiled and _straight_through(planes, rows.dtype, settings):
+        return _compiled_frames(planes, tables.packed, size, settings, compiled, pixels).reshape(image.shape)
     result = torch.empty(planes.shape, dtype=image.dtype)
-    if eager:
-        steps = tables.steps  # derived here, once, not in every worker
+    if compiled:
+        packed = tables.packed  # derived here, once, not in every worker
+
+        def runs(part, out):
+            _compiled_runs(part, out, packed, size, settings, pixels, compiled)
+    elif eager:
+        steps = tables.steps
 
         def runs(part, out):
             _eager_lookup(part, out, rows, size, settings, pixels, eager, steps)
@@ -264,25 +271,52 @@ def _gather_runs(planes, result, rows, size, settings, pixels) -> None:
             out[:, start:start + run.shape[1]] = lookup(run, rows, size, *settings).squeeze(-1)
 
 
-def _compiled_lookup(image, packed, size, settings, interpolate, pixels) -> torch.Tensor:
-    """:func:`chunked_lookup` through a compiled loop (:mod:`torchgrade.lut.native`), on whole frames in chunks of
-    ``pixels`` over torch's intra-op threads. The loop sanitizes and maps the domain itself, so linear pixels of the
-    table's dtype go in as they are (no temporary at all with a linear output); for another shaper, dtype or layout
-    the frames' shaper codes are formed first (:func:`lookup`'s steps), and a decoding or clamp follows."""
+def _straight_through(planes: torch.Tensor, dtype: torch.dtype, settings: tuple) -> bool:
+    """Whether the compiled loop takes ``planes`` ``(N, 3, P)`` as they are and its values are the result: a linear
+    shaper on rows of the table's dtype, a linear output without a clamp."""
+    shaper, _, _, _, output_range, _, _, output_encoding = settings
+    return (shaper == "linear" and output_encoding == "linear" and output_range is None and planes.dtype == dtype
+            and planes.stride(-1) == 1)
+
+
+def _compiled_frames(planes, packed, size, settings, interpolate, pixels) -> torch.Tensor:
+    """:func:`chunked_lookup` through a compiled loop (:mod:`torchgrade.lut.native`) where it takes the frames as they
+    are (:func:`_straight_through`): whole frames, chunks of ``pixels`` over torch's intra-op threads, no temporary."""
+    low, scale = _domain_columns(settings[1], settings[2], size, packed.dtype)
+    return interpolate(planes, torch.empty(planes.shape, dtype=planes.dtype), low, scale, packed, size, pixels)
+
+
+def _compiled_runs(planes, result, packed, size, settings, pixels, interpolate) -> None:
+    """:func:`chunked_lookup` through a compiled loop, one thread, runs of ``pixels`` (cache-sized: a shaper's and a
+    decoding's passes stay in cache): ``planes`` ``(N, 3, P)`` into ``result``. The loop sanitizes and maps the domain
+    itself; another shaper, dtype or layout goes through a buffer first, a decoding or clamp of the output after."""
     shaper, domain_min, domain_max, _, output_range, curve, curve_range, output_encoding = settings
     dtype = packed.dtype
+    run = max(1, min(pixels, planes.shape[-1]))
+    as_is = shaper == "linear" and planes.dtype == dtype and planes.stride(-1) == 1
+    codes = None if as_is else torch.empty(3, run, dtype=dtype)
+    direct = output_encoding == "linear" and output_range is None and result.dtype == dtype
+    values = None if direct else torch.empty(3, run, dtype=dtype)
     low, scale = _domain_columns(domain_min, domain_max, size, dtype)
-    planes = image.reshape(-1, 3, image.shape[-2] * image.shape[-1])
-    if shaper == "linear" and planes.dtype == dtype and planes.stride(-1) == 1:
-        codes = planes
-    else:  # (1, 3, N H W): every frame's pixels in one row per channel
-        x = sanitize(working_dtype(image).to(dtype)).movedim(-3, 0).reshape(3, -1)
-        codes = shaper_encode(x, shaper, curve, curve_range).contiguous().unsqueeze(0)
-    values = interpolate(codes, torch.empty(codes.shape, dtype=dtype), low, scale, packed, size, pixels)
-    y = table_output(values, output_encoding, output_range)
-    if codes is not planes:
-        y = y.reshape(3, *image.shape[:-3], *image.shape[-2:]).movedim(0, -3)
-    return to_input_dtype(y.reshape(image.shape), image)
+    for frame, out in zip(planes, result):
+        for start in range(0, frame.shape[-1], run):
+            x = frame[:, start:start + run]
+            n = x.shape[-1]
+            if not as_is:
+                x = _shaper_codes(x, codes[:, :n], shaper, curve, curve_range)
+            y = out[:, start:start + n] if direct else values[:, :n]
+            interpolate(x.unsqueeze(0), y.unsqueeze(0), low, scale, packed, size, run)
+            if not direct:
+                out[:, start:start + n] = to_input_dtype(table_output(y, output_encoding, output_range), out)
+
+
+def _shaper_codes(x: torch.Tensor, buffer: torch.Tensor, shaper: str, curve, curve_range) -> torch.Tensor:
+    """The shaper's codes of the sanitized pixels ``x`` ``(3, n)``, in ``buffer`` (or a new tensor), rows contiguous."""
+    x = buffer.copy_(x)
+    if shaper == "linear":
+        return x
+    torch.clamp(x, -HALF_MAX, HALF_MAX, out=buffer).nan_to_num_(nan=0.0)
+    return shaper_encode(buffer, shaper, curve, curve_range).contiguous()
 
 
 def _domain_columns(domain_min, domain_max, size: int, dtype) -> tuple:

@@ -1,6 +1,6 @@
 """The compiled CPU form of the tetrahedral lookup (``tetrahedral.c``): sanitize, domain, cell, tetrahedron and
-interpolation in one pass per pixel, on a packed ``(S³, 3)`` table, over whole frames in chunks spread over torch's
-intra-op threads.
+interpolation in one pass per pixel, on a packed ``(S³, 3)`` table: over whole frames in chunks spread over torch's
+intra-op threads, or on one thread over the runs of :func:`~torchgrade.lut.apply.chunked_lookup`.
 
 :func:`~torchgrade.lut.apply.chunked_lookup` runs it when the C file compiles here
 (:func:`torchgrade.runtime.native.native_library`); otherwise the torch form

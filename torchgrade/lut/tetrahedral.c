@@ -1,5 +1,5 @@
 /* Tetrahedral interpolation of a 3D LUT on the CPU, one pass per pixel: torchgrade.lut.native compiles this file
- * on first use (with OpenMP) and calls it on whole frames.
+ * on first use (with OpenMP) and calls it on whole frames or on runs of pixels.
  *
  * For each pixel i of the planar input (r, g, b), as torchgrade.lut.apply.lookup computes it:
  *     x = NaN -> 0, clamped to +-65504                          (torchgrade.base.core.sanitize)
