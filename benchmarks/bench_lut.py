@@ -12,7 +12,7 @@ peak-RSS counter, each method warmed up (compiled) first (:mod:`benchmarks.commo
 
 Accuracy: a strong look (``ColorGrade(contrast=30, saturation=20, temperature=20)`` then
 ``ToneMap("aces")``, or with post-exposure 0.5 then ``ToneMap("neutral")``) baked to the LUTs of
-:data:`ACCURACY_LUTS` (``bake_lut``'s default ``logc_hdr``, LogC on its default, full or the scene's lattice,
+:data:`ACCURACY_LUTS` (the former default ``logc_hdr``, LogC on its default, full or the scene's lattice,
 fitted shapers), applied to every
 4th pixel of the sample EXRs, against direct float64 evaluation, in 8-bit sRGB code values (p99.9
 and max), beside each bake's own error report. ``lut_floor.py`` asks what the best
@@ -81,7 +81,8 @@ ACCURACY_LUTS = ([("aces", SIZE, shaper, "default", encoding) for shaper in ("lo
                  + [("neutral", SIZE, shaper, domain, "srgb") for shaper, domain in
                     (("logc_hdr", "default"), ("logc", "default"), ("logc", "scene"), ("fitted", "scene"))])
 """(tone mapper, size, shaper, lattice, output encoding) of the LUTs in the accuracy table. ``logc_hdr``: the
-default bake (LogC to 58.86 on 27 of 32 intervals, a tail to 65504 on the last 5). LogC: the default
+former default bake (LogC to 58.86 on 27 of 32 intervals, a tail to 65504 on the last 5; lut_lattices.py compares
+the default, ``logc_extended``). LogC: the default
 domain (up to linear 58.86), the full range (up to the sanitize bound 65504, ``domain=FULL_LOGC``) or the scene's
 range (``bake_lut(scene=image)``); fitted: the shaper fitted to the
 look alone (default) or to the scene, from black to 65504."""
@@ -261,7 +262,7 @@ def markdown(report: dict) -> str:
             "## Accuracy of LUTs of a strong look (every 4th pixel, 8-bit sRGB code values vs direct float64)",
             "",
             "Look: contrast 30, saturation 20, temperature 20, then ACES, or post-exposure 0.5 and Neutral. logc_hdr: "
-            "`bake_lut`'s default (LogC to 58.86 on 27 of 32 intervals, then 4 intervals to LogC 1.3 ≈ 997 and 1 to 65504). "
+            "the former default (LogC to 58.86 on 27 of 32 intervals, then 4 intervals to LogC 1.3 ≈ 997 and 1 to 65504; the default, `logc_extended` 45³, is compared in lut_lattices.md). "
             "LogC lattice: the default (up to linear 58.86), the full range (black to 65504, `domain=(LOGC_BLACK, 1.744)`), or the scene's "
             "range (`bake_lut(scene=image)`); fitted: "
             "`shaper=\"fitted\"`, fitted to the look (default) or to the image (scene: tables with fitted entries steer its planes; the rows here sample the entries), black to 65504. "

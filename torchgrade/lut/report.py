@@ -40,13 +40,12 @@ import torch
 
 from ..base.core import HALF_MAX, sanitize
 from ..color import linear_to_srgb
-from .lattice import MAX_SIZE
 from .shapers import SHAPERS
 from .validation import bright_saturated_colours
 
 __all__ = ["ErrorReport", "LUTAccuracyWarning", "code_errors", "measured_colours", "measure", "diagnose", "enforce",
            "SCENE_PIXELS", "KINK_RATIO", "CANDIDATES", "ADVICE_MAX_SIZE", "REALISTIC", "FRAMES", "WORST_CASE",
-           "HIGHLIGHT_TOLERANCE", "worst_case", "highlights_report"]
+           "HIGHLIGHT_TOLERANCE", "HIGHLIGHT_ADVICE_MAX_SIZE", "worst_case", "highlights_report"]
 
 REALISTIC = "realistic colours"
 """How a report names :func:`~torchgrade.lut.validation.realistic_colours`."""
@@ -67,6 +66,11 @@ KINK_RATIO = 2.5
 HIGHLIGHT_TOLERANCE = 2.0
 """The most a lattice reaching 65504 may miss a bright saturated colour by (8-bit codes, max) where a finer lattice
 would hold them: the report is then over its tolerance, and says so (:func:`highlights_report`)."""
+
+
+HIGHLIGHT_ADVICE_MAX_SIZE = 89
+"""The largest lattice :func:`highlights_report` bakes to see whether a finer one holds the highlights (twice the
+default 45³'s intervals: about half a second)."""
 
 
 class LUTAccuracyWarning(UserWarning):
@@ -248,11 +252,13 @@ def highlights_report(lut, transform, rebake: Callable[[int], object]) -> Option
     report = measure(lut, measured, HIGHLIGHT_TOLERANCE, "bright saturated colours")
     if report.max <= HIGHLIGHT_TOLERANCE:
         return report
-    size = min(2 * (lut.size - 1) + 1, MAX_SIZE)
-    finer = measure(rebake(size), measured, HIGHLIGHT_TOLERANCE) if size > lut.size else None
+    size = 2 * (lut.size - 1) + 1
+    tried = size <= HIGHLIGHT_ADVICE_MAX_SIZE and lut.shaper != "fitted"  # a fitted lattice would be fitted again: minutes
+    finer = measure(rebake(size), measured, HIGHLIGHT_TOLERANCE) if tried else None
     if finer is not None and finer.max <= HIGHLIGHT_TOLERANCE:
         return replace(report, cause=f"the lattice is too coarse there: size={size} holds them (max {finer.max:.2f})")
-    still = f"a lattice twice as fine ({size}³) still misses them by {finer.max:.2f}" if finer else "no finer lattice to try"
+    still = (f"a lattice twice as fine ({size}³) still misses them by {finer.max:.2f}" if finer
+             else f"no lattice twice as fine tried (up to {HIGHLIGHT_ADVICE_MAX_SIZE}³, not fitted)")
     return replace(report, binding=False, cause=f"the transform bends there: {still}; the bake is not judged on them")
 
 
