@@ -153,6 +153,31 @@ def in_state_check(value) -> bool:
     return not isinstance(value, nn.Parameter) and not (isinstance(value, torch.Tensor) and value.is_meta)
 
 
+def check_given(table: dict, params: dict) -> None:
+    """Check the controls of ``params`` given as plain values (numbers, triples, lists of them) against ``table``, a
+    stage's :class:`Control` table, with its ranges and messages: the functional API's door, where a stage checks at
+    construction. Tensors are not read (on a GPU each read would wait for the device; a stage checks its learnable
+    values with :meth:`Stage.check_learnable`); names outside the table are the caller's to refuse.
+
+    Examples:
+        >>> check_given({"contrast": Control(0.0, (-100.0, 100.0))}, {"contrast": 500.0})
+        Traceback (most recent call last):
+        ...
+        ValueError: contrast must lie in [-100.0, 100.0], got 500.0
+        >>> check_given({"contrast": Control(0.0, (-100.0, 100.0))}, {"contrast": torch.tensor(500.0)})  # not read
+    """
+    for name, value in params.items():
+        control = table.get(name)
+        if control is not None and control.kind == "number" and not _holds_tensor(value):
+            control.check(name, value)
+
+
+def _holds_tensor(value) -> bool:
+    if isinstance(value, (tuple, list)):
+        return any(_holds_tensor(v) for v in value)
+    return isinstance(value, torch.Tensor)
+
+
 def controls_signature(controls: dict, leading: tuple = ()) -> inspect.Signature:
     """A constructor signature listing ``leading`` parameters, then every control as a keyword with its default.
 

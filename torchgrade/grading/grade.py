@@ -50,7 +50,7 @@ from ..base.core import (
     untracked,
     working_dtype,
 )
-from ..base.stage import Control
+from ..base.stage import Control, check_given
 from ..color import srgb_to_linear
 from ..color.spaces import shared_matrix
 from ..runtime import folded, is_exporting, policy_for
@@ -72,7 +72,7 @@ from .steps import (
     yrgb_curves,
 )
 
-__all__ = ["COLOR_GRADE_CONTROLS", "GRADE_SETTINGS", "color_grade", "color_grade_planes", "active_steps", "is_identity_control", "grade_matrix", "output_matrix"]
+__all__ = ["COLOR_GRADE_CONTROLS", "GRADE_SETTINGS", "color_grade", "graded_image", "color_grade_planes", "active_steps", "is_identity_control", "grade_matrix", "output_matrix"]
 
 COLOR_GRADE_CONTROLS = {
     "aces": Control(False),
@@ -169,13 +169,32 @@ def color_grade(image: torch.Tensor, aces: bool = False, log_space: str = "acesc
     """The whole grade, in Unity's order; steps left at identity are not computed.
 
     An all-identity grade returns ``image`` itself. Otherwise the input passes the non-finite policy,
-    float16/bfloat16 are computed in float32, and the result is linear Rec.709 in the input's dtype.
+    float16/bfloat16 are computed in float32, and the result is linear Rec.709 in the input's dtype. Controls given as
+    numbers are checked as :class:`~torchgrade.ColorGrade` checks them (:data:`COLOR_GRADE_CONTROLS`,
+    :func:`~torchgrade.base.stage.check_given`); tensors are taken as they are.
 
     Examples:
         >>> image = torch.rand(1, 3, 2, 2)
         >>> color_grade(image, contrast=0.0) is image
         True
         >>> color_grade(image, saturation=-100.0).std(dim=1).max().item() < 1e-6
+        True
+        >>> color_grade(image, contrast=500.0)
+        Traceback (most recent call last):
+        ...
+        ValueError: contrast must lie in [-100.0, 100.0], got 500.0
+    """
+    check_given(COLOR_GRADE_CONTROLS, params)
+    return graded_image(image, aces, log_space, **params)
+
+
+def graded_image(image: torch.Tensor, aces: bool = False, log_space: str = "acescc", **params) -> torch.Tensor:
+    """:func:`color_grade` without checking the controls' values: for :class:`~torchgrade.ColorGrade`, which checked
+    them when they were set, on every strip of a frame.
+
+    Examples:
+        >>> image = torch.rand(1, 3, 2, 2)
+        >>> torch.equal(graded_image(image, contrast=20.0), color_grade(image, contrast=20.0))
         True
     """
     graded = color_grade_planes(image, aces, log_space, **params)

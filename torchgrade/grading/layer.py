@@ -16,7 +16,7 @@ from .grade import (
     COLOR_GRADE_CONTROLS,
     GRADE_SETTINGS,
     active_steps,
-    color_grade,
+    graded_image,
     is_identity_control,
 )
 from .primary import (
@@ -95,7 +95,7 @@ class ColorGrade(Stage):
         return {name: getattr(self, name) for name in curves if not self.is_default(name)}
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
-        return self.run_in_strips(color_grade, image)
+        return self.run_in_strips(graded_image, image)
 
 
 ColorGrade.__signature__ = controls_signature(ColorGrade.controls)

@@ -8,7 +8,7 @@ import torch
 
 from ..base.core import Param
 from ..base.stage import Control, Stage, controls_signature
-from .registry import TONE_MAPPERS, TONEMAP_MODES, tone_mapper, tonemap
+from .registry import TONE_MAPPERS, TONEMAP_MODES, tone_mapped, tone_mapper
 
 __all__ = ["ToneMap"]
 
@@ -111,7 +111,7 @@ class ToneMap(Stage):
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
         self.check_learnable()
-        return self.run_in_strips(tonemap, image)
+        return self.run_in_strips(tone_mapped, image)
 
 
 def _signature() -> inspect.Signature:

@@ -27,6 +27,7 @@ from .aces2_curves import (
 )
 from .aces_fits import aces, aces_hill, aces_narkowicz
 from .agx_curves import agx, agx_godot
+from ..base.stage import check_given
 from .base import WHITE_POINT_RANGE, ToneMapper, no_tonemap
 from .filmic_curves import (
     FILMIC_RANGES,
@@ -41,7 +42,7 @@ from .hdr_range import HDR_PRIMARIES, NEUTRAL_HDR_RANGES, neutral_hdr
 from .khronos_pbr import khronos_pbr_neutral
 from .reinhard_curves import reinhard, reinhard_extended, reinhard_luminance
 
-__all__ = ["TONE_MAPPERS", "TONEMAP_MODES", "HDR_MODES", "tone_mapper", "tonemap"]
+__all__ = ["TONE_MAPPERS", "TONEMAP_MODES", "HDR_MODES", "tone_mapper", "tonemap", "tone_mapped"]
 
 TONE_MAPPERS = {
     "none": ToneMapper.of(no_tonemap),
@@ -97,7 +98,9 @@ def tonemap(image: torch.Tensor, mode: str = "neutral", clip: bool = True, **par
 
     The input passes the library's non-finite policy first; float16/bfloat16 inputs are computed in
     float32 and returned in their own dtype. ``clip=False`` skips the final clip to [0, 1] (used
-    when baking a LUT that clips after its lookup, :func:`torchgrade.lut.bake_lut`).
+    when baking a LUT that clips after its lookup, :func:`torchgrade.lut.bake_lut`). Parameters given as numbers are
+    checked as :class:`~torchgrade.ToneMap` checks them (the mode's controls,
+    :func:`~torchgrade.base.stage.check_given`); tensors are taken as they are.
 
     Examples:
         >>> image = torch.full((1, 3, 1, 1), 8.0)
@@ -105,6 +108,23 @@ def tonemap(image: torch.Tensor, mode: str = "neutral", clip: bool = True, **par
         [1.0, 1.0, 1.0]
         >>> tonemap(image, "reinhard_luminance", clip=False, white_point=4.0).flatten().tolist()
         [1.333333134651184, 1.333333134651184, 1.333333134651184]
+        >>> tonemap(image, "hable", white_point=-1.0)
+        Traceback (most recent call last):
+        ...
+        ValueError: white_point must lie in [0.001, 10000.0], got -1.0
+    """
+    check_given(tone_mapper(mode).controls, params)
+    return tone_mapped(image, mode, clip, **params)
+
+
+def tone_mapped(image: torch.Tensor, mode: str = "neutral", clip: bool = True, **params: Param) -> torch.Tensor:
+    """:func:`tonemap` without checking the parameters' values: for :class:`~torchgrade.ToneMap`, which checked them
+    when they were set, on every strip of a frame.
+
+    Examples:
+        >>> image = torch.full((1, 3, 1, 1), 8.0)
+        >>> torch.equal(tone_mapped(image, "hable"), tonemap(image, "hable"))
+        True
     """
     check_image(image)
     entry = tone_mapper(mode)

@@ -1,0 +1,59 @@
+"""The functional API checks the controls it is given as numbers as the stages do: the same ranges, the same messages
+(one table per stage); tensors pass unread, as a stage's learnable values do between its checks."""
+
+import math
+
+import pytest
+import torch
+
+import torchgrade as tg
+from torchgrade import functional as F
+from torchgrade.grading.grade import COLOR_GRADE_CONTROLS
+from torchgrade.tonemap import TONE_MAPPERS
+
+IMAGE = torch.rand(1, 3, 4, 4)
+
+
+def outside(control):
+    """A value just outside ``control``'s range, or None where the range is unbounded."""
+    low, high = control.range
+    if not math.isinf(high):
+        return high + 1.0 if isinstance(control.default, (int, float)) else tuple(high + 1.0 for _ in control.default)
+    if not math.isinf(low):
+        return low - 1.0 if isinstance(control.default, (int, float)) else tuple(low - 1.0 for _ in control.default)
+    return None
+
+
+def message(call) -> str:
+    with pytest.raises(ValueError) as caught:
+        call()
+    return str(caught.value)
+
+
+GRADE_NUMBERS = [name for name, control in COLOR_GRADE_CONTROLS.items()
+                 if control.kind == "number" and control.range is not None and outside(control) is not None]
+
+
+@pytest.mark.parametrize("name", GRADE_NUMBERS)
+def test_color_grade_refuses_what_colorgrade_refuses_with_its_message(name):
+    value = outside(COLOR_GRADE_CONTROLS[name])
+    assert message(lambda: F.color_grade(IMAGE, **{name: value})) == message(lambda: tg.ColorGrade(**{name: value}))
+
+
+TONEMAP_NUMBERS = [(mode, name) for mode, entry in TONE_MAPPERS.items() for name, control in entry.controls.items()
+                   if control.kind == "number" and control.range is not None and outside(control) is not None]
+
+
+@pytest.mark.parametrize("mode, name", TONEMAP_NUMBERS)
+def test_tonemap_refuses_what_tonemap_refuses_with_its_message(mode, name):
+    value = outside(TONE_MAPPERS[mode].controls[name])
+    assert message(lambda: F.tonemap(IMAGE, mode, **{name: value})) == message(lambda: tg.ToneMap(mode, **{name: value}))
+
+
+def test_the_issues_two_cases_and_tensors_left_unread():
+    with pytest.raises(ValueError, match="contrast must lie in"):
+        F.color_grade(IMAGE, contrast=500)
+    with pytest.raises(ValueError, match="white_point must lie in"):
+        F.tonemap(IMAGE, "hable", white_point=-1)
+    assert torch.isfinite(F.color_grade(IMAGE, contrast=torch.tensor(50.0))).all()  # a tensor is the caller's
+    assert len(GRADE_NUMBERS) > 10 and len(TONEMAP_NUMBERS) > 10
