@@ -50,7 +50,9 @@ OPERATORS = ("exposure", "reinhard")
 STOPS_RANGE = (-32.0, 32.0)
 """Range of every control in stops (limits, compensation, the curve, fixed exposure): 2^32 either way."""
 
-MAX_CURVE_POINTS = 64
+MAX_COMPENSATION_POINTS = 64
+"""Most ``(metered stops, compensation stops)`` pairs a compensation curve holds (a grading curve's own limit is
+:data:`torchgrade.grading.curves.MAX_CURVE_POINTS`)."""
 MAX_MASK_SIDE = 4096
 
 
@@ -143,7 +145,7 @@ def check_metering_mask(mask):
 
 
 def check_compensation_curve(curve):
-    """``None``, or 2 to :data:`MAX_CURVE_POINTS` ``(metered stops, compensation stops)`` pairs in
+    """``None``, or 2 to :data:`MAX_COMPENSATION_POINTS` ``(metered stops, compensation stops)`` pairs in
     :data:`STOPS_RANGE` with the metered stops increasing, as a tuple of float pairs; ``ValueError`` otherwise.
 
     Examples:
@@ -156,8 +158,8 @@ def check_compensation_curve(curve):
         points = tuple((float(ev), float(stops)) for ev, stops in curve)
     except (TypeError, ValueError, OverflowError):
         raise ValueError(f"compensation_curve must be a list of [metered stops, compensation stops] pairs, got {curve!r:.80}") from None
-    if not 2 <= len(points) <= MAX_CURVE_POINTS:
-        raise ValueError(f"compensation_curve must have 2 to {MAX_CURVE_POINTS} points, got {len(points)}")
+    if not 2 <= len(points) <= MAX_COMPENSATION_POINTS:
+        raise ValueError(f"compensation_curve must have 2 to {MAX_COMPENSATION_POINTS} points, got {len(points)}")
     low, high = STOPS_RANGE
     if not all(low <= v <= high for point in points for v in point):
         raise ValueError(f"compensation_curve values must lie in [{low}, {high}] stops, got {list(points)}")

@@ -5,7 +5,7 @@ system's C compiler (``$CC``, else ``cc``, ``gcc`` or ``clang``: the compiler ``
 into a shared library, once per source, compiler, machine and instruction set, and loaded with :mod:`ctypes` (whose
 calls release the GIL). It is built with OpenMP, whose runtime (``libgomp.so.1``) torch has loaded already, so its
 parallel loops run on torch's own intra-op threads: the threads a torch operation just before left spinning for work
-take it at once, where threads of another pool would compete with them for the cores. The first use costs one compile (about 0.3 s); later
+take it at once, where threads of another pool would compete with them for the cores. The first use costs one compile (``benchmarks/results/lut_cpu.md`` times it); later
 processes load the cached library (:func:`cache_folder`; where none can be made, each process compiles into a
 private temporary folder). Where no compiler works, or ``TORCHGRADE_NATIVE=0``,
 :func:`native_library` returns ``None`` (with one warning saying why) and the caller keeps its torch form.
