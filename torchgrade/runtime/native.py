@@ -5,10 +5,12 @@ system's C compiler (``$CC``, else ``cc``, ``gcc`` or ``clang``: the compiler ``
 into a shared library, once per source, compiler, machine and instruction set, and loaded with :mod:`ctypes` (whose
 calls release the GIL). It is built with OpenMP, whose runtime (``libgomp.so.1``) torch has loaded already, so its
 parallel loops run on torch's own intra-op threads: the threads a torch operation just before left spinning for work
-take it at once, where threads of another pool would compete with them for the cores. The first use costs one compile (``benchmarks/results/lut_cpu.md`` times it); later
-processes load the cached library (:func:`cache_folder`; where none can be made, each process compiles into a
-private temporary folder). Where no compiler works, or ``TORCHGRADE_NATIVE=0``,
-:func:`native_library` returns ``None`` (with one warning saying why) and the caller keeps its torch form.
+take it at once, where threads of another pool would compete with them for the cores. The first use costs one
+compile (``benchmarks/results/lut_cpu.md`` times it); later processes load the cached library (:func:`cache_folder`;
+where none can be made, each process compiles into a private temporary folder). Where no compiler works, or
+``TORCHGRADE_NATIVE=0``, :func:`native_library` returns ``None`` (with one warning saying why) and the caller keeps
+its torch form. As with torch's own parallel operations, a process forked after a parallel region must use one
+thread (``torch.set_num_threads(1)``, as DataLoader workers do): GNU OpenMP's threads do not survive a fork.
 
 The instruction set follows torch's own choice for its CPU kernels (``torch.backends.cpu.get_cpu_capability()``):
 AVX2 and FMA where torch uses AVX2 or AVX-512, the compiler's baseline elsewhere, never ``-march=native`` (a cache
