@@ -3,7 +3,7 @@ quiet machine and with a second process loading every core.
 
 For each core count the rounds alternate, each running every method once on the same frame (float32, planar for
 torchgrade, packed RGB for OpenColorIO, the same .cube table): torchgrade's ``LUT3D`` as it runs by default (the
-compiled loop of ``torchgrade/lut/tetrahedral.c`` on that many worker threads), the same with the compiled loop taken
+compiled loop of ``torchgrade/lut/lookup.c`` on that many worker threads), the same with the compiled loop taken
 away (the torch form a machine without a C compiler runs), and OpenColorIO two ways: one ``applyRGB`` call on the
 whole frame (what its CPU processor does with a frame: one thread), and the frame in 64 row strips spread over that
 many threads (its best here: a strip's buffers stay in cache, and its Python binding lets go of the GIL). The load is a
@@ -60,8 +60,8 @@ image = torch.rand(1, 3, 64, 64)
 with torch.no_grad():
     t0 = time.perf_counter(); lut(image); first = time.perf_counter() - t0
     t0 = time.perf_counter(); lut(image); second = time.perf_counter() - t0
-from torchgrade.lut.native import compiled_tetrahedral
-print(first, second, compiled_tetrahedral(torch.float32) is not None)
+from torchgrade.lut.native import compiled_loop
+print(first, second, compiled_loop("tetrahedral", torch.float32) is not None)
 """
 
 

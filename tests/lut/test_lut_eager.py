@@ -1,5 +1,5 @@
 """The eager no-grad CPU lookup against the gather form that autograd, ``torch.compile`` and exports run, in both of
-tetrahedral's CPU forms (the compiled loop of ``tetrahedral.c`` and the torch form ``TetrahedralRuns``): the same
+tetrahedral's CPU forms (the compiled loop of ``lookup.c`` and the torch form ``TetrahedralRuns``): the same
 values to float rounding over shapers, domains, output encodings and clamps, dtypes, lattice sizes and non-finite or
 huge inputs; the torch form's lattice coordinates bit for bit."""
 
@@ -11,7 +11,7 @@ import torch
 from torchgrade.base.core import sanitize
 from torchgrade.lut import KERNELS, LUT3D, apply, identity_table, lattice
 from torchgrade.lut.apply import chunked_lookup, lookup
-from torchgrade.lut.native import compiled_tetrahedral
+from torchgrade.lut.native import compiled_loop
 from torchgrade.lut.shapers import lattice_unit
 from torchgrade.lut.lattice import planar_table
 from torchgrade.lut.apply import _LatticeCoordinates
@@ -24,9 +24,10 @@ def cpu_form(request, monkeypatch):
     """Each CPU form of the eager tetrahedral lookup in turn: the compiled loop (which must compile here: CI has the
     C compiler ``torch.compile`` needs) or, with the compiled loop taken away, the torch form."""
     if request.param == "compiled":
-        assert compiled_tetrahedral(torch.float32) is not None and compiled_tetrahedral(torch.float64) is not None
+        assert all(compiled_loop(kind, dtype) for kind in ("tetrahedral", "trilinear") for dtype in (torch.float32, torch.float64))
     else:
-        monkeypatch.setitem(KERNELS, "tetrahedral", dataclasses.replace(KERNELS["tetrahedral"], compiled=None))
+        for name in ("tetrahedral", "trilinear"):
+            monkeypatch.setitem(KERNELS, name, dataclasses.replace(KERNELS[name], compiled=None))
     return request.param
 
 
@@ -82,15 +83,16 @@ def test_lattice_coordinates_are_those_of_lookup_bit_for_bit(shaper, domain, ext
 @pytest.mark.parametrize("shaper, domain, extra", SHAPED)
 @pytest.mark.parametrize("encoding, output_range", [("linear", None), ("srgb", None), ("linear", (0.0, 0.9))])
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64, torch.float16])
-def test_eager_tetrahedral_matches_the_gather_form(shaper, domain, extra, encoding, output_range, dtype, cpu_form):
+@pytest.mark.parametrize("interpolation", ["tetrahedral", "trilinear"])
+def test_eager_lookup_matches_the_gather_form(shaper, domain, extra, encoding, output_range, dtype, interpolation, cpu_form):
     size = 9
     table = torch.rand(size, size, size, 3, dtype=torch.float64) * 3 - 1
     lut = LUT3D(table.to(torch.float64 if dtype == torch.float64 else torch.float32), shaper=shaper, domain=domain,
                 output_range=output_range, output_encoding=encoding, **extra)
     image = hostile_image(dtype)
     with torch.no_grad():
-        eager = lut(image)
-        one_pass = lookup(image, lut.rows(lut.table.dtype), size, lut.shaper, lut.domain_min, lut.domain_max, "tetrahedral",
+        eager = lut(image, interpolation)
+        one_pass = lookup(image, lut.rows(lut.table.dtype), size, lut.shaper, lut.domain_min, lut.domain_max, interpolation,
                           lut.output_range, lut.curve, lut.curve_range, lut.output_encoding)
     assert eager.dtype == one_pass.dtype == dtype and torch.isfinite(eager).all()
     # a few roundings of values up to 2, and the compiled loop's coordinate rounding (entries in [-1, 2]: steps up

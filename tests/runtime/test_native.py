@@ -23,7 +23,7 @@ def test_a_source_compiles_once_into_the_cache_and_later_loads_from_it(tmp_path,
     assert first is not None and second is not None and hasattr(second, "tetrahedral_float")
     assert [path.suffix for path in libraries] == [".so"]  # one library, no partial file left behind
     assert sorted((tmp_path / "native").iterdir()) == libraries
-    assert sum("compiled tetrahedral.c" in record.getMessage() for record in caplog.records) == 1
+    assert sum("compiled lookup.c" in record.getMessage() for record in caplog.records) == 1
     assert oct((tmp_path / "native").stat().st_mode & 0o777) == oct(0o700)
 
 
@@ -38,7 +38,7 @@ def test_another_compiler_or_flags_make_another_library(tmp_path, monkeypatch):
 def test_without_a_working_compiler_the_loader_warns_and_the_torch_form_runs(tmp_path, monkeypatch):
     monkeypatch.setenv(native.CACHE_VARIABLE, str(tmp_path))
     monkeypatch.setenv("CC", "false")
-    with pytest.warns(RuntimeWarning, match="tetrahedral.c could not be compiled .*torch form"):
+    with pytest.warns(RuntimeWarning, match="lookup.c could not be compiled .*torch form"):
         assert compile_fresh(SOURCE) is None
     assert list((tmp_path / "native").iterdir()) == []  # the failed compile left nothing behind
 

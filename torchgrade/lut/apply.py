@@ -55,7 +55,7 @@ from ..color import linear_to_srgb, srgb_to_linear
 from ..runtime import LOOKUP_CHUNK, policy_for, run_pieces
 from .kernels import KERNELS
 from .lattice import planar_table
-from .native import MAX_SIZE as COMPILED_MAX_SIZE, compiled_tetrahedral
+from .native import MAX_SIZE as COMPILED_MAX_SIZE
 from .shapers import SHAPERS, lattice_unit, shaper_encode
 
 __all__ = [ "OUTPUT_ENCODINGS", "LOOKUP_CHUNK", "SHARES_PER_WORKER", "EagerTables", "apply_lut", "lookup", "chunked_lookup",

@@ -25,6 +25,7 @@ Examples:
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import Callable, Optional
 
@@ -32,7 +33,7 @@ import torch
 import torch.nn.functional as F
 
 from ..runtime import constant, device_cached
-from .native import compiled_tetrahedral
+from .native import compiled_loop
 
 __all__ = ["Kernel", "EagerForm", "KERNELS", "INTERPOLATIONS", "BACKENDS", "LUT_BACKENDS", "tetrahedron", "tetrahedral",
            "tetrahedral_tables", "TetrahedralRuns", "tetrahedral_frame", "trilinear", "trilinear_grid_sample", "strip_table", "trilinear_strip",
@@ -424,10 +425,11 @@ class Kernel:
 
 
 KERNELS = {
-    "trilinear": Kernel(trilinear, {"strip": trilinear_strip_lookup, "volume": trilinear_grid_sample}),
+    "trilinear": Kernel(trilinear, {"strip": trilinear_strip_lookup, "volume": trilinear_grid_sample},
+                        compiled=functools.partial(compiled_loop, "trilinear")),
     # Up to 65³: the tables are 4 times the planar table (13 MiB at 65³; 4 S³ < 2²⁴ keeps the index product exact).
     "tetrahedral": Kernel(tetrahedral, eager=EagerForm(tetrahedral_tables, TetrahedralRuns, tetrahedral_frame, max_size=65),
-                          compiled=compiled_tetrahedral),
+                          compiled=functools.partial(compiled_loop, "tetrahedral")),
 }
 """The interpolations by name, what ``LUT3D(...)(image, interpolation)`` takes."""
 

@@ -1,6 +1,6 @@
 """CPU loops that torch has no single operation for, compiled from C on first use and cached on disk.
 
-A source file beside the module that calls it (such as ``torchgrade/lut/tetrahedral.c``) is compiled by the
+A source file beside the module that calls it (such as ``torchgrade/lut/lookup.c``) is compiled by the
 system's C compiler (``$CC``, else ``cc``, ``gcc`` or ``clang``: the compiler ``torch.compile`` needs on a CPU too)
 into a shared library, once per source, compiler, machine and instruction set, and loaded with :mod:`ctypes` (whose
 calls release the GIL). It is built with OpenMP, whose runtime (``libgomp.so.1``) torch has loaded already, so its
@@ -20,7 +20,7 @@ rounding behave as in torch.
 Examples:
     >>> from pathlib import Path
     >>> import torchgrade
-    >>> library = native_library(Path(torchgrade.__file__).parent / "lut" / "tetrahedral.c")
+    >>> library = native_library(Path(torchgrade.__file__).parent / "lut" / "lookup.c")
     >>> library is None or hasattr(library, "tetrahedral_float")
     True
 """
