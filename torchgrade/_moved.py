@@ -42,6 +42,8 @@ MOVED = {
     "torchgrade.distributed": ("torchgrade.integrations.ray",),
     "torchgrade.catalog": ("torchgrade.testing.catalog",),
     "torchgrade.lut.lut3d": ("torchgrade.lut.apply", "torchgrade.lut.layer"),
+    "torchgrade.cli.shot": ("torchgrade.shots.frames",),
+    "torchgrade.cli.outputs": ("torchgrade.shots.outputs",),
 }
 """Each old module path and the modules its names now live in, searched in order."""
 

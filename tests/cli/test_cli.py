@@ -205,15 +205,12 @@ def test_export_of_a_lut_over_its_tolerance_exits_3_writes_nothing_and_says_what
     assert not out.exists()
 
 
-def test_python_m_export_runs_the_same_report(exr_dir, tmp_path):
+def test_export_verifies_on_the_given_exrs(exr_dir, tmp_path, capsys):
     config = tmp_path / "look.json"
     config.write_text('{"grade": {"contrast": 15}, "tonemap": "aces"}')
     out = tmp_path / "look.onnx"
-    root = Path(__file__).resolve().parents[2]
-    result = subprocess.run([sys.executable, "-m", "export", "--config", str(config), "--out", str(out),
-                             "--exr-dir", str(exr_dir), "--images", "GrayRampsHorizontal.exr"],
-                            cwd=root, capture_output=True, text=True, check=True)
-    lines = result.stdout.strip().splitlines()
+    assert main(["export", "--config", str(config), "--out", str(out), "--scene", str(exr_dir / "GrayRampsHorizontal.exr")]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
     assert lines[0].endswith(f"{tg.onnx.node_count(out)} nodes")
     errors = dict(part.rsplit(" ", 1) for part in lines[1].split("PyTorch: ")[1].split(", "))
     assert float(errors["onnxruntime"]) < 1e-4 and float(errors["openvino f32"]) < 1e-4

@@ -19,6 +19,7 @@ OLD_NAMES = {
     "torchgrade.curves": "evaluate_curve", "torchgrade.dither": "Dither", "torchgrade.display": "encode_display",
     "torchgrade.pipeline": "PostFX", "torchgrade.augment_ranges": "checked_range", "torchgrade.augment_saved": "SAVED_NAME",
     "torchgrade.distributed": "grade_shot_on_ray", "torchgrade.catalog": "STAGE_KINDS", "torchgrade.lut.lut3d": "LUT3D",
+    "torchgrade.cli.shot": "render_frame", "torchgrade.cli.outputs": "write_frame",
 }
 
 

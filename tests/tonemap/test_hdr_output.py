@@ -10,7 +10,7 @@ import pytest
 import torch
 
 import torchgrade as tg
-from torchgrade.cli.outputs import write_frame
+from torchgrade.shots.outputs import write_frame
 from torchgrade.output.display import encode_display
 from torchgrade.functional import tonemap
 from torchgrade.tonemap import bt2390_eetf

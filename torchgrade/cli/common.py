@@ -22,6 +22,7 @@ from ..color import linear_to_srgb
 from ..io import read_exr
 from ..io.atomic import atomic_write
 from ..look.postfx import PostFX
+from ..shots.outputs import display_codes, write_png
 
 __all__ = ["GRADING_FLAGS", "EXPOSURE_FLAGS", "refuse_overwriting", "read_rec709", "display_codes", "write_png", "report_line", "LUTOverTolerance", "OVER_TOLERANCE", "refuse_lut_over_tolerance", "stages_label", "grade_from_args", "given_grading_flags", "look_from_args",
            "add_grading_flags", "add_exposure_flags", "exposure_from_args", "given_exposure_flags"]
@@ -100,37 +101,6 @@ def read_rec709(path, to_rec709: bool = True, adaptation: str = "auto", **option
     spaces, none for XYZ); ``to_rec709=False`` keeps the file's RGB as it is. ``options`` go to ``read_exr``.
     """
     return read_exr(path, to_rec709=to_rec709, adaptation=adaptation, **options)[:3]
-
-
-def display_codes(image: torch.Tensor, maximum: int, encoded: bool = False) -> np.ndarray:
-    """Integer codes ``(H, W, 3)`` in ``[0, maximum]``: of a display signal as it is (``encoded``), else of
-    display-referred linear light, sRGB-encoded.
-
-    Examples:
-        >>> display_codes(torch.full((3, 1, 1), 0.5), 255, encoded=True).ravel().tolist()
-        [128.0, 128.0, 128.0]
-    """
-    signal = image.clamp(0.0, 1.0) if encoded else linear_to_srgb(image.clamp(0.0, 1.0))
-    return np.ascontiguousarray((signal * maximum).round().permute(1, 2, 0).cpu().numpy())
-
-
-def write_png(path, image: torch.Tensor, encoded: bool = False) -> None:
-    """Write a ``(3, H, W)`` image as an 8-bit PNG (atomically): sRGB-encoded light, or a display signal as it is.
-
-    Examples:
-        >>> import tempfile
-        >>> from pathlib import Path
-        >>> from PIL import Image
-        >>> with tempfile.TemporaryDirectory() as folder:
-        ...     write_png(Path(folder) / "grey.png", torch.full((3, 2, 4), 0.18))
-        ...     with Image.open(Path(folder) / "grey.png") as png:
-        ...         png.size, png.getpixel((0, 0))   # linear 0.18 is sRGB code 118
-        ((4, 2), (118, 118, 118))
-    """
-    from PIL import Image
-
-    pixels = display_codes(image, 255, encoded).astype(np.uint8)
-    atomic_write(path, lambda temporary: Image.fromarray(pixels, "RGB").save(temporary, format="PNG"))
 
 
 def report_line(report) -> str:

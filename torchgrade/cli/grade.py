@@ -38,8 +38,8 @@ from .common import (
     refuse_overwriting,
     stages_label,
 )
-from .outputs import BIT_DEPTHS, check_output, write_frame
-from .shot import grade_shot, output_paths, shot_frames
+from ..shots.frames import grade_shot, output_paths, shot_frames
+from ..shots.outputs import BIT_DEPTHS, check_output, write_frame
 
 __all__ = ["run_grade", "add_grade", "look_to_grade", "check_grading_memory", "GRADING_COPIES", "MAX_GRADING_BYTES"]
 

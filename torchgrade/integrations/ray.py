@@ -1,5 +1,5 @@
 """Grade a shot on a Ray cluster with Ray Data: read -> ``map_batches`` -> write, frame by frame, with
-the same per-frame function as ``torchgrade grade`` (:func:`torchgrade.cli.shot.render_frame`).
+the same per-frame function as ``torchgrade grade`` (:func:`torchgrade.shots.frames.render_frame`).
 
 Needs the ``ray`` extra (``pip install torchgrade[ray]``); Ray is imported only when called.
 
@@ -25,8 +25,8 @@ from pathlib import Path
 
 import torch
 
-from ..cli.outputs import check_output, write_frame
-from ..cli.shot import output_paths, render_frame, shot_frames
+from ..shots.frames import output_paths, render_frame, shot_frames
+from ..shots.outputs import check_output, write_frame
 from ..io import read_exr
 from ..look.postfx import PostFX
 

@@ -1,4 +1,4 @@
-"""The image files ``grade`` writes: sRGB PNG (8 or 16 bits), TIFF (16-bit sRGB or 32-bit float linear) and
+"""The image files a graded shot is written to (``torchgrade grade``, :mod:`torchgrade.integrations.ray`): sRGB PNG (8 or 16 bits), TIFF (16-bit sRGB or 32-bit float linear) and
 linear OpenEXR, display-referred or, before tone mapping, scene-referred.
 
 Pillow writes 16-bit PNG only in greyscale, so 16-bit RGB PNG goes through ``pypng`` and TIFF through
@@ -21,11 +21,42 @@ import numpy as np
 import torch
 
 from ..base.core import sanitize
+from ..color import linear_to_srgb
 from ..io import write_exr
 from ..io.atomic import atomic_write
-from .common import display_codes, write_png
+__all__ = ["BIT_DEPTHS", "check_output", "write_frame", "display_codes", "write_png"]
 
-__all__ = ["BIT_DEPTHS", "check_output", "write_frame"]
+def display_codes(image: torch.Tensor, maximum: int, encoded: bool = False) -> np.ndarray:
+    """Integer codes ``(H, W, 3)`` in ``[0, maximum]``: of a display signal as it is (``encoded``), else of
+    display-referred linear light, sRGB-encoded.
+
+    Examples:
+        >>> display_codes(torch.full((3, 1, 1), 0.5), 255, encoded=True).ravel().tolist()
+        [128.0, 128.0, 128.0]
+    """
+    signal = image.clamp(0.0, 1.0) if encoded else linear_to_srgb(image.clamp(0.0, 1.0))
+    return np.ascontiguousarray((signal * maximum).round().permute(1, 2, 0).cpu().numpy())
+
+
+def write_png(path, image: torch.Tensor, encoded: bool = False) -> None:
+    """Write a ``(3, H, W)`` image as an 8-bit PNG (atomically): sRGB-encoded light, or a display signal as it is.
+
+    Examples:
+        >>> import tempfile
+        >>> from pathlib import Path
+        >>> from PIL import Image
+        >>> with tempfile.TemporaryDirectory() as folder:
+        ...     write_png(Path(folder) / "grey.png", torch.full((3, 2, 4), 0.18))
+        ...     with Image.open(Path(folder) / "grey.png") as png:
+        ...         png.size, png.getpixel((0, 0))   # linear 0.18 is sRGB code 118
+        ((4, 2), (118, 118, 118))
+    """
+    from PIL import Image
+
+    pixels = display_codes(image, 255, encoded).astype(np.uint8)
+    atomic_write(path, lambda temporary: Image.fromarray(pixels, "RGB").save(temporary, format="PNG"))
+
+
 
 BIT_DEPTHS = {".png": ("8", "16"), ".tif": ("16", "float"), ".tiff": ("16", "float"), ".exr": ("half", "float")}
 """The sample formats each output extension takes, its default first."""
