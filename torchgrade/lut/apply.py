@@ -13,11 +13,12 @@ after the lookup, sign-preserving): the interpolation error is then spread evenl
 values instead of piling up in the shadows.
 
 **Speed.** The lookup is gather-based on a planar ``(3, size³)`` table that :meth:`LUT3D.rows`
-converts once and caches. On the CPU, without autograd, tetrahedral runs a loop compiled from C on first use
-(:mod:`torchgrade.lut.native`): sanitize, domain, tetrahedron and interpolation in one vectorised pass per pixel on
-a packed table, over whole frames in chunks of :data:`~torchgrade.runtime.LOOKUP_CHUNK` pixels spread over torch's
-own OpenMP threads (``benchmarks/bench_lut_cpu.py`` times it against OpenColorIO). Where it does not compile, and
-for trilinear, the eager form runs (:func:`chunked_lookup`): one pass per operation over runs of
+converts once and caches. On the CPU, without autograd, both interpolations run a loop compiled from C on first use
+(:mod:`torchgrade.lut.native`): sanitize, domain, cell and interpolation in one vectorised pass per pixel on a
+packed table, over whole frames in chunks of :data:`~torchgrade.runtime.LOOKUP_CHUNK` pixels spread over torch's
+own OpenMP threads where the frame goes in and out as it is, else on runs on worker threads between the shaper's and
+the decoding's operations (``benchmarks/bench_lut_cpu.py`` times it against OpenColorIO). Where it does not compile,
+the eager form runs (:func:`chunked_lookup`): one pass per operation over runs of
 :data:`~torchgrade.runtime.LOOKUP_CHUNK` pixels, each run on one thread, from 2 intra-op threads up on as many worker
 threads taking shares as they come free; tetrahedral there goes through
 :class:`~torchgrade.lut.kernels.TetrahedralRuns`, 15 in-place operations a run from value-and-step tables derived
