@@ -3,17 +3,16 @@
 from __future__ import annotations
 
 import contextlib
+import inspect
 from typing import Hashable, Optional
 
 import torch
 
 from ..base.core import Param, check_image, scalar_param, working_dtype
-from ..base.stage import Stage
+from ..base.stage import Stage, controls_signature
 from .adaptation import (
     BOUNDS,
     CONTROLS,
-    MAX_ADAPTED,
-    MIN_LUMINANCE,
     NOT_NUMBERS,
     check_bounds,
     check_step,
@@ -72,34 +71,18 @@ class AutoExposure(Stage):
 
     adapted_luminance: torch.Tensor
 
-    def __init__(
-        self,
-        middle_grey: Param = 0.18,
-        max_luminance: Param = 16.0,
-        speed: Param = 1.0,
-        metering: str = "log",
-        *,
-        operator: str = "exposure",
-        speed_to_light: Optional[Param] = None,
-        speed_to_dark: Optional[Param] = None,
-        min_luminance: Param = MIN_LUMINANCE,
-        max_adapted: Param = MAX_ADAPTED,
-        metering_mask="average",
-        low_percent: Param = 40.0,
-        high_percent: Param = 90.0,
-        min_ev: Optional[Param] = None,
-        max_ev: Optional[Param] = None,
-        compensation: Param = 0.0,
-        compensation_curve=None,
-        fixed_exposure: Optional[Param] = None,
-    ) -> None:
+    POSITIONAL = ("middle_grey", "max_luminance", "speed", "metering")
+    """The controls that may be given in order, before the others by name (defaults: :data:`CONTROLS`)."""
+
+    def __init__(self, *values, **controls) -> None:
+        if len(values) > len(self.POSITIONAL):
+            raise TypeError(f"AutoExposure takes at most {len(self.POSITIONAL)} controls in order "
+                            f"({', '.join(self.POSITIONAL)}), got {len(values)}")
+        twice = [name for name in self.POSITIONAL[:len(values)] if name in controls]
+        if twice:
+            raise TypeError(f"AutoExposure got {twice[0]!r} both in order and by name")
         super().__init__()
-        self.init_controls(
-            middle_grey=middle_grey, max_luminance=max_luminance, speed=speed, metering=metering, operator=operator,
-            speed_to_light=speed_to_light, speed_to_dark=speed_to_dark, min_luminance=min_luminance, max_adapted=max_adapted,
-            metering_mask=metering_mask, low_percent=low_percent, high_percent=high_percent, min_ev=min_ev, max_ev=max_ev,
-            compensation=compensation, compensation_curve=compensation_curve, fixed_exposure=fixed_exposure,
-        )
+        self.init_controls(**dict(zip(self.POSITIONAL, values)), **controls)
         self.register_buffer("adapted_luminance", torch.empty(0))
         self.streams: dict = {}
 
@@ -202,3 +185,10 @@ class AutoExposure(Stage):
         else:
             self.streams[stream] = adapted.detach()
         return exposed
+
+
+AutoExposure.__signature__ = controls_signature(
+    {name: control for name, control in CONTROLS.items() if name not in AutoExposure.POSITIONAL},
+    leading=tuple(inspect.Parameter(name, inspect.Parameter.POSITIONAL_OR_KEYWORD, default=CONTROLS[name].default)
+                  for name in AutoExposure.POSITIONAL),
+)
