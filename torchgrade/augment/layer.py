@@ -441,9 +441,8 @@ class RandomPostFX(IntensityAugmentationBase2D):
                     "tonemap": list(self.tonemap) or None, "look_lut": look, "aces": self.aces, "input_space": self.input_space,
                     "p": self.p, "same_on_batch": self.same_on_batch, "keepdim": self.keepdim,
                     "same_on_frame": self.same_on_frame}
-        defaults = {"bloom_mode": "additive", "tonemap": None, "look_lut": None, "aces": False, "input_space": "linear", "p": 1.0,
-                    "same_on_batch": False, "keepdim": False, "same_on_frame": True}
-        config.update({name: value for name, value in settings.items() if value != defaults[name]})
+        defaults = inspect.signature(type(self)).parameters  # stated once, in the constructor
+        config.update({name: value for name, value in settings.items() if value != defaults[name].default})
         return config
 
     @classmethod
