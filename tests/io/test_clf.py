@@ -28,7 +28,7 @@ def looks():
     look = torch.nn.Sequential(tg.ColorGrade(contrast=20.0, saturation=10.0, temperature=10.0), tg.ToneMap("aces"))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LUTAccuracyWarning)
-        luts = {shaper: tg.bake_lut(look, size=9, shaper=shaper) for shaper in ("linear", "logc", "logc_hdr", "fitted")}
+        luts = {shaper: tg.bake_lut(look, size=9, shaper=shaper) for shaper in ("linear", "logc", "logc_hdr", "logc_extended", "fitted")}
         luts["fitted to a scene"] = tg.bake_lut(look, size=9, shaper="fitted", scene=hdr_image(), entries="fitted")
         return luts
 
@@ -47,7 +47,7 @@ def hdr_image() -> torch.Tensor:
     return image
 
 
-@pytest.mark.parametrize("shaper", ["linear", "logc", "logc_hdr", "fitted", "fitted to a scene"])
+@pytest.mark.parametrize("shaper", ["linear", "logc", "logc_hdr", "logc_extended", "fitted", "fitted to a scene"])
 @pytest.mark.parametrize("interpolation", ["tetrahedral", "trilinear"])
 def test_opencolorio_applies_the_clf_as_the_lut_does(tmp_path, looks, shaper, interpolation):
     lut = looks[shaper]
@@ -69,10 +69,11 @@ def test_the_logc_shaper_is_an_exact_log_node_and_the_lattice_a_range(tmp_path, 
     assert float(root.find("Range/maxInValue").text) == pytest.approx(1.0)
 
 
-def test_the_logc_hdr_tail_is_an_exact_piecewise_linear_lut1d_after_the_log_node(tmp_path, looks):
+@pytest.mark.parametrize("shaper", ["logc_hdr", "logc_extended"])
+def test_the_tail_is_an_exact_piecewise_linear_lut1d_after_the_log_node(tmp_path, looks, shaper):
     """Log (LogC), then a Range and a LUT1D whose points include the knots (LogC codes 1 and 1.3), so its linear
     interpolation is the shaper itself: OpenColorIO gives the shaper's code values, 65504 included."""
-    lut = looks["logc_hdr"]
+    lut = looks[shaper]
     path = tmp_path / "hdr.clf"
     write_clf(path, lut)
     root = ET.parse(path).getroot()
@@ -82,7 +83,7 @@ def test_the_logc_hdr_tail_is_an_exact_piecewise_linear_lut1d_after_the_log_node
     shaper_only.write_text(f'<?xml version="1.0" encoding="UTF-8"?>\n<ProcessList compCLFversion="3" id="s">{nodes}</ProcessList>\n')
     linear = torch.tensor([0.0, 1e-4, 0.18, 58.0, 58.8566, 60.0, 500.0, 997.0, 1000.0, 20000.0, 65504.0])
     image = linear.repeat(3, 1).reshape(1, 3, 1, -1)
-    expected = tg.lut.SHAPERS["logc_hdr"].encode(linear.double())
+    expected = tg.lut.SHAPERS[shaper].encode(linear.double())
     torch.testing.assert_close(ocio_apply(shaper_only, image, "trilinear")[0, 0, 0].double(), expected, atol=2e-6, rtol=0)
 
 

@@ -13,14 +13,11 @@ from __future__ import annotations
 import argparse
 import os
 
-import numpy as np
 import torch
 from torch import nn
 
 from .. import TONEMAP_MODES, ColorGrade, ToneMap
-from ..color import linear_to_srgb
 from ..io import read_exr
-from ..io.atomic import atomic_write
 from ..look.postfx import PostFX
 from ..shots.outputs import display_codes, write_png
 

@@ -273,11 +273,22 @@ def _gather_runs(planes, result, rows, size, settings, pixels) -> None:
 
 
 def _straight_through(planes: torch.Tensor, dtype: torch.dtype, settings: tuple) -> bool:
-    """Whether the compiled loop takes ``planes`` ``(N, 3, P)`` as they are and its values are the result: a linear
-    shaper on rows of the table's dtype, a linear output without a clamp."""
+    """Whether the compiled loop takes ``planes`` ``(N, 3, P)`` as they are and its values are the result
+    (:func:`_read_as_they_are`, :func:`_values_are_the_output`)."""
     shaper, _, _, _, output_range, _, _, output_encoding = settings
-    return (shaper == "linear" and output_encoding == "linear" and output_range is None and planes.dtype == dtype
-            and planes.stride(-1) == 1)
+    return _read_as_they_are(planes, dtype, shaper) and _values_are_the_output(planes.dtype, dtype, output_encoding, output_range)
+
+
+def _read_as_they_are(planes: torch.Tensor, dtype: torch.dtype, shaper: str) -> bool:
+    """Whether the compiled loop reads ``planes`` without a buffer: a linear shaper (the loop sanitizes and maps the
+    domain itself) on rows of the table's ``dtype``."""
+    return shaper == "linear" and planes.dtype == dtype and planes.stride(-1) == 1
+
+
+def _values_are_the_output(result_dtype: torch.dtype, dtype: torch.dtype, output_encoding: str, output_range) -> bool:
+    """Whether interpolated values of ``dtype`` are the lookup's output as they are: linear entries, no clamp, the
+    result's dtype."""
+    return output_encoding == "linear" and output_range is None and result_dtype == dtype
 
 
 def _compiled_frames(planes, packed, size, settings, interpolate, pixels) -> torch.Tensor:
@@ -294,9 +305,9 @@ def _compiled_runs(planes, result, packed, size, settings, pixels, interpolate) 
     shaper, domain_min, domain_max, _, output_range, curve, curve_range, output_encoding = settings
     dtype = packed.dtype
     run = max(1, min(pixels, planes.shape[-1]))
-    as_is = shaper == "linear" and planes.dtype == dtype and planes.stride(-1) == 1
+    as_is = _read_as_they_are(planes, dtype, shaper)
     codes = None if as_is else torch.empty(3, run, dtype=dtype)
-    direct = output_encoding == "linear" and output_range is None and result.dtype == dtype
+    direct = _values_are_the_output(result.dtype, dtype, output_encoding, output_range)
     values = None if direct else torch.empty(3, run, dtype=dtype)
     low, scale = _domain_columns(domain_min, domain_max, size, dtype)
     for frame, out in zip(planes, result):
@@ -304,20 +315,28 @@ def _compiled_runs(planes, result, packed, size, settings, pixels, interpolate) 
             x = frame[:, start:start + run]
             n = x.shape[-1]
             if not as_is:
-                x = _shaper_codes(x, codes[:, :n], shaper, curve, curve_range)
+                buffer = codes[:, :n]
+                x = buffer.copy_(x) if shaper == "linear" else _sanitized_codes(x, buffer, shaper, curve, curve_range).contiguous()
             y = out[:, start:start + n] if direct else values[:, :n]
             interpolate(x.unsqueeze(0), y.unsqueeze(0), low, scale, packed, size, run)
             if not direct:
                 out[:, start:start + n] = to_input_dtype(table_output(y, output_encoding, output_range), out)
 
 
-def _shaper_codes(x: torch.Tensor, buffer: torch.Tensor, shaper: str, curve, curve_range) -> torch.Tensor:
-    """The shaper's codes of the sanitized pixels ``x`` ``(3, n)``, in ``buffer`` (or a new tensor), rows contiguous."""
-    x = buffer.copy_(x)
-    if shaper == "linear":
-        return x
+def _sanitized_codes(x: torch.Tensor, buffer: torch.Tensor, shaper: str, curve, curve_range) -> torch.Tensor:
+    """``shaper_encode(sanitize(x))`` of pixels ``(3, n)``, sanitized into ``buffer`` (in its dtype): the non-finite
+    policy's clamp and NaN pass in place, then the shaper (in ``buffer`` where it works in place, else a new tensor).
+
+    Examples:
+        >>> import torch
+        >>> x = torch.tensor([[float("nan")], [float("inf")], [0.5]])
+        >>> _sanitized_codes(x, torch.empty(3, 1), "linear", None, (0.0, 1.0)).flatten().tolist()
+        [0.0, 65504.0, 0.5]
+    """
+    if x.dtype != buffer.dtype:
+        x = buffer.copy_(x)
     torch.clamp(x, -HALF_MAX, HALF_MAX, out=buffer).nan_to_num_(nan=0.0)
-    return shaper_encode(buffer, shaper, curve, curve_range).contiguous()
+    return shaper_encode(buffer, shaper, curve, curve_range)
 
 
 def _domain_columns(domain_min, domain_max, size: int, dtype) -> tuple:
@@ -340,7 +359,7 @@ def _eager_lookup(planes, result, rows, size, settings, pixels, eager, tables) -
     shaper, domain_min, domain_max, _, output_range, curve, curve_range, output_encoding = settings
     run = max(1, min(pixels, planes.shape[-1]))
     runs = eager.runs(tables, size, run)
-    direct = output_encoding == "linear" and output_range is None and result.dtype == rows.dtype
+    direct = _values_are_the_output(result.dtype, rows.dtype, output_encoding, output_range)
     values = None if direct else torch.empty(3 * run, dtype=rows.dtype)
     lattice = _LatticeCoordinates(rows.dtype, size, shaper, domain_min, domain_max, curve, curve_range)
     for frame, out in zip(planes, result):
@@ -374,13 +393,11 @@ class _LatticeCoordinates:
         self.unclamped = shaper == "linear" and bounded
 
     def __call__(self, x: torch.Tensor, buffer: torch.Tensor) -> torch.Tensor:
-        if x.dtype != self.dtype:
-            x = buffer.copy_(x)
         if self.unclamped:
+            x = buffer.copy_(x) if x.dtype != self.dtype else x
             codes = torch.nan_to_num(x, nan=0.0, posinf=HALF_MAX, neginf=-HALF_MAX, out=buffer)
         else:
-            torch.clamp(x, -HALF_MAX, HALF_MAX, out=buffer).nan_to_num_(nan=0.0)
-            codes = shaper_encode(buffer, self.shaper, self.curve, self.curve_range)
+            codes = _sanitized_codes(x, buffer, self.shaper, self.curve, self.curve_range)
         if self.shift or codes is not buffer:
             codes = torch.sub(codes, self.low, out=buffer)
         if self.scale:

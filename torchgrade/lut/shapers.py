@@ -214,9 +214,9 @@ class LogCExtendedShaper(LogCHDRShaper):
     Below LogC code 1 it is LogC itself, on the ``"logc"`` lattice's spacing (32 intervals at the default size);
     above, the tail of :class:`LogCHDRShaper` (each segment even in stops) on 12 more intervals, 6 up to LogC 1.3
     (≈ 997) and 6 up to 65504: 45³ by default, whose knots lie on lattice planes (as at every size ``44 k + 1``).
-    Chosen on photographs (``benchmarks/results/lut_lattices.md``): on the strong look it misses Desk, CandleGlass
-    and GoldenGate by no more than the better of ``"logc"`` and ``"logc_hdr"`` at 33³ (p99.9 and max), and it holds
-    very bright saturated colours through every tone mapper but two within 2 codes.
+    Chosen on photographs (``benchmarks/results/lut_lattices.md``: fewer values more than 1 code off than ``"logc"``
+    and ``"logc_hdr"`` at 33³ on every photograph tried, ``"logc"``'s p99.9 and max or better, ``"logc_hdr"``'s max
+    lower on two of them), and it holds very bright saturated colours through every tone mapper but two within 2 codes.
 
     Examples:
         >>> import torch

@@ -36,6 +36,7 @@ Examples:
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import torch
@@ -43,6 +44,7 @@ import torch
 from ..base.core import HALF_MAX
 from ..color import linear_to_logc, logc_to_linear
 from ..color.spaces import REC709_LUMINANCE
+from .shapers import LOGC_TOP
 
 __all__ = ["validation_colours", "realistic_colours", "bright_saturated_colours", "FOOTAGE_COLOURS", "GRID_LEVELS",
            "REALISTIC_COLOURS", "REALISTIC_STOPS", "CHROMA_SIGMA", "HIGHLIGHT_STEPS", "HIGHLIGHT_FRACTIONS"]
@@ -94,15 +96,13 @@ def bright_saturated_colours() -> torch.Tensor:
         >>> colours.shape, float(colours.max()) == 65504.0, float(colours.min())
         (torch.Size([3, 24576]), True, 0.0)
     """
-    top = float(logc_to_linear(torch.tensor(1.0, dtype=torch.float64)))
-    bright = torch.logspace(math.log10(top), math.log10(HALF_MAX), HIGHLIGHT_STEPS, dtype=torch.float64)
-    bright[0], bright[-1] = top, HALF_MAX  # the ends exactly
+    bright = torch.logspace(math.log10(LOGC_TOP), math.log10(HALF_MAX), HIGHLIGHT_STEPS, dtype=torch.float64)
+    bright[0], bright[-1] = LOGC_TOP, HALF_MAX  # the ends exactly
     fractions = torch.tensor(HIGHLIGHT_FRACTIONS, dtype=torch.float64)
     second, third = torch.meshgrid(fractions, fractions, indexing="ij")
     colours = torch.stack(torch.broadcast_tensors(bright[:, None], bright[:, None] * second.flatten(), bright[:, None] * third.flatten()))
     colours = colours.reshape(3, -1)
-    orders = ((0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0))
-    return torch.cat([colours[list(order)] for order in orders], dim=1)
+    return torch.cat([colours[list(order)] for order in itertools.permutations(range(3))], dim=1)
 
 
 def realistic_colours(hdr: bool = True, seed: int = 0) -> torch.Tensor:
