@@ -262,7 +262,7 @@ def markdown(report: dict) -> str:
             "## Accuracy of LUTs of a strong look (every 4th pixel, 8-bit sRGB code values vs direct float64)",
             "",
             "Look: contrast 30, saturation 20, temperature 20, then ACES, or post-exposure 0.5 and Neutral. logc_hdr: "
-            "the former default (LogC to 58.86 on 27 of 32 intervals, then 4 intervals to LogC 1.3 ≈ 997 and 1 to 65504; the default, `logc_extended` 45³, is compared in lut_lattices.md). "
+            "the former default (LogC to 58.86 on 27 of 32 intervals, then 4 intervals to LogC 1.3 ≈ 997 and 1 to 65504; the default, `logc_extended` 51³, is compared in lut_lattices.md). "
             "LogC lattice: the default (up to linear 58.86), the full range (black to 65504, `domain=(LOGC_BLACK, 1.744)`), or the scene's "
             "range (`bake_lut(scene=image)`); fitted: "
             "`shaper=\"fitted\"`, fitted to the look (default) or to the image (scene: tables with fitted entries steer its planes; the rows here sample the entries), black to 65504. "

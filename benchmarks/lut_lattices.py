@@ -1,14 +1,15 @@
 """The default lattice against the two it replaced, on photographs and on bright saturated colours.
 
 Three lattices, each at its default size: ``"logc_extended"`` (the default of ``bake_lut``, ``look.to_lut()`` and, as
-its ``.cube`` form, ``torchgrade bake``: the ``"logc"`` lattice to 58.86 and 12 more planes to 65504, 45³),
+its ``.cube`` form, ``torchgrade bake``: the ``"logc"`` 39³ lattice to 58.86 and 12 more planes to 65504, 51³),
 ``"logc"`` (33³, clamps at 58.86: the former CLI default) and ``"logc_hdr"`` (33³, LogC to 58.86 on 27 intervals and
 a tail on 5: the former Python default).
 
 1. Photographs: two looks (the strong look of ``bench_lut.py`` and the shipped cinematic look's grade and tone
-   mapper) baked with every default (linear entries, tetrahedral), applied to every 4th pixel of each photograph in
+   mapper) baked with every default (tetrahedral; linear entries, the default, and sRGB entries), applied to every 4th pixel of each photograph in
    ``../shared/data/exr``, against float64 direct evaluation, in 8-bit sRGB codes: p99.9, max and the share of
-   values more than 1 code off.
+   values more than 1 code off; and the same on the pixels inside every lattice's domain (no channel below 0, where
+   each lattice starts), for the photographs with pixels outside it.
 2. Highlights: every tone mapper the bake takes, alone, baked with every default, on
    :func:`~torchgrade.lut.validation.bright_saturated_colours` (one channel from 58.86 to 65504, the others a fraction
    of it): the max error, which the bake's report holds to 2 codes where a lattice twice as fine would.
@@ -19,6 +20,7 @@ ones with ``--out benchmarks/results``).
 
 from __future__ import annotations
 
+import itertools
 import json
 import warnings
 
@@ -35,7 +37,9 @@ from torchgrade.lut.validation import bright_saturated_colours
 from torchgrade.tonemap import TONEMAP_MODES
 
 COMMAND = ".venv/bin/python -m benchmarks.lut_lattices"
-LATTICES = (("logc_extended", 45), ("logc", 33), ("logc_hdr", 33))
+LATTICES = (("logc_extended", 51), ("logc", 33), ("logc_hdr", 33))
+ENCODINGS = ("linear", "srgb")
+"""The table's entries: linear (the bake's default) or sRGB-encoded (``output_encoding="srgb"``)."""
 PHOTOGRAPHS = ("Desk", "CandleGlass", "GoldenGate", "Carrots", "Garden", "WideColorGamut")
 
 
@@ -45,26 +49,32 @@ def looks() -> dict:
     return {"strong": strong_look(), "cinematic": tg.PostFX.from_config(cinematic).per_pixel_stages()}
 
 
-def bake(transform, shaper: str, size: int):
+def bake(transform, shaper: str, size: int, output_encoding: str = "linear"):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LUTAccuracyWarning)
-        return tg.bake_lut(transform, size=size, shaper=shaper, report_tolerance=float("inf"))
+        return tg.bake_lut(transform, size=size, shaper=shaper, output_encoding=output_encoding, report_tolerance=float("inf"))
 
 
 def photograph_rows() -> list:
     rows = []
-    for look_name, look in looks().items():
-        luts = {shaper: bake(look, shaper, size) for shaper, size in LATTICES}
+    for (look_name, look), encoding in itertools.product(looks().items(), ENCODINGS):
+        luts = {shaper: bake(look, shaper, size, encoding) for shaper, size in LATTICES}
         for name in PHOTOGRAPHS:
             image = tg.io.read_exr(EXR_DIR / f"{name}.exr")[:3, ::4, ::4].unsqueeze(0)
+            inside = (image >= 0).all(dim=1, keepdim=True).expand_as(image).flatten().numpy()
             with torch.no_grad():
                 direct = srgb_codes(look(image.double()))
                 for shaper, lut in luts.items():
                     error = (srgb_codes(lut(image)) - direct).abs().flatten().numpy()
-                    rows.append({"look": look_name, "image": name, "shaper": shaper, "size": lut.size,
-                                 "p99_9": float(np.quantile(error, 0.999)), "max": float(error.max()),
-                                 "over_1_code": float((error > 1.0).mean())})
+                    rows.append({"look": look_name, "entries": encoding, "image": name, "shaper": shaper, "size": lut.size,
+                                 **error_figures(error), "below_black": float(1.0 - inside.mean()),
+                                 "inside": error_figures(error[inside])})
     return rows
+
+
+def error_figures(error: np.ndarray) -> dict:
+    """p99.9, max and the share of values more than 1 code off."""
+    return {"p99_9": float(np.quantile(error, 0.999)), "max": float(error.max()), "over_1_code": float((error > 1.0).mean())}
 
 
 def highlight_rows() -> list:
@@ -93,19 +103,27 @@ def markdown(report: dict) -> str:
     shapers = [shaper for shaper, _ in report["lattices"]]
     sizes = {shaper: size for shaper, size in report["lattices"]}
     heads = " | ".join(f"{s} {sizes[s]}³ p99.9 / max / > 1 code" for s in shapers)
-    lines = ["# The default LUT lattice against the two it replaced", "",
-             "Every default (linear entries, tetrahedral); 8-bit sRGB codes against float64 direct evaluation, every 4th "
-             "pixel of each photograph. `logc_extended` is the default of `bake_lut`, `look.to_lut()` and, as its "
-             "`.cube` form (its planes up to 58.86, the `logc` 33³ lattice's), `torchgrade bake`.", "",
-             f"| look | photograph | {heads} |", "| --- | --- |" + " ---: |" * len(shapers)]
     photographs = report["photographs"]
-    for look in dict.fromkeys(r["look"] for r in photographs):
-        for image in dict.fromkeys(r["image"] for r in photographs):
-            cells = []
-            for shaper in shapers:
-                r = next(r for r in photographs if (r["look"], r["image"], r["shaper"]) == (look, image, shaper))
-                cells.append(f"{r['p99_9']:.2f} / {r['max']:.1f} / {100 * r['over_1_code']:.1f} %")
-            lines.append(f"| {look} | {image} | {' | '.join(cells)} |")
+    cases = list(dict.fromkeys((r["look"], r["entries"], r["image"]) for r in photographs))
+
+    def cells(case: tuple, part=lambda r: r) -> str:
+        found = {r["shaper"]: part(r) for r in photographs if (r["look"], r["entries"], r["image"]) == case}
+        return " | ".join(f"{found[s]['p99_9']:.2f} / {found[s]['max']:.1f} / {100 * found[s]['over_1_code']:.1f} %" for s in shapers)
+
+    lines = ["# The default LUT lattice against the two it replaced", "",
+             "Every default (tetrahedral; linear entries, the default, and sRGB entries); 8-bit sRGB codes against float64 "
+             "direct evaluation, every 4th pixel of each photograph. `logc_extended` is the default of `bake_lut`, "
+             "`look.to_lut()` and, as its `.cube` form (its planes up to 58.86, the `logc` 39³ lattice's), `torchgrade bake`.", "",
+             f"| look | entries | photograph | {heads} |", "| --- | --- | --- |" + " ---: |" * len(shapers)]
+    lines += [f"| {' | '.join(case)} | {cells(case)} |" for case in cases]
+    outside = [case for case in cases if next(r for r in photographs if (r["look"], r["entries"], r["image"]) == case)["below_black"] > 0]
+    if outside:
+        lines += ["", "## The same on the pixels inside every lattice (no channel below 0: each lattice starts at black and clamps "
+                  "below it)", "", f"| look | entries | photograph | pixels with a channel below 0 | {heads} |",
+                  "| --- | --- | --- | ---: |" + " ---: |" * len(shapers)]
+        for case in outside:
+            below = next(r for r in photographs if (r["look"], r["entries"], r["image"]) == case)["below_black"]
+            lines.append(f"| {' | '.join(case)} | {100 * below:.1f} % | {cells(case, lambda r: r['inside'])} |")
     lines += ["", f"## Bright saturated colours through each tone mapper alone (max codes; the report's tolerance "
               f"{report['highlight_tolerance']:g} where a lattice twice as fine holds them)", "", f"| tone mapper | {' | '.join(f'{s} {sizes[s]}³' for s in shapers)} |",
               "| --- |" + " ---: |" * len(shapers)]

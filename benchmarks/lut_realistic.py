@@ -14,7 +14,7 @@ image (every image weighs the same). Ratio: report / pooled. The worst case (val
 domain) is shown beside it. Writes ``lut_realistic.{md,json}`` to ``--out`` (default benchmarks/out; the committed ones
 with ``--out benchmarks/results``); about two minutes on 2 cores.
 
-A second table is the shipped look as ``look.to_lut()`` bakes it (45³) on every sample image, every pixel: the
+A second table is the shipped look as ``look.to_lut()`` bakes it (51³) on every sample image, every pixel: the
 report's figure on the realistic colours and, with the image given as ``frames=``, on the image's own pixels,
 each against the p99.9 the LUT really gets there.
 """
@@ -120,7 +120,7 @@ def framed_rows(look: tg.PostFX) -> list:
 
 def framed_lines(rows: list) -> list:
     """The ``frames=`` table and its summary line."""
-    lines = ["", "## The shipped look's `to_lut()` (45³, logc_extended), reported on realistic colours or on the image as `frames=`", "",
+    lines = ["", "## The shipped look's `to_lut()` (51³, logc_extended), reported on realistic colours or on the image as `frames=`", "",
              "| image | pixels | report: realistic p99.9 | real p99.9 | real / report | report: `frames=` p99.9 | real p99.9 | real / report |",
              "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for row in rows:

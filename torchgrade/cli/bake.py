@@ -9,7 +9,7 @@ Examples:
     error: p99.9 0.48, max 2.48 8-bit codes on 16384 realistic colours (tolerance 1 at p99.9); worst case: ...
     0
 
-At 33³ the same look misses realistic colours by p99.9 1.64 codes: the command writes nothing, prints the
+At the default 39³ the same look misses realistic colours by p99.9 1.15 codes: the command writes nothing, prints the
 report and what to do on stderr and returns :data:`~torchgrade.cli.common.OVER_TOLERANCE` (3), unless
 ``--accept-error`` is given.
 """
@@ -26,6 +26,7 @@ import torch
 from ..io import write_cube
 from ..lut import ENTRY_CHOICES, LUTAccuracyWarning, bake_lut, srgb_code_error
 from ..lut.bake import expects_hdr
+from ..lut.shapers import DEFAULT_SIZES, SHAPERS
 from .common import (add_grading_flags, look_from_args, read_rec709, refuse_lut_over_tolerance, refuse_overwriting,
                      report_line, stages_label)
 
@@ -76,8 +77,9 @@ def _check_bake_arguments(args: argparse.Namespace) -> None:
 
 def _cube_shaper(shaper: str, transform) -> str:
     """``--shaper``: ``auto`` is ``logc`` for a look taking HDR input: the default lattice (``"logc_extended"``) as a
-    ``.cube`` file can hold it. Its planes up to 58.86 are the ``"logc"`` 33³ lattice's, plane for plane, and a
-    ``.cube`` 1D section stops there; the tail above it lives on in ``bake_lut`` and CLF files.
+    ``.cube`` file can hold it. Its planes up to 58.86 are the ``"logc"`` lattice's at
+    :attr:`~torchgrade.lut.shapers.LogCExtendedShaper.cube_size` (39³), plane for plane, and a ``.cube`` 1D section
+    stops there; the tail above it lives on in ``bake_lut`` and CLF files.
 
     Examples:
         >>> from torchgrade import ToneMap
@@ -85,6 +87,18 @@ def _cube_shaper(shaper: str, transform) -> str:
         ('logc', 'auto', 'fitted')
     """
     return "logc" if shaper == "auto" and expects_hdr(transform) else shaper
+
+
+def _cube_size(size, shaper: str):
+    """``--size``, or when not given the default lattice's ``.cube`` form for ``logc`` (39) and 33 for the others.
+
+    Examples:
+        >>> _cube_size(None, "logc"), _cube_size(None, "linear"), _cube_size(17, "logc")
+        (39, 33, 17)
+    """
+    if size is not None:
+        return size
+    return SHAPERS["logc_extended"].cube_size if shaper == "logc" else DEFAULT_SIZES["logc"]
 
 
 def run_bake(args: argparse.Namespace) -> str:
@@ -108,7 +122,8 @@ def run_bake(args: argparse.Namespace) -> str:
     start = time.perf_counter()
     with warnings.catch_warnings():  # the report is printed below, with its cause and advice
         warnings.simplefilter("ignore", LUTAccuracyWarning)
-        lut = bake_lut(transform, size=args.size, shaper=_cube_shaper(args.shaper, transform), scene=scene, tolerance=tolerance, progress=True,
+        shaper = _cube_shaper(args.shaper, transform)
+        lut = bake_lut(transform, size=_cube_size(args.size, shaper), shaper=shaper, scene=scene, tolerance=tolerance, progress=True,
                        report_tolerance=args.report_tolerance, entries=args.entries, frames=frames)
     elapsed = time.perf_counter() - start
     refuse_lut_over_tolerance(lut.error_report, args.accept_error, REMEDIES.format(size=lut.size))
@@ -137,7 +152,8 @@ def add_bake(commands) -> None:
     bake = commands.add_parser("bake", help="bake grade and tone mapping into a .cube 3D LUT")
     bake.add_argument("--output", "-o", required=True, help=".cube file to write")
     bake.add_argument("--config", help="look JSON (PostFX config); without it, the grading flags below")
-    bake.add_argument("--size", type=_lut_size, default=33, help="points per axis, 2..256, or auto (needs --scene; default 33)")
+    bake.add_argument("--size", type=_lut_size, help="points per axis, 2..256, or auto (needs --scene); default 39 for logc "
+                      "(the default lattice's planes to 58.86), 33 for the others")
     bake.add_argument("--shaper", choices=("auto", "linear", "logc", "fitted"), default="auto",
                       help="default auto: logc (LogC to 58.86, what a .cube 1D section holds) when the look tone maps; fitted: per-channel shaper fitted to the look (and --scene)")
     bake.add_argument("--scene", help="EXR the look will grade: the lattice covers its range after the look's exposure and bloom, "

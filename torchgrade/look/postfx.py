@@ -239,7 +239,7 @@ class PostFX(nn.Module):
 
     def to_lut(self, size: Optional[int] = None, interpolation: Optional[str] = None, output_encoding: str = "linear",
                entries: str = "sampled", frames: Optional[torch.Tensor] = None) -> "PostFX":
-        """An equivalent look with grade, primary grade and tone mapping baked into a ``"logc_extended"`` LUT (45³ by
+        """An equivalent look with grade, primary grade and tone mapping baked into a ``"logc_extended"`` LUT (51³ by
         default, or ``size``³).
 
         The other slots stay live (copied, so the new look keeps its own adaptation state). The

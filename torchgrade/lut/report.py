@@ -68,9 +68,9 @@ HIGHLIGHT_TOLERANCE = 2.0
 would hold them: the report is then over its tolerance, and says so (:func:`highlights_report`)."""
 
 
-HIGHLIGHT_ADVICE_MAX_SIZE = 89
+HIGHLIGHT_ADVICE_MAX_SIZE = 101
 """The largest lattice :func:`highlights_report` bakes to see whether a finer one holds the highlights (twice the
-default 45³'s intervals: about half a second)."""
+default 51³'s intervals)."""
 
 
 class LUTAccuracyWarning(UserWarning):

@@ -209,26 +209,28 @@ class LogCHDRShaper(Shaper):
 
 
 class LogCExtendedShaper(LogCHDRShaper):
-    """The ``"logc"`` lattice from black to 58.86, extended past it to 65504: the default for HDR looks.
+    """The ``"logc"`` lattice's spacing from black to 58.86, extended past it to 65504: the default for HDR looks.
 
-    Below LogC code 1 it is LogC itself, on the ``"logc"`` lattice's spacing (32 intervals at the default size);
-    above, the tail of :class:`LogCHDRShaper` (each segment even in stops) on 12 more intervals, 6 up to LogC 1.3
-    (≈ 997) and 6 up to 65504: 45³ by default, whose knots lie on lattice planes (as at every size ``44 k + 1``).
-    Chosen on photographs (``benchmarks/results/lut_lattices.md``: fewer values more than 1 code off than ``"logc"``
-    and ``"logc_hdr"`` at 33³ on every photograph tried, ``"logc"``'s p99.9 and max or better, ``"logc_hdr"``'s max
-    lower on two of them), and it holds very bright saturated colours through every tone mapper but two within 2 codes.
+    Below LogC code 1 it is LogC itself, on 38 intervals at the default size; above, the tail of
+    :class:`LogCHDRShaper` (each segment even in stops) on 12 more intervals, 6 up to LogC 1.3 (≈ 997) and 6 up to
+    65504: 51³ by default, whose knots lie on lattice planes (as at every size ``50 k + 1``). Its planes up to 58.86
+    are the ``"logc"`` lattice's at :attr:`cube_size`, plane for plane, which is how a ``.cube`` file holds it. Chosen
+    on photographs (``benchmarks/results/lut_lattices.md`` compares it with ``"logc"`` and ``"logc_hdr"`` at 33³),
+    and it holds very bright saturated colours through every tone mapper but two within 2 codes.
 
     Examples:
         >>> import torch
         >>> shaper = LogCExtendedShaper()
-        >>> shaper.default_size, round(float(shaper.decode(torch.tensor(shaper.default_domain[1], dtype=torch.float64))))
-        (45, 65504)
+        >>> shaper.default_size, shaper.cube_size, round(float(shaper.decode(torch.tensor(shaper.default_domain[1], dtype=torch.float64))))
+        (51, 39, 65504)
     """
 
     name = "logc_extended"
-    BODY = 32
+    BODY = 38
     TAIL = ((1.0, 0), (1.3, 6), (LOGC_HALF_MAX, 12))
-    default_size = 45
+    default_size = BODY + TAIL[-1][1] + 1
+    cube_size = BODY + 1
+    """The ``"logc"`` lattice size whose planes are this lattice's up to 58.86 (its ``.cube`` form)."""
 
 
 class CurveShaper(Shaper):
