@@ -9,14 +9,13 @@ OpenColorIO 2.6's builtin ``studio-config-v4.0.0_aces-v2.0_ocio-v2.5``: "Linear 
 to OpenColorIO. The frame is the Desk sample exposed to a median luminance of 0.18, tiled to 1920×1080;
 the outputs' largest difference in 8-bit codes is reported too.
 
-Run: ``.venv/bin/python benchmarks/bench_aces2.py [--out DIR]`` (writes aces2.json and aces2.md to ``--out``,
+Run: ``.venv/bin/python -m benchmarks aces2 [--out DIR]`` (writes aces2.json and aces2.md to ``--out``,
 default benchmarks/out; the committed ones with ``--out benchmarks/results``).
 """
 
 from __future__ import annotations
 
 import platform
-import sys
 import time
 from pathlib import Path
 
@@ -24,13 +23,12 @@ import numpy as np
 import torch
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
-from benchmarks.common import argument_parser, median_ms, packed_rgb, sample_exr, write_results  # noqa: E402
-from torchgrade.tonemap.aces2 import aces2_output  # noqa: E402
-from torchgrade.tonemap.aces2.transform import prepare_output  # noqa: E402
+from benchmarks.common import argument_parser, median_ms, packed_rgb, sample_exr, write_results
+from torchgrade.tonemap.aces2 import aces2_output
+from torchgrade.tonemap.aces2.transform import prepare_output
 
-COMMAND = ".venv/bin/python benchmarks/bench_aces2.py"
+COMMAND = ".venv/bin/python -m benchmarks aces2"
 HEIGHT, WIDTH, RUNS = 1080, 1920, 5
 CONFIG, SOURCE = "studio-config-v4.0.0_aces-v2.0_ocio-v2.5", "Linear Rec.709 (sRGB)"
 DISPLAY, VIEW = "Rec.1886 Rec.709 - Display", "ACES 2.0 - SDR 100 nits (Rec.709)"

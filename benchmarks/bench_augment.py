@@ -14,7 +14,7 @@ Writes ``augment.json`` and ``augment.md`` to ``--out`` (default benchmarks/out;
 ``--out benchmarks/results``). With ``--device cuda`` it measures
 on the GPU (default batch 256 there) and writes ``augment_cuda.json`` / ``augment_cuda.md``.
 
-    .venv/bin/python benchmarks/bench_augment.py [--device cuda] [--batch N] [--resolution N] [--rounds N]
+    .venv/bin/python -m benchmarks augment [--device cuda] [--batch N] [--resolution N] [--rounds N]
 """
 
 from __future__ import annotations
@@ -22,16 +22,14 @@ from __future__ import annotations
 import functools
 import platform
 import sys
-from pathlib import Path
 
 import kornia
 import torch
 from kornia.augmentation import ColorJiggle
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import torchgrade as tg  # noqa: E402
-from benchmarks.common import argument_parser, median_ms, synchronizer, write_results  # noqa: E402
+import torchgrade as tg
+from benchmarks.common import argument_parser, median_ms, synchronizer, write_results
 
 
 JIGGLE = dict(brightness=0.2, contrast=0.2, saturation=0.2, hue=0.1)

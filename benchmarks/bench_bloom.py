@@ -7,7 +7,7 @@ timed alternately with it (:func:`benchmarks.common.interleaved_ms`) so that bot
 
 Run from the repository root::
 
-    .venv/bin/python benchmarks/bench_bloom.py [--out DIR]
+    .venv/bin/python -m benchmarks bloom [--out DIR]
 """
 
 from __future__ import annotations
@@ -16,16 +16,14 @@ import platform
 import statistics
 import sys
 import time
-from pathlib import Path
 
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import torchgrade as tg  # noqa: E402
-from benchmarks.common import argument_parser, interleaved_ms, write_results  # noqa: E402
+import torchgrade as tg
+from benchmarks.common import argument_parser, interleaved_ms, write_results
 
-COMMAND = ".venv/bin/python benchmarks/bench_bloom.py"
+COMMAND = ".venv/bin/python -m benchmarks bloom"
 FULL_HD = (1080, 1920)
 RESOLUTIONS = [(512, 512), (333, 517), (1024, 1024), FULL_HD, (1081, 1921), (1440, 2560), (2160, 3840)]
 """Powers of two and the usual video sizes, and odd sides (whose levels are resampled a side at a time)."""

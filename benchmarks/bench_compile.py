@@ -14,7 +14,7 @@ In each process: the eager call's median time (5 calls after one), the first com
 Writes ``compile.json`` and ``compile.md`` to ``--out`` (default benchmarks/out; the committed ones with
 ``--out benchmarks/results``). Takes many minutes on 2 cores: every case compiles three times from scratch.
 
-    .venv/bin/python benchmarks/bench_compile.py [--cases NAME ...] [--out DIR]
+    .venv/bin/python -m benchmarks compile [--cases NAME ...] [--out DIR]
 """
 
 from __future__ import annotations
@@ -28,11 +28,10 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import ROOT, argument_parser, write_results  # noqa: E402
+from benchmarks.common import ROOT, argument_parser, write_results
 
-COMMAND = ".venv/bin/python benchmarks/bench_compile.py --out benchmarks/results"
+COMMAND = ".venv/bin/python -m benchmarks compile --out benchmarks/results"
 CASES = {
     "look 1x3x1080x1920": dict(module="look", shape=(1, 3, 1080, 1920), training=False, autocast=None),
     "look training 16x3x128x128": dict(module="look", shape=(16, 3, 128, 128), training=True, autocast=None),

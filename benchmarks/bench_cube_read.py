@@ -6,7 +6,7 @@ the resident memory after the imports) counts only what the read allocates, the 
 included. The table itself is 256³ × 3 float32 = 192 MiB. Writes ``cube_read.json`` and ``cube_read.md``
 to ``--out`` (default benchmarks/out; the committed ones with ``--out benchmarks/results``).
 
-Run: ``PYTHONPATH=. .venv/bin/python benchmarks/bench_cube_read.py [--out DIR]``
+Run: ``.venv/bin/python -m benchmarks cube_read [--out DIR]``
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import torch
 import torchgrade as tg
 from benchmarks.common import argument_parser, write_results
 
-COMMAND = "PYTHONPATH=. .venv/bin/python benchmarks/bench_cube_read.py"
+COMMAND = ".venv/bin/python -m benchmarks cube_read"
 SIZE = 256
 COMMENT_BYTES = 200 << 20
 

@@ -10,7 +10,7 @@ the library code and starts torch's threads, the fixed costs of a process's firs
 ``exr_memory.json`` and ``exr_memory.md`` to ``--out`` (default benchmarks/out; the committed ones with
 ``--out benchmarks/results``).
 
-Run: ``PYTHONPATH=. .venv/bin/python benchmarks/bench_exr_memory.py [--out DIR]`` (Linux)
+Run: ``.venv/bin/python -m benchmarks exr_memory [--out DIR]`` (Linux)
 """
 
 from __future__ import annotations
@@ -25,11 +25,10 @@ import numpy as np
 import OpenEXR
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
-from benchmarks.common import EXR_DIR, argument_parser, write_results  # noqa: E402
+from benchmarks.common import EXR_DIR, argument_parser, write_results
 
-COMMAND = "PYTHONPATH=. .venv/bin/python benchmarks/bench_exr_memory.py"
+COMMAND = ".venv/bin/python -m benchmarks exr_memory"
 SIZE = 4096
 SAMPLES = [("formats/Adjuster.exr", {}), ("GoldenGate.exr", {}), ("formats/beachball_multipart.0001.exr", {}),
            ("formats/beachball_multipart.0001.exr", {"part": 1, "layer": ""}), ("formats/beachball_multipart.0001.exr", {"view": "left"}),

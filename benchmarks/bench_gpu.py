@@ -1,6 +1,6 @@
 """The GPU path measured: a look, its stages, a LUT, ACES 2.0, training and augmentation on CUDA, against the copy floor.
 
-    python benchmarks/bench_gpu.py [--out DIR] [--budget SECONDS] [--sections a,b,...]
+    python -m benchmarks gpu [--out DIR] [--budget SECONDS] [--sections a,b,...]
 
 Needs CUDA (the CPU section runs anywhere). Times are medians of CUDA-event timings after warm-up; the things a row
 compares alternate (A B A B). Each frame is 3840x2160 (4K) or 1920x1080 float32, the procedural demo scene.
@@ -40,11 +40,10 @@ from pathlib import Path
 
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import torchgrade as tg  # noqa: E402
-from benchmarks.bench_cpu_paths import training_step  # noqa: E402
-from benchmarks.common import ROOT, argument_parser, ocio_processor, packed_rgb, write_results  # noqa: E402
+import torchgrade as tg
+from benchmarks.bench_cpu_paths import training_step
+from benchmarks.common import ROOT, argument_parser, ocio_processor, packed_rgb, write_results
 
 CINEMATIC = json.loads((ROOT / "export" / "looks" / "cinematic.json").read_text())
 SIZES = {"1080p": (1080, 1920), "4K": (2160, 3840)}
@@ -423,7 +422,7 @@ def main(argv=None) -> int:
     if cuda:
         torch.backends.cuda.matmul.allow_tf32 = False
     info = {"device": torch.cuda.get_device_name() if cuda else "CPU only", "torch": torch.__version__, "cpus": os.cpu_count(),
-            "command": "python benchmarks/bench_gpu.py " + " ".join(argv if argv is not None else sys.argv[1:]),
+            "command": "python -m benchmarks gpu " + " ".join(argv if argv is not None else sys.argv[1:]),
             "date": time.strftime("%Y-%m-%d")}
     started, errors, skipped = time.monotonic(), [], []
 

@@ -5,7 +5,7 @@ not counted), the checkouts compared alternating (A B A B). ``--vs DIR`` imports
 beside this one's. Also lists the modules of :data:`LOADED_AT_FIRST_USE` that the import loaded (none expected: ONNX's
 exporter, the compiler and the optional packages load at their first use).
 
-    python benchmarks/bench_import.py [--out DIR] [--runs N] [--vs CHECKOUT]
+    python -m benchmarks import [--out DIR] [--runs N] [--vs CHECKOUT]
 
 Writes ``import.json`` and ``import.md`` to ``--out`` (default benchmarks/out; the committed ones with
 ``--out benchmarks/results``).
@@ -20,9 +20,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import ROOT, argument_parser, write_results  # noqa: E402
+from benchmarks.common import ROOT, argument_parser, write_results
 
 LOADED_AT_FIRST_USE = ("torch.onnx", "torch._dynamo", "kornia", "onnx", "onnxruntime", "PyOpenColorIO", "colour", "matplotlib")
 """Modules ``import torchgrade`` should leave to the first call that needs them (``tests/runtime/test_policies.py``)."""
@@ -89,7 +88,7 @@ def main(argv=None) -> int:
               for r in rows]
     args.out.mkdir(parents=True, exist_ok=True)
     write_results(args.out, "import", {"runs": args.runs, "rows": rows}, lines,
-                  "python benchmarks/bench_import.py --out DIR" + (" --vs CHECKOUT" if args.vs else ""))
+                  "python -m benchmarks import --out DIR" + (" --vs CHECKOUT" if args.vs else ""))
     return 0
 
 

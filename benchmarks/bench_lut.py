@@ -18,7 +18,7 @@ fitted shapers), applied to every
 and max), beside each bake's own error report. ``lut_floor.py`` asks what the best
 possible 33³ table would do on the same pixels.
 
-Run: ``.venv/bin/python benchmarks/bench_lut.py [--out DIR]`` (writes lut.json and lut.md to ``--out``, default
+Run: ``.venv/bin/python -m benchmarks lut [--out DIR]`` (writes lut.json and lut.md to ``--out``, default
 benchmarks/out; the committed ones with ``--out benchmarks/results``).
 """
 
@@ -37,16 +37,15 @@ import numpy as np
 import torch
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
-import torchgrade as tg  # noqa: E402
-from benchmarks.common import (  # noqa: E402
+import torchgrade as tg
+from benchmarks.common import (
     EXR_DIR, argument_parser, map_large_buffers, median_ms, ocio_in_place, ocio_processor, peak_rss_mb, run_and_reset, sample_exr, write_results)
-from benchmarks.metrics import srgb_codes  # noqa: E402
-from torchgrade.lut import INTERPOLATIONS, OUTPUT_ENCODINGS  # noqa: E402
-from torchgrade.lut.kernels import trilinear_grid_sample  # noqa: E402
+from benchmarks.metrics import srgb_codes
+from torchgrade.lut import INTERPOLATIONS, OUTPUT_ENCODINGS
+from torchgrade.lut.kernels import trilinear_grid_sample
 
-COMMAND = ".venv/bin/python benchmarks/bench_lut.py"
+COMMAND = ".venv/bin/python -m benchmarks lut"
 HEIGHT, WIDTH, SIZE, RUNS = 1080, 1920, 33, 7
 ACCURACY_IMAGES = ("Desk", "CandleGlass", "GoldenGate")
 

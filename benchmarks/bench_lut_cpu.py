@@ -17,7 +17,7 @@ pixel in a different cell: the worst case for caches) and the demo scene (smooth
 First use: a fresh process with an empty cache folder times its first lookup (the C file compiles), then a second
 fresh process with that folder (the library loads).
 
-Run: ``.venv/bin/python -m benchmarks.bench_lut_cpu [--rounds N] [--out DIR]`` (writes lut_cpu.json and lut_cpu.md;
+Run: ``.venv/bin/python -m benchmarks lut_cpu [--rounds N] [--out DIR]`` (writes lut_cpu.json and lut_cpu.md;
 the committed ones with ``--out benchmarks/results``).
 """
 
@@ -40,7 +40,7 @@ from benchmarks.bench_lut import look
 from benchmarks.common import argument_parser, ocio_processor, packed_rgb, write_results
 from torchgrade.lut import KERNELS
 
-COMMAND = ".venv/bin/python -m benchmarks.bench_lut_cpu"
+COMMAND = ".venv/bin/python -m benchmarks lut_cpu"
 HEIGHT, WIDTH, SIZE, STRIPS = 1080, 1920, 33, 64
 LOAD = """
 import sys, torch
@@ -173,11 +173,17 @@ def first_use() -> dict:
     return results
 
 
+QUICK = "3 rounds instead of 15"
+"""What ``--quick`` leaves out."""
+
+
 def main(argv=None) -> None:
-    parser = argument_parser(__doc__)
-    parser.add_argument("--rounds", type=int, default=15)
+    parser = argument_parser(__doc__, QUICK)
+    parser.add_argument("--rounds", type=int, help="alternating rounds (default 15, or 3 with --quick)")
     parser.add_argument("--loaded-only", action="store_true", help="print the loaded rows as JSON (the passive child)")
     args = parser.parse_args(argv)
+    if args.rounds is None:
+        args.rounds = 3 if args.quick else 15
     import PyOpenColorIO as OCIO
 
     lut = tg.bake_lut(look, size=SIZE, shaper="linear", report_tolerance=float("inf"))

@@ -9,14 +9,13 @@ than the fit's, plus the scene for scene bakes). *Floor*: bounds on the smallest
 lattice reaches on the seen pixels (HiGHS, :func:`benchmarks.lut_floor.lowest_max_error`; the LogC floors are
 read from ``results/lut_floor.json``, the lowest over its lattices and both interpolations).
 
-Run: ``.venv/bin/python benchmarks/bench_lut_fit.py [--out DIR]`` (about 15 minutes on two cores; writes
+Run: ``.venv/bin/python -m benchmarks lut_fit [--out DIR]`` (about 15 minutes on two cores; writes
 lut_fit.json and lut_fit.md to ``--out``, default benchmarks/out; the committed ones with ``--out benchmarks/results``).
 """
 
 from __future__ import annotations
 
 import json
-import sys
 import time
 import warnings
 from pathlib import Path
@@ -25,18 +24,17 @@ import numpy as np
 import torch
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
-from benchmarks.common import RESULTS, argument_parser, write_results  # noqa: E402
-from benchmarks.bench_lut import ACCURACY_IMAGES, SIZE, sample_exr, strong_look  # noqa: E402
-from benchmarks.lut_floor import interpolation_matrix, lowest_max_error  # noqa: E402
-from benchmarks.metrics import srgb_codes  # noqa: E402
-from torchgrade.lut.fit import SCENE_FIT_WEIGHT  # noqa: E402
-from torchgrade.lut.entries import SCENE_WEIGHT  # noqa: E402
-from torchgrade.lut import bake_lut, fit_entries  # noqa: E402
-from torchgrade.lut.shapers import lattice_unit  # noqa: E402
+from benchmarks.common import RESULTS, argument_parser, write_results
+from benchmarks.bench_lut import ACCURACY_IMAGES, SIZE, sample_exr, strong_look
+from benchmarks.lut_floor import interpolation_matrix, lowest_max_error
+from benchmarks.metrics import srgb_codes
+from torchgrade.lut.fit import SCENE_FIT_WEIGHT
+from torchgrade.lut.entries import SCENE_WEIGHT
+from torchgrade.lut import bake_lut, fit_entries
+from torchgrade.lut.shapers import lattice_unit
 
-COMMAND = ".venv/bin/python benchmarks/bench_lut_fit.py"
+COMMAND = ".venv/bin/python -m benchmarks lut_fit"
 LATTICES = {"LogC to 65504 (default)": {"shaper": "logc_hdr"}, "LogC to 58.86": {"shaper": "logc"}, "fitted to the look": {"shaper": "fitted"},
             "fitted to the scene": {"shaper": "fitted", "scene": True}}
 """``bake_lut`` arguments of each lattice (``scene: True`` passes the seen pixels)."""

@@ -15,26 +15,24 @@ than two for these small fits). Writes ``match.json``, ``match.md`` and ``match.
 the controls, with the residual LUT; the loss curve) to ``--out`` (default benchmarks/out; the committed ones with
 ``--out benchmarks/results``).
 
-    .venv/bin/python benchmarks/bench_match.py [--threads N] [--out DIR]
+    .venv/bin/python -m benchmarks match [--threads N] [--out DIR]
 """
 
 from __future__ import annotations
 
 import json
 import platform
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import torchgrade as tg  # noqa: E402
-from benchmarks.common import EXR_DIR, argument_parser, ocio_look, write_results  # noqa: E402
+import torchgrade as tg
+from benchmarks.common import EXR_DIR, argument_parser, ocio_look, write_results
 
-COMMAND = ".venv/bin/python benchmarks/bench_match.py"
+COMMAND = ".venv/bin/python -m benchmarks match"
 EXR = EXR_DIR / "GoldenGate.exr"
 
 

@@ -3,7 +3,7 @@ per-pixel stages on the whole frame, ``strips=False``), node counts before and a
 per-pixel stage (grade + tone map) eager vs ``torch.compile``, and the whole look under
 ``torch.compile(fullgraph=True)``.
 
-    .venv/bin/python benchmarks/bench_onnx.py [--device cuda] [--out DIR]
+    .venv/bin/python -m benchmarks onnx [--device cuda] [--out DIR]
 
 Writes onnx.json and onnx.md to ``--out`` (default benchmarks/out; the committed ones with ``--out benchmarks/results``;
 ``--device cuda``: onnx_cuda.json and onnx_cuda.md, with
@@ -30,15 +30,14 @@ from pathlib import Path
 import torch
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
-import torchgrade as tg  # noqa: E402
-from benchmarks.common import argument_parser, median_ms, write_results  # noqa: E402
-from torchgrade.base.core import one_thread  # noqa: E402
+import torchgrade as tg
+from benchmarks.common import argument_parser, median_ms, write_results
+from torchgrade.base.core import one_thread
 
 LOOK = ROOT / "export" / "looks" / "cinematic.json"
 HEIGHT, WIDTH, REPEATS = 1080, 1920, 9
-COMMAND = ".venv/bin/python benchmarks/bench_onnx.py"
+COMMAND = ".venv/bin/python -m benchmarks onnx"
 RUNTIMES = {
     "cpu": {"onnxruntime": ("onnxruntime", None), "onnxruntime_no_spin": ("onnxruntime", None),
             "openvino_f32": ("openvino", "f32"), "openvino_default": ("openvino", None)},

@@ -2,7 +2,7 @@
 export forms (:mod:`torchgrade.onnx`), which trade ``Where``, comparisons, ``Sign``, ``Pow`` and reductions over the
 3 channels for arithmetic.
 
-    .venv/bin/python benchmarks/bench_onnx_ops.py
+    .venv/bin/python -m benchmarks onnx_ops
 
 Each operator (or short pattern) is repeated 20 times in a chain on a strip of 3 x 68 x 1920 float32 values (about
 2^17 pixels, the strips a look's per-pixel end runs on), in one onnxruntime session on one intra-op thread; the
@@ -22,11 +22,10 @@ import onnxruntime
 from onnx import TensorProto, helper, numpy_helper
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
-from benchmarks.common import argument_parser, median_ms, write_results  # noqa: E402
+from benchmarks.common import argument_parser, median_ms, write_results
 
-COMMAND = ".venv/bin/python benchmarks/bench_onnx_ops.py"
+COMMAND = ".venv/bin/python -m benchmarks onnx_ops"
 STRIP = (1, 3, 68, 1920)
 STRIPS_PER_FRAME = 16
 CHAIN, REPEATS = 20, 9

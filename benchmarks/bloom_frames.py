@@ -14,27 +14,23 @@ Not a timing: what a per-pixel reference does not see, measured at the sizes use
 
 Run from the repository root::
 
-    .venv/bin/python benchmarks/bloom_frames.py [--out DIR]
+    .venv/bin/python -m benchmarks bloom_frames [--out DIR]
 """
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-import torchgrade as tg  # noqa: E402
-from benchmarks.common import EXR_DIR, ROOT, argument_parser, write_results  # noqa: E402
-from reference.bloom import unity_bloom  # noqa: E402
-from torchgrade.testing.frames import edge_band_codes, turn_error, uniform_spread  # noqa: E402
+import torchgrade as tg
+from benchmarks.common import EXR_DIR, ROOT, argument_parser, write_results
+from tests.reference.bloom import unity_bloom
+from torchgrade.testing.frames import edge_band_codes, turn_error, uniform_spread
 
-COMMAND = ".venv/bin/python benchmarks/bloom_frames.py --out benchmarks/results"
+COMMAND = ".venv/bin/python -m benchmarks bloom_frames --out benchmarks/results"
 SIZES = [(512, 512), (37, 53), (61, 97), (333, 517), (644, 874), (720, 1280), (1080, 1920)]
 MODES = {
     "additive": dict(mode="additive", intensity=1.0),

@@ -1,7 +1,7 @@
 """What the benchmarks share: output folder and record, the interleaved timer, peak-memory readers, OpenColorIO, the sample EXRs.
 
 Nothing here measures on its own; each benchmark says what it measures with these and how to run it
-(for example ``.venv/bin/python benchmarks/run.py --quick``, which uses every part of this module).
+(for example ``.venv/bin/python -m benchmarks suite --quick``, which uses every part of this module).
 
 Every benchmark that writes results takes ``--out DIR`` (:func:`argument_parser`), default ``benchmarks/out``
 (git-ignored); the committed results in ``benchmarks/results`` change only with ``--out benchmarks/results``.
@@ -44,12 +44,16 @@ PEERS = {"onnxruntime": "onnxruntime", "PyOpenColorIO": "opencolorio", "kornia":
 """Peer libraries whose version a result records when the run imported them: module name -> record key."""
 
 
-def argument_parser(doc: str) -> argparse.ArgumentParser:
-    """A benchmark's parser, described by the first paragraph of its docstring ``doc``, with ``--out DIR``."""
+def argument_parser(doc: str, quick: Optional[str] = None) -> argparse.ArgumentParser:
+    """A benchmark's parser, described by the first paragraph of its docstring ``doc``, with ``--out DIR``, and
+    ``--quick`` where the benchmark has a quick form (``quick`` says what it leaves out; the benchmark's module states
+    it as ``QUICK``, which ``python -m benchmarks --list`` shows)."""
     parser = argparse.ArgumentParser(description=" ".join(doc.strip().split("\n\n")[0].split()))
     parser.add_argument("--out", type=Path, default=OUT,
                         help="folder for the results (default benchmarks/out, git-ignored; "
                              "pass benchmarks/results to replace the committed results)")
+    if quick:
+        parser.add_argument("--quick", action="store_true", help=quick)
     return parser
 
 

@@ -1,23 +1,21 @@
-"""How far two runs of benchmarks/run.py agree: each row's ratios in both runs, and their spread.
+"""How far two runs of the suite agree: each row's ratios in both runs, and their spread.
 
-    .venv/bin/python benchmarks/compare_runs.py FIRST/results.json SECOND/results.json [--out DIR]
+    .venv/bin/python -m benchmarks stability FIRST/results.json SECOND/results.json [--out DIR]
 
 For every row timed in both runs: its ratio to the plain frame copy and (per-pixel rows) to OpenColorIO in
 each run, and the spread, the larger over the smaller minus 1 (0.2: the runs differ by 20 %); the same for the
-whole-look check. Each run's wall time and load averages are listed too. Writes ``quick_stability.json`` and
-``.md`` (``full_stability`` for full runs) to ``--out`` (default benchmarks/out; the committed ones with
+whole-look check. Each run's wall time and load averages are listed too. Writes ``stability.json`` and
+``.md`` (quick or full runs alike; the table says which) to ``--out`` (default benchmarks/out; the committed ones with
 ``--out benchmarks/results``).
 """
 
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import argument_parser, write_results  # noqa: E402
+from benchmarks.common import argument_parser, write_results
 
 RATIOS = {"ratio_to_copy": "× copy", "ratio_to_opencolorio": "× OCIO"}
 """The ratios a run reports per row, and their column names."""
@@ -52,7 +50,7 @@ def markdown(rows: list, first: dict, second: dict) -> list:
     within = sum(r["spread"] <= BAR for r in rows)
     worst = max(rows, key=lambda r: r["spread"])
     return [
-        f"# Two runs of benchmarks/run.py{' --quick' if first['quick'] else ''}: do their ratios agree?", "",
+        f"# Two runs of python -m benchmarks suite{' --quick' if first['quick'] else ''}: do their ratios agree?", "",
         run_line("first", first), run_line("second", second), "",
         f"{within} of {len(rows)} ratios within {BAR:.0%} of each other; the widest: {worst['method']} {worst['ratio']}, "
         f"{worst['spread']:.0%}.", "",
@@ -70,8 +68,8 @@ def main(argv=None) -> None:
     rows = ratio_rows(first, second)
     report = {"first": first["command"], "second": second["command"], "bar": BAR, "rows": rows,
               "within_bar": sum(r["spread"] <= BAR for r in rows)}
-    command = f".venv/bin/python benchmarks/compare_runs.py {args.first} {args.second}"
-    write_results(args.out, f"{'quick' if first['quick'] else 'full'}_stability", report, markdown(rows, first, second), command)
+    command = f".venv/bin/python -m benchmarks stability {args.first} {args.second}"
+    write_results(args.out, "stability", report, markdown(rows, first, second), command)
 
 
 if __name__ == "__main__":

@@ -2,7 +2,7 @@
 
 Usage::
 
-    PYTHONPATH=. .venv/bin/python benchmarks/exposure_samples.py [--look export/looks/cinematic.json] [--out DIR]
+    .venv/bin/python -m benchmarks exposure_samples [--look export/looks/cinematic.json] [--out DIR]
 
 For every image of ``../shared/data/exr`` (and ``formats/``; a deep file holds no flat image and is listed as
 such) the table gives the exposure the look's eye adaptation applies, in stops from viewing the file as it
@@ -21,14 +21,13 @@ shadows or its highlights. With ``grey`` the display luminance the look gives a 
 
 A frame that is only shadows or only highlights (a uniform chart) sits at ``grey`` and passes, as a meter
 should leave it. ``tests/exposure/test_exposure_samples.py`` applies the rule to every sample image, so a new image or
-a new default is judged the same way. Writes ``exposure_samples.md`` and ``exposure_contact_sheet.jpg`` to ``--out``
+a new default is judged the same way. Writes ``exposure_samples.md`` and ``exposure_samples.jpg`` to ``--out``
 (default benchmarks/out; the committed ones with ``--out benchmarks/results``).
 """
 
 from __future__ import annotations
 
 import json
-import sys
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,13 +36,12 @@ import numpy as np
 import torch
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
-import torchgrade as tg  # noqa: E402
-from torchgrade.color import linear_to_srgb, luminance  # noqa: E402
-from torchgrade.io import read_exr  # noqa: E402
-from torchgrade.io.atomic import atomic_write  # noqa: E402
-from benchmarks.common import argument_parser, write_markdown  # noqa: E402
+import torchgrade as tg
+from torchgrade.color import linear_to_srgb, luminance
+from torchgrade.io import read_exr
+from torchgrade.io.atomic import atomic_write
+from benchmarks.common import argument_parser, write_markdown
 
 SAMPLES = ROOT.parent / "shared" / "data" / "exr"
 LOOK = ROOT / "export" / "looks" / "cinematic.json"
@@ -142,7 +140,7 @@ def main(argv=None) -> None:
     look = tg.PostFX.from_config(json.loads(Path(args.look).read_text())).eval()
     grey = middle_grey_display(look)
     lines = [f"# Every sample image through `{Path(args.look).relative_to(ROOT) if Path(args.look).is_relative_to(ROOT) else args.look}`", "",
-             f"Command: `PYTHONPATH=. .venv/bin/python benchmarks/exposure_samples.py`. Display luminance: Rec.709 luminance "
+             f"Command: `.venv/bin/python -m benchmarks exposure_samples`. Display luminance: Rec.709 luminance "
              f"of the display frame, sRGB-encoded. The look shows middle grey at {float(linear_to_srgb(torch.tensor(grey))):.2f}; "
              f"washed out: 5th percentile above {float(linear_to_srgb(torch.tensor(min(2 * grey, 1.0)))):.2f}, crushed: 95th "
              f"percentile below {float(linear_to_srgb(torch.tensor(grey / 2))):.2f} (one stop either side of it).", "",
@@ -163,9 +161,9 @@ def main(argv=None) -> None:
             lines.append(f"| {name} | {image.shape[-1]}x{image.shape[-2]} | {stops:+.2f} | {b.p5:.2f} / {b.median:.2f} / {b.p95:.2f} | "
                          f"{a.p5:.2f} / {a.median:.2f} / {a.p95:.2f} | {verdict(a, grey)} |")
             rows.append((name, before, after))
-    lines += ["", "![Contact sheet](exposure_contact_sheet.jpg)", ""]
+    lines += ["", "![Contact sheet](exposure_samples.jpg)", ""]
     write_markdown(args.out, "exposure_samples.md", lines)
-    contact_sheet(rows, args.out / "exposure_contact_sheet.jpg")
+    contact_sheet(rows, args.out / "exposure_samples.jpg")
     print("\n".join(lines))
 
 

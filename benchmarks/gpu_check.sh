@@ -44,10 +44,10 @@ fi
 # the targets first, those no device run has timed before the others (the compiled look, stages, training and
 # augmentation; the host's cores since the worker fix), then the budget's comparison and what runs D and E measured
 # (benchmarks/results/gpu.md): what the budget leaves out is what is known or not a target
-timeout -s INT 260 python3 benchmarks/bench_gpu.py --out "$OUT" --budget 170 \
+timeout -s INT 260 python3 -m benchmarks gpu --out "$OUT" --budget 170 \
   --sections floor,look,stages,training_compiled,augment,augment_compiled,cpu,training_budget,lut,training,profile,kernels,forms \
   2>&1 | tee "$OUT/bench_gpu.log" | tail -40
 # the counts and the time they predict, beside the times measured above (gpu_proxy.md: CPU only, about 10 s)
-timeout -s INT 60 python3 benchmarks/gpu_proxy.py --out "$OUT" 2>&1 | tail -14
+timeout -s INT 60 python3 -m benchmarks gpu_proxy --out "$OUT" 2>&1 | tail -14
 # the host's CPU: the compiled LUT loop against OpenColorIO on 1, 2 and all its cores, quiet and loaded (lut_cpu.md)
-timeout -s INT 60 python3 -m benchmarks.bench_lut_cpu --rounds 5 --out "$OUT" 2>&1 | tail -20
+timeout -s INT 60 python3 -m benchmarks lut_cpu --rounds 5 --out "$OUT" 2>&1 | tail -20

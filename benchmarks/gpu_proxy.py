@@ -1,6 +1,6 @@
 """What the GPU path would cost, counted without a GPU: each case of bench_gpu.py on the ``meta`` device.
 
-    python benchmarks/gpu_proxy.py [--out DIR]
+    python -m benchmarks gpu_proxy [--out DIR]
 
 For each case it counts the kernel launches an eager forward makes (every operation dispatched, views and allocations aside) and
 the bytes they move, in *frame passes* (one pass: a copy of a 4K frame, read and written), with
@@ -24,17 +24,14 @@ Runs in about a minute on 2 cores. Writes ``gpu_proxy.json`` and ``gpu_proxy.md`
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
 
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import torchgrade as tg  # noqa: E402
-from benchmarks.bench_gpu import SIZES, STAGES, augmentations, cinematic  # noqa: E402
-from benchmarks.common import argument_parser, write_results  # noqa: E402
-from torchgrade.testing.dispatch import DispatchCount  # noqa: E402
+import torchgrade as tg
+from benchmarks.bench_gpu import SIZES, STAGES, augmentations, cinematic
+from benchmarks.common import argument_parser, write_results
+from torchgrade.testing.dispatch import DispatchCount
 
 LAUNCH_MS = 0.024
 """The least a launch costs eager (Python, PyTorch's dispatch, the driver): fitted, see the module's docstring."""
@@ -134,7 +131,7 @@ def main(argv=None) -> int:
         measured = " | ".join("" if row[f"measured_ms_{code}"] is None else f"{row[f'measured_ms_{code}']:.2f}" for code in MEASURED)
         lines.append(f"| {row['case']} | {row['launches']} | {row['frame_passes']} | {row['unvectorised']} | {row['predicted_ms']:.2f} | {measured} |")
     args.out.mkdir(parents=True, exist_ok=True)
-    write_results(args.out, "gpu_proxy", {"rows": rows}, lines, "python benchmarks/gpu_proxy.py --out DIR")
+    write_results(args.out, "gpu_proxy", {"rows": rows}, lines, "python -m benchmarks gpu_proxy --out DIR")
     return 0
 
 

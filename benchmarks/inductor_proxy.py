@@ -1,6 +1,6 @@
 """What a compiled frame would cost a GPU, read from the code Inductor generates for the CPU.
 
-    python benchmarks/inductor_proxy.py [--out DIR] [--cases NAME ...] [--activation-memory-budget B]
+    python -m benchmarks inductor_proxy [--out DIR] [--cases NAME ...] [--activation-memory-budget B]
 
 Each case of ``bench_gpu.py`` that it compiles (the look, its stages, ACES 2.0, ``RandomPostFX``, the look's training
 step) is compiled with ``torch.compile(fullgraph=True)`` on a small CPU frame, and the generated code is read
@@ -24,18 +24,15 @@ the training step.
 from __future__ import annotations
 
 import re
-import sys
 import time
 import warnings
-from pathlib import Path
 
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import torchgrade as tg  # noqa: E402
-from benchmarks.bench_gpu import STAGES, augmentations, cinematic  # noqa: E402
-from benchmarks.common import argument_parser, write_results  # noqa: E402
+import torchgrade as tg
+from benchmarks.bench_gpu import STAGES, augmentations, cinematic
+from benchmarks.common import argument_parser, write_results
 
 FRAME = (1, 3, 64, 96)
 CASES = {"cinematic look": cinematic, **{name: STAGES[name] for name in ("grade", "tonemap aces", "tonemap aces2", "bloom scattering", "exposure")},
@@ -107,7 +104,7 @@ def main(argv=None) -> int:
     lines += [f"| {r['case']} | {r['loops']} | {r['frame_buffers']} | {r['frames_written']} | {r['compile_s']} |" for r in rows]
     args.out.mkdir(parents=True, exist_ok=True)
     write_results(args.out, "inductor_proxy", {"frame": list(FRAME), "activation_memory_budget": args.activation_memory_budget, "rows": rows},
-                  lines, "python benchmarks/inductor_proxy.py --out DIR")
+                  lines, "python -m benchmarks inductor_proxy --out DIR")
     return 0
 
 

@@ -28,7 +28,7 @@ Lattices: 33³ LogC on the two domains ``bake_lut`` offers, the default (black t
 document's) and the scene's range (black to the image's largest value, ``bake_lut(scene=image)``),
 then, on Desk, lattices whose bottom is raised above black. Lookups are taken in float64.
 
-Run: ``.venv/bin/python benchmarks/lut_floor.py [--out DIR]`` (two worker processes, about 25 minutes on two cores;
+Run: ``.venv/bin/python -m benchmarks lut_floor [--out DIR]`` (two worker processes, about 25 minutes on two cores;
 writes lut_floor.json and .md to ``--out``, default benchmarks/out; the committed ones with ``--out benchmarks/results``,
 which benchmarks/bench_lut_fit.py reads).
 """
@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import functools
 import math
-import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -50,18 +49,17 @@ from scipy.sparse import csr_matrix, hstack, vstack
 from tqdm import tqdm
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
-from benchmarks.common import argument_parser, write_results  # noqa: E402
-from benchmarks.bench_lut import ACCURACY_IMAGES, SIZE, accuracy_image, strong_look  # noqa: E402
-from benchmarks.metrics import srgb_codes  # noqa: E402
-from torchgrade.color import linear_to_logc, srgb_to_linear  # noqa: E402
-from torchgrade.lut import DEFAULT_DOMAINS, INTERPOLATIONS, bake_lut  # noqa: E402
-from torchgrade.lut.shapers import lattice_unit  # noqa: E402
-from torchgrade.lut.bake import scene_domain  # noqa: E402
-from torchgrade.lut.kernels import tetrahedral, trilinear  # noqa: E402
+from benchmarks.common import argument_parser, write_results
+from benchmarks.bench_lut import ACCURACY_IMAGES, SIZE, accuracy_image, strong_look
+from benchmarks.metrics import srgb_codes
+from torchgrade.color import linear_to_logc, srgb_to_linear
+from torchgrade.lut import DEFAULT_DOMAINS, INTERPOLATIONS, bake_lut
+from torchgrade.lut.shapers import lattice_unit
+from torchgrade.lut.bake import scene_domain
+from torchgrade.lut.kernels import tetrahedral, trilinear
 
-COMMAND = ".venv/bin/python benchmarks/lut_floor.py"
+COMMAND = ".venv/bin/python -m benchmarks lut_floor"
 MAX_BAR, P999_BAR = 4.0, 1.0
 """The accuracy bar, 8-bit codes: max error, and error at the 99.9th percentile."""
 FEASIBLE = 1e-6

@@ -14,7 +14,7 @@ a tail on 5: the former Python default).
    :func:`~torchgrade.lut.validation.bright_saturated_colours` (one channel from 58.86 to 65504, the others a fraction
    of it): the max error, which the bake's report holds to 2 codes where a lattice twice as fine would.
 
-Run: ``.venv/bin/python -m benchmarks.lut_lattices [--out DIR]`` (writes lut_lattices.json and .md; the committed
+Run: ``.venv/bin/python -m benchmarks lut_lattices [--out DIR]`` (writes lut_lattices.json and .md; the committed
 ones with ``--out benchmarks/results``).
 """
 
@@ -36,7 +36,7 @@ from torchgrade.lut.report import HIGHLIGHT_TOLERANCE
 from torchgrade.lut.validation import bright_saturated_colours
 from torchgrade.tonemap import TONEMAP_MODES
 
-COMMAND = ".venv/bin/python -m benchmarks.lut_lattices"
+COMMAND = ".venv/bin/python -m benchmarks lut_lattices"
 LATTICES = (("logc_extended", 51), ("logc", 33), ("logc_hdr", 33))
 ENCODINGS = ("linear", "srgb")
 """The table's entries: linear (the bake's default) or sRGB-encoded (``output_encoding="srgb"``)."""
@@ -55,12 +55,16 @@ def bake(transform, shaper: str, size: int, output_encoding: str = "linear"):
         return tg.bake_lut(transform, size=size, shaper=shaper, output_encoding=output_encoding, report_tolerance=float("inf"))
 
 
-def photograph_rows() -> list:
+QUICK = "every 16th pixel of each photograph instead of every 4th"
+"""What ``--quick`` leaves out."""
+
+
+def photograph_rows(stride: int = 4) -> list:
     rows = []
     for (look_name, look), encoding in itertools.product(looks().items(), ENCODINGS):
         luts = {shaper: bake(look, shaper, size, encoding) for shaper, size in LATTICES}
         for name in PHOTOGRAPHS:
-            image = tg.io.read_exr(EXR_DIR / f"{name}.exr")[:3, ::4, ::4].unsqueeze(0)
+            image = tg.io.read_exr(EXR_DIR / f"{name}.exr")[:3, ::stride, ::stride].unsqueeze(0)
             inside = (image >= 0).all(dim=1, keepdim=True).expand_as(image).flatten().numpy()
             with torch.no_grad():
                 direct = srgb_codes(look(image.double()))
@@ -93,10 +97,12 @@ def highlight_rows() -> list:
 
 
 def main(argv=None) -> None:
-    args = argument_parser(__doc__).parse_args(argv)
-    report = {"command": COMMAND, "lattices": [list(lattice) for lattice in LATTICES], "highlight_tolerance": HIGHLIGHT_TOLERANCE,
-              "photographs": photograph_rows(), "highlights": highlight_rows()}
-    write_results(args.out, "lut_lattices", report, markdown(report).splitlines(), COMMAND)
+    args = argument_parser(__doc__, QUICK).parse_args(argv)
+    stride = 16 if args.quick else 4
+    report = {"command": COMMAND + (" --quick" if args.quick else ""), "lattices": [list(lattice) for lattice in LATTICES],
+              "highlight_tolerance": HIGHLIGHT_TOLERANCE, "stride": stride, "photographs": photograph_rows(stride),
+              "highlights": highlight_rows()}
+    write_results(args.out, "lut_lattices", report, markdown(report).splitlines(), report["command"])
 
 
 def markdown(report: dict) -> str:
@@ -112,7 +118,7 @@ def markdown(report: dict) -> str:
 
     lines = ["# The default LUT lattice against the two it replaced", "",
              "Every default (tetrahedral; linear entries, the default, and sRGB entries); 8-bit sRGB codes against float64 "
-             "direct evaluation, every 4th pixel of each photograph. `logc_extended` is the default of `bake_lut`, "
+             f"direct evaluation, every {report['stride']}th pixel of each photograph. `logc_extended` is the default of `bake_lut`, "
              "`look.to_lut()` and, as its `.cube` form (its planes up to 58.86, the `logc` 39³ lattice's), `torchgrade bake`.", "",
              f"| look | entries | photograph | {heads} |", "| --- | --- | --- |" + " ---: |" * len(shapers)]
     lines += [f"| {' | '.join(case)} | {cells(case)} |" for case in cases]

@@ -2,7 +2,7 @@
 
 Usage::
 
-    PYTHONPATH=. .venv/bin/python benchmarks/lut_realistic.py
+    .venv/bin/python -m benchmarks lut_realistic
 
 For each look and lattice size, bakes the look's per-pixel stages as the commands do (``torchgrade bake``: ``logc``
 for a look given by flags; ``look.to_lut`` and ``export --lut``: ``logc_extended``; tetrahedral, linear entries) and
@@ -21,19 +21,17 @@ each against the p99.9 the LUT really gets there.
 
 from __future__ import annotations
 
-import sys
 import warnings
 from pathlib import Path
 
 import torch
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
-import torchgrade as tg  # noqa: E402
-from benchmarks.common import argument_parser, sample_exr, write_results  # noqa: E402
-from torchgrade.lut import LUTAccuracyWarning, code_errors  # noqa: E402
-from torchgrade.lut.report import SCENE_PIXELS  # noqa: E402
+import torchgrade as tg
+from benchmarks.common import argument_parser, sample_exr, write_results
+from torchgrade.lut import LUTAccuracyWarning, code_errors
+from torchgrade.lut.report import SCENE_PIXELS
 
 IMAGES = ("CandleGlass", "Carrots", "Desk", "Garden", "GoldenGate")
 """The natural sample images (the others are charts and ramps)."""
@@ -160,7 +158,7 @@ def main(argv=None) -> None:
     framed = framed_rows(tg.PostFX.from_config(LOOKS["cinematic (export/looks/cinematic.json)"][0]).eval())
     lines += framed_lines(framed)
     write_results(out, "lut_realistic", {"rows": rows, "frames": framed}, lines,
-                  "PYTHONPATH=. .venv/bin/python benchmarks/lut_realistic.py --out benchmarks/results")
+                  ".venv/bin/python -m benchmarks lut_realistic --out benchmarks/results")
 
 
 if __name__ == "__main__":

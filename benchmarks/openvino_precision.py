@@ -1,7 +1,7 @@
 """OpenVINO at its default inference precision (bfloat16 on CPUs that have it) against PyTorch: the error of
 exported looks in 8-bit sRGB codes on the demo scene, the figure ``tests/onnx/test_openvino.py`` bounds.
 
-    .venv/bin/python benchmarks/openvino_precision.py
+    .venv/bin/python -m benchmarks openvino_precision
 
 Each look (parts of ``export/looks/cinematic.json``, tone mapped with ACES, and the whole look) is exported with
 :func:`torchgrade.onnx.export` and run on OpenVINO's CPU plugin with no precision hint; its display-linear output
@@ -21,13 +21,12 @@ import numpy as np
 import torch
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
-import torchgrade as tg  # noqa: E402
-from benchmarks.common import argument_parser, write_results  # noqa: E402
+import torchgrade as tg
+from benchmarks.common import argument_parser, write_results
 
 LOOK = ROOT / "export" / "looks" / "cinematic.json"
-COMMAND = ".venv/bin/python benchmarks/openvino_precision.py"
+COMMAND = ".venv/bin/python -m benchmarks openvino_precision"
 HEIGHT, WIDTH = 333, 517
 
 

@@ -2,35 +2,33 @@
 
 * ``tonemap_curves.png``: every SDR mode's grey curve (sRGB-encoded display value against scene stops
   around mid grey) and the HDR modes' curves in cd/m² for a 1000 cd/m² display.
-* ``aces1_vs_aces2.png``: ``aces_reference`` (ACES 1.0.3) and ``aces2`` (ACES 2.0) on two sample images.
+* ``tonemap_aces1_vs_aces2.png``: ``aces_reference`` (ACES 1.0.3) and ``aces2`` (ACES 2.0) on two sample images.
 * ``tonemap_distance.json`` / ``.md``: for the modes OpenColorIO implements, the largest and p99.9 distance
   in display codes on every finite pixel of every top-level sample image (exposed so the median positive
   Rec.709 luminance is 0.18; pixels beyond ±65504, which the library's non-finite policy bounds, left out).
 
-Run: ``.venv/bin/python benchmarks/plot_tonemap.py [--skip-distance] [--out DIR]`` (writes to ``--out``, default
+Run: ``.venv/bin/python -m benchmarks tonemap [--skip-distance] [--out DIR]`` (writes to ``--out``, default
 benchmarks/out; the committed ones with ``--out benchmarks/results``).
 """
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import torch  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import torch
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
-import torchgrade as tg  # noqa: E402
-from benchmarks.common import EXR_DIR, argument_parser, write_results  # noqa: E402
-from torchgrade.functional import tonemap  # noqa: E402
+import torchgrade as tg
+from benchmarks.common import EXR_DIR, argument_parser, write_results
+from torchgrade.functional import tonemap
 
-COMMAND = ".venv/bin/python benchmarks/plot_tonemap.py"
+COMMAND = ".venv/bin/python -m benchmarks tonemap"
 HDR_MODES = {"aces2_hdr": dict(peak_luminance=1000.0), "neutral_hdr": dict(peak_luminance=1000.0)}
 # mode -> (OpenColorIO config, display, view, encoding of our display-linear output, code scale)
 OCIO_VIEWS = {
@@ -140,7 +138,7 @@ def main(argv=None) -> None:
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     plot_curves(args.out / "tonemap_curves.png")
-    plot_aces1_vs_aces2(args.out / "aces1_vs_aces2.png")
+    plot_aces1_vs_aces2(args.out / "tonemap_aces1_vs_aces2.png")
     if not args.skip_distance:
         measured = distances()
         write_results(args.out, "tonemap_distance", measured, markdown(measured).splitlines(), COMMAND)

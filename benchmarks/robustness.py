@@ -8,7 +8,7 @@ The stages are :data:`torchgrade.testing.catalog.STAGE_KINDS` and the inputs
 sweep and autocast, alone with ``--controls``) to ``--out`` (default benchmarks/out; the committed ones with
 ``--out benchmarks/results``).
 
-    PYTHONPATH=. .venv/bin/python benchmarks/robustness.py [--controls | --fuzz] [--out DIR]
+    .venv/bin/python -m benchmarks robustness [--controls | --fuzz] [--out DIR]
 """
 
 from __future__ import annotations
@@ -23,15 +23,14 @@ import torch
 from tqdm import tqdm
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
-import torchgrade as tg  # noqa: E402
-import torchgrade.base.stage  # noqa: E402
-from benchmarks.bench_cube_read import timed_read  # noqa: E402
-from benchmarks.common import EXR_DIR, argument_parser, write_markdown  # noqa: E402
-from benchmarks.fuzz import DEFECTS_FREE, FAMILIES  # noqa: E402
-from torchgrade.testing.catalog import STAGE_KINDS  # noqa: E402
-from torchgrade.testing.extremes import extreme_inputs  # noqa: E402
+import torchgrade as tg
+import torchgrade.base.stage
+from benchmarks.bench_cube_read import timed_read
+from benchmarks.common import EXR_DIR, argument_parser, write_markdown
+from benchmarks.fuzz import DEFECTS_FREE, FAMILIES
+from torchgrade.testing.catalog import STAGE_KINDS
+from torchgrade.testing.extremes import extreme_inputs
 
 DTYPES = {"float32": torch.float32, "float16": torch.float16, "bfloat16": torch.bfloat16}
 FUZZED_FILES = 2000
@@ -186,7 +185,7 @@ def controls_report() -> list[str]:
         f"Autocast: ColorGrade(contrast=20, saturation=10, aces=True) + ToneMap(\"aces\") on Desk.exr under CPU bfloat16 "
         f"autocast, max error against float32: {guarded:.2f} 8-bit codes (without the stages' autocast guard: {unguarded:.1f}).",
         "",
-        "Command: `PYTHONPATH=. .venv/bin/python benchmarks/robustness.py --controls` (also part of the full run)",
+        "Command: `.venv/bin/python -m benchmarks robustness --controls` (also part of the full run)",
     ]
 
 
@@ -210,7 +209,7 @@ def inputs_report() -> list[str]:
         f"A 256³ .cube file ({cube['file_mib']} MiB, a 192 MiB float32 table) reads in {cube['cpu_seconds']} s of CPU "
         f"({cube['seconds']} s wall) with a peak of {cube['peak_mib']} MiB (fresh process, `benchmarks/bench_cube_read.py`'s reader).",
         "",
-        "Command: `PYTHONPATH=. .venv/bin/python benchmarks/robustness.py`",
+        "Command: `.venv/bin/python -m benchmarks robustness`",
     ]
 
 
@@ -229,7 +228,7 @@ def main(argv=None) -> None:
 
     if args.fuzz:
         write("robustness_fuzz.md", [f"{FUZZED_FILES} mutations of each family (`benchmarks/fuzz.py`, seed 0):", "",
-                                     *fuzz_report(FUZZED_FILES), "", "Command: `PYTHONPATH=. .venv/bin/python benchmarks/robustness.py --fuzz`"])
+                                     *fuzz_report(FUZZED_FILES), "", "Command: `.venv/bin/python -m benchmarks robustness --fuzz`"])
         return
     write("robustness_controls.md", controls_report())
     if not args.controls:

@@ -1,9 +1,9 @@
 """The benchmark suite: every way torchgrade (and its peers) can compute one strong look, for speed and accuracy.
 
-    .venv/bin/python benchmarks/run.py [--quick] [--device cpu|cuda] [--out DIR]
+    .venv/bin/python -m benchmarks suite [--quick] [--device cpu|cuda] [--out DIR]
 
 Writes to ``--out`` (default ``benchmarks/out``, git-ignored; the committed results are
-``--out benchmarks/results/full``).
+``--out benchmarks/results/suite``).
 
 **The look** (:data:`benchmarks.suite.workload.LOOK`): scattering bloom, an ACES-space grade (exposure, temperature, contrast,
 saturation, split toning) and the ACES tone mapper. Bloom looks at neighbouring pixels, so it always
@@ -57,7 +57,6 @@ speed, memory, scaling) and ``report`` (markdown, plots).
 
 from __future__ import annotations
 
-import sys
 import tempfile
 import time
 import warnings
@@ -65,11 +64,10 @@ from pathlib import Path
 
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks import common  # noqa: E402
-from benchmarks.suite import measure, report  # noqa: E402
-from benchmarks.suite.workload import FRAME, LOOK, Plan, Workload  # noqa: E402
+from benchmarks import common
+from benchmarks.suite import measure, report
+from benchmarks.suite.workload import FRAME, LOOK, Plan, Workload
 
 
 def measure_everything(work: Workload) -> dict:
@@ -84,11 +82,12 @@ def measure_everything(work: Workload) -> dict:
             "advice": report.advice(records, base), "rounds_ms": {name: [round(ms, 2) for ms in t] for name, t in times.items()}}
 
 
+QUICK = "the rows a choice hangs on, smaller accuracy images, fewer rounds, scaling up to 1024², no torch.compile, no peak memory"
+"""What ``--quick`` leaves out."""
+
+
 def main(argv=None) -> dict:
-    parser = common.argument_parser(__doc__)
-    parser.add_argument("--quick", action="store_true",
-                        help="the rows a choice hangs on, smaller accuracy images, fewer rounds, scaling up to 1024², "
-                             "no torch.compile, no peak memory")
+    parser = common.argument_parser(__doc__, QUICK)
     parser.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
     plan = Plan.from_args(parser.parse_args(argv))
     started = time.perf_counter()

@@ -3,7 +3,7 @@
 Accuracy pools the scenes against the float64 look (8-bit sRGB code errors, mean ΔE2000 on sampled pixels).
 Speed times every row and baseline in one session, alternated (each round runs each once,
 :func:`benchmarks.common.interleaved_ms`): medians, and ratios as medians of each round's ratio. Part of
-``.venv/bin/python benchmarks/run.py [--quick] [--out DIR]``.
+``.venv/bin/python -m benchmarks suite [--quick] [--out DIR]``.
 """
 
 from __future__ import annotations

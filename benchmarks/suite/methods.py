@@ -2,7 +2,7 @@
 
 Direct evaluation in four dtypes, baked LUTs (sizes, shapers, interpolations, fitted lattices),
 ``torch.compile``, onnxruntime on the exported model, and OpenColorIO's CPU processor on the same LUTs
-written as .cube files. Part of ``.venv/bin/python benchmarks/run.py [--quick] [--out DIR]``.
+written as .cube files. Part of ``.venv/bin/python -m benchmarks suite [--quick] [--out DIR]``.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The suite's report: the markdown table of every row, advice computed from it, the warnings the run raised,
 the speed-vs-accuracy (Pareto) plot and the scaling plot.
 
-Part of ``.venv/bin/python benchmarks/run.py [--quick] [--out DIR]``, which writes ``results.md``,
+Part of ``.venv/bin/python -m benchmarks suite [--quick] [--out DIR]``, which writes ``results.md``,
 ``pareto.png`` and ``scaling.png`` with these beside ``results.json``.
 """
 

@@ -1,6 +1,6 @@
 """The suite's workload: the look, the scenes it is measured on, and the float64 reference every row is compared with.
 
-Part of ``.venv/bin/python benchmarks/run.py [--quick] [--out DIR]`` (see its docstring for the whole method).
+Part of ``.venv/bin/python -m benchmarks suite [--quick] [--out DIR]`` (see its docstring for the whole method).
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ BATCHES = (1, 2, 4, 8)
 BATCH_SIDE = 512
 QUICK_RUNS = 7
 """Rounds timed under ``--quick``: enough for every ratio of two runs to agree within 20 % on a shared
-2-core machine (benchmarks/results/quick_stability.md)."""
+2-core machine (benchmarks/results/stability.md)."""
 
 
 @dataclass(frozen=True)
@@ -71,7 +71,7 @@ class Plan:
     def command(self) -> str:
         out = self.out.resolve()
         shown = out.relative_to(ROOT) if out.is_relative_to(ROOT) else out
-        return f".venv/bin/python benchmarks/run.py{' --quick' if self.quick else ''} --device {self.device.type} --out {shown}"
+        return f".venv/bin/python -m benchmarks suite{' --quick' if self.quick else ''} --device {self.device.type} --out {shown}"
 
 
 def downscale(image: torch.Tensor, max_side: Optional[int]) -> torch.Tensor:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib
 import json
 import os
+import subprocess
 import sys
 import warnings
 from pathlib import Path
@@ -17,6 +18,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 import torchgrade as tg  # noqa: E402
 from benchmarks import common, lut_floor, metrics  # noqa: E402
+from benchmarks.__main__ import NAMES  # noqa: E402
+from benchmarks.__main__ import main as door  # noqa: E402
 from benchmarks.suite import measure, methods, report, workload  # noqa: E402
 from torchgrade.color import linear_to_logc, srgb_to_linear  # noqa: E402
 
@@ -234,10 +237,36 @@ def test_compare_runs_lists_every_ratio_both_runs_measured_and_its_spread():
     assert [r["spread"] for r in rows] == pytest.approx([0.25, 0.1])
 
 
-RESULT_SCRIPTS = sorted(path.stem for path in (common.ROOT / "benchmarks").glob("*.py")
-                        if "__main__" in path.read_text() and path.stem != "bench_cpu_paths")
-"""Every runnable benchmark but bench_cpu_paths, which prints its figures (``--json FILE`` on request) and imports
-only torchgrade, so that it runs under another checkout's ``PYTHONPATH``."""
+RESULT_SCRIPTS = sorted(module for name, module in NAMES.items() if name != "cpu_paths")
+"""Every benchmark but cpu_paths, which prints its figures (``--json FILE`` on request) and imports only torchgrade, so
+that it runs under another checkout's ``PYTHONPATH``."""
+
+
+def test_the_door_lists_every_benchmark_and_marks_the_quick_ones():
+    listed = subprocess.run([sys.executable, "-m", "benchmarks", "--list"], cwd=common.ROOT, capture_output=True, text=True,
+                            check=True).stdout.splitlines()
+    assert sorted(line.split()[0] for line in listed) == sorted(NAMES)
+    quick = {line.split()[0] for line in listed if line.endswith("(--quick)")}
+    assert {"suite", "lut_cpu", "lut_lattices"} <= quick and "bloom" not in quick
+
+
+def test_the_door_refuses_an_unknown_name_and_a_quick_form_a_benchmark_lacks(capsys):
+    assert door(["nothing_here"]) == 2 and "no benchmark named 'nothing_here'" in capsys.readouterr().err
+    assert door(["bloom", "--quick"]) == 2 and "bloom has no quick form" in capsys.readouterr().err
+
+
+def test_no_benchmark_patches_the_import_path():
+    patched = [path.name for path in (common.ROOT / "benchmarks").rglob("*.py") if "sys.path" in path.read_text()]
+    assert patched == []
+
+
+def test_every_committed_result_is_named_by_its_benchmark():
+    """``NAME.md``/``.json``, ``NAME_*`` or the folder ``NAME/``, for a NAME the door runs."""
+    def owner(entry: Path) -> bool:
+        stem = entry.name if entry.is_dir() else entry.name.split(".")[0]
+        return any(stem == name or stem.startswith(f"{name}_") for name in NAMES)
+
+    assert [entry.name for entry in sorted(common.RESULTS.iterdir()) if not owner(entry)] == []
 
 
 @pytest.mark.parametrize("script", RESULT_SCRIPTS)
@@ -248,6 +277,7 @@ def test_every_benchmark_takes_out_and_defaults_away_from_the_committed_results(
     assert exit_info.value.code == 0
     usage = " ".join(capsys.readouterr().out.split())
     assert "--out OUT" in usage and "default benchmarks/out" in usage
+    assert ("--quick" in usage) == bool(getattr(module, "QUICK", None))
 
 
 def test_a_tiny_run_writes_to_out_only_and_collects_its_warnings(tmp_path, monkeypatch):
