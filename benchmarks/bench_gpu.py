@@ -326,7 +326,7 @@ def section_forms(device):
     """Ways to apply a 3x3 colour matrix to a 4K frame, side by side: the library's (``matrix_on_planes``: a product
     and two multiply-adds whose coefficient columns broadcast, three launches in CUDA's unvectorised loop), one output
     channel at a time with numbers (nine vectorised launches), and one 1x1 convolution."""
-    from torchgrade.base.core import matrix_on_planes
+    from torchgrade.base.planes import matrix_on_planes
     from torchgrade.color.spaces import MATRIX_VALUES
 
     values = MATRIX_VALUES["srgb_to_ap1"]

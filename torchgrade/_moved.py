@@ -27,7 +27,8 @@ import warnings
 __all__ = ["MOVED", "OLD_CLASS_PATHS", "install"]
 
 MOVED = {
-    "torchgrade.core": ("torchgrade.base.core",),
+    "torchgrade.core": ("torchgrade.base.images", "torchgrade.base.params", "torchgrade.base.planes", "torchgrade.runtime.policy",
+                        "torchgrade.runtime.recording", "torchgrade.runtime.workers"),
     "torchgrade.stage": ("torchgrade.base.stage",),
     "torchgrade.config": ("torchgrade.base.config",),
     "torchgrade.grade": ("torchgrade.grading.grade", "torchgrade.grading.layer", "torchgrade.grading.steps"),
@@ -44,6 +45,12 @@ MOVED = {
     "torchgrade.lut.lut3d": ("torchgrade.lut.apply", "torchgrade.lut.layer"),
     "torchgrade.cli.shot": ("torchgrade.shots.frames",),
     "torchgrade.cli.outputs": ("torchgrade.shots.outputs",),
+    "torchgrade.tonemap.aces_rrt": ("torchgrade.tonemap.aces1.rrt",),
+    "torchgrade.tonemap.aces_fits": ("torchgrade.tonemap.aces1.fits",),
+    "torchgrade.tonemap.aces1_reference": ("torchgrade.tonemap.aces1.reference",),
+    "torchgrade.tonemap.aces2_curves": ("torchgrade.tonemap.aces2.curves",),
+    "torchgrade.base.core": ("torchgrade.base.images", "torchgrade.base.params", "torchgrade.base.planes", "torchgrade.runtime.policy",
+                             "torchgrade.runtime.recording", "torchgrade.runtime.workers"),
 }
 """Each old module path and the modules its names now live in, searched in order."""
 

@@ -12,7 +12,7 @@ import torch.nn.functional as F
 import torchgrade as tg
 from torchgrade.bloom.composite import bevy_blend_factor
 from torchgrade.bloom.prefilter import karis_mean
-from torchgrade.bloom.pyramid import anamorphic_sigma
+from torchgrade.bloom.blur import anamorphic_sigma
 
 bloom = tg.functional.bloom
 

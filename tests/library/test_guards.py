@@ -1,6 +1,6 @@
 """Inputs as newcomers bring them: RGBA frames, 0..255 floats, 8-bit tensors, frames larger than a strip.
 
-* **Alpha** passes through every stage unchanged (``Stage.__call__``, :func:`torchgrade.base.core.with_alpha`): the RGB of
+* **Alpha** passes through every stage unchanged (``Stage.__call__``, :func:`torchgrade.base.images.with_alpha`): the RGB of
   a ``(B, 4, H, W)`` frame comes out as that of its ``(B, 3, H, W)`` colour, the fourth channel bit for bit.
 * **0..255 floats** given as linear light warn, naming the fix; HDR and [0, 1] frames do not.
 * **Errors name the caller's shape**, also for a frame larger than a CPU strip (2^17 pixels on 2 threads) and for an

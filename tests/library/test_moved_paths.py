@@ -20,6 +20,9 @@ OLD_NAMES = {
     "torchgrade.pipeline": "PostFX", "torchgrade.augment_ranges": "checked_range", "torchgrade.augment_saved": "SAVED_NAME",
     "torchgrade.distributed": "grade_shot_on_ray", "torchgrade.catalog": "STAGE_KINDS", "torchgrade.lut.lut3d": "LUT3D",
     "torchgrade.cli.shot": "render_frame", "torchgrade.cli.outputs": "write_frame",
+    "torchgrade.tonemap.aces_rrt": "smoothstep_hue_weight", "torchgrade.tonemap.aces_fits": "aces_hill",
+    "torchgrade.tonemap.aces1_reference": "aces_reference", "torchgrade.tonemap.aces2_curves": "aces2_sdr",
+    "torchgrade.base.core": "apply_matrix",
 }
 
 

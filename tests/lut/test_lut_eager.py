@@ -8,7 +8,7 @@ import dataclasses
 import pytest
 import torch
 
-from torchgrade.base.core import sanitize
+from torchgrade.base.images import sanitize
 from torchgrade.lut import KERNELS, LUT3D, apply, identity_table, lattice
 from torchgrade.lut.apply import chunked_lookup, lookup
 from torchgrade.lut.native import compiled_loop

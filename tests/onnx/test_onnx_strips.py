@@ -13,7 +13,7 @@ import torch
 from onnx import TensorProto, helper
 
 import torchgrade as tg
-from torchgrade.base.core import bounded_pow
+from torchgrade.base.planes import bounded_pow
 from torchgrade.color.transfer import safe_pow
 from torchgrade.onnx import export, session, verify
 from torchgrade.onnx.verify import graph_nodes
@@ -21,7 +21,7 @@ from torchgrade.onnx.strips import scan_strips
 from torchgrade.onnx.strips import DOMAIN
 from torchgrade.onnx.strips import SCAN_STRIP_PIXELS as STRIP_PIXELS
 from torchgrade.color import unity_to_aces
-from torchgrade.tonemap.aces_rrt import _red_centered_hue, _red_hue_distance, _rgb_yc, cubic_basis_hue_weight, smoothstep_hue_weight
+from torchgrade.tonemap.aces1.rrt import _red_centered_hue, _red_hue_distance, _rgb_yc, cubic_basis_hue_weight, smoothstep_hue_weight
 
 from reference.onnx import TOLERANCE
 

@@ -7,7 +7,7 @@ import torch
 
 import torchgrade as tg
 from torchgrade.color import MATRICES
-from torchgrade.base.core import color_param, scalar_param
+from torchgrade.base.params import color_param, scalar_param
 
 
 def test_changing_a_colour_matrix_in_place_leaves_later_conversions_alone():

@@ -1,4 +1,4 @@
-"""Eager forms used when nothing records gradients (``torchgrade.base.core.untracked``): the same values as the
+"""Eager forms used when nothing records gradients (``torchgrade.runtime.recording.untracked``): the same values as the
 guarded forms autograd runs, on HDR inputs with zeros, negatives, 65504, Inf and NaN."""
 
 import math
@@ -8,7 +8,8 @@ import torch
 
 import torchgrade as tg
 from torchgrade.color import aces_to_acescc, acescc_to_aces, safe_pow
-from torchgrade.base.core import apply_matrix, untracked
+from torchgrade.base.planes import apply_matrix
+from torchgrade.runtime.recording import untracked
 
 HDR = "../shared/data/exr/Desk.exr"
 EDGES = (0.0, -0.0, 1e-30, 2.0**-16, 2.0**-15, 0.18, 1.0, 60.0, 65504.0, -1.0, -65504.0, math.inf, -math.inf, math.nan)

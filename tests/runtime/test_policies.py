@@ -14,8 +14,8 @@ from torchgrade.runtime import policy
 
 ROOT = Path(__file__).resolve().parents[2]
 
-USERS = ["torchgrade.runtime.strips", "torchgrade.bloom.pyramid", "torchgrade.bloom.layer", "torchgrade.augment.layer",
-         "torchgrade.lut.apply", "torchgrade.base.core", "torchgrade.color.transfer", "torchgrade.exposure.metering"]
+USERS = ["torchgrade.runtime.strips", "torchgrade.runtime.policy", "torchgrade.runtime.variants", "torchgrade.bloom.pyramid",
+         "torchgrade.lut.apply", "torchgrade.base.params", "torchgrade.exposure.metering"]
 """Every module that asks ``policy_for``."""
 
 LOOKS = {

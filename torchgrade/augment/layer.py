@@ -17,9 +17,8 @@ tone mapper -> look LUT -> (sRGB encode).
 **Tone mapping** is off by default (``tonemap=None``): the output of an HDR input stays
 scene-referred linear, ready for the next augmentation or for the network. ``tonemap`` may name
 one mode of :data:`torchgrade.TONEMAP_MODES` or a sequence of them, one chosen uniformly per
-sample. Each mode is evaluated once, on the samples that chose it (the batch is sorted by mode,
-split, mapped and put back in order), so a batch costs one tone mapper per sample whatever the
-number of modes; counting the modes reads one small tensor back from the device.
+sample (:func:`~torchgrade.augment.per_sample.tonemap_per_sample`: one tone mapper per sample whatever the number of
+modes).
 
 **A look LUT** (``look_lut``: a :class:`~torchgrade.LookLUT`, a ``.cube``/CLF path, a
 :class:`~torchgrade.LUT3D` or a table) is applied after the tone mapper, on display-referred values
@@ -50,7 +49,9 @@ import torch
 from kornia.augmentation import IntensityAugmentationBase2D
 from torch import nn
 
-from ..base.core import check_image, full_precision, is_tracing, joined, to_input_dtype, working_dtype
+from ..base.images import check_image, full_precision, to_input_dtype, working_dtype
+from ..base.planes import joined
+from ..runtime.recording import is_tracing
 from ..bloom import BLOOM_MODES, bloom_settings, bloom_with_settings
 from ..color import linear_to_srgb, srgb_to_linear
 from ..grading.grade import color_grade_planes
@@ -58,8 +59,10 @@ from ..grading.layer import ColorGrade
 from ..look.slots import SLOTS
 from ..output.layer import LookLUT
 from ..output.look import look_lut
-from ..runtime import DeferredCheck, in_strips, policy_for
+from ..runtime import DeferredCheck, in_strips
 from ..tonemap import tonemap
+from .inputs import SRGB_TOLERANCE, check_srgb_peak, look_stage  # noqa: F401 (SRGB_TOLERANCE: its former path)
+from .per_sample import tonemap_per_sample
 from .ranges import (
     BLOOM_CONTROLS,
     COLOUR_CONTROLS,
@@ -76,48 +79,6 @@ __all__ = ["RandomPostFX", "tonemap_per_sample", "GRADE_CONTROLS", "BLOOM_CONTRO
 
 _RANDOM_SLOTS = ("bloom", "grade")
 """The slots whose controls are drawn and which a skipped sample passes through unchanged."""
-
-SRGB_TOLERANCE = 1e-3
-"""How far above 1 an sRGB input may reach (rounding of an earlier step) before it is refused as 0..255 data."""
-
-
-def _check_peak(name: str, peak: torch.Tensor) -> None:
-    if float(peak) > 1.0 + SRGB_TOLERANCE:
-        raise ValueError(f'input_space="srgb" takes images in [0, 1], got values up to {float(peak):g}: divide 0..255 images by 255')
-
-
-def tonemap_per_sample(images: torch.Tensor, choice: torch.Tensor, modes: tuple) -> torch.Tensor:
-    """Tone map sample ``i`` of ``images`` with ``modes[choice[i]]``: on the CPU each mode evaluated once on its
-    samples; where reading the draw back would wait for the device (and while tracing), every mode on every sample.
-
-    Examples:
-        >>> images = torch.full((2, 3, 1, 1), 4.0)
-        >>> out = tonemap_per_sample(images, torch.tensor([1, 0]), ("none", "reinhard"))
-        >>> out.flatten().tolist()
-        [0.800000011920929, 0.800000011920929, 0.800000011920929, 1.0, 1.0, 1.0]
-    """
-    if len(modes) == 1:
-        return tonemap(images, modes[0])
-    if is_tracing() or not policy_for(images.device).reads_values:
-        # Without reading the draw back (a synchronisation off the CPU): every mode on every sample, then a select.
-        picked = choice.reshape(-1, 1, 1, 1)
-        mapped = [tonemap(images, mode) for mode in modes]
-        out = mapped[0]
-        for index, candidate in enumerate(mapped[1:], start=1):
-            out = torch.where(picked == index, candidate, out)
-        return out
-    order = torch.argsort(choice, stable=True)
-    counts = torch.bincount(choice, minlength=len(modes)).tolist()
-    groups = images.index_select(0, order).split(counts)
-    mapped = torch.cat([tonemap(group, mode) for group, mode in zip(groups, modes) if len(group)])
-    return mapped.index_select(0, torch.argsort(order))
-
-
-def _look_stage(look_lut) -> LookLUT | None:
-    """``RandomPostFX``'s ``look_lut`` as a stage: a ``LookLUT``, a dict of its arguments (a config's), or its ``lut``."""
-    if look_lut is None or isinstance(look_lut, LookLUT):
-        return look_lut
-    return LookLUT.from_config(look_lut) if isinstance(look_lut, dict) else LookLUT(look_lut)
 
 
 class RandomPostFX(IntensityAugmentationBase2D):
@@ -213,7 +174,7 @@ class RandomPostFX(IntensityAugmentationBase2D):
             self.bloom_ranges = {}
         self.bloom_mode = bloom_mode
         self.tonemap = checked_tonemap(tonemap)
-        self.look_lut = _look_stage(look_lut)
+        self.look_lut = look_stage(look_lut)
         self.look_ranges = self._look_ranges(look_lut_contribution)
         self.aces = bool(aces)
         self.input_space = input_space
@@ -370,10 +331,10 @@ class RandomPostFX(IntensityAugmentationBase2D):
         at a later call."""
         if self.input_space == "srgb" and not is_tracing():
             check = self.__dict__.get("_range_check") or self.__dict__.setdefault("_range_check", DeferredCheck())
-            check({"peak": images.detach().amax()}, _check_peak)
+            check({"peak": images.detach().amax()}, check_srgb_peak)
 
     def _graded(self, images: torch.Tensor, params: dict) -> torch.Tensor:
-        """The batch graded by ``params``, with autocast off (:func:`~torchgrade.base.core.full_precision`): the
+        """The batch graded by ``params``, with autocast off (:func:`~torchgrade.base.images.full_precision`): the
         stages' maths keeps float32 or better whatever autocast a training loop runs, as each stage's call does.
 
         Without bloom every slot is per-pixel, so the batch runs on strips of rows where the device's policy asks

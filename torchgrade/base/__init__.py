@@ -4,6 +4,7 @@
 Write a stage of your own on :class:`Stage` and :class:`Control` (see :mod:`torchgrade.base.stage`).
 """
 
-from .stage import Control, Stage
+from .controls import Control
+from .stage import Stage
 
 __all__ = ["Control", "Stage"]

@@ -13,15 +13,13 @@ wrote as a list (a list nested deeper than the control's default, as ``[10, 20]`
 from __future__ import annotations
 
 import json
-from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 
+from .controls import Control
 from .files import read_regular
 
-if TYPE_CHECKING:  # the stage module reads configs with config_value: a type only, so no import circle
-    from .stage import Control
 
 __all__ = ["load_config", "config_value", "MAX_CONFIG_BYTES", "MAX_CONFIG_DEPTH"]
 
@@ -89,7 +87,7 @@ def config_value(name: str, value, control: Control):
     Values that are not JSON types (tensors, parameters) are left to the stage's own checks.
 
     Examples:
-        >>> from torchgrade.base.stage import Control
+        >>> from torchgrade.base.controls import Control
         >>> config_value("contrast", [10, 20], Control(0.0, (-100.0, 100.0)))
         tensor([10., 20.])
         >>> config_value("aces", 1, Control(False))

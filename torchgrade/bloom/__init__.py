@@ -24,7 +24,7 @@ light (levels hold means over equal areas), the mirrored blurs keep each pixel's
 the prefilter reports the exact light it passed on, which scattering removes from the image. So
 ``sum(output) = sum(image)`` up to rounding for any threshold, knee, scatter and image size.
 
-**Non-finite policy** (:func:`torchgrade.base.core.sanitize`, the library-wide rule): before anything
+**Non-finite policy** (:func:`torchgrade.base.images.sanitize`, the library-wide rule): before anything
 mixes pixels, NaN becomes 0 and values are bounded to ±65504, so +Inf blooms like a 65504 pixel and a
 NaN pixel like a black one; no NaN or Inf reaches the output.
 
@@ -32,7 +32,7 @@ NaN pixel like a black one; no NaN or Inf reaches the output.
 convolved with a user kernel by FFT (``torch.fft.rfft2``) over the frame extended by its mirror image.
 
 **Precision**: float16 and bfloat16 images are computed in float32 and returned in their own dtype,
-bounded to ±65504 (:func:`torchgrade.base.core.to_input_dtype`). Scene-referred values are never clamped otherwise.
+bounded to ±65504 (:func:`torchgrade.base.images.to_input_dtype`). Scene-referred values are never clamped otherwise.
 
 Examples:
     >>> import torch

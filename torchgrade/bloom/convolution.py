@@ -1,7 +1,7 @@
 """Convolution bloom (Unreal's): the thresholded image convolved with a user kernel, by FFT or directly.
 
 The kernel is the glow of a point light. The thresholded frame is extended by its mirror image about the edge
-(:func:`~torchgrade.bloom.pyramid.mirror_pad`, the pyramid bloom's edge rule) before it is convolved: a uniform
+(:func:`~torchgrade.bloom.blur.mirror_pad`, the pyramid bloom's edge rule) before it is convolved: a uniform
 frame blooms uniformly, and a frame turned or mirrored blooms turned or mirrored (with a kernel symmetric the same
 way). The convolution itself is zero-padded, so nothing wraps around. ONNX has no FFT at opset 17, so :meth:`ConvolutionBloom.export_form` gives a
 module that convolves directly (:func:`direct_convolve`): the same result, slower for large kernels.
@@ -13,21 +13,14 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from ..base.core import (
-    Param,
-    check_image,
-    check_range,
-    is_constant,
-    is_tracing,
-    sanitize,
-    scalar_param,
-    to_input_dtype,
-    working_dtype,
-)
-from ..base.stage import Control, Stage
+from ..base.images import check_image, sanitize, to_input_dtype, working_dtype
+from ..base.params import Param, check_range, is_constant, scalar_param
+from ..runtime.recording import is_tracing
+from ..base.controls import Control
+from ..base.stage import Stage
 from .layer import CONTROLS
 from .prefilter import threshold_fraction
-from .pyramid import mirror_pad
+from .blur import mirror_pad
 from .texture import as_texture, check_texture
 
 __all__ = ["fft_convolve", "direct_convolve", "check_kernel", "convolution_bloom", "ConvolutionBloom", "DirectConvolutionBloom"]

@@ -33,24 +33,18 @@ import numbers
 import torch
 from torch import nn
 
-from ..base.core import (
-    HALF_MAX,
-    check_image,
-    color_param,
-    is_constant,
-    is_plain_number,
-    is_tracing,
-    sanitize,
-    scalar_param,
-    to_input_dtype,
-    working_dtype,
-)
-from ..base.stage import Control, Stage, controls_signature
+from ..base.images import HALF_MAX, check_image, sanitize, to_input_dtype, working_dtype
+from ..base.params import color_param, is_constant, is_plain_number, scalar_param
+from ..runtime.recording import is_tracing
+from ..base.controls import Control, controls_signature
+from ..base.stage import Stage
 from ..color import srgb_to_linear
-from ..runtime import constant, policy_for
+from ..runtime import constant
+from ..runtime.policy import readable
 from .composite import BLOOM_MODES, COMPOSITES
 from .prefilter import prefilter
-from .pyramid import active_levels, anamorphic_sigma, glow_pyramid, pyramid_depth, upsample
+from .blur import anamorphic_sigma
+from .pyramid import active_levels, glow_pyramid, pyramid_depth, upsample
 from .texture import as_texture, check_texture, resampled
 
 __all__ = ["CONTROLS", "UNITY_SETTINGS", "OPTION_DEFAULTS", "MAX_FRAME_SIDE", "check_settings", "bloom_settings", "bloom", "bloom_with_settings", "Bloom",
@@ -205,19 +199,13 @@ def bloom_with_settings(image: torch.Tensor, settings: dict, fixed_depth=None) -
     light, fraction = prefilter(
         scene, number_or_param("threshold"), number_or_param("knee"), settings["fade_fireflies"], settings["karis_average"], bound
     )
-    if COMPOSITES[settings["mode"]].dark_is_identity and _reads_values(light) and not bool(light.any()):
+    if COMPOSITES[settings["mode"]].dark_is_identity and readable(light) and not bool(light.any()):
         out = scene
     else:
         out = _composited(scene, light, fraction, settings, param, depth, active, masked=fixed_depth is not None)
     if fixed_depth is not None and not COMPOSITES[settings["mode"]].zero_is_identity:
         out = torch.where(active > 0, out, scene)  # a frame too small for any level is not bloomed
     return to_input_dtype(out.reshape(image.shape), image)
-
-
-def _reads_values(light: torch.Tensor) -> bool:
-    """Whether the eager shortcut may read ``light`` back: not while tracing, and only where the device's policy
-    allows (on the CPU; elsewhere a read waits for the device)."""
-    return not is_tracing() and policy_for(light.device).reads_values
 
 
 def _composited(scene, light, fraction, settings: dict, param, depth: int, active, masked: bool) -> torch.Tensor:

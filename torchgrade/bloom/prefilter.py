@@ -18,7 +18,9 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
-from ..base.core import NEGLIGIBLE_LIGHT, Param, channel_max, check_image, scalar_param
+from ..base.images import NEGLIGIBLE_LIGHT, check_image
+from ..base.params import Param, scalar_param
+from ..base.planes import channel_max
 from ..color import luminance, srgb_to_linear
 from ..runtime import folded, where
 from .pyramid import halve
@@ -117,7 +119,7 @@ def _source_share(source: torch.Tensor, means: torch.Tensor) -> torch.Tensor:
     """``source / mean`` per channel: the share of a block's light its source holds (exactly 1 where they are equal,
     ``x / x``).
 
-    Blocks whose mean is below :data:`~torchgrade.base.core.NEGLIGIBLE_LIGHT` are black at any exposure: their share is 1,
+    Blocks whose mean is below :data:`~torchgrade.base.images.NEGLIGIBLE_LIGHT` are black at any exposure: their share is 1,
     and the division is by at least that floor, so the branch not taken cannot make an infinite gradient (a mean of
     1e-40 squared underflows to 0, and 0 times that infinity is NaN).
 

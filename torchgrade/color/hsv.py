@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import torch
 
-from ..base.core import channel_max, channel_min
+from ..base.planes import channel_max, channel_min
 from ..runtime import affine, constant, where
 from .spaces import CHANNEL
 

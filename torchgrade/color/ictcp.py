@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import torch
 
-from ..base.core import apply_matrix
+from ..base.planes import apply_matrix
 from ..runtime import constant, values_of
 from .transfer import linear_to_pq, pq_to_linear
 

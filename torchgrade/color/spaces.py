@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import torch
 
-from ..base.core import apply_matrix, channel_sum
+from ..base.planes import apply_matrix, channel_sum
 from ..runtime import constant, values_of
 
 __all__ = [

@@ -13,16 +13,16 @@ import numbers
 
 import torch
 
-from ..base.core import untracked
-from ..runtime.constants import affine, scalar, where
-from ..runtime.policy import policy_for
-from ..runtime.recording import is_exporting
+from ..runtime.constants import affine, where
+from ..runtime.policy import nonnegative
+from ..runtime.variants import formula
 
 __all__ = [
     "safe_pow", "safe_sqrt", "linear_to_srgb", "srgb_to_linear", "linear_to_logc", "logc_to_linear", "aces_to_acescc", "acescc_to_aces", "linear_to_pq", "pq_to_linear", "hlg_oetf", "hlg_inverse_oetf", "linear_to_acescct", "acescct_to_linear", "LOGC_CUT", "LOGC_E", "ACESCC_MIDGRAY", "ACESCC_MAX", "PQ_M1", "PQ_C1", "PQ_PEAK", "HLG_A", "HLG_B", "HLG_C", "ACESCCT_CUT_LINEAR", "ACESCCT_CUT_LOG", "ACESCCT_A", "LOGC_A", "LOGC_B", "LOGC_C", "LOGC_D", "LOGC_F", "PQ_M2", "PQ_C2", "PQ_C3", "ACESCCT_B",
 ]
 
 
+@formula
 def safe_pow(x: torch.Tensor, exponent) -> torch.Tensor:
     """``max(x, 0) ** exponent`` with a finite gradient at 0 (HLSL ``PositivePow`` on clamped input).
 
@@ -30,19 +30,28 @@ def safe_pow(x: torch.Tensor, exponent) -> torch.Tensor:
         >>> safe_pow(torch.tensor([-1.0, 0.0, 4.0]), 0.5).tolist()
         [0.0, 0.0, 2.0]
     """
-    if is_exporting() and isinstance(exponent, (int, float)) and exponent > 0:
-        # Exported without the gradient guard's two Where nodes, and as exp(e log x) (0 at x = 0, to a few ulps
-        # of the power): their costs on onnxruntime's CPU are in benchmarks/results/onnx_ops.md.
-        x = x.clamp_min(0.0)
-        return x.sqrt() if exponent == 0.5 else torch.exp(torch.log(x) * exponent)
-    if isinstance(exponent, numbers.Real) and exponent > 0 and x.is_floating_point() and untracked(x):
-        # Unguarded, the same values in two cheap passes (or one fmax, where the device's policy says) and one power
-        # instead of four passes.
-        if policy_for(x.device).nan_dropping_max:
-            return torch.fmax(x, scalar(0.0, x)).pow_(exponent)
-        return x.clamp_min(0.0).nan_to_num_(nan=0.0, posinf=math.inf).pow_(exponent)
     positive = x > 0
     return where(positive, where(positive, x, 1.0) ** exponent, 0.0)
+
+
+def _positive_number(x: torch.Tensor, exponent) -> bool:
+    """Whether ``exponent`` is a plain positive number and ``x`` floating point (the variants' precondition)."""
+    return isinstance(exponent, numbers.Real) and exponent > 0 and x.is_floating_point()
+
+
+@safe_pow.variant("export", when=_positive_number)
+def _safe_pow_exported(x: torch.Tensor, exponent) -> torch.Tensor:
+    """Without the gradient guard's two ``Where`` nodes, and as ``exp(e log x)`` (0 at x = 0, to a few ulps of the
+    power): their costs on onnxruntime's CPU are in ``benchmarks/results/onnx_ops.md``."""
+    x = x.clamp_min(0.0)
+    return x.sqrt() if exponent == 0.5 else torch.exp(torch.log(x) * exponent)
+
+
+@safe_pow.variant("untracked", when=_positive_number)
+def _safe_pow_in_place(x: torch.Tensor, exponent) -> torch.Tensor:
+    """Unguarded, the same values in two cheap passes (or one ``fmax``, where the device's policy says) and one power
+    in place instead of four passes."""
+    return nonnegative(x).pow_(exponent)
 
 
 def safe_sqrt(x: torch.Tensor) -> torch.Tensor:
@@ -114,6 +123,7 @@ _HALF_MAX = 65504.0
 _ACESCC_LOW_KNEE = (9.72 - 15.0) / 17.52
 
 
+@formula
 def aces_to_acescc(image: torch.Tensor) -> torch.Tensor:
     """ACES2065-1 -> ACEScc (S-2014-003 §4.4), input clamped to [0, 65504] as Unity does.
 
@@ -122,17 +132,30 @@ def aces_to_acescc(image: torch.Tensor) -> torch.Tensor:
         0.4136
     """
     x = image.clamp(0.0, _HALF_MAX)
-    if untracked(x):
-        # 2^-16 + x/2 < x exactly from 2^-15 up: the larger one is each segment's argument, one log for both.
-        return torch.maximum(x, x * 0.5 + 2.0**-16).log2_().add_(9.72).div_(17.52)
-    if is_exporting():
-        # The same maximum out of place: no comparison or Where (benchmarks/results/onnx_ops.md).
-        return (torch.log2(torch.maximum(x, x * 0.5 + 2.0**-16)) + 9.72) / 17.52
     low = (torch.log2(2.0**-16 + x * 0.5) + 9.72) / 17.52
     high = (torch.log2(x.clamp_min(2.0**-15)) + 9.72) / 17.52
     return torch.where(x < 2.0**-15, low, high)
 
 
+@aces_to_acescc.variant("untracked")
+def _aces_to_acescc_in_place(image: torch.Tensor) -> torch.Tensor:
+    """``2^-16 + x/2 < x`` exactly from ``2^-15`` up: the larger one is each segment's argument, one log for both."""
+    x = image.clamp(0.0, _HALF_MAX)
+    return torch.maximum(x, x * 0.5 + 2.0**-16).log2_().add_(9.72).div_(17.52)
+
+
+@aces_to_acescc.variant("export")
+def _aces_to_acescc_exported(image: torch.Tensor) -> torch.Tensor:
+    """The same maximum out of place: no comparison or ``Where`` (``benchmarks/results/onnx_ops.md``)."""
+    x = image.clamp(0.0, _HALF_MAX)
+    return (torch.log2(torch.maximum(x, x * 0.5 + 2.0**-16)) + 9.72) / 17.52
+
+
+_ACESCC_TOP = (math.log2(_HALF_MAX) + 9.72) / 17.52
+"""The ACEScc code of 65504, a Python float (``torch.compile`` traces no tensor read-back)."""
+
+
+@formula
 def acescc_to_aces(image: torch.Tensor) -> torch.Tensor:
     """ACEScc -> ACES2065-1 (S-2014-003 §4.4); saturates at 65504 like Unity.
 
@@ -140,15 +163,23 @@ def acescc_to_aces(image: torch.Tensor) -> torch.Tensor:
         >>> round(float(acescc_to_aces(torch.tensor(0.4135884))), 4)
         0.18
     """
-    top = (math.log2(_HALF_MAX) + 9.72) / 17.52  # a Python float: torch.compile traces no tensor read-back
-    x = image.clamp(max=top)
+    x = image.clamp(max=_ACESCC_TOP)
     value = torch.exp2(x * 17.52 - 9.72)
-    if untracked(value):
-        # (v - 2^-16)·2 < v exactly below the knee (v < 2^-15): the smaller one is the segment's value.
-        return torch.minimum(value, (value - 2.0**-16).mul_(2.0), out=value)
-    if is_exporting():
-        return torch.minimum(value, (value - 2.0**-16) * 2.0)  # the same minimum, without a comparison and Where
     return torch.where(x < _ACESCC_LOW_KNEE, (value - 2.0**-16) * 2.0, value)
+
+
+@acescc_to_aces.variant("untracked")
+def _acescc_to_aces_in_place(image: torch.Tensor) -> torch.Tensor:
+    """``(v - 2^-16)·2 < v`` exactly below the knee (``v < 2^-15``): the smaller one is the segment's value."""
+    value = torch.exp2(image.clamp(max=_ACESCC_TOP) * 17.52 - 9.72)
+    return torch.minimum(value, (value - 2.0**-16).mul_(2.0), out=value)
+
+
+@acescc_to_aces.variant("export")
+def _acescc_to_aces_exported(image: torch.Tensor) -> torch.Tensor:
+    """The same minimum, without a comparison and ``Where``."""
+    value = torch.exp2(image.clamp(max=_ACESCC_TOP) * 17.52 - 9.72)
+    return torch.minimum(value, (value - 2.0**-16) * 2.0)
 
 
 PQ_M1, PQ_M2 = 2610.0 / 16384.0, 2523.0 / 4096.0 * 128.0
@@ -223,6 +254,7 @@ ACESCCT_CUT_LOG = 0.155251141552511
 ACESCCT_A, ACESCCT_B = 10.5402377416545, 0.0729055341958355
 
 
+@formula
 def linear_to_acescct(image: torch.Tensor) -> torch.Tensor:
     """ACEScg (AP1) -> ACEScct: ``A x + B`` up to 2^-7, else ``(log2(x) + 9.72) / 17.52`` (S-2016-001).
 
@@ -231,13 +263,18 @@ def linear_to_acescct(image: torch.Tensor) -> torch.Tensor:
         [0.0729, 0.4136]
     """
     log = (torch.log2(image.clamp_min(ACESCCT_CUT_LINEAR)) + 9.72) / 17.52
-    if is_exporting():
-        # The segments meet at the cut: each on its own side of it, added, less their common value there; no comparison
-        # or Where (benchmarks/results/onnx_ops.md).
-        return log + (ACESCCT_A * image.clamp_max(ACESCCT_CUT_LINEAR) + (ACESCCT_B - ACESCCT_CUT_LOG))
     return torch.where(image <= ACESCCT_CUT_LINEAR, ACESCCT_A * image + ACESCCT_B, log)
 
 
+@linear_to_acescct.variant("export")
+def _linear_to_acescct_exported(image: torch.Tensor) -> torch.Tensor:
+    """The segments meet at the cut: each on its own side of it, added, less their common value there; no comparison
+    or ``Where`` (``benchmarks/results/onnx_ops.md``)."""
+    log = (torch.log2(image.clamp_min(ACESCCT_CUT_LINEAR)) + 9.72) / 17.52
+    return log + (ACESCCT_A * image.clamp_max(ACESCCT_CUT_LINEAR) + (ACESCCT_B - ACESCCT_CUT_LOG))
+
+
+@formula
 def acescct_to_linear(code: torch.Tensor) -> torch.Tensor:
     """ACEScct -> ACEScg (AP1), the inverse of :func:`linear_to_acescct`, saturating at 65504 like ACEScc.
 
@@ -245,8 +282,12 @@ def acescct_to_linear(code: torch.Tensor) -> torch.Tensor:
         >>> round(float(acescct_to_linear(torch.tensor(0.4135884))), 4)
         0.18
     """
-    top = (math.log2(_HALF_MAX) + 9.72) / 17.52
-    log = torch.exp2(code.clamp(ACESCCT_CUT_LOG, top) * 17.52 - 9.72)
-    if is_exporting():
-        return log + ((code.clamp_max(ACESCCT_CUT_LOG) - ACESCCT_B) / ACESCCT_A - ACESCCT_CUT_LINEAR)  # as in linear_to_acescct
+    log = torch.exp2(code.clamp(ACESCCT_CUT_LOG, _ACESCC_TOP) * 17.52 - 9.72)
     return torch.where(code <= ACESCCT_CUT_LOG, (code - ACESCCT_B) / ACESCCT_A, log)
+
+
+@acescct_to_linear.variant("export")
+def _acescct_to_linear_exported(code: torch.Tensor) -> torch.Tensor:
+    """The segments added, as in :func:`linear_to_acescct`'s export form."""
+    log = torch.exp2(code.clamp(ACESCCT_CUT_LOG, _ACESCC_TOP) * 17.52 - 9.72)
+    return log + ((code.clamp_max(ACESCCT_CUT_LOG) - ACESCCT_B) / ACESCCT_A - ACESCCT_CUT_LINEAR)

@@ -22,7 +22,7 @@ document's operator, Reinhard et al. 2002 "Photographic Tone Reproduction", Eq. 
 white point ``max_luminance``: it returns a display-referred image in which luminance
 ``max_luminance`` maps to 1 (brighter luminances exceed 1 and are not clipped here).
 
-Pixels go through the library's non-finite policy (:func:`torchgrade.base.core.sanitize`) before
+Pixels go through the library's non-finite policy (:func:`torchgrade.base.images.sanitize`) before
 metering and before the operator, and outputs are bounded to ±65504, so one NaN or Inf pixel
 changes neither the metered value nor any other pixel. float16/bfloat16 images are computed in
 float32 and returned in their own dtype; the adapted luminance is float32 for them.

@@ -7,20 +7,10 @@ from typing import Optional
 
 import torch
 
-from ..base.core import (
-    HALF_MAX,
-    Param,
-    check_choice,
-    check_image,
-    check_range,
-    is_plain_number,
-    is_tracing,
-    sanitize,
-    scalar_param,
-    to_input_dtype,
-    working_dtype,
-)
-from ..base.stage import Control
+from ..base.images import HALF_MAX, check_image, sanitize, to_input_dtype, working_dtype
+from ..base.params import Param, check_choice, check_range, is_plain_number, scalar_param
+from ..runtime.recording import is_tracing
+from ..base.controls import Control
 from ..color import luminance
 from ..runtime import constant
 from .metering import (
@@ -376,7 +366,7 @@ def exposed_frame(image: torch.Tensor, adapted: Optional[torch.Tensor], dt: Para
 
 def exposure_key(adapted: torch.Tensor, c: dict, curve) -> torch.Tensor:
     """The luminance ``adapted`` is exposed to: ``middle_grey * 2^(compensation + curve(log2(adapted / middle_grey)))``,
-    the curve left out for a fixed exposure (``c``: the number controls as :func:`~torchgrade.base.core.scalar_param` tensors).
+    the curve left out for a fixed exposure (``c``: the number controls as :func:`~torchgrade.base.params.scalar_param` tensors).
     The exposure applied is ``log2(key / adapted)`` stops."""
     stops = c["compensation"]
     if c["fixed_exposure"] is None:
@@ -386,7 +376,7 @@ def exposure_key(adapted: torch.Tensor, c: dict, curve) -> torch.Tensor:
 
 def metered_luminance(scene: torch.Tensor, c: dict, controls: dict) -> torch.Tensor:
     """The sanitized frame's metered luminance, ``(..., 1, 1, 1)``, bounded by the limits (``c``: the number
-    controls as :func:`~torchgrade.base.core.scalar_param` tensors; ``controls``: all of them as given)."""
+    controls as :func:`~torchgrade.base.params.scalar_param` tensors; ``controls``: all of them as given)."""
     weights = metering_weights(controls["metering_mask"], scene)
     if controls["metering"] == "histogram":
         low, high = histogram_range(c["min_ev"], c["max_ev"])

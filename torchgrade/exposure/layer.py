@@ -8,8 +8,10 @@ from typing import Hashable, Optional
 
 import torch
 
-from ..base.core import Param, check_image, scalar_param, working_dtype
-from ..base.stage import Stage, controls_signature
+from ..base.images import check_image, working_dtype
+from ..base.params import Param, scalar_param
+from ..base.controls import controls_signature
+from ..base.stage import Stage
 from .adaptation import (
     BOUNDS,
     CONTROLS,

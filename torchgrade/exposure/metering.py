@@ -16,7 +16,8 @@ from typing import Optional
 import torch
 import torch.nn.functional as F
 
-from ..base.core import check_choice, check_image, sanitize
+from ..base.images import check_image, sanitize
+from ..base.params import check_choice
 from ..color import luminance
 from ..runtime import constant, device_cached, policy_for
 
@@ -234,7 +235,7 @@ def meter_luminance(image: torch.Tensor, metering: str = "log", mask="average", 
 
 
 def meter_sanitized(scene: torch.Tensor, metering: str, weights: Optional[torch.Tensor] = None) -> torch.Tensor:
-    """:func:`meter_luminance` ``"mean"`` or ``"log"`` of a frame already sanitized (:func:`~torchgrade.base.core.sanitize`),
+    """:func:`meter_luminance` ``"mean"`` or ``"log"`` of a frame already sanitized (:func:`~torchgrade.base.images.sanitize`),
     unchecked, with :func:`metering_weights` ``weights``: for a caller that sanitizes the frame anyway.
 
     Examples:

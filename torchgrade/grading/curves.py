@@ -25,9 +25,10 @@ from typing import Any, Optional
 
 import torch
 
-from ..base.core import check_range
-from ..runtime import constant, policy_for
-from ..base.stage import Control
+from ..base.params import check_range
+from ..runtime import constant
+from ..runtime.policy import readable
+from ..base.controls import Control
 
 __all__ = [
     "CurveControl",
@@ -85,7 +86,7 @@ def curve_points(points, like: torch.Tensor, name: str = "curve") -> tuple:
     x, y = table.unbind(1)
     x = x.detach()
     # a tensor's points are read to check them where reading is free (a stage checks its curves at assignment)
-    if isinstance(points, torch.Tensor) and _reads_values(x) and not bool((x[1:] > x[:-1]).all()):
+    if isinstance(points, torch.Tensor) and readable(x) and not bool((x[1:] > x[:-1]).all()):
         raise ValueError(f"{name} x values must be strictly increasing, got {x.tolist()}")
     return x, y
 
@@ -95,12 +96,7 @@ def _spans_a_turn(points, x: torch.Tensor) -> bool:
     a tensor's where reading is free (a stage checks its curves at assignment)."""
     if not isinstance(points, torch.Tensor):
         return float(points[-1][0]) >= float(points[0][0]) + 1.0
-    return _reads_values(x) and bool(x[-1] >= x[0] + 1.0)
-
-
-def _reads_values(x: torch.Tensor) -> bool:
-    """Whether ``x``'s device policy reads values back (the CPU, eager): not a GPU (a synchronisation), nor a graph."""
-    return policy_for(x.device).reads_values
+    return readable(x) and bool(x[-1] >= x[0] + 1.0)
 
 
 def _plain_points(points, name: str) -> tuple:

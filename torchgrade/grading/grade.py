@@ -35,25 +35,15 @@ from __future__ import annotations
 
 import torch
 
-from ..base.core import (
-    HALF_MAX,
-    check_image,
-    color_param,
-    each_plane,
-    is_constant,
-    joined,
-    matrix_on,
-    matrix_product,
-    sanitize,
-    scalar_param,
-    to_input_dtype,
-    untracked,
-    working_dtype,
-)
-from ..base.stage import Control, check_given
+from ..base.images import HALF_MAX, check_image, sanitize, to_input_dtype, working_dtype
+from ..base.params import color_param, is_constant, scalar_param
+from ..base.planes import each_plane, joined, matrix_on, matrix_product
+from ..runtime.recording import untracked
+from ..base.controls import Control, check_given
 from ..color import srgb_to_linear
 from ..color.spaces import shared_matrix
-from ..runtime import folded, is_exporting, policy_for
+from ..runtime import folded, is_exporting
+from ..runtime.policy import pixel_layout
 from .curves import CurveControl, curve_is_identity
 from .steps import (
     IDENTITY_MATRIX,
@@ -171,7 +161,7 @@ def color_grade(image: torch.Tensor, aces: bool = False, log_space: str = "acesc
     An all-identity grade returns ``image`` itself. Otherwise the input passes the non-finite policy,
     float16/bfloat16 are computed in float32, and the result is linear Rec.709 in the input's dtype. Controls given as
     numbers are checked as :class:`~torchgrade.ColorGrade` checks them (:data:`COLOR_GRADE_CONTROLS`,
-    :func:`~torchgrade.base.stage.check_given`); tensors are taken as they are.
+    :func:`~torchgrade.base.controls.check_given`); tensors are taken as they are.
 
     Examples:
         >>> image = torch.rand(1, 3, 2, 2)
@@ -218,9 +208,8 @@ def color_grade_planes(image: torch.Tensor, aces: bool = False, log_space: str =
     if not steps:
         return image
     weights = "ap1" if aces else "rec709"
-    x = like = sanitize(working_dtype(image))
-    if policy_for(x.device).pixel_planes:  # compiling: the steps on planes, for Inductor to fuse
-        x = x.split(1, dim=-3)
+    like = sanitize(working_dtype(image))
+    x = pixel_layout(like)  # compiling: the steps on planes, for Inductor to fuse
     # The linear steps between two non-linear ones are folded into one matrix, so each pixel sees one 3x3: post
     # exposure, white balance and the way into contrast's primaries; the way out of them and the colour filter.
     # Of plain-number controls the matrix is a constant, made once (runtime.folded).

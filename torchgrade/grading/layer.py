@@ -6,11 +6,9 @@ import inspect
 
 import torch
 
-from ..base.core import (
-    Param,
-    is_constant,
-)
-from ..base.stage import Stage, controls_signature
+from ..base.params import Param, is_constant
+from ..base.controls import controls_signature
+from ..base.stage import Stage
 from .curves import CurveControl, check_curve, stored_curve
 from .grade import (
     COLOR_GRADE_CONTROLS,

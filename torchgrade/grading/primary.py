@@ -20,22 +20,13 @@ from __future__ import annotations
 
 import torch
 
-from ..base.core import (
-    Param,
-    bounded_pow,
-    check_choice,
-    check_image,
-    color_param,
-    is_constant,
-    readable,
-    sanitize,
-    scalar_param,
-    to_input_dtype,
-    working_dtype,
-)
-from ..base.stage import Control
+from ..base.images import check_image, sanitize, to_input_dtype, working_dtype
+from ..base.params import Param, check_choice, color_param, is_constant, scalar_param
+from ..base.planes import bounded_pow
+from ..base.controls import Control
 from ..color import CHANNEL
 from ..runtime import constant
+from ..runtime.policy import readable
 
 __all__ = [
     "primary_grade",

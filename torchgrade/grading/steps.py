@@ -3,59 +3,41 @@
 Each function takes and returns ``(..., 3, H, W)`` tensors; controls broadcast as the library's
 conventions say (numbers, 0-d, per-sample). :func:`torchgrade.grading.grade.color_grade` chains them in
 Unity's order and skips the steps left at identity; see :mod:`torchgrade.grading.grade` for the order,
-units and sources.
+units and sources. Contrast (:mod:`torchgrade.grading.contrast`) and split toning (:mod:`torchgrade.grading.toning`)
+have modules of their own; their steps are named here too.
 """
 
 from __future__ import annotations
 
-import math
-
 import torch
 
-from ..base.core import (
-    HALF_MAX,
-    NEGLIGIBLE_LIGHT,
-    Param,
+from ..base.images import HALF_MAX, NEGLIGIBLE_LIGHT
+from ..base.params import Param, color_param, matrix_param, scalar_param
+from ..base.planes import (
     apply_matrix,
     bounded_pow,
     channel_max,
-    color_param,
     each_plane,
-    is_constant,
-    joined,
     like_image,
     matrix_on,
-    matrix_param,
     matrix_product,
     per_channel,
-    scalar_param,
-    untracked,
 )
 from ..color import (
-    ACESCC_MIDGRAY,
     AP1_LUMINANCE,
     CHANNEL,
-    LOGC_A,
-    LOGC_B,
-    LOGC_C,
-    LOGC_D,
     REC709_LUMINANCE,
-    aces_to_acescc,
-    acescc_to_aces,
-    acescct_to_linear,
-    convert,
     hsv_planes,
-    linear_to_acescct,
     luminance,
     rgb_from_hsv_planes,
     rgb_planes_from_hsv,
-    safe_pow,
-    safe_sqrt,
     srgb_to_linear,
 )
 from ..color.spaces import shared_matrix
-from ..runtime import affine, constant, folded, is_exporting, where
+from ..runtime import constant, where
+from .contrast import contrast, contrast_space, log_contrast
 from .curves import evaluate_curve
+from .toning import soft_light, split_toning
 
 __all__ = [
     "IDENTITY_MATRIX",
@@ -157,123 +139,6 @@ def white_balance(image: torch.Tensor, temperature: Param = 0.0, tint: Param = 0
     return apply_matrix(white_balance_matrix(image, temperature, tint), image)
 
 
-def contrast_space(aces: bool = False, log_space: str = "acescc") -> tuple:
-    """``(encoding, into, out of)``: the log encoding contrast is graded in, the matrix (a :data:`~torchgrade.color.MATRICES`
-    name) from linear Rec.709 into its primaries and the one from them to the grade's working space (None: none).
-
-    Examples:
-        >>> contrast_space(), contrast_space(True), contrast_space(True, "acescct")
-        (('logc', None, None), ('acescc', 'srgb_to_ap0', 'ap0_to_ap1'), ('acescct', 'srgb_to_ap1', None))
-    """
-    if not aces:
-        return "logc", None, None
-    if log_space == "acescct":
-        return "acescct", "srgb_to_ap1", None
-    return "acescc", "srgb_to_ap0", "ap0_to_ap1"
-
-
-def log_contrast(image: torch.Tensor, amount: Param, encoding: str = "logc") -> torch.Tensor:
-    """Contrast about mid grey in ``encoding`` (``"logc"``, ``"acescc"`` or ``"acescct"``) on linear values in
-    that encoding's primaries: ``(log(x) - 0.4135884) · (1 + amount/100) + 0.4135884``, decoded back.
-
-    In LogC, ``c log10(a x + b) + d``, the encode, the scaling and the decode fold into one power:
-    ``((a x + b)^k · 10^((d - 0.4135884)(k - 1) / c) - b) / a``.
-
-    Examples:
-        >>> # in a pure log encoding x -> 0.18 (x / 0.18)^k: grey is the pivot, 1.0 goes to 0.18 (1 / 0.18)^1.5
-        >>> [round(v, 3) for v in log_contrast(torch.tensor([0.18, 1.0]), 50.0, "acescc").tolist()]
-        [0.18, 2.357]
-    """
-    k = folded(_contrast_slope, amount, like=image, host=untracked(image))  # the power's backward would copy a CPU exponent to the device
-    if encoding == "acescct":
-        return acescct_to_linear((linear_to_acescct(image) - ACESCC_MIDGRAY) * k + ACESCC_MIDGRAY)
-    if encoding == "acescc":
-        if untracked(image, k):
-            return _acescc_contrast_in_place(image, k)
-        if is_exporting():
-            return _acescc_contrast_folded(image, k)
-        return acescc_to_aces((aces_to_acescc(image) - ACESCC_MIDGRAY) * k + ACESCC_MIDGRAY)
-    base = affine(image, LOGC_A, LOGC_B).clamp_min(torch.finfo(image.dtype).tiny)
-    if is_exporting():
-        # The power as exp(k ln(base) + ln(gain)): a Log and an Exp cost less than half a Pow (benchmarks/results/onnx_ops.md).
-        log_gain = math.log(10.0) * (LOGC_D - ACESCC_MIDGRAY) / LOGC_C * (k - 1.0)
-        return (torch.exp(torch.log(base) * k + log_gain) - LOGC_B) / LOGC_A
-    gain = torch.pow(10.0, (LOGC_D - ACESCC_MIDGRAY) * (k - 1.0) / LOGC_C) / LOGC_A
-    return affine(base**k * gain, 1.0, -LOGC_B / LOGC_A)
-
-
-def _contrast_slope(amount: Param, *, like: torch.Tensor) -> torch.Tensor:
-    """The slope ``k = 1 + amount / 100`` of :func:`log_contrast` (made once for a plain number, ``runtime.folded``).
-
-    Examples:
-        >>> _contrast_slope(50.0, like=torch.zeros(())).item()
-        1.5
-    """
-    return 1.0 + scalar_param(amount, like, "contrast") * 0.01
-
-
-_ACESCC_PIVOT_STOPS = ACESCC_MIDGRAY * 17.52 - 9.72
-"""ACEScc's pivot as ``log2`` of linear (``log2(0.18)``): the code ``(log2(x) + 9.72) / 17.52`` at ``ACESCC_MIDGRAY``."""
-
-
-def _acescc_contrast_in_place(image: torch.Tensor, k: torch.Tensor) -> torch.Tensor:
-    """ACEScc contrast with the encode, the scaling and the decode folded into one power of two, computed in place.
-
-    ``min(2^(k log2(2u) + p - k(1 + p)), 65504)``, that is ``2^min((log2(u) - p) k + p, log2(65504))``, with ``p``
-    the pivot in stops and ``2u = x + max(x, 2^-15)`` twice the encode's ``u = max(x, 2^-16 + x/2)`` on ``x`` clamped
-    to [0, 65504] (its two segments, :func:`~torchgrade.color.aces_to_acescc`); the decode's low segment
-    ``(v - 2^-16)·2`` is below ``v`` exactly where ``v < 2^-15``, so the decode is ``2v - max(v, 2^-15)``.
-
-    Examples:
-        >>> x = torch.tensor([0.0, 1e-5, 0.18, 1.0, 1e5])
-        >>> bool(torch.allclose(_acescc_contrast_in_place(x, torch.tensor(1.3)), acescc_to_aces((aces_to_acescc(x) - ACESCC_MIDGRAY) * 1.3 + ACESCC_MIDGRAY), rtol=1e-5))
-        True
-    """
-    x = image.clamp(0.0, HALF_MAX)
-    offset = _ACESCC_PIVOT_STOPS - k * (1.0 + _ACESCC_PIVOT_STOPS)
-    # bounded after the power: in float16 log2(65504) rounds to 16, whose power is infinite
-    value = x.clamp_min(2.0**-15).add_(x).log2_().mul_(k).add_(offset).exp2_().clamp_max_(HALF_MAX)
-    return value.clamp_min(2.0**-15).lerp_(value, 2.0)  # m + 2(v - m) = 2v - m
-
-
-def _acescc_contrast_folded(image: torch.Tensor, k) -> torch.Tensor:
-    """:func:`_acescc_contrast_in_place` for export, with min and max of two branches as clamps: one ``Log``, one
-    ``Exp``, no comparison or ``Where`` (their costs on onnxruntime's CPU: ``benchmarks/results/onnx_ops.md``).
-
-    ``s = x + max(x, 2^-15)`` with ``x`` clamped to [0, 65504] is twice the encode's ``max(x, 2^-16 + x/2)``, rounded
-    alike; ``v = exp(min(k ln s + ((1 - k) p - k) ln 2, ln 65504))`` the scaled code decoded, with ``p`` the pivot
-    in stops; the decode's ``min(v, (v - 2^-16)·2)`` is ``2v - max(v, 2^-15)``, again with the same rounding.
-
-    Examples:
-        >>> x = torch.tensor([0.0, 2.0**-16, 2.0**-15, 0.18, 1e5])
-        >>> bool(torch.allclose(_acescc_contrast_folded(x, torch.tensor(1.3)), _acescc_contrast_in_place(x, torch.tensor(1.3)), rtol=1e-5))
-        True
-    """
-    x = image.clamp(0.0, HALF_MAX)
-    doubled = x + x.clamp_min(2.0**-15)
-    offset = ((1.0 - k) * _ACESCC_PIVOT_STOPS - k) * math.log(2.0)
-    value = torch.exp((torch.log(doubled) * k + offset).clamp_max(math.log(HALF_MAX)))
-    return 2.0 * value - value.clamp_min(2.0**-15)
-
-
-def contrast(image: torch.Tensor, amount: Param, aces: bool = False, log_space: str = "acescc") -> torch.Tensor:
-    """Contrast about mid grey in log space (:func:`log_contrast` in the encoding of :func:`contrast_space`).
-
-    Linear mode uses LogC and returns linear Rec.709; ``aces=True`` uses ACEScc and returns ACEScg
-    (Unity ``ColorGradingContrast``); ``log_space="acescct"`` uses ACEScct (S-2016-001) on ACEScg, whose
-    linear toe below 2^-7 keeps shadows from the log's steep fall.
-
-    Examples:
-        >>> out = contrast(torch.tensor([0.05, 1.0, 1.0]).reshape(3, 1, 1), 50.0).flatten()
-        >>> bool(out[0] < 0.05 and out[1] > 1.0)  # shadows darker, highlights brighter
-        True
-    """
-    encoding, into, out_of = contrast_space(aces, log_space)
-    x = image if into is None else convert(image, into)
-    x = log_contrast(x, amount, encoding)
-    return x if out_of is None else convert(x, out_of)
-
-
 def color_filter(image: torch.Tensor, color) -> torch.Tensor:
     """Colour filter: multiply by the colour, given sRGB-encoded as in Unity's picker (HDR allowed).
 
@@ -282,130 +147,6 @@ def color_filter(image: torch.Tensor, color) -> torch.Tensor:
         [1.0, 1.0, 0.0]
     """
     return image * srgb_to_linear(color_param(color, image, "color_filter"))
-
-
-def soft_light(base: torch.Tensor, blend: torch.Tensor) -> torch.Tensor:
-    """Soft-light blend (Unity ``SoftLight``, after Adobe): below 0.5 ``2ab + a²(1 - 2b)``, else
-    ``sqrt(a)(2b - 1) + 2a(1 - b)``.
-
-    Examples:
-        >>> soft_light(torch.tensor([0.3]), torch.tensor([0.5])).tolist()  # a 0.5 blend changes nothing
-        [0.30000001192092896]
-    """
-    return torch.where(blend >= 0.5, _lighten(base, blend), _darken(base, blend))
-
-
-def _darken(base: torch.Tensor, blend: torch.Tensor) -> torch.Tensor:
-    """Soft light below a blend of 0.5: ``2ab + a²(1 - 2b)``."""
-    return 2.0 * base * blend + base * base * (1.0 - 2.0 * blend)
-
-
-def _lighten(base: torch.Tensor, blend: torch.Tensor) -> torch.Tensor:
-    """Soft light from a blend of 0.5 up: ``sqrt(a)(2b - 1) + 2a(1 - b)``."""
-    return safe_sqrt(base) * (2.0 * blend - 1.0) + 2.0 * base * (1.0 - blend)
-
-
-def _soft_light_by_channel(gamma: torch.Tensor, weights: tuple, offsets: tuple) -> torch.Tensor:
-    """Soft-light blends of ``gamma`` with tints ``0.5 + offset · weight`` given by constant per-channel ``offsets``.
-
-    With ``weight`` in [0, 1] a channel's blend stays on the side of 0.5 its offset's sign gives, so each channel is
-    blended by that branch of :func:`soft_light` alone, written with ``s = 2 blend - 1 = 2 offset weight``:
-    ``a + s(√a - a)`` (:func:`_lighten`) and ``a + s·a(1 - a)`` (:func:`_darken`), one multiply-add each; an offset of
-    0 blends with 0.5 exactly, where both branches return the base, and is skipped. In place where nothing records
-    (:func:`untracked`), one plane at a time.
-
-    Examples:
-        >>> base, t = torch.rand(1, 3, 2, 2), torch.rand(1, 1, 2, 2)
-        >>> tint = 0.5 + torch.tensor([-0.2, 0.0, 0.3]).reshape(3, 1, 1) * t
-        >>> bool(torch.allclose(_soft_light_by_channel(base.clone(), (t,), ((-0.2, 0.0, 0.3),)), soft_light(base, tint), atol=1e-6))
-        True
-    """
-    on_planes = isinstance(gamma, tuple)  # the image's planes (ExecutionPolicy.pixel_planes): returned as planes
-    in_place = not on_planes and untracked(gamma, *weights)
-    exporting = is_exporting()
-    planes = []
-    for c, plane in enumerate(gamma if on_planes else gamma.split(1, dim=-3)):
-        for weight, offset in zip(weights, (channel_offsets[c] for channel_offsets in offsets)):
-            if offset == 0.0:
-                continue
-            if offset < 0.0:  # a(1 - a), as a - a² in one pass where not exported
-                shift = plane * (1.0 - plane) if exporting else torch.addcmul(plane, plane, plane, value=-1.0)
-            else:  # the planes are finite and at least 0 (gamma of a bounded frame; each blend keeps them so)
-                shift = (plane.sqrt() if in_place else safe_sqrt(plane)) - plane
-            if exporting:  # the expression's nodes: an addcmul exports its value as a float32 Constant, whatever the graph's dtype
-                plane = plane + 2.0 * offset * weight * shift
-            elif in_place:
-                plane = plane.addcmul_(weight, shift, value=2.0 * offset)
-            else:
-                plane = torch.addcmul(plane, weight, shift, value=2.0 * offset)
-        planes.append(plane)
-    if on_planes:
-        return tuple(planes)
-    return gamma if in_place else torch.cat(planes, dim=-3)
-
-
-def _soft_light_masked(base: torch.Tensor, weight: torch.Tensor, offset: torch.Tensor) -> torch.Tensor:
-    """:func:`soft_light` with the tint ``0.5 + offset · weight`` for export, with offsets that are graph inputs.
-
-    With ``weight`` in [0, 1] the blend's side of 0.5 is the offset's sign, so the branch is picked per channel by
-    ``m = [offset > 0]`` instead of per pixel: ``a + s(m √a + a((1 - 2m) - (1 - m) a))`` with ``s = 2 offset weight``
-    is :func:`_lighten` for ``m = 1`` and :func:`_darken` for ``m = 0``, exactly (a 0/1 factor of a finite value).
-
-    Examples:
-        >>> base, t, offset = torch.rand(2, 3, 2, 2), torch.rand(2, 1, 2, 2), torch.tensor([[-0.2, 0.0, 0.3], [0.1, -0.4, 0.0]])
-        >>> offset = offset.reshape(2, 3, 1, 1)
-        >>> bool(torch.allclose(_soft_light_masked(base, t, offset), soft_light(base, 0.5 + offset * t), atol=1e-6))
-        True
-    """
-    lighter = (offset > 0.0).to(base.dtype)
-    shift = lighter * safe_sqrt(base) + base * ((1.0 - 2.0 * lighter) - (1.0 - lighter) * base)
-    return base + 2.0 * offset * weight * shift
-
-
-def split_toning(
-    image: torch.Tensor, shadows=(0.5, 0.5, 0.5), highlights=(0.5, 0.5, 0.5), balance: Param = 0.0, luminance_weights="rec709"
-) -> torch.Tensor:
-    """Split toning in gamma 2.2 space (Unity ``ColorGradeSplitToning``).
-
-    ``t = saturate(Y(saturate(c)) + balance/100)``; the shadow tint ``lerp(0.5, shadows, 1 - t)`` and the
-    highlight tint ``lerp(0.5, highlights, t)`` are soft-light blended in turn. Grey 0.5 tints are neutral. An image
-    given as its three planes (a tuple, :attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`) is toned as planes
-    where the tints are numbers, and joined into one image where they are tensors.
-
-    Examples:
-        >>> image = torch.rand(3, 2, 2)
-        >>> bool(torch.allclose(split_toning(image), image, atol=1e-5))  # grey tints: neutral
-        True
-    """
-    plain = _plain_offsets(shadows), _plain_offsets(highlights)
-    if None in plain:
-        image = joined(image)  # tensor colours blend the frame
-    gamma = each_plane(lambda plane: safe_pow(plane, 1.0 / 2.2), image)
-    t = luminance(each_plane(lambda plane: plane.clamp(0.0, 1.0), gamma), luminance_weights)
-    if not is_constant(balance, 0.0):
-        t = t + scalar_param(balance, t, "split_balance") * 0.01
-    t = t.clamp(0.0, 1.0)
-    if None not in plain:
-        return each_plane(lambda plane: safe_pow(plane, 2.2), _soft_light_by_channel(gamma, (1.0 - t, t), plain))
-    offsets = (color_param(shadows, image, "split_shadows") - 0.5, color_param(highlights, image, "split_highlights") - 0.5)
-    if is_exporting():
-        return safe_pow(_soft_light_masked(_soft_light_masked(gamma, 1.0 - t, offsets[0]), t, offsets[1]), 2.2)
-    shadow_tint = 0.5 + offsets[0] * (1.0 - t)
-    highlight_tint = 0.5 + offsets[1] * t
-    return safe_pow(soft_light(soft_light(gamma, shadow_tint), highlight_tint), 2.2)
-
-
-def _plain_offsets(color):
-    """A split-toning colour given as three numbers, as its offsets from neutral grey ``c - 0.5`` in Python (the branch
-    each channel's blend takes is then known without reading the device); ``None`` for a tensor.
-
-    Examples:
-        >>> _plain_offsets((0.45, 0.5, 0.56)), _plain_offsets(torch.tensor([0.5, 0.5, 0.5]))
-        ((-0.04999999999999999, 0.0, 0.06000000000000005), None)
-    """
-    if isinstance(color, torch.Tensor) or len(color) != 3 or not all(isinstance(c, (int, float)) for c in color):
-        return None
-    return tuple(float(c) - 0.5 for c in color)
 
 
 def channel_mixer(image: torch.Tensor, mixer=IDENTITY_MATRIX) -> torch.Tensor:
@@ -512,7 +253,7 @@ def lift_gamma_gain(image: torch.Tensor, lift=IDENTITY_TRACKBALL, gamma=IDENTITY
     """Lift, gamma, gain (Unity ``LiftGammaGainHDR``): ``c = rgb · gain + lift``, ``sign(c) |c|^(1/gamma)``.
 
     The trackballs are prepared by :func:`lift_gamma_gain_coefficients`; the power is mirrored for
-    negative values (ACEScg can be negative) and saturates at ±65504 (:func:`~torchgrade.base.core.bounded_pow`):
+    negative values (ACEScg can be negative) and saturates at ±65504 (:func:`~torchgrade.base.planes.bounded_pow`):
     Unity's own minimum gamma is a power of 1000, which overflows float32 from 1.1 up.
 
     An image given as its three planes (a tuple, :attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`) is returned

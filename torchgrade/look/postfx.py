@@ -45,7 +45,7 @@ from torch import nn
 
 from .._moved import OLD_CLASS_PATHS
 from ..base.config import load_config
-from ..base.core import check_image, nan_free, with_alpha
+from ..base.images import check_image, nan_free, with_alpha
 from ..bloom import ConvolutionBloom
 from ..lut import INTERPOLATIONS, LUT3D, ErrorReport, bake_lut
 from ..runtime import is_tracing
@@ -328,7 +328,7 @@ def _through(stages, image: torch.Tensor, dt) -> torch.Tensor:
     """``image`` through ``(slot name, stage)`` pairs in order, ``dt`` to those that keep state between frames.
 
     A stage's output holds no NaN (``tests/library/test_extremes.py``), so a stage whose input another stage made is
-    told so (:func:`~torchgrade.base.core.nan_free`) and skips its input's NaN pass, one frame pass each. A stage that
+    told so (:func:`~torchgrade.base.images.nan_free`) and skips its input's NaN pass, one frame pass each. A stage that
     hands its input back (an identity setting, a frame too small for a bloom level) makes nothing: its output is as
     trusted as its input was. Not while tracing: a compiled look keeps every stage's whole policy (Inductor fuses it),
     and an export decides it in its graph.

@@ -42,25 +42,18 @@ from typing import Callable, Optional
 
 import torch
 
-from ..base.core import (
-    HALF_MAX,
-    check_choice,
-    check_image,
-    is_tracing,
-    one_thread,
-    sanitize,
-    to_input_dtype,
-    working_dtype,
-)
+from ..base.images import HALF_MAX, check_image, sanitize, to_input_dtype, working_dtype
+from ..base.params import check_choice
+from ..runtime.workers import one_thread
 from ..color import linear_to_srgb, srgb_to_linear
-from ..runtime import LOOKUP_CHUNK, policy_for, run_pieces
+from ..runtime import LOOKUP_CHUNK, policy_for, run_pieces, untracked
 from .kernels import KERNELS
 from .lattice import planar_table
 from .native import MAX_SIZE as COMPILED_MAX_SIZE
 from .shapers import SHAPERS, lattice_unit, shaper_encode
 
 __all__ = [ "OUTPUT_ENCODINGS", "LOOKUP_CHUNK", "SHARES_PER_WORKER", "EagerTables", "apply_lut", "lookup", "chunked_lookup",
-           "untracked_lookup", "compiled_lookup", "decode_output", "encode_output", "table_output"]
+           "compiled_lookup", "decode_output", "encode_output", "table_output"]
 
 OUTPUT_ENCODINGS = ("linear", "srgb")
 """How table entries are stored: linear values, or sRGB-encoded values decoded after the lookup."""
@@ -143,7 +136,7 @@ def apply_lut(image: torch.Tensor, table: torch.Tensor, shaper: str = "linear", 
               curve_range=(0.0, 1.0), output_encoding: str = "linear") -> torch.Tensor:
     """Apply a 3D LUT to a linear image ``(..., 3, H, W)``; see the module docstring for the steps.
 
-    Non-finite pixels follow the library policy (:func:`torchgrade.base.core.sanitize`) before the
+    Non-finite pixels follow the library policy (:func:`torchgrade.base.images.sanitize`) before the
     shaper; inputs outside the domain clamp to it. Differentiable with respect to the image and the
     table; float16/bfloat16 are computed in float32.
 
@@ -209,7 +202,7 @@ def chunked_lookup(image, rows, size: int, *settings, pixels: Optional[int] = No
         >>> torch.equal(chunked_lookup(x, *args, pixels=7), lookup(x, *args))
         True
     """
-    if not untracked_lookup(image, rows):
+    if not untracked(image, rows):  # the eager forms record no gradient
         return lookup(image, rows, size, *settings)
     kernel = KERNELS[settings[3]]
     eager = kernel.eager if kernel.eager is not None and size <= kernel.eager.max_size else None
@@ -344,13 +337,6 @@ def _domain_columns(domain_min, domain_max, size: int, dtype) -> tuple:
     low = torch.as_tensor(domain_min, dtype=dtype).reshape(-1).expand(3).contiguous()
     span = torch.as_tensor(domain_max, dtype=dtype).reshape(-1).expand(3) - low
     return low, ((size - 1) / span).contiguous()
-
-
-def untracked_lookup(image: torch.Tensor, rows: torch.Tensor) -> bool:
-    """Whether :func:`chunked_lookup` may run an interpolation's eager form: untraced, no gradient flowing to the
-    image or the table."""
-    grad = torch.is_grad_enabled() and (image.requires_grad or rows.requires_grad)
-    return not grad and not is_tracing()
 
 
 def _eager_lookup(planes, result, rows, size, settings, pixels, eager, tables) -> None:

@@ -26,7 +26,8 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
-from ..base.core import HALF_MAX, check_choice, check_image, check_on_cpu, sanitize
+from ..base.images import HALF_MAX, check_image, check_on_cpu, sanitize
+from ..base.params import check_choice
 from .entries import ENTRY_CHOICES, SCENE_WEIGHT, fit_entries, scene_pixels
 from .fit import SCENE_FIT_WEIGHT, SCENE_MIN_SIZE, fit_scene_shaper, fit_shaper, refine_shaper
 from .lattice import MIN_SIZE, check_size, checked_domain, lattice

@@ -40,7 +40,7 @@ from typing import Optional
 
 import torch
 
-from ..base.core import sanitize
+from ..base.images import sanitize
 from ..color import linear_to_srgb
 from .kernels import KERNELS
 from .lattice import planar_table

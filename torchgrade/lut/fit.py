@@ -44,7 +44,7 @@ from typing import Callable
 import torch
 from tqdm import tqdm
 
-from ..base.core import HALF_MAX
+from ..base.images import HALF_MAX
 from ..color import linear_to_logc, linear_to_srgb, logc_to_linear
 from .validation import validation_colours
 

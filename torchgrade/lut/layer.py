@@ -9,14 +9,11 @@ from typing import Optional
 import torch
 from torch import nn
 
-from ..base.core import (
-    HALF_MAX,
-    check_choice,
-    is_tracing,
-    sanitize,
-    working_dtype,
-)
-from ..base.stage import Control, Stage, in_state_check
+from ..base.images import HALF_MAX, sanitize, working_dtype
+from ..base.params import check_choice
+from ..runtime.recording import is_tracing
+from ..base.controls import Control, in_state_check
+from ..base.stage import Stage
 from .kernels import BACKENDS, KERNELS
 from .lattice import MAX_CODE, check_size, checked_domain, planar_table
 from .apply import (
@@ -27,9 +24,9 @@ from .apply import (
     compiled_lookup,
     decode_output,
     encode_output,
-    untracked_lookup,
     table_output,
 )
+from ..runtime import untracked
 from .shapers import SHAPERS, lattice_unit
 
 __all__ = ["LUT3D", "LUTLookup", "entry_bound"]
@@ -182,7 +179,7 @@ class LUT3D(Stage):
     def _eager_tables(self, image: torch.Tensor, rows: torch.Tensor, interpolation: str) -> Optional[EagerTables]:
         """The eager forms' tables of ``rows`` (:meth:`rows`), cached with them (each derived on first use); ``None``
         while the lookup of ``image`` runs the gather form (gradients, tracing)."""
-        if not untracked_lookup(image, rows):
+        if not untracked(image, rows):
             return None
         cached_rows, cached_interpolation, tables = self._tables_cache
         if cached_rows is not rows or cached_interpolation != interpolation:

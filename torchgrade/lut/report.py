@@ -38,7 +38,7 @@ from typing import Callable, Optional
 
 import torch
 
-from ..base.core import HALF_MAX, sanitize
+from ..base.images import HALF_MAX, sanitize
 from ..color import linear_to_srgb
 from .shapers import SHAPERS
 from .validation import bright_saturated_colours

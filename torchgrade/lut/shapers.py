@@ -23,7 +23,7 @@ from typing import Optional
 
 import torch
 
-from ..base.core import HALF_MAX
+from ..base.images import HALF_MAX
 from ..color import linear_to_logc, logc_to_linear
 
 __all__ = ["Shaper", "LinearShaper", "LogCShaper", "LogCHDRShaper", "LogCExtendedShaper", "CurveShaper", "FittedShaper", "SHAPERS",

@@ -41,7 +41,7 @@ import math
 
 import torch
 
-from ..base.core import HALF_MAX
+from ..base.images import HALF_MAX
 from ..color import linear_to_logc, logc_to_linear
 from ..color.spaces import REC709_LUMINANCE
 from .shapers import LOGC_TOP

@@ -38,7 +38,7 @@ __all__ = ["INPUT_DOCS", "look_config", "describe"]
 
 INPUT_DOCS = {
     "image": "scene-linear RGB, Rec.709 primaries (D65); HDR, unbounded above; "
-             "non-finite values are sanitized (torchgrade.base.core.sanitize)",
+             "non-finite values are sanitized (torchgrade.base.images.sanitize)",
     "adapted": "previous frame's adapted luminance per sample, (batch,); <= 0 starts a sequence (instant adaptation)",
     "dt": "seconds since the previous frame, a scalar",
 }

@@ -18,7 +18,7 @@ import onnx as onnx_lib  # the onnx package (absolute import), not this package
 import torch
 from torch import nn
 
-from ..base.core import check_on_cpu
+from ..base.images import check_on_cpu
 from ..io.atomic import atomic_write
 from ..lut import BACKENDS
 from .describe import describe

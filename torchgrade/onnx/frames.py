@@ -32,7 +32,7 @@ import onnx as onnx_lib  # the onnx package (absolute import), not this package
 import torch
 from onnx import TensorProto, helper
 
-from ..base.core import check_image
+from ..base.images import check_image
 from ..color.transfer import linear_to_srgb, srgb_to_linear
 
 __all__ = ["LAYOUTS", "INPUT_DTYPES", "FLOAT_DTYPES", "OUTPUTS", "CODE_MAX", "FrameFormat", "frame_format", "read_frame_format", "metadata_of",
@@ -182,7 +182,7 @@ def encode_frame(image: torch.Tensor, output: str = "linear", dtype: torch.dtype
 
 
 def check_batch(image) -> torch.Tensor:
-    """``image`` if it is a look's input, a float ``(batch, 3, height, width)`` tensor (:func:`~torchgrade.base.core.check_image`
+    """``image`` if it is a look's input, a float ``(batch, 3, height, width)`` tensor (:func:`~torchgrade.base.images.check_image`
     and a batch axis); otherwise the error that names what it is.
 
     Examples:

@@ -23,7 +23,7 @@ from typing import Callable, Optional, Sequence
 import torch
 from torch import nn
 
-from ..base.core import nan_free
+from ..base.images import nan_free
 from ..grading.grade import color_grade
 from ..grading.layer import ColorGrade
 from ..lut import BACKENDS

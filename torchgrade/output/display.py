@@ -12,7 +12,8 @@ from __future__ import annotations
 import torch
 
 from .. import color
-from ..base.core import Param, check_image, is_plain_number, scalar_param
+from ..base.images import check_image
+from ..base.params import Param, is_plain_number, scalar_param
 from ..tonemap import HDR_MODES
 
 __all__ = ["encode_display", "display_settings", "DISPLAY_ENCODINGS", "DISPLAY_PRIMARIES", "DISPLAY_PRESETS",

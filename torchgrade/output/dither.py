@@ -23,15 +23,8 @@ from typing import Optional
 
 import torch
 
-from ..base.core import (
-    Param,
-    check_image,
-    is_constant,
-    sanitize,
-    scalar_param,
-    to_input_dtype,
-    working_dtype,
-)
+from ..base.images import check_image, sanitize, to_input_dtype, working_dtype
+from ..base.params import Param, is_constant, scalar_param
 from ..color import linear_to_srgb, srgb_to_linear
 
 __all__ = [ "dither", "dither_pattern", "tile_pattern", "DEFAULT_AMPLITUDE"]

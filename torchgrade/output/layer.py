@@ -8,8 +8,9 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from ..base.core import Param, check_range, is_constant
-from ..base.stage import Control, Stage, in_state_check, plain
+from ..base.params import Param, check_range, is_constant
+from ..base.controls import Control, in_state_check, plain
+from ..base.stage import Stage
 from ..lut import LUT3D, identity_table
 from ..runtime import in_strips
 from .display import DISPLAY_ENCODINGS, DISPLAY_PRIMARIES, HLG_PEAK_RANGE, encode_display

@@ -30,14 +30,8 @@ from pathlib import Path
 
 import torch
 
-from ..base.core import (
-    Param,
-    check_image,
-    sanitize,
-    scalar_param,
-    to_input_dtype,
-    working_dtype,
-)
+from ..base.images import check_image, sanitize, to_input_dtype, working_dtype
+from ..base.params import Param, scalar_param
 from ..color import linear_to_srgb, srgb_to_linear
 from ..lut import LUT3D
 

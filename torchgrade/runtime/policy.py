@@ -24,14 +24,16 @@ Examples:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from typing import Optional
 
 import torch
 
+from .constants import scalar
 from .recording import is_tracing
 
-__all__ = ["ExecutionPolicy", "policy_for", "STRIP_PIXELS_PER_THREAD", "PARALLEL_FROM", "LOOKUP_CHUNK", "ONE_KERNEL_BLUR_PIXELS",
+__all__ = ["ExecutionPolicy", "policy_for", "readable", "nonnegative", "pixel_layout", "STRIP_PIXELS_PER_THREAD", "PARALLEL_FROM", "LOOKUP_CHUNK", "ONE_KERNEL_BLUR_PIXELS",
            "CPU_HISTOGRAM_TABLES", "RESAMPLING_MATRIX_SIDE"]
 
 STRIP_PIXELS_PER_THREAD = 1 << 16
@@ -162,3 +164,44 @@ def policy_for(device: torch.device) -> ExecutionPolicy:
     return ExecutionPolicy(strip_pixels=STRIP_PIXELS_PER_THREAD * threads, workers=workers, lookup_chunk=LOOKUP_CHUNK,
                            reads_values=True, filters_as_kernels=False, histogram_tables=CPU_HISTOGRAM_TABLES,
                            histogram_row_groups=threads, resampling_matrix_side=RESAMPLING_MATRIX_SIDE["cpu"])
+
+
+def nonnegative(x: torch.Tensor) -> torch.Tensor:
+    """``max(x, 0)`` with NaN to 0 and +Inf kept, as a new tensor: one ``torch.fmax`` where the device's policy says
+    (:attr:`ExecutionPolicy.nan_dropping_max`), else a clamp and a NaN pass in place on it.
+
+    Examples:
+        >>> import math
+        >>> nonnegative(torch.tensor([-1.0, math.nan, 2.0, math.inf])).tolist()
+        [0.0, 0.0, 2.0, inf]
+    """
+    if policy_for(x.device).nan_dropping_max:
+        return torch.fmax(x, scalar(0.0, x))
+    return x.clamp_min(0.0).nan_to_num_(nan=0.0, posinf=math.inf)
+
+
+def pixel_layout(image: torch.Tensor, keepdim: bool = True):
+    """``image`` as its device's policy computes per-pixel chains on it: the image itself, or while compiling
+    (:attr:`ExecutionPolicy.pixel_planes`) its three planes as a tuple, each ``(..., 1, H, W)`` (``keepdim``) or
+    ``(..., H, W)``, which Inductor fuses into one kernel.
+
+    Examples:
+        >>> pixel_layout(torch.zeros(1, 3, 2, 2)).shape  # eager: the image
+        torch.Size([1, 3, 2, 2])
+    """
+    if not policy_for(image.device).pixel_planes:
+        return image
+    return image.split(1, dim=-3) if keepdim else image.unbind(-3)
+
+
+def readable(value) -> bool:
+    """Whether ``value`` can be checked in a forward pass without waiting for a device: a plain value, or a tensor
+    where the device's policy reads values (the CPU), outside tracing.
+
+    Examples:
+        >>> readable(0.5), readable(torch.tensor(0.5)), readable(torch.tensor(0.5, device="meta"))
+        (True, True, False)
+    """
+    if not isinstance(value, torch.Tensor):
+        return True
+    return not is_tracing() and policy_for(value.device).reads_values

@@ -17,6 +17,7 @@ Examples:
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
@@ -24,7 +25,7 @@ from typing import Callable, Iterable
 
 import torch
 
-__all__ = ["run_pieces", "worker_pool"]
+__all__ = ["run_pieces", "worker_pool", "one_thread"]
 
 _POOLS: dict = {}
 _LOCK = threading.Lock()
@@ -96,3 +97,24 @@ def run_pieces(work: Callable, pieces: Iterable, workers: int) -> None:
     for error in errors:
         if error is not None:
             raise error
+
+
+@contextlib.contextmanager
+def one_thread():
+    """Run the block with one intra-op CPU thread, then restore the count (thread-local under OpenMP and MKL).
+
+    Examples:
+        >>> import torch
+        >>> before = torch.get_num_threads()
+        >>> with one_thread():
+        ...     torch.get_num_threads()
+        1
+        >>> torch.get_num_threads() == before
+        True
+    """
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..base.core import sanitize
+from ..base.images import sanitize
 from ..color import linear_to_srgb
 from ..io import write_exr
 from ..io.atomic import atomic_write
@@ -111,7 +111,7 @@ def write_frame(path, image: torch.Tensor, depth: str, encoded: bool = False) ->
 
     Integer formats (PNG, 16-bit TIFF) hold sRGB-encoded light clamped to [0, 1], or with ``encoded`` a
     display's signal (:class:`~torchgrade.output.layer.Display`) as it is; EXR and float TIFF hold the values as they are.
-    Every format gets the non-finite policy's values (:func:`~torchgrade.base.core.sanitize`: NaN 0, ±Inf ±65504): a look
+    Every format gets the non-finite policy's values (:func:`~torchgrade.base.images.sanitize`: NaN 0, ±Inf ±65504): a look
     that changes nothing (no stage built) would otherwise write the input's NaN and Inf as they are.
 
     Examples:

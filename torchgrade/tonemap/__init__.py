@@ -19,9 +19,9 @@ Examples:
     [0.5, 0.5, 0.5]
 """
 
-from .aces1_reference import aces_reference
-from .aces2_curves import aces2_hdr, aces2_sdr
-from .aces_fits import aces, aces_fitted, aces_hill, aces_narkowicz
+from .aces1.reference import aces_reference
+from .aces2.curves import aces2_hdr, aces2_sdr
+from .aces1.fits import aces, aces_fitted, aces_hill, aces_narkowicz
 from .agx_curves import agx, agx_godot
 from .base import TONEMAP_INPUT_LIMIT, ToneMapper, no_tonemap
 from .hdr_range import bt2390_eetf, neutral_hdr

@@ -13,9 +13,9 @@ from typing import Callable, NamedTuple, Optional
 
 import torch
 
-from ..base.core import apply_matrix, untracked
-from ..base.stage import Control
-from ..runtime import is_exporting
+from ..base.planes import apply_matrix
+from ..base.controls import Control
+from ..runtime.variants import formula
 
 __all__ = ["TONEMAP_INPUT_LIMIT", "WHITE_POINT_RANGE", "ToneMapper", "limited", "display", "apply_rows", "no_tonemap"]
 
@@ -58,6 +58,7 @@ class ToneMapper(NamedTuple):
         return cls(curve, {name: Control(defaults[name].default, allowed) for name, allowed in ranges.items()}, prepare)
 
 
+@formula
 def limited(image: torch.Tensor, limit=TONEMAP_INPUT_LIMIT) -> torch.Tensor:
     """``clamp(image, 0, limit)``: black for negative (out-of-gamut) values, ``limit`` a number or a tensor.
 
@@ -65,9 +66,14 @@ def limited(image: torch.Tensor, limit=TONEMAP_INPUT_LIMIT) -> torch.Tensor:
         >>> limited(torch.tensor([-1.0, 0.5, 100.0])).tolist()
         [0.0, 0.5, 60.0]
     """
-    if isinstance(limit, numbers.Real) and (untracked(image) or is_exporting()):
-        return image.clamp(0.0, limit)  # exported, one Clip where the other form is a Clip and a Min
     return torch.minimum(image.clamp_min(0.0), torch.as_tensor(limit, dtype=image.dtype, device=image.device))
+
+
+@limited.variant("untracked", when=lambda image, limit=TONEMAP_INPUT_LIMIT: isinstance(limit, numbers.Real))
+@limited.variant("export", when=lambda image, limit=TONEMAP_INPUT_LIMIT: isinstance(limit, numbers.Real))
+def _limited_by_a_number(image: torch.Tensor, limit=TONEMAP_INPUT_LIMIT) -> torch.Tensor:
+    """One clamp (exported, one ``Clip`` where the other form is a ``Clip`` and a ``Min``)."""
+    return image.clamp(0.0, limit)
 
 
 def display(image: torch.Tensor, clip: bool) -> torch.Tensor:

@@ -6,10 +6,10 @@ import math
 
 import torch
 
-from ..base.core import Param, scalar_param
+from ..base.params import Param, scalar_param
 from ..color import convert, unity_to_aces
 from ..runtime import constant
-from .aces_rrt import (
+from .aces1.rrt import (
     ODT_SAT_FACTOR,
     RRT_SAT_FACTOR,
     ap1_desaturate,

@@ -13,7 +13,7 @@ from __future__ import annotations
 import torch
 
 from .. import color
-from ..base.core import Param, scalar_param
+from ..base.params import Param, scalar_param
 from .base import display
 
 __all__ = ["bt2390_eetf", "unity_reinhard_nits", "neutral_hdr", "NEUTRAL_HDR_RANGES", "HDR_PRIMARIES"]

@@ -6,8 +6,9 @@ import inspect
 
 import torch
 
-from ..base.core import Param
-from ..base.stage import Control, Stage, controls_signature
+from ..base.params import Param
+from ..base.controls import Control, controls_signature
+from ..base.stage import Stage
 from .registry import TONE_MAPPERS, TONEMAP_MODES, tone_mapped, tone_mapper
 
 __all__ = ["ToneMap"]

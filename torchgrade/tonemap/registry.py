@@ -8,26 +8,19 @@ from __future__ import annotations
 
 import torch
 
-from ..base.core import (
-    Param,
-    check_choice,
-    check_image,
-    nan_free,
-    sanitize,
-    to_input_dtype,
-    working_dtype,
-)
-from .aces1_reference import aces_reference
-from .aces2_curves import (
+from ..base.images import check_image, nan_free, sanitize, to_input_dtype, working_dtype
+from ..base.params import Param, check_choice
+from .aces1.reference import aces_reference
+from .aces2.curves import (
     ACES2_HDR_RANGES,
     aces2_hdr,
     aces2_sdr,
     prepare_aces2_hdr,
     prepare_aces2_sdr,
 )
-from .aces_fits import aces, aces_hill, aces_narkowicz
+from .aces1.fits import aces, aces_hill, aces_narkowicz
 from .agx_curves import agx, agx_godot
-from ..base.stage import check_given
+from ..base.controls import check_given
 from .base import WHITE_POINT_RANGE, ToneMapper, no_tonemap
 from .filmic_curves import (
     FILMIC_RANGES,
@@ -100,7 +93,7 @@ def tonemap(image: torch.Tensor, mode: str = "neutral", clip: bool = True, **par
     float32 and returned in their own dtype. ``clip=False`` skips the final clip to [0, 1] (used
     when baking a LUT that clips after its lookup, :func:`torchgrade.lut.bake_lut`). Parameters given as numbers are
     checked as :class:`~torchgrade.ToneMap` checks them (the mode's controls,
-    :func:`~torchgrade.base.stage.check_given`); tensors are taken as they are.
+    :func:`~torchgrade.base.controls.check_given`); tensors are taken as they are.
 
     Examples:
         >>> image = torch.full((1, 3, 1, 1), 8.0)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import torch
 
-from ..base.core import Param, scalar_param
+from ..base.params import Param, scalar_param
 from ..color import luminance
 from .base import display, limited
 

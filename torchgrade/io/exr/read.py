@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ...base.core import check_choice
+from ...base.params import check_choice
 from ...base.files import check_regular
 from ...color import REC709_CHROMATICITIES
 from .chromaticities import ADAPTATIONS, to_rec709_matrix

@@ -6,7 +6,7 @@ import numpy as np
 import OpenEXR
 import torch
 
-from ...base.core import check_image
+from ...base.images import check_image
 from ..atomic import atomic_write
 
 __all__ = ["write_exr"]

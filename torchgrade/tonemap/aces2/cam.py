@@ -18,9 +18,10 @@ from dataclasses import dataclass, field
 
 import torch
 
-from ...base.core import apply_matrix, matrix_on_planes, rows_on_planes, untracked
+from ...base.planes import apply_matrix, matrix_on_planes, rows_on_planes
 from ...color import rgb_to_xyz_matrix, safe_pow
-from ...runtime import affine, constant, is_exporting, values_of, where
+from ...runtime import affine, constant, values_of, where
+from ...runtime.variants import formula
 
 __all__ = ["CAM16_PRIMARIES", "JMhParams", "jmh_params", "rgb_to_aab", "rgb_to_aab_planes", "aab_to_jmh",
            "aab_planes_to_jmh", "jmh_to_rgb", "jmh_to_rgb_planes", "y_to_j", "a_to_y"]
@@ -78,12 +79,21 @@ def _expanded(r: torch.Tensor, divisor: float = 1.0) -> torch.Tensor:
     return safe_pow(r / affine(r, -scale, scale), 1.0 / 0.42)
 
 
+@formula
 def _signed_as(magnitude: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
-    """``sign(v) magnitude`` for a magnitude that is 0 where ``v`` is: one ``copysign``, exported as ``Sign`` and ``Mul``
-    (ONNX has no copysign)."""
-    if is_exporting():
-        return torch.sign(v) * magnitude
+    """``sign(v) magnitude`` for a magnitude that is 0 where ``v`` is: one ``copysign``.
+
+    Examples:
+        >>> _signed_as(torch.tensor([2.0, 0.0]), torch.tensor([-1.0, 0.0])).tolist()
+        [-2.0, 0.0]
+    """
     return torch.copysign(magnitude, v)
+
+
+@_signed_as.variant("export")
+def _signed_as_exported(magnitude: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+    """``Sign`` and ``Mul`` (ONNX has no copysign)."""
+    return torch.sign(v) * magnitude
 
 
 @dataclass(frozen=True)
@@ -173,20 +183,49 @@ def rgb_to_aab_planes(planes, p: JMhParams) -> tuple:
     return rows_on_planes(p.values["cone_to_aab"], cone)
 
 
+@formula
 def _safe_hypot_atan2(a: torch.Tensor, b: torch.Tensor):
     """``sqrt(a²+b²)`` and ``atan2(b, a)`` with finite gradients at the origin (hue 0 there).
 
     Below the smallest normal ``a²+b²`` counts as the origin: atan2's gradient divides by ``a²+b²``,
-    which a denormal turns into 0/0 (a grey pixel of 1e-38 in float32 did). Where nothing records a gradient,
-    ``hypot`` and ``atan2`` themselves (2 operations instead of 10; ``atan2(0, 0)`` is 0).
+    which a denormal turns into 0/0 (a grey pixel of 1e-38 in float32 did).
+
+    Examples:
+        >>> [[round(v, 6) for v in t.tolist()] for t in _safe_hypot_atan2(torch.tensor([3.0, 0.0]), torch.tensor([4.0, 0.0]))]
+        [[5.0, 0.0], [0.927295, 0.0]]
     """
-    if untracked(a, b):
-        return torch.hypot(a, b), torch.atan2(b, a)
     r2 = a * a + b * b
     zero = r2 <= torch.finfo(r2.dtype).tiny
     m = torch.sqrt(where(zero, 1.0, r2))
     hue = torch.atan2(where(zero, 0.0, b), where(zero, 1.0, a))
     return where(zero, 0.0, m), hue
+
+
+@_safe_hypot_atan2.variant("untracked")
+def _hypot_atan2(a: torch.Tensor, b: torch.Tensor):
+    """``hypot`` and ``atan2`` themselves: 2 operations instead of 10 (``atan2(0, 0)`` is 0)."""
+    return torch.hypot(a, b), torch.atan2(b, a)
+
+
+@formula
+def _hue_cos_sin(a: torch.Tensor, b: torch.Tensor, m: torch.Tensor, hue: torch.Tensor):
+    """The cosine and sine of the hue of ``(a, b)``, of magnitude ``m`` and angle ``hue``, from ``(a, b)`` directly:
+    ``(a / m, b / m)``, ``(1, 0)`` where ``m`` is 0 (as ``atan2`` gives hue 0 there).
+
+    Examples:
+        >>> a, b = torch.tensor([0.0, 3.0], dtype=torch.float64), torch.tensor([0.0, 4.0], dtype=torch.float64)
+        >>> [[round(v, 6) for v in t.tolist()] for t in _hue_cos_sin(a, b, torch.hypot(a, b), torch.atan2(b, a))]
+        [[1.0, 0.6], [0.0, 0.8]]
+    """
+    chromatic = m > 0
+    safe_m = where(chromatic, m, 1.0)
+    return where(chromatic, a / safe_m, 1.0), where(chromatic, b / safe_m, 0.0)
+
+
+@_hue_cos_sin.variant("untracked")
+def _hue_cos_sin_of_angle(a: torch.Tensor, b: torch.Tensor, m: torch.Tensor, hue: torch.Tensor):
+    """``cos`` and ``sin`` of the angle: 2 operations instead of 5."""
+    return torch.cos(hue), torch.sin(hue)
 
 
 def aab_to_jmh(aab: torch.Tensor, p: JMhParams, dim: int = -3):
@@ -211,13 +250,7 @@ def aab_planes_to_jmh(a_: torch.Tensor, a: torch.Tensor, b: torch.Tensor, p: JMh
     lit = a_ > 0
     j = J_SCALE * safe_pow(a_, p.cz)
     m, hue = _safe_hypot_atan2(a, b)
-    if untracked(a, b):  # 2 operations instead of 5; at the origin (1, 0), as atan2 gives 0 there
-        cos_h, sin_h = torch.cos(hue), torch.sin(hue)
-    else:
-        chromatic = lit & (m > 0)
-        safe_m = where(chromatic, m, 1.0)
-        cos_h = where(chromatic, a / safe_m, 1.0)
-        sin_h = where(chromatic, b / safe_m, 0.0)
+    cos_h, sin_h = _hue_cos_sin(a, b, m, hue)
     h = where(lit, torch.remainder(torch.rad2deg(hue), 360.0), 0.0)
     return j, where(lit, m, 0.0), h, cos_h, sin_h
 

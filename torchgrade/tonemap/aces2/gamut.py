@@ -15,7 +15,8 @@ from __future__ import annotations
 import torch
 
 from ...color import safe_pow, safe_sqrt
-from ...runtime import affine, constant, is_tracing, policy_for, values_of, where
+from ...runtime import affine, constant, values_of, where
+from ...runtime.variants import formula
 
 __all__ = ["count_below", "GamutParams", "gamut_compress", "focus_gain", "solve_j_intersect", "compression_slope",
            "hull_boundary_m", "focus_j"]
@@ -123,6 +124,7 @@ def _remap_m(m, gamut_m, reach_m):
     return torch.where(active, threshold + scale * nd / (1.0 + nd), m)
 
 
+@formula
 def count_below(table: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
     """How many entries of the ascending 1-D ``table`` lie below each ``x``: ``torch.searchsorted(table, x)``.
 
@@ -137,8 +139,12 @@ def count_below(table: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
         >>> count_below(table, x).tolist() == torch.searchsorted(table, x).tolist()
         True
     """
-    if not is_tracing():
-        return torch.searchsorted(table, x.contiguous())  # warns on a strided input
+    return torch.searchsorted(table, x.contiguous())  # warns on a strided input
+
+
+@count_below.variant("graph")
+def _count_below_in_halving_steps(table: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
+    """Halving steps of gathers (ONNX has no search operator)."""
     n = int(table.shape[0])  # a constant table: its size may be frozen into a traced graph
     count = torch.zeros(x.shape, dtype=torch.long, device=x.device)
     step = 1 << (n.bit_length() - 1)
@@ -214,6 +220,7 @@ def _segment_columns(knots: torch.Tensor, values: torch.Tensor) -> tuple:
     return values_of(torch.cat((rows[:1], rows)).T)
 
 
+@formula
 def _gathered_columns(table: torch.Tensor, index: torch.Tensor):
     """``(C, *index.shape)``: the columns ``index`` of a ``(C, K)`` table, each row of the table a plane (while
     compiling, a tuple of the ``C`` planes).
@@ -228,9 +235,13 @@ def _gathered_columns(table: torch.Tensor, index: torch.Tensor):
         >>> _gathered_columns(torch.tensor([[0.0, 10.0, 20.0], [1.0, 2.0, 3.0]]), torch.tensor([[2, 0]])).tolist()
         [[[20.0, 0.0]], [[3.0, 1.0]]]
     """
-    if policy_for(index.device).pixel_planes:
-        return tuple(row[index] for row in table)
     return table.index_select(1, index.reshape(-1)).view(table.shape[0], *index.shape)
+
+
+@_gathered_columns.variant("planes")
+def _gathered_rows(table: torch.Tensor, index: torch.Tensor) -> tuple:
+    """Each row gathered on its own, as a tuple of planes: loads of the pixels' loop."""
+    return tuple(row[index] for row in table)
 
 
 def gamut_compress(j, m, h, reach_m, p: GamutParams):

@@ -15,9 +15,11 @@ import weakref
 import torch
 
 from ... import color
-from ...base.core import check_image, each_plane, full_precision, matrix_on, sanitize
-from ...runtime import policy_for, values_of
-from ..aces_rrt import REC709_TO_AP0
+from ...base.images import check_image, full_precision, sanitize
+from ...base.planes import each_plane, matrix_on
+from ...runtime import values_of
+from ...runtime.policy import pixel_layout
+from ..aces1.rrt import REC709_TO_AP0
 from .cam import (
     REFERENCE_LUMINANCE,
     a_to_y,
@@ -252,11 +254,9 @@ def aces2_output(image: torch.Tensor, peak_luminance: float = 100.0, limiting_pr
     # The CAM's powers and the table lookups need float32 or better, whatever autocast is active.
     with full_precision():
         image = sanitize(image)
-        on_planes = policy_for(image.device).pixel_planes  # compiling: the chain on planes, fused into one kernel
-        linear = _display_linear(image.unbind(-3) if on_planes else image, peak, limiting_primaries,
-                                 display_primaries, input_space)
+        linear = _display_linear(pixel_layout(image, keepdim=False), peak, limiting_primaries, display_primaries, input_space)
         encoded = each_plane(lambda plane: _encoded(plane, encoding, peak), linear)
-        return torch.stack(encoded, dim=-3) if on_planes else encoded
+        return torch.stack(encoded, dim=-3) if isinstance(encoded, tuple) else encoded
 
 
 def _encoded(linear: torch.Tensor, encoding: str, peak: float) -> torch.Tensor:

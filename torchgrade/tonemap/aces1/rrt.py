@@ -13,15 +13,16 @@ import math
 
 import torch
 
-from ..base.core import apply_matrix, channel_max, channel_min, channel_sum, untracked
-from ..color import (
+from ...base.planes import apply_matrix, channel_max, channel_min, channel_sum
+from ...color import (
     AP0_CHROMATICITIES,
     MATRICES,
     MATRIX_VALUES,
     primaries_to_rec709_matrix,
     safe_sqrt,
 )
-from ..runtime import affine, constant, is_exporting, scalar, values_of, where
+from ...runtime import affine, constant, scalar, values_of, where
+from ...runtime.variants import formula
 
 __all__ = [
     "RRT_SAT_FACTOR",
@@ -117,13 +118,23 @@ def _sigmoid_shaper(x: torch.Tensor) -> torch.Tensor:
     return 0.5 + c * affine(torch.abs(c), -0.125, 0.5)
 
 
+@formula
 def _glow(yc: torch.Tensor, gain: torch.Tensor, mid: float) -> torch.Tensor:
-    """ACES ``glow_fwd``: full gain below 2/3·mid, none above 2·mid, ``gain (mid / yc - 1/2)`` between."""
-    if untracked(yc, gain) or is_exporting():
-        # yc clamped to the ramp gives gain (to float rounding) below it and exactly 0 above it, without selects.
-        return torch.div(scalar(mid, yc), yc.clamp(2.0 / 3.0 * mid, 2.0 * mid)).sub_(0.5).mul_(gain)
+    """ACES ``glow_fwd``: full gain below 2/3·mid, none above 2·mid, ``gain (mid / yc - 1/2)`` between.
+
+    Examples:
+        >>> [round(v, 6) for v in _glow(torch.tensor([0.0, 0.08, 1.0]), torch.tensor(0.05), 0.08).tolist()]
+        [0.05, 0.025, 0.0]
+    """
     between = gain * (mid / yc.clamp_min(2.0 / 3.0 * mid) - 0.5)
     return where(yc <= 2.0 / 3.0 * mid, gain, where(yc >= 2.0 * mid, 0.0, between))
+
+
+@_glow.variant("untracked")
+@_glow.variant("export")
+def _glow_clamped(yc: torch.Tensor, gain: torch.Tensor, mid: float) -> torch.Tensor:
+    """``yc`` clamped to the ramp gives ``gain`` (to float rounding) below it and exactly 0 above it, without selects."""
+    return torch.div(scalar(mid, yc), yc.clamp(2.0 / 3.0 * mid, 2.0 * mid)).sub_(0.5).mul_(gain)
 
 
 def smoothstep_hue_weight(centered_hue: torch.Tensor) -> torch.Tensor:
@@ -154,6 +165,7 @@ def cubic_basis_hue_weight(centered_hue: torch.Tensor) -> torch.Tensor:
     return 1.5 * torch.where(u < 1.0, inner, outer)
 
 
+@formula
 def rrt_glow_and_red_modifier(aces: torch.Tensor, hue_weight, tiny: float = UNITY_TINY) -> torch.Tensor:
     """The ACES RRT's first two modules on ACES2065-1 (RRT 1.0.3, ``rrt.ctl``).
 
@@ -166,18 +178,31 @@ def rrt_glow_and_red_modifier(aces: torch.Tensor, hue_weight, tiny: float = UNIT
         >>> torch.equal(rrt_glow_and_red_modifier(grey, smoothstep_hue_weight), grey)  # no saturation: no glow
         True
     """
-    if is_exporting():
-        return torch.cat(rrt_glow_and_red_modifier_planes(aces.split(1, dim=-3), hue_weight, tiny), dim=-3)
+    glowed, weight, toward_pivot = _glowed_and_red_terms(aces, hue_weight, tiny)
+    red, green_blue = glowed.split((1, 2), dim=-3)
+    return torch.cat((torch.addcmul(red, weight, toward_pivot, value=1.0 - _RRT_RED_SCALE), green_blue), dim=-3)
+
+
+@rrt_glow_and_red_modifier.variant("untracked")
+def _rrt_glow_and_red_modifier_in_place(aces: torch.Tensor, hue_weight, tiny: float = UNITY_TINY) -> torch.Tensor:
+    """The red modifier in place on the glow's product (made here), which it returns."""
+    glowed, weight, toward_pivot = _glowed_and_red_terms(aces, hue_weight, tiny)
+    glowed.narrow(-3, 0, 1).addcmul_(weight, toward_pivot, value=1.0 - _RRT_RED_SCALE)
+    return glowed
+
+
+@rrt_glow_and_red_modifier.variant("export")
+def _rrt_glow_and_red_modifier_exported(aces: torch.Tensor, hue_weight, tiny: float = UNITY_TINY) -> torch.Tensor:
+    """On planes (:func:`rrt_glow_and_red_modifier_planes`), joined."""
+    return torch.cat(rrt_glow_and_red_modifier_planes(aces.split(1, dim=-3), hue_weight, tiny), dim=-3)
+
+
+def _glowed_and_red_terms(aces: torch.Tensor, hue_weight, tiny: float) -> tuple:
+    """The glow applied, and the red modifier's weight ``w(h) s`` and pull ``0.03 - r`` on the glowed image."""
     saturation = _rgb_saturation(aces, tiny)
     s = _sigmoid_shaper(affine(saturation, 5.0, -2.0))  # (s - 0.4) / 0.2
-    aces = torch.addcmul(aces, aces, _glow(_rgb_yc(aces), _RRT_GLOW_GAIN * s, _RRT_GLOW_MID))
-
-    red, green_blue = aces.split((1, 2), dim=-3)
-    weight, toward_pivot = hue_weight(_red_centered_hue(aces)) * saturation, _RRT_RED_PIVOT - red
-    if untracked(aces, weight):
-        red.addcmul_(weight, toward_pivot, value=1.0 - _RRT_RED_SCALE)  # in place: aces is the glow's product, made above
-        return aces
-    return torch.cat((torch.addcmul(red, weight, toward_pivot, value=1.0 - _RRT_RED_SCALE), green_blue), dim=-3)
+    glowed = torch.addcmul(aces, aces, _glow(_rgb_yc(aces), _RRT_GLOW_GAIN * s, _RRT_GLOW_MID))
+    return glowed, hue_weight(_red_centered_hue(glowed)) * saturation, _RRT_RED_PIVOT - glowed.narrow(-3, 0, 1)
 
 
 def rrt_glow_and_red_modifier_planes(planes, hue_weight, tiny: float = UNITY_TINY) -> tuple:
@@ -200,17 +225,22 @@ def rrt_glow_and_red_modifier_planes(planes, hue_weight, tiny: float = UNITY_TIN
     return r + change, g, b
 
 
+@formula
 def _red_centered_hue(rgb: torch.Tensor) -> torch.Tensor:
     """The hue in degrees relative to red's (``_RRT_RED_HUE``, 0°), in (-180, 180]: ``hue - 0`` wrapped.
 
     Eager, that is ``atan2`` itself, which also gives 0 for neutrals: the hue's shift into [0, 360) and
     back is skipped (it moved hues below 0° by float rounding, 3e-5° at most).
     """
-    if untracked(rgb):
-        r, g, b = rgb.split(1, dim=-3)
-        return torch.atan2((g - b).mul_(3.0**0.5), (2.0 * r).sub_(g).sub_(b)).mul_(180.0 / math.pi)
     centered = _rgb_hue_degrees(rgb) - _RRT_RED_HUE
     return torch.where(centered < -180.0, centered + 360.0, torch.where(centered > 180.0, centered - 360.0, centered))
+
+
+@_red_centered_hue.variant("untracked")
+def _red_centered_hue_of_atan2(rgb: torch.Tensor) -> torch.Tensor:
+    """``atan2`` itself, in place on its temporaries."""
+    r, g, b = rgb.split(1, dim=-3)
+    return torch.atan2((g - b).mul_(3.0**0.5), (2.0 * r).sub_(g).sub_(b)).mul_(180.0 / math.pi)
 
 
 def _red_hue_distance(r: torch.Tensor, g: torch.Tensor, b: torch.Tensor) -> torch.Tensor:

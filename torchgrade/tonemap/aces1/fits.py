@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import torch
 
-from ..base.core import apply_matrix, matrix_on_planes, rows_on_planes, untracked
-from ..color import AP1_LUMINANCE, MATRICES, MATRIX_VALUES, convert, unity_to_aces
-from ..color.spaces import shared_matrix
-from ..runtime import affine, constant, is_exporting, policy_for, values_of, where
-from .aces_rrt import (
+from ...base.planes import apply_matrix, matrix_on_planes, rows_on_planes
+from ...color import AP1_LUMINANCE, MATRICES, MATRIX_VALUES, convert, unity_to_aces
+from ...color.spaces import shared_matrix
+from ...runtime import affine, constant, values_of, where
+from ...runtime.variants import formula
+from .rrt import (
     AP1_TO_REC709,
     DIM_SURROUND_GAMMA,
     ODT_SAT_FACTOR,
@@ -17,7 +18,7 @@ from .aces_rrt import (
     rrt_glow_and_red_modifier_planes,
     smoothstep_hue_weight,
 )
-from .base import apply_rows, display, limited
+from ..base import apply_rows, display, limited
 
 __all__ = ["aces_fitted", "aces_fitted_planes", "aces", "aces_hill", "aces_narkowicz"]
 
@@ -48,17 +49,35 @@ def _dim_surround_planes(big_x: torch.Tensor, big_y: torch.Tensor, big_z: torch.
     """Unity's ``darkSurround_to_dimSurround`` on the planes of XYZ: ``Y → Y^0.9811`` in xyY, chromaticity kept, with 1e-4 floors."""
     total = (big_x + big_y + big_z).clamp_min(1e-4)
     x, y = big_x / total, big_y / total
-    new_y = big_y.clamp(0.0, 65504.0)
-    if is_exporting():
-        new_y = torch.exp(torch.log(new_y) * DIM_SURROUND_GAMMA)  # Y is clamped: safe_pow's form without its clamp (no Where, no Pow)
-    elif untracked(new_y):
-        new_y = new_y.pow_(DIM_SURROUND_GAMMA)  # the guard only keeps the gradient at 0 finite: 0^0.9811 is 0
-    else:
-        new_y = where(new_y > 0, where(new_y > 0, new_y, 1.0) ** DIM_SURROUND_GAMMA, new_y)
+    new_y = _dim_surround_power(big_y.clamp(0.0, 65504.0))
     m = new_y / y.clamp_min(1e-4)
     return x * m, new_y, (1.0 - x - y) * m
 
 
+@formula
+def _dim_surround_power(y: torch.Tensor) -> torch.Tensor:
+    """``y^0.9811`` on ``y`` in [0, 65504], with a finite gradient at 0.
+
+    Examples:
+        >>> _dim_surround_power(torch.tensor([0.0, 1.0])).tolist()
+        [0.0, 1.0]
+    """
+    return where(y > 0, where(y > 0, y, 1.0) ** DIM_SURROUND_GAMMA, y)
+
+
+@_dim_surround_power.variant("export")
+def _dim_surround_power_exported(y: torch.Tensor) -> torch.Tensor:
+    """``y`` is bounded: :func:`~torchgrade.color.safe_pow`'s export form without its clamp (no ``Where``, no ``Pow``)."""
+    return torch.exp(torch.log(y) * DIM_SURROUND_GAMMA)
+
+
+@_dim_surround_power.variant("untracked")
+def _dim_surround_power_in_place(y: torch.Tensor) -> torch.Tensor:
+    """In place on ``y`` (a temporary of its caller): the guard only keeps the gradient at 0 finite, and 0^0.9811 is 0."""
+    return y.pow_(DIM_SURROUND_GAMMA)
+
+
+@formula
 def aces_fitted(aces: torch.Tensor) -> torch.Tensor:
     """Unity ``AcesTonemap`` on ACES2065-1 input: RRT glow and red modifier, desaturation, the luminance
     fit ``x (a x + b) / (x (c x + d) + e)`` of RRT+ODT (RGB monitor, 100 nits, dim), dim surround,
@@ -68,13 +87,19 @@ def aces_fitted(aces: torch.Tensor) -> torch.Tensor:
         >>> round(float(aces_fitted(torch.zeros(3, 1, 1)).max()), 6)
         0.0
     """
-    if is_exporting():
-        # The RRT's planes go into the next matrix as they are (matrix_on_planes), without a Concat and a Split (the
-        # matrices on planes too, as 9 products by constants and 6 sums, would add 38 nodes).
-        planes = rrt_glow_and_red_modifier_planes(aces.split(1, dim=-3), smoothstep_hue_weight)
-        ap1 = matrix_on_planes(shared_matrix("ap0_to_ap1", aces), planes)
-    else:
-        ap1 = convert(rrt_glow_and_red_modifier(aces, smoothstep_hue_weight), "ap0_to_ap1")
+    return _fitted_from_ap1(convert(rrt_glow_and_red_modifier(aces, smoothstep_hue_weight), "ap0_to_ap1"))
+
+
+@aces_fitted.variant("export")
+def _aces_fitted_exported(aces: torch.Tensor) -> torch.Tensor:
+    """The RRT's planes go into the next matrix as they are (``matrix_on_planes``), without a ``Concat`` and a
+    ``Split`` (the matrices on planes too, as 9 products by constants and 6 sums, would add 38 nodes)."""
+    planes = rrt_glow_and_red_modifier_planes(aces.split(1, dim=-3), smoothstep_hue_weight)
+    return _fitted_from_ap1(matrix_on_planes(shared_matrix("ap0_to_ap1", aces), planes))
+
+
+def _fitted_from_ap1(ap1: torch.Tensor) -> torch.Tensor:
+    """:func:`aces_fitted` after the RRT's glow and red modifier, from AP1."""
     acescg = apply_matrix(constant(_RRT_DESATURATE_VALUES, ap1), ap1.clamp_min(0.0))
     xyz = convert(_fit(acescg), "ap1_to_xyz")
     # the dim surround's planes go into the last matrix as they are, without a concatenation
@@ -96,6 +121,7 @@ def aces_fitted_planes(planes) -> tuple:
     return rows_on_planes(_ODT_TAIL_VALUES, _dim_surround_planes(*xyz))
 
 
+@formula
 def aces(image: torch.Tensor, clip: bool = True) -> torch.Tensor:
     """ACES filmic tone mapping as Unity does it: ``AcesTonemap(unity_to_ACES(min(x, 60)))`` (HDR §3.5).
 
@@ -103,10 +129,14 @@ def aces(image: torch.Tensor, clip: bool = True) -> torch.Tensor:
         >>> [round(v, 3) for v in aces(torch.tensor([0.18, 1.0, 100.0]).expand(3, 1, 3))[0, 0].tolist()]
         [0.108, 0.63, 0.945]
     """
-    if policy_for(image.device).pixel_planes:
-        scene = rows_on_planes(MATRIX_VALUES["srgb_to_ap0"], limited(image).unbind(-3))
-        return torch.stack([display(plane, clip) for plane in aces_fitted_planes(scene)], dim=-3)
     return display(aces_fitted(unity_to_aces(limited(image))), clip)
+
+
+@aces.variant("planes")
+def _aces_on_planes(image: torch.Tensor, clip: bool = True) -> torch.Tensor:
+    """Step by step on the image's planes (:func:`aces_fitted_planes`), which a compiler fuses into one kernel."""
+    scene = rows_on_planes(MATRIX_VALUES["srgb_to_ap0"], limited(image).unbind(-3))
+    return torch.stack([display(plane, clip) for plane in aces_fitted_planes(scene)], dim=-3)
 
 
 _HILL_INPUT = ((0.59719, 0.35458, 0.04823), (0.07600, 0.90834, 0.01566), (0.02840, 0.13383, 0.83777))

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import torch
 
-from .aces2 import aces2_output
-from .aces2.transform import Prepared, peak_number, prepare_output
+from .transform import aces2_output
+from .transform import Prepared, peak_number, prepare_output
 
 __all__ = ["aces2_sdr", "aces2_hdr", "prepare_aces2_sdr", "prepare_aces2_hdr", "ACES2_HDR_RANGES"]
 

@@ -6,10 +6,10 @@ import math
 
 import torch
 
-from ..base.core import HALF_MAX
-from ..color import convert
-from ..runtime import constant, values_of
-from .aces_rrt import (
+from ...base.images import HALF_MAX
+from ...color import convert
+from ...runtime import constant, values_of
+from .rrt import (
     ACES_TINY,
     ODT_SAT_FACTOR,
     RRT_SAT_FACTOR,
@@ -20,7 +20,7 @@ from .aces_rrt import (
     rec709_to_aces,
     rrt_glow_and_red_modifier,
 )
-from .base import display
+from ..base import display
 
 __all__ = ["aces_reference"]
 

@@ -1,0 +1,243 @@
+"""Images and their checks: shape and dtype, an alpha channel passed through, 8-bit pictures, the non-finite policy
+and the precision a stage computes in.
+
+* Images are float tensors ``(..., 3, H, W)`` (a stage also takes ``(..., 4, H, W)``, its alpha passed through:
+  :func:`with_alpha`); anything else is a ``TypeError`` (dtype) or a ``ValueError`` (shape), with a message naming
+  the problem and the caller's shape.
+* **Non-finite policy** (:func:`sanitize`): NaN becomes 0 and every value is bounded to
+  ``[-HALF_MAX, HALF_MAX]`` (±65504, the range of the half-float HDR buffers that engines render
+  to), so ±Inf becomes ±65504. Stages that mix pixels (bloom, metering) or raise values to powers
+  apply it first, so one bad pixel never spreads and intermediate sums never overflow in float32.
+  Scene-referred values inside that range are never clamped.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import contextvars
+import warnings
+
+import torch
+
+from ..runtime.policy import readable
+from ..runtime.recording import is_exporting, is_tracing
+from ..runtime.strips import named_as
+from ..runtime.workers import one_thread
+
+__all__ = ["HALF_MAX", "NEGLIGIBLE_LIGHT", "check_image", "with_alpha", "warn_if_eight_bit", "check_on_cpu", "sanitize", "nan_free",
+           "working_dtype", "to_input_dtype", "full_precision"]
+
+HALF_MAX = 65504.0
+"""Largest finite half-float value: the bound of the non-finite policy."""
+
+
+NEGLIGIBLE_LIGHT = 1e-10
+"""Light below this is black at any exposure a display shows (2^-33 of white). Divisions by a quantity of light
+(a hue's chroma, a block's mean) take such values as black, or divide by at least this: squared, a float32
+denormal underflows to 0, and the division's gradient to infinity."""
+
+
+def check_image(image: torch.Tensor, name: str = "image", alpha: bool = False) -> None:
+    """Raise a clear error unless ``image`` is a non-empty floating tensor shaped ``(..., 3, H, W)`` (with ``alpha``, also
+    ``(..., 4, H, W)``: colour and alpha).
+
+    Examples:
+        >>> check_image(torch.zeros(1, 4, 2, 2))
+        Traceback (most recent call last):
+        ...
+        ValueError: image must have shape (..., 3, H, W) with 3 colour channels, got (1, 4, 2, 2)
+    """
+    if not isinstance(image, torch.Tensor):
+        raise TypeError(f"{name} must be a torch.Tensor, got {type(image).__name__}")
+    if not image.is_floating_point():
+        raise TypeError(
+            f"{name} must be a floating-point tensor (float16, bfloat16, float32 or float64), got {image.dtype}; "
+            "an 8-bit image holds sRGB codes: tg.color.srgb_to_linear(image.float() / 255) gives the linear light a "
+            'stage takes, and RandomPostFX(input_space="srgb") grades image.float() / 255 as it is'
+        )
+    channels = (3, 4) if alpha else (3,)
+    if image.dim() < 3 or image.shape[-3] not in channels:
+        with_alpha = ", or (..., 4, H, W) with alpha" if alpha else ""
+        raise ValueError(f"{name} must have shape (..., 3, H, W) with 3 colour channels{with_alpha}, got {tuple(image.shape)}")
+    if image.numel() == 0:
+        raise ValueError(f"{name} is empty: shape {tuple(image.shape)}")
+
+
+def with_alpha(function, image: torch.Tensor, *args, **kwargs) -> torch.Tensor:
+    """``function(image, *args, **kwargs)`` for a checked ``(..., 3, H, W)`` image; for ``(..., 4, H, W)``, ``function`` of the
+    colour channels with the fourth (alpha) appended unchanged, as OpenColorIO and compositors grade RGBA. An error
+    naming the colour's shape names the caller's.
+
+    Examples:
+        >>> rgba = torch.tensor([1.0, 2.0, 3.0, 0.5]).reshape(1, 4, 1, 1)
+        >>> with_alpha(lambda x: x * 2, rgba).flatten().tolist()
+        [2.0, 4.0, 6.0, 0.5]
+    """
+    check_image(image, alpha=True)
+    if image.shape[-3] == 3:
+        return function(image, *args, **kwargs)
+    colour, alpha = image.split((3, 1), dim=-3)
+    with named_as(colour.shape, image.shape):
+        return torch.cat((function(colour, *args, **kwargs), alpha), dim=-3)
+
+
+EIGHT_BIT_ROWS = 8
+"""Rows :func:`warn_if_eight_bit` reads at most (at least half as many), evenly spaced, of the colour of the first image
+of a batch: whole rows, read in order. In the cinematic look at 1920x1080 (CPU time, one thread) the check took 0.24 ms
+a stage call, 0.3 % of the frame; 64x64 values spread over the frame took 0.39 ms (a cache line fetched per value)."""
+
+
+EIGHT_BIT_LEVELS = 16
+"""Different whole numbers from which a sample reads as an 8-bit picture: a photograph's 8 rows hold far more (the
+sample pictures of the suite: every one above 60), a synthetic HDR frame of whole-number lamps on black a handful."""
+
+
+def warn_if_eight_bit(image: torch.Tensor) -> None:
+    """Warn when a linear ``image`` looks like 0..255 data: a sample of it holds whole numbers only, at least
+    :data:`EIGHT_BIT_LEVELS` different ones, none negative, the largest in (1, 255]. Such floats taken as light come out
+    nearly white; an HDR frame holds fractions, and a frame of a few whole levels (a test pattern of lamps of 8 and
+    60 on black) is no 8-bit picture. Only where the device's policy reads values (the CPU, :func:`readable`): on a
+    GPU the read would wait for the device at every frame.
+
+    Examples:
+        >>> import warnings
+        >>> with warnings.catch_warnings(record=True) as caught:
+        ...     warnings.simplefilter("always")
+        ...     warn_if_eight_bit(torch.arange(48.0).reshape(3, 4, 4) * 5)
+        >>> "divide by 255" in str(caught[0].message)
+        True
+    """
+    if not readable(image):
+        return
+    first = image.detach()[(0,) * (image.dim() - 3)][:3]  # colour, without an alpha
+    sample = first[:, :: max(1, first.shape[-2] // EIGHT_BIT_ROWS)]
+    with one_thread():  # tens of thousands of values: a parallel region's barrier would cost more on a loaded machine
+        low, high = torch.stack(sample.aminmax()).tolist()  # one read
+        eight_bit = (0.0 <= low < high and 1.0 < high <= 255.0 and torch.equal(sample, sample.round())
+                     and sample.unique().numel() >= EIGHT_BIT_LEVELS)  # counted only where the rest holds: almost never
+    if eight_bit:
+        warnings.warn(
+            f"the image looks like 0..255 data (whole numbers up to {high:g}), but stages take linear light: divide "
+            "by 255, and decode sRGB-encoded pictures (PNG, JPEG) with tg.color.srgb_to_linear or grade them with "
+            'RandomPostFX(input_space="srgb")', UserWarning, stacklevel=3)
+
+
+_NAN_FREE = contextvars.ContextVar("nan_free", default=None)
+
+
+def sanitize(image: torch.Tensor) -> torch.Tensor:
+    """Apply the non-finite policy: NaN -> 0, values bounded to [-65504, 65504] (so ±Inf -> ±65504).
+
+    ``clamp`` keeps NaN, so the clamped copy is then fixed in place: one new frame instead of two. Inside
+    :func:`nan_free` for this very tensor only the bound is applied.
+
+    Examples:
+        >>> sanitize(torch.tensor([float('nan'), float('inf'), -1.0])).tolist()
+        [0.0, 65504.0, -1.0]
+    """
+    bounded = image.clamp(-HALF_MAX, HALF_MAX)
+    exporting = is_exporting()
+    if (exporting or not is_tracing()) and _NAN_FREE.get() is image:  # a compiler would break its graph to read it
+        return bounded
+    if not exporting:
+        return bounded.nan_to_num_(nan=0.0)
+    # NaN is found on the input itself: OpenVINO's Clip turns NaN into its lower bound (the clamped copy's NaN came
+    # out -65504 there); and nan_to_num would export a second Clip, to the dtype's range, a copy of the frame.
+    return torch.where(torch.isnan(image), 0.0, bounded)
+
+
+@contextlib.contextmanager
+def nan_free(image: torch.Tensor):
+    """Within the block, :func:`sanitize` of ``image`` (this tensor object) only bounds it: the caller knows that
+    ``image`` holds no NaN (the output of a stage, which never makes one: ``tests/library/test_extremes.py``), so
+    the NaN pass over the frame (a kernel, or ``IsNaN`` and ``Where`` in an exported graph) is left out.
+
+    Examples:
+        >>> x = torch.tensor([float('nan'), 1e6])
+        >>> sanitize(x).tolist()
+        [0.0, 65504.0]
+        >>> with nan_free(x):
+        ...     sanitize(x).tolist()  # trusted: only bounded
+        [nan, 65504.0]
+
+    While ``torch.compile`` traces, nothing: a compiled :func:`sanitize` does not look (Dynamo cannot trace a context
+    variable, and the compiler fuses the NaN pass into its neighbours).
+    """
+    if torch.compiler.is_compiling():
+        yield
+        return
+    token = _NAN_FREE.set(image)
+    try:
+        yield
+    finally:
+        _NAN_FREE.reset(token)
+
+
+def check_on_cpu(transform, what: str) -> None:
+    """Raise ``ValueError`` naming the devices when ``transform`` (an ``nn.Module``) holds tensors off the CPU.
+
+    Baking and ONNX export evaluate on the CPU; a look trained on a GPU is moved with ``look.cpu()``.
+
+    Examples:
+        >>> module = torch.nn.Module()
+        >>> module.register_buffer("table", torch.zeros(2, device="meta"))
+        >>> check_on_cpu(module, "bake_lut")
+        Traceback (most recent call last):
+        ValueError: bake_lut evaluates on the CPU, but the look holds tensors on meta: pass look.cpu()
+    """
+    if not isinstance(transform, torch.nn.Module):
+        return
+    devices = sorted({str(t.device) for t in (*transform.parameters(), *transform.buffers()) if t.device.type != "cpu"})
+    if devices:
+        raise ValueError(f"{what} evaluates on the CPU, but the look holds tensors on {', '.join(devices)}: pass look.cpu()")
+
+
+_LOW_PRECISION = (torch.float16, torch.bfloat16)
+
+
+def working_dtype(image: torch.Tensor) -> torch.Tensor:
+    """float16/bfloat16 images are computed in float32 (no silent overflow); others as they are.
+
+    Examples:
+        >>> working_dtype(torch.zeros(1, dtype=torch.float16)).dtype, working_dtype(torch.zeros(1, dtype=torch.float64)).dtype
+        (torch.float32, torch.float64)
+    """
+    return image.float() if image.dtype in _LOW_PRECISION else image
+
+
+def to_input_dtype(result: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
+    """Cast a float32 result back to the input's low-precision dtype, bounded to its finite range.
+
+    Examples:
+        >>> half = torch.zeros(1, dtype=torch.float16)
+        >>> to_input_dtype(torch.tensor([1e6]), half).tolist()  # bounded to half's finite range
+        [65504.0]
+    """
+    if result.dtype == image.dtype:
+        return result
+    return result.clamp(-HALF_MAX, HALF_MAX).to(image.dtype)
+
+
+_AUTOCAST_DEVICES = ("cpu", "cuda")
+
+
+@contextlib.contextmanager
+def full_precision():
+    """Turn off every active ``torch.autocast`` for the block: torchgrade's maths keeps float32 or better.
+
+    Autocast would run the colour matrices (``einsum``) and FFTs in bfloat16/float16 whatever the
+    input's dtype, 43 8-bit codes off on a real image; reduced precision is instead chosen by the
+    input's dtype (:func:`working_dtype`). Inactive autocast costs nothing: no context is entered.
+
+    Examples:
+        >>> with torch.autocast("cpu", dtype=torch.bfloat16), full_precision():
+        ...     (torch.ones(2, 2) @ torch.ones(2, 2)).dtype
+        torch.float32
+    """
+    # One device a level, as plain ``with`` blocks: torch.compile traces those (an ExitStack's enter_context it refuses).
+    device = next((device for device in _AUTOCAST_DEVICES if torch.is_autocast_enabled(device)), None)
+    if device is None:
+        yield
+        return
+    with torch.autocast(device, enabled=False), full_precision():
+        yield
