@@ -45,6 +45,7 @@ MOVED = {
     "torchgrade.lut.lut3d": ("torchgrade.lut.apply", "torchgrade.lut.layer"),
     "torchgrade.cli.shot": ("torchgrade.shots.frames",),
     "torchgrade.cli.outputs": ("torchgrade.shots.outputs",),
+    "torchgrade.output.look": ("torchgrade.output.look_lut",),
     "torchgrade.tonemap.aces_rrt": ("torchgrade.tonemap.aces1.rrt",),
     "torchgrade.tonemap.aces_fits": ("torchgrade.tonemap.aces1.fits",),
     "torchgrade.tonemap.aces1_reference": ("torchgrade.tonemap.aces1.reference",),

@@ -22,7 +22,7 @@ OLD_NAMES = {
     "torchgrade.cli.shot": "render_frame", "torchgrade.cli.outputs": "write_frame",
     "torchgrade.tonemap.aces_rrt": "smoothstep_hue_weight", "torchgrade.tonemap.aces_fits": "aces_hill",
     "torchgrade.tonemap.aces1_reference": "aces_reference", "torchgrade.tonemap.aces2_curves": "aces2_sdr",
-    "torchgrade.base.core": "apply_matrix",
+    "torchgrade.base.core": "apply_matrix", "torchgrade.output.look": "look_lut",
 }
 
 

@@ -12,11 +12,12 @@ PREDICATES = ("is_exporting", "is_tracing", "policy_for", "untracked", "is_compi
 """The questions about where a call runs (exporting, tracing, compiling, which device, whether a gradient is recorded)."""
 RUNTIME_PACKAGES = ("runtime", "onnx")
 """The packages whose job is to answer them."""
-MOST_PREDICATE_CALLS = 28
-"""Calls of :data:`PREDICATES` allowed outside :data:`RUNTIME_PACKAGES` (65 before the variants): the checks a stage
-skips while a graph is recorded, the non-finite policy's trusted inputs, the device policy's filter forms in bloom, the
-saturation matrix's folding and the LUT's eager-loop choice. A form of a formula goes in
-:mod:`torchgrade.runtime.variants` instead, and this number only goes down."""
+MOST_PREDICATE_CALLS = 15
+"""Calls of :data:`PREDICATES` allowed outside :data:`RUNTIME_PACKAGES` (65 before the variants): the non-finite
+policy's trusted inputs (``base/images.py``, ``look/postfx.py``), whether a control is a known constant
+(``base/params.py``), the device policy's sizes for one bloom blur and for resampling matrices, the metering's
+histogram tables, the saturation matrix's folding and the LUT's eager-loop choice and table cache. A form of a formula
+goes in :mod:`torchgrade.runtime.variants` instead, and this number only goes down."""
 
 
 def predicate_calls() -> list:

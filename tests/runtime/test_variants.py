@@ -10,6 +10,7 @@ import pytest
 import torch
 
 import torchgrade  # noqa: F401  (imports every maths module, so that FORMULAS holds every formula)
+from torchgrade.runtime.recording import untracked
 from torchgrade.runtime.variants import CONTEXTS, FORMULAS, Variant
 from torchgrade.tonemap.aces1.rrt import cubic_basis_hue_weight, smoothstep_hue_weight
 
@@ -57,6 +58,13 @@ def signed_as_arguments(v):
     return v.abs().flip(0) * (v != 0), v
 
 
+def light(dtype, height, width):
+    """A ``(1, 3, height, width)`` frame of light: a seeded random field with a bright pixel in a corner."""
+    frame = torch.rand(1, 3, height, width, generator=torch.Generator().manual_seed(height * 1000 + width), dtype=torch.float64)
+    frame[..., 0, -1] = 60.0
+    return frame.to(dtype)
+
+
 def matrix(dtype):
     """A colour matrix with negative coefficients (sRGB to AP1's inverse direction and back)."""
     return torch.tensor([[1.7050, -0.6217, -0.0833], [-0.1302, 1.1408, -0.0106], [-0.0240, -0.1290, 1.1530]], dtype=dtype)
@@ -102,6 +110,15 @@ ARGUMENTS = {
     "torchgrade.base.planes.matrix_on_planes": lambda dtype: [(matrix(dtype), colours(dtype).split(1, dim=-3))],
     "torchgrade.base.planes.channel_sum": lambda dtype: [(colours(dtype), (0.2126, 0.7152, 0.0722)), (colours(dtype).split(1, dim=-3), (1.0, -2.0, 0.5))],
     "torchgrade.base.planes.bounded_pow": lambda dtype: [(finite_edges(dtype), e) for e in (0.5, 1.0, 2.4, torch.tensor(1.7, dtype=dtype))],
+    "torchgrade.bloom.pyramid.active_levels": lambda dtype: [(torch.zeros(1, 3, h, w, dtype=dtype), 16, 2)
+                                                             for h, w in ((1080, 1920), (37, 53), (1, 1), (64, 9))],
+    "torchgrade.bloom.pyramid.halve": lambda dtype: [(light(dtype, h, w),) for h, w in ((8, 6), (7, 6), (1, 1), (2, 2))],
+    "torchgrade.bloom.pyramid.expand": lambda dtype: [(light(dtype, 3, 4), size) for size in ((6, 8), (5, 7), (6, 7))],
+    "torchgrade.bloom.pyramid.upsample": lambda dtype: [(light(dtype, 3, 5), sizes, bicubic) for bicubic in (False, True)
+                                                        for sizes in ([(6, 10)], [(6, 10), (12, 20)], [(5, 9), (9, 17)])],
+    "torchgrade.bloom.blur.mirror_pad": lambda dtype: [(light(dtype, 5, 7), radius) for radius in (0, 2, (1, 3), 9)],
+    "torchgrade.bloom.blur.mirrored": lambda dtype: [(light(dtype, 5, 7), axis, radius) for axis in (-2, -1) for radius in (0, 3, 6)],
+    "torchgrade.bloom.blur.unity_blur": lambda dtype: [(light(dtype, h, w),) for h, w in ((6, 7), (1, 1), (40, 3))],
     "torchgrade.tonemap.aces2.gamut.count_below": lambda dtype: [(torch.linspace(0.0, 360.0, n, dtype=dtype), finite_edges(dtype))
                                                                  for n in (1, 2, 5, 362)],
     "torchgrade.tonemap.aces2.gamut._gathered_columns": lambda dtype: [
@@ -113,7 +130,8 @@ PUBLIC_DTYPES = (torch.float32, torch.float16, torch.bfloat16)
 """What a public formula may be given (``tg.color``'s transfer functions)."""
 WORKING_DTYPES = (torch.float32, torch.float64)
 """What a stage's formulas compute in (``base.images.working_dtype``: half images in float32)."""
-DTYPES = {name: WORKING_DTYPES for name in ARGUMENTS if name.startswith(("torchgrade.grading.", "torchgrade.tonemap.", "torchgrade.base."))}
+DTYPES = {name: WORKING_DTYPES for name in ARGUMENTS
+          if name.startswith(("torchgrade.grading.", "torchgrade.tonemap.", "torchgrade.base.", "torchgrade.bloom."))}
 """The dtypes each formula is reached with, :data:`PUBLIC_DTYPES` where not named here."""
 EXPORTED_DTYPES = (torch.float32,)
 """What an exported graph computes in (``tg.onnx.frames``: float32 whatever its inputs and outputs)."""
@@ -188,8 +206,8 @@ def within_ulps(got, expected, truth, dtype, label):
 
 @pytest.mark.parametrize(("name", "context"), VARIANTS)
 def test_each_variant_runs_in_its_context_only(name, context, monkeypatch):
-    """Export forms while exporting (here: its context made to hold); in-place forms without autograd, and the
-    reference where a gradient is recorded."""
+    """A variant runs where its context holds (the others made not to), and the reference where none does; an in-place
+    form never where a gradient is recorded."""
     entry = FORMULAS[name]
     variant = entry.variants[context]
     args = next(a for a in ARGUMENTS[name](torch.float32) if variant.when is None or variant.when(*a))
@@ -197,15 +215,18 @@ def test_each_variant_runs_in_its_context_only(name, context, monkeypatch):
     monkeypatch.setitem(entry.variants, context, Variant(context, lambda *a: calls.append(context) or entry.reference(*a), variant.when))
     module, function = name.rsplit(".", 1)
     run = getattr(importlib.import_module(module), function)
-    if context in ("export", "graph", "planes"):
+    for other in CONTEXTS:
+        monkeypatch.setitem(CONTEXTS, other, lambda tensors: False)
+    with torch.no_grad():
         run(*args)
-        assert calls == []  # not exporting, tracing or compiling
-        monkeypatch.setitem(CONTEXTS, context, lambda tensors: True)
+    assert calls == []  # no context holds: the reference
+    monkeypatch.setitem(CONTEXTS, context, lambda tensors: True)
     with torch.no_grad():
         run(*args)
     assert calls == [context]
     if context == "untracked":
-        tracked = [a.clone().requires_grad_() if isinstance(a, torch.Tensor) else a for a in args]
+        monkeypatch.setitem(CONTEXTS, context, lambda tensors: untracked(*tensors))
+        tracked = [a.clone().requires_grad_() if isinstance(a, torch.Tensor) and a.is_floating_point() else a for a in args]
         assert as_tuple(run(*tracked))[0].requires_grad and calls == [context]
 
 
@@ -230,3 +251,12 @@ def test_every_planes_form_has_its_references_gradients(name, dtype):
             assert torch.isfinite(variant).all()
             scale = float(reference.abs().max())
             torch.testing.assert_close(variant, reference, rtol=ULPS * torch.finfo(dtype).eps, atol=ULPS * torch.finfo(dtype).eps * scale)
+
+
+def test_the_contexts_hold_where_they_say_on_an_eager_cpu():
+    x, tracked = torch.ones(2), torch.ones(2, requires_grad=True)
+    holds = {context: bool(test([x])) for context, test in CONTEXTS.items()}
+    assert holds == {"export": False, "graph": False, "untracked": True, "planes": False, "kernels": False, "host": True,
+                     "sizes": True}
+    assert not CONTEXTS["untracked"]([tracked]) and not CONTEXTS["host"]([torch.ones(2, device="meta")])
+    assert CONTEXTS["kernels"]([torch.ones(2, device="meta")])  # a device whose every read waits: a GPU's policy

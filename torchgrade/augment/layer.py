@@ -51,15 +51,15 @@ from torch import nn
 
 from ..base.images import check_image, full_precision, to_input_dtype, working_dtype
 from ..base.planes import joined
-from ..runtime.recording import is_tracing
 from ..bloom import BLOOM_MODES, bloom_settings, bloom_with_settings
 from ..color import linear_to_srgb, srgb_to_linear
 from ..grading.grade import color_grade_planes
 from ..grading.layer import ColorGrade
 from ..look.slots import SLOTS
 from ..output.layer import LookLUT
-from ..output.look import look_lut
+from ..output.look_lut import look_lut
 from ..runtime import DeferredCheck, in_strips
+from ..runtime.checks import check_eagerly
 from ..tonemap import tonemap
 from .inputs import SRGB_TOLERANCE, check_srgb_peak, look_stage  # noqa: F401 (SRGB_TOLERANCE: its former path)
 from .per_sample import tonemap_per_sample
@@ -329,9 +329,8 @@ class RandomPostFX(IntensityAugmentationBase2D):
         """Refuse 0..255 floats given as sRGB (kornia would clamp them to white). The batch's peak is read back
         without waiting for a GPU (:class:`~torchgrade.runtime.DeferredCheck`): there a batch out of range raises
         at a later call."""
-        if self.input_space == "srgb" and not is_tracing():
-            check = self.__dict__.get("_range_check") or self.__dict__.setdefault("_range_check", DeferredCheck())
-            check({"peak": images.detach().amax()}, check_srgb_peak)
+        check = self.__dict__.get("_range_check") or self.__dict__.setdefault("_range_check", DeferredCheck())
+        check({"peak": images.detach().amax()}, check_srgb_peak)
 
     def _graded(self, images: torch.Tensor, params: dict) -> torch.Tensor:
         """The batch graded by ``params``, with autocast off (:func:`~torchgrade.base.images.full_precision`): the
@@ -341,7 +340,8 @@ class RandomPostFX(IntensityAugmentationBase2D):
         (:func:`~torchgrade.runtime.in_strips`: on the CPU, eager, each strip's intermediates stay in cache)."""
         if self.is_identity or (self.p == 0 and not self.tonemap):
             return images
-        self._check_display_range(images)
+        if self.input_space == "srgb":
+            check_eagerly(self._check_display_range, images)
         applied = params["batch_prob"].bool().reshape(-1, 1, 1, 1)
         with full_precision():
             if "bloom" in self.slots():

@@ -39,7 +39,6 @@ from .config import config_value
 from .controls import KINDS, Control, check_given, controls_signature, digit_count, in_state_check, plain  # noqa: F401 (their former path)
 from .images import check_image, full_precision, warn_if_eight_bit, with_alpha
 from .params import is_constant
-from ..runtime.recording import is_tracing
 from ..runtime import DeferredCheck, in_strips
 
 __all__ = ["Stage"]
@@ -187,8 +186,6 @@ class Stage(nn.Module):
         checks). A value is checked once per change (an optimiser step changes it in place); on CUDA without waiting
         for the device, so the error comes at a later forward (:class:`~torchgrade.runtime.DeferredCheck`).
         """
-        if is_tracing():
-            return
         table = self.control_table()
         learnable = {name: value for name, value in self._parameters.items()
                      if value is not None and name in table and table[name].kind == "number"}

@@ -8,10 +8,11 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
-from ..runtime import device_cached, is_exporting, is_tracing, policy_for
+from ..runtime import device_cached, policy_for
+from ..runtime.variants import formula
 
 __all__ = ["UNITY_BLUR_WEIGHTS", "BLUR_TAPS", "BLUR_SIGMA", "ANAMORPHIC_TAPS", "mirror_pad", "mirror_filter", "pyramid_blur",
-           "anamorphic_sigma", "mirrored", "symmetric_filter", "sliced", "sizes_unknown"]
+           "anamorphic_sigma", "mirrored", "symmetric_filter", "sliced", "unity_blur"]
 
 
 UNITY_BLUR_WEIGHTS = tuple(c / 4070 for c in (66, 220, 495, 792, 924, 792, 495, 220, 66))
@@ -32,6 +33,7 @@ ANAMORPHIC_TAPS = 23
 """Taps of the stretched blur: radius 11 covers 3 sigma at the widest stretch (``2 * 1.69``)."""
 
 
+@formula
 def mirror_pad(light: torch.Tensor, radius) -> torch.Tensor:
     """Extend the frame by ``radius`` pixels (a number, or ``(rows, columns)``) on every side with its mirror image
     about the edge.
@@ -47,25 +49,38 @@ def mirror_pad(light: torch.Tensor, radius) -> torch.Tensor:
         >>> mirror_pad(torch.tensor([[[[1.0, 2.0, 3.0]]]]), 2)[0, 0, 0]
         tensor([2., 1., 1., 2., 3., 3., 2.])
     """
-    radii = (radius, radius) if isinstance(radius, int) else tuple(radius)
-    height, width = light.shape[-2:]
-    if policy_for(light.device).filters_as_kernels:  # never while tracing (runtime.policy.GRAPH)
-        index = _mirror_plane_index(height, width, *radii, light.device)
-        return light.flatten(-2).index_select(-1, index).unflatten(-1, (height + 2 * radii[0], width + 2 * radii[1]))
-    for axis, side_radius in zip((-2, -1), radii):
+    for axis, side_radius in zip((-2, -1), _radii(radius)):
         light = mirrored(light, axis, side_radius)
     return light
 
 
+@mirror_pad.variant("kernels")
+def _mirror_pad_gathered(light: torch.Tensor, radius) -> torch.Tensor:
+    """Where the device's policy takes library kernels (one launch each): one gather over the flattened plane."""
+    radii, (height, width) = _radii(radius), light.shape[-2:]
+    index = _mirror_plane_index(height, width, *radii, light.device)
+    return light.flatten(-2).index_select(-1, index).unflatten(-1, (height + 2 * radii[0], width + 2 * radii[1]))
+
+
+def _radii(radius) -> tuple:
+    """``(rows, columns)`` of a radius given as one number or as both."""
+    return (radius, radius) if isinstance(radius, int) else tuple(radius)
+
+
+@formula
 def mirrored(light: torch.Tensor, axis: int, radius: int) -> torch.Tensor:
     """``light`` extended by ``radius`` pixels at both ends of ``axis`` (:func:`mirror_pad`): where the side is at least
     ``radius`` (and sizes are not symbolic), its edge slices flipped and joined (a gather along the last axis is several
     times slower on the CPU); otherwise a gather of :func:`_mirror_index`."""
-    side = light.shape[axis]
-    if sizes_unknown() or side < radius:
-        return light.index_select(axis, _mirror_index(side, radius, light.device))
+    return light.index_select(axis, _mirror_index(light.shape[axis], radius, light.device))
+
+
+@mirrored.variant("sizes", when=lambda light, axis, radius: light.shape[axis] >= radius)
+def _mirrored_by_slices(light: torch.Tensor, axis: int, radius: int) -> torch.Tensor:
+    """A side of at least ``radius`` pixels: its edge slices flipped and joined."""
     if radius == 0:
         return light
+    side = light.shape[axis]
     edges = sliced(light, axis, slice(0, radius)).flip(axis), sliced(light, axis, slice(side - radius, side)).flip(axis)
     return torch.cat((edges[0], light, edges[1]), dim=axis)
 
@@ -138,16 +153,39 @@ def pyramid_blur(light: torch.Tensor, sigma=None) -> torch.Tensor:
     if sigma is not None:  # kornia's gaussian_blur2d would read the sigmas back to check them: they are positive
         kernel_y, kernel_x = (kornia.filters.get_gaussian_kernel1d(ANAMORPHIC_TAPS, s.unsqueeze(-1)) for s in sigma.to(light).unbind(-1))
         return kornia.filters.filter2d_separable(mirror_pad(light, ANAMORPHIC_TAPS // 2), kernel_x, kernel_y, padding="valid")
-    policy = policy_for(light.device)
-    if not is_tracing() and not policy.filters_as_kernels:
-        return mirror_filter(light, UNITY_BLUR_WEIGHTS)
-    padded = mirror_pad(light, BLUR_TAPS // 2)
-    small = policy.one_kernel_blur_pixels is not None and light.shape[-2] * light.shape[-1] <= policy.one_kernel_blur_pixels
-    if small:
-        planes = padded.reshape((-1, 1) + padded.shape[-2:])
-        return F.conv2d(planes, _blur_kernel_2d(light.device, light.dtype)).reshape(light.shape)
+    return unity_blur(light)
+
+
+@formula
+def unity_blur(light: torch.Tensor) -> torch.Tensor:
+    """Unity's 9 taps (:data:`UNITY_BLUR_WEIGHTS`) over the mirrored frame, as kornia's separable filter (while a
+    graph is recorded: an ONNX ``Conv``; kornia picks its own form for a compiler).
+
+    Examples:
+        >>> round(float(unity_blur(torch.ones(1, 1, 5, 5)).mean()), 6)
+        1.0
+    """
+    import kornia.filters
+
     kernel = _blur_kernel(light.device, light.dtype)
-    return kornia.filters.filter2d_separable(padded, kernel, kernel, padding="valid")
+    return kornia.filters.filter2d_separable(mirror_pad(light, BLUR_TAPS // 2), kernel, kernel, padding="valid")
+
+
+@unity_blur.variant("kernels")
+def _unity_blur_in_one_kernel(light: torch.Tensor) -> torch.Tensor:
+    """Where the device's policy takes library kernels: small planes (up to its ``one_kernel_blur_pixels``) in one 2D
+    convolution, larger ones as kornia's separable filter."""
+    limit = policy_for(light.device).one_kernel_blur_pixels
+    if limit is None or light.shape[-2] * light.shape[-1] > limit:
+        return unity_blur.formula.reference(light)
+    padded = mirror_pad(light, BLUR_TAPS // 2)
+    return F.conv2d(padded.reshape((-1, 1) + padded.shape[-2:]), _blur_kernel_2d(light.device, light.dtype)).reshape(light.shape)
+
+
+@unity_blur.variant("host")
+def _unity_blur_by_shifts(light: torch.Tensor) -> torch.Tensor:
+    """On the CPU, eager: sums of shifted views (:func:`mirror_filter`)."""
+    return mirror_filter(light, UNITY_BLUR_WEIGHTS)
 
 
 @device_cached
@@ -172,12 +210,6 @@ def anamorphic_sigma(ratio: torch.Tensor) -> torch.Tensor:
     """
     stretch = torch.pow(2.0, ratio.reshape(-1, 1))
     return BLUR_SIGMA * torch.cat((1.0 / stretch, stretch), dim=1)
-
-
-def sizes_unknown() -> bool:
-    """Whether sizes are symbolic to Python: while a graph is traced for ONNX (``torch.jit`` or an export), every size
-    takes the general forms. A compiler's sizes are ints or guarded symbols: it takes the even sides' fast forms too."""
-    return torch.jit.is_tracing() or is_exporting()
 
 
 def sliced(light: torch.Tensor, axis: int, part: slice) -> torch.Tensor:

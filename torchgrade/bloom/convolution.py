@@ -15,7 +15,6 @@ from torch import nn
 
 from ..base.images import check_image, sanitize, to_input_dtype, working_dtype
 from ..base.params import Param, check_range, is_constant, scalar_param
-from ..runtime.recording import is_tracing
 from ..base.controls import Control
 from ..base.stage import Stage
 from .layer import CONTROLS
@@ -153,7 +152,7 @@ class ConvolutionBloom(Stage):
         """Also check a learnable kernel, which an optimiser may move to a zero sum or to NaN: once per change of the
         kernel, without waiting for a GPU (:class:`~torchgrade.runtime.DeferredCheck`)."""
         super().check_learnable()
-        if isinstance(self.kernel, nn.Parameter) and not is_tracing():
+        if isinstance(self.kernel, nn.Parameter):
             self.deferred_check()({"kernel": self.kernel}, lambda name, kernel: check_kernel(kernel))
 
     @property

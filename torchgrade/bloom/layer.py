@@ -35,11 +35,11 @@ from torch import nn
 
 from ..base.images import HALF_MAX, check_image, sanitize, to_input_dtype, working_dtype
 from ..base.params import color_param, is_constant, is_plain_number, scalar_param
-from ..runtime.recording import is_tracing
 from ..base.controls import Control, controls_signature
 from ..base.stage import Stage
 from ..color import srgb_to_linear
 from ..runtime import constant
+from ..runtime.checks import check_eagerly
 from ..runtime.policy import readable
 from .composite import BLOOM_MODES, COMPOSITES
 from .prefilter import prefilter
@@ -162,8 +162,7 @@ def bloom(image: torch.Tensor, *, fixed_depth: int = None, **settings) -> torch.
     """
     check_image(image)
     settings = bloom_settings(settings)
-    if not is_tracing():
-        check_settings(settings)
+    check_eagerly(check_settings, settings)
     return bloom_with_settings(image, settings, fixed_depth)
 
 

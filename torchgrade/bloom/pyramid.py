@@ -29,9 +29,10 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
-from ..runtime import device_cached, is_tracing, policy_for
+from ..runtime import device_cached, policy_for
+from ..runtime.variants import formula
 from .blur import ANAMORPHIC_TAPS, BLUR_SIGMA, BLUR_TAPS, UNITY_BLUR_WEIGHTS, anamorphic_sigma, mirror_pad  # noqa: F401 (their former path)
-from .blur import mirror_filter, mirrored, pyramid_blur, sizes_unknown, sliced, symmetric_filter
+from .blur import mirror_filter, mirrored, pyramid_blur, sliced, symmetric_filter
 
 __all__ = [
     "UNITY_BLUR_WEIGHTS", "BLUR_TAPS", "BLUR_SIGMA", "ANAMORPHIC_TAPS", "SMOOTHING", "BSPLINE_AFTER_BILINEAR",
@@ -80,6 +81,7 @@ def pyramid_depth(height: int, width: int, max_iterations: int, downscale_limit:
     return depth
 
 
+@formula
 def active_levels(image: torch.Tensor, max_iterations: int, downscale_limit: int) -> torch.Tensor:
     """:func:`pyramid_depth` as a 0-d tensor: while tracing, computed from ``image``'s runtime shape (an exported
     graph keeps it symbolic); otherwise made once per frame size on ``image``'s device, so that the selects it drives
@@ -92,8 +94,12 @@ def active_levels(image: torch.Tensor, max_iterations: int, downscale_limit: int
         >>> int(active_levels(torch.zeros(1, 3, 1080, 1920), 16, 2))
         8
     """
-    if not is_tracing():
-        return _levels_on(*image.shape[-2:], max_iterations, downscale_limit, image.device)
+    return _levels_on(*image.shape[-2:], max_iterations, downscale_limit, image.device)
+
+
+@active_levels.variant("graph")
+def _active_levels_traced(image: torch.Tensor, max_iterations: int, downscale_limit: int) -> torch.Tensor:
+    """From the image's shape as a tensor, so that a traced graph keeps it symbolic."""
     smaller_side = torch._shape_as_tensor(image)[-2:].min()
     thresholds = downscale_limit * 2 ** torch.arange(2, max_iterations + 2)
     return (smaller_side >= thresholds).sum()
@@ -109,6 +115,7 @@ def _doubles(small, large) -> bool:
     return all(2 * s == l for s, l in zip(small, large))
 
 
+@formula
 def halve(light: torch.Tensor) -> torch.Tensor:
     """Exact area means on sides of ``ceil(side / 2)`` pixels spanning the frame (the module's first rule).
 
@@ -124,11 +131,23 @@ def halve(light: torch.Tensor) -> torch.Tensor:
         >>> halve(torch.tensor([[[[3.0, 0.0, 3.0]]]]))  # each half takes 1.5 pixels: (3 + 0.5 * 0) / 1.5
         tensor([[[[2., 2.]]]])
     """
-    if not sizes_unknown() and light.shape[-2] % 2 == 0 and light.shape[-1] % 2 == 0:
-        if policy_for(light.device).filters_as_kernels:
-            return F.avg_pool2d(light, 2)
-        return 0.25 * (light[..., ::2, ::2] + light[..., 1::2, ::2] + light[..., ::2, 1::2] + light[..., 1::2, 1::2])
     return _along_sides(light, _halve_along, ((), ()))
+
+
+def _even_sides(light: torch.Tensor) -> bool:
+    return light.shape[-2] % 2 == 0 and light.shape[-1] % 2 == 0
+
+
+@halve.variant("kernels", when=_even_sides)
+def _halve_pooled(light: torch.Tensor) -> torch.Tensor:
+    """Even sides where the device's policy takes library kernels: ``F.avg_pool2d``, one launch."""
+    return F.avg_pool2d(light, 2)
+
+
+@halve.variant("sizes", when=_even_sides)
+def _halve_strided(light: torch.Tensor) -> torch.Tensor:
+    """Even sides: the mean of four strided views (on the CPU about 3 times faster than ``F.avg_pool2d``)."""
+    return 0.25 * (light[..., ::2, ::2] + light[..., 1::2, ::2] + light[..., ::2, 1::2] + light[..., 1::2, 1::2])
 
 
 def _halve_along(light: torch.Tensor, axis: int) -> torch.Tensor:
@@ -153,6 +172,7 @@ def _halving_weight(side: int, dtype: torch.dtype, device: torch.device) -> torc
     return torch.stack((before, torch.ones_like(before), after), dim=-1) * (half / side)
 
 
+@formula
 def expand(values: torch.Tensor, size) -> torch.Tensor:
     """Each pixel of the ``size`` level (sides ``n``) given the pixels of the halved level it overlaps (sides
     ``ceil(n / 2)``), weighted by overlap: the adjoint of :func:`halve`'s area mean, so ``sum`` times area is kept.
@@ -164,9 +184,13 @@ def expand(values: torch.Tensor, size) -> torch.Tensor:
         >>> expand(torch.tensor([[[[1.0, 2.0]]]]), (1, 3))  # the middle pixel lies half in each
         tensor([[[[1.0000, 1.5000, 2.0000]]]])
     """
-    if not sizes_unknown() and _doubles(values.shape[-2:], size):
-        return F.interpolate(values, scale_factor=2.0, mode="nearest")
     return _along_sides(values, _expand_along, ((size[0],), (size[1],)))
+
+
+@expand.variant("sizes", when=lambda values, size: _doubles(values.shape[-2:], size))
+def _expand_doubled(values: torch.Tensor, size) -> torch.Tensor:
+    """Sides exactly doubled: nearest-neighbour upsampling."""
+    return F.interpolate(values, scale_factor=2.0, mode="nearest")
 
 
 def _expand_along(values: torch.Tensor, axis: int, side: int) -> torch.Tensor:
@@ -217,6 +241,7 @@ def _step_matrix(step, side: int, arguments: tuple, dtype: torch.dtype, device: 
     return step(identity, -2, *arguments).to(dtype=dtype, device=device)
 
 
+@formula
 def upsample(light: torch.Tensor, sizes, bicubic: bool) -> torch.Tensor:
     """Upsample a level through ``sizes``, each the level above the one before (one step: 2x; two: 4x), keeping a
     uniform frame uniform and the light: :func:`expand` to each size, then :data:`SMOOTHING` (bilinear) and, with
@@ -234,15 +259,20 @@ def upsample(light: torch.Tensor, sizes, bicubic: bool) -> torch.Tensor:
         (torch.Size([1, 1, 9, 17]), True)
     """
     factor = 2 ** len(sizes)
-    if not sizes_unknown() and all(_doubles(small, large) for small, large in zip([light.shape[-2:], *sizes], sizes)):
-        # channels folded into the batch: PyTorch's CPU kernel is about 3 times faster on one channel
-        fine = F.interpolate(light.reshape((-1, 1) + light.shape[-2:]), scale_factor=float(factor), mode="bilinear", align_corners=False)
-        fine = fine.reshape(light.shape[:-2] + fine.shape[-2:])
-        return mirror_filter(fine, BSPLINE_AFTER_BILINEAR[factor]) if bicubic else fine
     smoothing = _convolved(SMOOTHING[factor], BSPLINE_AFTER_BILINEAR[factor]) if bicubic else SMOOTHING[factor]
     total = sum(smoothing)
     smoothing = tuple(w / total for w in smoothing)
     return _along_sides(light, _upsample_along, tuple((tuple(size[k] for size in sizes), smoothing) for k in range(2)))
+
+
+@upsample.variant("sizes", when=lambda light, sizes, bicubic: all(_doubles(small, large) for small, large in zip([light.shape[-2:], *sizes], sizes)))
+def _upsample_doubled(light: torch.Tensor, sizes, bicubic: bool) -> torch.Tensor:
+    """Every size exactly twice the one before: one bilinear ``F.interpolate`` (channels folded into the batch:
+    PyTorch's CPU kernel is about 3 times faster on one channel), then the B-spline's remaining smoothing."""
+    factor = 2 ** len(sizes)
+    fine = F.interpolate(light.reshape((-1, 1) + light.shape[-2:]), scale_factor=float(factor), mode="bilinear", align_corners=False)
+    fine = fine.reshape(light.shape[:-2] + fine.shape[-2:])
+    return mirror_filter(fine, BSPLINE_AFTER_BILINEAR[factor]) if bicubic else fine
 
 
 def _upsample_along(light: torch.Tensor, axis: int, sides: tuple, smoothing: tuple) -> torch.Tensor:

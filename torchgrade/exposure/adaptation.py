@@ -9,10 +9,10 @@ import torch
 
 from ..base.images import HALF_MAX, check_image, sanitize, to_input_dtype, working_dtype
 from ..base.params import Param, check_choice, check_range, is_plain_number, scalar_param
-from ..runtime.recording import is_tracing
 from ..base.controls import Control
 from ..color import luminance
 from ..runtime import constant
+from ..runtime.checks import check_eagerly
 from .metering import (
     HISTOGRAM_RANGE,
     METERING_MASKS,
@@ -319,12 +319,17 @@ def auto_exposure(
         metering_mask=metering_mask, low_percent=low_percent, high_percent=high_percent, min_ev=min_ev, max_ev=max_ev,
         compensation=compensation, compensation_curve=compensation_curve, fixed_exposure=fixed_exposure,
     )
-    if not is_tracing():
-        _check_controls(controls)
-        check_range(dt, "dt", 0.0, HALF_MAX)
-        controls["metering_mask"] = check_metering_mask(metering_mask)
-        controls["compensation_curve"] = check_compensation_curve(compensation_curve)
+    check_eagerly(_check_given, controls, dt)
     return exposed_frame(image, adapted, dt, **controls)
+
+
+def _check_given(controls: dict, dt) -> None:
+    """:func:`auto_exposure`'s controls and step checked as the stage checks them, the mask and the curve in the forms
+    the operator takes (written back into ``controls``)."""
+    _check_controls(controls)
+    check_range(dt, "dt", 0.0, HALF_MAX)
+    controls["metering_mask"] = check_metering_mask(controls["metering_mask"])
+    controls["compensation_curve"] = check_compensation_curve(controls["compensation_curve"])
 
 
 def check_step(dt) -> None:

@@ -23,7 +23,6 @@ from ..color import (
     linear_to_acescct,
 )
 from ..runtime import affine, folded
-from ..runtime.recording import untracked
 from ..runtime.variants import formula
 
 __all__ = ["contrast_space", "log_contrast", "logc_contrast", "acescc_contrast", "contrast"]
@@ -56,7 +55,7 @@ def log_contrast(image: torch.Tensor, amount: Param, encoding: str = "logc") -> 
         >>> [round(v, 3) for v in log_contrast(torch.tensor([0.18, 1.0]), 50.0, "acescc").tolist()]
         [0.18, 2.357]
     """
-    k = folded(_contrast_slope, amount, like=image, host=untracked(image))  # the power's backward would copy a CPU exponent to the device
+    k = folded(_contrast_slope, amount, like=image, host="untracked")
     if encoding == "acescct":
         return acescct_to_linear((linear_to_acescct(image) - ACESCC_MIDGRAY) * k + ACESCC_MIDGRAY)
     if encoding == "acescc":

@@ -11,7 +11,6 @@ from torch import nn
 
 from ..base.images import HALF_MAX, sanitize, working_dtype
 from ..base.params import check_choice
-from ..runtime.recording import is_tracing
 from ..base.controls import Control, in_state_check
 from ..base.stage import Stage
 from .kernels import BACKENDS, KERNELS
@@ -117,7 +116,7 @@ class LUT3D(Stage):
         """Also check a learnable table, which an optimiser may move to NaN or Inf: once per change of the table,
         without waiting for a GPU (:class:`~torchgrade.runtime.DeferredCheck`)."""
         super().check_learnable()
-        if isinstance(self.table, nn.Parameter) and not is_tracing():
+        if isinstance(self.table, nn.Parameter):
             bound = entry_bound(self.output_encoding)
             self.deferred_check()({"table": self.table}, lambda name, extremes: _check_extremes(extremes, bound), summary=_extremes)
 

@@ -16,7 +16,7 @@ from .display import (
 )
 from .dither import dither, dither_pattern
 from .layer import Display, Dither, LookLUT
-from .look import LOOK_ENCODINGS, look_lut, read_lut_file
+from .look_lut import LOOK_ENCODINGS, look_lut, read_lut_file
 
 __all__ = ["LookLUT", "Dither", "Display", "look_lut", "read_lut_file", "dither", "dither_pattern", "encode_display",
            "LOOK_ENCODINGS", "DISPLAY_ENCODINGS", "DISPLAY_PRESETS", "DISPLAY_PRIMARIES"]

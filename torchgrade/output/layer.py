@@ -15,7 +15,7 @@ from ..lut import LUT3D, identity_table
 from ..runtime import in_strips
 from .display import DISPLAY_ENCODINGS, DISPLAY_PRIMARIES, HLG_PEAK_RANGE, encode_display
 from .dither import DEFAULT_AMPLITUDE, dither, dither_pattern
-from .look import LOOK_ENCODINGS, look_lut, read_lut_file
+from .look_lut import LOOK_ENCODINGS, look_lut, read_lut_file
 
 __all__ = ["Display", "Dither", "LookLUT", "LookLUTForm", "lut_settings"]
 

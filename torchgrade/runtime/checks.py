@@ -1,4 +1,7 @@
-"""Range checks of learnable controls on a GPU, without waiting for it.
+"""Checks of values: range checks of learnable controls on a GPU, without waiting for it, and none in a recorded graph.
+
+A recorded graph (traced, compiled, exported) carries no checks: :class:`DeferredCheck` and :func:`check_eagerly` do
+nothing while one is recorded, so no stage asks.
 
 A learnable control is checked against its range before every forward (an optimiser may have moved it out).
 On the CPU the check reads the value directly. On CUDA a read would wait for every queued kernel, once per
@@ -28,7 +31,21 @@ from typing import Callable, NamedTuple, Optional
 
 import torch
 
-__all__ = ["DeferredCheck"]
+from .recording import is_tracing
+
+__all__ = ["DeferredCheck", "check_eagerly"]
+
+
+def check_eagerly(check: Callable, *args, **kwargs) -> None:
+    """``check(*args, **kwargs)``, except while a graph is recorded (it carries no checks; a check of a tensor's value
+    would break a compiler's graph).
+
+    Examples:
+        >>> check_eagerly(lambda x: print("checked", x), 3)
+        checked 3
+    """
+    if not is_tracing():
+        check(*args, **kwargs)
 
 
 class _Copy(NamedTuple):
@@ -77,8 +94,10 @@ class DeferredCheck:
         """Check each of ``values`` (by name) whose tensor or version changed: ``check(name, summary(value))``.
 
         ``summary`` (default: the value itself) reduces a large value to what ``check`` needs (a table to its
-        extremes), so only that is copied back.
+        extremes), so only that is copied back. Nothing while a graph is recorded.
         """
+        if is_tracing():
+            return
         with self._lock:
             for name, value in values.items():
                 passed = self._passed.get(name)

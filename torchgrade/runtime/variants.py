@@ -20,6 +20,11 @@ The contexts:
 * ``"planes"``: the device's policy computes per-pixel chains on the image's three planes
   (:attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`: while compiling), which Inductor fuses into one kernel.
   Differentiable: their gradients are held to the reference's too.
+* ``"kernels"``: the device's policy runs filters as library kernels, one launch each
+  (:attr:`~torchgrade.runtime.ExecutionPolicy.filters_as_kernels`: a GPU, eager).
+* ``"host"``: eager on the CPU, where the policy reads values: the views and slices the CPU is fastest at.
+* ``"sizes"``: sizes are Python numbers (eager, or compiling; not while a graph is traced for ONNX,
+  :func:`~torchgrade.runtime.recording.sizes_are_symbolic`): forms for particular sizes (even sides, exact doubling).
 
 Every variant is held to its reference by one test over :data:`FORMULAS` (``tests/runtime/test_variants.py``: edge
 values, the dtypes each formula is reached with, gradients of the planes forms).
@@ -46,13 +51,16 @@ from typing import Callable, Optional
 import torch
 
 from .policy import policy_for
-from .recording import is_exporting, is_tracing, untracked
+from .recording import is_exporting, is_tracing, sizes_are_symbolic, untracked
 
 __all__ = ["formula", "Formula", "Variant", "FORMULAS", "CONTEXTS"]
 
 CONTEXTS = {"export": lambda tensors: is_exporting(), "graph": lambda tensors: is_tracing(),
             "untracked": lambda tensors: untracked(*tensors),
-            "planes": lambda tensors: bool(tensors) and policy_for(tensors[0].device).pixel_planes}
+            "planes": lambda tensors: bool(tensors) and policy_for(tensors[0].device).pixel_planes,
+            "kernels": lambda tensors: bool(tensors) and policy_for(tensors[0].device).filters_as_kernels,
+            "host": lambda tensors: bool(tensors) and policy_for(tensors[0].device).reads_values,
+            "sizes": lambda tensors: not sizes_are_symbolic()}
 """The contexts a variant may be declared for, each with whether it holds for a call's tensor arguments, in the order
 they are tried."""
 
