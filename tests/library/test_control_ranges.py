@@ -243,6 +243,18 @@ def test_a_learnable_lut_table_that_became_nan_raises_at_forward():
         tg.LUT3D(lut.table.detach())
 
 
+@pytest.mark.parametrize("make", [lambda: tg.ColorGrade(contrast=nn.Parameter(torch.tensor(20.0))),
+                                  lambda: tg.LUT3D(identity_table(3), learnable=True),
+                                  lambda: tg.ConvolutionBloom(nn.Parameter(torch.ones(1, 3, 3) / 9))], ids=["grade", "lut", "convolution bloom"])
+def test_a_learnable_stage_compiles_in_one_graph_before_any_eager_call(make):
+    """A recorded graph carries no checks (``runtime.checks``): torch.compile with ``fullgraph=True`` of a stage that
+    has never run eagerly (so holds no check's state yet) traces through its checks without a graph break."""
+    stage, image = make(), torch.rand(1, 3, 4, 4)
+    compiled = torch.compile(stage, backend="eager", fullgraph=True)
+    with torch.no_grad():
+        torch.testing.assert_close(compiled(image), stage(image))
+
+
 def test_pivot_black_must_be_below_pivot_white():
     with pytest.raises(ValueError, match="pivot_black"):
         tg.PrimaryGrade("log", gamma=(2.0, 2.0, 2.0), pivot_black=0.5, pivot_white=0.5)

@@ -40,6 +40,7 @@ from .controls import KINDS, Control, check_given, controls_signature, digit_cou
 from .images import check_image, full_precision, warn_if_eight_bit, with_alpha
 from .params import is_constant
 from ..runtime import DeferredCheck, in_strips
+from ..runtime.checks import check_eagerly
 
 __all__ = ["Stage"]
 
@@ -173,7 +174,7 @@ class Stage(nn.Module):
           like 0..255 data warn (:func:`~torchgrade.base.images.warn_if_eight_bit`, on the CPU);
         * errors name the caller's shape, not a strip's.
         """
-        self.check_learnable()
+        check_eagerly(self.check_learnable)  # a recorded graph carries no checks
         check_image(image, alpha=True)
         warn_if_eight_bit(image)
         with full_precision():

@@ -178,16 +178,15 @@ def rrt_glow_and_red_modifier(aces: torch.Tensor, hue_weight, tiny: float = UNIT
         >>> torch.equal(rrt_glow_and_red_modifier(grey, smoothstep_hue_weight), grey)  # no saturation: no glow
         True
     """
-    glowed, weight, toward_pivot = _glowed_and_red_terms(aces, hue_weight, tiny)
-    red, green_blue = glowed.split((1, 2), dim=-3)
-    return torch.cat((torch.addcmul(red, weight, toward_pivot, value=1.0 - _RRT_RED_SCALE), green_blue), dim=-3)
+    _, red, green_blue, weight = _glowed_and_red_terms(aces, hue_weight, tiny)
+    return torch.cat((torch.addcmul(red, weight, _RRT_RED_PIVOT - red, value=1.0 - _RRT_RED_SCALE), green_blue), dim=-3)
 
 
 @rrt_glow_and_red_modifier.variant("untracked")
 def _rrt_glow_and_red_modifier_in_place(aces: torch.Tensor, hue_weight, tiny: float = UNITY_TINY) -> torch.Tensor:
     """The red modifier in place on the glow's product (made here), which it returns."""
-    glowed, weight, toward_pivot = _glowed_and_red_terms(aces, hue_weight, tiny)
-    glowed.narrow(-3, 0, 1).addcmul_(weight, toward_pivot, value=1.0 - _RRT_RED_SCALE)
+    glowed, red, _, weight = _glowed_and_red_terms(aces, hue_weight, tiny)
+    red.addcmul_(weight, _RRT_RED_PIVOT - red, value=1.0 - _RRT_RED_SCALE)
     return glowed
 
 
@@ -198,11 +197,12 @@ def _rrt_glow_and_red_modifier_exported(aces: torch.Tensor, hue_weight, tiny: fl
 
 
 def _glowed_and_red_terms(aces: torch.Tensor, hue_weight, tiny: float) -> tuple:
-    """The glow applied, and the red modifier's weight ``w(h) s`` and pull ``0.03 - r`` on the glowed image."""
+    """The glow applied, its red and its green and blue (views of it), and the red modifier's weight ``w(h) s``."""
     saturation = _rgb_saturation(aces, tiny)
     s = _sigmoid_shaper(affine(saturation, 5.0, -2.0))  # (s - 0.4) / 0.2
     glowed = torch.addcmul(aces, aces, _glow(_rgb_yc(aces), _RRT_GLOW_GAIN * s, _RRT_GLOW_MID))
-    return glowed, hue_weight(_red_centered_hue(glowed)) * saturation, _RRT_RED_PIVOT - glowed.narrow(-3, 0, 1)
+    red, green_blue = glowed.split((1, 2), dim=-3)
+    return glowed, red, green_blue, hue_weight(_red_centered_hue(glowed)) * saturation
 
 
 def rrt_glow_and_red_modifier_planes(planes, hue_weight, tiny: float = UNITY_TINY) -> tuple:
