@@ -196,7 +196,7 @@ def main(argv=None) -> int:
             rows["full look, one thread each"] = measure("full_one_thread", look, image, Path(folder), device,
                                                          runtimes=("onnxruntime",), threads=1)
         baked = look.to_lut(33)
-        for interpolation, backend in (("tetrahedral", "gather"), ("trilinear", "strip")):
+        for interpolation, backend in (("tetrahedral", "gather"), ("trilinear", "slices")):
             baked.interpolation = interpolation
             rows[f"full look, 33³ LUT {interpolation} ({backend})"] = measure(
                 f"lut_{interpolation}_{backend}", baked, image, Path(folder), device, lut_backend=backend)

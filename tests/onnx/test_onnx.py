@@ -79,7 +79,7 @@ LUT = LUTS["linear"]
 
 @pytest.mark.parametrize("encoding", tg.lut.OUTPUT_ENCODINGS)
 @pytest.mark.parametrize("interpolation", ["trilinear", "tetrahedral"])
-@pytest.mark.parametrize("backend, opset", [("strip", 17), ("gather", 17), ("volume", 20)])
+@pytest.mark.parametrize("backend, opset", [("slices", 17), ("gather", 17), ("volume", 20)])
 def test_lut_matches_in_both_interpolations_and_encodings(exported, interpolation, backend, opset, encoding):
     module = tg.PostFX(lut=LUTS[encoding], interpolation=interpolation)
     path = exported(f"lut_{interpolation}_{backend}_{encoding}", module, lut_backend=backend)
@@ -93,7 +93,7 @@ def test_lut_matches_in_both_interpolations_and_encodings(exported, interpolatio
 
 
 def test_strip_lookup_matches_the_gather_kernel_on_lattice_points():
-    """Lattice points come back exactly from the strip layout (no half-texel offset)."""
+    """Lattice points come back exactly from the slices layout (no half-texel offset)."""
     from torchgrade.lut.kernels import strip_table, trilinear_strip
 
     table = torch.rand(5, 5, 5, 3)
@@ -163,6 +163,9 @@ def test_grading_controls_as_inputs_per_sample(exported):
 def test_bad_options_raise(tmp_path):
     with pytest.raises(ValueError, match="lut_backend"):
         export(tg.ToneMap(), tmp_path / "x.onnx", lut_backend="texture")
+    with pytest.warns(DeprecationWarning, match="'slices'"):  # the former name of the slices backend
+        form = tg.LUT3D(tg.lut.identity_table(3)).export_form("trilinear", "strip")
+    assert form.grid is tg.lut.kernels.trilinear_slices_lookup
     with pytest.raises(ValueError, match="opset >= 20"):
         export(tg.PostFX(lut=LUT), tmp_path / "x.onnx", lut_backend="volume", opset=17)
     with pytest.raises(ValueError, match="needs a ColorGrade"):

@@ -19,13 +19,14 @@ Examples:
     >>> rows = torch.arange(8.0).expand(3, 8)
     >>> KERNELS["trilinear"](torch.full((3, 1), 0.5), rows, 2).flatten().tolist()
     [3.5, 3.5, 3.5]
-    >>> KERNELS["trilinear"].graph_form("strip") is trilinear_strip_lookup
+    >>> KERNELS["trilinear"].graph_form("slices") is trilinear_slices_lookup
     True
 """
 
 from __future__ import annotations
 
 import functools
+import warnings
 from dataclasses import dataclass, field
 from typing import Callable, Optional
 
@@ -37,7 +38,7 @@ from .native import compiled_loop
 
 __all__ = ["Kernel", "EagerForm", "KERNELS", "INTERPOLATIONS", "BACKENDS", "LUT_BACKENDS", "tetrahedron", "tetrahedral",
            "tetrahedral_tables", "TetrahedralRuns", "tetrahedral_frame", "trilinear", "trilinear_grid_sample", "strip_table", "trilinear_strip",
-           "trilinear_strip_lookup"]
+           "trilinear_slices_lookup", "trilinear_strip_lookup", "FORMER_BACKENDS", "backend_named"]
 
 
 def _cell(coords: torch.Tensor, size: int):
@@ -371,15 +372,20 @@ def trilinear_strip(unit: torch.Tensor, strip: torch.Tensor) -> torch.Tensor:
     return low + blend * (sample(columns + step) - low)
 
 
-def trilinear_strip_lookup(unit: torch.Tensor, table: torch.Tensor) -> torch.Tensor:
-    """:func:`trilinear_strip` on a ``(S, S, S, 3)`` table (laid out by :func:`strip_table`), a grid form.
+def trilinear_slices_lookup(unit: torch.Tensor, table: torch.Tensor) -> torch.Tensor:
+    """:func:`trilinear_strip` on a ``(S, S, S, 3)`` table laid out as its blue slices side by side (:func:`strip_table`),
+    the ``"slices"`` graph form.
 
     Examples:
         >>> from torchgrade.lut import identity_table
-        >>> trilinear_strip_lookup(torch.full((1, 3, 1, 1), 0.5), identity_table(3)).flatten().tolist()
+        >>> trilinear_slices_lookup(torch.full((1, 3, 1, 1), 0.5), identity_table(3)).flatten().tolist()
         [0.5, 0.5, 0.5]
     """
     return trilinear_strip(unit, strip_table(table))
+
+
+trilinear_strip_lookup = trilinear_slices_lookup
+"""The former name of :func:`trilinear_slices_lookup`, kept for a release."""
 
 
 @dataclass(frozen=True)
@@ -407,7 +413,7 @@ class Kernel:
     (``compiled(dtype)`` gives it, or ``None`` where it did not compile: :mod:`torchgrade.lut.native`).
 
     Examples:
-        >>> KERNELS["tetrahedral"].graph_form("strip") is None
+        >>> KERNELS["tetrahedral"].graph_form("slices") is None
         True
     """
 
@@ -425,7 +431,7 @@ class Kernel:
 
 
 KERNELS = {
-    "trilinear": Kernel(trilinear, {"strip": trilinear_strip_lookup, "volume": trilinear_grid_sample},
+    "trilinear": Kernel(trilinear, {"slices": trilinear_slices_lookup, "volume": trilinear_grid_sample},
                         compiled=functools.partial(compiled_loop, "trilinear")),
     # Up to 65³: the tables are 4 times the planar table (13 MiB at 65³; 4 S³ < 2²⁴ keeps the index product exact).
     "tetrahedral": Kernel(tetrahedral, eager=EagerForm(tetrahedral_tables, TetrahedralRuns, tetrahedral_frame, max_size=65),
@@ -435,9 +441,33 @@ KERNELS = {
 
 INTERPOLATIONS = tuple(KERNELS)
 
-BACKENDS = {"strip": 16, "gather": 16, "volume": 20}
-"""Export backends of a LUT and the lowest opset each needs: ``"strip"`` (4-D ``GridSample`` on the
-2-D strip layout where a kernel has that form, else gathers), ``"gather"`` (gathers only) and
+BACKENDS = {"slices": 16, "gather": 16, "volume": 20}
+"""Export backends of a LUT and the lowest opset each needs: ``"slices"`` (4-D ``GridSample`` on the table laid out
+as its blue slices side by side, where a kernel has that form, else gathers), ``"gather"`` (gathers only) and
 ``"volume"`` (5-D ``GridSample``, opset 20, which OpenVINO rejects and TensorRT has mis-mapped)."""
 
 LUT_BACKENDS = tuple(BACKENDS)
+
+FORMER_BACKENDS = {"strip": "slices"}
+"""Backend names of earlier releases (``"strip"`` also named the CPU's and the ONNX graph's strips of rows), each
+taken with a ``DeprecationWarning`` for a release."""
+
+
+def backend_named(name: str) -> str:
+    """The export backend ``name`` means: one of :data:`BACKENDS`, or a former name, with a warning.
+
+    Examples:
+        >>> backend_named("gather")
+        'gather'
+        >>> backend_named("texture")
+        Traceback (most recent call last):
+        ...
+        ValueError: lut_backend must be one of 'slices', 'gather', 'volume', got 'texture'
+    """
+    if name in FORMER_BACKENDS:
+        warnings.warn(f"lut_backend={name!r} is now {FORMER_BACKENDS[name]!r}; the old name goes in the next release",
+                      DeprecationWarning, stacklevel=3)
+        return FORMER_BACKENDS[name]
+    if name not in BACKENDS:
+        raise ValueError(f"lut_backend must be one of {', '.join(map(repr, BACKENDS))}, got {name!r}")
+    return name

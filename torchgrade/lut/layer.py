@@ -13,7 +13,7 @@ from ..base.images import HALF_MAX, sanitize, working_dtype
 from ..base.params import check_choice
 from ..base.controls import Control, in_state_check
 from ..base.stage import Stage
-from .kernels import BACKENDS, KERNELS
+from .kernels import KERNELS, backend_named
 from .lattice import MAX_CODE, check_size, checked_domain, planar_table
 from .apply import (
     OUTPUT_ENCODINGS,
@@ -207,13 +207,12 @@ class LUT3D(Stage):
         """The table with linear output values (decoded by ``output_encoding``), as a ``.cube`` file holds it."""
         return decode_output(self.table, self.output_encoding)
 
-    def export_form(self, interpolation: Optional[str] = None, backend: str = "strip") -> nn.Module:
+    def export_form(self, interpolation: Optional[str] = None, backend: str = "slices") -> nn.Module:
         """The module an ONNX export traces for this LUT looked up with ``interpolation`` (its own by default), in
         ``backend``'s graph form."""
         interpolation = interpolation or self.interpolation
         check_choice("interpolation", interpolation, KERNELS)
-        check_choice("lut_backend", backend, BACKENDS)
-        return LUTLookup(self, interpolation, backend)
+        return LUTLookup(self, interpolation, backend_named(backend))
 
     def extra_repr(self) -> str:
         domain = f"domain=({_short(self.domain_min)}, {_short(self.domain_max)})"
@@ -232,7 +231,7 @@ class LUTLookup(nn.Module):
     Examples:
         >>> import torch
         >>> from torchgrade.lut import identity_table
-        >>> lookup = LUT3D(identity_table(3)).export_form("trilinear", "strip")
+        >>> lookup = LUT3D(identity_table(3)).export_form("trilinear", "slices")
         >>> lookup(torch.full((1, 3, 1, 1), 0.5)).flatten().tolist()
         [0.5, 0.5, 0.5]
     """

@@ -21,6 +21,7 @@ from torch import nn
 from ..base.images import check_on_cpu
 from ..io.atomic import atomic_write
 from ..lut import BACKENDS
+from ..lut.kernels import backend_named
 from .describe import describe
 from .frames import FLOAT_DTYPES, FrameFormat, frame_format, retype_uint16
 from .graph import (
@@ -92,7 +93,7 @@ def used_opsets(model: onnx_lib.ModelProto) -> onnx_lib.ModelProto:
 
 
 def export(module: nn.Module, path, *, example: Optional[torch.Tensor] = None, opset: Optional[int] = None,
-           lut_backend: str = "strip", grade_inputs: bool = False, output: str = "linear",
+           lut_backend: str = "slices", grade_inputs: bool = False, output: str = "linear",
            io_dtype: torch.dtype = torch.float32, input_dtype: Optional[torch.dtype] = None, layout: str = "NCHW",
            output_layout: Optional[str] = None, optional_inputs: bool = True, fold: bool = True, strips: bool = True) -> Path:
     """Export a torchgrade module or :class:`~torchgrade.PostFX` look to ``path``; returns the path.
@@ -105,7 +106,8 @@ def export(module: nn.Module, path, *, example: Optional[torch.Tensor] = None, o
         opset: default :data:`DEFAULT_OPSET` (17), or :data:`VOLUME_OPSET` (20) for
             ``lut_backend="volume"``; each backend needs at least its opset in
             :data:`~torchgrade.lut.BACKENDS`.
-        lut_backend: ``"strip"``, ``"gather"`` or ``"volume"`` (see :data:`~torchgrade.lut.BACKENDS`).
+        lut_backend: ``"slices"``, ``"gather"`` or ``"volume"`` (see :data:`~torchgrade.lut.BACKENDS`; ``"strip"``, its
+            former name for ``"slices"``, warns).
         grade_inputs: expose the grading controls as graph inputs (see :mod:`torchgrade.onnx`), optional
             (the look's values are their defaults) and clamped to their ranges.
         output: the output encoding, one of :data:`~torchgrade.onnx.OUTPUTS` (``"linear"``, ``"srgb"``, ``"srgb8"``,
@@ -131,7 +133,8 @@ def export(module: nn.Module, path, *, example: Optional[torch.Tensor] = None, o
         ValueError: lut_backend='volume' needs opset >= 20, got 17
     """
     check_on_cpu(module, "tg.onnx.export")
-    minimum = BACKENDS.get(lut_backend, 0)
+    lut_backend = backend_named(lut_backend)
+    minimum = BACKENDS[lut_backend]
     opset = opset or max(DEFAULT_OPSET, minimum)
     if opset < minimum:
         raise ValueError(f"lut_backend={lut_backend!r} needs opset >= {minimum}, got {opset}")

@@ -26,7 +26,7 @@ from torch import nn
 from ..base.images import nan_free
 from ..grading.grade import color_grade
 from ..grading.layer import ColorGrade
-from ..lut import BACKENDS
+from ..lut.kernels import backend_named
 from .frames import (
     FrameFormat,
     decode_frame,
@@ -185,7 +185,7 @@ def _export_form(stage: nn.Module, options: dict) -> nn.Module:
     return form(**{name: value for name, value in options.items() if name in accepted})
 
 
-def export_graph(module: nn.Module, lut_backend: str = "strip", grade_inputs: bool = False,
+def export_graph(module: nn.Module, lut_backend: str = "slices", grade_inputs: bool = False,
                  frames: FrameFormat = FrameFormat(), strips: bool = True) -> ExportGraph:
     """The export-ready form of ``module`` (see the module docstring for how each stage is asked).
 
@@ -194,10 +194,8 @@ def export_graph(module: nn.Module, lut_backend: str = "strip", grade_inputs: bo
         >>> export_graph(tg.ColorGrade(contrast=10), grade_inputs=True).stages[0].aces
         False
     """
-    if lut_backend not in BACKENDS:
-        raise ValueError(f"lut_backend must be one of {tuple(BACKENDS)}, got {lut_backend!r}")
     exposure, named = _look_stages(module)
-    options = {"backend": lut_backend}
+    options = {"backend": backend_named(lut_backend)}
     stages = []
     for stage in named:
         if grade_inputs and isinstance(stage, ColorGrade):

@@ -40,7 +40,7 @@ def graph_inputs(look: PostFX, image: torch.Tensor):
     return image, torch.zeros(image.shape[0]), torch.tensor(0.0)
 
 
-def export_look(look: PostFX, path, images: Mapping[str, torch.Tensor], lut_backend: str = "strip",
+def export_look(look: PostFX, path, images: Mapping[str, torch.Tensor], lut_backend: str = "slices",
                 grade_inputs: bool = False, output: str = "linear", strips: bool = True, **frames) -> list:
     """Export ``look`` to ``path`` and report it: one line with its stages, input and output formats and node count,
     for a look baked by :meth:`~torchgrade.PostFX.to_lut` one line with the LUT's error report

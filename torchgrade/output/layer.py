@@ -66,7 +66,7 @@ class LookLUT(Stage):
         call = functools.partial(look_lut, lookup=self.lut, contribution=self.contribution, encoding=self.encoding)
         return in_strips(call, image, (self.contribution, self.lut.table))
 
-    def export_form(self, backend: str = "strip") -> nn.Module:
+    def export_form(self, backend: str = "slices") -> nn.Module:
         """The module an ONNX export traces: the blend around the LUT's own export form in ``backend``'s graph form."""
         return LookLUTForm(self, self.lut.export_form(backend=backend))
 
