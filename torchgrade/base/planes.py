@@ -21,8 +21,8 @@ def apply_matrix(matrix: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
 
     Three per-channel multiply-adds (a product and two ``addcmul``), never a matrix product: a 3x3 ``einsum``
     runs as a batched product with an inner dimension of 3, which oneDNN and MKL block poorly (2x the time of
-    these passes on a CPU strip of 2^17 pixels), cuBLAS runs as ``gemv`` calls that nothing fuses (2.59 of a
-    compiled look's 4.47 ms on an H200, ``../shared/measurements/gpu-h200``), and Inductor fuses these into the
+    these passes on a CPU strip of 2^17 pixels), cuBLAS runs as ``gemv`` calls that nothing fuses (over half of a
+    compiled look's time on an H200: ``../shared/measurements/gpu-h200``), and Inductor fuses these into the
     steps around them. Computed in place where nothing records (:func:`untracked`).
 
     Examples:

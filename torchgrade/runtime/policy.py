@@ -122,7 +122,7 @@ GPU's choice, would not fit that cache (1920 tables of 128 bins at 1080p)."""
 
 ONE_KERNEL_BLUR_PIXELS = 1 << 17
 """Pixels of a plane up to which a GPU blurs it with one 2-D convolution. A 9-tap blur of 2^17 pixels is 10.6 million
-products a channel, microseconds on a GPU, against a launch's 24 µs (``benchmarks/gpu_proxy.py``): the deep levels of a
+products a channel, microseconds on a GPU, against a launch's fixed cost (``benchmarks/gpu_proxy.py``): the deep levels of a
 bloom pyramid (from 270x480 at 4K; 8 of its 9 levels) cost their launches, not their arithmetic."""
 
 RESAMPLING_MATRIX_SIDE = {"cpu": 128, "other": 1024}

@@ -3,8 +3,8 @@
 On CUDA every operation PyTorch dispatches (views and allocations aside) is a kernel launch, a value read back
 (``_local_scalar_dense``: ``.item()``, ``bool()``, ``.tolist()``) waits for the device, and a tensor made from host
 data (``lift_fresh``, a CPU-to-device copy) is a pageable copy. A gather of whole rows, a multiple of :data:`ROW_GATHER_BYTES`
-each (``table[index]``), runs as CUDA's vectorised gather, a block of threads per index: 4.99 ms for 8.3 million rows of 8
-floats on an H200 (``benchmarks/results/gpu.md``), where gathering each column (``index_select`` on dimension 1) is an
+each (``table[index]``), runs as CUDA's vectorised gather, a block of threads per index (its cost for a 4K frame's rows
+of 8 floats on an H200: ``benchmarks/results/gpu.md``, run D), where gathering each column (``index_select`` on dimension 1) is an
 elementwise pass. PyTorch's CUDA elementwise kernels are vectorised only where every operand is contiguous and of
 the result's size (a 0-d CPU operand is passed as an argument): an operand broadcast to the frame (a 0-d or per-channel
 tensor on the device) or strided takes the unvectorised loop, counted as ``unvectorised``. An elementwise kernel on a frame runs at the memory's

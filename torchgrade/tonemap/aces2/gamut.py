@@ -226,7 +226,7 @@ def _gathered_columns(table: torch.Tensor, index: torch.Tensor):
     compiling, a tuple of the ``C`` planes).
 
     By column, not ``table.T[index]``: CUDA gathers rows of a multiple of 16 bytes (the cusp table's 8 values) with a
-    block of threads per pixel, 4.99 ms of a 4K frame of ACES 2.0's 14.19 ms on an H200 (``benchmarks/results/gpu.md``),
+    block of threads per pixel (about a third of ACES 2.0's 4K frame on an H200: ``benchmarks/results/gpu.md``, run D),
     and the planes it would give are strided. While compiling, each row gathered on its own, as a tuple of planes
     (:attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`): loads of the pixels' loop, where the ``(C, ...)``
     gather is a loop of its own whose planes the frame's loop then reads back.
