@@ -20,6 +20,7 @@ import torch
 import torchgrade as tg
 from runtime.test_device import CASES  # tests/runtime, a namespace package beside this folder
 from torchgrade.base.stage import Stage
+from torchgrade.lut import LUT_BACKENDS
 
 EXR = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "exr"
 
@@ -32,7 +33,7 @@ NO_ALPHA = {
 """Cases of ``tests/runtime/test_device.py`` that are no stage (nor a look of stages), and why."""
 
 ALPHA_CASES = sorted(name for name in CASES if name not in NO_ALPHA and not name.endswith("-export")
-                     and not re.match(r"lut-\w+-(strip|gather|volume)$", name))
+                     and not (name.startswith("lut-") and name.rsplit("-", 1)[-1] in LUT_BACKENDS))
 """Every stage and look of ``tests/runtime/test_device.py``; export forms are what an ONNX graph traces, on colour only."""
 
 

@@ -26,7 +26,7 @@ import torch
 
 from ..look.postfx import PostFX
 from ..lut import INTERPOLATIONS, LUT_BACKENDS, LUTAccuracyWarning
-from ..lut.kernels import FORMER_BACKENDS
+from ..lut.backends import FORMER_BACKENDS
 from ..onnx import INPUT_DTYPES, IO_DTYPES, LAYOUTS, OUTPUTS, export_look
 from ..scene import demo_scene
 from .common import read_rec709, refuse_lut_over_tolerance, refuse_overwriting

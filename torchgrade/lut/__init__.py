@@ -27,7 +27,8 @@ Examples:
 from .bake import AUTO_SIZES, bake_lut, srgb_code_error
 from .entries import ENTRY_CHOICES, fit_entries
 from .fit import fit_scene_shaper, fit_shaper
-from .kernels import BACKENDS, INTERPOLATIONS, KERNELS, LUT_BACKENDS, Kernel
+from .backends import BACKENDS, LUT_BACKENDS
+from .kernels import INTERPOLATIONS, KERNELS, Kernel
 from .lattice import MAX_SIZE, MIN_SIZE, identity_table, lattice
 from .layer import LUT3D
 from .apply import OUTPUT_ENCODINGS, apply_lut

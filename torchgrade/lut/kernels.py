@@ -26,19 +26,19 @@ Examples:
 from __future__ import annotations
 
 import functools
-import warnings
 from dataclasses import dataclass, field
 from typing import Callable, Optional
 
 import torch
 import torch.nn.functional as F
 
+from .backends import BACKENDS, LUT_BACKENDS  # noqa: F401 (their former path)
 from ..runtime import constant, device_cached
 from .native import compiled_loop
 
 __all__ = ["Kernel", "EagerForm", "KERNELS", "INTERPOLATIONS", "BACKENDS", "LUT_BACKENDS", "tetrahedron", "tetrahedral",
            "tetrahedral_tables", "TetrahedralRuns", "tetrahedral_frame", "trilinear", "trilinear_grid_sample", "strip_table", "trilinear_strip",
-           "trilinear_slices_lookup", "trilinear_strip_lookup", "FORMER_BACKENDS", "backend_named"]
+           "trilinear_slices_lookup", "trilinear_strip_lookup"]
 
 
 def _cell(coords: torch.Tensor, size: int):
@@ -440,34 +440,3 @@ KERNELS = {
 """The interpolations by name, what ``LUT3D(...)(image, interpolation)`` takes."""
 
 INTERPOLATIONS = tuple(KERNELS)
-
-BACKENDS = {"slices": 16, "gather": 16, "volume": 20}
-"""Export backends of a LUT and the lowest opset each needs: ``"slices"`` (4-D ``GridSample`` on the table laid out
-as its blue slices side by side, where a kernel has that form, else gathers), ``"gather"`` (gathers only) and
-``"volume"`` (5-D ``GridSample``, opset 20, which OpenVINO rejects and TensorRT has mis-mapped)."""
-
-LUT_BACKENDS = tuple(BACKENDS)
-
-FORMER_BACKENDS = {"strip": "slices"}
-"""Backend names of earlier releases (``"strip"`` also named the CPU's and the ONNX graph's strips of rows), each
-taken with a ``DeprecationWarning`` for a release."""
-
-
-def backend_named(name: str) -> str:
-    """The export backend ``name`` means: one of :data:`BACKENDS`, or a former name, with a warning.
-
-    Examples:
-        >>> backend_named("gather")
-        'gather'
-        >>> backend_named("texture")
-        Traceback (most recent call last):
-        ...
-        ValueError: lut_backend must be one of 'slices', 'gather', 'volume', got 'texture'
-    """
-    if name in FORMER_BACKENDS:
-        warnings.warn(f"lut_backend={name!r} is now {FORMER_BACKENDS[name]!r}; the old name goes in the next release",
-                      DeprecationWarning, stacklevel=3)
-        return FORMER_BACKENDS[name]
-    if name not in BACKENDS:
-        raise ValueError(f"lut_backend must be one of {', '.join(map(repr, BACKENDS))}, got {name!r}")
-    return name

@@ -13,7 +13,8 @@ from ..base.images import HALF_MAX, sanitize, working_dtype
 from ..base.params import check_choice
 from ..base.controls import Control, in_state_check
 from ..base.stage import Stage
-from .kernels import KERNELS, backend_named
+from .backends import backend_named
+from .kernels import KERNELS
 from .lattice import MAX_CODE, check_size, checked_domain, planar_table
 from .apply import (
     OUTPUT_ENCODINGS,

@@ -21,7 +21,7 @@ from torch import nn
 from ..base.images import check_on_cpu
 from ..io.atomic import atomic_write
 from ..lut import BACKENDS
-from ..lut.kernels import backend_named
+from ..lut.backends import backend_named
 from .describe import describe
 from .frames import FLOAT_DTYPES, FrameFormat, frame_format, retype_uint16
 from .graph import (

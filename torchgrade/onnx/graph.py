@@ -26,7 +26,7 @@ from torch import nn
 from ..base.images import nan_free
 from ..grading.grade import color_grade
 from ..grading.layer import ColorGrade
-from ..lut.kernels import backend_named
+from ..lut.backends import backend_named
 from .frames import (
     FrameFormat,
     decode_frame,
