@@ -14,20 +14,16 @@ from ..runtime.variants import formula
 __all__ = ["UNITY_BLUR_WEIGHTS", "BLUR_TAPS", "BLUR_SIGMA", "ANAMORPHIC_TAPS", "mirror_pad", "mirror_filter", "pyramid_blur",
            "anamorphic_sigma", "mirrored", "symmetric_filter", "sliced", "unity_blur"]
 
-
 UNITY_BLUR_WEIGHTS = tuple(c / 4070 for c in (66, 220, 495, 792, 924, 792, 495, 220, 66))
 """The pyramid blur per axis: the weights of Unity's ``BloomHorizontalPassFragment`` (0.01621622, 0.05405405,
 0.12162162, 0.19459459, 0.22702703, ...), binomial coefficients ``C(12, k)`` for ``k = 2 .. 10`` over their sum 4070.
 Its ``BloomVerticalPassFragment`` takes the same 9 taps as 5 bilinear samples."""
 
-
 BLUR_TAPS = len(UNITY_BLUR_WEIGHTS)
-
 
 BLUR_SIGMA = 1.69
 """Standard deviation (in level pixels) of :data:`UNITY_BLUR_WEIGHTS` (variance ``2 * 5808 / 4070 = 2.854``): the
 Gaussian the anamorphic blur stretches."""
-
 
 ANAMORPHIC_TAPS = 23
 """Taps of the stretched blur: radius 11 covers 3 sigma at the widest stretch (``2 * 1.69``)."""

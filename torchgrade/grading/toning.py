@@ -58,7 +58,12 @@ def _soft_light_by_channel(gamma, weights: tuple, offsets: tuple):
     return tuple(planes) if on_planes else torch.cat(planes, dim=-3)
 
 
-@_soft_light_by_channel.variant("untracked", when=lambda gamma, weights, offsets: isinstance(gamma, torch.Tensor))
+def _a_frame(gamma, weights: tuple, offsets: tuple) -> bool:
+    """Whether the blend is given a frame, not its planes."""
+    return isinstance(gamma, torch.Tensor)
+
+
+@_soft_light_by_channel.variant("untracked", when=_a_frame)
 def _soft_light_by_channel_in_place(gamma: torch.Tensor, weights: tuple, offsets: tuple) -> torch.Tensor:
     """In place on ``gamma``'s planes, which it returns (a temporary of its caller); the planes are finite and at least
     0 (gamma of a bounded frame; each blend keeps them so), so the square root needs no guard."""
@@ -67,7 +72,7 @@ def _soft_light_by_channel_in_place(gamma: torch.Tensor, weights: tuple, offsets
     return gamma
 
 
-@_soft_light_by_channel.variant("export", when=lambda gamma, weights, offsets: isinstance(gamma, torch.Tensor))
+@_soft_light_by_channel.variant("export", when=_a_frame)
 def _soft_light_by_channel_exported(gamma: torch.Tensor, weights: tuple, offsets: tuple) -> torch.Tensor:
     """The expressions' nodes: an ``addcmul`` exports its value as a float32 ``Constant``, whatever the graph's dtype."""
     planes = _blend_planes(gamma.split(1, dim=-3), weights, offsets, darken=lambda a: a * (1.0 - a),

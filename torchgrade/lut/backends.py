@@ -5,17 +5,16 @@ from __future__ import annotations
 
 import warnings
 
-__all__ = ["BACKENDS", "LUT_BACKENDS", "FORMER_BACKENDS", "backend_named"]
+from ..base.params import check_choice
 
+__all__ = ["BACKENDS", "LUT_BACKENDS", "FORMER_BACKENDS", "backend_named"]
 
 BACKENDS = {"slices": 16, "gather": 16, "volume": 20}
 """Export backends of a LUT and the lowest opset each needs: ``"slices"`` (4-D ``GridSample`` on the table laid out
 as its blue slices side by side, where a kernel has that form, else gathers), ``"gather"`` (gathers only) and
 ``"volume"`` (5-D ``GridSample``, opset 20, which OpenVINO rejects and TensorRT has mis-mapped)."""
 
-
 LUT_BACKENDS = tuple(BACKENDS)
-
 
 FORMER_BACKENDS = {"strip": "slices"}
 """Backend names of earlier releases (``"strip"`` also named the CPU's and the ONNX graph's strips of rows), each
@@ -37,6 +36,5 @@ def backend_named(name: str) -> str:
         warnings.warn(f"lut_backend={name!r} is now {FORMER_BACKENDS[name]!r}; the old name goes in the next release",
                       DeprecationWarning, stacklevel=3)
         return FORMER_BACKENDS[name]
-    if name not in BACKENDS:
-        raise ValueError(f"lut_backend must be one of {', '.join(map(repr, BACKENDS))}, got {name!r}")
+    check_choice("lut_backend", name, BACKENDS)
     return name

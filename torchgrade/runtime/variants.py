@@ -95,8 +95,8 @@ class Formula:
         return declare
 
     def form(self, args: tuple, kwargs: dict) -> Callable:
-        """The function a call with these arguments runs: the first variant whose context holds for the call's tensors (its
-    tensor arguments, and those of its tuple and list arguments) and which applies."""
+        """The function a call with these arguments runs: the first variant whose context holds for the call's tensors
+        (its tensor arguments, and those of its tuple and list arguments) and which applies."""
         tensors = [tensor for value in (*args, *kwargs.values()) for tensor in _tensors_in(value)]
         for context, holds in CONTEXTS.items():
             variant = self.variants.get(context)

@@ -69,8 +69,12 @@ def limited(image: torch.Tensor, limit=TONEMAP_INPUT_LIMIT) -> torch.Tensor:
     return torch.minimum(image.clamp_min(0.0), torch.as_tensor(limit, dtype=image.dtype, device=image.device))
 
 
-@limited.variant("untracked", when=lambda image, limit=TONEMAP_INPUT_LIMIT: isinstance(limit, numbers.Real))
-@limited.variant("export", when=lambda image, limit=TONEMAP_INPUT_LIMIT: isinstance(limit, numbers.Real))
+def _limit_is_a_number(image: torch.Tensor, limit=TONEMAP_INPUT_LIMIT) -> bool:
+    return isinstance(limit, numbers.Real)
+
+
+@limited.variant("untracked", when=_limit_is_a_number)
+@limited.variant("export", when=_limit_is_a_number)
 def _limited_by_a_number(image: torch.Tensor, limit=TONEMAP_INPUT_LIMIT) -> torch.Tensor:
     """One clamp (exported, one ``Clip`` where the other form is a ``Clip`` and a ``Min``)."""
     return image.clamp(0.0, limit)
