@@ -6,9 +6,10 @@ from pathlib import Path
 import pytest
 import torch
 import torch.nn.functional as F
+from torch.utils._python_dispatch import TorchDispatchMode
 
 import torchgrade as tg
-from torchgrade.lut import srgb_code_error
+from torchgrade.lut import identity_table, srgb_code_error
 
 STRONG_LOOK = {
     "grade": {"post_exposure": 0.5, "temperature": 20, "contrast": 30, "saturation": 20},
@@ -160,3 +161,40 @@ def test_the_nan_pass_runs_once_a_look_and_never_trusts_a_frame_a_stage_handed_b
     with torch.no_grad():
         out = tg.PostFX.from_config(slots)(image)
     assert torch.isfinite(out).all() and out.min() >= 0 and out.max() <= 1
+
+
+class NanPasses(TorchDispatchMode):
+    """Counts the NaN passes (``nan_to_num``) dispatched inside the block."""
+
+    def __init__(self):
+        super().__init__()
+        self.count = 0
+
+    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+        self.count += func.overloadpacket in (torch.ops.aten.nan_to_num, torch.ops.aten.nan_to_num_)
+        return func(*args, **(kwargs or {}))
+
+
+def nan_passes(call, *args) -> int:
+    with torch.no_grad(), NanPasses() as passes:
+        call(*args)
+    return passes.count
+
+
+def test_each_stage_after_the_first_is_told_its_input_holds_no_nan():
+    """In an eager look every stage after the first skips its input's NaN pass, and only that one: the look's passes
+    are the stages' own, one fewer for each stage after the first (each stage alone sanitizes its input)."""
+    slots = {"bloom": {"intensity": 0.5}, "grade": {"contrast": 20}, "primary": {"saturation": 1.2}, "tonemap": "aces",
+             "look_lut": {"lut": tg.LUT3D(identity_table(5) * 0.9)}, "dither": {"amplitude": 0.01}}
+    look = tg.PostFX(**slots)
+    image = torch.rand(1, 3, 40, 48) * 4
+    alone = [nan_passes(stage, image) for stage in look.stages().values()]
+    assert len(alone) == len(slots) and min(alone) >= 1
+    assert nan_passes(look, image) == sum(alone) - (len(alone) - 1)
+
+
+def test_tone_mapping_sanitizes_once_before_a_curve_that_sanitizes_too():
+    """ACES 2.0's transform sanitizes its own input; through ``tonemap`` (which sanitized it already) it only bounds it."""
+    image = torch.rand(1, 3, 8, 8) * 4
+    tg.tonemap.aces2.aces2_output(image)  # its gamut tables are searched once, then cached
+    assert nan_passes(tg.functional.tonemap, image, "aces2") == nan_passes(tg.tonemap.aces2.aces2_output, image)

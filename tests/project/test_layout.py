@@ -1,5 +1,5 @@
 """The package's structure: the maths modules ask no context question (the runtime does, through the variants each
-formula declares), and the packages import one another without a cycle."""
+formula declares), state passes as arguments, and the packages import one another without a cycle."""
 
 from __future__ import annotations
 
@@ -12,9 +12,9 @@ PREDICATES = ("is_exporting", "is_tracing", "policy_for", "untracked", "is_compi
 """The questions about where a call runs (exporting, tracing, compiling, which device, whether a gradient is recorded)."""
 RUNTIME_PACKAGES = ("runtime", "onnx")
 """The packages whose job is to answer them."""
-MOST_PREDICATE_CALLS = 15
-"""Calls of :data:`PREDICATES` allowed outside :data:`RUNTIME_PACKAGES` (65 before the variants): the non-finite
-policy's trusted inputs (``base/images.py``, ``look/postfx.py``), whether a control is a known constant
+MOST_PREDICATE_CALLS = 14
+"""Calls of :data:`PREDICATES` allowed outside :data:`RUNTIME_PACKAGES` (65 before the variants): whether a trusted
+input skips the non-finite policy's NaN pass (``base/images.py``, ``look/postfx.py``), whether a control is a known constant
 (``base/params.py``), the device policy's sizes for one bloom blur and for resampling matrices, the metering's
 histogram tables, the saturation matrix's folding and the LUT's eager-loop choice and table cache. A form of a formula
 goes in :mod:`torchgrade.runtime.variants` instead, and this number only goes down."""
@@ -90,3 +90,11 @@ def test_no_module_holds_more_than_450_lines():
     long = {str(path.relative_to(PACKAGE)): n for path in PACKAGE.rglob("*.py")
             if (n := len(path.read_text().splitlines())) > 450}
     assert long == {}
+
+
+def test_state_passes_as_arguments_not_context_variables():
+    """No module keeps call state in a ``ContextVar`` (a trusted frame is ``nan_free=True``, given by the caller)."""
+    holders = [str(path.relative_to(PACKAGE)) for path in PACKAGE.rglob("*.py")
+               if any(isinstance(node, (ast.Import, ast.ImportFrom)) and "contextvars" in ast.unparse(node)
+                      for node in ast.walk(ast.parse(path.read_text())))]
+    assert holders == []

@@ -14,7 +14,6 @@ and the precision a stage computes in.
 from __future__ import annotations
 
 import contextlib
-import contextvars
 import warnings
 
 import torch
@@ -24,7 +23,7 @@ from ..runtime.recording import is_exporting, is_tracing
 from ..runtime.strips import named_as
 from ..runtime.workers import one_thread
 
-__all__ = ["HALF_MAX", "NEGLIGIBLE_LIGHT", "check_image", "with_alpha", "warn_if_eight_bit", "check_on_cpu", "sanitize", "nan_free",
+__all__ = ["HALF_MAX", "NEGLIGIBLE_LIGHT", "check_image", "with_alpha", "warn_if_eight_bit", "check_on_cpu", "sanitize",
            "working_dtype", "to_input_dtype", "full_precision"]
 
 HALF_MAX = 65504.0
@@ -122,55 +121,30 @@ def warn_if_eight_bit(image: torch.Tensor) -> None:
             'RandomPostFX(input_space="srgb")', UserWarning, stacklevel=3)
 
 
-_NAN_FREE = contextvars.ContextVar("nan_free", default=None)
-
-
-def sanitize(image: torch.Tensor) -> torch.Tensor:
+def sanitize(image: torch.Tensor, *, nan_free: bool = False) -> torch.Tensor:
     """Apply the non-finite policy: NaN -> 0, values bounded to [-65504, 65504] (so ±Inf -> ±65504).
 
-    ``clamp`` keeps NaN, so the clamped copy is then fixed in place: one new frame instead of two. Inside
-    :func:`nan_free` for this very tensor only the bound is applied.
+    ``clamp`` keeps NaN, so the clamped copy is then fixed in place: one new frame instead of two. ``nan_free``: the
+    caller knows ``image`` holds no NaN (a stage's output never does: ``tests/library/test_extremes.py``), so only the
+    bound is applied, without the NaN pass over the frame (a kernel, or ``IsNaN`` and ``Where`` in an exported graph).
+    A compiled graph keeps the pass whoever calls: Inductor fuses it into its neighbours.
 
     Examples:
-        >>> sanitize(torch.tensor([float('nan'), float('inf'), -1.0])).tolist()
+        >>> x = torch.tensor([float('nan'), float('inf'), -1.0])
+        >>> sanitize(x).tolist()
         [0.0, 65504.0, -1.0]
+        >>> sanitize(x, nan_free=True).tolist()  # the caller's word is taken: only bounded
+        [nan, 65504.0, -1.0]
     """
     bounded = image.clamp(-HALF_MAX, HALF_MAX)
     exporting = is_exporting()
-    if (exporting or not is_tracing()) and _NAN_FREE.get() is image:  # a compiler would break its graph to read it
+    if nan_free and (exporting or not is_tracing()):
         return bounded
     if not exporting:
         return bounded.nan_to_num_(nan=0.0)
     # NaN is found on the input itself: OpenVINO's Clip turns NaN into its lower bound (the clamped copy's NaN came
     # out -65504 there); and nan_to_num would export a second Clip, to the dtype's range, a copy of the frame.
     return torch.where(torch.isnan(image), 0.0, bounded)
-
-
-@contextlib.contextmanager
-def nan_free(image: torch.Tensor):
-    """Within the block, :func:`sanitize` of ``image`` (this tensor object) only bounds it: the caller knows that
-    ``image`` holds no NaN (the output of a stage, which never makes one: ``tests/library/test_extremes.py``), so
-    the NaN pass over the frame (a kernel, or ``IsNaN`` and ``Where`` in an exported graph) is left out.
-
-    Examples:
-        >>> x = torch.tensor([float('nan'), 1e6])
-        >>> sanitize(x).tolist()
-        [0.0, 65504.0]
-        >>> with nan_free(x):
-        ...     sanitize(x).tolist()  # trusted: only bounded
-        [nan, 65504.0]
-
-    While ``torch.compile`` traces, nothing: a compiled :func:`sanitize` does not look (Dynamo cannot trace a context
-    variable, and the compiler fuses the NaN pass into its neighbours).
-    """
-    if torch.compiler.is_compiling():
-        yield
-        return
-    token = _NAN_FREE.set(image)
-    try:
-        yield
-    finally:
-        _NAN_FREE.reset(token)
 
 
 def check_on_cpu(transform, what: str) -> None:

@@ -101,12 +101,13 @@ def convolution_bloom(
     return _convolved(image, kernel, threshold, knee, intensity, fft_convolve)
 
 
-def _convolved(image, kernel, threshold, knee, intensity, convolve) -> torch.Tensor:
-    """:func:`convolution_bloom` on checked arguments, convolving with ``convolve``."""
+def _convolved(image, kernel, threshold, knee, intensity, convolve, *, nan_free: bool = False) -> torch.Tensor:
+    """:func:`convolution_bloom` on checked arguments, convolving with ``convolve``; ``nan_free``: ``image`` holds no
+    NaN (:func:`~torchgrade.base.images.sanitize`)."""
     if is_constant(intensity, 0.0):
         return image
     height, width = image.shape[-2:]
-    scene = sanitize(working_dtype(image)).reshape(-1, 3, height, width)
+    scene = sanitize(working_dtype(image), nan_free=nan_free).reshape(-1, 3, height, width)
     reference = scene if image.dim() == 4 else scene[0]
     threshold, knee, intensity = (
         scalar_param(value, reference, name) for name, value in zip(PREFILTER_CONTROLS, (threshold, knee, intensity))
@@ -160,9 +161,9 @@ class ConvolutionBloom(Stage):
         """True when ``intensity`` is a plain 0."""
         return is_constant(self.intensity, 0.0)
 
-    def forward(self, image: torch.Tensor) -> torch.Tensor:
+    def forward(self, image: torch.Tensor, *, nan_free: bool = False) -> torch.Tensor:
         check_image(image)
-        return _convolved(image, self.kernel, self.threshold, self.knee, self.intensity, fft_convolve)
+        return _convolved(image, self.kernel, self.threshold, self.knee, self.intensity, fft_convolve, nan_free=nan_free)
 
     def export_form(self) -> nn.Module:
         """The form an ONNX graph runs: :class:`DirectConvolutionBloom` (no FFT at opset 17)."""
@@ -183,7 +184,7 @@ class DirectConvolutionBloom(nn.Module):
         super().__init__()
         self.stage = stage
 
-    def forward(self, image: torch.Tensor) -> torch.Tensor:
+    def forward(self, image: torch.Tensor, *, nan_free: bool = False) -> torch.Tensor:
         check_image(image)
         stage = self.stage
-        return _convolved(image, stage.kernel, stage.threshold, stage.knee, stage.intensity, direct_convolve)
+        return _convolved(image, stage.kernel, stage.threshold, stage.knee, stage.intensity, direct_convolve, nan_free=nan_free)

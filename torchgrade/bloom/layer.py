@@ -171,10 +171,10 @@ bloom.__signature__ = controls_signature(
 )
 
 
-def bloom_with_settings(image: torch.Tensor, settings: dict, fixed_depth=None) -> torch.Tensor:
+def bloom_with_settings(image: torch.Tensor, settings: dict, fixed_depth=None, *, nan_free: bool = False) -> torch.Tensor:
     """:func:`bloom` on ``settings`` already checked (every one of :func:`bloom_settings`): depth, identity shortcuts,
     working precision, prefilter, composite. Nothing is read back: a stage's controls were checked when set, and
-    random ones are drawn inside their ranges."""
+    random ones are drawn inside their ranges. ``nan_free``: ``image`` holds no NaN (:func:`~torchgrade.base.images.sanitize`)."""
     height, width = image.shape[-2:]
     most, limit = settings["max_iterations"], settings["downscale_limit"]
     if fixed_depth is None:
@@ -184,7 +184,7 @@ def bloom_with_settings(image: torch.Tensor, settings: dict, fixed_depth=None) -
     if depth == 0 or is_constant(settings["intensity"], 0.0):
         return image
 
-    scene = sanitize(working_dtype(image)).reshape(-1, 3, height, width)
+    scene = sanitize(working_dtype(image), nan_free=nan_free).reshape(-1, 3, height, width)
     reference = scene if image.dim() == 4 else scene[0]  # per-sample parameters need a (B, 3, H, W) image
 
     def param(name):
@@ -276,9 +276,9 @@ class Bloom(Stage):
         """True when no image can change: no pyramid level (``max_iterations == 0``) or ``intensity`` a plain 0."""
         return self.max_iterations == 0 or is_constant(self.intensity, 0.0)
 
-    def forward(self, image: torch.Tensor) -> torch.Tensor:
+    def forward(self, image: torch.Tensor, *, nan_free: bool = False) -> torch.Tensor:
         check_image(image)
-        return bloom_with_settings(image, self.params())
+        return bloom_with_settings(image, self.params(), nan_free=nan_free)
 
     def export_form(self) -> nn.Module:
         """The fixed-depth form (:class:`FixedDepthBloom`) that one ONNX graph serves every frame size with."""
@@ -316,6 +316,6 @@ class FixedDepthBloom(nn.Module):
         self.stage = stage
         self.depth = pyramid_depth(MAX_FRAME_SIDE, MAX_FRAME_SIDE, stage.max_iterations, stage.downscale_limit)
 
-    def forward(self, image: torch.Tensor) -> torch.Tensor:
+    def forward(self, image: torch.Tensor, *, nan_free: bool = False) -> torch.Tensor:
         check_image(image)
-        return bloom_with_settings(image, self.stage.params(), fixed_depth=self.depth)
+        return bloom_with_settings(image, self.stage.params(), fixed_depth=self.depth, nan_free=nan_free)

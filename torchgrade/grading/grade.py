@@ -178,20 +178,23 @@ def color_grade(image: torch.Tensor, aces: bool = False, log_space: str = "acesc
     return graded_image(image, aces, log_space, **params)
 
 
-def graded_image(image: torch.Tensor, aces: bool = False, log_space: str = "acescc", **params) -> torch.Tensor:
+def graded_image(image: torch.Tensor, aces: bool = False, log_space: str = "acescc", *, nan_free: bool = False,
+                 **params) -> torch.Tensor:
     """:func:`color_grade` without checking the controls' values: for :class:`~torchgrade.ColorGrade`, which checked
-    them when they were set, on every strip of a frame.
+    them when they were set, on every strip of a frame. ``nan_free``: ``image`` holds no NaN
+    (:func:`~torchgrade.base.images.sanitize`).
 
     Examples:
         >>> image = torch.rand(1, 3, 2, 2)
         >>> torch.equal(graded_image(image, contrast=20.0), color_grade(image, contrast=20.0))
         True
     """
-    graded = color_grade_planes(image, aces, log_space, **params)
+    graded = color_grade_planes(image, aces, log_space, nan_free=nan_free, **params)
     return graded if graded is image else to_input_dtype(joined(graded), image)
 
 
-def color_grade_planes(image: torch.Tensor, aces: bool = False, log_space: str = "acescc", **params):
+def color_grade_planes(image: torch.Tensor, aces: bool = False, log_space: str = "acescc", *, nan_free: bool = False,
+                       **params):
     """:func:`color_grade` without the cast back to the input's dtype, as the graded image's three planes (a tuple) where
     its last steps ran on planes (while compiling, :attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`): for a
     chain that goes on computing on planes, so no frame is joined only to be split again. A graded result is in the
@@ -208,7 +211,7 @@ def color_grade_planes(image: torch.Tensor, aces: bool = False, log_space: str =
     if not steps:
         return image
     weights = "ap1" if aces else "rec709"
-    like = sanitize(working_dtype(image))
+    like = sanitize(working_dtype(image), nan_free=nan_free)
     x = pixel_layout(like)  # compiling: the steps on planes, for Inductor to fuse
     # The linear steps between two non-linear ones are folded into one matrix, so each pixel sees one 3x3: post
     # exposure, white balance and the way into contrast's primaries; the way out of them and the colour filter.

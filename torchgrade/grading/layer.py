@@ -92,8 +92,8 @@ class ColorGrade(Stage):
         curves = (name for name, control in self.controls.items() if isinstance(control, CurveControl))
         return {name: getattr(self, name) for name in curves if not self.is_default(name)}
 
-    def forward(self, image: torch.Tensor) -> torch.Tensor:
-        return self.run_in_strips(graded_image, image)
+    def forward(self, image: torch.Tensor, *, nan_free: bool = False) -> torch.Tensor:
+        return self.run_in_strips(graded_image, image, nan_free=nan_free)
 
 
 ColorGrade.__signature__ = controls_signature(ColorGrade.controls)
@@ -155,8 +155,8 @@ class PrimaryGrade(Stage):
         """True when no control changes the image (then skipped by ``PostFX`` and not exported)."""
         return all(self.is_default(name) for name in self._control_names if name not in ("style", *PIVOTS))
 
-    def forward(self, image: torch.Tensor) -> torch.Tensor:
-        return self.run_in_strips(primary_grade, image)
+    def forward(self, image: torch.Tensor, *, nan_free: bool = False) -> torch.Tensor:
+        return self.run_in_strips(primary_grade, image, nan_free=nan_free)
 
 
 PrimaryGrade.__signature__ = controls_signature(

@@ -191,8 +191,9 @@ def primary_saturation(image: torch.Tensor, amount: Param = 1.0) -> torch.Tensor
     return luma + (image - luma) * scalar_param(amount, image, "saturation")
 
 
-def primary_grade(image: torch.Tensor, style: str = "linear", **controls) -> torch.Tensor:
+def primary_grade(image: torch.Tensor, style: str = "linear", *, nan_free: bool = False, **controls) -> torch.Tensor:
     """OpenColorIO primary grading of ``style`` (see the module docstring); identity returns ``image`` itself.
+    ``nan_free``: the caller knows ``image`` holds no NaN (:func:`~torchgrade.base.images.sanitize`).
 
     Controls: those of :attr:`PRIMARY_GRADE_CONTROLS` that the style has (:data:`STYLE_CONTROLS`);
     those not given take :func:`style_defaults`.
@@ -213,7 +214,7 @@ def primary_grade(image: torch.Tensor, style: str = "linear", **controls) -> tor
     if not changed:
         return image
     p = {**defaults, **controls}
-    x = sanitize(working_dtype(image))
+    x = sanitize(working_dtype(image), nan_free=nan_free)
     if changed & {"offset", "exposure"}:
         x = offset_exposure(x, p["offset"], p["exposure"])
     if "brightness" in changed:

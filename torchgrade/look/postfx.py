@@ -45,7 +45,8 @@ from torch import nn
 
 from .._moved import OLD_CLASS_PATHS
 from ..base.config import load_config
-from ..base.images import check_image, nan_free, with_alpha
+from ..base.images import check_image, with_alpha
+from ..base.stage import on_nan_free
 from ..bloom import ConvolutionBloom
 from ..lut import INTERPOLATIONS, LUT3D, ErrorReport, bake_lut
 from ..runtime import is_tracing
@@ -328,15 +329,15 @@ def _through(stages, image: torch.Tensor, dt) -> torch.Tensor:
     """``image`` through ``(slot name, stage)`` pairs in order, ``dt`` to those that keep state between frames.
 
     A stage's output holds no NaN (``tests/library/test_extremes.py``), so a stage whose input another stage made is
-    told so (:func:`~torchgrade.base.images.nan_free`) and skips its input's NaN pass, one frame pass each. A stage that
+    told so (:func:`~torchgrade.base.stage.on_nan_free`) and skips its input's NaN pass, one frame pass each. A stage that
     hands its input back (an identity setting, a frame too small for a bloom level) makes nothing: its output is as
     trusted as its input was. Not while tracing: a compiled look keeps every stage's whole policy (Inductor fuses it),
     and an export decides it in its graph.
     """
     made = False
     for name, stage in stages:
-        with nan_free(image) if made and not is_tracing() else contextlib.nullcontext():
-            out = stage(image, dt) if SLOT[name].timed else stage(image)
+        args = (dt,) if SLOT[name].timed else ()
+        out = on_nan_free(stage, image, *args) if made and not is_tracing() else stage(image, *args)
         made = made or not _shares_base(out, image)
         image = out
     return image

@@ -152,13 +152,14 @@ def apply_lut(image: torch.Tensor, table: torch.Tensor, shaper: str = "linear", 
 
 
 def lookup(image, rows, size: int, shaper, domain_min, domain_max, interpolation, output_range, curve, curve_range, output_encoding,
-           tables: Optional[torch.Tensor] = None) -> torch.Tensor:
+           tables: Optional[torch.Tensor] = None, nan_free: bool = False) -> torch.Tensor:
     """:func:`apply_lut` on a planar table ``rows`` ``(3, size³)`` already in the image's working dtype.
 
     One pass per pixel from input to output: non-finite policy, shaper, lattice coordinates,
     interpolation, output decoding and clamp. Arguments are not checked (see :func:`apply_lut`);
     this is the function ``LUT3D(..., compile=True)`` compiles. With the eager form's ``tables``
-    (:class:`EagerTables`, without autograd) the interpolation is its whole-frame form.
+    (:class:`EagerTables`, without autograd) the interpolation is its whole-frame form. ``nan_free``: ``image`` holds no
+    NaN (:func:`~torchgrade.base.images.sanitize`).
 
     Examples:
         >>> import torch
@@ -169,7 +170,7 @@ def lookup(image, rows, size: int, shaper, domain_min, domain_max, interpolation
         >>> lookup(x, rows, 2, "linear", 0.0, 1.0, "trilinear", None, None, (0.0, 1.0), "linear").flatten().tolist()
         [0.5, 0.5, 0.5]
     """
-    x = sanitize(working_dtype(image)).movedim(-3, 0)  # (3, ..., H, W): a view
+    x = sanitize(working_dtype(image), nan_free=nan_free).movedim(-3, 0)  # (3, ..., H, W): a view
     coords = lattice_unit(x.reshape(3, -1), shaper, domain_min, domain_max, curve, curve_range) * (size - 1)
     kernel = KERNELS[interpolation]
     values = kernel(coords, rows, size) if tables is None else kernel.eager.frame(coords, tables.steps, size)
@@ -177,7 +178,7 @@ def lookup(image, rows, size: int, shaper, domain_min, domain_max, interpolation
     return to_input_dtype(y.reshape(x.shape).movedim(0, -3), image)
 
 
-def chunked_lookup(image, rows, size: int, *settings, pixels: Optional[int] = None, tables=None) -> torch.Tensor:
+def chunked_lookup(image, rows, size: int, *settings, pixels: Optional[int] = None, tables=None, nan_free: bool = False) -> torch.Tensor:
     """:func:`lookup` (same arguments after ``size``) over ``pixels``-sized runs of each CPU image's pixels, each on one thread.
 
     Every step is per pixel, so the runs give the one-pass result. On the CPU the runs go through the
@@ -191,7 +192,8 @@ def chunked_lookup(image, rows, size: int, *settings, pixels: Optional[int] = No
     whichever worker is free. Off the CPU the whole image is one
     pass of :func:`lookup`, through the eager form's whole-frame form where there is one; while gradients
     flow to the image or the table (autograd keeps every temporary anyway) and while tracing (an export
-    records one pass), one pass of its gather form.
+    records one pass), one pass of its gather form. ``nan_free`` is passed to a whole image's :func:`lookup` (runs
+    sanitize their own copies).
 
     Examples:
         >>> import torch
@@ -203,7 +205,7 @@ def chunked_lookup(image, rows, size: int, *settings, pixels: Optional[int] = No
         True
     """
     if not untracked(image, rows):  # the eager forms record no gradient
-        return lookup(image, rows, size, *settings)
+        return lookup(image, rows, size, *settings, nan_free=nan_free)
     kernel = KERNELS[settings[3]]
     eager = kernel.eager if kernel.eager is not None and size <= kernel.eager.max_size else None
     policy = policy_for(image.device)
@@ -211,7 +213,7 @@ def chunked_lookup(image, rows, size: int, *settings, pixels: Optional[int] = No
     if tables is None and (eager or compiled):
         tables = EagerTables(rows, size, settings[3])
     if policy.lookup_chunk is None:
-        return lookup(image, rows, size, *settings, tables=tables if eager else None)
+        return lookup(image, rows, size, *settings, tables=tables if eager else None, nan_free=nan_free)
     pixels = pixels or policy.lookup_chunk
     height, width = image.shape[-2:]
     planes = image.reshape(-1, 3, height * width)

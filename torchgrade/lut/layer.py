@@ -141,7 +141,7 @@ class LUT3D(Stage):
         """Never: a table is not checked for being the identity, so a LUT always runs."""
         return False
 
-    def forward(self, image: torch.Tensor, interpolation: Optional[str] = None) -> torch.Tensor:
+    def forward(self, image: torch.Tensor, interpolation: Optional[str] = None, *, nan_free: bool = False) -> torch.Tensor:
         interpolation = interpolation or self.interpolation
         check_lookup_arguments(image, self.shaper, interpolation, self.output_encoding)
         arguments = (image, self.rows(working_dtype(image).dtype), self.size, self.shaper, self.domain_min, self.domain_max,
@@ -152,7 +152,7 @@ class LUT3D(Stage):
             except Exception as error:  # no C++ compiler, unsupported device, ...: the eager path always works
                 warnings.warn(f"LUT3D(compile=True) fell back to eager: torch.compile failed with {error!r}", RuntimeWarning)
                 self.compile = False
-        return chunked_lookup(*arguments, tables=self._eager_tables(image, arguments[1], interpolation))
+        return chunked_lookup(*arguments, tables=self._eager_tables(image, arguments[1], interpolation), nan_free=nan_free)
 
     def rows(self, dtype: torch.dtype) -> torch.Tensor:
         """The table as planar rows ``(3, S³)`` in ``dtype`` (:func:`~torchgrade.lut.planar_table`), what the kernels read.
@@ -245,11 +245,11 @@ class LUTLookup(nn.Module):
         self.interpolation = interpolation
         self.grid = KERNELS[interpolation].graph_form(backend)
 
-    def forward(self, image: torch.Tensor) -> torch.Tensor:
+    def forward(self, image: torch.Tensor, *, nan_free: bool = False) -> torch.Tensor:
         if self.grid is None:
-            return self.lut(image, self.interpolation)
+            return self.lut(image, self.interpolation, nan_free=nan_free)
         lut = self.lut
-        x = sanitize(image)
+        x = sanitize(image, nan_free=nan_free)
         n, _, height, width = x.shape
         points = x.transpose(0, 1).reshape(3, -1)
         unit = lattice_unit(points, lut.shaper, lut.domain_min, lut.domain_max, lut.curve, lut.curve_range)

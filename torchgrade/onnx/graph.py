@@ -16,15 +16,14 @@ Examples:
 
 from __future__ import annotations
 
-import contextlib
 import inspect
 from typing import Callable, Optional, Sequence
 
 import torch
 from torch import nn
 
-from ..base.images import nan_free
-from ..grading.grade import color_grade
+from ..base.stage import on_nan_free
+from ..grading.grade import graded_image
 from ..grading.layer import ColorGrade
 from ..lut.backends import backend_named
 from .frames import (
@@ -81,9 +80,9 @@ class GradeWithInputs(nn.Module):
         self.curves = curves or {}
         self.log_space = log_space
 
-    def forward(self, image: torch.Tensor, *controls: torch.Tensor) -> torch.Tensor:
+    def forward(self, image: torch.Tensor, *controls: torch.Tensor, nan_free: bool = False) -> torch.Tensor:
         clamped = {name: value.clamp(*ColorGrade.controls[name].range) for name, value in zip(GRADE_INPUTS, controls)}
-        return color_grade(image, aces=self.aces, log_space=self.log_space, **clamped, **self.curves)
+        return graded_image(image, self.aces, self.log_space, nan_free=nan_free, **clamped, **self.curves)
 
 
 class ExportGraph(nn.Module):
@@ -129,9 +128,9 @@ class ExportGraph(nn.Module):
             controls = list(extra)
         for index, stage in enumerate(self.stages):
             image = mark(image) if index == mark_at else image
+            args = (image, *controls) if isinstance(stage, GradeWithInputs) else (image,)
             # the exposed frame holds no NaN (auto_exposure), so the stage after it skips its sanitize's NaN pass
-            with nan_free(image) if index == 0 and self.exposure is not None else contextlib.nullcontext():
-                image = stage(image, *controls) if isinstance(stage, GradeWithInputs) else stage(image)
+            image = on_nan_free(stage, *args) if index == 0 and self.exposure is not None else stage(*args)
         return (image, adapted) if self.exposure is not None else (image,)
 
 

@@ -59,11 +59,12 @@ def tile_pattern(pattern: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
     return pattern.to(device=like.device, dtype=like.dtype).index_select(-2, rows).index_select(-1, columns)
 
 
-def dither(image: torch.Tensor, pattern: torch.Tensor, amplitude: Param = DEFAULT_AMPLITUDE) -> torch.Tensor:
+def dither(image: torch.Tensor, pattern: torch.Tensor, amplitude: Param = DEFAULT_AMPLITUDE, *, nan_free: bool = False) -> torch.Tensor:
     """``decode(clamp(encode(clamp(image, 0, 1)) + amplitude · noise, 0, 1))`` with the tiled ``pattern`` as noise.
 
     ``image`` is display-referred linear; ``encode``/``decode`` are the sRGB transfer functions.
-    ``amplitude`` 0 returns ``image`` itself.
+    ``amplitude`` 0 returns ``image`` itself. ``nan_free``: the caller knows ``image`` holds no NaN
+    (:func:`~torchgrade.base.images.sanitize`).
 
     Examples:
         >>> image = torch.full((1, 3, 4, 4), 0.5)
@@ -74,6 +75,6 @@ def dither(image: torch.Tensor, pattern: torch.Tensor, amplitude: Param = DEFAUL
     check_image(image)
     if is_constant(amplitude, 0.0):
         return image
-    x = sanitize(working_dtype(image)).clamp(0.0, 1.0)
+    x = sanitize(working_dtype(image), nan_free=nan_free).clamp(0.0, 1.0)
     noise = tile_pattern(pattern, x) * scalar_param(amplitude, x, "amplitude")
     return to_input_dtype(srgb_to_linear((linear_to_srgb(x) + noise).clamp(0.0, 1.0)), image)

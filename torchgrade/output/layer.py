@@ -62,8 +62,8 @@ class LookLUT(Stage):
         """True at contribution 0 (a LUT table is not checked for being the identity)."""
         return is_constant(self.contribution, 0.0)
 
-    def forward(self, image: torch.Tensor) -> torch.Tensor:
-        call = functools.partial(look_lut, lookup=self.lut, contribution=self.contribution, encoding=self.encoding)
+    def forward(self, image: torch.Tensor, *, nan_free: bool = False) -> torch.Tensor:
+        call = functools.partial(look_lut, lookup=self.lut, contribution=self.contribution, encoding=self.encoding, nan_free=nan_free)
         return in_strips(call, image, (self.contribution, self.lut.table))
 
     def export_form(self, backend: str = "slices") -> nn.Module:
@@ -95,8 +95,8 @@ class LookLUTForm(nn.Module):
         super().__init__()
         self.stage, self.lookup = stage, lookup
 
-    def forward(self, image: torch.Tensor) -> torch.Tensor:
-        return look_lut(image, self.lookup, self.stage.contribution, self.stage.encoding)
+    def forward(self, image: torch.Tensor, *, nan_free: bool = False) -> torch.Tensor:
+        return look_lut(image, self.lookup, self.stage.contribution, self.stage.encoding, nan_free=nan_free)
 
 
 def lut_settings(lut: LUT3D) -> dict:
@@ -204,8 +204,8 @@ class Dither(Stage):
         """True at amplitude 0 (then skipped by ``PostFX`` and not exported)."""
         return is_constant(self.amplitude, 0.0)
 
-    def forward(self, image: torch.Tensor) -> torch.Tensor:
-        return dither(image, self.pattern, self.amplitude)
+    def forward(self, image: torch.Tensor, *, nan_free: bool = False) -> torch.Tensor:
+        return dither(image, self.pattern, self.amplitude, nan_free=nan_free)
 
 
 class Display(Stage):

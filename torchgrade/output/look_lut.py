@@ -41,9 +41,10 @@ LOOK_ENCODINGS = ("srgb", "linear")
 """How the display-referred image is encoded for the LUT: sRGB codes (Unity URP, most show LUTs) or display-linear."""
 
 
-def look_lut(image: torch.Tensor, lookup, contribution: Param = 1.0, encoding: str = "srgb") -> torch.Tensor:
+def look_lut(image: torch.Tensor, lookup, contribution: Param = 1.0, encoding: str = "srgb", *, nan_free: bool = False) -> torch.Tensor:
     """Apply a creative LUT ``lookup`` (a :class:`~torchgrade.LUT3D`, or its export form) to display-referred
     ``image`` with ``contribution`` in [0, 1] (a number or per sample ``(B,)``); see the module docstring.
+    ``nan_free``: the caller knows ``image`` holds no NaN (:func:`~torchgrade.base.images.sanitize`).
 
     Examples:
         >>> from torchgrade.lut import LUT3D, identity_table
@@ -54,7 +55,7 @@ def look_lut(image: torch.Tensor, lookup, contribution: Param = 1.0, encoding: s
         True
     """
     check_image(image)
-    x = sanitize(working_dtype(image)).clamp(0.0, 1.0)
+    x = sanitize(working_dtype(image), nan_free=nan_free).clamp(0.0, 1.0)
     coded = linear_to_srgb(x) if encoding == "srgb" else x
     amount = scalar_param(contribution, coded, "contribution")
     blended = (coded + amount * (lookup(coded) - coded)).clamp(0.0, 1.0)

@@ -30,9 +30,11 @@ class ToneMapper(NamedTuple):
     """One tone mapping mode: its ``curve``, its ``controls`` ``{name: Control(default, range)}`` and what a stage
     must ``prepare`` when its controls are set (tables searched per value, built outside any graph), or ``None``.
 
-    ``curve(image, clip=True, **controls)`` takes scene-referred linear Rec.709 and returns
-    display-referred linear Rec.709, clipped to [0, 1] when ``clip``; ``prepare(**controls)`` returns what the
-    stage keeps so that what was built stays built while the stage lives.
+    ``curve(image, clip=True, **controls)`` takes scene-referred linear Rec.709, sanitized
+    (:func:`~torchgrade.base.images.sanitize`), and returns display-referred linear Rec.709, clipped to [0, 1] when
+    ``clip``; ``prepare(**controls)`` returns what the stage keeps so that what was built stays built while the stage
+    lives. A curve that also stands alone and sanitizes its input itself (ACES 2.0's) takes ``nan_free``
+    (``takes_nan_free``), so its input's NaN pass is not made twice.
 
     Examples:
         >>> entry = ToneMapper.of(no_tonemap)
@@ -43,6 +45,7 @@ class ToneMapper(NamedTuple):
     curve: Callable[..., torch.Tensor]
     controls: dict
     prepare: Optional[Callable[..., object]] = None
+    takes_nan_free: bool = False
 
     @classmethod
     def of(cls, curve: Callable[..., torch.Tensor], prepare: Optional[Callable[..., object]] = None, **ranges: tuple) -> "ToneMapper":
@@ -55,7 +58,8 @@ class ToneMapper(NamedTuple):
             Control(default=0.5, range=(0.0, 1.0), kind='number')
         """
         defaults = inspect.signature(curve).parameters
-        return cls(curve, {name: Control(defaults[name].default, allowed) for name, allowed in ranges.items()}, prepare)
+        controls = {name: Control(defaults[name].default, allowed) for name, allowed in ranges.items()}
+        return cls(curve, controls, prepare, takes_nan_free="nan_free" in defaults)
 
 
 @formula

@@ -110,9 +110,9 @@ class ToneMap(Stage):
         """True when a curve maps scene-referred input (any mode but ``"none"``): a LUT baked through it needs an HDR shaper."""
         return self.mode != "none"
 
-    def forward(self, image: torch.Tensor) -> torch.Tensor:
+    def forward(self, image: torch.Tensor, *, nan_free: bool = False) -> torch.Tensor:
         self.check_learnable()
-        return self.run_in_strips(tone_mapped, image)
+        return self.run_in_strips(tone_mapped, image, nan_free=nan_free)
 
 
 def _signature() -> inspect.Signature:

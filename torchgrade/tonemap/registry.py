@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import torch
 
-from ..base.images import check_image, nan_free, sanitize, to_input_dtype, working_dtype
+from ..base.images import check_image, sanitize, to_input_dtype, working_dtype
 from ..base.params import Param, check_choice
 from .aces1.reference import aces_reference
 from .aces2.curves import (
@@ -110,9 +110,11 @@ def tonemap(image: torch.Tensor, mode: str = "neutral", clip: bool = True, **par
     return tone_mapped(image, mode, clip, **params)
 
 
-def tone_mapped(image: torch.Tensor, mode: str = "neutral", clip: bool = True, **params: Param) -> torch.Tensor:
+def tone_mapped(image: torch.Tensor, mode: str = "neutral", clip: bool = True, *, nan_free: bool = False,
+                **params: Param) -> torch.Tensor:
     """:func:`tonemap` without checking the parameters' values: for :class:`~torchgrade.ToneMap`, which checked them
-    when they were set, on every strip of a frame.
+    when they were set, on every strip of a frame. ``nan_free``: ``image`` holds no NaN
+    (:func:`~torchgrade.base.images.sanitize`).
 
     Examples:
         >>> image = torch.full((1, 3, 1, 1), 8.0)
@@ -124,6 +126,6 @@ def tone_mapped(image: torch.Tensor, mode: str = "neutral", clip: bool = True, *
     unknown = set(params) - set(entry.controls)
     if unknown:
         raise ValueError(f"tone mapper {mode!r} takes {list(entry.controls) or 'no parameters'}, got {sorted(unknown)}")
-    working = sanitize(working_dtype(image))
-    with nan_free(working):  # a curve that sanitizes its input again (ACES 2.0's transform) leaves out the NaN pass
-        return to_input_dtype(entry.curve(working, clip=clip, **params), image)
+    working = sanitize(working_dtype(image), nan_free=nan_free)
+    sanitized = {"nan_free": True} if entry.takes_nan_free else {}  # a curve that sanitizes again leaves out the NaN pass
+    return to_input_dtype(entry.curve(working, clip=clip, **sanitized, **params), image)

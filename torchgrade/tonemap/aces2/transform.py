@@ -217,11 +217,12 @@ def _check(peak_luminance: float, limiting_primaries, display_primaries, encodin
 
 def aces2_output(image: torch.Tensor, peak_luminance: float = 100.0, limiting_primaries: str = "rec709",
                  display_primaries: str | None = None, encoding: str = "linear",
-                 input_space: str = "rec709") -> torch.Tensor:
+                 input_space: str = "rec709", *, nan_free: bool = False) -> torch.Tensor:
     r"""ACES 2.0 Output Transform of a scene-referred ``(..., 3, H, W)`` image.
 
     ``input_space`` is ``"rec709"`` (linear Rec.709, Bradford-adapted to AP0) or ``"aces"``
-    (ACES2065-1). The image is sanitised (NaN -> 0, ±Inf -> ±65504), AP1-clamped to
+    (ACES2065-1). The image is sanitised (NaN -> 0, ±Inf -> ±65504; only bounded when the caller says it is
+    ``nan_free``: :func:`~torchgrade.base.images.sanitize`), AP1-clamped to
     ``[0, 8 r_hit]`` and rendered for a display of ``peak_luminance`` cd/m² whose gamut is limited
     to ``limiting_primaries``; the result is expressed in ``display_primaries`` (default: the
     limiting ones) and encoded:
@@ -253,7 +254,7 @@ def aces2_output(image: torch.Tensor, peak_luminance: float = 100.0, limiting_pr
         raise TypeError(f"aces2_output needs float32 or float64 input (its CAM overflows {image.dtype})")
     # The CAM's powers and the table lookups need float32 or better, whatever autocast is active.
     with full_precision():
-        image = sanitize(image)
+        image = sanitize(image, nan_free=nan_free)
         linear = _display_linear(pixel_layout(image, keepdim=False), peak, limiting_primaries, display_primaries, input_space)
         encoded = each_plane(lambda plane: _encoded(plane, encoding, peak), linear)
         return torch.stack(encoded, dim=-3) if isinstance(encoded, tuple) else encoded
