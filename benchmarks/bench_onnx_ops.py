@@ -92,6 +92,10 @@ def _matmul(x, out):
             helper.make_node("Reshape", [out + "_m", "strip"], [out])]
 
 
+def _einsum(x, out):
+    return [helper.make_node("Einsum", ["matrix", x], [out], equation="ij,njhw->nihw")]
+
+
 def _split_concat(x, out):
     planes = [f"{out}_{c}" for c in "rgb"]
     return [helper.make_node("Split", [x], planes, axis=1), helper.make_node("Concat", planes[::-1], [out], axis=1)]
@@ -117,6 +121,7 @@ PATTERNS = {
     "ReduceMax over channels": _channel_reduction("ReduceMax"),
     "3x3 matrix, plane products": _plane_products,
     "3x3 matrix, MatMul": _matmul,
+    "3x3 matrix, Einsum": _einsum,
     "Split and Concat": _split_concat,
 }
 """Each pattern as ``step(x, out) -> nodes`` computing ``out`` from ``x``; its cost is its nodes' together."""

@@ -6,12 +6,16 @@ exported looks in 8-bit sRGB codes on the demo scene, the figure ``tests/onnx/te
 Each look (parts of ``export/looks/cinematic.json``, tone mapped with ACES, and the whole look) is exported with
 :func:`torchgrade.onnx.export` and run on OpenVINO's CPU plugin with no precision hint; its display-linear output
 and PyTorch's are clipped to [0, 1], sRGB-encoded and compared in codes at 333x517, the test's largest frame.
+A second table exports the grade + ACES look with its colour matrices as torchgrade exports them (three products of
+planes, :func:`torchgrade.base.planes.apply_matrix`) and as the two one-node forms it does not take, a ``MatMul`` and
+an ``Einsum``.
 Writes openvino_precision.json and openvino_precision.md to ``--out`` (default benchmarks/out; the committed ones
 with ``--out benchmarks/results``).
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import sys
 import tempfile
@@ -24,6 +28,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 import torchgrade as tg
 from benchmarks.common import argument_parser, write_results
+from torchgrade.base.planes import apply_matrix
+from torchgrade.runtime.variants import Variant
 
 LOOK = ROOT / "export" / "looks" / "cinematic.json"
 COMMAND = ".venv/bin/python -m benchmarks openvino_precision"
@@ -51,17 +57,49 @@ def code_error(config: dict, folder: Path) -> dict:
     return {"max": round(float(error.max()), 2), "p999": round(float(np.percentile(error, 99.9)), 2)}
 
 
+def _matmul(matrix: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
+    return (image.movedim(-3, -1) @ matrix.mT).movedim(-1, -3)
+
+
+def _einsum(matrix: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
+    return torch.einsum("ij,...jhw->...ihw" if matrix.dim() == 2 else "bij,bjhw->bihw", matrix, image)
+
+
+MATRIX_FORMS = {"three products of planes (torchgrade's)": None, "MatMul": _matmul, "Einsum": _einsum}
+"""The exported forms of a colour matrix compared: ``None`` is torchgrade's own."""
+
+
+@contextlib.contextmanager
+def matrices_exported_as(form):
+    """Colour matrices exported as ``form(matrix, image)`` within the block (``None``: torchgrade's own form)."""
+    variants = apply_matrix.formula.variants
+    kept = variants["export"]
+    variants["export"] = kept if form is None else Variant("export", form)
+    try:
+        yield
+    finally:
+        variants["export"] = kept
+
+
 def main(argv=None) -> int:
     args = argument_parser(__doc__).parse_args(argv)
     import openvino
 
     with tempfile.TemporaryDirectory() as folder:
         rows = {name: code_error(config, Path(folder)) for name, config in looks().items()}
-    report = {"command": COMMAND, "openvino": openvino.__version__, "frame": [HEIGHT, WIDTH], "results": rows}
+        matrices = {}
+        for name, form in MATRIX_FORMS.items():
+            with matrices_exported_as(form):
+                matrices[name] = code_error(looks()["grade + ACES"], Path(folder))
+    report = {"command": COMMAND, "openvino": openvino.__version__, "frame": [HEIGHT, WIDTH], "results": rows,
+              "colour_matrices": matrices}
     lines = [f"# OpenVINO default precision vs PyTorch: demo scene {WIDTH}x{HEIGHT}, 8-bit sRGB codes", "",
              f"`{COMMAND}` (OpenVINO {openvino.__version__}, CPU plugin, no precision hint)", "",
              "| look | max | p99.9 |", "| --- | ---: | ---: |"]
     lines += [f"| {name} | {r['max']} | {r['p999']} |" for name, r in rows.items()]
+    lines += ["", "## Colour matrices: grade + ACES with its matrices exported as", "", "| form | max | p99.9 |",
+              "| --- | ---: | ---: |"]
+    lines += [f"| {name} | {r['max']} | {r['p999']} |" for name, r in matrices.items()]
     write_results(args.out, "openvino_precision", report, lines, COMMAND)
     return 0
 

@@ -64,7 +64,7 @@ __all__ = [
 
 _LAZY_MODULES = ("io", "onnx", "testing", "integrations")
 """Subpackages imported at their first use: the onnx, OpenEXR and numpy packages behind them take longer to
-import than torchgrade itself (``import torchgrade`` stays within 0.3 s of ``import torch``)."""
+import than torchgrade itself (``benchmarks/results/import.md``)."""
 
 
 def __getattr__(name: str):

@@ -82,8 +82,8 @@ def with_alpha(function, image: torch.Tensor, *args, **kwargs) -> torch.Tensor:
 
 EIGHT_BIT_ROWS = 8
 """Rows :func:`warn_if_eight_bit` reads at most (at least half as many), evenly spaced, of the colour of the first image
-of a batch: whole rows, read in order. In the cinematic look at 1920x1080 (CPU time, one thread) the check took 0.24 ms
-a stage call, 0.3 % of the frame; 64x64 values spread over the frame took 0.39 ms (a cache line fetched per value)."""
+of a batch: whole rows, read in order (values spread over the frame would fetch a cache line each). Its cost against
+a copy of the frame: ``benchmarks/results/cpu_forms.md``, "8-bit check of a frame"."""
 
 
 EIGHT_BIT_LEVELS = 16

@@ -20,10 +20,9 @@ def apply_matrix(matrix: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
     """``out[..., i, h, w] = sum_j matrix[..., i, j] * image[..., j, h, w]`` for (3,3) or (B,3,3) matrices.
 
     Three per-channel multiply-adds (a product and two ``addcmul``), never a matrix product: a 3x3 ``einsum``
-    runs as a batched product with an inner dimension of 3, which oneDNN and MKL block poorly (2x the time of
-    these passes on a CPU strip of 2^17 pixels), cuBLAS runs as ``gemv`` calls that nothing fuses (over half of a
-    compiled look's time on an H200: ``../shared/measurements/gpu-h200``), and Inductor fuses these into the
-    steps around them. Computed in place where nothing records (:func:`untracked`).
+    runs as a batched product with an inner dimension of 3, which oneDNN and MKL block poorly
+    (``benchmarks/results/cpu_forms.md``, "3x3 colour matrix, a strip"), cuBLAS runs as ``gemv`` calls that nothing
+    fuses, and Inductor fuses these into the steps around them. Computed in place where nothing records (:func:`untracked`).
 
     Examples:
         >>> swap = torch.tensor([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
@@ -35,8 +34,10 @@ def apply_matrix(matrix: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
 
 @apply_matrix.variant("export")
 def _apply_matrix_exported(matrix: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
-    """Three broadcast products summed, of slices: onnxruntime's CPU ``Einsum`` ran 3 to 5 times slower, and a
-    ``MatMul`` runs in bfloat16 at OpenVINO's default precision, coefficients and all (7.1 codes p99.9 on the look)."""
+    """Three broadcast products summed, of slices: where OpenVINO's default inference precision is bfloat16 (CPUs
+    with bfloat16 units) it runs a ``MatMul`` or an ``Einsum`` in bfloat16, coefficients and all, and the products in
+    float32 (``benchmarks/results/openvino_precision.md``, "Colour matrices"); onnxruntime's CPU runs the one-node
+    forms faster (``benchmarks/results/onnx_ops.md``)."""
     return matrix_on_planes(matrix, [image[..., j : j + 1, :, :] for j in range(3)])
 
 
@@ -190,7 +191,8 @@ def channel_sum(image: torch.Tensor, weights) -> torch.Tensor:
     """``sum_j weights[j] * image[..., j, :, :]`` as ``(..., 1, H, W)``, for three Python-number ``weights``.
 
     Three passes over the planes (a product and two adds by a number, in place where nothing records): no weight
-    tensor to make or copy, and faster on the CPU than a product and a channel reduction (35 against 71 µs a strip).
+    tensor to make or copy, and faster on the CPU than a product and a channel reduction
+    (``benchmarks/results/cpu_forms.md``, "channel sum by numbers, a strip").
 
     Examples:
         >>> channel_sum(torch.tensor([1.0, 2.0, 3.0]).reshape(3, 1, 1), (0.5, 0.25, 0.0)).flatten().tolist()

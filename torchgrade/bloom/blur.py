@@ -66,8 +66,8 @@ def _radii(radius) -> tuple:
 @formula
 def mirrored(light: torch.Tensor, axis: int, radius: int) -> torch.Tensor:
     """``light`` extended by ``radius`` pixels at both ends of ``axis`` (:func:`mirror_pad`): where the side is at least
-    ``radius`` (and sizes are not symbolic), its edge slices flipped and joined (a gather along the last axis is several
-    times slower on the CPU); otherwise a gather of :func:`_mirror_index`."""
+    ``radius`` (and sizes are not symbolic), its edge slices flipped and joined (faster on the CPU than a gather along
+    the last axis: ``benchmarks/results/cpu_forms.md``, "mirror padding of rows"); otherwise a gather of :func:`_mirror_index`."""
     return light.index_select(axis, _mirror_index(light.shape[axis], radius, light.device))
 
 
@@ -99,8 +99,8 @@ def mirror_filter(light: torch.Tensor, weights) -> torch.Tensor:
     """``light`` filtered along both axes by the symmetric ``weights`` (numbers, normalised here) over the mirrored
     frame: keeps a uniform frame uniform and every pixel's light in the frame.
 
-    Sums of shifted views (:func:`symmetric_filter`): on CPU about 7 times faster than
-    ``kornia.filters.filter2d_separable``, whose depthwise convolution oneDNN runs slowly.
+    Sums of shifted views (:func:`symmetric_filter`): on the CPU faster than ``kornia.filters.filter2d_separable``,
+    whose depthwise convolution oneDNN runs slowly (``benchmarks/results/cpu_forms.md``, "bloom blur").
 
     Examples:
         >>> mirror_filter(torch.tensor([[[[0.0, 4.0, 0.0]]]]), (1, 2, 1))

@@ -85,8 +85,8 @@ def cross_sum(values: torch.Tensor) -> torch.Tensor:
     The taps are the shader's offsets of 2 source texels, each a bilinear tap that averages a 2x2 block.
     With clamped taps the cross is a symmetric operator whose rows (and so columns) all sum to 5: a uniform frame
     stays uniform, and the light each block passes on is known exactly (:func:`prefilter`). Sums of shifted views
-    of the padded tensor, the two neighbours of each row first: on CPU about 100 times faster than a 3x3
-    convolution (``kornia.filters.filter2d``), which oneDNN runs slowly.
+    of the padded tensor, the two neighbours of each row first: on the CPU faster than a 3x3 convolution
+    (``kornia.filters.filter2d``), which oneDNN runs slowly (``benchmarks/results/cpu_forms.md``, "firefly cross sum").
 
     Examples:
         >>> cross_sum(torch.ones(1, 1, 3, 3))[0, 0]

@@ -122,7 +122,7 @@ def halve(light: torch.Tensor) -> torch.Tensor:
     Pixel ``i`` of ``m = ceil(n / 2)`` is ``(m / n) (a_i x_{2i-1} + x_{2i} + b_i x_{2i+1})`` with ``a_i = i d / m``,
     ``b_i = 1 - (i + 1) d / m`` and ``d = 2 m - n`` (1 at an odd side, where the ``m`` pixels share the ``n``; 0 at an
     even one, the 2x2 mean). Even sides (unless traced for ONNX, where sizes are symbolic) take the mean of four
-    strided views (on the CPU about 3 times faster than ``F.avg_pool2d``), or ``F.avg_pool2d`` where the device's
+    strided views (on the CPU faster than ``F.avg_pool2d``: ``benchmarks/results/cpu_forms.md``, "bloom halving"), or ``F.avg_pool2d`` where the device's
     policy takes library kernels; other sides go a side at a time (:func:`_along_sides`).
 
     Examples:
@@ -146,7 +146,7 @@ def _halve_pooled(light: torch.Tensor) -> torch.Tensor:
 
 @halve.variant("sizes", when=_even_sides)
 def _halve_strided(light: torch.Tensor) -> torch.Tensor:
-    """Even sides: the mean of four strided views (on the CPU about 3 times faster than ``F.avg_pool2d``)."""
+    """Even sides: the mean of four strided views (see :func:`halve`)."""
     return 0.25 * (light[..., ::2, ::2] + light[..., 1::2, ::2] + light[..., ::2, 1::2] + light[..., 1::2, 1::2])
 
 
@@ -267,8 +267,8 @@ def upsample(light: torch.Tensor, sizes, bicubic: bool) -> torch.Tensor:
 
 @upsample.variant("sizes", when=lambda light, sizes, bicubic: all(_doubles(small, large) for small, large in zip([light.shape[-2:], *sizes], sizes)))
 def _upsample_doubled(light: torch.Tensor, sizes, bicubic: bool) -> torch.Tensor:
-    """Every size exactly twice the one before: one bilinear ``F.interpolate`` (channels folded into the batch:
-    PyTorch's CPU kernel is about 3 times faster on one channel), then the B-spline's remaining smoothing."""
+    """Every size exactly twice the one before: one bilinear ``F.interpolate`` (of one channel, every leading
+    dimension and the channels folded into its batch), then the B-spline's remaining smoothing."""
     factor = 2 ** len(sizes)
     fine = F.interpolate(light.reshape((-1, 1) + light.shape[-2:]), scale_factor=float(factor), mode="bilinear", align_corners=False)
     fine = fine.reshape(light.shape[:-2] + fine.shape[-2:])

@@ -24,12 +24,13 @@ from ..color import linear_to_logc, linear_to_srgb, srgb_to_linear
 from ..grading.grade import color_grade
 from ..grading.layer import ColorGrade
 from ..look.postfx import PostFX
+from ..lut.kernels import KERNELS
 from ..lut.lattice import planar_table
 from ..tonemap import tone_mapper, tonemap
 from .bounded import BoundedControls, fittable_names
 from .metrics import display_codes, match_errors
 from .pixels import PixelPairs
-from .residual import ResidualLUT, lookup_matrix, monotonicity, smoothness
+from .residual import ResidualLUT, lattice_coordinates, monotonicity, smoothness
 
 __all__ = ["GRADE_CONTROLS", "TONEMAP_CANDIDATES", "TRACKBALLS", "canonical_trackball", "MatchedControls", "optimise",
            "levenberg_marquardt", "every_loss", "pixel_residuals", "ControlsFit", "fit_controls",
@@ -267,17 +268,18 @@ def fit_residual(display: torch.Tensor, target: torch.Tensor, size: int, steps: 
                  progress: bool) -> tuple:
     """Fit a :class:`ResidualLUT` from the look's display output to the target; ``(residual, losses by optimiser)``.
 
-    The data term is Huber in 8-bit codes (see :func:`pixel_residuals`); the lookup runs as :func:`lookup_matrix`.
+    The data term is Huber in 8-bit codes (see :func:`pixel_residuals`); the table is looked up at the pixels'
+    :func:`~torchgrade.match.residual.lattice_coordinates`, computed once.
     """
     residual = ResidualLUT(size).to(display.device)
-    weights = lookup_matrix(display, size)
+    coords = lattice_coordinates(display, size)
     target_codes = display_codes(target).movedim(-3, 0).reshape(3, -1).T
     scale = 255.0**2  # regularisers on the table's [0, 1] units, brought to the data term's squared codes
 
     def loss_fn():
         table = residual.lut.table
         # Entries are sRGB codes: decoding, clamping to the display and encoding again is a clamp.
-        codes = 255.0 * (weights @ planar_table(table).T).clamp(0.0, 1.0)
+        codes = 255.0 * KERNELS["tetrahedral"](coords, planar_table(table), size).T.clamp(0.0, 1.0)
         data = 2.0 * nn.functional.smooth_l1_loss(codes, target_codes, beta=1.0)
         return data + scale * (smooth * smoothness(table) + monotone * monotonicity(table))
 

@@ -24,9 +24,8 @@ from torch import nn
 
 from ..color import linear_to_srgb
 from ..lut import LUT3D, identity_table
-from ..lut.kernels import tetrahedron
 
-__all__ = ["ResidualLUT", "smoothness", "monotonicity", "lookup_matrix"]
+__all__ = ["ResidualLUT", "smoothness", "monotonicity", "lattice_coordinates"]
 
 
 class ResidualLUT(nn.Module):
@@ -80,28 +79,22 @@ def monotonicity(table: torch.Tensor) -> torch.Tensor:
     return total
 
 
-def lookup_matrix(display_linear: torch.Tensor, size: int) -> torch.Tensor:
-    """The tetrahedral lookup of :class:`ResidualLUT` at fixed pixels, as a sparse ``(P, S³)`` matrix of weights.
+def lattice_coordinates(display_linear: torch.Tensor, size: int) -> torch.Tensor:
+    """The lattice coordinates ``(3, P)`` at which :class:`ResidualLUT` looks up display-linear pixels: their sRGB
+    codes times ``size - 1``.
 
-    While the residual is fitted its input (the look's output) does not change, so the lookup is a fixed
-    linear map of the planar table (:func:`~torchgrade.lut.planar_table`): one sparse product per step
-    instead of the gathers, whose backward scatters (several times slower on CPU). Same cells, tie rules and
-    vertices as :func:`~torchgrade.lut.tetrahedral` (:func:`~torchgrade.lut.kernels.tetrahedron`).
+    While the residual is fitted its input (the look's output) does not change, so they are computed once; each step
+    looks the table up at them with the tetrahedral kernel (:data:`~torchgrade.lut.kernels.KERNELS`), as
+    :class:`ResidualLUT` does, and its gathers' backward is cheaper than a sparse matrix's
+    (``benchmarks/results/cpu_forms.md``, "residual fit step").
 
     Examples:
+        >>> from torchgrade.lut.kernels import KERNELS
+        >>> from torchgrade.lut.lattice import planar_table
         >>> display = torch.rand(1, 3, 6, 1, dtype=torch.float64)
         >>> residual = ResidualLUT(5)
-        >>> from torchgrade.lut.lattice import planar_table
-        >>> by_matrix = (lookup_matrix(display, 5) @ planar_table(residual.lut.table).T).T.reshape(1, 3, 6, 1)
-        >>> bool(torch.allclose(by_matrix, linear_to_srgb(residual(display)), atol=1e-9))
+        >>> looked_up = KERNELS["tetrahedral"](lattice_coordinates(display, 5), planar_table(residual.lut.table), 5)
+        >>> bool(torch.allclose(looked_up.reshape(1, 3, 6, 1), linear_to_srgb(residual(display)), atol=1e-9))
         True
     """
-    coords = linear_to_srgb(display_linear.clamp(0.0, 1.0)).movedim(-3, 0).reshape(3, -1) * (size - 1)
-    indices, (f_max, f_mid, f_min) = tetrahedron(coords, size)
-    columns = torch.cat(indices).long()
-    weights = torch.cat([1.0 - f_max, f_max - f_mid, f_mid - f_min, f_min])
-    pixels = coords.shape[1]
-    rows = torch.arange(pixels, device=coords.device).repeat(4)
-    # COO, not CSR: the product's backward with a CSR matrix measured 15 times slower on CPU (torch 2.x).
-    matrix = torch.sparse_coo_tensor(torch.stack([rows, columns]), weights, (pixels, size**3), check_invariants=False)
-    return matrix.coalesce()
+    return linear_to_srgb(display_linear.clamp(0.0, 1.0)).movedim(-3, 0).reshape(3, -1) * (size - 1)

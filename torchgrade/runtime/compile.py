@@ -65,20 +65,16 @@ LOG = logging.getLogger("torchgrade.compile")
 CPU_OPTIONS = {"layout_optimization": False}
 """Inductor's settings on the CPU. Its layout optimisation gives the outputs of a graph's convolutions (the bloom
 pyramid's blurs) channels-last buffers; a per-pixel loop that reads such a frame as planes is then not vectorised
-(``benchmarks/results/cpu_paths.md``: with the grade on planes, the compiled cinematic look at 1920x1080 on one thread
-took 1.22 times as long as before with it, 0.69-0.72 without it)."""
+(the compiled cinematic look with and without it: ``benchmarks/results/cpu_paths.md``)."""
 
 
 ACTIVATION_MEMORY_BUDGET = 0.5
 """PyTorch's activation memory budget for a compiled training forward (``torch._functorch.config.activation_memory_budget``):
 between 0, what recomputing everything in the backward keeps (the inputs), and 1, what AOTAutograd's min-cut
-partitioner keeps by default; the partitioner recomputes the least that holds its estimate of the saved memory there.
-At 0.5 the look's forward compiled by Inductor writes 5 frames (its output and what it saves) instead of 25.3, in 65
-loops instead of 106, and its backward writes 3.67 frames either way, in 90 loops instead of 83
-(``benchmarks/results/inductor_proxy.md``). On
-the CPU its training step (4x3x256x384) at 0.5 took 0.64 of its time at 1.0 on one thread and 0.78 on two; at 0.25,
-1.09 (``benchmarks/results/cpu_paths.md``). Not yet timed on a GPU (``benchmarks/bench_gpu.py``'s
-``training_budget`` section times it against 1.0)."""
+partitioner keeps by default; the partitioner recomputes the least that holds its estimate of the saved memory there. The frames the compiled look's
+forward and backward write at each budget: ``benchmarks/results/inductor_proxy.md``; its training step on the CPU at
+0.25, 0.5 and 1.0: ``benchmarks/results/cpu_paths.md``. On a GPU, ``benchmarks/bench_gpu.py``'s ``training_budget``
+section times it against 1.0."""
 
 
 _calling = threading.local()

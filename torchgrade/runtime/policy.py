@@ -8,9 +8,9 @@ maths, so the maths modules keep one differentiable form each and ask :func:`pol
   pixel runs, one thread each, go to :data:`PARALLEL_FROM` or more worker threads when there are that many. A value
   of the data may be read back (free on the CPU), and blurs and pooling take the slices the CPU is fastest at.
 * **Any other device** (CUDA, ``meta``, ...): whole frames. Each operation is a kernel launch there, and a strip
-  loop multiplies launches (16,875 a 4K frame of ``export/looks/cinematic.json`` on an H200, against 1,060 whole;
-  ``../shared/measurements/gpu-h200``) for no cache to gain; a value read back is a synchronisation, so no eager
-  shortcut reads one; blurs and pooling are one library kernel each.
+  loop multiplies launches for no cache to gain (``benchmarks/results/gpu.md``, the stages' "before (strips / none)");
+  a value read back is a synchronisation, so no eager shortcut reads one; blurs and pooling are one library kernel
+  each.
 * **While tracing, compiling or exporting**: one graph of whole frames, no reads. While compiling, per-pixel chains
   run on the image's three planes (:attr:`ExecutionPolicy.pixel_planes`), which the compiler fuses into one kernel.
 
@@ -37,11 +37,11 @@ __all__ = ["ExecutionPolicy", "policy_for", "readable", "nonnegative", "pixel_la
            "CPU_HISTOGRAM_TABLES", "RESAMPLING_MATRIX_SIDE"]
 
 STRIP_PIXELS_PER_THREAD = 1 << 16
-"""Pixels of a CPU strip per intra-op thread (batch included). On a 2-core Xeon (2 MiB L2 a core), grade + tone map of
-``export/looks/cinematic.json`` at 1920x1080 took 516 ms whole, 418 / 312 / 296 / 308 / 317 ms in strips of
-2^15 / 2^16 / 2^17 / 2^18 / 2^19 pixels with 2 threads (medians of 5, alternating, load average 1.8), with identical
-output. A strip grows with the thread count: each thread's share stays that size, and a frame on many cores is fewer
-strips, each of the same dozens of operations (Python dispatches every one of them, one at a time)."""
+"""Pixels of a CPU strip per intra-op thread (batch included): a strip's intermediates stay in the cores' caches,
+and each of its dozens of operations is dispatched by Python once a strip, so smaller strips pay that more often and
+larger ones leave the cache (grade and tone map of ``export/looks/cinematic.json`` at 1920x1080 in strips of 2^15 to
+2^19 pixels a thread and whole: ``benchmarks/results/cpu_forms.md``, "Strips"; the output is the same). A strip grows
+with the thread count: each thread's share stays that size, and a frame on many cores is fewer strips."""
 
 PARALLEL_FROM = 2
 """Intra-op thread count from which the torch form of a LUT's pixel runs (one thread each,
@@ -50,10 +50,10 @@ PARALLEL_FROM = 2
 calling thread, each operation on every thread."""
 
 LOOKUP_CHUNK = 32768
-"""Pixels per pass of the eager CPU LUT lookup. Tetrahedral's eager form holds 20 values a pixel (2.5 MiB a run);
-smaller runs pay the fixed cost of each operation more often (about 45 µs a run of 15: 8K-pixel runs took 1.3
-times as long a 1080p frame, 4K 1.55 times), larger ones leave the cache (64K: even, 128K: 1.08 times).
-benchmarks/bench_lut.py measures the time and the temporary bytes per pixel."""
+"""Pixels per pass of the CPU LUT lookup. Tetrahedral's eager form holds 20 values a pixel (2.5 MiB a run): smaller
+runs pay the fixed cost of each of its 15 operations more often, larger ones leave the cache. The size is the eager
+form's: the compiled loop, a few values a pixel, is faster on larger runs. Both across run sizes: ``benchmarks/results/cpu_forms.md``,
+"LUT runs"; the time and temporary bytes per pixel: ``benchmarks/results/lut.md``."""
 
 
 @dataclass(frozen=True)
@@ -68,24 +68,22 @@ class ExecutionPolicy:
         reads_values: eager shortcuts may read a value of the data (bloom skips its pyramid when no pixel
             passes the threshold): free on the CPU, a synchronisation of the device elsewhere.
         filters_as_kernels: a separable blur as two convolutions with kernels made once, and a 2x2 mean as one
-            ``avg_pool2d``: one library kernel each (cuDNN), where the CPU is faster on sums of shifted slices (a
-            9-tap blur of 540x960 took 14 ms as slices against 94 ms as a oneDNN convolution; four strided views
-            summed about 3 times faster than ``avg_pool2d``).
+            ``avg_pool2d``: one library kernel each (cuDNN), where the CPU is faster on sums of shifted slices
+            (``benchmarks/results/cpu_forms.md``, "bloom blur" and "bloom halving").
         one_kernel_blur_pixels: with ``filters_as_kernels``, a plane of at most this many pixels is blurred by one 2-D
             convolution (taps² products a pixel, one launch) instead of two 1-D ones (one launch each); ``None``: never.
         nan_dropping_max: ``max(x, 0)`` with NaN to 0 as one ``torch.fmax`` (one launch) instead of a clamp and a NaN
-            pass; the CPU does not vectorise ``fmax``, which runs several times slower there than the two passes.
+            pass; the CPU does not vectorise ``fmax``, slower there than the two passes (``benchmarks/results/cpu_forms.md``, "max(x, 0)").
         histogram_tables: the tables of bins a histogram is counted into, image column ``c`` into table ``c mod
             histogram_tables``, the tables summed after; ``None``: one per column. Neighbouring pixels, often of one
             bin, then add to different addresses instead of each waiting on the one before: on a GPU, atomic
-            additions (the 8.3 million pixels of a 4K frame counted into one table of 128 bins took 13.2 ms on an
-            H200, ``AutoExposure(metering="histogram")``, ``benchmarks/results/gpu.md``); on the CPU, a chain of
-            additions to one address (see :data:`CPU_HISTOGRAM_TABLES`).
+            additions (a 4K frame counted into one table: ``benchmarks/results/gpu.md``, run D's histogram); on the
+            CPU, a chain of additions to one address (see :data:`CPU_HISTOGRAM_TABLES`).
         histogram_row_groups: the groups of image rows a histogram is counted by, each into its own tables, the
             groups summed after (the largest number up to this that divides the image's height): ATen's CPU scatter
             runs the rows of its output on threads, one row each, so one row for the whole frame runs on one thread.
-            The CPU policy has one group a thread: the cinematic look's exposure stage at 1920x1080 on 2 threads took
-            0.89 and 0.96 of its time with one group (``benchmarks/results/cpu_paths.md``, both orders).
+            The CPU policy has one group a thread (the cinematic look's exposure stage against one group:
+            ``benchmarks/results/cpu_paths.md``).
         resampling_matrix_side: a side of at most this many pixels that bloom resamples to a size other than half or
             twice its own (an odd side) is resampled by its matrix, made once a size (one matrix product), instead of
             by gathers (a gather, a product and a sum a step); ``None``: never (while tracing, compiling or exporting,
@@ -116,9 +114,9 @@ CPU_HISTOGRAM_TABLES = 8
 """Tables a CPU counts a histogram into (:attr:`ExecutionPolicy.histogram_tables`). The CPU adds a pixel to its bin
 after the previous pixel's addition, and neighbouring pixels of a frame mostly fall in one bin: each addition then
 waits for the one before it at the same address. Eight neighbouring columns in eight tables of 128 bins (4 KiB, in
-the core's first-level cache) break that chain: the cinematic look's exposure stage at 1920x1080 took 0.86 and 0.65
-of its time with one table (``benchmarks/results/cpu_paths.md``, one thread, both orders). A table per column, a
-GPU's choice, would not fit that cache (1920 tables of 128 bins at 1080p)."""
+the core's first-level cache) break that chain (the cinematic look's exposure stage against one table:
+``benchmarks/results/cpu_paths.md``). A table per column, a GPU's choice, would not fit that cache (1920 tables of
+128 bins at 1080p)."""
 
 ONE_KERNEL_BLUR_PIXELS = 1 << 17
 """Pixels of a plane up to which a GPU blurs it with one 2-D convolution. A 9-tap blur of 2^17 pixels is 10.6 million

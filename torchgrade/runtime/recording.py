@@ -25,7 +25,7 @@ def is_tracing() -> bool:
 
 def is_exporting() -> bool:
     """``torch.onnx.is_in_onnx_export()``, without loading ``torch.onnx`` where nothing has: an export loads it first,
-    and ONNX's exporter takes about 0.1 s to import (``import torchgrade``, whose constants are computed with the
+    and ONNX's exporter takes longer to import than torchgrade (``benchmarks/results/import.md``; ``import torchgrade``, whose constants are computed with the
     library's functions, and the first frame would pay it). While compiling it is asked directly: Dynamo folds the
     call, and would trace the lookup in ``sys.modules``.
 
