@@ -9,6 +9,8 @@ import torch
 import torchgrade as tg
 from torchgrade import functional as F
 from torchgrade.grading.grade import COLOR_GRADE_CONTROLS
+from torchgrade.grading.primary import STYLES, style_table
+from torchgrade.output.dither import DITHER_CONTROLS
 from torchgrade.tonemap import TONE_MAPPERS
 
 IMAGE = torch.rand(1, 3, 4, 4)
@@ -48,6 +50,23 @@ TONEMAP_NUMBERS = [(mode, name) for mode, entry in TONE_MAPPERS.items() for name
 def test_tonemap_refuses_what_tonemap_refuses_with_its_message(mode, name):
     value = outside(TONE_MAPPERS[mode].controls[name])
     assert message(lambda: F.tonemap(IMAGE, mode, **{name: value})) == message(lambda: tg.ToneMap(mode, **{name: value}))
+
+
+PRIMARY_NUMBERS = [(style, name) for style in STYLES for name, control in style_table(style).items()
+                   if control.kind == "number" and control.range is not None and outside(control) is not None]
+
+
+@pytest.mark.parametrize("style, name", PRIMARY_NUMBERS)
+def test_primary_grade_refuses_what_primarygrade_refuses_with_its_message(style, name):
+    value = outside(style_table(style)[name])
+    assert message(lambda: F.primary_grade(IMAGE, style, **{name: value})) == message(lambda: tg.PrimaryGrade(style, **{name: value}))
+
+
+def test_dither_refuses_what_dither_refuses_with_its_message():
+    value = outside(DITHER_CONTROLS["amplitude"])
+    pattern = F.dither_pattern(4)
+    assert message(lambda: F.dither(IMAGE, pattern, value)) == message(lambda: tg.Dither(amplitude=value))
+    assert torch.isfinite(F.dither(IMAGE, pattern, torch.tensor(0.5))).all()  # a tensor is the caller's
 
 
 def test_the_issues_two_cases_and_tensors_left_unread():

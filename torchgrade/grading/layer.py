@@ -156,7 +156,7 @@ class PrimaryGrade(Stage):
         return all(self.is_default(name) for name in self._control_names if name not in ("style", *PIVOTS))
 
     def forward(self, image: torch.Tensor, *, nan_free: bool = False) -> torch.Tensor:
-        return self.run_in_strips(primary_grade, image, nan_free=nan_free)
+        return self.run_in_strips(primary_graded, image, nan_free=nan_free)
 
 
 PrimaryGrade.__signature__ = controls_signature(

@@ -23,13 +23,14 @@ import torch
 from ..base.images import check_image, sanitize, to_input_dtype, working_dtype
 from ..base.params import Param, check_choice, color_param, is_constant, scalar_param
 from ..base.planes import bounded_pow
-from ..base.controls import Control
+from ..base.controls import Control, check_given
 from ..color import CHANNEL
 from ..runtime import constant
 from ..runtime.policy import readable
 
 __all__ = [
     "primary_grade",
+    "primary_graded",
     "style_defaults",
     "offset_exposure",
     "brightness",
@@ -191,18 +192,36 @@ def primary_saturation(image: torch.Tensor, amount: Param = 1.0) -> torch.Tensor
     return luma + (image - luma) * scalar_param(amount, image, "saturation")
 
 
-def primary_grade(image: torch.Tensor, style: str = "linear", *, nan_free: bool = False, **controls) -> torch.Tensor:
+def primary_grade(image: torch.Tensor, style: str = "linear", **controls) -> torch.Tensor:
     """OpenColorIO primary grading of ``style`` (see the module docstring); identity returns ``image`` itself.
-    ``nan_free``: the caller knows ``image`` holds no NaN (:func:`~torchgrade.base.images.sanitize`).
 
     Controls: those of :attr:`PRIMARY_GRADE_CONTROLS` that the style has (:data:`STYLE_CONTROLS`);
-    those not given take :func:`style_defaults`.
+    those not given take :func:`style_defaults`. Controls given as numbers are checked as
+    :class:`~torchgrade.PrimaryGrade` checks them (:func:`style_table`); tensors are taken as they are.
 
     Examples:
         >>> image = torch.full((1, 3, 1, 1), 0.5)
         >>> primary_grade(image, "linear", exposure=(1.0, 1.0, 1.0)).flatten().tolist()
         [1.0, 1.0, 1.0]
         >>> primary_grade(image, "log", pivot=0.3) is image  # a pivot alone changes nothing
+        True
+        >>> primary_grade(image, saturation=50.0)
+        Traceback (most recent call last):
+        ...
+        ValueError: saturation must lie in [0.0, 10.0], got 50.0
+    """
+    check_given(style_table(style), controls)
+    return primary_graded(image, style, **controls)
+
+
+def primary_graded(image: torch.Tensor, style: str = "linear", *, nan_free: bool = False, **controls) -> torch.Tensor:
+    """:func:`primary_grade` without checking the controls' values: for :class:`~torchgrade.PrimaryGrade`, which
+    checked them when they were set, on every strip of a frame. ``nan_free``: ``image`` holds no NaN
+    (:func:`~torchgrade.base.images.sanitize`).
+
+    Examples:
+        >>> image = torch.rand(1, 3, 2, 2)
+        >>> torch.equal(primary_graded(image, saturation=1.5), primary_grade(image, saturation=1.5))
         True
     """
     check_image(image)

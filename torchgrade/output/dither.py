@@ -23,14 +23,23 @@ from typing import Optional
 
 import torch
 
+from ..base.controls import Control, check_given
 from ..base.images import check_image, sanitize, to_input_dtype, working_dtype
 from ..base.params import Param, is_constant, scalar_param
 from ..color import linear_to_srgb, srgb_to_linear
 
-__all__ = [ "dither", "dither_pattern", "tile_pattern", "DEFAULT_AMPLITUDE"]
+__all__ = ["dither", "dithered", "dither_pattern", "tile_pattern", "DEFAULT_AMPLITUDE", "DITHER_CONTROLS"]
 
 DEFAULT_AMPLITUDE = 1.0 / 255.0
 """Half-width of the noise: one 8-bit sRGB code value."""
+
+DITHER_CONTROLS = {
+    "amplitude": Control(DEFAULT_AMPLITUDE, (0.0, 16.0 / 255.0)),
+    # torch.Generator.manual_seed's range.
+    "seed": Control(0, (-(2**63), 2**64 - 1)),
+    "size": Control(64, (1, 4096)),
+}
+""":class:`~torchgrade.Dither`'s controls: the noise's half-width, and the seed and side of its tile."""
 
 
 def dither_pattern(size: int = 64, generator: Optional[torch.Generator] = None, dtype=torch.float32) -> torch.Tensor:
@@ -59,18 +68,36 @@ def tile_pattern(pattern: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
     return pattern.to(device=like.device, dtype=like.dtype).index_select(-2, rows).index_select(-1, columns)
 
 
-def dither(image: torch.Tensor, pattern: torch.Tensor, amplitude: Param = DEFAULT_AMPLITUDE, *, nan_free: bool = False) -> torch.Tensor:
+def dither(image: torch.Tensor, pattern: torch.Tensor, amplitude: Param = DEFAULT_AMPLITUDE) -> torch.Tensor:
     """``decode(clamp(encode(clamp(image, 0, 1)) + amplitude · noise, 0, 1))`` with the tiled ``pattern`` as noise.
 
     ``image`` is display-referred linear; ``encode``/``decode`` are the sRGB transfer functions.
-    ``amplitude`` 0 returns ``image`` itself. ``nan_free``: the caller knows ``image`` holds no NaN
-    (:func:`~torchgrade.base.images.sanitize`).
+    ``amplitude`` 0 returns ``image`` itself; as a number it is checked as :class:`~torchgrade.Dither` checks it
+    (:data:`DITHER_CONTROLS`).
 
     Examples:
         >>> image = torch.full((1, 3, 4, 4), 0.5)
         >>> out = dither(image, dither_pattern(4, torch.Generator().manual_seed(0)))
         >>> bool((out - image).abs().max() < 0.01), dither(image, torch.ones(4, 4), 0.0) is image
         (True, True)
+        >>> dither(image, torch.ones(4, 4), 0.5)
+        Traceback (most recent call last):
+        ...
+        ValueError: amplitude must lie in [0.0, 0.06274509803921569], got 0.5
+    """
+    check_given(DITHER_CONTROLS, {"amplitude": amplitude})
+    return dithered(image, pattern, amplitude)
+
+
+def dithered(image: torch.Tensor, pattern: torch.Tensor, amplitude: Param = DEFAULT_AMPLITUDE, *,
+             nan_free: bool = False) -> torch.Tensor:
+    """:func:`dither` without checking ``amplitude``: for :class:`~torchgrade.Dither`, which checked it when it was
+    set. ``nan_free``: ``image`` holds no NaN (:func:`~torchgrade.base.images.sanitize`).
+
+    Examples:
+        >>> image = torch.full((1, 3, 4, 4), 0.5)
+        >>> torch.equal(dithered(image, torch.ones(4, 4), 0.01), dither(image, torch.ones(4, 4), 0.01))
+        True
     """
     check_image(image)
     if is_constant(amplitude, 0.0):

@@ -14,7 +14,7 @@ from ..base.stage import Stage
 from ..lut import LUT3D, identity_table
 from ..runtime import in_strips
 from .display import DISPLAY_ENCODINGS, DISPLAY_PRIMARIES, HLG_PEAK_RANGE, encode_display
-from .dither import DEFAULT_AMPLITUDE, dither, dither_pattern
+from .dither import DEFAULT_AMPLITUDE, DITHER_CONTROLS, dither_pattern, dithered
 from .look_lut import LOOK_ENCODINGS, look_lut, read_lut_file
 
 __all__ = ["Display", "Dither", "LookLUT", "LookLUTForm", "lut_settings"]
@@ -155,7 +155,7 @@ class Dither(Stage):
     ``amplitude`` (number, ``(B,)`` tensor or ``nn.Parameter``, 0..16/255) is the half-width of the
     triangular noise in sRGB values (1/255: one 8-bit code); 0 makes the layer an identity. ``seed``
     (an int) draws the noise tile of ``size x size`` pixels, so the same seed gives the same noise;
-    the functional :func:`dither` takes any tile, for instance from :func:`dither_pattern` with a
+    the functional :func:`~torchgrade.output.dither.dither` takes any tile, for instance from :func:`dither_pattern` with a
     ``torch.Generator``.
 
     Examples:
@@ -166,12 +166,7 @@ class Dither(Stage):
         True
     """
 
-    controls = {
-        "amplitude": Control(DEFAULT_AMPLITUDE, (0.0, 16.0 / 255.0)),
-        # torch.Generator.manual_seed's range.
-        "seed": Control(0, (-(2**63), 2**64 - 1)),
-        "size": Control(64, (1, 4096)),
-    }
+    controls = DITHER_CONTROLS
     always_in_config = ("amplitude", "seed", "size")
 
     def __init__(self, amplitude: Param = DEFAULT_AMPLITUDE, seed: int = 0, size: int = 64):
@@ -205,7 +200,7 @@ class Dither(Stage):
         return is_constant(self.amplitude, 0.0)
 
     def forward(self, image: torch.Tensor, *, nan_free: bool = False) -> torch.Tensor:
-        return dither(image, self.pattern, self.amplitude, nan_free=nan_free)
+        return dithered(image, self.pattern, self.amplitude, nan_free=nan_free)
 
 
 class Display(Stage):
