@@ -60,7 +60,6 @@ from ..output.layer import LookLUT
 from ..output.look_lut import look_lut
 from ..runtime import DeferredCheck, in_strips
 from ..runtime.checks import check_eagerly
-from ..tonemap import tonemap
 from .inputs import SRGB_TOLERANCE, check_srgb_peak, look_stage  # noqa: F401 (SRGB_TOLERANCE: its former path)
 from .per_sample import tonemap_per_sample
 from .ranges import (

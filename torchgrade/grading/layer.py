@@ -21,7 +21,7 @@ from .primary import (
     PIVOTS,
     PRIMARY_GRADE_CONTROLS,
     check_pivots,
-    primary_grade,
+    primary_graded,
     style_table,
 )
 
