@@ -123,7 +123,7 @@ def interleaved_ms(calls: dict, runs: int, warmup: int = 1, sync: Optional[Calla
 
     A call is ``run`` or ``(run, reset)``: ``reset`` (or None) runs untimed before each ``run``, e.g. to restore a
     buffer an in-place call overwrites. ``warmup`` untimed rounds come first. ``sync`` (see :func:`synchronizer`)
-    brackets each timed call. Autograd is off: no benchmark times a backward pass.
+    brackets each timed call. Autograd is off; a call that times a backward pass turns it on itself.
     """
     sync = sync or (lambda: None)
     pairs = [(name, *run_and_reset(call)) for name, call in calls.items()]

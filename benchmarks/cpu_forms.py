@@ -118,7 +118,7 @@ def rows() -> list:
             (lambda: channel_sum(strip, weights), lambda: (strip * weight_tensor).sum(-3, keepdim=True))),
         Row("max(x, 0) with NaN to 0, a frame", "clamp and NaN pass in place", "torch.fmax",
             (lambda: frame.clamp_min(0.0).nan_to_num_(nan=0.0, posinf=float("inf")), lambda: torch.fmax(frame, torch.zeros(())))),
-        Row("residual fit step", "tetrahedral gathers and backward", "a sparse lookup matrix (COO) and backward",
+        Row("residual fit: the lookup and its backward", "tetrahedral gathers", "a sparse lookup matrix (COO)",
             (_gathered_backward(coords, table, size), _sparse_backward(lookup_matrix(coords, size), table))),
         Row("8-bit check of a frame", "warn_if_eight_bit", "a copy of the frame",
             (lambda: warn_if_eight_bit(frame), frame.clone)),

@@ -6,9 +6,9 @@ exported looks in 8-bit sRGB codes on the demo scene, the figure ``tests/onnx/te
 Each look (parts of ``export/looks/cinematic.json``, tone mapped with ACES, and the whole look) is exported with
 :func:`torchgrade.onnx.export` and run on OpenVINO's CPU plugin with no precision hint; its display-linear output
 and PyTorch's are clipped to [0, 1], sRGB-encoded and compared in codes at 333x517, the test's largest frame.
-A second table exports the grade + ACES look with its colour matrices as torchgrade exports them (three products of
-planes, :func:`torchgrade.base.planes.apply_matrix`) and as the two one-node forms it does not take, a ``MatMul`` and
-an ``Einsum``.
+A second table exports the grade + ACES look with the grade's colour matrices
+(:func:`torchgrade.base.planes.apply_matrix`; the ACES fit's own stay as they are) as torchgrade exports them (three
+products of planes) and as the two one-node forms it does not take, a ``MatMul`` and an ``Einsum``.
 Writes openvino_precision.json and openvino_precision.md to ``--out`` (default benchmarks/out; the committed ones
 with ``--out benchmarks/results``).
 """
@@ -97,7 +97,7 @@ def main(argv=None) -> int:
              f"`{COMMAND}` (OpenVINO {openvino.__version__}, CPU plugin, no precision hint)", "",
              "| look | max | p99.9 |", "| --- | ---: | ---: |"]
     lines += [f"| {name} | {r['max']} | {r['p999']} |" for name, r in rows.items()]
-    lines += ["", "## Colour matrices: grade + ACES with its matrices exported as", "", "| form | max | p99.9 |",
+    lines += ["", "## Colour matrices: grade + ACES with the grade's matrices exported as", "", "| form | max | p99.9 |",
               "| --- | ---: | ---: |"]
     lines += [f"| {name} | {r['max']} | {r['p999']} |" for name, r in matrices.items()]
     write_results(args.out, "openvino_precision", report, lines, COMMAND)

@@ -63,8 +63,8 @@ __all__ = [
 
 
 _LAZY_MODULES = ("io", "onnx", "testing", "integrations")
-"""Subpackages imported at their first use: the onnx, OpenEXR and numpy packages behind them take longer to
-import than torchgrade itself (``benchmarks/results/import.md``)."""
+"""Subpackages imported at their first use, so that ``import torchgrade`` loads none of the onnx, OpenEXR and numpy
+packages behind them (``benchmarks/results/import.md``: what the import loads, and its time)."""
 
 
 def __getattr__(name: str):

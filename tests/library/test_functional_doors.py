@@ -76,3 +76,14 @@ def test_the_issues_two_cases_and_tensors_left_unread():
         F.tonemap(IMAGE, "hable", white_point=-1)
     assert torch.isfinite(F.color_grade(IMAGE, contrast=torch.tensor(50.0))).all()  # a tensor is the caller's
     assert len(GRADE_NUMBERS) > 10 and len(TONEMAP_NUMBERS) > 10
+
+
+@pytest.mark.parametrize("door", [lambda x: F.color_grade(x, contrast=10.0, nan_free=True),
+                                  lambda x: F.primary_grade(x, saturation=1.2, nan_free=True),
+                                  lambda x: F.tonemap(x, "reinhard", nan_free=True)], ids=["color_grade", "primary_grade", "tonemap"])
+def test_a_door_refuses_the_stages_word_that_a_frame_holds_no_nan(door):
+    """``nan_free`` is what a look tells its stages about a frame a stage made; a caller's frame always takes the NaN pass."""
+    image = IMAGE.clone()
+    image[0, 0, 0, 0] = float("nan")
+    with pytest.raises(ValueError, match=r"unknown .* control\(s\) \['nan_free'\]"):
+        door(image)

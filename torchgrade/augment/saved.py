@@ -3,7 +3,7 @@ only imported torchgrade.
 
 ``weights_only`` loading makes only the classes registered with ``torch.serialization.add_safe_globals``, found by
 the name the file holds (``torchgrade.augment.layer.RandomPostFX``). Registering the layer itself at ``import torchgrade``
-would import kornia (its base class), about as long as torchgrade itself takes to import; :class:`SavedRandomPostFX`
+would import kornia (its base class), which ``import torchgrade`` does not load (``benchmarks/results/import.md``); :class:`SavedRandomPostFX`
 is registered under that name instead, and imports the layer only when a file holds one. The layer, once imported,
 is registered under another name (:data:`LOADED_NAME`): the load then fills it (``__setstate__``, which checks it as
 construction does).

@@ -19,7 +19,7 @@ from torch import nn
 
 from .params import check_choice, check_range, is_plain_number
 
-__all__ = ["KINDS", "Control", "plain", "in_state_check", "check_given", "controls_signature", "digit_count"]
+__all__ = ["KINDS", "Control", "plain", "in_state_check", "check_given", "refuse_unknown", "controls_signature", "digit_count"]
 
 
 KINDS = ("number", "int", "bool", "choice", "value")
@@ -130,23 +130,44 @@ def in_state_check(value) -> bool:
     return not isinstance(value, nn.Parameter) and not (isinstance(value, torch.Tensor) and value.is_meta)
 
 
-def check_given(table: dict, params: dict) -> None:
+def check_given(table: dict, params: dict, owner: str) -> None:
     """Check the controls of ``params`` given as plain values (numbers, triples, lists of them) against ``table``, a
     stage's :class:`Control` table, with its ranges and messages: the functional API's door, where a stage checks at
     construction. Tensors are not read (on a GPU each read would wait for the device; a stage checks its learnable
-    values with :meth:`Stage.check_learnable`); names outside the table are the caller's to refuse.
+    values with :meth:`Stage.check_learnable`). A name outside the table is refused as the stage ``owner`` refuses it
+    (:func:`refuse_unknown`).
 
     Examples:
-        >>> check_given({"contrast": Control(0.0, (-100.0, 100.0))}, {"contrast": 500.0})
+        >>> table = {"contrast": Control(0.0, (-100.0, 100.0))}
+        >>> check_given(table, {"contrast": 500.0}, "ColorGrade")
         Traceback (most recent call last):
         ...
         ValueError: contrast must lie in [-100.0, 100.0], got 500.0
-        >>> check_given({"contrast": Control(0.0, (-100.0, 100.0))}, {"contrast": torch.tensor(500.0)})  # not read
+        >>> check_given(table, {"contrast": torch.tensor(500.0)}, "ColorGrade")  # not read
+        >>> check_given(table, {"brightness": 1.0}, "ColorGrade")
+        Traceback (most recent call last):
+        ...
+        ValueError: unknown ColorGrade control(s) ['brightness']; known: contrast
     """
+    refuse_unknown(table, params, owner)
     for name, value in params.items():
         control = table.get(name)
         if control is not None and control.kind == "number" and not _holds_tensor(value):
             control.check(name, value)
+
+
+def refuse_unknown(table: dict, names, owner: str) -> None:
+    """Raise ``ValueError`` naming the ``names`` that ``table`` lacks, ``owner``'s controls, and the known ones.
+
+    Examples:
+        >>> refuse_unknown({"amplitude": Control(0.0, (0.0, 1.0))}, ["amplitude", "nan_free"], "Dither")
+        Traceback (most recent call last):
+        ...
+        ValueError: unknown Dither control(s) ['nan_free']; known: amplitude
+    """
+    unknown = [name for name in names if name not in table]
+    if unknown:
+        raise ValueError(f"unknown {owner} control(s) {sorted(unknown)}; known: {', '.join(table) or 'none'}")
 
 
 def _holds_tensor(value) -> bool:

@@ -21,8 +21,9 @@ def apply_matrix(matrix: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
 
     Three per-channel multiply-adds (a product and two ``addcmul``), never a matrix product: a 3x3 ``einsum``
     runs as a batched product with an inner dimension of 3, which oneDNN and MKL block poorly
-    (``benchmarks/results/cpu_forms.md``, "3x3 colour matrix, a strip"), cuBLAS runs as ``gemv`` calls that nothing
-    fuses, and Inductor fuses these into the steps around them. Computed in place where nothing records (:func:`untracked`).
+    (``benchmarks/results/cpu_forms.md``, "3x3 colour matrix, a strip"), on CUDA a matrix product is a library call
+    of its own that nothing fuses (``benchmarks/bench_gpu.py``'s ``forms`` times three forms on a GPU), and Inductor
+    fuses these into the steps around them. Computed in place where nothing records (:func:`untracked`).
 
     Examples:
         >>> swap = torch.tensor([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])

@@ -38,6 +38,7 @@ from torch import nn
 
 from .config import config_value
 from .controls import KINDS, Control, check_given, controls_signature, digit_count, in_state_check, plain  # noqa: F401 (their former path)
+from .controls import refuse_unknown
 from .images import check_image, full_precision, warn_if_eight_bit, with_alpha
 from .params import is_constant
 from ..runtime import DeferredCheck, in_strips
@@ -100,9 +101,7 @@ class Stage(nn.Module):
         Raises ``ValueError`` for a name the table does not have, naming the known ones.
         """
         table = self.control_table()
-        unknown = [name for name in values if name not in table]
-        if unknown:
-            raise ValueError(f"unknown {type(self).__name__} control(s) {sorted(unknown)}; known: {', '.join(table)}")
+        refuse_unknown(table, values, type(self).__name__)
         for name, control in table.items():
             self._store(name, self._checked(name, values.get(name, control.default)))
         self.check_together()

@@ -174,7 +174,7 @@ def color_grade(image: torch.Tensor, aces: bool = False, log_space: str = "acesc
         ...
         ValueError: contrast must lie in [-100.0, 100.0], got 500.0
     """
-    check_given(COLOR_GRADE_CONTROLS, params)
+    check_given(COLOR_GRADE_CONTROLS, params, "ColorGrade")
     return graded_image(image, aces, log_space, **params)
 
 

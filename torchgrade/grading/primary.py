@@ -210,7 +210,7 @@ def primary_grade(image: torch.Tensor, style: str = "linear", **controls) -> tor
         ...
         ValueError: saturation must lie in [0.0, 10.0], got 50.0
     """
-    check_given(style_table(style), controls)
+    check_given(style_table(style), controls, f"{style} PrimaryGrade")
     return primary_graded(image, style, **controls)
 
 

@@ -85,8 +85,8 @@ def lattice_coordinates(display_linear: torch.Tensor, size: int) -> torch.Tensor
 
     While the residual is fitted its input (the look's output) does not change, so they are computed once; each step
     looks the table up at them with the tetrahedral kernel (:data:`~torchgrade.lut.kernels.KERNELS`), as
-    :class:`ResidualLUT` does, and its gathers' backward is cheaper than a sparse matrix's
-    (``benchmarks/results/cpu_forms.md``, "residual fit step").
+    :class:`ResidualLUT` does, and the gathers' lookup and backward cost less than a sparse matrix's
+    (``benchmarks/results/cpu_forms.md``, "residual fit: the lookup and its backward").
 
     Examples:
         >>> from torchgrade.lut.kernels import KERNELS

@@ -85,7 +85,7 @@ def dither(image: torch.Tensor, pattern: torch.Tensor, amplitude: Param = DEFAUL
         ...
         ValueError: amplitude must lie in [0.0, 0.06274509803921569], got 0.5
     """
-    check_given(DITHER_CONTROLS, {"amplitude": amplitude})
+    check_given(DITHER_CONTROLS, {"amplitude": amplitude}, "Dither")
     return dithered(image, pattern, amplitude)
 
 

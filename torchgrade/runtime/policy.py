@@ -39,9 +39,10 @@ __all__ = ["ExecutionPolicy", "policy_for", "readable", "nonnegative", "pixel_la
 STRIP_PIXELS_PER_THREAD = 1 << 16
 """Pixels of a CPU strip per intra-op thread (batch included): a strip's intermediates stay in the cores' caches,
 and each of its dozens of operations is dispatched by Python once a strip, so smaller strips pay that more often and
-larger ones leave the cache (grade and tone map of ``export/looks/cinematic.json`` at 1920x1080 in strips of 2^15 to
-2^19 pixels a thread and whole: ``benchmarks/results/cpu_forms.md``, "Strips"; the output is the same). A strip grows
-with the thread count: each thread's share stays that size, and a frame on many cores is fewer strips."""
+much larger ones leave the cache; twice this size runs about as fast on 2 cores (grade and tone map of
+``export/looks/cinematic.json`` at 1920x1080 in strips of 2^15 to 2^19 pixels a thread and whole:
+``benchmarks/results/cpu_forms.md``, "Strips"). A strip grows with the thread count: each thread's share stays that
+size, and a frame on many cores is fewer strips."""
 
 PARALLEL_FROM = 2
 """Intra-op thread count from which the torch form of a LUT's pixel runs (one thread each,

@@ -106,7 +106,7 @@ def tonemap(image: torch.Tensor, mode: str = "neutral", clip: bool = True, **par
         ...
         ValueError: white_point must lie in [0.001, 10000.0], got -1.0
     """
-    check_given(tone_mapper(mode).controls, params)
+    check_given(tone_mapper(mode).controls, params, f"ToneMap({mode!r})")
     return tone_mapped(image, mode, clip, **params)
 
 
