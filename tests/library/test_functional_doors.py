@@ -78,12 +78,18 @@ def test_the_issues_two_cases_and_tensors_left_unread():
     assert len(GRADE_NUMBERS) > 10 and len(TONEMAP_NUMBERS) > 10
 
 
-@pytest.mark.parametrize("door", [lambda x: F.color_grade(x, contrast=10.0, nan_free=True),
-                                  lambda x: F.primary_grade(x, saturation=1.2, nan_free=True),
-                                  lambda x: F.tonemap(x, "reinhard", nan_free=True)], ids=["color_grade", "primary_grade", "tonemap"])
-def test_a_door_refuses_the_stages_word_that_a_frame_holds_no_nan(door):
+@pytest.mark.parametrize("door, refusal", [
+    (lambda x: F.color_grade(x, contrast=10.0, nan_free=True), r"unknown ColorGrade control\(s\) \['nan_free'\]"),
+    (lambda x: F.primary_grade(x, saturation=1.2, nan_free=True), r"unknown linear PrimaryGrade control\(s\) \['nan_free'\]"),
+    (lambda x: F.tonemap(x, "reinhard", nan_free=True), r"tone mapper 'reinhard' takes no 'nan_free'; it takes no parameters"),
+], ids=["color_grade", "primary_grade", "tonemap"])
+def test_a_door_refuses_the_stages_word_that_a_frame_holds_no_nan(door, refusal):
     """``nan_free`` is what a look tells its stages about a frame a stage made; a caller's frame always takes the NaN pass."""
     image = IMAGE.clone()
     image[0, 0, 0, 0] = float("nan")
-    with pytest.raises(ValueError, match=r"unknown .* control\(s\) \['nan_free'\]"):
+    with pytest.raises(ValueError, match=refusal):
         door(image)
+
+
+def test_a_tone_mapping_door_refuses_an_unknown_parameter_as_tonemap_does():
+    assert message(lambda: F.tonemap(IMAGE, "agx", slope=0.9)) == message(lambda: tg.ToneMap("agx", slope=0.9))

@@ -39,7 +39,7 @@ from ..base.images import HALF_MAX, check_image, sanitize, to_input_dtype, worki
 from ..base.params import color_param, is_constant, scalar_param
 from ..base.planes import each_plane, joined, matrix_on, matrix_product
 from ..runtime.recording import untracked
-from ..base.controls import Control, check_given
+from ..base.controls import Control, check_given, refuse_unknown
 from ..color import srgb_to_linear
 from ..color.spaces import shared_matrix
 from ..runtime import folded, is_exporting
@@ -142,10 +142,7 @@ def active_steps(params: dict) -> set:
 
 def _grade_inputs(params: dict) -> dict:
     """Every control of the grade: the given ones, the others at their defaults; identity curves as None."""
-    unknown = set(params) - set(COLOR_GRADE_CONTROLS)
-    if unknown:
-        known = ", ".join(name for name in COLOR_GRADE_CONTROLS if name not in GRADE_SETTINGS)
-        raise ValueError(f"unknown grading control(s) {sorted(unknown)}; known: {known}")
+    refuse_unknown(COLOR_GRADE_CONTROLS, params, "ColorGrade")
     inputs = {}
     for name, control in COLOR_GRADE_CONTROLS.items():
         if isinstance(control, CurveControl):

@@ -23,7 +23,7 @@ import torch
 from ..base.images import check_image, sanitize, to_input_dtype, working_dtype
 from ..base.params import Param, check_choice, color_param, is_constant, scalar_param
 from ..base.planes import bounded_pow
-from ..base.controls import Control, check_given
+from ..base.controls import Control, check_given, refuse_unknown
 from ..color import CHANNEL
 from ..runtime import constant
 from ..runtime.policy import readable
@@ -226,9 +226,7 @@ def primary_graded(image: torch.Tensor, style: str = "linear", *, nan_free: bool
     """
     check_image(image)
     defaults = style_defaults(style)
-    unknown = set(controls) - set(defaults)
-    if unknown:
-        raise ValueError(f"unknown {style} primary control(s) {sorted(unknown)}; known: {', '.join(defaults)}")
+    refuse_unknown(defaults, controls, f"{style} PrimaryGrade")
     changed = _changed(controls, defaults)
     if not changed:
         return image

@@ -9,7 +9,7 @@ import torch
 from ..base.params import Param
 from ..base.controls import Control, controls_signature
 from ..base.stage import Stage
-from .registry import TONE_MAPPERS, TONEMAP_MODES, tone_mapped, tone_mapper
+from .registry import TONE_MAPPERS, TONEMAP_MODES, check_curve_params, tone_mapped
 
 __all__ = ["ToneMap"]
 
@@ -57,10 +57,7 @@ class ToneMap(Stage):
 
     def _use_mode(self, mode: str, clip: bool, curve_params: dict) -> None:
         """Replace every control by ``mode``'s, from ``curve_params`` and the mode's defaults."""
-        curve_controls = tone_mapper(mode).controls
-        for name in curve_params:
-            if name not in curve_controls:
-                raise ValueError(f"tone mapper {mode!r} takes no {name!r}; it takes {list(curve_controls) or 'no parameters'}")
+        check_curve_params(mode, curve_params)
         for name in self._control_names:
             delattr(self, name)
         self._control_names = []
@@ -111,7 +108,6 @@ class ToneMap(Stage):
         return self.mode != "none"
 
     def forward(self, image: torch.Tensor, *, nan_free: bool = False) -> torch.Tensor:
-        self.check_learnable()
         return self.run_in_strips(tone_mapped, image, nan_free=nan_free)
 
 

@@ -35,7 +35,7 @@ from .hdr_range import HDR_PRIMARIES, NEUTRAL_HDR_RANGES, neutral_hdr
 from .khronos_pbr import khronos_pbr_neutral
 from .reinhard_curves import reinhard, reinhard_extended, reinhard_luminance
 
-__all__ = ["TONE_MAPPERS", "TONEMAP_MODES", "HDR_MODES", "tone_mapper", "tonemap", "tone_mapped"]
+__all__ = ["TONE_MAPPERS", "TONEMAP_MODES", "HDR_MODES", "tone_mapper", "check_curve_params", "tonemap", "tone_mapped"]
 
 TONE_MAPPERS = {
     "none": ToneMapper.of(no_tonemap),
@@ -86,6 +86,22 @@ def tone_mapper(mode: str) -> ToneMapper:
     return TONE_MAPPERS[mode]
 
 
+def check_curve_params(mode: str, names) -> None:
+    """Raise ``ValueError`` naming the first of ``names`` that tone mapper ``mode`` does not take, and those it takes:
+    the one check of a mode's parameter names, for :class:`~torchgrade.ToneMap`, :func:`tonemap` and :func:`tone_mapped`.
+
+    Examples:
+        >>> check_curve_params("agx", ["slope"])
+        Traceback (most recent call last):
+        ...
+        ValueError: tone mapper 'agx' takes no 'slope'; it takes no parameters
+    """
+    controls = tone_mapper(mode).controls
+    for name in names:
+        if name not in controls:
+            raise ValueError(f"tone mapper {mode!r} takes no {name!r}; it takes {list(controls) or 'no parameters'}")
+
+
 def tonemap(image: torch.Tensor, mode: str = "neutral", clip: bool = True, **params: Param) -> torch.Tensor:
     """Apply tone mapper ``mode`` (one of :data:`TONEMAP_MODES`) with its parameters.
 
@@ -106,6 +122,7 @@ def tonemap(image: torch.Tensor, mode: str = "neutral", clip: bool = True, **par
         ...
         ValueError: white_point must lie in [0.001, 10000.0], got -1.0
     """
+    check_curve_params(mode, params)
     check_given(tone_mapper(mode).controls, params, f"ToneMap({mode!r})")
     return tone_mapped(image, mode, clip, **params)
 
@@ -123,9 +140,7 @@ def tone_mapped(image: torch.Tensor, mode: str = "neutral", clip: bool = True, *
     """
     check_image(image)
     entry = tone_mapper(mode)
-    unknown = set(params) - set(entry.controls)
-    if unknown:
-        raise ValueError(f"tone mapper {mode!r} takes {list(entry.controls) or 'no parameters'}, got {sorted(unknown)}")
+    check_curve_params(mode, params)
     working = sanitize(working_dtype(image), nan_free=nan_free)
     sanitized = {"nan_free": True} if entry.takes_nan_free else {}  # a curve that sanitizes again leaves out the NaN pass
     return to_input_dtype(entry.curve(working, clip=clip, **sanitized, **params), image)
