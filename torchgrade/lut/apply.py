@@ -153,10 +153,10 @@ def lookup(image, rows, size: int, shaper, domain_min, domain_max, interpolation
 def operator_lookup(image, table, shaper, domain_min, domain_max, interpolation, output_range, curve, curve_range,
                     output_encoding, nan_free: bool = False) -> torch.Tensor:
     """:func:`lookup` through the operator :func:`~torchgrade.lut.operator.lut_lookup` on the LUT's own ``table``
-    ``(S, S, S, 3)`` in the image's working dtype: the image goes to the operator as it is with a linear shaper (the
-    operator applies the non-finite policy itself), else as the shaper's codes of the sanitized image; the output
-    decoding and clamp follow. Differentiable (the operator's gradients), compiled whole by ``torch.compile``, and
-    exported as :func:`lookup`'s gathers.
+    ``(S, S, S, 3)`` in the image's working dtype: the image's planes go to the operator as they are with a linear
+    shaper (the operator applies the non-finite policy itself), else the shaper's codes of the sanitized image; the
+    output decoding and clamp follow. Differentiable (the operator's gradients), compiled whole by ``torch.compile``,
+    and exported as :func:`lookup`'s gathers.
 
     Examples:
         >>> import torch
@@ -166,13 +166,20 @@ def operator_lookup(image, table, shaper, domain_min, domain_max, interpolation,
         >>> [round(v, 6) for v in y.flatten().tolist()]  # the entries decoded from sRGB: ((0.5 + 0.055) / 1.055)^2.4
         [0.214041, 0.214041, 0.214041]
     """
-    codes = working_dtype(image)
+    x = working_dtype(image).movedim(-3, 0)  # (3, ..., H, W): a view
+    codes = x.reshape(3, -1)  # a view for one image
     if shaper != "linear":
-        points = sanitize(codes, nan_free=nan_free).movedim(-3, 0)  # (3, ..., H, W): a view
-        codes = shaper_encode(points.reshape(3, -1), shaper, curve, curve_range).reshape(points.shape).movedim(0, -3)
-    domain = [torch.as_tensor(bound, dtype=codes.dtype).reshape(-1).expand(3) for bound in (domain_min, domain_max)]
-    values = lut_lookup(codes, table, *domain, interpolation, nan_free or shaper != "linear")
-    return to_input_dtype(table_output(values, output_encoding, output_range), image)
+        codes = shaper_encode(sanitize(codes, nan_free=nan_free), shaper, curve, curve_range)
+    low, high = (_channel_triple(bound, x.dtype) for bound in (domain_min, domain_max))
+    values = lut_lookup(codes, table, low, high, interpolation, nan_free or shaper != "linear")
+    y = table_output(values, output_encoding, output_range)
+    return to_input_dtype(y.reshape(x.shape).movedim(0, -3), image)
+
+
+def _channel_triple(bound, dtype: torch.dtype) -> torch.Tensor:
+    """A domain bound, a number or an RGB triple, as the operator takes it: ``(3,)`` (a LUT's own bounds as they are)."""
+    bound = bound if isinstance(bound, torch.Tensor) else torch.tensor(bound, dtype=dtype)
+    return bound if bound.shape == (3,) else bound.reshape(-1).expand(3)
 
 
 def runs_operator(image: torch.Tensor, table: torch.Tensor) -> bool:

@@ -1,8 +1,8 @@
 """``torchgrade::lut_lookup``: a 3D LUT's interpolation as a ``torch.library`` operator, whose CPU kernel is the C loop
 built with the package (``lookup.c``, the extension ``torchgrade.lut._lookup``).
 
-For codes ``x`` ``(..., 3, H, W)`` (linear values, or a shaper's codes), a table ``(S, S, S, 3)`` ``[b, g, r,
-channel]`` of the same dtype and the lattice's domain ``(3,)`` ``low`` and ``high``::
+For the planar codes ``x`` ``(3, P)`` of ``P`` pixels (linear values, or a shaper's codes), a table ``(S, S, S, 3)``
+``[b, g, r, channel]`` of the same dtype and the lattice's domain ``(3,)`` ``low`` and ``high``::
 
     u = clamp((sanitize(x) - low) / (high - low), 0, 1) * (S - 1)      # lattice coordinates, per channel
     y = interpolate(table, u)                                           # torchgrade.lut.kernels: tetrahedral, trilinear
@@ -26,7 +26,7 @@ runs for it where the C loop does not.
 Examples:
     >>> import torch
     >>> from torchgrade.lut import identity_table
-    >>> x = torch.tensor([0.25, 0.5, 1.5]).reshape(1, 3, 1, 1)
+    >>> x = torch.tensor([[0.25], [0.5], [1.5]])
     >>> lut_lookup(x, identity_table(3), torch.zeros(3), torch.ones(3), "tetrahedral").flatten().tolist()
     [0.25, 0.5, 1.0]
 """
@@ -68,22 +68,22 @@ def torch_form(codes: Tensor, table: Tensor, domain_min: Tensor, domain_max: Ten
 
     Examples:
         >>> from torchgrade.lut import identity_table
-        >>> x = torch.full((1, 3, 1, 1), float("nan"))
+        >>> x = torch.full((3, 1), float("nan"))
         >>> torch_form(x, identity_table(2), torch.zeros(3), torch.ones(3), "trilinear").flatten().tolist()
         [0.0, 0.0, 0.0]
     """
-    size = table.shape[0]
-    x = sanitize(codes, nan_free=nan_free).movedim(-3, 0)  # (3, ..., H, W)
-    coords = lattice_unit(x.reshape(3, -1), "linear", domain_min, domain_max) * (size - 1)
-    values = KERNELS[interpolation](coords, planar_table(table), size)
-    return values.reshape(x.shape).movedim(0, -3)
+    size = int(table.shape[0])  # a constant of a traced graph, as the LUT's own size is
+    coords = lattice_unit(sanitize(codes, nan_free=nan_free), "linear", domain_min, domain_max) * (size - 1)
+    return KERNELS[interpolation](coords, planar_table(table), size)
 
 
 @torch.library.custom_op("torchgrade::lut_lookup", mutates_args=(), device_types="cpu")
 def lut_lookup(codes: Tensor, table: Tensor, domain_min: Tensor, domain_max: Tensor, interpolation: str,
                nan_free: bool = False) -> Tensor:
-    """The operator on the CPU (see the module docstring): ``codes`` ``(..., 3, H, W)`` and ``table`` ``(S, S, S, 3)``
-    of one dtype, ``domain_min`` and ``domain_max`` ``(3,)``; a new contiguous tensor of ``codes``' shape."""
+    """The operator on the CPU (see the module docstring): ``codes`` ``(3, P)`` and ``table`` ``(S, S, S, 3)`` of one
+    dtype, ``domain_min`` and ``domain_max`` ``(3,)``; a new contiguous ``(3, P)`` tensor. ``ValueError`` for other
+    shapes (the C loop reads what they promise)."""
+    _check_arguments(codes, table, domain_min, domain_max, interpolation)
     loop = _LOOPS.get((interpolation, codes.dtype)) if NATIVE is not None and table.dtype == codes.dtype else None
     if loop is None:
         if NATIVE is None:
@@ -93,22 +93,34 @@ def lut_lookup(codes: Tensor, table: Tensor, domain_min: Tensor, domain_max: Ten
     return _native(loop, codes, table, domain_min, domain_max)
 
 
+def _check_arguments(codes: Tensor, table: Tensor, domain_min: Tensor, domain_max: Tensor, interpolation: str) -> None:
+    """``ValueError`` unless the arguments have the shapes, dtypes and names :func:`lut_lookup` takes."""
+    if interpolation not in KERNELS:
+        raise ValueError(f"lut_lookup: interpolation must be one of {', '.join(map(repr, KERNELS))}, got {interpolation!r}")
+    size = table.shape[0] if table.dim() == 4 else 0
+    if codes.dim() != 2 or codes.shape[0] != 3 or size < 2 or table.shape != (size, size, size, 3):
+        raise ValueError(f"lut_lookup takes codes (3, P) and a table (S, S, S, 3) with S >= 2, got {tuple(codes.shape)} and "
+                         f"{tuple(table.shape)}")
+    if not codes.is_floating_point() or table.dtype != codes.dtype:
+        raise ValueError(f"lut_lookup takes codes and a table of one floating-point dtype, got {codes.dtype} and {table.dtype}")
+    if domain_min.shape != (3,) or domain_max.shape != (3,):
+        raise ValueError(f"lut_lookup takes a domain of two (3,) tensors, got {tuple(domain_min.shape)} and {tuple(domain_max.shape)}")
+
+
 def _native(loop: int, codes: Tensor, table: Tensor, domain_min: Tensor, domain_max: Tensor) -> Tensor:
-    """The C loop on ``codes`` as frames ``(N, 3, H W)`` whose planes are contiguous (a view where they already are):
-    the lattice coordinate ``(x - low) * scale`` with ``scale = (S - 1) / (high - low)``, a product where
+    """The C loop on ``codes`` ``(3, P)`` (copied where a channel's pixels are not contiguous) into a new ``(3, P)``
+    tensor: the lattice coordinate ``(x - low) * scale`` with ``scale = (S - 1) / (high - low)``, a product where
     :func:`torch_form` divides (the two agree to a rounding of the coordinate)."""
-    size, (height, width) = table.shape[0], codes.shape[-2:]
-    if codes.stride(-1) != 1 or codes.stride(-2) != width:
+    size = table.shape[0]
+    if codes.stride(-1) != 1:
         codes = codes.contiguous()
-    frames = codes.reshape(-1, 3, height * width)
-    out = torch.empty(frames.shape, dtype=codes.dtype)
-    low = domain_min.to(torch.float64).reshape(-1).expand(3)
-    scale = ((size - 1) / (domain_max.to(torch.float64).reshape(-1).expand(3) - low)).to(codes.dtype)
+    out = torch.empty(codes.shape, dtype=codes.dtype)
+    low = domain_min.to(torch.float64)
+    scale = ((size - 1) / (domain_max.to(torch.float64) - low)).to(codes.dtype).contiguous()
     low, packed = low.to(codes.dtype).contiguous(), table.contiguous()
-    NATIVE.interpolate(loop, frames.data_ptr(), frames.stride(0), frames.stride(1), out.data_ptr(), out.stride(0),
-                       out.stride(1), frames.shape[0], frames.shape[-1], low.data_ptr(), scale.contiguous().data_ptr(),
-                       packed.data_ptr(), size, CHUNK_PIXELS, torch.get_num_threads())
-    return out.reshape(codes.shape)
+    NATIVE.interpolate(loop, codes.data_ptr(), 0, codes.stride(0), out.data_ptr(), 0, out.stride(0), 1, codes.shape[1],
+                       low.data_ptr(), scale.data_ptr(), packed.data_ptr(), size, CHUNK_PIXELS, torch.get_num_threads())
+    return out
 
 
 @functools.lru_cache(maxsize=None)
