@@ -53,8 +53,8 @@ __all__ = ["lut_lookup", "torch_form", "NATIVE", "CHUNK_PIXELS"]
 
 CHUNK_PIXELS = 32768
 """Pixels of a frame a thread takes at a time in the C loop: threads that a loaded core slows take fewer chunks
-instead of holding the frame up with a fixed share (``benchmarks/results/cpu_forms.md``, "LUT runs", timed the loop
-from 8,192 to whole frames)."""
+instead of holding the frame up with a fixed share (``benchmarks/cpu_forms.py``, "LUT runs", times chunks of 2^13 to
+2^17 pixels at 1920x1080)."""
 
 _LOOPS = {("tetrahedral", torch.float32): 0, ("tetrahedral", torch.float64): 1, ("trilinear", torch.float32): 2,
           ("trilinear", torch.float64): 3}
