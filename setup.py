@@ -10,9 +10,11 @@ from setuptools import Extension, setup
 if sys.platform == "win32":
     COMPILE, LINK = ["/O2", "/openmp"], []
 elif sys.platform == "darwin":  # Apple's clang has no -fopenmp: the loops run on one thread
-    COMPILE, LINK = ["-O3", "-ffp-contract=off"], []
-else:  # OpenMP binds to the libgomp.so.1 torch has loaded (lookup.c); no -ffast-math, no -march=native
-    COMPILE, LINK = ["-O3", "-ffp-contract=off", "-fopenmp"], ["-fopenmp"]
+    COMPILE, LINK = ["-O3", "-ffp-contract=off", "-fno-wrapv"], []
+else:  # OpenMP binds to the libgomp.so.1 torch has loaded (lookup.c); no -ffast-math, no -march=native. Python's own
+    # CFLAGS carry -fwrapv, under which GCC 12 vectorises the 32-bit index arithmetic worse: the same values bit for bit,
+    # more slowly (benchmarks/bench_lut_cpu.py); 3 S^3 < 2^31, so no index overflows.
+    COMPILE, LINK = ["-O3", "-ffp-contract=off", "-fno-wrapv", "-fopenmp"], ["-fopenmp"]
 
 setup(
     ext_modules=[Extension("torchgrade.lut._lookup", ["torchgrade/lut/lookup.c"], extra_compile_args=COMPILE,
