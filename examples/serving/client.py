@@ -29,7 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from frames import pack_frame  # noqa: E402
 
-__all__ = ["get_json", "post", "random_frame", "send_all", "trickle"]
+__all__ = ["get_json", "percentile_ms", "post", "random_frame", "read_answer", "send_all", "trickle"]
 
 
 def post(url: str, body: bytes, timeout: float = 60.0) -> tuple:
@@ -56,9 +56,9 @@ def random_frame(height: int, width: int, dtype: str, seed: int = 0) -> np.ndarr
     return (generator.random((height, width, 3)) * 4.0).astype(dtype)
 
 
-def _answer(connection: socket.socket) -> bytes:
-    """What the server sends on ``connection`` until it closes it (or stays silent for 5 s)."""
-    connection.settimeout(5.0)
+def read_answer(connection: socket.socket, silence_s: float = 5.0) -> bytes:
+    """What the server sends on ``connection`` until it closes it (or stays silent for ``silence_s`` seconds)."""
+    connection.settimeout(silence_s)
     chunks = []
     try:
         while chunk := connection.recv(65536):
@@ -79,7 +79,7 @@ def _trickle_once(address: tuple, path: str, body: bytes, stop: threading.Event,
                 connection.sendall(body[at:at + 1])
             except OSError:
                 break
-        return _answer(connection) if not stop.is_set() else b""
+        return read_answer(connection) if not stop.is_set() else b""
 
 
 def trickle(url: str, path: str, body: bytes, stop: threading.Event, interval: float = 0.1) -> list:

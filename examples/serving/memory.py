@@ -8,8 +8,8 @@ two, times :data:`MARGIN`. Free heap pages are handed back to the system before 
 so a probe that reuses them counts them. Between requests glibc keeps freed memory for reuse; with one malloc arena
 for the process (``MALLOC_ARENA_MAX=1``, which ``serve.py`` gives Ray's workers) every thread reuses it, so it adds
 little to the peak; the budget leaves :data:`RETAINED_MIB` for what it does add. (Handing every buffer back to the
-system as it is freed bounds it too, but a 1080p frame then took 1.9 times as long to grade here: each run faulted
-its pages in anew.)
+system as it is freed bounds it too, but then every run faults all its pages in anew, which slowed grading
+markedly.)
 """
 
 from __future__ import annotations

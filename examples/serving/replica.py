@@ -90,25 +90,28 @@ class Looks:
         self.lock, self.counts, self.running = threading.Lock(), collections.Counter(), 0
         self.recent = collections.deque(maxlen=WINDOW)  # latencies: bounded, whatever the traffic
         self.max_pixels = limits.max_pixels
-        self.costs = {kind: self._measure(kind) for kind in ("frame", "png", "exr") if kind != "exr" or self.takes_light}
+        kinds = ("frame", "png", "exr") if self.format.input_dtype.is_floating_point else ("frame", "png")
+        self.costs = {kind: self._measure(kind) for kind in kinds}
         self.counts.clear()
         self.idle_mib = resident_mib()
-        room = limits.memory_mib - self.idle_mib - RETAINED_MIB
-        if room <= 0:
-            raise ValueError(f"the replica holds {self.idle_mib:.0f} MiB idle and keeps up to {RETAINED_MIB} MiB freed: "
-                             f"more than its {limits.memory_mib} MiB memory budget")
-        self.memory = MemoryBudget(int(room * 2**20))
-        largest, body = max(self.costs.values(), key=lambda cost: cost.per_pixel), 3 * self.input_dtype.itemsize
-        self.max_pixels = min(limits.max_pixels, int((self.memory.capacity - largest.fixed) / (largest.per_pixel + 2 * body)))
+        self.memory = self._memory_budget()
         reset_peak()
 
-    @property
-    def takes_light(self) -> bool:
-        return self.format.input_dtype.is_floating_point
+    def _memory_budget(self) -> MemoryBudget:
+        """The memory requests may hold: the budget less what the replica holds idle and what glibc keeps freed; the
+        pixel budget lowered to the largest raw frame whose request fits it alone."""
+        room = self.limits.memory_mib - self.idle_mib - RETAINED_MIB
+        if room <= 0:
+            raise ValueError(f"the replica holds {self.idle_mib:.0f} MiB idle and keeps up to {RETAINED_MIB} MiB freed: "
+                             f"more than its {self.limits.memory_mib} MiB memory budget")
+        budget = MemoryBudget(int(room * 2**20))
+        largest, body = max(self.costs.values(), key=lambda cost: cost.per_pixel), 3 * self.input_dtype.itemsize
+        self.max_pixels = min(self.max_pixels, int((budget.capacity - largest.fixed) / (largest.per_pixel + 2 * body)))
+        return budget
 
     def _measure(self, kind: str) -> Cost:
-        """The cost of a request of ``kind``, from the peak memory of probe frames graded here (the first one, untimed,
-        pays the decoders' and the session's first-use costs)."""
+        """The cost of a request of ``kind``, from the peak memory of probe frames graded here (the first one, not
+        measured, pays the decoders' and the session's first-use costs)."""
         bodies = [sample_body(kind, side, self.format) for side in (PROBE_SIDES[0], *PROBE_SIDES)]
         self._grade_now(kind, bodies[0])
         peaks = [(side * side, peak_growth(lambda body=body: self._grade_now(kind, body)))

@@ -76,10 +76,10 @@ def check_port_free(host: str, port: int) -> None:
 def start_proxy(host: str = "127.0.0.1", port: int = 8000, timeout_s: float = Limits.timeout_s) -> str:
     """Start Ray (if it is not running) and Serve's HTTP proxy on ``host:port``, answering 408 to a request not done in
     ``timeout_s`` seconds and closing idle connections after 5; its URL. ``OSError`` where the port is taken."""
+    check_port_free(host, port)
     import ray
     from ray import serve
 
-    check_port_free(host, port)
     if not ray.is_initialized():  # the replica imports this folder's modules; one malloc arena: see memory.py
         ray.init(include_dashboard=False, log_to_driver=False, configure_logging=False,
                  runtime_env={"working_dir": str(HERE), "env_vars": {"MALLOC_ARENA_MAX": "1"}})
