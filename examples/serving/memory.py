@@ -1,15 +1,19 @@
-"""The replica's memory: what it holds now and at its peak, what a request costs, and the budget requests reserve from
-before their bodies are read.
+"""The replica's memory: what it holds now and at its peak, what a request and a batch cost, and the budget requests
+reserve from before their bodies are read.
 
-A request's cost is its body twice (the bytes, and the copy a decoder may take) plus a fixed part and a part per
-pixel, each measured when the replica starts: the growth of the replica's peak resident memory (``VmHWM``, reset
-through ``/proc/self/clear_refs``) while a probe frame of two sizes is decoded, graded and packed, a line through the
-two, times :data:`MARGIN`. Free heap pages are handed back to the system before each probe (glibc's ``malloc_trim``),
-so a probe that reuses them counts them. Between requests glibc keeps freed memory for reuse; with one malloc arena
-for the process (``MALLOC_ARENA_MAX=1``, which ``serve.py`` gives Ray's workers) every thread reuses it, so it adds
-little to the peak; the budget leaves :data:`RETAINED_MIB` for what it does add. (Handing every buffer back to the
-system as it is freed bounds it too, but then every run faults all its pages in anew, which slowed grading
-markedly.)
+Costs are measured when the replica starts: the growth of its peak resident memory (``VmHWM``, reset through
+``/proc/self/clear_refs``) while probe frames of two sizes are decoded, and while they are graded and packed; a line
+through the two (:class:`Cost`), times :data:`MARGIN`. A request holds its body twice (the bytes, and the copy a
+decoder may take), its decoding's peak and its answer twice (the graded frame and its packed bytes) from the moment
+its header is read until it is answered: that much it reserves from the :class:`MemoryBudget`, waiting in line. Its
+grading needs more, but only while its batch runs, and one batch runs at a time: the replica keeps a share of the
+budget for the running batch and splits a batch whose grading would not fit it.
+
+Free heap pages are handed back to the system before each probe (glibc's ``malloc_trim``), so a probe that reuses them
+counts them. Between requests glibc keeps freed memory for reuse; with one malloc arena for the process
+(``MALLOC_ARENA_MAX=1``, which ``serve.py`` gives Ray's workers) every thread reuses it, so it adds little to the
+peak; the budget leaves :data:`RETAINED_MIB` for what it does add. (Handing every buffer back to the system as it is
+freed bounds it too, but then every run faults all its pages in anew, which slowed grading markedly.)
 """
 
 from __future__ import annotations
@@ -90,12 +94,12 @@ def peak_growth(run) -> int:
 
 @dataclass(frozen=True)
 class Cost:
-    """What a request of one kind holds at its peak: ``fixed + per_pixel * pixels`` bytes, plus its body twice.
+    """Bytes a step holds at its peak for a frame of ``pixels`` pixels: ``fixed + per_pixel * pixels``.
 
     Examples:
         >>> cost = Cost.through((256 * 256, 7 << 20), (512 * 512, 19 << 20), margin=1.0)
-        >>> cost.per_pixel, cost.fixed / 2**20, cost.bytes(1000, body=100) - cost.bytes(1000, body=0)
-        (64.0, 3.0, 200)
+        >>> cost.per_pixel, cost.fixed / 2**20, cost.bytes(1000)
+        (64.0, 3.0, 3209728)
     """
 
     fixed: float
@@ -104,13 +108,20 @@ class Cost:
     @classmethod
     def through(cls, small: tuple, large: tuple, floor: float = 0.0, margin: float = MARGIN) -> "Cost":
         """The line through two probes ``(pixels, bytes)``, its slope at least ``floor`` bytes a pixel (what the
-        frames a request holds take), times ``margin``."""
+        frames the step holds take), times ``margin``."""
         (p0, b0), (p1, b1) = small, large
         per_pixel = max((b1 - b0) / (p1 - p0), floor)
         return cls(margin * max(0.0, b1 - per_pixel * p1), margin * per_pixel)
 
-    def bytes(self, pixels: int, body: int) -> int:
-        return round(self.fixed + self.per_pixel * pixels + 2 * body)
+    def bytes(self, pixels: int) -> int:
+        return round(self.fixed + self.per_pixel * pixels)
+
+    def pixels(self, room: float) -> int:
+        """The most pixels whose cost fits ``room`` bytes."""
+        return max(0, int((room - self.fixed) / self.per_pixel)) if self.per_pixel else 1 << 62
+
+    def mib(self) -> dict:
+        return {"fixed_mib": round(self.fixed / _MIB, 1), "bytes_per_pixel": round(self.per_pixel, 1)}
 
 
 class OverBudget(ValueError):
@@ -119,7 +130,7 @@ class OverBudget(ValueError):
 
 class MemoryBudget:
     """Bytes requests reserve before their bodies are read, granted first come first served: a request waits while
-    the memory is held by others, so every batch is made of frames whose memory was granted.
+    the memory is held by others.
 
     Examples:
         >>> async def two():

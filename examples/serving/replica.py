@@ -89,38 +89,52 @@ class Looks:
         self.grader = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="grade")
         self.lock, self.counts, self.running = threading.Lock(), collections.Counter(), 0
         self.recent = collections.deque(maxlen=WINDOW)  # latencies: bounded, whatever the traffic
-        self.max_pixels = limits.max_pixels
-        kinds = ("frame", "png", "exr") if self.format.input_dtype.is_floating_point else ("frame", "png")
-        self.costs = {kind: self._measure(kind) for kind in kinds}
+        self.max_pixels, self.batch_room = limits.max_pixels, 0  # the probes run single frames
+        self.output_dtype = np.dtype(str(self.format.output_dtype).replace("torch.", ""))
+        self.decoding, self.grading = self._measure()
         self.counts.clear()
         self.idle_mib = resident_mib()
-        self.memory = self._memory_budget()
+        self.memory, self.batch_room = self._memory_budget()
         reset_peak()
 
-    def _memory_budget(self) -> MemoryBudget:
-        """The memory requests may hold: the budget less what the replica holds idle and what glibc keeps freed; the
-        pixel budget lowered to the largest raw frame whose request fits it alone."""
-        room = self.limits.memory_mib - self.idle_mib - RETAINED_MIB
+    def _memory_budget(self) -> tuple[MemoryBudget, int]:
+        """The memory requests may hold, and the room kept for the batch being graded: each half of the budget less
+        what the replica holds idle and what glibc keeps freed. The pixel budget is lowered to the largest raw frame
+        that both fit alone."""
+        room = (self.limits.memory_mib - self.idle_mib - RETAINED_MIB) * 2**20
         if room <= 0:
             raise ValueError(f"the replica holds {self.idle_mib:.0f} MiB idle and keeps up to {RETAINED_MIB} MiB freed: "
                              f"more than its {self.limits.memory_mib} MiB memory budget")
-        budget = MemoryBudget(int(room * 2**20))
-        largest, body = max(self.costs.values(), key=lambda cost: cost.per_pixel), 3 * self.input_dtype.itemsize
-        self.max_pixels = min(self.max_pixels, int((budget.capacity - largest.fixed) / (largest.per_pixel + 2 * body)))
-        return budget
+        held = max(self.decoding.values(), key=lambda cost: cost.per_pixel)
+        body = 3 * self.input_dtype.itemsize
+        held = Cost(held.fixed, held.per_pixel + 2 * body + 2 * 3 * self.output_dtype.itemsize)
+        self.max_pixels = min(self.max_pixels, held.pixels(room / 2), self.grading.pixels(room / 2))
+        return MemoryBudget(int(room / 2)), int(room / 2)
 
-    def _measure(self, kind: str) -> Cost:
-        """The cost of a request of ``kind``, from the peak memory of probe frames graded here (the first one, not
-        measured, pays the decoders' and the session's first-use costs)."""
-        bodies = [sample_body(kind, side, self.format) for side in (PROBE_SIDES[0], *PROBE_SIDES)]
-        self._grade_now(kind, bodies[0])
-        peaks = [(side * side, peak_growth(lambda body=body: self._grade_now(kind, body)))
-                 for side, body in zip(PROBE_SIDES, bodies[1:])]
-        frames = 3 * (self.input_dtype.itemsize + np.dtype(str(self.format.output_dtype).replace("torch.", "")).itemsize)
-        return Cost.through(*peaks, floor=frames)
+    def _measure(self) -> tuple[dict, Cost]:
+        """The cost of decoding a request of each kind the model takes and of grading a frame, from the peak memory of
+        probe frames decoded and graded here (a first one, not measured, pays their first-use costs)."""
+        kinds = ("frame", "png", "exr") if self.format.input_dtype.is_floating_point else ("frame", "png")
+        frame_bytes = 3 * self.input_dtype.itemsize
+        decoding = {}
+        for kind in kinds:
+            bodies = [sample_body(kind, side, self.format) for side in (PROBE_SIDES[0], *PROBE_SIDES)]
+            self._decode(kind, bodies[0])
+            peaks = [(side * side, peak_growth(lambda body=body: self._decode(kind, body)))
+                     for side, body in zip(PROBE_SIDES, bodies[1:])]
+            decoding[kind] = Cost.through(*peaks, floor=0 if kind == "frame" else frame_bytes)
+        frames = [self._decode("frame", sample_body("frame", side, self.format)) for side in (PROBE_SIDES[0], *PROBE_SIDES)]
+        self._grade_now(frames[0])
+        peaks = [(side * side, peak_growth(lambda frame=frame: self._grade_now(frame))) for side, frame in zip(PROBE_SIDES, frames[1:])]
+        return decoding, Cost.through(*peaks, floor=frame_bytes + 3 * self.output_dtype.itemsize)
 
-    def _grade_now(self, kind: str, body: bytes) -> bytes:
-        return pack_frame(self._run([Ticket(self._decode(kind, body), float("inf"))])[0])
+    def _grade_now(self, frame: np.ndarray) -> bytes:
+        return pack_frame(self._run([Ticket(frame, float("inf"))])[0])
+
+    def held(self, kind: str, pixels: int, body: int) -> int:
+        """Bytes a request holds from its header until it is answered: its body twice (the bytes, and a decoder's
+        copy), its decoding's peak, its answer twice (the graded frame and its packed bytes)."""
+        return 2 * body + self.decoding[kind].bytes(pixels) + 2 * 3 * self.output_dtype.itemsize * pixels
 
     def _decode(self, kind: str, body) -> np.ndarray:
         if kind == "frame":
@@ -181,7 +195,7 @@ class Looks:
         body = Body(request, self._length(request), self.limits.min_body_rate, self.limits.body_grace_s)
         kind, pixels = await (self._frame_head(body) if path == "/frame" else self._image_head(body))
         waited = time.monotonic()
-        async with self.memory.reserved(self.costs[kind].bytes(pixels, body.length)):
+        async with self.memory.reserved(self.held(kind, pixels, body.length)):
             body.pause(time.monotonic() - waited)
             data = await body.whole()
             frame = self._decode(kind, data) if kind == "frame" else await asyncio.to_thread(self._decode, kind, data)
@@ -229,34 +243,47 @@ class Looks:
             groups[ticket.frame.shape].append(index)
         results = [None] * len(tickets)
         for same_size in groups.values():
-            indices = [index for index in same_size if tickets[index].wanted()]  # asked again before each group
-            self._count("skipped", len(same_size) - len(indices))
-            if not indices:
-                continue
-            batch = np.stack([tickets[index].frame for index in indices])
-            if self.format.layout == "NCHW":
-                batch = batch.transpose(0, 3, 1, 2)
-            self.running = len(indices)
-            try:
-                output = self.session.run(["output"], {"image": np.ascontiguousarray(batch)})[0]
-            finally:
-                self.running = 0
-            del batch
-            if self.format.output_layout == "NCHW":
-                output = output.transpose(0, 2, 3, 1)
-            for index, result in zip(indices, output):
-                results[index] = np.ascontiguousarray(result)
-            self._count("batches")
-            self._count("frames", len(indices))
+            for indices in self._split(tickets, same_size):
+                self._grade(tickets, indices, results)
         return results
+
+    def _split(self, tickets: list, same_size: list):
+        """The frames of a group still wanted (asked again before each part), in parts whose grading fits the room kept
+        for the running batch."""
+        pixels = tickets[same_size[0]].frame.shape[0] * tickets[same_size[0]].frame.shape[1]
+        per_part = max(1, self.grading.pixels(self.batch_room) // pixels) if self.batch_room else len(same_size)
+        while same_size:
+            part, same_size = same_size[:per_part], same_size[per_part:]
+            indices = [index for index in part if tickets[index].wanted()]
+            self._count("skipped", len(part) - len(indices))
+            if indices:
+                yield indices
+
+    def _grade(self, tickets: list, indices: list, results: list) -> None:
+        """The model on the frames ``indices`` of ``tickets`` as one batch, their results into ``results``."""
+        batch = np.stack([tickets[index].frame for index in indices])
+        if self.format.layout == "NCHW":
+            batch = batch.transpose(0, 3, 1, 2)
+        self.running = len(indices)
+        try:
+            output = self.session.run(["output"], {"image": np.ascontiguousarray(batch)})[0]
+        finally:
+            self.running = 0
+        del batch
+        if self.format.output_layout == "NCHW":
+            output = output.transpose(0, 2, 3, 1)
+        for index, result in zip(indices, output):
+            results[index] = np.ascontiguousarray(result)
+        self._count("batches")
+        self._count("frames", len(indices))
 
     def model(self) -> dict:
         fmt = self.format
-        costs = {kind: {"fixed_mib": round(cost.fixed / 2**20, 1), "bytes_per_pixel": round(cost.per_pixel, 1)}
-                 for kind, cost in self.costs.items()}
+        costs = {"grading": self.grading.mib(), **{f"decoding_{kind}": cost.mib() for kind, cost in self.decoding.items()}}
         return {"input_dtype": self.input_dtype.str, "layout": fmt.layout, "output": fmt.output,
                 "output_dtype": str(fmt.output_dtype).replace("torch.", ""), "output_layout": fmt.output_layout,
-                **asdict(self.limits), "max_pixels": self.max_pixels, "idle_mib": round(self.idle_mib, 1), "costs": costs}
+                **asdict(self.limits), "max_pixels": self.max_pixels, "idle_mib": round(self.idle_mib, 1), "costs": costs,
+                "requests_room_mib": round(self.memory.capacity / 2**20, 1), "batch_room_mib": round(self.batch_room / 2**20, 1)}
 
     def stats(self) -> dict:
         with self.lock:

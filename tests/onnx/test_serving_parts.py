@@ -119,7 +119,8 @@ def test_a_request_given_up_while_waiting_gives_its_place_and_a_request_past_the
 
 def test_a_cost_is_the_line_through_its_probes_with_its_margin_and_floor():
     cost = Cost.through((100, 1500), (400, 3000), margin=2.0)
-    assert cost.per_pixel == 2.0 * 5 and cost.fixed == 2.0 * 1000 and cost.bytes(10, body=7) == 2000 + 100 + 14
+    assert cost.per_pixel == 2.0 * 5 and cost.fixed == 2.0 * 1000 and cost.bytes(10) == 2000 + 100
+    assert cost.pixels(2000 + 10 * 99 + 9) == 99
     floored = Cost.through((100, 1500), (400, 1200), floor=3.0, margin=1.0)
     assert floored.per_pixel == 3.0 and floored.fixed == 0.0
 
@@ -140,15 +141,34 @@ def test_a_port_in_use_is_reported_as_such():
     check_port_free("127.0.0.1", port)
 
 
-def test_the_replica_grades_only_the_frames_someone_waits_for(tmp_path):
-    """Of four frames in a batch, one whose request was cancelled and one past its deadline are not graded; the
-    others are, as the look gives them; each kind of request the model takes has a measured cost."""
-    from replica import Looks, Ticket
+@pytest.fixture(scope="module")
+def replica(tmp_path_factory):
+    """The replica of a float-input model, outside Ray Serve (its batches are called directly), and its look."""
+    from replica import Looks
 
     look = tg.PostFX(grade={"contrast": 20}, tonemap="aces").eval()
-    model = tg.onnx.export(look, tmp_path / "look.onnx", input_dtype=torch.float32, layout="NHWC", output="srgb8")
-    looks = Looks(str(model), Limits(memory_mib=8192), threads=1)
-    assert set(looks.costs) == {"frame", "png", "exr"} and all(cost.per_pixel >= 6 for cost in looks.costs.values())
+    model = tg.onnx.export(look, tmp_path_factory.mktemp("replica") / "look.onnx", input_dtype=torch.float32,
+                           layout="NHWC", output="srgb8")
+    return Looks(str(model), Limits(memory_mib=8192), threads=1), look
+
+
+def test_the_replica_measures_what_each_kind_of_request_and_a_batch_cost(replica):
+    looks, _ = replica
+    assert set(looks.decoding) == {"frame", "png", "exr"}
+    assert looks.grading.per_pixel >= 12 + 3  # at least the float32 frame and its 8-bit answer
+    assert looks.decoding["png"].per_pixel >= 12 and looks.decoding["exr"].per_pixel >= 12
+    room = looks.memory.capacity
+    assert looks.batch_room == room and looks.max_pixels <= looks.grading.pixels(room)
+    assert looks.held("png", 1000, body=500) == 1000 + looks.decoding["png"].bytes(1000) + 6000
+
+
+def test_the_replica_grades_only_the_frames_someone_waits_for(replica):
+    """Of four frames in a batch, one whose request was cancelled and one past its deadline are not graded; the
+    others are, as the look gives them."""
+    from replica import Ticket
+
+    looks, look = replica
+    before = looks.stats()
     frames = [np.random.default_rng(seed).random((9, 13 + seed % 2, 3), np.float32) * 4 for seed in range(4)]
     tickets = [Ticket(frames[0], float("inf")), Ticket(frames[1], float("inf"), gone=True),
                Ticket(frames[2], time.monotonic() - 1.0), Ticket(frames[3], float("inf"))]
@@ -159,7 +179,19 @@ def test_the_replica_grades_only_the_frames_someone_waits_for(tmp_path):
         expected = tg.onnx.encode_frame(tg.onnx.reference(look, linear)[0], "srgb8")[0].permute(1, 2, 0).numpy()
         assert np.abs(results[index].astype(int) - expected).max() <= 1
     stats = looks.stats()
-    assert stats["frames"] == 2 and stats["skipped"] == 2 and stats["batches"] == 2
+    assert (stats["frames"] - before["frames"], stats["skipped"] - before["skipped"], stats["batches"] - before["batches"]) == (2, 2, 2)
+
+
+def test_a_batch_whose_grading_would_not_fit_its_room_is_graded_in_parts(replica, monkeypatch):
+    from replica import Ticket
+
+    looks, _ = replica
+    frames = [np.full((30, 40, 3), 0.1 * seed, np.float32) for seed in range(5)]
+    monkeypatch.setattr(looks, "batch_room", looks.grading.bytes(5 * 30 * 40 // 2))  # room for two frames and a half
+    before = looks.stats()["batches"]
+    results = looks._run([Ticket(frame, float("inf")) for frame in frames])
+    assert looks.stats()["batches"] - before == 3 and all(result.shape == (30, 40, 3) for result in results)
+    assert [int(result[0, 0, 0]) for result in results] == [int(looks._run([Ticket(frame, float("inf"))])[0][0, 0, 0]) for frame in frames]
 
 
 @pytest.mark.parametrize("name", ["frames", "images", "limits", "memory"])
