@@ -112,11 +112,12 @@ def markdown(results: dict) -> list:
     for phase in ("real_frames", "slow_clients"):
         run = results[phase]
         lines.append(f"| {phase.replace('_', ' ')} | {run['requests']} | {run['concurrency']} | {run['statuses']} | "
-                     f"{run['latency_ms_p50']} | {run['latency_ms_p99']} | {run['latency_ms_max']} | {run['slow_answers'] or '-'} |")
+                     f"{run['latency_ms_p50']} | {run['latency_ms_p99']} | {run['latency_ms_max']} | "
+                     f"{run['slow_answers'] or '-'} |")
     memory = server["memory"]
     lines += ["", f"Replica peak resident memory {server['peak_rss_mib']} MiB of its {results['memory_mib']} MiB budget; "
               f"requests held at most {memory['held_peak_mib']} MiB at once; {memory['waited']} waited for memory. "
-              f"Measured cost per request kind: {results['model']['costs']}.",
+              f"Measured costs (fixed MiB, bytes a pixel): {results['model']['costs']}.",
               "Files: " + ", ".join(f"{name} ({size // 1024} KiB)" for name, size in results["files"].items()) + "."]
     return lines
 

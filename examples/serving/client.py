@@ -71,7 +71,8 @@ def read_answer(connection: socket.socket, silence_s: float = 5.0) -> bytes:
 def _trickle_once(address: tuple, path: str, body: bytes, stop: threading.Event, interval: float) -> bytes:
     """One connection sending ``body`` a byte every ``interval`` seconds until it is answered (or ``stop``)."""
     with socket.create_connection(address, timeout=10.0) as connection:
-        connection.sendall(b"POST %s HTTP/1.1\r\nHost: %s\r\nContent-Length: %d\r\n\r\n" % (path.encode(), address[0].encode(), len(body)))
+        head = b"POST %s HTTP/1.1\r\nHost: %s\r\nContent-Length: %d\r\n\r\n"
+        connection.sendall(head % (path.encode(), address[0].encode(), len(body)))
         for at in range(len(body)):
             if stop.is_set() or select.select([connection], [], [], interval)[0]:
                 break
@@ -142,8 +143,8 @@ def main(argv=None) -> int:
     else:
         height, width = (int(side) for side in args.size.split("x"))
         bodies, path, what = [pack_frame(random_frame(height, width, dtype))] * args.frames, "/frame", f"frames {args.size}"
-    stop, slow_answers = threading.Event(), []
-    tricklers = [threading.Thread(target=lambda: slow_answers.extend(trickle(args.url, "/frame", pack_frame(random_frame(64, 64, dtype)), stop)))
+    stop, slow_answers, slow_body = threading.Event(), [], pack_frame(random_frame(64, 64, dtype))
+    tricklers = [threading.Thread(target=lambda: slow_answers.extend(trickle(args.url, "/frame", slow_body, stop)))
                  for _ in range(args.slow)]
     for trickler in tricklers:
         trickler.start()

@@ -6,8 +6,9 @@ A request goes through, each step before the next one's cost is paid: its ``Cont
 its body, which says how many pixels it holds (a frame's 16-byte header, a PNG's ``IHDR``, an EXR's headers: 400 for
 a malformed, unsupported or over-budget image); the memory it will hold (:mod:`memory`: 413 if it could never fit,
 else it waits in line); the rest of its body (:mod:`body`: 408 when it comes slower than the minimum rate); its
-decoding, off the event loop; its batch, graded on the replica's one grading thread, so ``/stats`` and admission keep
-answering meanwhile. A request whose client left or timed out is dropped from its batch before the batch runs.
+decoding, off the event loop; its batch, graded on the replica's one grading thread (in parts that fit the memory kept
+for grading), so ``/stats`` and admission keep answering meanwhile. A request whose client left or timed out is
+dropped from its batch before the batch (or its part) runs.
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ __all__ = ["Looks", "Ticket"]
 WINDOW = 1000
 """Frames the latency figures of ``/stats`` are taken over (the most recent)."""
 PROBE_SIDES = (256, 512)
-"""Sides of the square probe frames whose peak memory gives each kind of request its cost."""
+"""Sides of the square probe frames whose peak memory gives decoding each kind of request, and grading, their costs."""
 
 
 def _route(request) -> str:
@@ -48,7 +49,7 @@ def _route(request) -> str:
 
 def _session(model: str, threads: int | None):
     """An onnxruntime session of ``model`` without its memory arena, which keeps a run's peak for good: freed buffers
-    go back to the system, so the memory budget counts what runs hold."""
+    go back to the allocator, where later runs and requests reuse them, so the memory budget counts what runs hold."""
     import onnxruntime
 
     options = onnxruntime.SessionOptions()
@@ -125,7 +126,8 @@ class Looks:
             decoding[kind] = Cost.through(*peaks, floor=0 if kind == "frame" else frame_bytes)
         frames = [self._decode("frame", sample_body("frame", side, self.format)) for side in (PROBE_SIDES[0], *PROBE_SIDES)]
         self._grade_now(frames[0])
-        peaks = [(side * side, peak_growth(lambda frame=frame: self._grade_now(frame))) for side, frame in zip(PROBE_SIDES, frames[1:])]
+        peaks = [(side * side, peak_growth(lambda frame=frame: self._grade_now(frame)))
+                 for side, frame in zip(PROBE_SIDES, frames[1:])]
         return decoding, Cost.through(*peaks, floor=frame_bytes + 3 * self.output_dtype.itemsize)
 
     def _grade_now(self, frame: np.ndarray) -> bytes:
@@ -236,8 +238,8 @@ class Looks:
         return await asyncio.get_running_loop().run_in_executor(self.grader, self._run, tickets)
 
     def _run(self, tickets: list) -> list:
-        """The model on the frames still wanted, grouped by size, each group one batch; in the order given, ``None``
-        for a frame no one waits for."""
+        """The model on the frames still wanted, grouped by size, each group one batch (or parts of one, see
+        :meth:`_split`); in the order given, ``None`` for a frame no one waits for."""
         groups = collections.defaultdict(list)
         for index, ticket in enumerate(tickets):
             groups[ticket.frame.shape].append(index)

@@ -69,8 +69,8 @@ def check_port_free(host: str, port: int) -> None:
         try:
             probe.bind((host, port))
         except OSError as error:
-            raise OSError(f"cannot serve on {host}:{port}: {'the port is in use' if error.errno == errno.EADDRINUSE else error.strerror}"
-                          " (choose another with --port)") from None
+            reason = "the port is in use" if error.errno == errno.EADDRINUSE else error.strerror
+            raise OSError(f"cannot serve on {host}:{port}: {reason} (choose another with --port)") from None
 
 
 def start_proxy(host: str = "127.0.0.1", port: int = 8000, timeout_s: float = Limits.timeout_s) -> str:
