@@ -39,12 +39,12 @@ grows with the square of their number (200,000 empty ones, 3 MB, took 198 s), so
 
 MAX_FILE_ATTRIBUTES = 16384
 """Most attributes all the headers of a file may hold together (the required ones of 1,024 parts are 11,264): OpenEXR's
-parser pays for every part's (1,024 parts of 1,000 attributes, 14 MB, took 35 s and 1,030 MiB for an 8x4 image)."""
+parser pays for every part's, and 1,024 parts of 1,000 attributes (14 MB) held it for tens of seconds and a GiB
+for an 8x4 image."""
 
 MAX_CHANNELS = 4096
 """Most channels a part may hold (a render's AOVs are a few hundred): OpenEXR's header parser takes time that grows with
-the square of their number (20,000 took 0.6 s, 100,003 took 15 s of CPU here, 49.5 s on a busy machine; 4,096 take
-0.04 s)."""
+the square of their number (100,003 held it for tens of seconds)."""
 
 MAX_FILE_CHANNELS = 16384
 """Most channels all the parts of a file may hold together."""
