@@ -204,7 +204,7 @@ __all__ = [
 ]
 
 
-class Family(NamedTuple):
+class StageCheck(NamedTuple):
     """A stage and its check of the numbers given for its controls: ``check({control: value})`` raises the stage's
     ``ValueError`` (``stage`` is ``None`` for a function no stage runs)."""
 
@@ -212,14 +212,14 @@ class Family(NamedTuple):
     check: Callable
 
 
-def checked(function, family: Family, arguments: dict):
+def checked(function, checks: StageCheck, arguments: dict):
     """``function``, checking first the numbers it is given for a stage's controls: ``arguments`` maps each argument to
-    the control it is (or to a pair of controls, for an argument that holds a pair), checked by ``family.check``. A
+    the control it is (or to a pair of controls, for an argument that holds a pair), checked by ``checks.check``. A
     tensor is not read (on a GPU each read waits for the device). The door keeps ``controls`` (``arguments``) and
     ``stage``, for ``help()`` and the tests.
 
     Examples:
-        >>> gain = Family(None, partial(check_given, {"gain": Control(1.0, (0.0, 2.0))}, owner="Gain"))
+        >>> gain = StageCheck(None, partial(check_given, {"gain": Control(1.0, (0.0, 2.0))}, owner="Gain"))
         >>> scaled = checked(lambda image, gain=1.0: image * gain, gain, {"gain": "gain"})
         >>> scaled(torch.ones(1), 3.0)
         Traceback (most recent call last):
@@ -244,10 +244,10 @@ def checked(function, family: Family, arguments: dict):
                 given[control] = value
             elif isinstance(value, (tuple, list)):
                 given.update(zip(control, value))
-        family.check(given)
+        checks.check(given)
         return function(*args, **kwargs)
 
-    door.controls, door.stage = dict(arguments), family.stage
+    door.controls, door.stage = dict(arguments), checks.stage
     return door
 
 
@@ -265,21 +265,21 @@ def _exposure_checks(given: dict) -> None:
             checked_control(name, value)
 
 
-def _tone_mapper(mode: str) -> Family:
-    return Family(partial(ToneMap, mode), _table(TONE_MAPPERS[mode].controls, f"ToneMap({mode!r})"))
+def _tone_mapper(mode: str) -> StageCheck:
+    return StageCheck(partial(ToneMap, mode), _table(TONE_MAPPERS[mode].controls, f"ToneMap({mode!r})"))
 
 
-def _primary(style: str) -> Family:
-    return Family(partial(PrimaryGrade, style), _table(style_table(style), f"{style} PrimaryGrade"))
+def _primary(style: str) -> StageCheck:
+    return StageCheck(partial(PrimaryGrade, style), _table(style_table(style), f"{style} PrimaryGrade"))
 
 
 def _same(*names: str) -> dict:
     return {name: name for name in names}
 
 
-_GRADE = Family(ColorGrade, _table(COLOR_GRADE_CONTROLS, "ColorGrade"))
-_EXPOSURE = Family(AutoExposure, _exposure_checks)
-_DISPLAY = Family(Display, _table(Display.controls, "Display"))
+_GRADE = StageCheck(ColorGrade, _table(COLOR_GRADE_CONTROLS, "ColorGrade"))
+_EXPOSURE = StageCheck(AutoExposure, _exposure_checks)
+_DISPLAY = StageCheck(Display, _table(Display.controls, "Display"))
 
 DOORS = {
     post_exposure: (_GRADE, {"stops": "post_exposure"}),
@@ -304,18 +304,18 @@ DOORS = {
     **{entry.curve: (_tone_mapper(mode), _same(*entry.controls))
        for mode, entry in TONE_MAPPERS.items() if entry.controls and entry.curve is globals().get(mode)},
     aces2_output: (_tone_mapper("aces2_hdr"), _same("peak_luminance")),
-    bloom_threshold: (Family(Bloom, _table(Bloom.controls, "Bloom")), _same("threshold", "knee")),
+    bloom_threshold: (StageCheck(Bloom, _table(Bloom.controls, "Bloom")), _same("threshold", "knee")),
     meter_luminance: (_EXPOSURE, {"stop_range": ("min_ev", "max_ev"), "percents": ("low_percent", "high_percent"),
                                   "middle_grey": "middle_grey"}),
     adapt_luminance: (_EXPOSURE, _same("dt", "speed", "speed_to_light", "speed_to_dark")),
     exposure_operator: (_EXPOSURE, _same("middle_grey", "max_luminance")),
-    area_resize: (Family(None, _table({"size": Control(64, (1, MAX_FRAME_SIDE))}, "area_resize")), _same("size")),
-    dither_pattern: (Family(Dither, _table(Dither.controls, "Dither")), _same("size")),
+    area_resize: (StageCheck(None, _table({"size": Control(64, (1, MAX_FRAME_SIDE))}, "area_resize")), _same("size")),
+    dither_pattern: (StageCheck(Dither, _table(Dither.controls, "Dither")), _same("size")),
     linear_to_pq: (_DISPLAY, {"reference": "peak_luminance"}),
     pq_to_linear: (_DISPLAY, {"reference": "peak_luminance"}),
 }
 """The functions that compute a step of a stage without checking its controls, each with its stage's
-:class:`Family` and ``{argument: control}``: this module's names are those functions behind their checks
+:class:`StageCheck` and ``{argument: control}``: this module's names are those functions behind their checks
 (:func:`checked`). The stages' own doors (:func:`color_grade`, :func:`tonemap`, :func:`primary_grade`, :func:`bloom`,
 :func:`convolution_bloom`, :func:`auto_exposure`, :func:`dither`) check inside; the stages call the unchecked forms."""
 

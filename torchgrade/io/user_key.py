@@ -36,8 +36,10 @@ _PRIVATE = 0o077
 
 
 def key_folder() -> Path:
-    """Where this user's key lives: ``$XDG_CONFIG_HOME/torchgrade``, else ``~/.config/torchgrade``."""
-    return Path(os.environ.get("XDG_CONFIG_HOME") or Path.home() / ".config") / "torchgrade"
+    """Where this user's key lives: ``$XDG_CONFIG_HOME/torchgrade``, else (unset, or not an absolute path, which the XDG
+    Base Directory specification says to ignore) ``~/.config/torchgrade``."""
+    configured = os.environ.get("XDG_CONFIG_HOME", "")
+    return (Path(configured) if os.path.isabs(configured) else Path.home() / ".config") / "torchgrade"
 
 
 def user_key(folder=None, create: bool = False) -> bytes:
