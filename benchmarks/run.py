@@ -16,19 +16,20 @@ an ACES-space grade (exposure, temperature, contrast, saturation, split toning) 
 adaptation meters the frame and bloom looks at neighbouring pixels, so both run live; the *per-pixel stage* (grade +
 tone map) is what most rows compute in different ways, and *whole-look* rows compute all of it.
 
-**Rows** (:func:`benchmarks.suite.methods.method_rows`): the per-pixel stage computed directly in float64 (the
-reference), float32, bfloat16 and float16 (the library computes half inputs in float32: those rows measure the
-conversion and the quantisation of half inputs); the default bake (``tg.bake_lut`` with every default: its size and
-lattice are read from the LUT it returns) looked up tetrahedrally and trilinearly, each in both CPU forms (the loop
-compiled from C and the torch form, :mod:`benchmarks.suite.forms`); a 33³ LogC LUT, the twin of OpenColorIO's row;
-``look.to_lut()`` (the baked look: eye adaptation and bloom live, the default bake after them); exported to ONNX and
-run by onnxruntime and by OpenVINO (f32; the full run adds its default precision); OpenColorIO's CPU processor on the
-33³ LogC LUT as a ``.cube`` and on the default bake as CLF. Whole-look rows: direct float32, the baked look, and the
-exported look on both runtimes. The full run adds ``torch.compile`` (direct, the default bake's lookups, the whole
-look; a row whose compilation fails records why), every LUT size (9, 17, 33, 65) × lattice × interpolation with
-OpenColorIO at each (``.cube`` lattices), 33³ and 65³ LogC LUTs whose lattice reaches the scenes' brightest pixel
-(``bake_lut(scene=...)``), and the exported baked look. Linear-shaper LUTs clip above 1: the table keeps them, the
-plot leaves them out.
+**Rows** (:func:`benchmarks.suite.methods.method_rows`): the per-pixel stage computed directly in float32, bfloat16
+and float16 (the library computes half inputs in float32: those rows measure the conversion and the quantisation of
+half inputs); the default bake (``tg.bake_lut`` with every default: its size and lattice are read from the LUT it
+returns) looked up tetrahedrally in both CPU forms (the loop compiled from C and the torch form,
+:mod:`benchmarks.suite.forms`) and trilinearly by the loop; a 33³ LogC LUT, the twin of OpenColorIO's row;
+``look.to_lut()`` (the baked look: eye adaptation and bloom live, the default bake after them); the default bake
+exported to ONNX and run by onnxruntime and by OpenVINO (f32); OpenColorIO's CPU processor on the 33³ LogC LUT as a
+``.cube`` and on the default bake as CLF. Whole-look rows: direct float32, the baked look, and the exported look on
+both runtimes. The full run adds the float64 reference itself, trilinear's torch form, ``torch.compile``
+(``tg.compile`` of the direct stage and of the whole look, ``LUT3D(compile=True)`` of the default bake; a row whose
+compilation fails records why), the exported per-pixel stage and baked look, OpenVINO's default precision, every LUT
+size (9, 17, 33, 65) × lattice × interpolation with OpenColorIO at each (``.cube`` lattices) and 33³ and 65³ LogC
+LUTs whose lattice reaches the scenes' brightest pixel (``bake_lut(scene=...)``). Linear-shaper LUTs clip above 1:
+the table keeps them, the plot leaves them out.
 
 **Accuracy** is measured on the whole look: the scene goes through the live stages (in the row's dtype) and the
 row's per-pixel stage, and is compared with the float64 look, on the sample photographs (Desk, CandleGlass,

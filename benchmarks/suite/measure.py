@@ -49,7 +49,7 @@ def measure_row(work: Workload, name: str, build: Callable[[], Method]):
         method = build()
         record = {"method": name, "family": method.family, "dtype": str(method.dtype).replace("torch.", ""),
                   "timed": "whole look" if method.whole_look else "per-pixel stage",
-                  "device": "cpu" if method.host else work.plan.device.type, **method.info}
+                  "device": "cpu" if method.host else work.plan.device.type, "headline": method.headline, **method.info}
         record.update(accuracy(work, method))
         return method, record
     except Exception as error:  # noqa: BLE001 — e.g. torch.compile without a working compiler

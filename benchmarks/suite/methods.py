@@ -55,19 +55,22 @@ def looked_up(lut: tg.LUT3D, interpolation: str, form: Optional[str] = None) -> 
 
 
 def default_rows(work: Workload) -> list:
-    """The default bake, each interpolation in each CPU form (on a GPU, once: the forms are CPU forms)."""
-    forms = FORMS if work.plan.device.type == "cpu" else (None,)
+    """The default bake, each interpolation in each CPU form (trilinear's torch form in the full run; on a GPU, once:
+    the forms are CPU forms)."""
 
     def build(interpolation, form):
         lut = work.default_lut
-        info = lut_info(lut, interpolation, default_bake=True, headline=True)
+        info = lut_info(lut, interpolation, default_bake=True)
         if form is not None:
-            ran = form if form == TORCH_FORM or compiled_loop_runs(interpolation) else f"{TORCH_FORM}: the loop did not compile here"
-            info["lookup_form"] = ran
+            looped = form == TORCH_FORM or compiled_loop_runs(interpolation)
+            info["lookup_form"] = form if looped else f"{TORCH_FORM}: the loop did not compile here"
         return Method(default_name(lut, interpolation, form), "lut", looked_up(lut, interpolation, form), info=info)
 
     lut = work.default_lut
-    return [(default_name(lut, i, f), functools.partial(build, i, f)) for i in INTERPOLATIONS for f in forms]
+    keys = [(i, f) for i in INTERPOLATIONS for f in FORMS if work.plan.every_row or (i, f) != ("trilinear", TORCH_FORM)]
+    if work.plan.device.type != "cpu":
+        keys = [(i, None) for i in INTERPOLATIONS]
+    return [(default_name(lut, i, f), functools.partial(build, i, f)) for i, f in keys]
 
 
 def grid_keys(work: Workload) -> list:
@@ -87,14 +90,14 @@ def fitted_lut_name(size: int) -> str:
 def lut_rows(work: Workload) -> list:
     def build(size, shaper, interpolation, headline):
         lut = work.lut(size, shaper)
-        info = lut_info(lut, interpolation, headline=headline)
-        return Method(lut_name(size, shaper, interpolation), "lut", looked_up(lut, interpolation), info=info)
+        info = lut_info(lut, interpolation)
+        return Method(lut_name(size, shaper, interpolation), "lut", looked_up(lut, interpolation), info=info, headline=headline)
 
     def build_fitted(size):
         lut = work.lut(size, "logc", fitted=True)
         top = float(tg.color.logc_to_linear(lut.domain_max.double()).max())
         info = lut_info(lut, "tetrahedral", domain_top_linear=round(top, 1))
-        return Method(fitted_lut_name(size), "lut", looked_up(lut, "tetrahedral"), info=info)
+        return Method(fitted_lut_name(size), "lut", looked_up(lut, "tetrahedral"), info=info, headline=False)
 
     rows = [(lut_name(*key[:3]), functools.partial(build, *key)) for key in grid_keys(work)]
     if work.plan.every_row:
@@ -110,14 +113,15 @@ def baked_look_rows(work: Workload) -> list:
     def build():
         look = work.baked_look
         return Method(BAKED_LOOK, "lut", look, whole_look=True,
-                      info=lut_info(look.lut, look.lut.interpolation, default_bake=True, headline=True))
+                      info=lut_info(look.lut, look.lut.interpolation, default_bake=True))
 
     return [(BAKED_LOOK, build)]
 
 
 def compile_rows(work: Workload) -> list:
-    """``torch.compile`` of the direct float32 stage, of the default bake's lookups (``LUT3D(compile=True)``) and of
-    the whole look; compile time = the first call at 1080p."""
+    """``torch.compile`` through the library's door, ``tg.compile``, of the direct float32 stage and of the whole look,
+    and of the default bake's lookups (``LUT3D(compile=True)``); compile time = the first call at 1080p (the accuracy
+    scenes' other sizes then compile once more, with symbolic sizes)."""
 
     def build(name, module, whole_look=False, interpolation=None):
         apply = (lambda x: module(x, interpolation)) if interpolation else module
@@ -127,13 +131,13 @@ def compile_rows(work: Workload) -> list:
             apply(frame)
         if isinstance(module, tg.LUT3D) and not module.compile:
             raise RuntimeError("torch.compile failed; LUT3D fell back to its eager lookup")
-        info = {"compile_s": round(time.perf_counter() - start, 1), "headline": True}
+        info = {"compile_s": round(time.perf_counter() - start, 1)}
         if interpolation:
             info.update(lut_info(module, interpolation), default_bake=True)
         return Method(name, "torch.compile", apply, whole_look=whole_look, info=info)
 
-    rows = [("torch.compile direct float32", lambda: build("torch.compile direct float32", torch.compile(work.per_pixel))),
-            ("torch.compile whole look", lambda: build("torch.compile whole look", torch.compile(work.look), whole_look=True))]
+    rows = [("torch.compile direct float32", lambda: build("torch.compile direct float32", tg.compile(work.per_pixel))),
+            ("torch.compile whole look", lambda: build("torch.compile whole look", tg.compile(work.look), whole_look=True))]
     for interpolation in INTERPOLATIONS:
         name = f"torch.compile {default_name(work.default_lut, interpolation)}"
         rows.append((name, functools.partial(

@@ -70,17 +70,18 @@ def look_block(results: dict) -> str:
 
 def table_block(results: dict) -> str:
     report = headline(results)
-    shown = [r for r in report["rows"] if r.get("headline") or "error" in r]
+    form, shown = form_of(report), [r for r in report["rows"] if r.get("headline", True)]
     return "\n".join([
-        f"From the {form_of(report)} form ([all {len(report['rows'])} rows](../benchmarks/results/suite/{form_of(report)}/results.md)). "
-        f"{provenance(report)} Speed: median of {report['runs']} alternated rounds at 1920×1080; × copy and × OCIO are "
-        f"medians of each round's ratio to a plain frame copy and to {PEER}. Per-pixel rows leave out the live stages, "
+        f"From the {form} form ([all {len(report['rows'])} rows](../benchmarks/results/suite/{form}/results.md)). "
+        f"{provenance(report)} On {condition(report)}. Speed: median of {report['runs']} alternated rounds at "
+        f"1920×1080; × copy and × OCIO are medians of each round's ratio to a plain frame copy and to {PEER}. "
+        "Per-pixel rows leave out the live stages, "
         f"which every look adds: {baselines_text(report)}. Accuracy: the whole look on {', '.join(report['scenes'])} "
         "against the float64 look.",
         "",
         markdown_table(shown),
         "",
-        f"![Speed vs accuracy](../benchmarks/results/suite/{form_of(report)}/pareto.png)",
+        f"![Speed vs accuracy](../benchmarks/results/suite/{form}/pareto.png)",
         "",
     ])
 

@@ -21,8 +21,9 @@ class Method:
     ``apply`` maps the row's input (what the per-pixel stage receives, or the scene for a whole-look row) in
     ``dtype`` to display-referred linear RGB. ``timer(frame)`` returns ``(run, reset)``: the timed call and an
     untimed call to run before each one (or ``None``); by default ``run`` is ``apply(frame)``.
-    ``host`` rows run on the CPU whatever the device (onnxruntime, OpenVINO, OpenColorIO). ``info`` goes into the
-    row's record (``"headline": True``: a row the performance page shows).
+    ``host`` rows run on the CPU whatever the device (onnxruntime, OpenVINO, OpenColorIO). ``headline``: a row a
+    choice hangs on, which the performance page shows (not one of the full run's grid). ``info`` goes into the row's
+    record.
     """
 
     name: str
@@ -33,6 +34,7 @@ class Method:
     host: bool = False
     timer: Optional[Callable] = None
     info: dict = field(default_factory=dict)
+    headline: bool = True
 
     def timed_call(self, frame: torch.Tensor):
         return self.timer(frame) if self.timer else ((lambda: self.apply(frame)), None)

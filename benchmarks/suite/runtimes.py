@@ -84,7 +84,7 @@ def exported_method(work: Workload, runtime: str, stem: str, opener=None) -> Met
 
     name = f"{runtime} {stem}"
     return Method(name, runtime.lower(), apply, whole_look=whole_look, host=True, timer=timer,
-                  info={**info, "export_s": export_s, "onnx_nodes": nodes, "headline": True})
+                  info={**info, "export_s": export_s, "onnx_nodes": nodes})
 
 
 def exported_rows(work: Workload) -> list:
@@ -106,10 +106,13 @@ def opencolorio_method(work: Workload, lut: tg.LUT3D, name: str, suffix: str, in
     """``lut`` written as a ``.cube`` (``suffix`` ``".cube"``, :func:`torchgrade.io.write_cube`) or CLF (``".clf"``,
     :func:`torchgrade.io.write_clf`) and applied by OpenColorIO's CPU processor."""
     path = work.folder / f"{len(list(work.folder.iterdir()))}{suffix}"  # a fresh path per table: OpenColorIO caches by path
-    (tg.io.write_cube if suffix == ".cube" else tg.io.write_clf)(path, lut.cpu())
+    if suffix == ".cube":
+        tg.io.write_cube(path, lut.cpu())
+    else:  # a CLF file names its interpolation, which OpenColorIO follows
+        tg.io.write_clf(path, lut.cpu(), interpolation=interpolation)
     processor = ocio_processor(path, interpolation)
     return Method(name, "opencolorio", functools.partial(ocio_apply, processor), host=True,
-                  timer=functools.partial(ocio_in_place, processor), info=lut_info(lut, interpolation, headline=headline))
+                  timer=functools.partial(ocio_in_place, processor), info=lut_info(lut, interpolation), headline=headline)
 
 
 def opencolorio_rows(work: Workload) -> list:
