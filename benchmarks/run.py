@@ -99,14 +99,14 @@ QUICK = "the rows a choice hangs on, smaller accuracy images, fewer rounds, scal
 
 def run_suite(plan: Plan) -> dict:
     """One run of ``plan``: measures, writes its results to ``plan.out`` and returns them."""
-    started, cpu_started = time.perf_counter(), stamp.cpu_seconds()
+    started, cpu_started, source = time.perf_counter(), stamp.cpu_seconds(), stamp.source_commit()  # the code loaded now
     torch.manual_seed(0)
     with tempfile.TemporaryDirectory(prefix="torchgrade-bench-") as folder, warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")  # into the report, not between the progress bars
         work = Workload(plan, Path(folder))
         measured = measure_everything(work)
     results = {
-        "command": plan.command(), **stamp.source_commit(), "quick": plan.quick, "device": plan.device.type, "look": LOOK,
+        "command": plan.command(), **source, "quick": plan.quick, "device": plan.device.type, "look": LOOK,
         "frame": list(FRAME), "runs": plan.runs, "statistic": "median, ratios: median of each round's ratio",
         "scenes": list(work.scenes), "accuracy_sizes": {name: list(image.shape[-2:]) for name, image in work.scenes.items()},
         "delta_e_samples": int(work.delta_e_pixels.numel()), **measured,

@@ -48,11 +48,12 @@ def form_of(report: dict) -> str:
 
 
 def condition(report: dict) -> str:
-    """The machine a run had, from its recorded environment: cores and the load average at its end (quiet: at most one
-    runnable process per core, the run's own included)."""
+    """The machine a run had, from its recorded environment: cores and the 1-minute load average at its end (quiet: at
+    most one more than the cores, which the run's own threads fill)."""
     env = report["environment"]
     load = env["load_average"][0]
-    return f"{'a quiet' if load <= env['cpu_count'] else 'a busy'} {env['cpu_count']}-core machine (load average {load:.1f})"
+    quiet = load <= env["cpu_count"] + 1
+    return f"{'a quiet' if quiet else 'a busy'} {env['cpu_count']}-core machine (load average {load:.1f})"
 
 
 def timing_line(report: dict) -> str:

@@ -96,7 +96,7 @@ def test_the_pages_quote_the_committed_results(page):
     assert names and pages.stale(page, bodies) == [], "run: .venv/bin/python -m benchmarks suite --pages"
 
 
-SUITE_FIGURES = re.compile(r"ms/MP|× OCIO|× copy")
+SUITE_FIGURES = re.compile(r"ms/MP|× OCIO")
 """How the suite's figures read on a page."""
 
 
