@@ -3,10 +3,7 @@ pixels as eager. Identity shortcuts that read a control's value are decided in P
 
 import itertools
 import json
-import os
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -306,38 +303,3 @@ def test_warm_up_for_inference_compiles_for_the_callers_gradient_mode(monkeypatc
         compiled.warm_up(hdr((2, 3, 8, 8)))
         compiled(hdr((5, 3, 8, 8)))
     assert counter.frame_count == 1
-
-
-def test_a_saved_compile_cache_loads_in_another_process(tmp_path):
-    """``tg.io.save_compile_cache`` after a compile, ``tg.io.load_compile_cache`` in a fresh process with an empty
-    Inductor cache: PyTorch takes the file, and the compiled stage gives the eager pixels."""
-    script = """
-import sys, torch, torchgrade as tg
-path, role = sys.argv[1], sys.argv[2]
-if role == "load":
-    assert tg.io.load_compile_cache(path)
-stage = tg.ToneMap("reinhard")
-image = torch.rand(1, 3, 8, 8)
-with torch.no_grad():
-    assert torch.allclose(tg.compile(stage)(image), stage(image), atol=1e-6)
-if role == "save":
-    assert tg.io.save_compile_cache(path)
-"""
-    path = tmp_path / "reinhard.compiled"
-    for role in ("save", "load"):
-        environment = {**os.environ, "TORCHINDUCTOR_CACHE_DIR": str(tmp_path / f"inductor-{role}")}
-        run = subprocess.run([sys.executable, "-c", script, str(path), role], env=environment, capture_output=True,
-                             text=True, timeout=300)
-        assert run.returncode == 0, run.stderr[-2000:]
-    assert path.stat().st_size > 0
-
-
-def test_a_compile_cache_is_checked_before_it_is_read(tmp_path):
-    with pytest.raises(FileNotFoundError):
-        tg.io.load_compile_cache(tmp_path / "missing.compiled")
-    os.mkfifo(tmp_path / "pipe")
-    with pytest.raises(ValueError, match="not a regular file"):
-        tg.io.load_compile_cache(tmp_path / "pipe")
-    (tmp_path / "junk.compiled").write_bytes(b"not a cache")
-    with pytest.warns(RuntimeWarning, match="could not load the compile cache"):
-        assert tg.io.load_compile_cache(tmp_path / "junk.compiled") is False
