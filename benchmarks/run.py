@@ -19,7 +19,7 @@ tone map) is what most rows compute in different ways, and *whole-look* rows com
 **Rows** (:func:`benchmarks.suite.methods.method_rows`): the per-pixel stage computed directly in float32, bfloat16
 and float16 (the library computes half inputs in float32: those rows measure the conversion and the quantisation of
 half inputs); the default bake (``tg.bake_lut`` with every default: its size and lattice are read from the LUT it
-returns) looked up tetrahedrally in both CPU forms (the loop compiled from C and the torch form,
+returns) looked up tetrahedrally in both CPU forms (the C loop built with the package and the torch form,
 :mod:`benchmarks.suite.forms`) and trilinearly by the loop; a 33³ LogC LUT, the twin of OpenColorIO's row;
 ``look.to_lut()`` (the baked look: eye adaptation and bloom live, the default bake after them); the default bake
 exported to ONNX and run by onnxruntime and by OpenVINO (f32); OpenColorIO's CPU processor on the 33³ LogC LUT as a
