@@ -38,11 +38,13 @@ class Sent:
 
 
 def read(chunks: list, delay: float = 0.0, length: int | None = None, wait_s: float = 0.0, paused: bool = False,
-         min_rate: float = 1000.0, grace_s: float = 0.2):
+         min_rate: float = 1000.0, grace_s: float = 0.2, timeout_s: float = 60.0):
     """The whole body as ``Body`` reads it, or the ``Refused`` it raises; ``wait_s`` seconds pass after its first byte
-    (a wait for memory), left out of its time where ``paused``."""
+    (a wait for memory), left out of its time where ``paused``; the request is answered 408 ``timeout_s`` after it
+    came."""
     async def whole():
-        body = Body(Sent(chunks, delay), sum(map(len, chunks)) if length is None else length, min_rate, grace_s)
+        body = Body(Sent(chunks, delay), sum(map(len, chunks)) if length is None else length, min_rate, grace_s,
+                    time.monotonic() + timeout_s)
         await body.head(1)
         await asyncio.sleep(wait_s)
         if paused:
@@ -63,6 +65,16 @@ def test_a_body_that_keeps_pace_is_read_whole():
 def test_a_body_slower_than_the_minimum_rate_is_answered_408():
     refused = read([b"x"] * 200, delay=0.05)  # 20 bytes a second against 1000
     assert isinstance(refused, Refused) and refused.status == 408 and "slower than 1000 bytes a second" in str(refused)
+
+
+def test_a_body_that_could_not_end_before_its_deadline_is_answered_408_after_the_grace():
+    """A large body sent above the minimum rate but too slowly to end before the proxy's timeout held its slot, and the
+    memory it reserved, until that timeout (a 27 MB frame at 128 KiB/s: 30 s): it must keep the pace that ends it in
+    time, 40,000 bytes in the 0.8 s after the grace here, and is answered 408 once it falls behind."""
+    chunks = [bytes(2000)] * 20  # 40,000 bytes at 20,000 bytes a second: twice the minimum rate, four times too slow
+    refused = read(chunks, delay=0.1, min_rate=10_000.0, timeout_s=1.0)
+    assert isinstance(refused, Refused) and refused.status == 408 and "slower than 50000 bytes a second" in str(refused)
+    assert read([bytes(20_000), bytes(20_000)], delay=0.05, min_rate=10_000.0, timeout_s=1.0) == bytes(40_000)
 
 
 def test_time_spent_waiting_for_memory_is_not_the_clients():
