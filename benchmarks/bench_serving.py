@@ -122,7 +122,7 @@ def markdown(results: dict) -> list:
     return lines
 
 
-def main(argv=None) -> dict:
+def main(argv=None) -> None:
     parser = argument_parser(__doc__, QUICK)
     parser.add_argument("--requests", type=int, default=64, help="requests of the real-frames phase")
     parser.add_argument("--memory-mib", type=int, default=4096, help="the replica's memory budget")
@@ -147,7 +147,6 @@ def main(argv=None) -> dict:
         results = {"command": command, "quick": args.quick, "memory_mib": args.memory_mib, "model": served,
                    "files": {path.name: path.stat().st_size for path in files}, "real_frames": loaded, "slow_clients": slow}
     write_results(args.out, "serving", results, markdown(results), command)
-    return results
 
 
 if __name__ == "__main__":

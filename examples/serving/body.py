@@ -3,10 +3,12 @@ one buffer allocated only once the request's memory is granted.
 
 Ray Serve's proxy (uvicorn) bounds a request only end to end (``request_timeout_s``), and the replica's request slot
 is held while the body arrives: a client sending a frame at a byte a second keeps a slot for the whole timeout. So a
-body must keep pace here: ``t`` seconds after the replica took the request, at least ``min_rate * (t - grace_s)``
-bytes must have come, or the request is answered 408 and its slot freed. Time the replica spends waiting for the
-request's memory is not counted (:meth:`Body.pause`): the proxy keeps reading the body meanwhile, but the replica does
-not.
+body must keep pace here: ``t`` seconds after the replica took the request, at least ``rate * (t - grace_s)`` bytes
+must have come, or the request is answered 408 and its slot freed. The rate is ``min_rate``, or where it is faster the
+pace that ends the body before the request's deadline (the proxy's timeout): a large body sent slowly would hold its
+slot and the memory it reserved until that timeout, and be answered 408 then anyway. Time the replica spends waiting
+for the request's memory is not counted (:meth:`Body.pause`): the proxy keeps reading the body meanwhile, but the
+replica does not.
 """
 
 from __future__ import annotations
@@ -27,23 +29,30 @@ class Refused(Exception):
 
 class Body:
     """The body of ``request``, ``length`` bytes by its ``Content-Length``, read at ``min_rate`` bytes a second or
-    faster after ``grace_s`` seconds (``Refused(408)`` otherwise): first a head of it (:meth:`head`), then the whole
-    (:meth:`whole`)."""
+    faster after ``grace_s`` seconds, and fast enough to end by ``deadline`` (``time.monotonic()``; ``Refused(408)``
+    otherwise): first a head of it (:meth:`head`), then the whole (:meth:`whole`)."""
 
-    def __init__(self, request, length: int, min_rate: float, grace_s: float):
-        self.length, self.min_rate, self.grace_s = length, min_rate, grace_s
+    def __init__(self, request, length: int, min_rate: float, grace_s: float, deadline: float):
+        self.length, self.min_rate, self.grace_s, self.deadline = length, min_rate, grace_s, deadline
         self._chunks = request.stream().__aiter__()
         self._started = time.monotonic()
         self._head = bytearray()
         self.size, self.ended = 0, length == 0
 
+    def _rate(self) -> float:
+        """Bytes a second the body must keep up with after the grace: ``min_rate``, or the pace that ends it by the
+        deadline where that is faster."""
+        window = self.deadline - self._started - self.grace_s
+        return max(self.min_rate, self.length / window) if window > 0 else float("inf")
+
     async def _next(self) -> bytes:
         """The next chunk (``b""`` at the end), refused if it comes after the rate's line."""
-        due = self._started + self.grace_s + self.size / self.min_rate - time.monotonic()
+        rate = self._rate()
+        due = self._started + self.grace_s + self.size / rate - time.monotonic()
         try:
             chunk = await asyncio.wait_for(self._chunks.__anext__(), max(due, 0.0))
         except asyncio.TimeoutError:
-            raise Refused(408, f"the body came slower than {self.min_rate:.0f} bytes a second ({self.size} of "
+            raise Refused(408, f"the body came slower than {rate:.0f} bytes a second ({self.size} of "
                                f"{self.length} bytes after {time.monotonic() - self._started:.1f} s)") from None
         except StopAsyncIteration:
             chunk = b""

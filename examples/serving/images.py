@@ -5,8 +5,9 @@ the server.
 A PNG's size and sample format are in its first 33 bytes (the signature and the ``IHDR`` chunk, whose CRC is checked);
 only 8-bit RGB and RGBA are taken. An OpenEXR file's data windows are in its headers, read by torchgrade's own header
 reader (:mod:`torchgrade.io.exr.header_bytes`) from the body's first bytes (at most :data:`EXR_HEAD_BYTES`); the
-largest part bounds what a read may decode. EXR frames are scene-linear light: a model whose input is sRGB codes would
-clip them at 1.0, so they are refused for it, naming the export that takes them.
+largest part bounds what a read may decode, and a read may take :data:`EXR_BYTES_PER_PIXEL` bytes a pixel at most.
+EXR frames are scene-linear light: a model whose input is sRGB codes would clip them at 1.0, so they are refused for
+it, naming the export that takes them.
 """
 
 from __future__ import annotations
@@ -25,8 +26,8 @@ from torchgrade.base.budget import check_pixels
 from frames import pack_frame
 from torchgrade.io.exr.header_bytes import HeaderBudgetError, check_required, read_headers, value
 
-__all__ = ["EXR_HEAD_BYTES", "PNG_HEAD_BYTES", "check_kind", "decode_image", "encode_exr", "encode_png", "image_header",
-           "sample_body"]
+__all__ = ["EXR_BYTES_PER_PIXEL", "EXR_HEAD_BYTES", "PNG_HEAD_BYTES", "check_kind", "costliest_exr", "decode_image",
+           "encode_png", "image_header", "sample_body"]
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 EXR_MAGIC = b"\x76\x2f\x31\x01"
@@ -36,6 +37,11 @@ methods, CRC."""
 PNG_HEAD_BYTES = len(PNG_SIGNATURE) + _IHDR.size
 EXR_HEAD_BYTES = 1 << 20
 """Bytes an OpenEXR file's headers may span here (the sample files' span at most a few KiB)."""
+EXR_BYTES_PER_PIXEL = 48
+"""Bytes a pixel ``tg.io.read_exr`` may take here (its ``max_bytes``, counted as it counts them: the samples decoded,
+the float32 tensor returned, a tiled part's row of tiles): a float RGBA file in tiles no taller than the image
+(:func:`costliest_exr`). OpenEXR buffers a row of tiles whatever the image's height, so without this a 563-byte 4096x2
+file in tiles 8000 rows high held 502 MiB."""
 _COLOUR_TYPES = {0: "grey", 2: "RGB", 3: "palette", 4: "grey and alpha", 6: "RGBA"}
 _PNG_ERRORS = (OSError, SyntaxError, ValueError, EOFError, struct.error, zlib.error)
 """What Pillow raises for a damaged, truncated or oversized PNG (``DecompressionBombError`` is added at import)."""
@@ -122,14 +128,14 @@ def _png_codes(body) -> np.ndarray:
         raise ValueError(f"the PNG could not be decoded: {str(error)[:200]}") from None
 
 
-def _exr_linear(body, max_pixels: int) -> torch.Tensor:
+def _exr_linear(body, max_pixels: int, max_bytes: int) -> torch.Tensor:
     """The ``(3, height, width)`` linear Rec.709 light of an OpenEXR file's bytes, read by ``tg.io.read_exr`` (which
-    reads files) from a private temporary folder whose name no message keeps."""
+    reads files) within its budgets from a private temporary folder whose name no message keeps."""
     with tempfile.TemporaryDirectory(prefix="torchgrade-serve-") as folder:
         path = Path(folder) / "frame.exr"
         path.write_bytes(body)
         try:
-            return tg.io.read_exr(path, to_rec709=True, max_pixels=max_pixels)[:3]
+            return tg.io.read_exr(path, to_rec709=True, max_pixels=max_pixels, max_bytes=max_bytes)[:3]
         except ValueError as error:
             raise ValueError(str(error).replace(str(path), "the OpenEXR file").replace(folder, "")) from None
 
@@ -149,35 +155,44 @@ def decode_image(body, fmt, max_pixels: int) -> np.ndarray:
             return codes.astype(np.uint16) * np.uint16(257)
         linear = tg.color.srgb_to_linear(torch.from_numpy(codes).permute(2, 0, 1) / 255.0)
     else:
-        linear = _exr_linear(body, max_pixels)
+        linear = _exr_linear(body, max_pixels, EXR_BYTES_PER_PIXEL * height * width)
     return tg.onnx.model_input(linear[None], fmt._replace(layout="NHWC"))[0].numpy()
 
 
 def encode_png(codes: np.ndarray) -> bytes:
-    """A ``(height, width, 3)`` uint8 array as the bytes of an RGB PNG."""
+    """A ``(height, width, 3)`` or ``(height, width, 4)`` uint8 array as the bytes of an RGB or RGBA PNG."""
     from PIL import Image
 
     out = io.BytesIO()
-    Image.fromarray(codes, "RGB").save(out, format="PNG")
+    Image.fromarray(codes, "RGB" if codes.shape[2] == 3 else "RGBA").save(out, format="PNG")
     return out.getvalue()
 
 
-def encode_exr(linear: torch.Tensor) -> bytes:
-    """A ``(3, height, width)`` linear image as the bytes of a half-float OpenEXR file."""
+def costliest_exr(linear: torch.Tensor) -> bytes:
+    """A ``(3, height, width)`` linear image as the costliest OpenEXR file this server reads for its size (it takes
+    :data:`EXR_BYTES_PER_PIXEL`): float RGBA, alpha 1, in one row of tiles as tall as the image."""
+    import OpenEXR
+
+    height, width = linear.shape[1:]
+    tiles = OpenEXR.TileDescription()
+    tiles.xSize, tiles.ySize = width, height
+    planes = {name: plane.numpy() for name, plane in zip("RGB", linear.float().contiguous())}
+    planes["A"] = np.ones((height, width), np.float32)
     with tempfile.TemporaryDirectory(prefix="torchgrade-serve-") as folder:
         path = Path(folder) / "frame.exr"
-        tg.io.write_exr(path, linear)
+        OpenEXR.File({"type": OpenEXR.tiledimage, "tiles": tiles, "compression": OpenEXR.ZIP_COMPRESSION}, planes).write(str(path))
         return path.read_bytes()
 
 
 def sample_body(kind: str, side: int, fmt) -> bytes:
     """A ``side`` x ``side`` request body of ``kind`` (``"frame"``, ``"png"`` or ``"exr"``) for a model of format
-    ``fmt``: ramps of light from 0 to 4, as a raw frame of the model's input, an 8-bit PNG of their sRGB codes, or a
-    half EXR."""
+    ``fmt``, the costliest of its kind to decode: ramps of light from 0 to 4, as a raw frame of the model's input, an
+    8-bit RGBA PNG of their sRGB codes (its alpha dropped in a copy), or :func:`costliest_exr`."""
     ramp = torch.linspace(0.0, 2.0, side)
     linear = torch.stack([ramp[:, None] * ramp, ramp.flip(0)[:, None] * ramp, ramp[:, None] * ramp.flip(0)])
     if kind == "exr":
-        return encode_exr(linear)
+        return costliest_exr(linear)
     if kind == "png":
-        return encode_png(tg.onnx.model_input(linear[None], tg.onnx.frame_format(torch.uint8, "NHWC"))[0].numpy())
+        codes = tg.onnx.model_input(linear[None], tg.onnx.frame_format(torch.uint8, "NHWC"))[0].numpy()
+        return encode_png(np.concatenate([codes, np.full_like(codes[..., :1], 255)], axis=2))
     return pack_frame(tg.onnx.model_input(linear[None], fmt._replace(layout="NHWC"))[0].numpy())

@@ -37,7 +37,8 @@ class Limits:
     """The replica's resident memory at its peak: a request waits until its cost fits (413 if it never can)."""
     min_body_rate: float = float(128 << 10)
     """Bytes a second a body must keep up with after ``body_grace_s`` (408 otherwise): 1 Mbit/s, a slow uplink; a
-    client sending slower holds a request slot that others need."""
+    client sending slower holds a request slot that others need. A larger body must keep the pace that ends it within
+    ``timeout_s`` (``body.py``)."""
     body_grace_s: float = 1.0
 
     def __post_init__(self):

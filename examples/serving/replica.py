@@ -194,7 +194,7 @@ class Looks:
     async def _graded(self, request, path: str) -> bytes:
         """The graded frame of a ``/frame`` or ``/image`` request, packed; each limit checked before its cost is paid."""
         deadline = time.monotonic() + self.limits.timeout_s
-        body = Body(request, self._length(request), self.limits.min_body_rate, self.limits.body_grace_s)
+        body = Body(request, self._length(request), self.limits.min_body_rate, self.limits.body_grace_s, deadline)
         kind, pixels = await (self._frame_head(body) if path == "/frame" else self._image_head(body))
         waited = time.monotonic()
         async with self.memory.reserved(self.held(kind, pixels, body.length)):

@@ -19,9 +19,10 @@ Endpoints:
 ``--max-ongoing`` requests to the replica and queues at most ``--max-queued`` more; beyond that its proxy answers 503
 without reading the request. An admitted request's ``Content-Length`` is checked before its body is read (413 past
 ``--max-bytes``, 411 without one); its body must keep up with ``--min-body-rate`` bytes a second after
-``--body-grace`` seconds (408, and its slot goes to the next request: ``body.py``); the pixels its header declares
-are checked against the pixel budget, and its whole cost (body, decoding, its share of a batch, measured when the
-replica starts) waits until it fits the replica's ``--memory-mib`` (``memory.py``). A request not answered in
+``--body-grace`` seconds, and with the pace that ends it before ``--timeout`` (408, and its slot goes to the next
+request: ``body.py``); the pixels its header declares are checked against the pixel budget, and its whole cost
+(body, decoding, its share of a batch, measured when the replica starts) waits until it fits the replica's
+``--memory-mib`` (``memory.py``). A request not answered in
 ``--timeout`` seconds is answered 408 by the proxy, and its frame is not graded. Malformed requests get 400 with a
 short reason.
 

@@ -196,9 +196,11 @@ def _attribute(name: str, kind: str, value: bytes) -> bytes:
     return name.encode() + b"\0" + kind.encode() + b"\0" + struct.pack("<i", len(value)) + value
 
 
-def _scanline_exr(channels: list, parts: int = 1, extra: int = 0, width: int = 8, height: int = 4) -> bytes:
+def _scanline_exr(channels: list, parts: int = 1, extra: int = 0, width: int = 8, height: int = 4,
+                  extra_bytes: int = 0) -> bytes:
     """An uncompressed half-float scanline file of zeros, laid out as OpenEXR's file layout document says: ``parts``
-    parts (a multi-part file past one) of ``channels`` each, every header with ``extra`` empty string attributes."""
+    parts (a multi-part file past one) of ``channels`` each, every header with ``extra`` string attributes of
+    ``extra_bytes`` bytes."""
     import struct
 
     box = struct.pack("<4i", 0, 0, width - 1, height - 1)
@@ -214,7 +216,7 @@ def _scanline_exr(channels: list, parts: int = 1, extra: int = 0, width: int = 8
         if multi:
             required += [("name", "string", b"part%d" % index), ("type", "string", b"scanlineimage"),
                          ("chunkCount", "int", struct.pack("<i", height))]
-        extras = [(f"x{i}", "string", b"") for i in range(extra)]
+        extras = [(f"x{i}", "string", b"x" * extra_bytes) for i in range(extra)]
         return b"".join(_attribute(*entry) for entry in required + extras) + b"\0"
 
     headers = b"".join(header(index) for index in range(parts)) + (b"\0" if multi else b"")
@@ -292,6 +294,32 @@ def test_exr_headers_at_their_budgets_are_read(tmp_path):
     path.write_bytes(_scanline_exr(list("BGR"), parts=1024, extra=5))
     parts = tg.io.exr_info(path)
     assert len(parts) == 1024 and tg.io.read_exr(path, part=1023).shape == (3, 4, 8)
+
+
+@pytest.mark.parametrize("reader", ["read_exr", "exr_info"])
+def test_one_attribute_spanning_the_headers_past_their_byte_budget_is_refused_before_openexr_parses_it(tmp_path,
+                                                                                                       header_work, reader):
+    """The budget was checked where each attribute starts, so a single attribute of 70 MB passed and OpenEXR's parser
+    held 280 MB reading an 8x4 image's headers: where an attribute ends counts."""
+    import torchgrade as tg
+    from torchgrade.io.exr.header_bytes import MAX_HEADER_BYTES
+
+    path = tmp_path / "one large attribute.exr"
+    path.write_bytes(_scanline_exr(list("BGR"), extra=1, extra_bytes=MAX_HEADER_BYTES))
+    with pytest.raises(ValueError, match=f"the headers span more than {MAX_HEADER_BYTES} bytes"):
+        getattr(tg.io, reader)(path)
+    assert header_work["attributes"] <= 2 * 9
+
+
+def test_exr_headers_at_their_byte_budget_are_read_within_100_mb(tmp_path):
+    """OpenEXR's parser holds about four times the headers' bytes: at the budget, an 8x4 image's headers are read
+    within 100 MB."""
+    from torchgrade.io.exr.header_bytes import MAX_HEADER_BYTES
+
+    path = tmp_path / "large headers.exr"
+    path.write_bytes(_scanline_exr(list("BGR"), extra=1, extra_bytes=MAX_HEADER_BYTES - 1024))
+    seconds, peak, outcome = run_bounded(f"result = tuple(tg.io.read_exr({str(path)!r}).shape)")
+    assert outcome == "(3, 4, 8)" and peak <= 100 << 20 and seconds <= CPU_SECONDS, (seconds, peak, outcome)
 
 
 # ---------------------------------------------------------------- sizes: one pixel budget

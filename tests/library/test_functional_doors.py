@@ -96,6 +96,36 @@ def test_a_door_refuses_the_stages_word_that_a_frame_holds_no_nan(door, refusal)
         door(image)
 
 
+SHADOWS = (1.2, 1.0, 0.9)
+
+
+@pytest.mark.parametrize("call, stage", [
+    (lambda: F.shadows_midtones_highlights(IMAGE, SHADOWS, shadows_start=0.5, shadows_end=0.2),
+     lambda: tg.ColorGrade(shadows_start=0.5, shadows_end=0.2)),
+    (lambda: F.shadows_midtones_highlights(IMAGE, highlights_start=1.0), lambda: tg.ColorGrade(highlights_start=1.0)),
+    (lambda: F.color_grade(IMAGE, shadows=SHADOWS, shadows_start=0.3, shadows_end=0.3),
+     lambda: tg.ColorGrade(shadows=SHADOWS, shadows_start=0.3, shadows_end=0.3)),
+    (lambda: F.log_gamma(IMAGE, SHADOWS, pivot_black=0.4, pivot_white=0.4),
+     lambda: tg.PrimaryGrade("log", pivot_black=0.4, pivot_white=0.4)),
+    (lambda: F.meter_luminance(IMAGE, "histogram", percents=(100.0, 0.0)),
+     lambda: tg.AutoExposure(metering="histogram", low_percent=100.0, high_percent=0.0)),
+    (lambda: F.meter_luminance(IMAGE, "histogram", stop_range=(3.0, 3.0)), lambda: tg.AutoExposure(min_ev=3.0, max_ev=3.0)),
+], ids=["zone reversed", "zone empty at its default end", "color_grade zone empty", "pivots equal", "band reversed",
+        "stop range empty"])
+def test_a_door_refuses_controls_out_of_order_as_the_stage_does(call, stage):
+    """Each number was checked alone, their order not: a tonal zone that ends before it starts, log gamma's pivots one
+    on the other (every pixel came back at the pivot), a histogram band upside down (NaN) or of no width
+    (ZeroDivisionError) were graded, where the stages refuse them."""
+    assert message(call) == message(stage)
+
+
+def test_a_door_leaves_alone_an_order_the_stage_leaves_alone():
+    """Log metering reads no band, so its bounds may be in any order, as AutoExposure takes them; tensors are unread."""
+    tg.AutoExposure(metering="log", low_percent=100.0, high_percent=0.0)
+    assert torch.isfinite(F.meter_luminance(IMAGE, "log", percents=(100.0, 0.0))).all()
+    assert F.log_gamma(IMAGE, SHADOWS, pivot_black=torch.tensor(0.4), pivot_white=0.4).shape == IMAGE.shape
+
+
 def test_a_tone_mapping_door_refuses_an_unknown_parameter_as_tonemap_does():
     assert message(lambda: F.tonemap(IMAGE, "agx", slope=0.9)) == message(lambda: tg.ToneMap("agx", slope=0.9))
 

@@ -124,3 +124,30 @@ def test_damaged_exrs_are_refused_without_naming_a_file_on_the_server(path):
         decode_image(path.read_bytes(), FLOAT32, 1 << 24)
     message = str(refused.value)
     assert tempfile.gettempdir() not in message and "torchgrade-serve" not in message and "frame.exr" not in message, message
+
+
+def tiled_exr(height: int, width: int, tile_height: int, dtype=np.float32) -> bytes:
+    """An RGBA OpenEXR file of zeros in tiles as wide as the image and ``tile_height`` rows high, written by OpenEXR."""
+    import OpenEXR
+
+    tiles = OpenEXR.TileDescription()
+    tiles.xSize, tiles.ySize = width, tile_height
+    header = {"type": OpenEXR.tiledimage, "tiles": tiles, "compression": OpenEXR.ZIP_COMPRESSION}
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "tiled.exr"
+        OpenEXR.File(header, {name: np.zeros((height, width), dtype) for name in "RGBA"}).write(str(path))
+        return path.read_bytes()
+
+
+def test_an_exr_whose_tiles_are_taller_than_the_image_is_refused_before_it_is_decoded():
+    """OpenEXR buffers a row of tiles whatever the image's height: a 563-byte 4096x2 file in tiles 8000 rows high held
+    502 MiB as it was read (2 GiB, read_exr's own default budget, for taller tiles), while the server had reserved the
+    memory of 8192 pixels. The server reads an EXR within the bytes a pixel of the costliest file it takes may need."""
+    from images import EXR_BYTES_PER_PIXEL
+
+    hostile = tiled_exr(2, 4096, 8000)
+    assert len(hostile) < 1000
+    with pytest.raises(ValueError, match=f"above the budget of {EXR_BYTES_PER_PIXEL * 2 * 4096} bytes") as refused:
+        decode_image(hostile, FLOAT32, 1 << 22)
+    assert tempfile.gettempdir() not in str(refused.value) and "frame.exr" not in str(refused.value)
+    assert decode_image(tiled_exr(2, 4096, 2), FLOAT32, 1 << 22).shape == (2, 4096, 3)  # tiles as tall as the image

@@ -475,3 +475,35 @@ def test_the_gpu_benchmark_writes_its_results_without_cuda(tmp_path):
     report = json.loads((tmp_path / "gpu.json").read_text())
     assert report["skipped"] == ["kernels (no CUDA)", "forms (no CUDA)"] and not report["errors"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["gpu.json", "gpu.md"]  # no temporary file left
+
+
+def test_the_serving_benchmark_exits_0_through_the_door_and_writes_its_table(tmp_path, monkeypatch, capsys):
+    """``python -m benchmarks serving`` exits with what its ``main`` returns: it returned its results, which
+    ``sys.exit`` printed and exited 1 with. The server and its clients stand in here (the serving tests run them)."""
+    from benchmarks import bench_serving
+
+    run = {"requests": 16, "concurrency": 16, "statuses": {"200": 16}, "latency_ms_p50": 1.0, "latency_ms_p99": 2.0,
+           "latency_ms_max": 3.0, "slow_answers": {}, "server": {"peak_rss_mib": 900.0,
+                                                                  "memory": {"held_peak_mib": 10.0, "waited": 0}}}
+
+    class Served:
+        url = "http://127.0.0.1:1"
+
+        def __init__(self, model, flags):
+            pass
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *_):
+            pass
+
+        def client(self, flags, out):
+            return run
+
+    monkeypatch.setattr(bench_serving, "Server", Served)
+    monkeypatch.setattr(bench_serving, "_get_json", lambda url: {"idle_mib": 500.0, "costs": {}})
+    monkeypatch.setattr(tg.onnx, "export", lambda look, path, **options: path)
+    assert door(["serving", "--quick", "--out", str(tmp_path)]) == 0
+    assert "| real frames | 16 | 16 |" in (tmp_path / "serving.md").read_text()
+    assert "{'command'" not in capsys.readouterr().err
