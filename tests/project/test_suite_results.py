@@ -4,7 +4,6 @@ pages quote is what ``python -m benchmarks suite --pages`` writes from the resul
 
 from __future__ import annotations
 
-import dataclasses
 import re
 import sys
 import tempfile
@@ -20,6 +19,7 @@ import torchgrade as tg  # noqa: E402
 from benchmarks.common import ROOT  # noqa: E402
 from benchmarks.suite import forms, measure, pages  # noqa: E402
 from benchmarks.suite.workload import Plan, Workload  # noqa: E402
+from torchgrade.lut import operator  # noqa: E402
 
 COMMITTED = pages.committed()
 ACCURACY = {"p999_error_8bit": 0.005, "max_error_8bit": 0.005, "mean_delta_e2000": 0.0005}
@@ -117,13 +117,15 @@ def test_filled_rewrites_the_blocks_and_nothing_else():
 
 def test_the_torch_form_leaves_the_compiled_loop_out_and_gives_its_values(monkeypatch):
     calls = []
-    kernel = tg.lut.KERNELS["tetrahedral"]
+    built = operator.NATIVE
 
-    def counted(dtype):
-        loop = kernel.compiled(dtype)
-        return None if loop is None else (lambda *args, **kw: calls.append(1) or loop(*args, **kw))
+    class CountedLoop:
+        def interpolate(self, *args):
+            calls.append(1)
+            return built.interpolate(*args)
 
-    monkeypatch.setitem(tg.lut.KERNELS, "tetrahedral", dataclasses.replace(kernel, compiled=counted))
+    counted = None if built is None else CountedLoop()
+    monkeypatch.setattr(operator, "NATIVE", counted)
     lut = tg.LUT3D(torch.rand(9, 9, 9, 3, generator=torch.Generator().manual_seed(0)), shaper="logc")
     image = torch.rand(1, 3, 32, 48, generator=torch.Generator().manual_seed(1)) * 4
     with torch.no_grad():
@@ -133,5 +135,5 @@ def test_the_torch_form_leaves_the_compiled_loop_out_and_gives_its_values(monkey
         with forms.lookup_form(forms.TORCH_FORM):
             torch_form = lut(image)
     assert len(calls) == loop_calls and (loop_calls > 0) == forms.compiled_loop_runs("tetrahedral")
-    assert tg.lut.KERNELS["tetrahedral"].compiled is counted  # restored after the block
+    assert operator.NATIVE is counted  # restored after the block
     torch.testing.assert_close(torch_form, looped, rtol=1e-5, atol=1e-6)
