@@ -24,9 +24,9 @@ from pathlib import Path
 import numpy as np
 import OpenEXR
 
-ROOT = Path(__file__).resolve().parents[1]
-
 from benchmarks.common import EXR_DIR, argument_parser, write_results
+
+ROOT = Path(__file__).resolve().parents[1]
 
 COMMAND = ".venv/bin/python -m benchmarks exr_memory"
 SIZE = 4096

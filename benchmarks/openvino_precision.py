@@ -24,12 +24,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
-ROOT = Path(__file__).resolve().parents[1]
-
 import torchgrade as tg
 from benchmarks.common import argument_parser, write_results
 from torchgrade.base.planes import apply_matrix
 from torchgrade.runtime.variants import Variant
+
+ROOT = Path(__file__).resolve().parents[1]
 
 LOOK = ROOT / "export" / "looks" / "cinematic.json"
 COMMAND = ".venv/bin/python -m benchmarks openvino_precision"

@@ -22,11 +22,11 @@ import matplotlib.pyplot as plt
 import numpy as np
 import torch
 
-ROOT = Path(__file__).resolve().parents[1]
-
 import torchgrade as tg
 from benchmarks.common import EXR_DIR, argument_parser, write_results
 from torchgrade.functional import tonemap
+
+ROOT = Path(__file__).resolve().parents[1]
 
 COMMAND = ".venv/bin/python -m benchmarks tonemap"
 HDR_MODES = {"aces2_hdr": dict(peak_luminance=1000.0), "neutral_hdr": dict(peak_luminance=1000.0)}

@@ -32,7 +32,8 @@ def decoded_pixels(monkeypatch) -> list:
 
     decoded = []
     for name in ("decode", "decode_strips"):
-        monkeypatch.setattr(read, name, lambda path, *args, real=getattr(read, name): decoded.append(path) or real(path, *args))
+        real = getattr(read, name)
+        monkeypatch.setattr(read, name, lambda path, *args, real=real: decoded.append(path) or real(path, *args))
     return decoded
 
 

@@ -39,7 +39,7 @@ def test_an_old_path_imports_with_a_warning_naming_the_new_one(old):
     new = next(importlib.import_module(m) for m in MOVED[old] if hasattr(importlib.import_module(m), name))
     assert getattr(module, name) is getattr(new, name)
     with pytest.raises(AttributeError, match="no attribute 'no_such_name'"):
-        module.no_such_name
+        _ = module.no_such_name
 
 
 def test_old_attribute_paths_of_the_package_and_functional_warn():

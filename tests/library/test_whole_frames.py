@@ -12,7 +12,6 @@ edges, its size or its orientation; these checks do (:mod:`torchgrade.testing.fr
 import json
 from pathlib import Path
 
-import numpy as np
 import pytest
 import torch
 

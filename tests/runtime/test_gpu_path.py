@@ -66,7 +66,7 @@ def _cinematic_stages() -> dict:
 
 def _second_frame(module, image: torch.Tensor, train: bool = False) -> DispatchCount:
     """What the second frame through ``module`` dispatches (the first builds constants and tables)."""
-    for frame in range(2):
+    for _ in range(2):
         counted = DispatchCount(frame=image)
         with torch.set_grad_enabled(train), counted:
             out = module(image)

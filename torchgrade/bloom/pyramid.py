@@ -112,7 +112,7 @@ def _levels_on(height: int, width: int, max_iterations: int, downscale_limit: in
 
 def _doubles(small, large) -> bool:
     """Whether every side of ``large`` is exactly twice that of ``small``: the case bilinear resampling by 2 is."""
-    return all(2 * s == l for s, l in zip(small, large))
+    return all(2 * s == big for s, big in zip(small, large))
 
 
 @formula
