@@ -272,7 +272,8 @@ def _grade_checks(given: dict) -> None:
     for zone in ("shadows", "highlights"):
         edges = _given_or_default(given, COLOR_GRADE_CONTROLS, (f"{zone}_start", f"{zone}_end"))
         if edges is not None:
-            check_zone(*edges, zone)
+            start, end = edges
+            check_zone(start, end, zone)
 
 
 def _exposure_checks(given: dict) -> None:

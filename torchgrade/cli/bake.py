@@ -26,7 +26,7 @@ import torch
 from ..io import write_cube
 from ..lut import ENTRY_CHOICES, LUTAccuracyWarning, bake_lut, srgb_code_error
 from ..lut.bake import expects_hdr
-from ..lut.shapers import DEFAULT_SIZES, SHAPERS
+from ..lut.shapers import DEFAULT_SIZES, LogCExtendedShaper
 from .common import (add_grading_flags, look_from_args, read_rec709, refuse_lut_over_tolerance, refuse_overwriting,
                      report_line, stages_label)
 
@@ -98,7 +98,7 @@ def _cube_size(size, shaper: str):
     """
     if size is not None:
         return size
-    return SHAPERS["logc_extended"].cube_size if shaper == "logc" else DEFAULT_SIZES["logc"]
+    return LogCExtendedShaper.cube_size if shaper == "logc" else DEFAULT_SIZES["logc"]
 
 
 def run_bake(args: argparse.Namespace) -> str:

@@ -173,7 +173,10 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=None, shape
         measured, colour_set, scene_colours = measured_colours(transform, realistic[:, :0], frames), FRAMES, 0
     worst = measured_colours(transform, validation_colours(hdr), None)
     bake = _baker(transform, domain, scene, chunk, output_encoding, progress, worst, hdr)
-    lut = bake(shaper, size) if size != "auto" else _smallest_within(lambda n: bake(shaper, n), transform, scene, tolerance)
+    if size == "auto" and scene is not None:  # "auto" without a scene was refused above
+        lut = _smallest_within(lambda n: bake(shaper, n), transform, scene, tolerance)
+    else:
+        lut = bake(shaper, size)
     if entries == "fitted":
         lut = fit_entries(lut, transform, scene, hdr, scene_weight=_scene_weight(lut, scene))
     report = measure(lut, measured, report_tolerance, colour_set)

@@ -189,7 +189,7 @@ def diagnose(report: ErrorReport, lut, transform, measured: tuple, rebake: Calla
     lattice.
     """
     range_error, within_lattice = _within_lattice(lut, transform, measured)
-    causes = []
+    causes: list[str | None] = []
     if scene_colours and lut.shaper == "fitted":
         causes.append(_scene_fitted_cause(lut, measured, scene_colours))
     causes.append(_range_cause(lut, range_error, report.tolerance))

@@ -115,7 +115,7 @@ def optimise(module: nn.Module, loss_fn, steps: int, lbfgs_steps: int, lr: float
             bar.set_postfix(loss=f"{history[-1]:.4g}", refresh=False)
             return loss
 
-        optimiser = torch.optim.Adam(parameters, lr=lr)
+        optimiser: torch.optim.Optimizer = torch.optim.Adam(parameters, lr=lr)
         for _ in range(steps):
             optimiser.step(closure)
             bar.update()
@@ -166,14 +166,14 @@ def levenberg_marquardt(module: nn.Module, residuals, iterations: int, progress:
         r = residuals_at(theta)
     loss = float(r.square().mean())
     history = [loss]
-    damping, growth, jacobian_due, scale = 1e-3, 2.0, True, None
+    damping, growth, jacobian_due = 1e-3, 2.0, True
+    scale = torch.zeros_like(theta)  # the largest diagonal of JᵀJ met so far (none is negative)
     with tqdm(total=iterations, desc=desc, disable=None if progress else True, leave=False) as bar:
         for _ in range(iterations):
             if jacobian_due:
                 jacobian = torch.func.jacfwd(residuals_at)(theta)
                 gradient, curvature = jacobian.T @ r, jacobian.T @ jacobian
-                diagonal = curvature.diagonal()
-                scale = diagonal if scale is None else torch.maximum(scale, diagonal)
+                scale = torch.maximum(scale, curvature.diagonal())
                 scale = scale.clamp_min(1e-12 * float(scale.max()) + 1e-300)
                 jacobian_due = False
             with torch.no_grad():

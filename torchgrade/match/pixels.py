@@ -28,7 +28,7 @@ class PixelPairs:
     test_target: torch.Tensor
 
 
-def as_list(images) -> list:
+def as_list(images) -> list | None:
     """One tensor or a sequence of them, as a list (``None`` stays ``None``)."""
     if images is None or isinstance(images, torch.Tensor):
         return images if images is None else [images]

@@ -71,10 +71,10 @@ class DispatchCount(TorchDispatchMode):
     def __init__(self, frame: Optional[torch.Tensor] = None):
         super().__init__()
         self.frame_bytes = 2 * frame.numel() * frame.element_size() if frame is not None else None
-        self.moved = []
-        self.reads = collections.Counter()
-        self.host_data = collections.Counter()
-        self.by_operation = collections.Counter()
+        self.moved: list[int] = []  # bytes each copy moved
+        self.reads: collections.Counter[str] = collections.Counter()
+        self.host_data: collections.Counter[str] = collections.Counter()
+        self.by_operation: collections.Counter[str] = collections.Counter()
         self.row_gathers = 0
         self.unvectorised = 0
 
@@ -86,6 +86,8 @@ class DispatchCount(TorchDispatchMode):
     @property
     def frame_passes(self) -> float:
         """The bytes every launch moved over the bytes one copy of the frame reads and writes."""
+        if self.frame_bytes is None:
+            raise ValueError("frame_passes needs the frame: DispatchCount(frame=image)")
         return sum(self.moved) / self.frame_bytes
 
     def __torch_dispatch__(self, func, types, args=(), kwargs=None):

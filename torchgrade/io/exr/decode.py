@@ -216,7 +216,7 @@ def decode_strips(path, chosen: ExrPart, sources: list, target, crop: tuple[slic
         opened = OpenEXR.InputFile(str(source))
         try:
             types = opened.header()["channels"]
-            by_type = {}
+            by_type: dict[int, list[str]] = {}
             for name in names:
                 by_type.setdefault(types[name].type.v, []).append(name)
             for first in range(0, height, rows):

@@ -108,7 +108,9 @@ def _describe(index: int, part, raw: PartBytes | None) -> ExrPart:
     part_view = header.get("view")  # in a multi-part file, every channel of the part is in its view
     if not views and part_view:
         views = (str(part_view),)
-    channels, layers, names = {}, {}, {}
+    channels: dict[str, tuple[int, int]] = {}
+    layers: dict[tuple[str | None, str], list[str]] = {}
+    names: dict[str, tuple[str | None, str, str]] = {}
     for channel in header.get("channels") or ():
         channels[channel.name] = (int(channel.xSampling), int(channel.ySampling))
         view, layer, letter = split_channel_name(channel.name, views)
