@@ -20,7 +20,6 @@ from typing import Optional
 import torch
 from torch import nn
 
-from ..io import read_cube, write_clf, write_cube
 from ..look.postfx import PostFX
 from ..lut import LUT3D, bake_lut
 from ..tonemap import tone_mapper
@@ -95,6 +94,8 @@ class MatchResult:
         back, or of the LUT a CLF states exactly (shaper included, as OpenColorIO applies it), and the bake's
         :class:`~torchgrade.lut.ErrorReport` (validation colours and fitting pixels against the look itself).
         """
+        from ..io import read_cube, write_clf, write_cube  # file formats load at their first use, not with torchgrade
+
         suffix = Path(path).suffix.lower()
         if suffix not in LUT_FILES:
             raise ValueError(f"a look's LUT is written as {' or '.join(LUT_FILES)}, got {path}")
