@@ -12,7 +12,10 @@ import torch
 import torchgrade as tg
 from torchgrade.cli import main
 from torchgrade.lut import ErrorReport, LUTAccuracyWarning
-from torchgrade.match import BoundedControls, ResidualLUT, fittable_names, delta_e_2000, linear_to_lab, match_errors
+from torchgrade.match import ResidualLUT, delta_e_2000, linear_to_lab, match_errors
+from torchgrade.match.bounded import BoundedControls, fittable_names
+from torchgrade.match.pixels import sample_pairs
+from torchgrade.match.residual import monotonicity
 
 with warnings.catch_warnings():
     warnings.simplefilter("ignore")
@@ -69,7 +72,7 @@ def test_match_errors_are_codes_and_mean_delta_e_as_colour_science_computes_them
 def test_held_out_pixels_are_never_fitted():
     source = torch.arange(3 * 40 * 50, dtype=torch.float64).reshape(3, 40, 50)  # every pixel distinct
     mask = torch.rand(40, 50, generator=torch.Generator().manual_seed(3)) < 0.7
-    pairs = tg.match.sample_pairs(source, source * 2.0, mask, max_pixels=100000, holdout=0.25)
+    pairs = sample_pairs(source, source * 2.0, mask, max_pixels=100000, holdout=0.25)
     train, test = (set(map(tuple, p.reshape(3, -1).T.tolist())) for p in (pairs.train_source, pairs.test_source))
     inside = set(map(tuple, source[:, mask].T.tolist()))
     assert not train & test and train | test == inside
@@ -245,7 +248,7 @@ def test_opencolorio_look_is_matched_by_controls_and_a_residual_lut(exr_dir, tmp
     assert result.errors["residual"]["p99.9"] < result.errors["controls"]["p99.9"]
     assert result.errors["residual"]["delta_e_2000"] < result.errors["controls"]["delta_e_2000"]
     table = result.residual.lut.table.detach()
-    assert tg.match.monotonicity(table) < 1e-6
+    assert monotonicity(table) < 1e-6
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LUTAccuracyWarning)  # the report is checked below
         written = {suffix: result.write_lut(tmp_path / f"look{suffix}", size=65) for suffix in (".cube", ".clf")}

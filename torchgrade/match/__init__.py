@@ -13,15 +13,14 @@ Examples:
     True
 """
 
-from .bounded import BoundedControls, fittable_names
 from .fit import GRADE_CONTROLS, TONEMAP_CANDIDATES, MatchedControls
 from .look import LUT_FILES, STAGES, MatchResult, match_look
 from .metrics import delta_e_2000, linear_to_lab, match_errors
-from .pixels import PixelPairs, sample_pairs
-from .residual import ResidualLUT, monotonicity, smoothness
+from .residual import ResidualLUT
 
 __all__ = [
-    "BoundedControls", "fittable_names", "GRADE_CONTROLS", "TONEMAP_CANDIDATES", "MatchedControls", "STAGES", "LUT_FILES",
-    "MatchResult", "match_look", "delta_e_2000", "linear_to_lab", "match_errors", "PixelPairs", "sample_pairs",
-    "ResidualLUT", "monotonicity", "smoothness",
+    "match_look", "MatchResult", "MatchedControls", "ResidualLUT", "GRADE_CONTROLS", "TONEMAP_CANDIDATES", "STAGES",
+    "LUT_FILES", "delta_e_2000", "linear_to_lab", "match_errors",
 ]
+"""What a user calls and what a match returns; the fit's building blocks (bounded controls, pixel pairs, the residual
+LUT's penalties) are imported from their modules."""

@@ -78,17 +78,14 @@ Examples:
     True
 """
 
-from .defaults import STATE_DEFAULTS
 from .describe import describe
-from .exporter import DEFAULT_OPSET, IO_DTYPES, VOLUME_OPSET, export
+from .exporter import DEFAULT_OPSET, IO_DTYPES, export
 from .frames import (
-    CODE_MAX,
     INPUT_DTYPES,
     LAYOUTS,
     OUTPUTS,
     FrameFormat,
     decode_frame,
-    eight_bit_codes,
     encode_frame,
     frame_format,
     model_input,
@@ -97,9 +94,7 @@ from .frames import (
 from .graph import GRADE_INPUTS, grade_feeds
 from .look import export_look, graph_inputs
 from .verify import (
-    DEVICES,
     RUNTIMES,
-    Inputs,
     OpenVINOSession,
     feeds,
     latency_ms,
@@ -109,14 +104,12 @@ from .verify import (
     session,
     verify,
 )
-from ..lut import LUT_BACKENDS
 
 __all__ = [
     "export", "verify", "session", "reference", "feeds", "graph_inputs", "metadata", "describe", "node_count",
     "latency_ms", "export_look", "grade_feeds", "FrameFormat", "frame_format", "read_frame_format", "model_input",
-    "decode_frame", "encode_frame", "eight_bit_codes", "GRADE_INPUTS", "INPUT_DTYPES", "IO_DTYPES", "LAYOUTS",
-    "OUTPUTS", "CODE_MAX", "LUT_BACKENDS", "RUNTIMES", "DEVICES", "DEFAULT_OPSET", "VOLUME_OPSET", "STATE_DEFAULTS",
-    "Inputs", "OpenVINOSession",
+    "decode_frame", "encode_frame", "GRADE_INPUTS", "INPUT_DTYPES", "IO_DTYPES", "LAYOUTS", "OUTPUTS", "RUNTIMES",
+    "DEFAULT_OPSET", "OpenVINOSession",
 ]
 """The names a user calls. The package also imports the export's building blocks (the graph forms, symbolics, strip
 forms, graph inspection helpers) for its modules and the tests; they are not part of the API contract: import them
