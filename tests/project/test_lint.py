@@ -16,6 +16,6 @@ LINTED = ("torchgrade", "tests", "benchmarks", "examples", "docs", "setup.py")
 def test_ruff_finds_nothing_in_the_package_tests_benchmarks_and_examples():
     selected = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["ruff"]["lint"]["select"]
     assert {"E", "W", "F", "B"} <= set(selected), selected
-    result = subprocess.run([sys.executable, "-m", "ruff", "check", "--no-cache", "--output-format", "concise", *LINTED],
-                            cwd=ROOT, capture_output=True, text=True, timeout=300)
+    command = [sys.executable, "-m", "ruff", "check", "--no-cache", "--output-format", "concise", *LINTED]
+    result = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stdout[-6000:] + result.stderr[-2000:]
