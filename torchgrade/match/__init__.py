@@ -1,4 +1,5 @@
-"""Learn a look from examples: fit interpretable controls, and optionally a residual LUT, by gradient descent.
+"""Learn a look from examples: fit interpretable controls and the tone mapper by Levenberg-Marquardt, and optionally a
+residual LUT by gradient descent.
 
 * :mod:`~torchgrade.match.look`: :func:`match_look` and :class:`MatchResult`;
 * :mod:`~torchgrade.match.fit`: the fitted model, the staged fit of its controls, tone mapper screening;

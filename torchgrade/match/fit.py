@@ -1,11 +1,11 @@
 """Fit a look's interpretable controls to before/after pixels, and find its tone mapper.
 
-Every candidate tone mapper is fitted briefly on a small sample; the best few are fitted fully, and the one whose
-fitted error is lowest is the look's. Each fit is parsimonious: the global controls first (exposure, white balance,
-contrast, hue shift, saturation, with the tone mapper's curve), then every control from there. Lift, gamma and gain
-repeat what exposure and contrast do (a gain is an exposure; contrast, a power about middle grey in log space, is a
-gamma's power and a gain), so a fit of all of them at once from the identity lands on any of the equivalent
-recipes; fitted second, they move only for what the global controls cannot express.
+Every candidate tone mapper is fitted briefly on a small sample; the best few are fitted afresh on every fitting
+pixel, and the one whose fitted error is lowest is the look's. Each fit is parsimonious: the global controls first
+(exposure, white balance, contrast, hue shift, saturation, with the tone mapper's curve), and only where they do not
+reach the target every control. Lift, gamma and gain repeat what exposure and contrast do (a gain is an exposure;
+contrast, a power about middle grey in log space, is a gamma's power and a gain), so a fit of all of them at once
+lands on any of the equivalent recipes: contrast traded for exposure and gamma.
 
 Examples:
     >>> import torch
@@ -38,31 +38,33 @@ from .solver import levenberg_marquardt
 
 __all__ = ["GRADE_CONTROLS", "GLOBAL_CONTROLS", "TONEMAP_CANDIDATES", "TRACKBALLS", "canonical_trackball",
            "MatchedControls", "every_loss", "pixel_residuals", "fewer_controls_suffice", "fit_model", "ControlsFit",
-           "fit_controls", "evaluate"]
+           "fit_controls", "EVALUATED_PIXELS", "evaluate"]
 
 GRADE_CONTROLS = ("post_exposure", "temperature", "tint", "contrast", "split_shadows", "split_highlights",
                   "split_balance", "lift", "gamma", "gain", "hue_shift", "saturation")
-"""The grading controls fitted by default: the global ones. Colour filter, channel mixer and shadows/midtones/highlights
+"""The grading controls fitted by default. Colour filter, channel mixer and shadows/midtones/highlights
 are left out because, with these, they only add directions that say the same (a gain colour and a colour filter
 both scale a channel); pass ``controls=`` to fit them."""
 
 GLOBAL_CONTROLS = ("post_exposure", "temperature", "tint", "contrast", "hue_shift", "saturation")
 """The controls fitted first (those of them a fit is given): one number each, and no two with the same effect."""
 
-TONEMAP_CANDIDATES = tuple(mode for mode in TONEMAP_MODES if mode != "none" and mode not in HDR_MODES)
-"""The tone mappers tried by default for a display-referred target: every SDR mode of the registry."""
+TONEMAP_CANDIDATES = tuple(sorted((mode for mode in TONEMAP_MODES if mode != "none" and mode not in HDR_MODES),
+                                  key=lambda mode: len(fittable_names(tone_mapper(mode).controls))))
+"""The tone mappers tried by default for a display-referred target: every SDR mode of the registry, those with the
+fewest curve parameters first (the registry's order among equals). The first that reaches a look ends the search,
+so where several do (``filmic``'s eight parameters can draw Narkowicz's ACES fit), the simplest is kept."""
 
 TRACKBALLS = ("lift", "gamma", "gain")
 
 REACHED = 1e-6
 """A fitted loss (mean squared 8-bit codes, or LogC codes ×255) at which the look is reached: a root mean square of a
-thousandth of a code, which no other tone mapper could better visibly, so the finalists after it are not fitted. A
-fit stops at a hundredth of it (a tenth as far in codes), where the controls are found within a thousandth of
-their units."""
+thousandth of a code, which no other tone mapper could better visibly, so the candidates after it are not fitted. A
+fit stops at a hundredth of it, a tenth as far in codes."""
 
 JACOBIAN_DTYPE = torch.float32
-"""The dtype the forward differences are computed in (:func:`~torchgrade.match.solver.forward_differences`): half the
-time of float64 on a batch of looks; the trials, which decide what is kept, are computed in float64."""
+"""The dtype the forward differences are computed in (:func:`~torchgrade.match.solver.forward_differences`): the
+batch of looks moves half the bytes of float64; the trials, which decide what is kept, are computed in float64."""
 
 # Unity's trackball identity (1, 1, 1, 0) sits on the edge of the range, where a sigmoid has no slope. Any grey
 # colour is the same identity (a trackball's colour counts only minus its luminance), so the fit starts at this
@@ -275,10 +277,15 @@ def fit_controls(pairs: PixelPairs, names, modes, aces: bool, steps: int, screen
     return best, screened, {fit.model.mode: fit.loss for fit in fits}
 
 
+EVALUATED_PIXELS = 1 << 16
+"""Held-out pixels a look is applied to at a time: its working memory, not the picture's, bounds the evaluation."""
+
+
 def evaluate(transform, pairs: PixelPairs, display: bool) -> dict:
     """:func:`~torchgrade.match.metrics.match_errors` on the held-out pixels (scene-referred ones viewed through ``neutral``)."""
     with torch.no_grad():
-        fitted, target = transform(pairs.test_source), pairs.test_target
+        fitted = torch.cat([transform(part) for part in pairs.test_source.split(EVALUATED_PIXELS, dim=2)], dim=2)
+        target = pairs.test_target
         if not display:
             fitted, target = tonemap(fitted, "neutral"), tonemap(target, "neutral")
     return match_errors(target.reshape(3, -1), fitted.reshape(3, -1))

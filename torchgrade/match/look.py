@@ -45,10 +45,10 @@ class MatchResult:
     * ``residual``: the :class:`~torchgrade.match.ResidualLUT` fitted on top (``residual=True``), else ``None``.
     * ``errors``: ``{"controls": ..., "residual": ...}``, each ``{"p99.9", "max"}`` in 8-bit sRGB codes and
       ``"delta_e_2000"`` (mean), on the held-out pixels (every pixel of the held-out blocks, never fitted).
-    * ``history``: the fitting loss at every evaluation (the chosen tone mapper's screening and full fit, then the
-      residual's).
-    * ``phases``: ``[(phase, evaluations)]`` in order, how ``history`` divides: ``"screening"``,
-      ``"Levenberg-Marquardt"``, ``"residual Adam"``, ``"residual L-BFGS"`` (those that ran).
+    * ``history``: the fitting loss at every evaluation (the chosen tone mapper's full fit, then the residual's).
+    * ``phases``: ``[(phase, evaluations)]`` in order, how ``history`` divides: ``"global controls"``,
+      ``"every control"`` (see :func:`~torchgrade.match.fit.fit_model`), ``"residual Adam"``, ``"residual L-BFGS"``
+      (those that ran; ``"fixed"`` for a model with nothing to fit).
     * ``candidates``: each tone mapper screened and its loss after screening (empty when one was given).
     * ``finalists``: each tone mapper fitted fully and its fitted loss, the look's the lowest.
     """
