@@ -35,7 +35,8 @@ from pathlib import Path
 import torch
 
 import torchgrade as tg
-from benchmarks.common import EXR_DIR, argument_parser, ocio_look, write_results
+from benchmarks.bench_import import revision
+from benchmarks.common import EXR_DIR, ROOT, argument_parser, ocio_look, write_results
 from torchgrade.match import TONEMAP_CANDIDATES, MatchedControls, match_errors
 
 COMMAND = ".venv/bin/python -m benchmarks match"
@@ -191,6 +192,7 @@ def _ratio(row: dict) -> str:
 def markdown(report: dict, quick: bool) -> list:
     timing = not quick
     lines = [f"# Learning a look (bench_match.py{' --quick' if quick else ''}, {report['threads']} thread(s))", "",
+             f"Made by `{report['command']}` at commit {report['commit']}.", "",
              f"## 1. A known look with every SDR tone mapper ({LOOK}), every default", "",
              "Fitted on the left half of each picture; *truth*: the fitted look against the known one on every pixel of the "
              "right half; *held-out*: `result.errors['controls']`, every pixel of the left half's held-out blocks. "
@@ -230,7 +232,9 @@ def main(argv=None) -> None:
     torch.set_num_threads(args.threads)
     stem = "match_quick" if args.quick else "match"
     pictures, step = (["GoldenGate"], 8) if args.quick else (["GoldenGate", "CandleGlass", "Desk"], 4)
-    report = {"threads": args.threads, "look": LOOK, "known_looks": known_looks(pictures, step),
+    command = f"{COMMAND}{' --quick' if args.quick else ''} --threads {args.threads} --out {args.out}"
+    report = {"command": command, "commit": revision(ROOT), "threads": args.threads, "look": LOOK,
+              "known_looks": known_looks(pictures, step),
               "out_of_reach": out_of_reach(pictures, step), "photographs": []}
     source = tg.io.read_exr(EXR_DIR / "GoldenGate.exr")[:3].double()
     scales = (source,) if args.quick else (source, torch.nn.functional.interpolate(source[None], scale_factor=2, mode="bilinear", align_corners=False)[0])
@@ -246,8 +250,7 @@ def main(argv=None) -> None:
         for row in report["known_looks"] + report["out_of_reach"] + report["photographs"]:
             for key in ("fit_s", "fit_cpu_s", "cube_s"):
                 row.pop(key, None)
-    write_results(args.out, stem, report, markdown(report, args.quick),
-                  f"{COMMAND}{' --quick' if args.quick else ''} --threads {args.threads} --out {args.out}")
+    write_results(args.out, stem, report, markdown(report, args.quick), command)
 
 
 if __name__ == "__main__":

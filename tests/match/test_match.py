@@ -291,3 +291,5 @@ def test_residual_lut_starts_as_identity_and_bad_inputs_raise():
         tg.match_look(source, source, stages=("grade",), residual=True, progress=False)
     with pytest.raises(ValueError, match="stages must be"):
         tg.match_look(source, source, stages=("bloom",), progress=False)
+    with pytest.raises(ValueError, match="keep must be an integer of at least 1, got 0"):
+        tg.match_look(source, source, keep=0, progress=False)

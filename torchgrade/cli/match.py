@@ -39,7 +39,7 @@ from ..match import GRADE_CONTROLS, LUT_FILES, match_look
 from ..tonemap import TONEMAP_MODES
 from .common import read_rec709, refuse_overwriting, report_line
 
-__all__ = ["run_match", "add_match", "read_target", "png_size", "target_sizes", "MAX_PNG_BYTES"]
+__all__ = ["run_match", "add_match", "read_target", "png_size", "MAX_PNG_BYTES"]
 
 MAX_PNG_BYTES = 1 << 30
 """Largest PNG file read as a target (its pixels pass the pixel budget, :data:`torchgrade.base.budget.MAX_PIXELS`)."""
@@ -67,22 +67,13 @@ def png_size(header: bytes, path) -> tuple:
     return height, width
 
 
-def target_sizes(path: Path) -> set:
-    """The ``(height, width)`` the target picture may have, read from its header without decoding a pixel: a PNG's
-    IHDR (:func:`png_size`), an EXR's data windows (one per part, :func:`~torchgrade.io.exr_info`)."""
-    if path.suffix.lower() == ".exr":
-        return {part.size() for part in exr_info(path)}
-    if path.suffix.lower() != ".png":
-        raise ValueError(f"target must be an .exr or .png file, got {path}")
-    with open_regular(path, MAX_PNG_BYTES, "target") as handle:
-        return {png_size(handle.read(24), path)}
-
-
 def read_target(path: Path, size: tuple | None = None) -> torch.Tensor:
     """The target picture as ``(3, H, W)`` linear: an 8-bit PNG decoded from sRGB, or an EXR in Rec.709.
 
-    Its header is read first (:func:`target_sizes`): a picture over the pixel budget, or of another ``size``
-    ``(height, width)`` than the source's, is refused before a pixel is decoded.
+    Its header is read first, a PNG's IHDR (:func:`png_size`) or an EXR's data windows
+    (:func:`~torchgrade.io.exr_info`): a picture over the pixel budget, or of another ``size`` ``(height, width)``
+    than the source's, is refused before a pixel is decoded. A PNG is decoded from the handle its header was read
+    from, so no other file can take its place in between; an EXR is read within the source's pixel count.
 
     Examples:
         >>> import tempfile
@@ -96,25 +87,34 @@ def read_target(path: Path, size: tuple | None = None) -> torch.Tensor:
         ...
         ValueError: target .../after.png is 2x2 pixels and the source 240x135: a look is matched pixel for pixel, so both must be the same size
     """
-    sizes = target_sizes(path)
-    for height, width in sizes:
+    if path.suffix.lower() == ".exr":
+        _check_size(path, {part.size() for part in exr_info(path)}, size)
+        return read_rec709(path, **({} if size is None else {"max_pixels": size[0] * size[1]}))
+    if path.suffix.lower() != ".png":
+        raise ValueError(f"target must be an .exr or .png file, got {path}")
+    with open_regular(path, MAX_PNG_BYTES, "target") as handle:
+        height, width = png_size(handle.read(24), path)
         check_pixels(height, width, f"target {path}")
+        _check_size(path, {(height, width)}, size)
+        handle.seek(0)
+        return _decoded_png(handle, path)
+
+
+def _check_size(path: Path, sizes: set, size: tuple | None) -> None:
+    """``ValueError`` unless the source's ``size`` (``None``: any) is one of the target's ``sizes``."""
     if size is not None and tuple(size) not in sizes:
         height, width = min(sizes)
         raise ValueError(f"target {path} is {width}x{height} pixels and the source {size[1]}x{size[0]}: a look is "
                          "matched pixel for pixel, so both must be the same size")
-    if path.suffix.lower() == ".exr":
-        return read_rec709(path, **({} if size is None else {"max_pixels": size[0] * size[1]}))
-    return _decoded_png(path)
 
 
-def _decoded_png(path: Path) -> torch.Tensor:
-    """The PNG's pixels, decoded from sRGB; a damaged file (a bad chunk, a truncated or garbled image stream) is a
-    ``ValueError`` naming it, whatever PIL raised."""
+def _decoded_png(handle, path: Path) -> torch.Tensor:
+    """The PNG's pixels from ``handle``, decoded from sRGB; a damaged file (a bad chunk, a truncated or garbled image
+    stream) is a ``ValueError`` naming it, whatever PIL raised."""
     from PIL import Image, UnidentifiedImageError
 
     try:
-        with open_regular(path, MAX_PNG_BYTES, "target") as handle, Image.open(handle, formats=["PNG"]) as image:
+        with Image.open(handle, formats=["PNG"]) as image:
             codes = np.asarray(image.convert("RGB"), dtype=np.float32)
     except UnidentifiedImageError:  # its message names the file handle, not the file
         raise ValueError(f"target {path} is not a readable PNG file (a damaged chunk)") from None

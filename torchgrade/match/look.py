@@ -116,6 +116,21 @@ def _modes(stages, tonemaps) -> tuple:
     return modes
 
 
+def _check_counts(**counts) -> None:
+    """``ValueError`` naming the first count that is not an integer, at least 0 for steps and 1 for the others.
+
+    Examples:
+        >>> _check_counts(steps=0, keep=0)
+        Traceback (most recent call last):
+        ...
+        ValueError: keep must be an integer of at least 1, got 0
+    """
+    for name, value in counts.items():
+        least = 0 if name.endswith("steps") else 1
+        if isinstance(value, bool) or not isinstance(value, int) or value < least:
+            raise ValueError(f"{name} must be an integer of at least {least}, got {value!r}")
+
+
 def match_look(source, target, stages=STAGES, mask=None, *, controls=GRADE_CONTROLS, tonemaps=None, aces: bool = False,
                steps: int = 100, screen_steps: int = 20, screen_pixels: int = 2048, keep: int = 3,
                residual: bool = False, residual_size: int = 17, residual_steps: int = 300, smooth: float = 0.05,
@@ -129,11 +144,11 @@ def match_look(source, target, stages=STAGES, mask=None, *, controls=GRADE_CONTR
     picture's blocks is held out (:func:`~torchgrade.match.pixels.sample_pairs`): the errors are measured on all
     their pixels, and the fit sees none of them. The ``controls`` of the grade (names in
     :class:`~torchgrade.ColorGrade`'s table) are fitted within their documented ranges (a sigmoid onto each range)
-    by Levenberg-Marquardt in float64 on ``max_pixels`` pixels stratified by colour, the global controls first
-    (:func:`~torchgrade.match.fit.fit_controls`), up to ``steps`` trials each stage. ``tonemaps``: a mode, several,
+    by Levenberg-Marquardt (trials in float64) on ``max_pixels`` pixels stratified by colour, the global controls
+    first (:func:`~torchgrade.match.fit.fit_model`), up to ``steps`` trials a phase. ``tonemaps``: a mode, several,
     or ``None`` for :data:`TONEMAP_CANDIDATES` (every SDR mode); with more than one each is fitted for
-    ``screen_steps`` trials per stage on ``screen_pixels`` pixels, the ``keep`` best are fitted fully and the lowest
-    fitted error chooses. ``residual=True`` (display targets) then fits a ``residual_size``³
+    ``screen_steps`` trials a phase on ``screen_pixels`` pixels, the ``keep`` best are fitted fully and the lowest
+    fitted error chooses (:func:`~torchgrade.match.fit.fit_controls`). ``residual=True`` (display targets) then fits a ``residual_size``³
     :class:`~torchgrade.match.ResidualLUT` with weights ``smooth`` and ``monotone`` on up to ``residual_pixels``.
     ``progress`` shows a tqdm bar per fit with the latest loss (on stderr, when it is a terminal).
     """
@@ -141,10 +156,7 @@ def match_look(source, target, stages=STAGES, mask=None, *, controls=GRADE_CONTR
     names = tuple(controls) if "grade" in stages else ()
     if residual and modes == (None,):
         raise ValueError("residual=True needs a display-referred target: include 'tonemap' in stages")
-    for name, value in (("steps", steps), ("screen_steps", screen_steps), ("screen_pixels", screen_pixels),
-                        ("keep", keep), ("max_pixels", max_pixels)):
-        if not isinstance(value, int) or value < (0 if name.endswith("steps") else 1):
-            raise ValueError(f"{name} must be a {'non-negative' if name.endswith('steps') else 'positive'} integer, got {value!r}")
+    _check_counts(steps=steps, screen_steps=screen_steps, screen_pixels=screen_pixels, keep=keep, max_pixels=max_pixels)
     generator = torch.Generator().manual_seed(seed)
     pixels = sample_pairs(source, target, mask, max(max_pixels, residual_pixels if residual else 0), holdout, generator)
     fitting = PixelPairs(pixels.train_source[:, :, :max_pixels], pixels.train_target[:, :, :max_pixels],
