@@ -90,8 +90,9 @@ LOG.setLevel(logging.INFO)
 
 CPU_OPTIONS = {"layout_optimization": False}
 """Inductor's settings on the CPU. Its layout optimisation gives the outputs of a graph's convolutions (the bloom
-pyramid's blurs) channels-last buffers; a per-pixel loop that reads such a frame as planes is then not vectorised
-(the compiled cinematic look with and without it: ``benchmarks/results/cpu_paths.md``)."""
+pyramid's blurs, when they compiled as convolutions; an anamorphic bloom's) channels-last buffers; a per-pixel loop
+that reads such a frame as planes is then not vectorised (the compiled cinematic look with and without it:
+``benchmarks/results/cpu_paths.md``)."""
 
 
 COMPILE_SECONDS = {("PostFX", False): (46.6, 7.0), ("PostFX", True): (93.4, 8.6),
@@ -132,8 +133,8 @@ def _failed_guards(error: RuntimeError) -> list:
 def _call_kind(args: tuple, kwargs: dict) -> tuple:
     """What a call's graph depends on that changes from call to call: its tensors' devices, dtypes, shapes and
     gradients, and the gradient and autocast modes."""
-    tensors = [value for value in (*args, *kwargs.values()) for value in (value.values() if isinstance(value, dict) else (value,))
-               if isinstance(value, torch.Tensor)]
+    values = [item for value in (*args, *kwargs.values()) for item in (value.values() if isinstance(value, dict) else (value,))]
+    tensors = [value for value in values if isinstance(value, torch.Tensor)]  # a drawn look's parameters are a dict
     autocast = tuple(torch.is_autocast_enabled(device) and torch.get_autocast_dtype(device) for device in ("cpu", "cuda"))
     return (tuple((t.device, t.dtype, tuple(t.shape), t.requires_grad) for t in tensors), torch.is_grad_enabled(), autocast)
 
