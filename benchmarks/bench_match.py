@@ -4,8 +4,8 @@ the picture, and what a fit of a photograph costs.
 1. **A known look with every SDR tone mapper** (:data:`LOOK`: contrast −10, saturation 30, temperature −20, tint 10,
    then each mode of ``TONEMAP_CANDIDATES``), fitted with every default on the left half of a photograph; the truth
    is the fitted look against the known one on every pixel of the right half, which the fit never saw. Columns:
-   the tone mapper found, the truth and the held-out figure (p99.9 / max, 8-bit sRGB codes), their ratio, the
-   contrast and exposure found (the recipe: −10 and 0).
+   the tone mapper found, the truth and the held-out figure (p99.9 / max, 8-bit sRGB codes), their ratio, whether
+   the row meets the bar (:func:`recovered`), the contrast and exposure found (the recipe: −10 and 0).
 2. **Out of reach**: the same look fitted with a tone mapper that is not its own (``tonemaps=`` one mode), so the
    errors are codes, not rounding; the held-out figure against the truth.
 3. **A photograph**: a look made by OpenColorIO (``GradingPrimaryTransform`` then its ACES 1.0 SDR view) learnt
@@ -18,7 +18,9 @@ Torch runs on ``--threads`` threads (default 1: a fit works on batches of a few 
 shared 2-core machine a second thread mostly waits for the first; ``--threads 2`` to compare). ``--quick`` measures
 accuracy only (no timings) on GoldenGate at every 8th pixel for parts 1 and 2, and part 3 at 1.1 MP; it writes
 ``match_quick.{md,json,png}``, the full run ``match.{md,json,png}`` (every 4th pixel of GoldenGate, CandleGlass and
-Desk), to ``--out`` (default benchmarks/out; the committed ones with ``--out benchmarks/results``). The figure:
+Desk), to ``--out`` (default benchmarks/out; the committed ones with ``--out benchmarks/results``), each stamped with
+the commit it measured; the tables are marked so that ``python -m benchmarks suite --pages`` copies them onto
+docs/match.md (:func:`marked`). The figure:
 before, target, matched by the controls, with the residual LUT; the loss at every evaluation by phase.
 
     .venv/bin/python -m benchmarks match [--quick] [--threads N] [--out DIR]
@@ -35,8 +37,8 @@ from pathlib import Path
 import torch
 
 import torchgrade as tg
-from benchmarks.bench_import import revision
-from benchmarks.common import EXR_DIR, ROOT, argument_parser, ocio_look, write_results
+from benchmarks.common import EXR_DIR, argument_parser, ocio_look, write_results
+from benchmarks.suite.stamp import source_commit
 from torchgrade.match import TONEMAP_CANDIDATES, MatchedControls, match_errors
 
 COMMAND = ".venv/bin/python -m benchmarks match"
@@ -189,38 +191,77 @@ def _ratio(row: dict) -> str:
     return "both < 0.01" if max(truth, held) < 0.01 else f"{held / truth:.2f}"
 
 
-def markdown(report: dict, quick: bool) -> list:
-    timing = not quick
-    lines = [f"# Learning a look (bench_match.py{' --quick' if quick else ''}, {report['threads']} thread(s))", "",
-             f"Made by `{report['command']}` at commit {report['commit']}.", "",
-             f"## 1. A known look with every SDR tone mapper ({LOOK}), every default", "",
-             "Fitted on the left half of each picture; *truth*: the fitted look against the known one on every pixel of the "
-             "right half; *held-out*: `result.errors['controls']`, every pixel of the left half's held-out blocks. "
-             "p99.9 / max in 8-bit sRGB codes.", "",
-             "| picture | tone mapper | found | truth | held-out | held-out / truth | contrast | exposure |"
+RECOVERED, FORESEEN = 0.5, 1.5
+"""The bar a known look meets: p99.9 at most half a code on the right half and on the held-out blocks, and the
+held-out figure within 1.5x of the right half's either way (or both under a hundredth of a code)."""
+
+
+def recovered(row: dict) -> bool:
+    truth, held = row["truth"]["p99.9"], row["held_out"]["p99.9"]
+    foreseen = max(truth, held) < 0.01 or (truth > 0 and 1 / FORESEEN <= held / truth <= FORESEEN)
+    return max(truth, held) <= RECOVERED and foreseen
+
+
+def verdict(rows: list) -> str:
+    """How many known looks meet the bar (:func:`recovered`), naming those that do not."""
+    missed = [f"{row['mode']} on {row['picture']}" for row in rows if not recovered(row)]
+    return (f"{len(rows) - len(missed)} of {len(rows)} meet the bar (p99.9 ≤ {RECOVERED} codes on the right half and on "
+            f"the held-out blocks, the held-out figure within {FORESEEN}× of the right half's){'; not: ' + ', '.join(missed) if missed else ''}.")
+
+
+def marked(name: str, table: list) -> list:
+    """``table``'s lines between ``<!-- match:NAME -->`` and ``<!-- /match:NAME -->``, the marks by which
+    ``python -m benchmarks suite --pages`` copies it onto docs/match.md (:data:`benchmarks.suite.pages.MATCH_TABLES`)."""
+    return [f"<!-- match:{name} -->", *table, f"<!-- /match:{name} -->"]
+
+
+def known_table(rows: list, timing: bool) -> list:
+    lines = ["| picture | tone mapper | found | truth | held-out | held-out / truth | bar | contrast | exposure |"
              + (" fit s | CPU s |" if timing else ""),
-             "| --- | --- | --- | --- | --- | ---: | ---: | ---: |" + (" ---: | ---: |" if timing else "")]
-    for row in report["known_looks"]:
+             "| --- | --- | --- | --- | --- | ---: | --- | ---: | ---: |" + (" ---: | ---: |" if timing else "")]
+    for row in rows:
         cells = [row["picture"], row["mode"], row["found"], _pair(row["truth"]), _pair(row["held_out"]), _ratio(row),
-                 f"{row['contrast']:.3f}", f"{row['post_exposure']:.4f}"]
+                 "met" if recovered(row) else "**missed**", f"{row['contrast']:.3f}", f"{row['post_exposure']:.4f}"]
         cells += [f"{row['fit_s']:.1f}", f"{row['fit_cpu_s']:.1f}"] if timing else []
         lines.append("| " + " | ".join(cells) + " |")
-    lines += ["", "## 2. Out of reach: the look fitted with another tone mapper", "",
-              "| picture | look's tone mapper | fitted | truth | held-out | held-out / truth |", "| --- | --- | --- | --- | --- | ---: |"]
-    for row in report["out_of_reach"]:
-        lines.append(f"| {row['picture']} | {row['mode']} | {row['found']} | {_pair(row['truth'])} | {_pair(row['held_out'])} | {_ratio(row)} |")
-    lines += ["", "## 3. A photograph: OpenColorIO's look on GoldenGate, every default, a 17³ residual LUT", "",
-              "Errors on the held-out blocks (p99.9 / max / mean ΔE2000).", "",
-              "| MP | controls | + residual | 65³ .cube | tone mapper |" + (" fit s | CPU s | .cube s |" if timing else ""),
-              "| ---: | --- | --- | --- | --- |" + (" ---: | ---: | ---: |" if timing else "")]
-    for row in report["photographs"]:
+    return lines + ["", verdict(rows)]
+
+
+def reach_table(rows: list) -> list:
+    return ["| picture | look's tone mapper | fitted | truth | held-out | held-out / truth |", "| --- | --- | --- | --- | --- | ---: |"] + [
+        f"| {row['picture']} | {row['mode']} | {row['found']} | {_pair(row['truth'])} | {_pair(row['held_out'])} | {_ratio(row)} |"
+        for row in rows]
+
+
+def photograph_table(rows: list, timing: bool) -> list:
+    lines = ["| MP | controls | + residual | 65³ .cube | tone mapper |" + (" fit s | CPU s | .cube s |" if timing else ""),
+             "| ---: | --- | --- | --- | --- |" + (" ---: | ---: | ---: |" if timing else "")]
+    for row in rows:
         cells = [f"{row[k]['p99.9']:.2f} / {row[k]['max']:.2f} / {row[k]['delta_e_2000']:.4f}" for k in ("controls", "residual", "cube")]
         extra = f" {row['fit_s']:.1f} | {row['fit_cpu_s']:.1f} | {row['cube_s']:.1f} |" if timing else ""
         lines.append(f"| {row['megapixels']:.1f} | {' | '.join(cells)} | {row['look']['tonemap']['mode']} |{extra}")
+    return lines
+
+
+def markdown(report: dict, quick: bool) -> list:
+    """The results page: each part's table marked (:func:`marked`) as ``known``, ``reach``, ``photograph`` and, in
+    the full run, ``jacobian``."""
+    timing = not quick
+    stamp = f"`{report['commit'][:7]}`{' with uncommitted changes' if report['modified'] else ''}"
+    lines = [f"# Learning a look (bench_match.py{' --quick' if quick else ''}, {report['threads']} thread(s))", "",
+             f"Made by `{report['command']}` at commit {stamp}.", "",
+             f"## 1. A known look with every SDR tone mapper ({LOOK}), every default", "",
+             "Fitted on the left half of each picture; *truth*: the fitted look against the known one on every pixel of the "
+             "right half; *held-out*: `result.errors['controls']`, every pixel of the left half's held-out blocks. "
+             "p99.9 / max in 8-bit sRGB codes.", "", *marked("known", known_table(report["known_looks"], timing)),
+             "", "## 2. Out of reach: the look fitted with another tone mapper", "", *marked("reach", reach_table(report["out_of_reach"])),
+             "", "## 3. A photograph: OpenColorIO's look on GoldenGate, every default, a 17³ residual LUT", "",
+             "Errors on the held-out blocks (p99.9 / max / mean ΔE2000).", "",
+             *marked("photograph", photograph_table(report["photographs"], timing))]
     if "jacobian" in report:
         jacobian = report["jacobian"]
         lines += ["", f"## 4. One Jacobian: {jacobian['parameters']} parameters, {jacobian['pixels']} pixels", "",
-                  "| form | ms |", "| --- | ---: |"] + [f"| {name} | {ms:.0f} |" for name, ms in jacobian["ms"].items()]
+                  *marked("jacobian", ["| form | ms |", "| --- | ---: |"] + [f"| {name} | {ms:.0f} |" for name, ms in jacobian["ms"].items()])]
     return lines
 
 
@@ -233,7 +274,7 @@ def main(argv=None) -> None:
     stem = "match_quick" if args.quick else "match"
     pictures, step = (["GoldenGate"], 8) if args.quick else (["GoldenGate", "CandleGlass", "Desk"], 4)
     command = f"{COMMAND}{' --quick' if args.quick else ''} --threads {args.threads} --out {args.out}"
-    report = {"command": command, "commit": revision(ROOT), "threads": args.threads, "look": LOOK,
+    report = {"command": command, **source_commit(), "threads": args.threads, "look": LOOK,
               "known_looks": known_looks(pictures, step),
               "out_of_reach": out_of_reach(pictures, step), "photographs": []}
     source = tg.io.read_exr(EXR_DIR / "GoldenGate.exr")[:3].double()
