@@ -28,7 +28,7 @@ __all__ = ["MOVED", "OLD_CLASS_PATHS", "install"]
 
 MOVED = {
     "torchgrade.core": ("torchgrade.base.images", "torchgrade.base.params", "torchgrade.base.planes", "torchgrade.runtime.policy",
-                        "torchgrade.runtime.recording", "torchgrade.runtime.workers"),
+                        "torchgrade.runtime.recording"),
     "torchgrade.stage": ("torchgrade.base.stage",),
     "torchgrade.config": ("torchgrade.base.config",),
     "torchgrade.grade": ("torchgrade.grading.grade", "torchgrade.grading.layer", "torchgrade.grading.steps"),
@@ -51,7 +51,7 @@ MOVED = {
     "torchgrade.tonemap.aces1_reference": ("torchgrade.tonemap.aces1.reference",),
     "torchgrade.tonemap.aces2_curves": ("torchgrade.tonemap.aces2.curves",),
     "torchgrade.base.core": ("torchgrade.base.images", "torchgrade.base.params", "torchgrade.base.planes", "torchgrade.runtime.policy",
-                             "torchgrade.runtime.recording", "torchgrade.runtime.workers"),
+                             "torchgrade.runtime.recording"),
 }
 """Each old module path and the modules its names now live in, searched in order."""
 

@@ -15,7 +15,7 @@ from torchgrade.runtime import policy
 ROOT = Path(__file__).resolve().parents[2]
 
 USERS = ["torchgrade.runtime.strips", "torchgrade.runtime.policy", "torchgrade.runtime.variants", "torchgrade.bloom.pyramid", "torchgrade.bloom.blur",
-         "torchgrade.lut.apply", "torchgrade.base.params", "torchgrade.exposure.metering"]
+         "torchgrade.base.params", "torchgrade.exposure.metering"]
 """Every module that asks ``policy_for``."""
 
 LOOKS = {

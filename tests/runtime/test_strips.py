@@ -1,10 +1,5 @@
 """Per-pixel stages run in strips of rows on the CPU (``torchgrade.runtime.in_strips``): the whole frame's values to
-float32 rounding, and the whole frame whenever autograd records the call or the device is not the CPU; a LUT's pixel
-runs on worker threads give the serial runs' values."""
-
-import multiprocessing
-import os
-import threading
+float32 rounding, and the whole frame whenever autograd records the call or the device is not the CPU."""
 
 import pytest
 import torch
@@ -51,81 +46,3 @@ def test_strips_are_skipped_when_autograd_records(desk, monkeypatch):
     with torch.no_grad():
         runtime.in_strips(lambda x: calls.append(x.shape) or x, desk[..., :64, :64], (learnable,))
     assert len(calls) > 3
-
-
-def test_lut_runs_on_worker_threads_give_the_serial_runs_values_and_leave_the_callers_threads_alone(desk, monkeypatch):
-    lut = tg.bake_lut(tg.PostFX(grade={"contrast": 20}, tonemap="aces"), size=17, report_tolerance=float("inf"))
-    image = desk[..., :200, :300]
-    with torch.no_grad():
-        serial = lut(image)
-    monkeypatch.setattr(policy, "PARALLEL_FROM", 1)  # workers from one thread up
-    threads = torch.get_num_threads()
-    try:
-        for count in (threads + 1, threads + 2):  # a new pool for each count: its workers set one thread each
-            torch.set_num_threads(count)
-            with torch.inference_mode():
-                threaded = lut(image)
-            assert threaded.is_inference() and torch.get_num_threads() == count
-            assert torch.equal(threaded, serial)
-            seen = []
-            thread = threading.Thread(target=lambda: seen.append(torch.get_num_threads()))
-            thread.start()
-            thread.join()
-            assert seen == [count]  # a thread started later begins with the caller's count, not the workers' one
-    finally:
-        torch.set_num_threads(threads)
-
-
-def test_each_worker_computes_on_one_thread_whatever_the_callers_count():
-    threads = torch.get_num_threads()
-    try:
-        torch.set_num_threads(threads + 3)  # a count no other test gives a pool: a new pool starts here
-        seen = []
-        runtime.run_pieces(lambda piece: seen.append(torch.get_num_threads()), range(8), workers=threads + 3)
-        assert seen == [1] * 8 and torch.get_num_threads() == threads + 3
-    finally:
-        torch.set_num_threads(threads)
-
-
-def _squares_on_workers(queue=None):
-    out = torch.zeros(4)
-    runtime.run_pieces(lambda i: out.__setitem__(i, i * i), range(4), workers=2)
-    if queue is None:
-        return out.tolist()
-    queue.put(out.tolist())
-
-
-@pytest.mark.skipif(not hasattr(os, "fork"), reason="platform-conditional: needs fork")
-def test_a_forked_child_runs_pieces_on_its_own_workers():
-    """A pool made before a fork holds threads that the child does not have: the child must start its own."""
-    assert _squares_on_workers() == [0.0, 1.0, 4.0, 9.0]  # the parent's pool of 2 exists now
-    context = multiprocessing.get_context("fork")
-    queue = context.Queue()
-    child = context.Process(target=_squares_on_workers, args=(queue,))
-    child.start()
-    child.join(60)
-    if child.is_alive():
-        child.kill()
-        child.join()
-    assert child.exitcode == 0, "the forked child never finished its pieces"
-    assert queue.get(timeout=5) == [0.0, 1.0, 4.0, 9.0]
-
-
-def test_other_devices_compute_whole_frames():
-    assert runtime.policy_for(torch.device("meta")).strip_pixels is None
-    calls = []
-    image = torch.empty(1, 3, 2000, 2000, device="meta")
-    runtime.in_strips(lambda x: calls.append(x.shape) or x, image)
-    assert calls == [image.shape]
-
-
-def test_gradients_of_the_folded_grade_match_finite_differences():
-    torch.manual_seed(0)
-    image = (torch.rand(1, 3, 3, 4, dtype=torch.float64) * 2.0 + 0.05).requires_grad_()
-    params = {name: torch.tensor(value, dtype=torch.float64, requires_grad=True)
-              for name, value in (("post_exposure", 0.3), ("temperature", 8.0), ("tint", -5.0), ("contrast", 15.0))}
-    color = torch.tensor((1.0, 0.9, 0.8), dtype=torch.float64, requires_grad=True)
-    for aces in (False, True):
-        def graded(x, *values):
-            return tg.functional.color_grade(x, aces=aces, color_filter=values[-1], **dict(zip(params, values[:-1])))
-        assert torch.autograd.gradcheck(graded, (image, *params.values(), color))

@@ -21,7 +21,7 @@ import torch
 from ..runtime.policy import readable
 from ..runtime.recording import is_exporting, is_tracing
 from ..runtime.strips import named_as
-from ..runtime.workers import one_thread
+from ..runtime.policy import one_thread
 
 __all__ = ["HALF_MAX", "NEGLIGIBLE_LIGHT", "check_image", "with_alpha", "warn_if_eight_bit", "check_on_cpu", "sanitize",
            "working_dtype", "to_input_dtype", "full_precision"]

@@ -4,8 +4,7 @@ A per-pixel stage is dozens of elementwise operations. How they should run depen
 maths, so the maths modules keep one differentiable form each and ask :func:`policy_for`:
 
 * **CPU**: strips of rows of :data:`STRIP_PIXELS_PER_THREAD` pixels per intra-op thread, so that each thread's
-  share of a strip's intermediates stays in its core's cache while every operation uses all the threads; a LUT's
-  pixel runs, one thread each, go to :data:`PARALLEL_FROM` or more worker threads when there are that many. A value
+  share of a strip's intermediates stays in its core's cache while every operation uses all the threads. A value
   of the data may be read back (free on the CPU), and blurs and pooling take the slices the CPU is fastest at.
 * **Any other device** (CUDA, ``meta``, ...): whole frames. Each operation is a kernel launch there, and a strip
   loop multiplies launches for no cache to gain (``benchmarks/results/gpu.md``, the stages' "before (strips / none)");
@@ -24,6 +23,7 @@ Examples:
 
 from __future__ import annotations
 
+import contextlib
 import math
 from dataclasses import dataclass, replace
 from typing import Optional
@@ -33,7 +33,7 @@ import torch
 from .constants import scalar
 from .recording import is_tracing
 
-__all__ = ["ExecutionPolicy", "policy_for", "readable", "nonnegative", "pixel_layout", "STRIP_PIXELS_PER_THREAD", "PARALLEL_FROM", "LOOKUP_CHUNK", "ONE_KERNEL_BLUR_PIXELS",
+__all__ = ["ExecutionPolicy", "policy_for", "readable", "nonnegative", "pixel_layout", "STRIP_PIXELS_PER_THREAD", "ONE_KERNEL_BLUR_PIXELS", "one_thread",
            "CPU_HISTOGRAM_TABLES", "RESAMPLING_MATRIX_SIDE"]
 
 STRIP_PIXELS_PER_THREAD = 1 << 16
@@ -44,18 +44,6 @@ much larger ones leave the cache; twice this size runs about as fast on 2 cores 
 ``benchmarks/results/cpu_forms.md``, "Strips"). A strip grows with the thread count: each thread's share stays that
 size, and a frame on many cores is fewer strips."""
 
-PARALLEL_FROM = 2
-"""Intra-op thread count from which the torch form of a LUT's pixel runs (one thread each,
-:func:`torchgrade.lut.apply.chunked_lookup`) goes to as many worker threads; below it they run on the calling thread.
-(The compiled tetrahedral loop spreads its chunks over torch's own threads instead.) Strips of a look stay on the
-calling thread, each operation on every thread."""
-
-LOOKUP_CHUNK = 32768
-"""Pixels per pass of the CPU LUT lookup. Tetrahedral's eager form holds 20 values a pixel (2.5 MiB a run): smaller
-runs pay the fixed cost of each of its 15 operations more often, larger ones leave the cache. The size is the eager
-form's: the compiled loop, a few values a pixel, is faster on larger runs. Both across run sizes: ``benchmarks/results/cpu_forms.md``,
-"LUT runs"; the time and temporary bytes per pixel: ``benchmarks/results/lut.md``."""
-
 
 @dataclass(frozen=True)
 class ExecutionPolicy:
@@ -63,9 +51,6 @@ class ExecutionPolicy:
 
     Attributes:
         strip_pixels: pixels per strip of a per-pixel stage, or ``None`` for whole frames.
-        workers: LUT runs computed at once, each on a worker thread of one intra-op thread; 1 runs them in the
-            calling thread.
-        lookup_chunk: pixels per pass of the eager LUT lookup, or ``None`` for one pass over the frame.
         reads_values: eager shortcuts may read a value of the data (bloom skips its pyramid when no pixel
             passes the threshold): free on the CPU, a synchronisation of the device elsewhere.
         filters_as_kernels: a separable blur as two convolutions with kernels made once, and a 2x2 mean as one
@@ -99,8 +84,6 @@ class ExecutionPolicy:
     """
 
     strip_pixels: Optional[int]
-    workers: int
-    lookup_chunk: Optional[int]
     reads_values: bool
     filters_as_kernels: bool
     one_kernel_blur_pixels: Optional[int] = None
@@ -129,11 +112,11 @@ RESAMPLING_MATRIX_SIDE = {"cpu": 128, "other": 1024}
 matrix product costs ``n · m`` products a row where the gathers cost a few passes: on a GPU, where the deep levels of a
 pyramid cost their launches, up to 1024 (every odd level of a 4K frame's pyramid); on the CPU up to 128."""
 
-WHOLE_FRAMES = ExecutionPolicy(strip_pixels=None, workers=1, lookup_chunk=None, reads_values=False, filters_as_kernels=True,
+WHOLE_FRAMES = ExecutionPolicy(strip_pixels=None, reads_values=False, filters_as_kernels=True,
                                one_kernel_blur_pixels=ONE_KERNEL_BLUR_PIXELS, nan_dropping_max=True, histogram_tables=None,
                                resampling_matrix_side=RESAMPLING_MATRIX_SIDE["other"])
 
-GRAPH = ExecutionPolicy(strip_pixels=None, workers=1, lookup_chunk=None, reads_values=False, filters_as_kernels=False)
+GRAPH = ExecutionPolicy(strip_pixels=None, reads_values=False, filters_as_kernels=False)
 """While tracing, compiling or exporting: kornia's blur, which picks its own form for the compiler (convolution on the
 CPU, slices that Inductor fuses on CUDA) and exports as before."""
 
@@ -159,9 +142,7 @@ def policy_for(device: torch.device) -> ExecutionPolicy:
     if device.type != "cpu":
         return WHOLE_FRAMES
     threads = torch.get_num_threads()
-    workers = threads if threads >= PARALLEL_FROM else 1
-    return ExecutionPolicy(strip_pixels=STRIP_PIXELS_PER_THREAD * threads, workers=workers, lookup_chunk=LOOKUP_CHUNK,
-                           reads_values=True, filters_as_kernels=False, histogram_tables=CPU_HISTOGRAM_TABLES,
+    return ExecutionPolicy(strip_pixels=STRIP_PIXELS_PER_THREAD * threads, reads_values=True, filters_as_kernels=False, histogram_tables=CPU_HISTOGRAM_TABLES,
                            histogram_row_groups=threads, resampling_matrix_side=RESAMPLING_MATRIX_SIDE["cpu"])
 
 
@@ -204,3 +185,24 @@ def readable(value) -> bool:
     if not isinstance(value, torch.Tensor):
         return True
     return not is_tracing() and policy_for(value.device).reads_values
+
+
+@contextlib.contextmanager
+def one_thread():
+    """Run the block with one intra-op CPU thread, then restore the count (thread-local under OpenMP and MKL).
+
+    Examples:
+        >>> import torch
+        >>> before = torch.get_num_threads()
+        >>> with one_thread():
+        ...     torch.get_num_threads()
+        1
+        >>> torch.get_num_threads() == before
+        True
+    """
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)
