@@ -178,9 +178,12 @@ def _unity_blur_in_one_kernel(light: torch.Tensor) -> torch.Tensor:
     return F.conv2d(padded.reshape((-1, 1) + padded.shape[-2:]), _blur_kernel_2d(light.device, light.dtype)).reshape(light.shape)
 
 
+@unity_blur.variant("planes")
 @unity_blur.variant("host")
 def _unity_blur_by_shifts(light: torch.Tensor) -> torch.Tensor:
-    """On the CPU, eager: sums of shifted views (:func:`mirror_filter`)."""
+    """On the CPU, eager: sums of shifted views (:func:`mirror_filter`). Compiling too, on every device: a convolution's
+    backend is chosen by its sizes (oneDNN from a batch of 16 on the CPU), and the compiled graph would keep that choice
+    as a guard on the batch, compiling again for a last, smaller batch; sums of views are one fused loop for any size."""
     return mirror_filter(light, UNITY_BLUR_WEIGHTS)
 
 

@@ -95,13 +95,20 @@ def _yc(r: torch.Tensor, g: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
 
 
 def _rgb_hue_degrees(rgb: torch.Tensor) -> torch.Tensor:
-    """ACES ``rgb_2_hue`` in [0, 360): ``atan2(sqrt(3)(g - b), 2r - g - b)``; 0 for neutrals."""
+    """ACES ``rgb_2_hue`` in [0, 360): ``atan2(sqrt(3)(g - b), 2r - g - b)``; 0 for neutrals.
+
+    Where ``x² + y²`` is below the dtype's smallest normal the hue passes no gradient: atan2's derivative,
+    ``(x, -y) / (x² + y²)``, is then 0/0 or beyond the dtype (a float32 pixel of 2.3e-23 gave NaN on every channel).
+    Only pixels whose saturation is 0 get there: their channels differ by less than a step of a channel above the
+    saturation's floor (a float32 step of 1e-10 is 6.9e-18, the hue's ``sqrt(tiny)`` 1.1e-19), and the red modifier
+    multiplies the hue's weight by that saturation. The values stay ``atan2``'s.
+    """
     r, g, b = rgb.split(1, dim=-3)
     y = 3.0**0.5 * (g - b)
     x = 2.0 * r - g - b
-    neutral_pixel = (x == 0) & (y == 0)
-    hue = torch.atan2(y, where(neutral_pixel, 1.0, x)) * (180.0 / math.pi)  # rad2deg has no ONNX export
-    hue = where(neutral_pixel, 0.0, hue)
+    x = where((x == 0) & (y == 0), 1.0, x)  # neutral: 0°
+    flat = torch.addcmul(x * x, y, y) <= torch.finfo(x.dtype).tiny
+    hue = torch.atan2(torch.where(flat, y.detach(), y), torch.where(flat, x.detach(), x)) * (180.0 / math.pi)  # rad2deg has no ONNX export
     return torch.where(hue < 0, hue + 360.0, hue)
 
 
