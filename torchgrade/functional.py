@@ -178,12 +178,3 @@ __all__ = [
     "apply_lut",
 ]
 
-
-def __getattr__(name: str):
-    if name == "log_contrast":  # OpenColorIO's log contrast, named apart from Unity's (grading.steps.log_contrast)
-        import warnings
-
-        warnings.warn("torchgrade.functional.log_contrast is now primary_log_contrast; the old name goes in the next release",
-                      DeprecationWarning, stacklevel=2)
-        return primary_log_contrast
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

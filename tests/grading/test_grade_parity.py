@@ -361,7 +361,7 @@ def test_primary_grade_matches_opencolorio(style, index):
 
 def test_primary_defaults_are_opencolorio_defaults_and_identity_returns_the_input():
     for style in ("linear", "log"):
-        assert OCIO.GradingPrimary(OCIO_STYLE[style]).pivot == pytest.approx(tg.primary.DEFAULT_PIVOT[style])
+        assert OCIO.GradingPrimary(OCIO_STYLE[style]).pivot == pytest.approx(tg.grading.primary.DEFAULT_PIVOT[style])
         image = torch.rand(2, 3, 4, 4)
         grade = tg.PrimaryGrade(style, contrast=(1.0, 1.0, 1.0), pivot=0.3)
         assert grade.is_identity and grade(image) is image

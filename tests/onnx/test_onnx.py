@@ -9,6 +9,7 @@ import pytest
 import torch
 
 import torchgrade as tg
+from torchgrade.base.images import sanitize
 from torchgrade.onnx import export, grade_feeds, node_count, session, verify
 from torchgrade.onnx.verify import graph_nodes
 
@@ -163,9 +164,8 @@ def test_grading_controls_as_inputs_per_sample(exported):
 def test_bad_options_raise(tmp_path):
     with pytest.raises(ValueError, match="lut_backend"):
         export(tg.ToneMap(), tmp_path / "x.onnx", lut_backend="texture")
-    with pytest.warns(DeprecationWarning, match="'slices'"):  # the former name of the slices backend
-        form = tg.LUT3D(tg.lut.identity_table(3)).export_form("trilinear", "strip")
-    assert form.grid is tg.lut.kernels.trilinear_slices_lookup
+    with pytest.raises(ValueError, match="lut_backend must be one of 'slices'"):
+        tg.LUT3D(tg.lut.identity_table(3)).export_form("trilinear", "strip")
     with pytest.raises(ValueError, match="opset >= 20"):
         export(tg.PostFX(lut=LUT), tmp_path / "x.onnx", lut_backend="volume", opset=17)
     with pytest.raises(ValueError, match="needs a ColorGrade"):
@@ -176,7 +176,7 @@ class _NonFinite(torch.nn.Module):
     """The non-finite policy, and ``nan_to_num`` with replacements of its own for the infinities."""
 
     def forward(self, image):
-        return tg.core.sanitize(image) + torch.nan_to_num(image, nan=1.0, posinf=5.0, neginf=-7.0)
+        return sanitize(image) + torch.nan_to_num(image, nan=1.0, posinf=5.0, neginf=-7.0)
 
 
 def test_nan_to_num_exports_without_float64_and_matches_pytorch(tmp_path):

@@ -60,7 +60,7 @@ from ..output.layer import LookLUT
 from ..output.look_lut import look_lut
 from ..runtime import DeferredCheck, in_strips
 from ..runtime.checks import check_eagerly
-from .inputs import SRGB_TOLERANCE, check_srgb_peak, look_stage  # noqa: F401 (SRGB_TOLERANCE: its former path)
+from .inputs import check_srgb_peak, look_stage
 from .per_sample import tonemap_per_sample
 from .ranges import (
     BLOOM_CONTROLS,

@@ -10,6 +10,7 @@ from the same tables, so a range is written in exactly one place.
 
 Examples:
     >>> import torch
+    >>> from torchgrade.base.controls import Control
     >>> class Gain(Stage):
     ...     controls = {"gain": Control(1.0, (0.0, 10.0))}
     ...     def __init__(self, gain=1.0):
@@ -37,8 +38,7 @@ import torch
 from torch import nn
 
 from .config import config_value
-from .controls import KINDS, Control, check_given, controls_signature, digit_count, in_state_check, plain  # noqa: F401 (their former path)
-from .controls import refuse_unknown
+from .controls import digit_count, in_state_check, plain, refuse_unknown
 from .images import check_image, full_precision, warn_if_eight_bit, with_alpha
 from .params import is_constant
 from ..runtime import DeferredCheck, in_strips

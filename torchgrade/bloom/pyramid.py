@@ -31,14 +31,9 @@ import torch.nn.functional as F
 
 from ..runtime import device_cached, policy_for
 from ..runtime.variants import formula
-from .blur import ANAMORPHIC_TAPS, BLUR_SIGMA, BLUR_TAPS, UNITY_BLUR_WEIGHTS, anamorphic_sigma, mirror_pad  # noqa: F401 (their former path)
 from .blur import mirror_filter, mirrored, pyramid_blur, sliced, symmetric_filter
 
-__all__ = [
-    "UNITY_BLUR_WEIGHTS", "BLUR_TAPS", "BLUR_SIGMA", "ANAMORPHIC_TAPS", "SMOOTHING", "BSPLINE_AFTER_BILINEAR",
-    "pyramid_depth", "active_levels", "halve", "expand", "mirror_pad", "mirror_filter", "pyramid_blur",
-    "anamorphic_sigma", "upsample", "glow_pyramid",
-]
+__all__ = ["SMOOTHING", "BSPLINE_AFTER_BILINEAR", "pyramid_depth", "active_levels", "halve", "expand", "upsample", "glow_pyramid"]
 
 
 SMOOTHING = {2: (1 / 4, 2 / 4, 1 / 4), 4: (1 / 8, 2 / 8, 2 / 8, 2 / 8, 1 / 8)}

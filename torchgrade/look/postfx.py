@@ -43,7 +43,6 @@ from typing import Optional
 import torch
 from torch import nn
 
-from .._moved import OLD_CLASS_PATHS
 from ..base.config import load_config
 from ..base.images import check_image, with_alpha
 from ..base.stage import on_nan_free
@@ -321,8 +320,6 @@ SAFE_GLOBALS = (PostFX, LUT3D, ErrorReport, ConvolutionBloom, *STAGES.values())
 torchgrade is imported, so ``torch.load(path, weights_only=True)`` reads back a ``torch.save(look)``."""
 
 torch.serialization.add_safe_globals(list(SAFE_GLOBALS))
-torch.serialization.add_safe_globals([(cls, old) for cls in SAFE_GLOBALS for old, new in OLD_CLASS_PATHS.items()
-                                      if new == f"{cls.__module__}.{cls.__qualname__}"])  # files saved before the move
 
 
 def _through(stages, image: torch.Tensor, dt) -> torch.Tensor:
