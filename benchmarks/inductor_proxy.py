@@ -50,7 +50,7 @@ def generated_code(module: torch.nn.Module, training: bool = False, budget: floa
     with the activation memory ``budget``."""
     from torch._inductor.utils import run_and_get_code
 
-    torch._dynamo.reset()
+    torch.compiler.reset()
     image = tg.scene.demo_scene(*FRAME[2:])[None].contiguous().requires_grad_(training)
     if training:
         compiled = tg.compile(module, dynamic=False, activation_memory_budget=budget)

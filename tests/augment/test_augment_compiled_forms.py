@@ -84,7 +84,7 @@ def test_a_compiled_layer_takes_a_generator_as_an_eager_one_does(monkeypatch, na
     capture alone (backend "eager", ``fullgraph=True``): the capture is what refused the generator."""
     real = torch.compile
     monkeypatch.setattr(torch, "compile", lambda *args, options=None, **kwargs: real(*args, **{**kwargs, "backend": "eager"}))
-    torch._dynamo.reset()
+    torch.compiler.reset()
     layer, images = tg.RandomPostFX(**LAYERS[name]), _images(name).float()
     compiled = tg.compile(layer)
     with torch.no_grad():

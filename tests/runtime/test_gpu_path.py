@@ -147,7 +147,7 @@ def test_inductor_compiles_the_cinematic_look_without_matrix_calls_in_few_kernel
     from torch._inductor import metrics
     from torch._inductor.utils import run_and_get_code
 
-    torch._dynamo.reset()
+    torch.compiler.reset()
     look = tg.PostFX.from_config(CINEMATIC).eval()
     compiled = tg.compile(look)
     image = torch.rand(1, 3, 64, 96) * 8
@@ -188,7 +188,7 @@ def test_inductor_compiles_a_chain_on_planes_into_one_pass_that_writes_only_the_
     once (on frames, ``ToneMap("aces")`` wrote 6 and the grade 5: ``benchmarks/results/inductor_proxy.md``)."""
     from torch._inductor.utils import run_and_get_code
 
-    torch._dynamo.reset()
+    torch.compiler.reset()
     image = torch.rand(1, 3, 64, 96, generator=torch.Generator().manual_seed(0)) * 8
     with torch.no_grad():
         out, code = run_and_get_code(torch.compile(PLANES_CHAINS[name](), fullgraph=True), image)
@@ -204,7 +204,7 @@ def test_inductor_compiles_the_augmentation_into_one_pass_that_writes_only_the_o
     (it wrote 2.33 frames an image when the grade joined its planes and the output was encoded as one frame)."""
     from torch._inductor.utils import run_and_get_code
 
-    torch._dynamo.reset()
+    torch.compiler.reset()
     layer = tg.RandomPostFX(contrast=30, saturation=30, hue_shift=20, post_exposure=0.5, input_space="srgb", p=0.5)
     images = torch.rand(4, 3, 64, 96, generator=torch.Generator().manual_seed(0))
     layer(images, generator=torch.Generator().manual_seed(1))
@@ -224,7 +224,7 @@ def captured_graph(module: torch.nn.Module, image: torch.Tensor) -> torch.fx.Gra
         graphs.append(graph)
         return graph.forward
 
-    torch._dynamo.reset()
+    torch.compiler.reset()
     with torch.no_grad():
         torch.compile(module, fullgraph=True, backend=keep)(image)
     return graphs[0]
@@ -263,7 +263,7 @@ GRAPHS = {
 def test_every_stage_and_look_is_captured_as_one_graph(name, eager_first):
     """Dynamo alone (backend "eager": the capture is what can break); ``fullgraph=True`` raises at a graph break.
     Captured fresh, and after an eager frame, as a user compiles a module after trying it: its caches are filled then."""
-    torch._dynamo.reset()
+    torch.compiler.reset()
     module = GRAPHS[name]()
     image = torch.rand(2, 3, 24, 32) * 4
     with torch.no_grad():

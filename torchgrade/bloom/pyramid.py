@@ -76,11 +76,9 @@ def pyramid_depth(height: int, width: int, max_iterations: int, downscale_limit:
     return depth
 
 
-@formula
 def active_levels(image: torch.Tensor, max_iterations: int, downscale_limit: int) -> torch.Tensor:
-    """:func:`pyramid_depth` as a 0-d tensor: while tracing, computed from ``image``'s runtime shape (an exported
-    graph keeps it symbolic); otherwise made once per frame size on ``image``'s device, so that the selects it drives
-    copy nothing from the host (``torch.where`` copies a CPU condition to the device at every call).
+    """:func:`pyramid_depth` as a 0-d tensor on ``image``'s device, computed from its sizes as tensors (a traced graph
+    keeps them symbolic: an exported model counts the levels of each frame it is given).
 
     Level ``n`` counts when ``floor(side / 2^(n+1)) >= downscale_limit`` for both sides, that is when
     ``min(height, width) >= downscale_limit · 2^(n+1)``.
@@ -89,20 +87,9 @@ def active_levels(image: torch.Tensor, max_iterations: int, downscale_limit: int
         >>> int(active_levels(torch.zeros(1, 3, 1080, 1920), 16, 2))
         8
     """
-    return _levels_on(*image.shape[-2:], max_iterations, downscale_limit, image.device)
-
-
-@active_levels.variant("graph")
-def _active_levels_traced(image: torch.Tensor, max_iterations: int, downscale_limit: int) -> torch.Tensor:
-    """From the image's shape as a tensor, so that a traced graph keeps it symbolic."""
-    smaller_side = torch._shape_as_tensor(image)[-2:].min()
-    thresholds = downscale_limit * 2 ** torch.arange(2, max_iterations + 2)
-    return (smaller_side >= thresholds).sum()
-
-
-@device_cached
-def _levels_on(height: int, width: int, max_iterations: int, downscale_limit: int, device: torch.device) -> torch.Tensor:
-    return torch.tensor(pyramid_depth(height, width, max_iterations, downscale_limit), device=device)
+    height, width = (torch.as_tensor(side, device=image.device) for side in image.shape[-2:])
+    thresholds = downscale_limit * 2 ** torch.arange(2, max_iterations + 2, device=image.device)
+    return (torch.minimum(height, width) >= thresholds).sum()
 
 
 def _doubles(small, large) -> bool:

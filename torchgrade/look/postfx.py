@@ -335,11 +335,6 @@ def _through(stages, image: torch.Tensor, dt) -> torch.Tensor:
     for name, stage in stages:
         args = (dt,) if SLOT[name].timed else ()
         out = on_nan_free(stage, image, *args) if made and not is_tracing() else stage(image, *args)
-        made = made or not _shares_base(out, image)
+        made = made or out is not image
         image = out
     return image
-
-
-def _shares_base(a: torch.Tensor, b: torch.Tensor) -> bool:
-    """Whether ``a`` and ``b`` are the same tensor or views of the same one."""
-    return (a if a._base is None else a._base) is (b if b._base is None else b._base)

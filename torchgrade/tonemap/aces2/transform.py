@@ -155,8 +155,9 @@ def _output(peak: float, limiting: str) -> Aces2Output:
 
 
 def prepare_output(peak: float, limiting: str) -> Prepared:
-    """Build (once) the tables of ``(peak, limiting)``, outside any ONNX trace (which would record their search), and
-    keep them while the returned :class:`Prepared` lives (and while they are among the :data:`MAX_BUILT` built last).
+    """Build (once) the tables of ``(peak, limiting)`` and keep them while the returned :class:`Prepared` lives (and
+    while they are among the :data:`MAX_BUILT` built last). A stage prepares its tables when its controls are set, so
+    that an ONNX trace or a compiler finds them built (a graph keeps their values as constants, not their search).
 
     Examples:
         >>> prepare_output(100.0, "rec709").output is prepare_output(100.0, "rec709").output
@@ -166,13 +167,7 @@ def prepare_output(peak: float, limiting: str) -> Prepared:
     with _LOCK:
         built = _BUILT.get(key)
         if built is None:
-            tracing = torch._C._get_tracing_state()
-            torch._C._set_tracing_state(None)
-            try:
-                built = Aces2Output(*key)
-            finally:
-                torch._C._set_tracing_state(tracing)
-            _BUILT[key] = built
+            built = _BUILT[key] = Aces2Output(*key)
             held = {prepared.key for prepared in _HELD}
             for old in [old for old in _BUILT if old not in held and old != key][:max(len(_BUILT) - MAX_BUILT, 0)]:
                 del _BUILT[old]
