@@ -1,6 +1,6 @@
 """RandomPostFX as a compiler is given it, run eagerly: its grade on the image's planes and the output finished plane by
-plane (``ExecutionPolicy.pixel_planes``), against its eager form on the same draw, in outputs and gradients, on ordinary
-and extreme values. (That Inductor then writes only the output: ``tests/runtime/test_gpu_path.py``.)"""
+plane (:func:`~torchgrade.runtime.strips.pixelwise`), against its eager form on the same draw, in outputs and
+gradients, on ordinary and extreme values. (That Inductor then writes only the output: ``tests/runtime/test_gpu_path.py``.)"""
 
 import pytest
 import torch

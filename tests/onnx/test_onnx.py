@@ -141,8 +141,14 @@ def test_grading_controls_as_inputs_serve_many_looks(exported):
     for shape in SHAPES:
         image = hdr(shape)
         feeds = {"image": image.numpy(), **{k: v.numpy() for k, v in grade_feeds(baked_look.grade, shape[0]).items()}}
-        from_inputs = runner.run(None, feeds)[0]
-        np.testing.assert_allclose(from_inputs, baked_runner.run(None, {"image": image.numpy()})[0], atol=TOLERANCE, rtol=0)
+        from_inputs, baked = runner.run(None, feeds)[0], baked_runner.run(None, {"image": image.numpy()})[0]
+        np.testing.assert_allclose(from_inputs, baked, atol=3 * TOLERANCE, rtol=0)
+        # the two graphs round apart in float32 (the baked one folds its matrices in float64): each as near the float64
+        # look as the other, and as eager float32 is
+        with torch.no_grad():
+            exact = tg.PostFX(grade=FULL_GRADE, tonemap="neutral").double()(image.double()).numpy()
+            eager = baked_look(image).numpy()
+        assert np.abs(from_inputs - exact).max() <= max(np.abs(baked - exact).max(), np.abs(eager - exact).max()) + 1e-5
         feeds.update({k: v.numpy() for k, v in grade_feeds(other_look.grade, shape[0]).items()})
         with torch.no_grad():
             np.testing.assert_allclose(runner.run(None, feeds)[0], other_look(image).numpy(), atol=STEP_TOLERANCE, rtol=0)

@@ -1,6 +1,6 @@
 """Per-pixel stages run in strips of rows on the CPU (``torchgrade.runtime.in_strips``): the whole frame's values to
-float32 rounding, and the whole frame whenever autograd records the call or the device is not the CPU; a LUT's pixel
-runs on worker threads give the serial runs' values."""
+float32 rounding, with or without autograd (the same code records gradients), and the whole frame where the device is
+not the CPU; a LUT's pixel runs on worker threads give the serial runs' values."""
 
 import multiprocessing
 import os
@@ -39,18 +39,25 @@ def test_strips_give_the_whole_frames_values(name, desk, monkeypatch):
     torch.testing.assert_close(strips, whole, rtol=1e-5, atol=1e-6)  # a matrix product may block a strip differently
 
 
-def test_strips_are_skipped_when_autograd_records(desk, monkeypatch):
-    monkeypatch.setattr(policy, "STRIP_PIXELS_PER_THREAD", 997 // torch.get_num_threads())
+def test_strips_record_gradients_as_the_whole_frame_does(desk, monkeypatch):
+    """A frame that records gradients runs on strips too (eager and autograd run the same code), joined by a
+    concatenation autograd records: the whole frame's values and gradients."""
+    layer, image = STAGES["grade"](), desk[..., :64, :64]
+
+    def run():
+        x = image.clone().requires_grad_()
+        out = layer(x)
+        out.square().sum().backward()
+        return out.detach(), x.grad
+
+    monkeypatch.setattr(policy, "STRIP_PIXELS_PER_THREAD", 1 << 20)  # one strip: the whole frame
+    whole = run()
     calls = []
-    image = desk[..., :64, :64].clone().requires_grad_()
-    out = runtime.in_strips(lambda x: calls.append(x.shape) or x * 2.0, image)
-    assert calls == [image.shape] and out.requires_grad
-    learnable = torch.nn.Parameter(torch.tensor(2.0))
-    runtime.in_strips(lambda x: calls.append(x.shape) or x * learnable, desk[..., :64, :64], (learnable,))
-    assert calls[-1] == image.shape
-    with torch.no_grad():
-        runtime.in_strips(lambda x: calls.append(x.shape) or x, desk[..., :64, :64], (learnable,))
+    monkeypatch.setattr(policy, "STRIP_PIXELS_PER_THREAD", 997 // torch.get_num_threads())
+    assert runtime.in_strips(lambda x: calls.append(x.shape) or x, image.clone().requires_grad_()).requires_grad
     assert len(calls) > 3
+    for stripped, expected in zip(run(), whole):
+        torch.testing.assert_close(stripped, expected, rtol=1e-5, atol=1e-6)
 
 
 def test_lut_runs_on_worker_threads_give_the_serial_runs_values_and_leave_the_callers_threads_alone(desk, monkeypatch):

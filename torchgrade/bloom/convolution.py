@@ -180,6 +180,8 @@ class DirectConvolutionBloom(nn.Module):
         True
     """
 
+    takes_nan_free = True  # as the stage (Stage.takes_nan_free)
+
     def __init__(self, stage: ConvolutionBloom):
         super().__init__()
         self.stage = stage

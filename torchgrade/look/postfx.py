@@ -45,10 +45,8 @@ from torch import nn
 
 from ..base.config import load_config
 from ..base.images import check_image, with_alpha
-from ..base.stage import on_nan_free
 from ..bloom import ConvolutionBloom
 from ..lut import INTERPOLATIONS, LUT3D, ErrorReport, bake_lut
-from ..runtime import is_tracing
 from .slots import SLOT, SLOTS, STAGES, build_stage, is_identity_stage
 
 __all__ = ["PostFX", "SAFE_GLOBALS"]
@@ -326,15 +324,15 @@ def _through(stages, image: torch.Tensor, dt) -> torch.Tensor:
     """``image`` through ``(slot name, stage)`` pairs in order, ``dt`` to those that keep state between frames.
 
     A stage's output holds no NaN (``tests/library/test_extremes.py``), so a stage whose input another stage made is
-    told so (:func:`~torchgrade.base.stage.on_nan_free`) and skips its input's NaN pass, one frame pass each. A stage that
-    hands its input back (an identity setting, a frame too small for a bloom level) makes nothing: its output is as
-    trusted as its input was. Not while tracing: a compiled look keeps every stage's whole policy (Inductor fuses it),
-    and an export decides it in its graph.
+    told so (``nan_free=True``, :attr:`~torchgrade.base.stage.Stage.takes_nan_free`) and skips its input's NaN pass, one
+    frame pass each. A stage that hands its input back (an identity setting, a frame too small for a bloom level)
+    makes nothing: its output is as trusted as its input was.
     """
     made = False
     for name, stage in stages:
         args = (dt,) if SLOT[name].timed else ()
-        out = on_nan_free(stage, image, *args) if made and not is_tracing() else stage(image, *args)
+        trusted = {"nan_free": True} if made and getattr(stage, "takes_nan_free", False) else {}
+        out = stage(image, *args, **trusted)
         made = made or out is not image
         image = out
     return image

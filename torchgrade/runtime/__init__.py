@@ -13,8 +13,8 @@ from .compile import ACTIVATION_MEMORY_BUDGET, CPU_OPTIONS, compile, compile_mod
 from .constants import affine, constant, device_cached, folded, scalar, values_of, where
 from .recording import is_exporting, is_tracing, untracked
 from .policy import LOOKUP_CHUNK, PARALLEL_FROM, STRIP_PIXELS_PER_THREAD, ExecutionPolicy, policy_for
-from .strips import in_strips
+from .strips import in_strips, pixelwise
 from .workers import run_pieces
 
-__all__ = ["ExecutionPolicy", "policy_for", "STRIP_PIXELS_PER_THREAD", "PARALLEL_FROM", "LOOKUP_CHUNK", "in_strips", "run_pieces", "constant", "scalar", "where", "affine", "values_of", "device_cached", "folded",
+__all__ = ["ExecutionPolicy", "policy_for", "STRIP_PIXELS_PER_THREAD", "PARALLEL_FROM", "LOOKUP_CHUNK", "in_strips", "pixelwise", "run_pieces", "constant", "scalar", "where", "affine", "values_of", "device_cached", "folded",
            "compile", "compile_mode", "CPU_OPTIONS", "ACTIVATION_MEMORY_BUDGET", "DeferredCheck", "is_tracing", "is_exporting", "untracked"]

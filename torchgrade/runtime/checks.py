@@ -1,7 +1,7 @@
 """Checks of values: range checks of learnable controls on a GPU, without waiting for it, and none in a recorded graph.
 
-A recorded graph (traced, compiled, exported) carries no checks: :class:`DeferredCheck` and :func:`check_eagerly` do
-nothing while one is recorded, so no stage asks.
+A recorded graph (traced, compiled, exported) carries no checks: :class:`DeferredCheck` and :func:`warn_if_eight_bit`
+do nothing while one is recorded, so no stage asks.
 
 A learnable control is checked against its range before every forward (an optimiser may have moved it out).
 On the CPU the check reads the value directly. On CUDA a read would wait for every queued kernel, once per
@@ -23,25 +23,57 @@ from __future__ import annotations
 
 import collections
 import threading
+import warnings
 from typing import Callable, NamedTuple, Optional
 
 import torch
 
+from .policy import readable
 from .recording import is_tracing
+from .workers import one_thread
 
-__all__ = ["DeferredCheck", "check_eagerly"]
+__all__ = ["DeferredCheck", "warn_if_eight_bit", "EIGHT_BIT_ROWS", "EIGHT_BIT_LEVELS"]
 
 
-def check_eagerly(check: Callable, *args, **kwargs) -> None:
-    """``check(*args, **kwargs)``, except while a graph is recorded (it carries no checks; a check of a tensor's value
-    would break a compiler's graph).
+EIGHT_BIT_ROWS = 8
+"""Rows :func:`warn_if_eight_bit` reads at most (at least half as many), evenly spaced, of the colour of the first image
+of a batch: whole rows, read in order (values spread over the frame would fetch a cache line each). Its cost against
+a copy of the frame: ``benchmarks/results/cpu_forms.md``, "8-bit check of a frame"."""
+
+
+EIGHT_BIT_LEVELS = 16
+"""Different whole numbers from which a sample reads as an 8-bit picture: a photograph's 8 rows hold far more (the
+sample pictures of the suite: every one above 60), a synthetic HDR frame of whole-number lamps on black a handful."""
+
+
+def warn_if_eight_bit(image: torch.Tensor) -> None:
+    """Warn when a linear ``image`` looks like 0..255 data: a sample of it holds whole numbers only, at least
+    :data:`EIGHT_BIT_LEVELS` different ones, none negative, the largest in (1, 255]. Such floats taken as light come out
+    nearly white; an HDR frame holds fractions, and a frame of a few whole levels (a test pattern of lamps of 8 and
+    60 on black) is no 8-bit picture. Only where the device's policy reads values (the CPU,
+    :func:`~torchgrade.runtime.policy.readable`): on a GPU the read would wait for the device at every frame.
 
     Examples:
-        >>> check_eagerly(lambda x: print("checked", x), 3)
-        checked 3
+        >>> import warnings
+        >>> with warnings.catch_warnings(record=True) as caught:
+        ...     warnings.simplefilter("always")
+        ...     warn_if_eight_bit(torch.arange(48.0).reshape(3, 4, 4) * 5)
+        >>> "divide by 255" in str(caught[0].message)
+        True
     """
-    if not is_tracing():
-        check(*args, **kwargs)
+    first = image.detach()[(0,) * (image.dim() - 3)][:3]  # colour, without an alpha
+    sample = first[:, :: max(1, first.shape[-2] // EIGHT_BIT_ROWS)]
+    if sample.numel() < EIGHT_BIT_LEVELS or not readable(image):  # too few values to hold that many levels
+        return
+    with one_thread():  # tens of thousands of values: a parallel region's barrier would cost more on a loaded machine
+        low, high = torch.stack(sample.aminmax()).tolist()  # one read
+        eight_bit = (0.0 <= low < high and 1.0 < high <= 255.0 and torch.equal(sample, sample.round())
+                     and sample.unique().numel() >= EIGHT_BIT_LEVELS)  # counted only where the rest holds: almost never
+    if eight_bit:
+        warnings.warn(
+            f"the image looks like 0..255 data (whole numbers up to {high:g}), but stages take linear light: divide "
+            "by 255, and decode sRGB-encoded pictures (PNG, JPEG) with tg.color.srgb_to_linear or grade them with "
+            'RandomPostFX(input_space="srgb")', UserWarning, stacklevel=3)
 
 
 class _Copy(NamedTuple):

@@ -24,7 +24,7 @@ import numbers
 
 import torch
 
-from .recording import is_tracing, untracked
+from .recording import is_tracing
 
 __all__ = ["constant", "scalar", "where", "is_plain_number", "affine", "values_of", "device_cached", "folded", "CACHED_CONSTANTS"]
 
@@ -163,15 +163,13 @@ def device_cached(make):
     return call
 
 
-def folded(function, *arguments, like: torch.Tensor, host=False):
+def folded(function, *arguments, like: torch.Tensor, host: bool = False):
     """``function(*arguments, like=like)``, a small tensor of the controls (a colour matrix, gains), made once.
 
     With plain controls (numbers, strings, nested sequences, ``None``) the result is computed once in float64 on
     the CPU and kept, in ``like``'s dtype, on its device (:func:`constant`): a frame then launches nothing for it.
     With ``host``, kept on the CPU instead (:func:`scalar`), for a caller that takes its values as 0-d operands of
-    two-operand operations; ``host="untracked"`` only where nothing records how ``like`` is used
-    (:func:`~torchgrade.runtime.recording.untracked`: a backward through such an operand, a power's exponent, would copy
-    it to the device at every step). A tensor among the arguments (a per-sample or learnable control), or tracing, computes it
+    two-operand operations. A tensor among the arguments (a per-sample or learnable control), or tracing, computes it
     on ``like`` as called.
 
     Examples:
@@ -191,8 +189,7 @@ def folded(function, *arguments, like: torch.Tensor, host=False):
     except TypeError:
         return function(*arguments, like=like)
     values = _float64_values(function, key)
-    on_host = untracked(like) if host == "untracked" else host
-    return None if values is None else (scalar if on_host else constant)(values, like)
+    return None if values is None else (scalar if host else constant)(values, like)
 
 
 @functools.lru_cache(maxsize=CACHED_CONSTANTS)

@@ -75,14 +75,3 @@ def is_differentiated(value: torch.Tensor) -> bool:
         (False, True)
     """
     return forward_ad.unpack_dual(value).tangent is not None
-
-
-def sizes_are_symbolic() -> bool:
-    """Whether sizes are symbolic to Python: while a graph is traced for ONNX (``torch.jit`` or an export), every size
-    takes the general forms. A compiler's sizes are ints or guarded symbols: it takes the forms of particular sizes.
-
-    Examples:
-        >>> sizes_are_symbolic()
-        False
-    """
-    return torch.jit.is_tracing() or is_exporting()
