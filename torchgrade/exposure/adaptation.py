@@ -323,12 +323,15 @@ def auto_exposure(
 
 
 def _check_given(controls: dict, dt) -> None:
-    """:func:`auto_exposure`'s controls and step checked as the stage checks them, where they are plain values: a
-    tensor's values are not read (on a GPU each read would wait for the device; a stage checks its own when they are
-    set, and its learnable ones before every forward)."""
+    """:func:`auto_exposure`'s controls and step checked as the stage checks them, where they are plain values, the mask
+    and the curve in the forms the operator takes (written back into ``controls``): a tensor's values are not read (on
+    a GPU each read would wait for the device; a stage checks its own when they are set, and its learnable ones before
+    every forward)."""
     for name, value in controls.items():
         if not isinstance(value, torch.Tensor):
-            checked_control(name, value)
+            checked = checked_control(name, value)
+            if name in ("metering_mask", "compensation_curve"):
+                controls[name] = checked
     bounds = {name: controls[name] for name in BOUNDS}
     if not any(isinstance(value, torch.Tensor) for value in bounds.values()):
         check_bounds(**bounds)
