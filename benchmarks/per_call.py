@@ -6,8 +6,9 @@ guarded square root against ``torch.sqrt``.
 
 Each case times a loop of calls (a call takes microseconds, a timer's resolution less), the compared calls
 alternating round by round (:func:`benchmarks.common.interleaved_ms`); it reports the median time of a call and the
-median over rounds of the ratio to its peer, and the operations one call dispatches
-(:class:`torchgrade.testing.dispatch.DispatchCount`, what ``tests/runtime/test_per_call.py`` holds). Writes
+median over rounds of the ratio to its peer, the operations one call dispatches
+(:class:`torchgrade.testing.dispatch.DispatchCount`, what ``tests/runtime/test_per_call.py`` holds) and the Python
+functions it enters (the interpreter's share, which no operation count shows). Writes
 ``per_call.json`` and ``per_call.md`` to ``--out`` (default ``benchmarks/out``; the committed ones with
 ``--out benchmarks/results``).
 """
@@ -15,6 +16,7 @@ median over rounds of the ratio to its peer, and the operations one call dispatc
 from __future__ import annotations
 
 import statistics
+import sys
 
 import torch
 
@@ -66,10 +68,11 @@ def measure(quick: bool) -> list:
         calls = {"ours": repeated(ours, times), **({"peer": repeated(peer, times)} if peer else {})}
         timed = interleaved_ms(calls, rounds)
         row = {"case": name, "target": TARGETS[name], "ours_us": round(statistics.median(timed["ours"]) * 1000 / times, 1),
-               "operations": _operations(ours)}
+               "operations": _operations(ours), "python_calls": _python_calls(ours)}
         if peer:
             row.update(peer=peer_name, peer_us=round(statistics.median(timed["peer"]) * 1000 / times, 1),
-                       peer_operations=_operations(peer), ours_over_peer=round(median_ratio(timed, "ours", "peer"), 2))
+                       peer_operations=_operations(peer), peer_python_calls=_python_calls(peer),
+                       ours_over_peer=round(median_ratio(timed, "ours", "peer"), 2))
         rows.append(row)
         print(row, flush=True)
     return rows
@@ -84,6 +87,25 @@ def _operations(call) -> int:
     return counted.launches
 
 
+def _python_calls(call) -> int:
+    """The Python functions one call of ``call`` enters (after a first call), counted by ``sys.setprofile``: the
+    interpreter's share of a small call, which the operations' count leaves out."""
+    entered = 0
+
+    def count(frame, event, arg):
+        nonlocal entered
+        entered += event == "call"
+
+    with torch.no_grad():
+        call()
+        sys.setprofile(count)
+        try:
+            call()
+        finally:
+            sys.setprofile(None)
+    return entered
+
+
 def main(argv=None) -> int:
     parser = argument_parser(__doc__, QUICK)
     parser.add_argument("--threads", type=int, help="torch's intra-op threads (default: torch's own; a DataLoader worker runs 1)")
@@ -94,12 +116,14 @@ def main(argv=None) -> int:
     lines = ["# A call at training sizes", "",
              f"`{COMMAND}`{' --quick' if args.quick else ''}: median µs a call over alternating rounds "
              f"({torch.get_num_threads()} torch threads), the ratio the median over rounds of the two calls' times; "
-             "operations: those one call dispatches (`torchgrade.testing.dispatch.DispatchCount`).", "",
-             "| case | target | ours µs | operations | peer | peer µs | peer operations | ours / peer |",
-             "| --- | --- | ---: | ---: | --- | ---: | ---: | ---: |"]
+             "operations: those one call dispatches (`torchgrade.testing.dispatch.DispatchCount`); Python calls: the "
+             "Python functions it enters (`sys.setprofile`).", "",
+             "| case | target | ours µs | operations | Python calls | peer | peer µs | peer operations | peer Python calls | ours / peer |",
+             "| --- | --- | ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: |"]
     for row in rows:
-        lines.append(f"| {row['case']} | {row['target']} | {row['ours_us']} | {row['operations']} | {row.get('peer', '')} | "
-                     f"{row.get('peer_us', '')} | {row.get('peer_operations', '')} | {row.get('ours_over_peer', '')} |")
+        lines.append(f"| {row['case']} | {row['target']} | {row['ours_us']} | {row['operations']} | {row['python_calls']} | "
+                     f"{row.get('peer', '')} | {row.get('peer_us', '')} | {row.get('peer_operations', '')} | "
+                     f"{row.get('peer_python_calls', '')} | {row.get('ours_over_peer', '')} |")
     args.out.mkdir(parents=True, exist_ok=True)
     write_results(args.out, "per_call", {"command": COMMAND, "quick": args.quick, "rows": rows}, lines, COMMAND)
     return 0

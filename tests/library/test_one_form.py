@@ -28,3 +28,21 @@ def test_eager_and_autograd_compute_the_same_values(name, frame):
     recorded = stage(frame.clone().requires_grad_())
     assert recorded.requires_grad
     assert torch.equal(recorded.detach(), eager)
+
+
+def test_every_stage_takes_the_word_of_a_caller_that_knows_its_image_holds_no_nan():
+    """``Stage.takes_nan_free`` is declared, not read from a signature: every stage's ``forward`` takes ``nan_free``."""
+    import inspect
+    import sys
+
+    from torchgrade.base.stage import Stage
+
+    def kinds(base):  # the package's own (a docstring's example stage is not an attribute of its module)
+        for kind in base.__subclasses__():
+            if getattr(sys.modules[kind.__module__], kind.__qualname__, None) is kind:
+                yield kind
+            yield from kinds(kind)
+
+    assert len(list(kinds(Stage))) >= 10
+    refusing = [kind.__name__ for kind in kinds(Stage) if "nan_free" not in inspect.signature(kind.forward).parameters]
+    assert refusing == []
