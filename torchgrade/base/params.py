@@ -5,6 +5,7 @@
 
 from __future__ import annotations
 
+import functools
 import numbers
 from typing import Union
 
@@ -141,28 +142,43 @@ def check_choice(name: str, value, choices) -> None:
 
 
 def _flat(value) -> list:
-    """A number or nested sequence of numbers as a flat list of floats."""
-    return [float(item) for part in value for item in _flat(part)] if isinstance(value, (list, tuple)) else [float(value)]
+    """A number or nested sequence of numbers as a flat list of its numbers."""
+    return [item for part in value for item in _flat(part)] if isinstance(value, (list, tuple)) else [value]
 
 
 def is_constant(value, constant) -> bool:
     """True when ``value`` is a plain value (a number, or a sequence of numbers) equal to ``constant`` everywhere.
 
-    A tensor never is: learnable, per-sample or traced, its value may change, and reading it back would wait for a
-    device (a stage skips a step of a plain identity value, and computes a tensor's). Plain values are compared in
-    Python: a tensor made here would be traced while compiling.
+    A tensor never is, nor a sequence holding one: learnable, per-sample or traced, its value may change, and reading
+    it back would wait for a device (a stage skips a step of a plain identity value, and computes a tensor's). Plain
+    values are compared in Python (a tensor made here would be traced while compiling), a sequence once for each pair
+    of values (a stage asks of each of its controls at every call).
 
     Examples:
-        >>> is_constant((0.5, 0.5, 0.5), 0.5), is_constant(torch.tensor(0.5), 0.5)
-        (True, False)
+        >>> is_constant((0.5, 0.5, 0.5), 0.5), is_constant(torch.tensor(0.5), 0.5), is_constant([[1, 0], [0, 1]], ((1, 0), (0, 1)))
+        (True, False, True)
     """
-    if isinstance(value, numbers.Real) and isinstance(constant, numbers.Real):
-        return value == constant
-    if not isinstance(value, (numbers.Real, list, tuple)):
+    if _is_number(value):
+        if _is_number(constant):
+            return value == constant
+    elif not isinstance(value, (list, tuple)):
         return False
     try:
-        values, target = _flat(value), _flat(constant)
-    except (TypeError, ValueError):
+        return _equal_everywhere(value, constant)
+    except TypeError:  # a list: not hashable, compared as it is
+        return _equal_everywhere.__wrapped__(value, constant)
+
+
+def _is_number(value) -> bool:
+    """Whether ``value`` is a real number: a float or an int at once (``numbers.Real``'s check runs Python code)."""
+    return isinstance(value, (float, int)) or isinstance(value, numbers.Real)
+
+
+@functools.lru_cache(maxsize=256)
+def _equal_everywhere(value, constant) -> bool:
+    """:func:`is_constant` of plain values, one of them a sequence."""
+    values, target = _flat(value), _flat(constant)
+    if not all(isinstance(item, numbers.Real) for item in (*values, *target)):
         return False
     if len(values) == 1 or len(target) == 1:  # one number against many broadcasts
         return all(v == t for v in values for t in target)
