@@ -10,7 +10,8 @@ TORCH_PIN := torch==2.13.0
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 
-$(VENV)/.installed: pyproject.toml | $(BIN)/python
+# setup.py builds torchgrade/lut/lookup.c into the package (an editable install builds it in place).
+$(VENV)/.installed: pyproject.toml setup.py torchgrade/lut/lookup.c | $(BIN)/python
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet $(TORCH_PIN)
 	$(BIN)/python -m pip install --quiet -e ".[test]"

@@ -1,11 +1,10 @@
 """The eager CPU paths on this machine's threads: the cinematic look, its stages, ACES 2.0 and 33³ LUTs at 1920x1080,
 ``RandomPostFX`` on a 32x3x224x224 batch and the look's training step (forward and backward) on 4x3x256x384; with
 ``--compiled``, the look, its per-pixel stages, ``RandomPostFX`` and the training step through ``tg.compile`` (each
-compiles in the first, untimed round; ``--activation-memory-budget`` is passed to it). ``--cases`` times only the
-cases named.
+compiles in the first, untimed round). ``--cases`` times only the cases named.
 
     python benchmarks/bench_cpu_paths.py [--runs N] [--threads N] [--clock wall|cpu] [--compiled]
-        [--activation-memory-budget B] [--cases NAME ...] [--json FILE]
+        [--cases NAME ...] [--json FILE]
 
 Prints the median ms of each case (every round runs each case once: A B C A B C ...). It uses only the public API, so
 two versions of torchgrade can be compared by running it under each (``PYTHONPATH=<checkout>``) in turn; the
@@ -45,10 +44,9 @@ def training_step(look, batch: torch.Tensor):
     return step
 
 
-def cases(compiled: bool = False, activation_memory_budget: float | None = None) -> dict:
+def cases(compiled: bool = False) -> dict:
     """Every case: a call on a 1920x1080 frame (or a batch), its inputs made once; ``compiled``: the :data:`COMPILED`
-    ones, through ``tg.compile`` (with ``activation_memory_budget`` where one is given; ``None``: its default, so that
-    a checkout without the setting runs too)."""
+    ones, through ``tg.compile``."""
     image = tg.scene.demo_scene(1080, 1920)
     look = tg.PostFX.from_config(CINEMATIC).eval()
     grade = tg.ColorGrade(**CINEMATIC["grade"])
@@ -64,10 +62,8 @@ def cases(compiled: bool = False, activation_memory_budget: float | None = None)
     training_batch = torch.rand(4, 3, 256, 384, generator=torch.Generator().manual_seed(3)) * 4
     trained = tg.PostFX.from_config(CINEMATIC).eval()
     if compiled:
-        settings = {} if activation_memory_budget is None else {"activation_memory_budget": activation_memory_budget}
-        look, grade, tonemap, aces2, augment = (tg.compile(module, **settings) for module in (look, grade, tonemap, aces2, augment))
-        # its own sizes, fixed: with PyTorch's default a second size of PostFX (the look's frame first) compiles symbolic
-        trained = tg.compile(trained, dynamic=False, **settings)
+        look, grade, tonemap, aces2, augment = (tg.compile(module) for module in (look, grade, tonemap, aces2, augment))
+        trained = tg.compile(trained, dynamic=False)  # its own sizes, fixed, as the look's frame is (a class compiles apart)
     calls = {
         "cinematic look": lambda: look(image),
         "grade": lambda: grade(image),
@@ -90,16 +86,12 @@ def main(argv=None) -> None:
     parser.add_argument("--threads", type=int, default=None, help="torch threads (default: torch's)")
     parser.add_argument("--clock", choices=("wall", "cpu"), default="wall")
     parser.add_argument("--compiled", action="store_true", help="the look, its per-pixel stages, RandomPostFX and the training step through tg.compile")
-    parser.add_argument("--activation-memory-budget", type=float, default=None,
-                        help="passed to tg.compile, with --compiled (default: tg.compile's)")
     parser.add_argument("--cases", nargs="+", metavar="NAME", help="only these cases (default: every one)")
     args = parser.parse_args(argv)
-    if args.activation_memory_budget is not None and not args.compiled:
-        parser.error("--activation-memory-budget is tg.compile's: give --compiled too")
     if args.threads:
         torch.set_num_threads(args.threads)
     clock = time.perf_counter if args.clock == "wall" else time.process_time
-    calls = cases(args.compiled, args.activation_memory_budget)
+    calls = cases(args.compiled)
     unknown = set(args.cases or ()) - set(calls)
     if unknown:
         parser.error(f"unknown case(s) {sorted(unknown)}; the cases: {', '.join(calls)}")
@@ -114,7 +106,6 @@ def main(argv=None) -> None:
                     times[name].append((clock() - start) * 1e3)
     medians = {name: round(statistics.median(values), 2) for name, values in times.items()}
     print(json.dumps({"threads": torch.get_num_threads(), "clock": args.clock, "compiled": args.compiled,
-                      **({"activation_memory_budget": args.activation_memory_budget} if args.activation_memory_budget is not None else {}),
                       "torchgrade": str(Path(tg.__file__).parent),
                       "ms": medians}))
     if args.json:

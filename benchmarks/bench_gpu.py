@@ -22,7 +22,6 @@ Sections, each skipped once ``--budget`` seconds have passed (compiles are the s
 * ``cpu``: the look and the LUT on the host's cores, all of them against 2, and the LUT against OpenColorIO;
 * ``augment_compiled``: both augmentations compiled (kornia's takes over a minute to compile);
 * ``training_compiled``: the look's forward and backward through :func:`torchgrade.compile` against eager;
-* ``training_budget``: the same at ``tg.compile``'s activation memory budget against PyTorch's default.
 
 Writes ``gpu.json`` and ``gpu.md`` to ``--out`` (default ``benchmarks/out``; the committed ones with ``--out benchmarks/results``).
 """
@@ -198,23 +197,6 @@ def augmentations():
     ours = tg.RandomPostFX(contrast=30, saturation=30, hue_shift=20, post_exposure=0.5, input_space="srgb")
     jiggle = kornia.augmentation.ColorJiggle(brightness=0.2, contrast=0.3, saturation=0.3, hue=0.05, p=1.0)
     return ours, jiggle
-
-
-def section_training_budget(device):
-    """The look's compiled training step at ``tg.compile``'s activation memory budget against PyTorch's default (1.0),
-    alternating. Dynamo does not guard on the budget, so a graph compiled for one ``PostFX`` would serve the other:
-    the default's look is a subclass of ``PostFX``, which Dynamo compiles apart. The budget's step runs the graph
-    ``training_compiled`` compiled, where that section ran first: only the default's compile is recorded."""
-    batch = torch.rand(16, 3, 512, 512, device=device) * 4
-    at_default = type("PostFXAtTheDefaultBudget", (tg.PostFX,), {}).from_config(CINEMATIC).eval().to(device)
-    steps = {"budget": training_step(tg.compile(cinematic().to(device), dynamic=False), batch),
-             "default": training_step(tg.compile(at_default, dynamic=False, activation_memory_budget=1.0), batch)}
-    first_call_s(steps["budget"])
-    default_compile_s = first_call_s(steps["default"])
-    times = cuda_ms(steps, runs=10)
-    record("training", f"cinematic forward+backward 16x3x512x512 compiled, activation memory budget "
-           f"{tg.runtime.ACTIVATION_MEMORY_BUDGET} against 1.0", ms=times["budget"], default_ms=times["default"],
-           ratio=times["budget"] / times["default"], default_compile_s=default_compile_s)
 
 
 def section_augment(device):
@@ -393,7 +375,7 @@ def section_cpu(device):
 SECTIONS = {"floor": section_floor, "look": section_look, "profile": section_profile, "lut": section_lut,
             "augment": section_augment, "training": section_training, "stages": section_stages, "kernels": section_kernels,
             "forms": section_forms, "cpu": section_cpu, "augment_compiled": section_augment_compiled,
-            "training_compiled": section_training_compiled, "training_budget": section_training_budget}
+            "training_compiled": section_training_compiled}
 NEEDS_CUDA = set(SECTIONS) - {"cpu"}
 
 

@@ -3,19 +3,20 @@ quiet machine and with a second process loading every core.
 
 For each core count the rounds alternate, each running every method once on the same frame (float32, planar for
 torchgrade, packed RGB for OpenColorIO, the same .cube table): torchgrade's ``LUT3D`` as it runs by default (the
-compiled loop of ``torchgrade/lut/lookup.c`` on that many worker threads), the same with the compiled loop taken
-away (the torch form a machine without a C compiler runs), and OpenColorIO two ways: one ``applyRGB`` call on the
+operator ``torchgrade::lut_lookup``, whose CPU kernel is the C loop of ``torchgrade/lut/lookup.c`` built with the
+package, on that many of torch's threads), the same with the built loop taken away (the torch form an install
+built without a C compiler runs), and OpenColorIO two ways: one ``applyRGB`` call on the
 whole frame (what its CPU processor does with a frame: one thread), and the frame in 64 row strips spread over that
 many threads (its best here: a strip's buffers stay in cache, and its Python binding lets go of the GIL). The load is a
 child process multiplying 512x512 matrices on every core for the whole loaded part. The loaded part runs twice: in this
 process, and in a child process started with ``OMP_WAIT_POLICY=passive`` (the load keeps the default), because
-torchgrade's compiled loop runs on torch's OpenMP threads, which by default spin a while at the end of each parallel
+torchgrade's C loop runs on torch's OpenMP threads, which by default spin a while at the end of each parallel
 region, and on a loaded machine a spinning thread holds a core that a thread with work is waiting for. Each ratio is the median over
 rounds of torchgrade's time over OpenColorIO's in the same round. Two frames: uniform noise in [-0.05, 1.05] (every
 pixel in a different cell: the worst case for caches) and the demo scene (smooth, like footage).
 
-First use: a fresh process with an empty cache folder times its first lookup (the C file compiles), then a second
-fresh process with that folder (the library loads).
+First use: a fresh process times its first and second lookups (nothing is compiled at run time: the loop came built
+with the package).
 
 Run: ``.venv/bin/python -m benchmarks lut_cpu [--rounds N] [--out DIR]`` (writes lut_cpu.json and lut_cpu.md;
 the committed ones with ``--out benchmarks/results``).
@@ -30,6 +31,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import warnings
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -38,7 +40,7 @@ import torch
 import torchgrade as tg
 from benchmarks.bench_lut import look
 from benchmarks.common import argument_parser, ocio_processor, packed_rgb, write_results
-from torchgrade.lut import KERNELS
+from torchgrade.lut import operator
 
 COMMAND = ".venv/bin/python -m benchmarks lut_cpu"
 HEIGHT, WIDTH, SIZE, STRIPS = 1080, 1920, 33, 64
@@ -51,17 +53,15 @@ while True:
 """
 
 FIRST_USE = """
-import os, sys, time, warnings
-start = time.perf_counter()
+import time
 import torch, torchgrade as tg
-imported = time.perf_counter()
+from torchgrade.lut import operator
 lut = tg.LUT3D(torch.rand(33, 33, 33, 3))
 image = torch.rand(1, 3, 64, 64)
 with torch.no_grad():
     t0 = time.perf_counter(); lut(image); first = time.perf_counter() - t0
     t0 = time.perf_counter(); lut(image); second = time.perf_counter() - t0
-from torchgrade.lut.native import compiled_loop
-print(first, second, compiled_loop("tetrahedral", torch.float32) is not None)
+print(first, second, operator.NATIVE is not None)
 """
 
 
@@ -74,19 +74,19 @@ def frames() -> dict:
 def methods(image: torch.Tensor, lut: tg.LUT3D, processor, threads: int) -> dict:
     """Every method on ``image`` as ``(run, reset)`` timer calls by name; OpenColorIO's work in place on a buffer that
     ``reset`` restores (untimed)."""
-    torch_form = tg.LUT3D(lut.table, shaper="linear")
-    kernel = KERNELS["tetrahedral"]
     source = packed_rgb(image)
     buffer = source.copy()
     strips = np.array_split(buffer, STRIPS, axis=0)
     pool = ThreadPoolExecutor(threads) if threads > 1 else None
 
     def torch_only():
-        KERNELS["tetrahedral"] = kernel.__class__(kernel.gather, kernel.grids, kernel.eager, None)
+        native, operator.NATIVE = operator.NATIVE, None
         try:
-            torch_form(image)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # the torch form's: built without a compiler
+                lut(image)
         finally:
-            KERNELS["tetrahedral"] = kernel
+            operator.NATIVE = native
 
     def in_strips():
         if pool is None:
@@ -162,15 +162,10 @@ def passive_rows(rounds: int) -> list:
 
 
 def first_use() -> dict:
-    """Seconds of the first and second lookup in a fresh process: with an empty cache folder, then with it filled."""
-    with tempfile.TemporaryDirectory() as folder:
-        env = {**os.environ, "TORCHGRADE_CACHE_DIR": folder}
-        results = {}
-        for case in ("empty cache (compiles)", "cached library (loads)"):
-            done = subprocess.run([sys.executable, "-c", FIRST_USE], env=env, capture_output=True, text=True, check=True)
-            first, second, compiled = done.stdout.split()
-            results[case] = {"first_s": float(first), "second_s": float(second), "compiled_loop": compiled == "True"}
-    return results
+    """Seconds of the first and second lookup in a fresh process, and whether the built loop ran."""
+    done = subprocess.run([sys.executable, "-c", FIRST_USE], capture_output=True, text=True, check=True)
+    first, second, native = done.stdout.split()
+    return {"fresh process": {"first_s": float(first), "second_s": float(second), "compiled_loop": native == "True"}}
 
 
 QUICK = "3 rounds instead of 15"
@@ -221,7 +216,7 @@ def markdown(report: dict) -> str:
                      f"{ms[2]:.1f} | {ms[3]:.1f} | {r['ratio_to_ocio_whole']:.2f} | {r['ratio_to_ocio_strips']:.2f} | "
                      f"{r['torch_form_ratio_to_ocio_strips']:.2f} |")
     lines += ["", "First use (a fresh process, a 33³ LUT on a 64x64 frame):", "",
-              "| cache | first lookup s | second lookup s | compiled loop |", "| --- | ---: | ---: | --- |"]
+              "| process | first lookup s | second lookup s | C loop |", "| --- | ---: | ---: | --- |"]
     for case, r in report["first_use"].items():
         lines.append(f"| {case} | {r['first_s']:.3f} | {r['second_s']:.4f} | {'yes' if r['compiled_loop'] else 'no'} |")
     lines += ["", f"Reproduce: `{report['command']}`", ""]

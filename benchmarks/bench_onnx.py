@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 import torchgrade as tg
 from benchmarks.common import argument_parser, median_ms, write_results
-from torchgrade.runtime.workers import one_thread
+from torchgrade.runtime.policy import one_thread
 
 LOOK = ROOT / "export" / "looks" / "cinematic.json"
 HEIGHT, WIDTH, REPEATS = 1080, 1920, 9

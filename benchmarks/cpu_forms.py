@@ -30,8 +30,7 @@ from torchgrade.base.planes import apply_matrix, channel_sum
 from torchgrade.bloom.blur import UNITY_BLUR_WEIGHTS, _mirror_filter_by_shifts, mirrored, unity_blur
 from torchgrade.bloom.prefilter import cross_sum
 from torchgrade.bloom.pyramid import halve
-from torchgrade.lut import identity_table
-from torchgrade.lut.apply import chunked_lookup
+from torchgrade.lut import identity_table, operator
 from torchgrade.lut.kernels import KERNELS, tetrahedron
 from torchgrade.lut.lattice import planar_table
 from torchgrade.match.residual import lattice_coordinates
@@ -174,29 +173,27 @@ def strip_sweep(quick: bool, rounds: int) -> dict:
                    "policy": name == baseline} for name in sizes}
 
 
-@contextlib.contextmanager
-def without_compiled_loop():
-    """The CPU LUT lookup without its compiled loop within the block, as where it did not compile: the eager form."""
-    kept = KERNELS["tetrahedral"]
-    KERNELS["tetrahedral"] = dataclasses.replace(kept, compiled=None)
-    try:
-        yield
-    finally:
-        KERNELS["tetrahedral"] = kept
-
-
 def lookup_sweep(quick: bool, rounds: int) -> dict:
-    """A 33³ tetrahedral LUT with a LogC shaper on a 1920x1080 frame, in runs of each size, over the policy's size."""
+    """A 33³ tetrahedral LUT with a LogC shaper on a 1920x1080 frame through the operator, its C loop's threads taking
+    chunks of each size, over the size it takes (:data:`torchgrade.lut.operator.CHUNK_PIXELS`)."""
     frame = torch.rand(FRAME, generator=torch.Generator().manual_seed(2)) * 8
     lut = tg.LUT3D(identity_table(33), shaper="logc")
-    rows_ = lut.rows(torch.float32)
-    settings = (lut.shaper, lut.domain_min, lut.domain_max, "tetrahedral", lut.output_range, lut.curve, lut.curve_range, lut.output_encoding)
-    tables = lut._eager_tables(frame, rows_, "tetrahedral")
     exponents = (14, 15, 16) if quick else (13, 14, 15, 16, 17)
     sizes = {f"2^{e}": 1 << e for e in exponents}
-    calls = {name: (lambda n=n: chunked_lookup(frame, rows_, 33, *settings, pixels=n, tables=tables)) for name, n in sizes.items()}
-    times = interleaved_ms(calls, rounds)
-    baseline = next(name for name, n in sizes.items() if n == policy.LOOKUP_CHUNK)
+    taken = operator.CHUNK_PIXELS
+
+    def run(pixels):
+        def call():
+            operator.CHUNK_PIXELS = pixels
+            try:
+                with torch.no_grad():
+                    lut(frame)
+            finally:
+                operator.CHUNK_PIXELS = taken
+        return call
+
+    times = interleaved_ms({name: run(n) for name, n in sizes.items()}, rounds)
+    baseline = next(name for name, n in sizes.items() if n == taken)
     return {name: {"ms": round(statistics.median(times[name]), 2), "over_policy": round(median_ratio(times, name, baseline), 2),
                    "policy": name == baseline} for name in sizes}
 
@@ -213,8 +210,6 @@ def main(argv=None) -> int:
     forms = compare(rows(), rounds)
     strip_sizes = strip_sweep(args.quick, rounds)
     runs = lookup_sweep(args.quick, rounds)
-    with without_compiled_loop():
-        eager_runs = lookup_sweep(args.quick, rounds)
     threads = torch.get_num_threads()
     lines = ["# The CPU forms against the operations they replace", "",
              f"`{COMMAND}{' --quick' if args.quick else ''}`: medians of {rounds} interleaved rounds on {threads} torch "
@@ -228,11 +223,8 @@ def main(argv=None) -> int:
     lines += [""]
     lines += _table(f"Strips: grade and tone map of the cinematic look at 1920x1080 ({threads} threads)", strip_sizes,
                     "strip pixels")
-    lines += _table("LUT runs: 33³ tetrahedral, LogC shaper, 1920x1080 (`chunked_lookup`'s `pixels`), compiled loop", runs,
-                    "run pixels")
-    lines += _table("LUT runs: the same through the eager form (where the loop did not compile)", eager_runs, "run pixels")
-    report = {"command": COMMAND, "quick": args.quick, "rounds": rounds, "forms": forms, "strips": strip_sizes, "lookup_runs": runs,
-              "eager_lookup_runs": eager_runs}
+    lines += _table("LUT runs: 33³ tetrahedral, LogC shaper, 1920x1080 (the operator's `CHUNK_PIXELS`)", runs, "chunk pixels")
+    report = {"command": COMMAND, "quick": args.quick, "rounds": rounds, "forms": forms, "strips": strip_sizes, "lookup_runs": runs}
     write_results(args.out, "cpu_forms", report, lines[:-1], COMMAND + (" --quick" if args.quick else ""))
     return 0
 

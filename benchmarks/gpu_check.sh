@@ -42,10 +42,9 @@ else
   echo "onnxruntime's CUDA provider: not on this machine (tg.onnx.session(path, device='cuda') not run)" | tee -a "$OUT/device.txt"
 fi
 # the targets first, those no device run has timed before the others (the compiled look, stages, training and
-# augmentation; the host's cores since the worker fix), then the budget's comparison and what runs D and E measured
-# (benchmarks/results/gpu.md): what the budget leaves out is what is known or not a target
+# augmentation; the host's cores since the worker fix), then what runs D and E measured (benchmarks/results/gpu.md): what the budget leaves out is what is known or not a target
 timeout -s INT 260 python3 -m benchmarks gpu --out "$OUT" --budget 170 \
-  --sections floor,look,stages,training_compiled,augment,augment_compiled,cpu,training_budget,lut,training,profile,kernels,forms \
+  --sections floor,look,stages,training_compiled,augment,augment_compiled,cpu,lut,training,profile,kernels,forms \
   2>&1 | tee "$OUT/bench_gpu.log" | tail -40
 # the counts and the time they predict, beside the times measured above (gpu_proxy.md: CPU only, about 10 s)
 timeout -s INT 60 python3 -m benchmarks gpu_proxy --out "$OUT" 2>&1 | tail -14

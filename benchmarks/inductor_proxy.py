@@ -1,6 +1,6 @@
 """What a compiled frame would cost a GPU, read from the code Inductor generates for the CPU.
 
-    python -m benchmarks inductor_proxy [--out DIR] [--cases NAME ...] [--activation-memory-budget B]
+    python -m benchmarks inductor_proxy [--out DIR] [--cases NAME ...]
 
 Each case of ``bench_gpu.py`` that it compiles (the look, its stages, ACES 2.0, ``RandomPostFX``, the look's training
 step) is compiled with ``torch.compile(fullgraph=True)`` on a small CPU frame, and the generated code is read
@@ -13,8 +13,7 @@ step) is compiled with ``torch.compile(fullgraph=True)`` on a small CPU frame, a
   is written by one kernel and read back by a later one, memory traffic that a fused chain keeps in registers. The
   output is one of them. A training step compiles two graphs, the forward and the backward: the forward's frames
   are its output and what it saves for the backward (which reads them back); the backward's, the image's gradient
-  and what it writes on the way. It is compiled by ``tg.compile``, with its activation memory budget
-  (:data:`torchgrade.runtime.ACTIVATION_MEMORY_BUDGET`; ``--activation-memory-budget 1.0``: PyTorch's default).
+  and what it writes on the way. It is compiled by ``tg.compile``, which partitions it as PyTorch does.
 
 A count of structure, not a time: the GPU run (``benchmarks/gpu_check.sh``) measures. Compile seconds are the CPU's
 (a C++ compiler; Triton's differ) with Inductor's caches off. About 5 minutes on 2 cores, most of it ACES 2.0 and
@@ -44,16 +43,15 @@ LOOP_NEST = re.compile(r"for\(int64_t x0=")
 BUFFER = re.compile(r"empty_strided_cpu\(\(([\d, ]+)\)")
 
 
-def generated_code(module: torch.nn.Module, training: bool = False, budget: float = tg.runtime.ACTIVATION_MEMORY_BUDGET) -> tuple:
+def generated_code(module: torch.nn.Module, training: bool = False) -> tuple:
     """Inductor's code for one frame of ``module`` on the CPU, one source a graph, and the seconds it took to compile:
-    no_grad through ``torch.compile(fullgraph=True)``; ``training``, its forward and backward through ``tg.compile``
-    with the activation memory ``budget``."""
+    no_grad through ``torch.compile(fullgraph=True)``; ``training``, its forward and backward through ``tg.compile``."""
     from torch._inductor.utils import run_and_get_code
 
     torch.compiler.reset()
     image = tg.scene.demo_scene(*FRAME[2:])[None].contiguous().requires_grad_(training)
     if training:
-        compiled = tg.compile(module, dynamic=False, activation_memory_budget=budget)
+        compiled = tg.compile(module, dynamic=False, verbose=False)
     else:
         compiled = torch.compile(module.eval(), fullgraph=True)
 
@@ -80,15 +78,13 @@ def structure(source: str) -> dict:
 def main(argv=None) -> int:
     parser = argument_parser(__doc__)
     parser.add_argument("--cases", nargs="+", choices=[*CASES, *TRAINING], default=[*CASES, *TRAINING])
-    parser.add_argument("--activation-memory-budget", type=float, default=tg.runtime.ACTIVATION_MEMORY_BUDGET,
-                        help="of the training cases (default: tg.compile's)")
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
     warnings.simplefilter("ignore")  # the look's baked-LUT accuracy notes
     rows = []
     for name in args.cases:
         training = name in TRAINING
-        sources, seconds = generated_code({**CASES, **TRAINING}[name](), training, args.activation_memory_budget)
+        sources, seconds = generated_code({**CASES, **TRAINING}[name](), training)
         graphs = ("forward", "backward") if training else ("",)
         for graph, source in zip(graphs, sources, strict=True):
             rows.append({"case": f"{name} {graph}".strip(), **structure(source), "compile_s": round(seconds, 1)})
@@ -97,13 +93,12 @@ def main(argv=None) -> int:
              f"torch {torch.__version__}, torchgrade {tg.__version__}, a {FRAME[2]}x{FRAME[3]} frame, one thread. Loops: the "
              "loop nests of the generated code (on CUDA, a kernel each); frames written: the buffers of a plane's size or more, in "
              "frames (each written by one kernel, read back by another; the output among them; in training the forward's "
-             "are what it saves for the backward and its output; activation memory budget "
-             f"{args.activation_memory_budget}). Compile seconds of a training step: its two graphs together. "
+             "are what it saves for the backward and its output, as PyTorch's partitioner chose). Compile seconds of a training step: its two graphs together. "
              "See `benchmarks/inductor_proxy.py`.", "",
              "| case | loops | buffers | frames written | compile s (CPU) |", "| --- | ---: | ---: | ---: | ---: |"]
     lines += [f"| {r['case']} | {r['loops']} | {r['frame_buffers']} | {r['frames_written']} | {r['compile_s']} |" for r in rows]
     args.out.mkdir(parents=True, exist_ok=True)
-    write_results(args.out, "inductor_proxy", {"frame": list(FRAME), "activation_memory_budget": args.activation_memory_budget, "rows": rows},
+    write_results(args.out, "inductor_proxy", {"frame": list(FRAME), "rows": rows},
                   lines, "python -m benchmarks inductor_proxy --out DIR")
     return 0
 

@@ -48,6 +48,15 @@ def exr_dir() -> Path:
     return EXR_DIR
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _config_home(tmp_path_factory):
+    """A folder of the run's as ``XDG_CONFIG_HOME``: a key a test makes (a signed compile cache's) never lands in the
+    user's ``~/.config``, for the tests and the processes they start."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("XDG_CONFIG_HOME", str(tmp_path_factory.mktemp("config")))
+        yield
+
+
 @pytest.fixture(autouse=True)
 def _seed():
     torch.manual_seed(0)

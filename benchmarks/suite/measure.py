@@ -18,13 +18,15 @@ from tqdm import tqdm
 import torchgrade as tg
 from benchmarks import common, metrics
 from benchmarks.suite import workload
-from benchmarks.suite.methods import DEFAULT_SHAPER, DEFAULT_SIZE, PEER, Method, lut_name, method_rows
+from benchmarks.suite.methods import PEER, PER_PIXEL, WHOLE_LOOK, method_rows
+from benchmarks.suite.rows import Method, default_name
 from benchmarks.suite.workload import Workload, as_strip
 
 
 def timing_input(work: Workload, method: Method) -> torch.Tensor:
-    """The 1920×1080 frame a row is timed on: the scene for a whole-look row, else the frame after bloom."""
-    return work.frame.to(method.dtype) if method.whole_look else work.bloomed_frame(method.dtype)
+    """The 1920×1080 frame a row is timed on: the scene for a whole-look row, else the frame as the per-pixel stage
+    receives it."""
+    return work.frame.to(method.dtype) if method.whole_look else work.per_pixel_frame(method.dtype)
 
 
 def accuracy(work: Workload, method: Method) -> dict:
@@ -33,7 +35,7 @@ def accuracy(work: Workload, method: Method) -> dict:
         if method.whole_look:
             output = as_strip(method.apply(scene.to(method.dtype)) for scene in work.scenes.values())
         else:
-            output = method.apply(work.bloomed_strip(method.dtype))
+            output = method.apply(work.per_pixel_strip(method.dtype))
     codes = metrics.srgb_codes(output.reshape(work.reference_codes.shape))
     summary = metrics.code_error_summary(work.reference_codes, codes)
     reference, sample = (c[..., work.delta_e_pixels] for c in (work.reference_codes, codes))
@@ -47,7 +49,7 @@ def measure_row(work: Workload, name: str, build: Callable[[], Method]):
         method = build()
         record = {"method": name, "family": method.family, "dtype": str(method.dtype).replace("torch.", ""),
                   "timed": "whole look" if method.whole_look else "per-pixel stage",
-                  "device": "cpu" if method.host else work.plan.device.type, **method.info}
+                  "device": "cpu" if method.host else work.plan.device.type, "headline": method.headline, **method.info}
         record.update(accuracy(work, method))
         return method, record
     except Exception as error:  # noqa: BLE001 — e.g. torch.compile without a working compiler
@@ -67,13 +69,18 @@ def measure_rows(work: Workload) -> tuple:
     return methods, records
 
 
-COPY, BLOOM, BLOOM64 = "plain frame copy", "bloom float32", "bloom float64"
+COPY, LIVE, LIVE64 = "plain frame copy", "eye adaptation + bloom float32", "eye adaptation + bloom float64"
 
 
 def baseline_calls(work: Workload) -> dict:
-    """Timed-only references: the plain frame copy (the memory floor) and bloom, which every look adds."""
-    frame, frame64 = work.frame, work.frame.double()
-    return {COPY: lambda: frame.clone(), BLOOM: lambda: work.look.bloom(frame), BLOOM64: lambda: work.look.bloom(frame64)}
+    """Timed-only references: the plain frame copy (the memory floor) and the live stages before the per-pixel stage
+    (eye adaptation and bloom), which every row but the whole-look ones leaves out; in float64 too in the full run."""
+    frame, live = work.frame, work.look.per_pixel_input
+    calls = {COPY: lambda: frame.clone(), LIVE: lambda: live(frame)}
+    if work.plan.every_row:
+        frame64 = frame.double()
+        calls[LIVE64] = lambda: live(frame64)
+    return calls
 
 
 def time_rows(work: Workload, methods: dict) -> dict:
@@ -101,7 +108,7 @@ def add_speed(records: list, times: dict) -> dict:
         record["ratio_to_copy"] = common.median_ratio(times, name, COPY)
         per_pixel = record["timed"] == "per-pixel stage"
         record["ratio_to_opencolorio"] = common.median_ratio(times, name, PEER) if PEER in times and per_pixel else None
-    return {name: statistics.median(times[name]) for name in (COPY, BLOOM, BLOOM64)}
+    return {name: statistics.median(times[name]) for name in (COPY, LIVE, LIVE64) if name in times}
 
 
 def peak_memory(work: Workload, method: Method) -> Optional[float]:
@@ -123,9 +130,10 @@ def record_peak_memory(work: Workload, methods: dict, records: list) -> None:
 
 
 def scaling(work: Workload) -> list:
-    """ms and ms per megapixel of the direct float32 and 33³ default-lattice tetrahedral stages by resolution and by batch."""
-    lut = work.lut(DEFAULT_SIZE, DEFAULT_SHAPER)
-    paths = {"direct float32": work.per_pixel, lut_name(DEFAULT_SIZE, DEFAULT_SHAPER, "tetrahedral"): lambda x: lut(x, "tetrahedral")}
+    """ms and ms per megapixel of the direct float32 stage and the default bake's tetrahedral lookup by resolution and
+    by batch."""
+    lut = work.default_lut
+    paths = {PER_PIXEL: work.per_pixel, default_name(lut, "tetrahedral"): lambda x: lut(x, "tetrahedral")}
     shapes = [("resolution", 1, h, w) for h, w in work.plan.resolutions]
     shapes += [("batch", b, workload.BATCH_SIDE, workload.BATCH_SIDE) for b in workload.BATCHES]
     sync = common.synchronizer(work.plan.device)
@@ -139,16 +147,14 @@ def scaling(work: Workload) -> list:
     return points
 
 
-WHOLE_LOOK, PER_PIXEL = "direct float32, whole look", "direct float32"
-
 
 def whole_look_check(times: dict) -> Optional[dict]:
     """The eager whole look against its parts timed in the same rounds: median ms of each, and the median over
-    rounds of whole look / (bloom + per-pixel stage), which should not fall below 1. None if a part is missing."""
-    names = (WHOLE_LOOK, PER_PIXEL, BLOOM)
+    rounds of whole look / (live stages + per-pixel stage), which should not fall below 1. None if a part is missing."""
+    names = (WHOLE_LOOK, PER_PIXEL, LIVE)
     if not all(name in times for name in names):
         return None
-    whole, per_pixel, bloom = (times[name] for name in names)
-    ratio = statistics.median(w / (p + b) for w, p, b in zip(whole, per_pixel, bloom))
+    whole, per_pixel, live = (times[name] for name in names)
+    ratio = statistics.median(w / (p + b) for w, p, b in zip(whole, per_pixel, live))
     return {"whole_look_ms": statistics.median(whole), "per_pixel_ms": statistics.median(per_pixel),
-            "bloom_ms": statistics.median(bloom), "whole_over_parts": ratio}
+            "live_ms": statistics.median(live), "whole_over_parts": ratio}

@@ -1,190 +1,155 @@
 """The suite's methods: every way of computing the look's per-pixel stage (or the whole look), one row each.
 
-Direct evaluation in four dtypes, baked LUTs (sizes, shapers, interpolations, fitted lattices),
-``torch.compile``, onnxruntime on the exported model, and OpenColorIO's CPU processor on the same LUTs
-written as .cube files. Part of ``.venv/bin/python -m benchmarks suite [--quick] [--out DIR]``.
+Direct evaluation in four dtypes; the default bake (``tg.bake_lut`` with every default) looked up both ways a CPU
+runs it (:mod:`benchmarks.suite.forms`); a 33³ LogC LUT (the twin of OpenColorIO's row); ``look.to_lut()``'s
+baked look; in the full run every LUT size × lattice × interpolation and lattices fitted to the scenes;
+``torch.compile``; and the exported runtimes (:mod:`benchmarks.suite.runtimes`). Part of
+``.venv/bin/python -m benchmarks suite [--quick] [--out DIR]``.
 """
 
 from __future__ import annotations
 
 import functools
-import os
 import time
-from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Callable, Optional
 
 import torch
-from torch import nn
 
 import torchgrade as tg
-from benchmarks.common import ocio_apply, ocio_in_place, ocio_processor
-from benchmarks.suite.workload import LOOK, Workload, float32_lut
+from benchmarks.suite import runtimes
+from benchmarks.suite.forms import FORMS, TORCH_FORM, compiled_loop_runs, lookup_form
+from benchmarks.suite.rows import Method, default_name, lut_info, lut_name
+from benchmarks.suite.workload import GRID_SIZES, Workload, float32_lut, grid_shapers
 
-DEFAULT_SHAPER = "logc_extended"
-"""The lattice ``PostFX.to_lut`` and ``bake_lut(shaper="auto")`` give an HDR look (LogC, then a tail to 65504)."""
-DEFAULT_SIZE = 45
-"""Its size when none is given: its rows are measured whatever the plan's sizes and shapers."""
+__all__ = ["INTERPOLATIONS", "HDR_UNUSABLE", "PEER", "WHOLE_LOOK", "PER_PIXEL", "BAKED_LOOK", "method_rows"]
+
 HDR_UNUSABLE = "linear"
 """The shaper whose lattice clips everything above 1: its rows are kept in the table, never offered for HDR."""
-INTERPOLATIONS = ("trilinear", "tetrahedral")
+INTERPOLATIONS = ("tetrahedral", "trilinear")
 FITTED_SIZES = (33, 65)
-"""Sizes also baked with the lattice reaching the scenes' brightest pixel (tetrahedral rows)."""
-PEER = "OpenColorIO 33³ logc tetrahedral"
-"""The row every per-pixel row's time is also divided by (the peer a colourist would use)."""
-
-
-@dataclass
-class Method:
-    """One row: a way to compute the per-pixel stage (or the whole look, ``whole_look=True``).
-
-    ``apply`` maps the row's input (the bloomed image, or the scene for a whole-look row) in ``dtype``
-    to display-referred linear RGB. ``timer(frame)`` returns ``(run, reset)``: the timed call and an
-    untimed call to run before each one (or ``None``); by default ``run`` is ``apply(frame)``.
-    ``host`` rows run on the CPU whatever the device (onnxruntime, OpenColorIO).
-    """
-
-    name: str
-    family: str
-    apply: Callable[[torch.Tensor], torch.Tensor]
-    dtype: torch.dtype = torch.float32
-    whole_look: bool = False
-    host: bool = False
-    timer: Optional[Callable] = None
-    info: dict = field(default_factory=dict)
-
-    def timed_call(self, frame: torch.Tensor):
-        return self.timer(frame) if self.timer else ((lambda: self.apply(frame)), None)
+"""Sizes also baked with the lattice reaching the scenes' brightest pixel (tetrahedral rows, full run)."""
+PEER = runtimes.PEER
+WHOLE_LOOK, PER_PIXEL = "direct float32, whole look", "direct float32"
 
 
 def direct_rows(work: Workload) -> list:
-    dtypes = {"float64 (reference)": torch.float64, "float32": torch.float32,
-              "bfloat16": torch.bfloat16, "float16": torch.float16}
+    """The per-pixel stage evaluated in each dtype (float64, the reference itself, in the full run), and the whole look."""
+    dtypes = {"float64 (reference)": torch.float64} if work.plan.every_row else {}
+    dtypes.update({"float32": torch.float32, "bfloat16": torch.bfloat16, "float16": torch.float16})
     rows = [(f"direct {label}", functools.partial(Method, f"direct {label}", "direct", work.per_pixel, dtype))
             for label, dtype in dtypes.items()]
-    name = "direct float32, whole look"
-    rows.append((name, functools.partial(Method, name, "direct", work.look, whole_look=True)))
+    rows.append((WHOLE_LOOK, functools.partial(Method, WHOLE_LOOK, "direct", work.look, whole_look=True)))
     return rows
 
 
-def lut_name(size: int, shaper: str, interpolation: str) -> str:
-    return f"LUT {size}³ {shaper} {interpolation}"
+def looked_up(lut: tg.LUT3D, interpolation: str, form: Optional[str] = None) -> Callable:
+    """``lut(x, interpolation)``, in CPU lookup ``form`` (:func:`~benchmarks.suite.forms.lookup_form`) when given."""
+    if form is None:
+        return lambda x: lut(x, interpolation)
+
+    def apply(x):
+        with lookup_form(form):
+            return lut(x, interpolation)
+
+    return apply
+
+
+def default_rows(work: Workload) -> list:
+    """The default bake, each interpolation in each CPU form (trilinear's torch form in the full run; on a GPU, once:
+    the forms are CPU forms)."""
+
+    def build(interpolation, form):
+        lut = work.default_lut
+        info = lut_info(lut, interpolation, default_bake=True)
+        if form is not None:
+            looped = form == TORCH_FORM or compiled_loop_runs(interpolation)
+            info["lookup_form"] = form if looped else f"{TORCH_FORM}: the loop did not compile here"
+        return Method(default_name(lut, interpolation, form), "lut", looked_up(lut, interpolation, form), info=info)
+
+    lut = work.default_lut
+    keys = [(i, f) for i in INTERPOLATIONS for f in FORMS if work.plan.every_row or (i, f) != ("trilinear", TORCH_FORM)]
+    if work.plan.device.type != "cpu":
+        keys = [(i, None) for i in INTERPOLATIONS]
+    return [(default_name(lut, i, f), functools.partial(build, i, f)) for i, f in keys]
+
+
+def grid_keys(work: Workload) -> list:
+    """``(size, shaper, interpolation, headline)`` of the LUT rows: 33³ LogC tetrahedral (OpenColorIO's twin) in every
+    run, and in the full run every size × lattice × interpolation."""
+    keys = {(33, "logc", "tetrahedral"): True}
+    if work.plan.every_row:
+        for key in ((s, shaper, i) for s in GRID_SIZES for shaper in grid_shapers() for i in INTERPOLATIONS):
+            keys.setdefault(key, False)
+    return [(*key, headline) for key, headline in keys.items()]
 
 
 def fitted_lut_name(size: int) -> str:
     return f"LUT {size}³ logc tetrahedral, domain fitted to the scenes"
 
 
-def lut_keys(sizes, shapers) -> list:
-    return [(size, shaper, interpolation) for size in sizes for shaper in shapers for interpolation in INTERPOLATIONS]
-
-
 def lut_rows(work: Workload) -> list:
-    def build(size, shaper, interpolation):
+    def build(size, shaper, interpolation, headline):
         lut = work.lut(size, shaper)
-        info = {"lut_size": size, "shaper": shaper, "interpolation": interpolation}
-        return Method(lut_name(size, shaper, interpolation), "lut", lambda x: lut(x, interpolation), info=info)
+        info = lut_info(lut, interpolation)
+        return Method(lut_name(size, shaper, interpolation), "lut", looked_up(lut, interpolation), info=info, headline=headline)
 
     def build_fitted(size):
         lut = work.lut(size, "logc", fitted=True)
         top = float(tg.color.logc_to_linear(lut.domain_max.double()).max())
-        info = {"lut_size": size, "shaper": "logc", "interpolation": "tetrahedral", "domain_top_linear": round(top, 1)}
-        return Method(fitted_lut_name(size), "lut", lambda x: lut(x, "tetrahedral"), info=info)
+        info = lut_info(lut, "tetrahedral", domain_top_linear=round(top, 1))
+        return Method(fitted_lut_name(size), "lut", looked_up(lut, "tetrahedral"), info=info, headline=False)
 
-    keys = lut_keys(work.plan.lut_sizes, work.plan.shapers) + lut_keys((DEFAULT_SIZE,), (DEFAULT_SHAPER,))
-    rows = [(lut_name(*key), functools.partial(build, *key)) for key in dict.fromkeys(keys)]
-    return rows + [(fitted_lut_name(size), functools.partial(build_fitted, size)) for size in FITTED_SIZES]
+    rows = [(lut_name(*key[:3]), functools.partial(build, *key)) for key in grid_keys(work)]
+    if work.plan.every_row:
+        rows += [(fitted_lut_name(size), functools.partial(build_fitted, size)) for size in FITTED_SIZES]
+    return rows
+
+
+BAKED_LOOK = "baked look (look.to_lut()), whole look"
+
+
+def baked_look_rows(work: Workload) -> list:
+    """``look.to_lut()``: eye adaptation and bloom live, the per-pixel stage through the default bake."""
+    def build():
+        look = work.baked_look
+        return Method(BAKED_LOOK, "lut", look, whole_look=True,
+                      info=lut_info(look.lut, look.lut.interpolation, default_bake=True))
+
+    return [(BAKED_LOOK, build)]
 
 
 def compile_rows(work: Workload) -> list:
-    """``torch.compile`` of the direct float32 stage and of the 33³ default-lattice lookups; compile time = first call at 1080p."""
+    """``torch.compile`` through the library's door, ``tg.compile``, of the direct float32 stage and of the whole look,
+    and of the default bake's lookups (``LUT3D(compile=True)``); compile time = the first call at 1080p (the accuracy
+    scenes' other sizes then compile once more, with symbolic sizes)."""
 
-    def build(name, module, interpolation=None):
+    def build(name, module, whole_look=False, interpolation=None):
         apply = (lambda x: module(x, interpolation)) if interpolation else module
+        frame = work.frame if whole_look else work.per_pixel_frame(torch.float32)
         start = time.perf_counter()
         with torch.no_grad():
-            apply(work.bloomed_frame(torch.float32))
+            apply(frame)
         if isinstance(module, tg.LUT3D) and not module.compile:
             raise RuntimeError("torch.compile failed; LUT3D fell back to its eager lookup")
-        return Method(name, "torch.compile", apply, info={"compile_s": round(time.perf_counter() - start, 1)})
+        info = {"compile_s": round(time.perf_counter() - start, 1)}
+        if interpolation:
+            info.update(lut_info(module, interpolation), default_bake=True)
+        return Method(name, "torch.compile", apply, whole_look=whole_look, info=info)
 
-    rows = [("torch.compile direct float32", lambda: build("torch.compile direct float32", torch.compile(work.per_pixel)))]
+    rows = [("torch.compile direct float32", lambda: build("torch.compile direct float32", tg.compile(work.per_pixel))),
+            ("torch.compile whole look", lambda: build("torch.compile whole look", tg.compile(work.look), whole_look=True))]
     for interpolation in INTERPOLATIONS:
-        name = f"torch.compile {lut_name(DEFAULT_SIZE, DEFAULT_SHAPER, interpolation)}"
+        name = f"torch.compile {default_name(work.default_lut, interpolation)}"
         rows.append((name, functools.partial(
-            lambda n, i: build(n, float32_lut(work.lut(DEFAULT_SIZE, DEFAULT_SHAPER), compile=True), i), name, interpolation)))
+            lambda n, i: build(n, float32_lut(work.default_lut, compile=True), interpolation=i), name, interpolation)))
     return rows
-
-
-def onnx_session(path: Path):
-    """onnxruntime CPU session, one intra-op thread per core, arena off (so peak memory is per run)."""
-    import onnxruntime
-
-    options = onnxruntime.SessionOptions()
-    options.intra_op_num_threads = os.cpu_count()
-    options.enable_cpu_mem_arena = False
-    return onnxruntime.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
-
-
-def onnx_method(name: str, module: nn.Module, path: Path, whole_look: bool = False) -> Method:
-    """Export ``module`` with :func:`torchgrade.onnx.export` and run it with onnxruntime."""
-    start = time.perf_counter()
-    tg.onnx.export(module.cpu(), path)
-    export_s = round(time.perf_counter() - start, 1)
-    session = onnx_session(path)
-
-    def feed(image):
-        return {"image": image.detach().cpu().float().numpy()}
-
-    def apply(image):
-        return torch.from_numpy(session.run(None, feed(image))[0])
-
-    def timer(frame):
-        feeds = feed(frame)
-        return (lambda: session.run(None, feeds)), None
-
-    return Method(name, "onnxruntime", apply, whole_look=whole_look, host=True, timer=timer,
-                  info={"export_s": export_s, "onnx_nodes": tg.onnx.node_count(path)})
-
-
-def onnx_rows(work: Workload) -> list:
-    folder = work.folder
-    look = tg.PostFX.from_config(LOOK)
-    per_pixel = tg.PostFX(grade=LOOK["grade"], tonemap=LOOK["tonemap"])
-    rows = [
-        ("onnxruntime direct float32", lambda: onnx_method("onnxruntime direct float32", per_pixel, folder / "direct.onnx")),
-        ("onnxruntime whole look", lambda: onnx_method("onnxruntime whole look", look, folder / "look.onnx", whole_look=True)),
-    ]
-    for interpolation in work.plan.onnx_lut_interpolations:
-        name = f"onnxruntime {lut_name(DEFAULT_SIZE, DEFAULT_SHAPER, interpolation)}"
-        rows.append((name, functools.partial(
-            lambda n, i: onnx_method(n, tg.PostFX(lut=work.lut(DEFAULT_SIZE, DEFAULT_SHAPER), interpolation=i), folder / f"lut_{i}.onnx"),
-            name, interpolation)))
-    return rows
-
-
-def opencolorio_method(work: Workload, size: int, shaper: str, interpolation: str) -> Method:
-    """The LUT written with :func:`torchgrade.io.write_cube` and applied by OpenColorIO's CPU processor."""
-    path = work.folder / f"look_{size}_{shaper}.cube"  # a fresh folder per run: OpenColorIO caches by path
-    if not path.exists():
-        tg.io.write_cube(path, work.lut(size, shaper))
-    processor = ocio_processor(path, interpolation)
-    info = {"lut_size": size, "shaper": shaper, "interpolation": interpolation}
-    return Method(f"OpenColorIO {size}³ {shaper} {interpolation}", "opencolorio", functools.partial(ocio_apply, processor),
-                  host=True, timer=functools.partial(ocio_in_place, processor), info=info)
-
-
-def opencolorio_rows(work: Workload) -> list:
-    keys = lut_keys(work.plan.opencolorio_sizes, work.plan.shapers)
-    return [(f"OpenColorIO {size}³ {shaper} {interpolation}", functools.partial(opencolorio_method, work, size, shaper, interpolation))
-            for size, shaper, interpolation in keys]
 
 
 def method_rows(work: Workload) -> list:
-    """Every row as ``(name, build)``; rows that need a CPU library are left out on other devices."""
-    rows = direct_rows(work) + lut_rows(work)
+    """Every row as ``(name, build)``; rows of a CPU runtime are left out on other devices."""
+    rows = direct_rows(work) + default_rows(work) + lut_rows(work) + baked_look_rows(work)
     if work.plan.compile:
         rows += compile_rows(work)
     if work.plan.device.type == "cpu":
-        rows += onnx_rows(work) + opencolorio_rows(work)
+        rows += runtimes.runtime_rows(work)
     return rows

@@ -11,7 +11,8 @@ from collections import Counter
 from pathlib import Path
 
 from benchmarks.suite import workload
-from benchmarks.suite.methods import DEFAULT_SHAPER, DEFAULT_SIZE, HDR_UNUSABLE, PEER, lut_name
+from benchmarks.suite.measure import LIVE
+from benchmarks.suite.methods import HDR_UNUSABLE, PEER
 
 ERROR_FLOOR = 1e-3
 """Errors below this (the float64 reference's 0) are drawn at it on the log axis."""
@@ -34,6 +35,8 @@ def row_note(record: dict) -> str:
         notes.append(f"compile {record['compile_s']:.0f} s")
     if "export_s" in record:
         notes.append(f"export {record['export_s']:.0f} s, {record['onnx_nodes']} nodes")
+    if "did not compile" in record.get("lookup_form", ""):
+        notes.append(record["lookup_form"])
     if "error" in record:
         notes.append(f"failed: {record['error']}")
     return "; ".join(notes)
@@ -85,25 +88,27 @@ def serving_advice(records: list, baselines: dict) -> str:
     """The fastest per-pixel stage of any runtime within :data:`EXACT_CODES` at p99.9, and what the fastest HDR-capable row gives up."""
     exact = fastest(records, lambda r: per_pixel(r) and r["p999_error_8bit"] <= EXACT_CODES)
     quickest = min(hdr_choices(records), key=lambda r: r["ms"], default=None)
-    bloom = f"plus live bloom ({baselines['bloom float32'] / (workload.FRAME[0] * workload.FRAME[1] / 1e6):.1f} ms/MP)"
+    live = f"plus the live {LIVE.removesuffix(' float32')} ({baselines[LIVE] / (workload.FRAME[0] * workload.FRAME[1] / 1e6):.1f} ms/MP)"
     if exact is None:
-        return f"Serving: no row stayed within 1 code at p99.9; the fastest is {summary(quickest)}, {bloom}."
-    line = f"Serving: {summary(exact)}, {bloom}"
+        return f"Serving: no row stayed within 1 code at p99.9; the fastest is {summary(quickest)}, {live}."
+    line = f"Serving: {summary(exact)}, {live}"
     if quickest is not exact:
         line += f"; {quickest['method']} takes {quickest['ms'] / exact['ms']:.2f}× its time at p99.9 {quickest['p999_error_8bit']:.2f} codes"
     return line + "."
 
 
 def baking_advice(records: list) -> str:
-    """The most accurate HDR-capable LUT row (p99.9, then time), against the default lattice at the default size."""
-    luts = timed(records, lambda r: r["family"] == "lut" and r.get("shaper") != HDR_UNUSABLE)
+    """The most accurate HDR-capable LUT row (p99.9 as shown, then time), against the default bake looked up
+    tetrahedrally (its faster form)."""
+    luts = timed(records, lambda r: per_pixel(r) and r["family"] == "lut" and r.get("shaper") != HDR_UNUSABLE)
     if not luts:
         return "Baking a LUT: no LUT row was measured."
-    best = min(luts, key=lambda r: (r["p999_error_8bit"], r["ms"]))
-    default = next((r for r in luts if r["method"] == lut_name(DEFAULT_SIZE, DEFAULT_SHAPER, "tetrahedral")), None)
+    best = min(luts, key=lambda r: (round(r["p999_error_8bit"], 2), r["ms"]))  # a tie as the table shows it: the faster
+    default = fastest(luts, lambda r: r.get("default_bake") and r["interpolation"] == "tetrahedral")
     line = f"Baking a LUT: {summary(best)}"
     if default is not None and default is not best:
-        line += f"; the default ({DEFAULT_SHAPER}, {DEFAULT_SIZE}³ tetrahedral): p99.9 {default['p999_error_8bit']:.2f}, max {default['max_error_8bit']:.2f} codes"
+        line += (f"; the default bake ({default['shaper']}, {default['lut_size']}³ tetrahedral): p99.9 "
+                 f"{default['p999_error_8bit']:.2f}, max {default['max_error_8bit']:.2f} codes")
     return line + "."
 
 
@@ -121,24 +126,41 @@ def warning_records(caught: list) -> list:
 def check_line(check) -> str:
     if check is None:
         return "Check: the whole-look or per-pixel float32 row was not timed."
-    return (f"Check: the eager whole look took {check['whole_look_ms']:.0f} ms, its parts bloom {check['bloom_ms']:.0f} ms + "
+    return (f"Check: the eager whole look took {check['whole_look_ms']:.0f} ms, its parts the live stages {check['live_ms']:.0f} ms + "
             f"per-pixel stage {check['per_pixel_ms']:.0f} ms; per round, whole look / parts = {check['whole_over_parts']:.2f} (median)"
             + (": below 1, so this run's timings are not to be trusted." if check["whole_over_parts"] < 1 else "."))
 
 
+def provenance(report: dict) -> str:
+    """Which code a run measured, with which command, and how long it took.
+
+    Examples:
+        >>> provenance({"commit": "0123456789ab", "modified": True, "command": "python -m benchmarks suite",
+        ...             "wall_s": 30.4, "cpu_s": 51.0})
+        'Commit `0123456` with uncommitted changes, `python -m benchmarks suite`: 30 s (51 s of CPU time).'
+    """
+    commit = f"Commit `{report['commit'][:7]}`" if report.get("commit") else "Not a git checkout"
+    changes = " with uncommitted changes" if report.get("modified") else ""
+    return f"{commit}{changes}, `{report['command']}`: {report['wall_s']:.0f} s ({report['cpu_s']:.0f} s of CPU time)."
+
+
+def baselines_text(report: dict) -> str:
+    """The baselines' ms per megapixel, as a list in words."""
+    megapixels = workload.FRAME[0] * workload.FRAME[1] / 1e6
+    return ", ".join(f"{name} {ms / megapixels:.1f} ms/MP" for name, ms in report["baselines"].items())
+
+
 def markdown(report: dict) -> list:
     """The report as markdown lines: method, table, check, advice, warnings."""
-    megapixels = workload.FRAME[0] * workload.FRAME[1] / 1e6
-    base = ", ".join(f"{name} {ms / megapixels:.1f} ms/MP" for name, ms in report["baselines"].items())
     warned = [f"- {w['category']} ×{w['count']}: {w['message']}" for w in report["warnings"]] or ["none"]
     return [
         f"# torchgrade benchmark ({'quick' if report['quick'] else 'full'}, {report['device']})",
         "",
-        f"`{report['command']}` — {report['wall_s']:.0f} s in all.",
+        provenance(report),
         "",
         "Speed: the timed part of each row on a 1920×1080 frame, every row and baseline alternated in one session, median of "
         f"{report['runs']} rounds; × copy and × OCIO are medians of each round's ratio to a plain frame copy and to {PEER}. "
-        f"Per-pixel rows exclude bloom, which every look adds: {base}.",
+        f"Per-pixel rows leave out the live stages, which every look adds: {baselines_text(report)}.",
         f"Accuracy: the whole look on {', '.join(report['scenes'])} against the float64 look; "
         f"ΔE2000 over {report['delta_e_samples']} sampled pixels. Peak MiB: memory the timed part adds at 1920×1080.",
         "",
@@ -156,9 +178,26 @@ def markdown(report: dict) -> list:
     ]
 
 
+SHORT_WIDTH = 64
+"""Characters of a method's name the terminal table shows."""
+
+
+def short_table(report: dict) -> str:
+    """The run for a terminal: each row's ms/MP, × OCIO and errors, then the provenance line."""
+    lines = [f"{'method':{SHORT_WIDTH}} {'ms/MP':>7} {'×OCIO':>6} {'p99.9':>6} {'max':>6} {'ΔE':>6}"]
+    for r in report["rows"]:
+        if "error" in r:
+            lines.append(f"{r['method'][:SHORT_WIDTH]:{SHORT_WIDTH}} failed: {r['error']}")
+            continue
+        lines.append(f"{r['method'][:SHORT_WIDTH]:{SHORT_WIDTH}} {fmt(r.get('ms_per_megapixel'), 1):>7} "
+                     f"{fmt(r.get('ratio_to_opencolorio')):>6} {fmt(r['p999_error_8bit']):>6} {fmt(r['max_error_8bit']):>6} "
+                     f"{fmt(r['mean_delta_e2000'], 3):>6}")
+    return "\n".join([*lines, "", provenance(report)])
+
+
 def family_colours() -> dict:
     return {"direct": "tab:blue", "lut": "tab:orange", "torch.compile": "tab:green", "onnxruntime": "tab:purple",
-            "opencolorio": "tab:red"}
+            "openvino": "tab:brown", "opencolorio": "tab:red"}
 
 
 def pareto_front(points: list) -> list:
@@ -193,16 +232,16 @@ def hdr_choices(records: list) -> list:
 
 
 def plot_pareto(records: list, path: Path) -> None:
-    """:func:`hdr_choices` by time and error, the Pareto front labelled, default-lattice LUTs drawn as diamonds."""
+    """:func:`hdr_choices` by time and error, the Pareto front labelled, the default bake's rows drawn as diamonds."""
     fig, ax = _pyplot().subplots(figsize=(9, 6), dpi=90)
     points, choices = [], hdr_choices(records)
     for family, colour in family_colours().items():
         rows = [r for r in choices if r["family"] == family]
         for default in (False, True):
-            drawn = [r for r in rows if (r.get("shaper") == DEFAULT_SHAPER) == default]
+            drawn = [r for r in rows if bool(r.get("default_bake")) == default]
             xs = [r["ms_per_megapixel"] for r in drawn]
-            ys = [max(r["p999_error_8bit"], ERROR_FLOOR) for r in drawn]
-            label = f"{family}, default lattice ({DEFAULT_SHAPER})" if default else family
+            ys = [max(round(r["p999_error_8bit"], 2), ERROR_FLOOR) for r in drawn]  # as the table shows them
+            label = f"{family}, default bake" if default else family
             ax.scatter(xs, ys, s=40 if default else 22, color=colour, marker="D" if default else "o",
                        edgecolors="black" if default else "none", label=label if drawn else None, alpha=0.8)
             points += [(x, y, r["method"]) for x, y, r in zip(xs, ys, drawn)]

@@ -1,4 +1,4 @@
-"""The suite's workload: the look, the scenes it is measured on, and the float64 reference every row is compared with.
+"""The suite's workload: the look, the photographs it is measured on, and the float64 reference every row is compared with.
 
 Part of ``.venv/bin/python -m benchmarks suite [--quick] [--out DIR]`` (see its docstring for the whole method).
 """
@@ -18,13 +18,19 @@ import torchgrade as tg
 from benchmarks import metrics
 from benchmarks.common import ROOT, sample_exr
 
+__all__ = ["LOOK", "EXR_NAMES", "Plan", "Workload", "accuracy_scenes", "as_strip", "downscale", "float32_lut", "grid_shapers"]
+
 LOOK = {
+    "exposure": {"metering": "log", "middle_grey": 0.18},
     "bloom": {"mode": "scattering", "threshold": 1.0, "knee": 0.5, "intensity": 0.6, "scatter": 0.7},
     "grade": {"aces": True, "post_exposure": 0.5, "temperature": 20, "contrast": 30, "saturation": 20,
               "split_shadows": [0.42, 0.5, 0.6], "split_highlights": [0.6, 0.5, 0.42]},
     "tonemap": {"mode": "aces"},
 }
-EXR_NAMES = ("Desk", "CandleGlass", "GoldenGate", "BrightRings")
+"""One strong look: eye adaptation (each frame a first frame) and bloom run live; grade and tone map are the
+per-pixel stage the rows compute in different ways."""
+EXR_NAMES = ("Desk", "CandleGlass", "GoldenGate", "Carrots", "Garden", "BrightRings")
+"""The sample photographs (and one synthetic HDR test image) accuracy is measured on, beside the demo scene."""
 DEMO_SIZE = (720, 1280)
 FRAME = (1080, 1920)
 RESOLUTIONS = ((256, 256), (512, 512), (1024, 1024), (1080, 1920), (2160, 3840))
@@ -33,11 +39,23 @@ BATCH_SIDE = 512
 QUICK_RUNS = 7
 """Rounds timed under ``--quick``: enough for every ratio of two runs to agree within 20 % on a shared
 2-core machine (benchmarks/results/stability.md)."""
+QUICK_SIDE = 160
+"""The longer side (pixels) the photographs are area-downscaled to under ``--quick``: small enough that the quick
+form's accuracy is re-derived by the test suite (``tests/project/test_suite_results.py``) in seconds."""
+GRID_SIZES = (9, 17, 33, 65)
+"""LUT sizes of the full run's grid of sizes × lattices × interpolations."""
+
+
+def grid_shapers() -> tuple:
+    """Every lattice ``bake_lut`` bakes with a fixed shape (its default domains; not ``"fitted"``, which is fitted)."""
+    return tuple(name for name in tg.lut.DEFAULT_DOMAINS if name != "fitted")
 
 
 @dataclass(frozen=True)
 class Plan:
-    """What one run measures and how hard."""
+    """What one run measures and how hard. ``every_row``: beside the rows a choice hangs on, the float64 reference
+    timed, every LUT size × lattice × interpolation, OpenColorIO at each, lattices fitted to the scenes, the exported
+    per-pixel stage and baked look, and OpenVINO's default precision."""
 
     quick: bool
     device: torch.device
@@ -48,25 +66,19 @@ class Plan:
     delta_e_samples: int
     resolutions: tuple
     compile: bool
-    lut_sizes: tuple = (9, 17, 33, 65)
-    shapers: tuple = ("linear", "logc", "logc_hdr")
-    opencolorio_sizes: tuple = (9, 17, 33, 65)
-    onnx_lut_interpolations: tuple = ("trilinear", "tetrahedral")
-    peak_memory: bool = True
+    every_row: bool
+    peak_memory: bool
 
     @classmethod
-    def from_args(cls, args) -> "Plan":
-        """The full plan, or with ``--quick``: the LUT rows a choice hangs on (33³ and 65³, LogC and the default
-        lattice; OpenColorIO at 33³; onnxruntime tetrahedral only), smaller accuracy images, scaling up to 1024²,
-        no ``torch.compile``, no peak memory."""
-        device, out = torch.device(args.device), Path(args.out)
-        if not args.quick:
-            return cls(quick=False, device=device, out=out, runs=11, scaling_runs=5, accuracy_side=None,
-                       delta_e_samples=200_000, resolutions=RESOLUTIONS, compile=True)
-        return cls(quick=True, device=device, out=out, runs=QUICK_RUNS, scaling_runs=3, accuracy_side=400,
-                   delta_e_samples=20_000, resolutions=RESOLUTIONS[:3], compile=False, lut_sizes=(33, 65),
-                   shapers=("logc", "logc_hdr"), opencolorio_sizes=(33,), onnx_lut_interpolations=("tetrahedral",),
-                   peak_memory=False)
+    def of(cls, quick: bool, device: str = "cpu", out: Path = Path("benchmarks/out")) -> "Plan":
+        """The full plan, or the quick one: the rows a choice hangs on (not ``every_row``), photographs at most
+        :data:`QUICK_SIDE` pixels a side, fewer rounds, scaling up to 1024², no ``torch.compile``, no peak memory."""
+        device, out = torch.device(device), Path(out)
+        if not quick:
+            return cls(quick=False, device=device, out=out, runs=11, scaling_runs=5, accuracy_side=None, delta_e_samples=200_000,
+                       resolutions=RESOLUTIONS, compile=True, every_row=True, peak_memory=True)
+        return cls(quick=True, device=device, out=out, runs=QUICK_RUNS, scaling_runs=3, accuracy_side=QUICK_SIDE,
+                   delta_e_samples=20_000, resolutions=RESOLUTIONS[:3], compile=False, every_row=False, peak_memory=False)
 
     def command(self) -> str:
         out = self.out.resolve()
@@ -98,8 +110,10 @@ class Workload:
     def __init__(self, plan: Plan, folder: Path):
         self.plan = plan
         self.folder = folder
+        self.exports = {}  # ONNX files by model, exported once a run (benchmarks.suite.runtimes)
+        self.baked_from = tg.PostFX.from_config(LOOK).eval()  # bake_lut evaluates on the CPU
         self.look = tg.PostFX.from_config(LOOK).to(plan.device).eval()
-        self.per_pixel = nn.Sequential(self.look.grade, self.look.tonemap)
+        self.per_pixel = self.look.per_pixel_stages()
         self.scenes = accuracy_scenes(plan)
         self.frame = tg.scene.demo_scene(*FRAME).to(plan.device)
         with torch.no_grad():
@@ -109,26 +123,38 @@ class Workload:
         self.delta_e_pixels = metrics.sample_indices(pixels, plan.delta_e_samples)
 
     @functools.lru_cache(maxsize=None)
-    def bloomed_strip(self, dtype: torch.dtype) -> torch.Tensor:
-        """The accuracy scenes after bloom computed on ``dtype`` input, as one strip in ``dtype``."""
+    def per_pixel_strip(self, dtype: torch.dtype) -> torch.Tensor:
+        """The accuracy scenes as the per-pixel stage receives them (eye adaptation and bloom computed on ``dtype``
+        input, :meth:`torchgrade.PostFX.per_pixel_input`), as one strip in ``dtype``."""
         with torch.no_grad():
-            return as_strip(self.look.bloom(scene.to(dtype)) for scene in self.scenes.values())
+            return as_strip(self.look.per_pixel_input(scene.to(dtype)) for scene in self.scenes.values())
 
     @functools.lru_cache(maxsize=None)
-    def bloomed_frame(self, dtype: torch.dtype) -> torch.Tensor:
+    def per_pixel_frame(self, dtype: torch.dtype) -> torch.Tensor:
+        """The 1920×1080 frame as the per-pixel stage receives it."""
         with torch.no_grad():
-            return self.look.bloom(self.frame.to(dtype))
+            return self.look.per_pixel_input(self.frame.to(dtype))
 
     @functools.lru_cache(maxsize=None)
     def lut(self, size: int, shaper: str, fitted: bool = False) -> tg.LUT3D:
         """The per-pixel stage baked (in float64) into a ``size``³ LUT, table stored in float32.
 
-        ``fitted``: the lattice reaches the brightest bloomed pixel of the accuracy scenes
-        (``bake_lut(scene=...)``) instead of the shaper's default top (LogC 1.0, linear ≈ 58.9).
+        ``fitted``: the lattice reaches the brightest pixel the per-pixel stage receives from the accuracy scenes
+        (``bake_lut(scene=...)``) instead of the shaper's default top.
         """
-        scene = self.bloomed_strip(torch.float32).cpu() if fitted else None
-        baked = tg.bake_lut(self.per_pixel, size=size, shaper=shaper, scene=scene)
+        scene = self.per_pixel_strip(torch.float32).cpu() if fitted else None
+        baked = tg.bake_lut(self.baked_from.per_pixel_stages(), size=size, shaper=shaper, scene=scene)
         return float32_lut(baked).to(self.plan.device)
+
+    @functools.cached_property
+    def default_lut(self) -> tg.LUT3D:
+        """``tg.bake_lut`` of the per-pixel stage with every default (size, lattice), table stored in float32."""
+        return float32_lut(tg.bake_lut(self.baked_from.per_pixel_stages())).to(self.plan.device)
+
+    @functools.cached_property
+    def baked_look(self) -> tg.PostFX:
+        """``look.to_lut()``: the look with its per-pixel stage baked by default, eye adaptation and bloom live."""
+        return self.baked_from.to_lut().to(self.plan.device).eval()
 
 
 def float32_lut(lut: tg.LUT3D, compile: bool = False) -> tg.LUT3D:

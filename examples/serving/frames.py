@@ -1,4 +1,4 @@
-"""What the serving example's server and client share: the raw frame format and the decoding of image files.
+"""What the serving example's server and client share: the raw frame format (image files: ``images.py``).
 
 **Frame format** (little-endian): a 16-byte header, ``b"TGF1"``, ``uint32`` height, ``uint32`` width, the numpy
 dtype string of the samples (``"|u1"``, ``"<u2"``, ``"<f2"``, ``"<f4"``) NUL-padded to 4 bytes; then
@@ -8,15 +8,13 @@ and render targets give frames.
 
 from __future__ import annotations
 
-import io
 import struct
-import tempfile
 
 import numpy as np
-import torch
 
-import torchgrade as tg
 from torchgrade.base.budget import MAX_PIXELS, check_pixels
+
+__all__ = ["DTYPES", "HEADER", "MAGIC", "frame_header", "pack_frame", "unpack_frame"]
 
 HEADER = struct.Struct("<4sII4s")
 MAGIC = b"TGF1"
@@ -66,25 +64,3 @@ def unpack_frame(body: bytes, max_pixels: int = MAX_PIXELS) -> np.ndarray:
     if len(body) != expected:
         raise ValueError(f"a {height}x{width} {dtype} frame is {expected} bytes, got {len(body)}")
     return np.frombuffer(body, dtype, offset=HEADER.size).reshape(height, width, 3)
-
-
-def decode_image(body: bytes, fmt, max_pixels: int) -> np.ndarray:
-    """A PNG or OpenEXR file's bytes as the ``(height, width, 3)`` frame a model of format ``fmt`` takes; its size
-    checked from its header against ``max_pixels`` before a pixel is decoded."""
-    if body.startswith(b"\x89PNG\r\n\x1a\n"):
-        from PIL import Image
-
-        with Image.open(io.BytesIO(body)) as png:
-            check_pixels(png.height, png.width, "an image", max_pixels)
-            if png.mode not in ("RGB", "RGBA"):
-                raise ValueError(f"PNG must be 8-bit RGB or RGBA, got mode {png.mode}")
-            codes = np.array(png.convert("RGB"))  # a copy: writable, as torch wants it
-        linear = tg.color.srgb_to_linear(torch.from_numpy(codes).permute(2, 0, 1) / 255.0)
-    elif body.startswith(b"\x76\x2f\x31\x01"):
-        with tempfile.NamedTemporaryFile(suffix=".exr") as file:  # the EXR reader reads files, its budget from the header
-            file.write(body)
-            file.flush()
-            linear = tg.io.read_exr(file.name, to_rec709=True, max_pixels=max_pixels)[:3]
-    else:
-        raise ValueError("an image is a PNG or an OpenEXR file")
-    return tg.onnx.model_input(linear[None], fmt._replace(layout="NHWC"))[0].numpy()

@@ -2,6 +2,10 @@
 folders, globs and patterns, parallel jobs, LUTs, the output formats and the one-line errors."""
 
 import json
+import signal
+import subprocess
+import sys
+import time
 
 import numpy as np
 import png
@@ -128,6 +132,11 @@ def test_lut_grades_like_the_look_it_was_baked_from(plates, tmp_path):
         (["{plates}", "-o", "{tmp}/x.%d.png", "--config", "{exposure}", "-j", "2"], "--jobs needs a look without eye adaptation"),
         (["{plates}", "-o", "{tmp}/x.%d.png", "--scene-referred"], "--scene-referred values exceed 1"),
         (["{plates}", "-o", "{tmp}/x.%d.png", "--bit-depth", "float"], "does not fit .png"),
+        (["{plates}", "-o", "{tmp}/x.%d.png", "--histogram-percent", "100", "0"], "give it with --metering histogram"),
+        (["{plates}", "-o", "{tmp}/x.%d.png", "--metering", "histogram", "--histogram-percent", "100", "0"],
+         "low_percent ([100.0]) must be below high_percent ([0.0])"),
+        (["{plates}", "-o", "{tmp}/x.%d.png", "--metering", "histogram", "--histogram-percent", "40", "40"],
+         "low_percent ([40.0]) must be below high_percent ([40.0])"),
     ],
 )
 def test_bad_shots_fail_with_one_line(plates, tmp_path, capsys, arguments, message):
@@ -144,3 +153,77 @@ def test_version(capsys):
     with pytest.raises(SystemExit) as exit:
         main(["--version"])
     assert exit.value.code == 0 and capsys.readouterr().out.strip() == f"torchgrade {tg.__version__}"
+
+
+SLOW_SHOT = """
+import sys, time
+from torchgrade.shots import frames
+graded = frames.render_frame
+def slowly(*args, **kwargs):  # each frame a while, so that a signal lands mid-shot
+    time.sleep(0.2)
+    return graded(*args, **kwargs)
+frames.render_frame = slowly
+from torchgrade.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def start_shot(tmp_path, count: int, *flags) -> tuple:
+    """A ``grade`` of ``count`` plates to ``out/g.%04d.exr`` in a child process, each frame taking a while, and the
+    child once its first frame is written."""
+    folder = tmp_path / "plates"
+    folder.mkdir()
+    for number in range(1, count + 1):
+        tg.io.write_exr(folder / f"plate.{number:04d}.exr", torch.rand(3, 6, 8) * number, half=False)
+    (tmp_path / "out").mkdir()
+    command = [sys.executable, "-c", SLOW_SHOT, "grade", str(folder), "-o", str(tmp_path / "out" / "g.%04d.exr"),
+               "--scene-referred", "--contrast", "10", "--quiet", *flags]
+    child = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120  # a guard against a child that never starts, not a measure
+    while not list((tmp_path / "out").glob("g.*.exr")) and child.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    return child, tmp_path / "out"
+
+
+@pytest.mark.parametrize("jobs", ["1", "2"])
+def test_ctrl_c_stops_a_shot_with_one_line_and_status_130_and_leaves_no_temporary(tmp_path, jobs):
+    """Ctrl-C printed a traceback (and with --jobs the frames queued were all graded first): one line, status 130, the
+    frames written whole, no hidden temporary, and the frames not begun not graded."""
+    child, out = start_shot(tmp_path, 40, "--jobs", jobs)
+    child.send_signal(signal.SIGINT)
+    _, stderr = child.communicate(timeout=300)
+    assert child.returncode == 130 and stderr.splitlines() == ["torchgrade grade: interrupted"], stderr[-2000:]
+    written = sorted(out.glob("g.*.exr"))
+    assert 1 <= len(written) < 40 and not [p.name for p in out.iterdir() if p.name.startswith(".")]
+    for frame in written:
+        assert tg.io.read_exr(frame).shape == (3, 6, 8)
+
+
+KILLED_WRITE = """
+import pathlib, sys, time
+from torchgrade.io.atomic import atomic_write
+def stall(temporary):
+    pathlib.Path(temporary).write_bytes(b"half a frame")
+    time.sleep(600)  # killed here
+atomic_write(sys.argv[1], stall)
+"""
+
+
+def test_the_next_run_removes_the_temporary_a_killed_shot_left_and_no_other(plates, tmp_path):
+    """A write killed with SIGKILL left ``.g.0010.exr.8ff158ee.exr`` that no later run removed: a grade of the frames
+    it writes removes their temporaries; another file's temporary (a write in flight elsewhere) stays."""
+    folder, _ = plates
+    out = tmp_path / "out"
+    out.mkdir()
+    child = subprocess.Popen([sys.executable, "-c", KILLED_WRITE, str(out / "g.0010.exr")])
+    deadline = time.monotonic() + 120  # a guard against a child that never starts, not a measure
+    while not [p for p in out.iterdir() if p.name.startswith(".")] and time.monotonic() < deadline:
+        time.sleep(0.01)
+    child.send_signal(signal.SIGKILL)
+    child.wait(timeout=60)
+    left = [p.name for p in out.iterdir()]
+    assert len(left) == 1 and left[0].startswith(".g.0010.exr.")  # what SIGKILL leaves
+    (out / ".g.0099.exr.0bc52090.exr").write_bytes(b"another run's frame")
+    (out / ".notes").write_text("the user's")
+    assert main(["grade", str(folder), "-o", str(out / "g.%04d.exr"), "--scene-referred", "--quiet"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == [".g.0099.exr.0bc52090.exr", ".notes", *(f"g.{n:04d}.exr" for n in range(8, 13))]

@@ -65,8 +65,9 @@ def test_saturation_minus_100_gives_luminance_grey():
 
 @pytest.mark.parametrize("degrees", [360.0, -360.0])
 def test_full_turn_hue_shift_is_identity(degrees):
+    """A turn is outside the stage's ±180 (a number is refused): given as a tensor, which the function takes unread."""
     image = torch.rand(2, 3, 6, 6, dtype=torch.float64) * 3
-    torch.testing.assert_close(F.hue_shift(image, degrees), image, atol=1e-12, rtol=1e-12)
+    torch.testing.assert_close(F.hue_shift(image, torch.tensor(degrees, dtype=torch.float64)), image, atol=1e-12, rtol=1e-12)
 
 
 def test_hue_shift_of_120_degrees_turns_red_into_green():

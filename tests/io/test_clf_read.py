@@ -29,6 +29,7 @@ def lut3d(array: str = TABLE, dim: str = "2 2 2 3", attributes: str = 'inBitDept
     (clf(lut3d(array=TABLE.replace("1 1 1", "1 1 1e39"))), "not finite"),
     (clf(lut3d(array=TABLE.replace("1 1 1", "1 1 x"))), "not a number"),
     (clf(lut3d(attributes='inBitDepth="32f" outBitDepth="7i"')), "outBitDepth must be one of"),
+    (clf(lut3d(attributes='inBitDepth="99i" outBitDepth="32f"')), "LUT3D inBitDepth must be one of"),
     (clf(lut3d(attributes='interpolation="cubic"')), "trilinear or tetrahedral"),
     (clf('<Range inBitDepth="32f" outBitDepth="32f"><minInValue>0</minInValue></Range>' + lut3d()), "needs maxInValue"),
     (clf('<Range><minInValue>0</minInValue><maxInValue>1</maxInValue><minOutValue>0</minOutValue><maxOutValue>2</maxOutValue></Range>'

@@ -6,9 +6,6 @@ import torch
 
 from torchgrade.testing.catalog import STAGE_KINDS
 
-LOOKED_UP = {"look-lut", "lut-trilinear", "lut-tetrahedral", "postfx"}
-"""Kinds whose LUT lookup has an eager loop of its own, which the LUT's operator replaces."""
-
 
 @pytest.fixture(scope="module")
 def frame():
@@ -20,7 +17,7 @@ def frame():
     return image
 
 
-@pytest.mark.parametrize("name", sorted(set(STAGE_KINDS) - LOOKED_UP))
+@pytest.mark.parametrize("name", sorted(STAGE_KINDS))
 def test_eager_and_autograd_compute_the_same_values(name, frame):
     stage = STAGE_KINDS[name].example()
     with torch.no_grad():

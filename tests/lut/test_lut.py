@@ -8,8 +8,8 @@ import pytest
 import torch
 
 from torchgrade.color import linear_to_logc, linear_to_srgb, logc_to_linear
-from torchgrade.lut import INTERPOLATIONS, LUT3D, LUT_BACKENDS, apply_lut, bake_lut, identity_table, lattice
-from torchgrade.lut.apply import chunked_lookup, lookup
+from torchgrade.lut import INTERPOLATIONS, LUT3D, LUT_BACKENDS, apply_lut, bake_lut, identity_table, lattice, operator
+from torchgrade.lut.apply import lookup
 from torchgrade.lut.bake import expects_hdr
 from torchgrade.lut.lattice import planar_table
 from torchgrade.lut.shapers import shaper_decode
@@ -83,26 +83,24 @@ def test_matches_independent_float64_reference(interpolation, device):
 
 
 @pytest.mark.parametrize("interpolation", ["trilinear", "tetrahedral"])
-def test_chunked_eager_lookup_equals_one_pass_and_the_float64_reference(interpolation):
-    """Runs of 1000 pixels (a frame of 2 x 3000, so runs cross rows and the last run is short) give the
-    result of any other run length bit for bit, the one-pass float32 result bit for bit (trilinear) or to
-    float rounding (tetrahedral's eager form sums the same terms in another order), and the float64
-    per-pixel reference to 1e-6."""
+def test_the_operators_chunks_give_the_whole_frames_values_and_the_float64_reference(interpolation, monkeypatch):
+    """The operator's threads take chunks of 1000 pixels (a frame of 2 x 3000, so chunks cross rows and the last one
+    is short): the result of any other chunk size bit for bit, the one-pass float32 torch form to float rounding (a
+    lattice coordinate is a product there, a division in the torch form), and the float64 per-pixel reference to
+    1e-6."""
     size = 17
     table = random_table(size)
     image = torch.rand(2, 3, 40, 75, dtype=torch.float64) * 1.2 - 0.1
     settings = (size, "linear", 0.0, 1.0, interpolation, None, None, (0.0, 1.0), "linear")
-    rows = planar_table(table.float())
+    lut = LUT3D(table.float())
     with torch.no_grad():
-        chunked = chunked_lookup(image.float(), rows, *settings, pixels=1000)
+        monkeypatch.setattr(operator, "CHUNK_PIXELS", 1000)
+        chunked = lut(image.float(), interpolation)
         for pixels in (7, 4096, 6000):
-            assert torch.equal(chunked, chunked_lookup(image.float(), rows, *settings, pixels=pixels))
-        one_pass = lookup(image.float(), rows, *settings)
-        if interpolation == "trilinear":
-            assert torch.equal(chunked, one_pass)
-        else:
-            torch.testing.assert_close(chunked, one_pass, atol=4 * 2.0 ** -24, rtol=0)
-        assert torch.equal(LUT3D(table.float())(image.float(), interpolation), chunked_lookup(image.float(), rows, *settings))
+            monkeypatch.setattr(operator, "CHUNK_PIXELS", pixels)
+            assert torch.equal(chunked, lut(image.float(), interpolation))
+        one_pass = lookup(image.float(), planar_table(table.float()), *settings)
+        torch.testing.assert_close(chunked, one_pass, atol=4 * 2.0 ** -24 + 2.0 ** -24 * (size - 1), rtol=0)
     points = (image.clamp(0, 1) * (size - 1)).permute(0, 2, 3, 1).reshape(-1, 3).numpy()
     expected = np.stack([REFERENCES[interpolation](table.numpy(), p) for p in points])
     got = chunked.double().permute(0, 2, 3, 1).reshape(-1, 3).numpy()

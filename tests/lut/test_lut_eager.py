@@ -1,38 +1,39 @@
-"""The eager no-grad CPU lookup against the gather form that autograd, ``torch.compile`` and exports run, in both of
-tetrahedral's CPU forms (the compiled loop of ``lookup.c`` and the torch form ``TetrahedralRuns``): the same
-values to float rounding over shapers, domains, output encodings and clamps, dtypes, lattice sizes and non-finite or
-huge inputs; the torch form's lattice coordinates bit for bit."""
+"""The CPU lookup, the operator ``torchgrade::lut_lookup``, against the torch form that runs off the CPU and under
+``torch.func`` (:func:`~torchgrade.lut.apply.lookup`, the gather form), in both of the operator's CPU kernels (the C
+loop built with the package, and its torch form where the package was built without a compiler): the same values to
+float rounding over shapers, domains, output encodings and clamps, dtypes, lattice sizes and non-finite or huge
+inputs, its torch form bit for bit; the whole-frame form off the CPU against the gather form."""
 
 import dataclasses
+import warnings
 
 import pytest
 import torch
 
-from torchgrade.base.images import sanitize
-from torchgrade.lut import KERNELS, LUT3D, apply, identity_table, lattice
-from torchgrade.lut.apply import chunked_lookup, lookup
-from torchgrade.lut.native import compiled_loop
-from torchgrade.lut.shapers import lattice_unit
+from torchgrade.lut import KERNELS, LUT3D, identity_table, lattice, layer, operator
+from torchgrade.lut.apply import lookup
 from torchgrade.lut.lattice import planar_table
-from torchgrade.lut.apply import _LatticeCoordinates
 
 MAX_SIZE = KERNELS["tetrahedral"].eager.max_size
 
 
-@pytest.fixture(params=["compiled", "torch"])
+@pytest.fixture(params=["native", "torch"])
 def cpu_form(request, monkeypatch):
-    """Each CPU form of the eager tetrahedral lookup in turn: the compiled loop (which must compile here: CI has the
-    C compiler ``torch.compile`` needs) or, with the compiled loop taken away, the torch form."""
-    if request.param == "compiled":
-        assert all(compiled_loop(kind, dtype) for kind in ("tetrahedral", "trilinear") for dtype in (torch.float32, torch.float64))
-    else:
-        for name in ("tetrahedral", "trilinear"):
-            monkeypatch.setitem(KERNELS, name, dataclasses.replace(KERNELS[name], compiled=None))
-    return request.param
+    """Each CPU kernel of the operator in turn: the C loop (which the package's build must have made here: CI builds
+    it with the C compiler ``torch.compile`` needs) or, with the extension taken away, the torch form (its warning
+    silenced)."""
+    if request.param == "native":
+        assert operator.NATIVE is not None, "torchgrade.lut._lookup was not built: see setup.py"
+        yield request.param
+        return
+    monkeypatch.setattr(operator, "NATIVE", None)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        yield request.param
 
 
 def coordinate_rounding(size: int, dtype: torch.dtype, table_step: float) -> float:
-    """The output error one rounding of a lattice coordinate can make: the compiled loop forms ``(x - low) * ((S - 1) /
+    """The output error one rounding of a lattice coordinate can make: the C loop forms ``(x - low) * ((S - 1) /
     span)`` where the gather form divides, so a coordinate may differ by an ulp of ``S - 1``, which moves the output by
     that much times the table's largest step between neighbours."""
     return torch.finfo(dtype).eps * (size - 1) * table_step
@@ -68,19 +69,6 @@ SHAPED = [
 
 
 @pytest.mark.parametrize("shaper, domain, extra", SHAPED)
-@pytest.mark.parametrize("dtype", [torch.float32, torch.float64, torch.float16])
-def test_lattice_coordinates_are_those_of_lookup_bit_for_bit(shaper, domain, extra, dtype):
-    size = 17
-    lut = LUT3D(torch.rand(size, size, size, 3), shaper=shaper, domain=domain, **extra)
-    work = torch.float32 if dtype == torch.float16 else dtype
-    x = hostile_image(dtype)[0].reshape(3, -1)
-    expected = lattice_unit(sanitize(x.to(work)), shaper, lut.domain_min, lut.domain_max, lut.curve, lut.curve_range) * (size - 1)
-    coordinates = _LatticeCoordinates(work, size, shaper, lut.domain_min, lut.domain_max, lut.curve, lut.curve_range)
-    got = coordinates(x, torch.empty(x.shape, dtype=work))
-    assert torch.equal(got, expected)
-
-
-@pytest.mark.parametrize("shaper, domain, extra", SHAPED)
 @pytest.mark.parametrize("encoding, output_range", [("linear", None), ("srgb", None), ("linear", (0.0, 0.9))])
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64, torch.float16])
 @pytest.mark.parametrize("interpolation", ["tetrahedral", "trilinear"])
@@ -95,17 +83,19 @@ def test_eager_lookup_matches_the_gather_form(shaper, domain, extra, encoding, o
         one_pass = lookup(image, lut.rows(lut.table.dtype), size, lut.shaper, lut.domain_min, lut.domain_max, interpolation,
                           lut.output_range, lut.curve, lut.curve_range, lut.output_encoding)
     assert eager.dtype == one_pass.dtype == dtype and torch.isfinite(eager).all()
-    # a few roundings of values up to 2, and the compiled loop's coordinate rounding (entries in [-1, 2]: steps up
+    # a few roundings of values up to 2, and the C loop's coordinate rounding (entries in [-1, 2]: steps up
     # to 3); sRGB decoding has slope up to ~2.4 over these entries
     work = torch.float32 if dtype == torch.float16 else dtype
     eps = torch.finfo(work).eps
-    coordinate = coordinate_rounding(size, work, 3.0) if cpu_form == "compiled" else 0.0
-    atol = max(2.4 * (8 * 2 * eps + coordinate), torch.finfo(dtype).eps * 2 if dtype == torch.float16 else 0.0)
+    if cpu_form == "torch":  # the same operations as the torch form
+        assert torch.equal(eager, one_pass)
+        return
+    atol = max(2.4 * (8 * 2 * eps + coordinate_rounding(size, work, 3.0)), torch.finfo(dtype).eps * 2 if dtype == torch.float16 else 0.0)
     torch.testing.assert_close(eager, one_pass, atol=atol, rtol=0)
 
 
 @pytest.mark.parametrize("size", [2, 3, 33, MAX_SIZE])
-def test_eager_tetrahedral_is_exact_on_lattice_points_and_close_to_the_gather_form_at_every_size(size, cpu_form):
+def test_tetrahedral_is_exact_on_lattice_points_and_close_to_the_gather_form_at_every_size(size, cpu_form):
     points = lattice(size, torch.float32).reshape(1, -1, 1, 3).permute(0, 3, 1, 2)
     assert torch.equal(LUT3D(identity_table(size))(points), points)
     table = torch.rand(size, size, size, 3) * 2 - 1
@@ -115,32 +105,12 @@ def test_eager_tetrahedral_is_exact_on_lattice_points_and_close_to_the_gather_fo
     image[0, 1, :4, :] = torch.rand(4, image.shape[-1])
     settings = (size, "linear", 0.0, 1.0, "tetrahedral", None, None, (0.0, 1.0), "linear")
     with torch.no_grad():
-        torch.testing.assert_close(chunked_lookup(image, rows, *settings), lookup(image, rows, *settings), atol=1e-6, rtol=0)
-    assert torch.equal(LUT3D(table)(points), planar_table(table).t().reshape(1, -1, 1, 3).permute(0, 3, 1, 2))
-
-
-def test_lattices_above_the_torch_forms_largest_run_the_compiled_loop_or_else_the_gather_form(cpu_form):
-    size = MAX_SIZE + 1
-    rows = planar_table(torch.rand(size, size, size, 3))
-    image = hostile_image()
-    settings = (size, "linear", 0.0, 1.0, "tetrahedral", None, None, (0.0, 1.0), "linear")
-    with torch.no_grad():
-        got, expected = chunked_lookup(image, rows, *settings, pixels=1000), lookup(image, rows, *settings)
+        got, expected = LUT3D(table)(image), lookup(image, rows, *settings)
     if cpu_form == "torch":
         assert torch.equal(got, expected)
     else:
-        torch.testing.assert_close(got, expected, atol=8 * 2.0 ** -24 + coordinate_rounding(size, torch.float32, 1.0), rtol=0)
-        assert not torch.equal(got, expected)  # the compiled loop ran: it rounds differently somewhere
-
-
-def test_lattices_above_the_compiled_loops_largest_run_the_gather_form_bit_for_bit(monkeypatch):
-    size = 5
-    monkeypatch.setattr(apply, "COMPILED_MAX_SIZE", size - 1)
-    monkeypatch.setitem(KERNELS, "tetrahedral", dataclasses.replace(KERNELS["tetrahedral"], eager=None))
-    rows, image = planar_table(torch.rand(size, size, size, 3)), hostile_image()
-    settings = (size, "linear", 0.0, 1.0, "tetrahedral", None, None, (0.0, 1.0), "linear")
-    with torch.no_grad():
-        assert torch.equal(chunked_lookup(image, rows, *settings, pixels=100), lookup(image, rows, *settings))
+        torch.testing.assert_close(got, expected, atol=8 * 2.0 ** -24 + coordinate_rounding(size, torch.float32, 2.0), rtol=0)
+    assert torch.equal(LUT3D(table)(points), planar_table(table).t().reshape(1, -1, 1, 3).permute(0, 3, 1, 2))
 
 
 def test_a_constant_table_gives_its_constant_exactly(cpu_form):
@@ -163,7 +133,9 @@ def test_the_autograd_path_and_the_eager_path_give_the_same_values(requires_grad
     assert (image.grad if requires_grad == "image" else lut.table.grad) is not None
 
 
-def test_eager_tables_are_cached_and_follow_the_table():
+def test_whole_frame_tables_are_cached_and_follow_the_table(monkeypatch):
+    """Off the CPU (the CPU taken for another device) the whole-frame form's tables are derived once per table."""
+    monkeypatch.setattr(layer, "runs_operator", lambda image, table: False)
     lut = LUT3D(torch.rand(5, 5, 5, 3))
     image = torch.rand(1, 3, 6, 7)
     before = lut(image)
@@ -212,16 +184,13 @@ def test_the_whole_frame_form_matches_the_gather_form(size):
 
 @pytest.mark.parametrize("shaper, domain, extra", SHAPED)
 def test_off_the_cpu_a_frame_goes_through_the_whole_frame_form(shaper, domain, extra, monkeypatch):
-    """The CPU given a GPU's policy: LUT3D's eager no-grad lookup takes the whole-frame form, with the gather form's values."""
-    from torchgrade.lut import apply
-    from torchgrade.runtime.policy import WHOLE_FRAMES
-
+    """The CPU taken for another device: LUT3D's eager no-grad lookup takes the whole-frame form, with the gather form's values."""
     lut = LUT3D(torch.rand(9, 9, 9, 3) * 3 - 1, shaper=shaper, domain=domain, **extra)
     image = hostile_image()
     with torch.no_grad():
         gather = lookup(image, lut.rows(torch.float32), 9, lut.shaper, lut.domain_min, lut.domain_max, "tetrahedral",
                         lut.output_range, lut.curve, lut.curve_range, lut.output_encoding)
-        monkeypatch.setattr(apply, "policy_for", lambda device: WHOLE_FRAMES)
+        monkeypatch.setattr(layer, "runs_operator", lambda image, table: False)
         frames, kernel = [], KERNELS["tetrahedral"]
         recorded = dataclasses.replace(kernel.eager, frame=_recorded(kernel.eager.frame, frames))
         monkeypatch.setitem(KERNELS, "tetrahedral", dataclasses.replace(kernel, eager=recorded))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import json
 import os
@@ -20,7 +21,7 @@ import torchgrade as tg  # noqa: E402
 from benchmarks import common, lut_floor, metrics  # noqa: E402
 from benchmarks.__main__ import NAMES  # noqa: E402
 from benchmarks.__main__ import main as door  # noqa: E402
-from benchmarks.suite import measure, methods, report, workload  # noqa: E402
+from benchmarks.suite import measure, methods, report, rows, workload  # noqa: E402
 from torchgrade.color import linear_to_logc, srgb_to_linear  # noqa: E402
 
 
@@ -94,8 +95,8 @@ def tiny_work(tmp_path_factory):
     patch.setattr(workload, "DEMO_SIZE", (36, 64))
     patch.setattr(workload, "BATCHES", (1, 2))
     patch.setattr(workload, "BATCH_SIDE", 16)
-    plan = workload.Plan(quick=True, device=torch.device("cpu"), out=tmp_path_factory.mktemp("out"), runs=1, scaling_runs=1,
-                    accuracy_side=24, delta_e_samples=500, resolutions=((16, 16),), compile=False)
+    plan = dataclasses.replace(workload.Plan.of(quick=True, out=tmp_path_factory.mktemp("out")), runs=1, scaling_runs=1,
+                               accuracy_side=24, delta_e_samples=500, resolutions=((16, 16),))
     yield workload.Workload(plan, tmp_path_factory.mktemp("work"))
     patch.undo()
 
@@ -113,7 +114,7 @@ def test_direct_float32_row_matches_the_reference(tiny_work):
 
 
 def test_opencolorio_applies_the_same_lut_as_torchgrade(tiny_work):
-    _, ours = row(tiny_work, methods.lut_name(33, "logc", "tetrahedral"))
+    _, ours = row(tiny_work, rows.lut_name(33, "logc", "tetrahedral"))
     _, peer = row(tiny_work, "OpenColorIO 33³ logc tetrahedral")
     # The same lattice; they differ by where the output is interpolated (torchgrade: sRGB-encoded
     # entries, clip after the lookup; the .cube file: linear entries) and the .cube's 1D shaper.
@@ -129,14 +130,14 @@ def test_failing_row_records_its_error(tiny_work):
 
 
 def test_report_and_plots(tiny_work, tmp_path):
-    _, record = row(tiny_work, methods.lut_name(9, "logc_hdr", "trilinear"))
+    _, record = row(tiny_work, rows.lut_name(33, "logc", "tetrahedral"))
     records = [record, {"method": "broken", "error": "RuntimeError: x"}]
     assert "failed: RuntimeError: x" in report.markdown_table(records)
-    measure.add_speed(records, {record["method"]: [2.0], measure.COPY: [1.0], measure.BLOOM: [1.0], measure.BLOOM64: [1.0]})
+    measure.add_speed(records, {record["method"]: [2.0], measure.COPY: [1.0], measure.LIVE: [1.0], measure.LIVE64: [1.0]})
     report.plot_pareto(records, tmp_path / "pareto.png")
     points = measure.scaling(tiny_work)
     report.plot_scaling(points, tmp_path / "scaling.png")
-    assert {p["path"] for p in points} == {"direct float32", methods.lut_name(methods.DEFAULT_SIZE, methods.DEFAULT_SHAPER, "tetrahedral")}
+    assert {p["path"] for p in points} == {"direct float32", rows.default_name(tiny_work.default_lut, "tetrahedral")}
     for name in ("pareto.png", "scaling.png"):
         assert 0 < (tmp_path / name).stat().st_size < 200_000
 
@@ -151,15 +152,15 @@ def test_timer_alternates_and_rotates_the_calls():
 def test_ratios_are_medians_of_each_rounds_ratio():
     """Rounds where the machine slowed everything 3x: each round's ratio is 2, while the ratio of the medians is not."""
     times = {"row": [2.0, 6.0, 6.0, 2.0, 2.0], measure.COPY: [1.0, 3.0, 3.0, 1.0, 1.0], methods.PEER: [4.0, 4.0, 4.0, 4.0, 4.0],
-             measure.BLOOM: [1.0] * 5, measure.BLOOM64: [1.0] * 5}
+             measure.LIVE: [1.0] * 5, measure.LIVE64: [1.0] * 5}
     records = [{"method": "row", "timed": "per-pixel stage"}, {"method": "not built", "error": "x"}]
     base = measure.add_speed(records, times)
     assert records[0]["ms"] == 2.0 and records[0]["ratio_to_copy"] == 2.0 and records[0]["ratio_to_opencolorio"] == 0.5
-    assert base == {measure.COPY: 1.0, measure.BLOOM: 1.0, measure.BLOOM64: 1.0} and "ms" not in records[1]
+    assert base == {measure.COPY: 1.0, measure.LIVE: 1.0, measure.LIVE64: 1.0} and "ms" not in records[1]
 
 
 def test_whole_look_check_flags_a_look_faster_than_its_parts():
-    times = {measure.WHOLE_LOOK: [10.0, 12.0, 30.0], measure.PER_PIXEL: [8.0, 9.0, 20.0], measure.BLOOM: [3.0, 3.0, 9.0]}
+    times = {measure.WHOLE_LOOK: [10.0, 12.0, 30.0], measure.PER_PIXEL: [8.0, 9.0, 20.0], measure.LIVE: [3.0, 3.0, 9.0]}
     check = measure.whole_look_check(times)
     assert check["whole_over_parts"] == pytest.approx(1.0) and check["whole_look_ms"] == 12.0  # rounds: 10/11, 12/12, 30/29
     assert "not to be trusted" in report.check_line(measure.whole_look_check({**times, measure.WHOLE_LOOK: [5.0, 5.0, 5.0]}))
@@ -167,22 +168,23 @@ def test_whole_look_check_flags_a_look_faster_than_its_parts():
     assert measure.whole_look_check({measure.PER_PIXEL: [1.0]}) is None
 
 
-def record_of(method, family, ms, p999, largest, shaper=None, timed="per-pixel stage"):
+def record_of(method, family, ms, p999, largest, shaper=None, timed="per-pixel stage", **more):
     megapixels = workload.FRAME[0] * workload.FRAME[1] / 1e6
     return {"method": method, "family": family, "timed": timed, "ms": ms, "ms_per_megapixel": ms / megapixels,
-            "p999_error_8bit": p999, "max_error_8bit": largest, **({"shaper": shaper} if shaper else {})}
+            "p999_error_8bit": p999, "max_error_8bit": largest, **({"shaper": shaper} if shaper else {}), **more}
 
 
 def test_advice_follows_the_measured_numbers():
-    default = methods.lut_name(methods.DEFAULT_SIZE, methods.DEFAULT_SHAPER, "tetrahedral")
+    default = "LUT 5³ lattice tetrahedral, default bake"
     records = [record_of("direct float32", "direct", 100.0, 0.0, 0.2), record_of("direct float16", "direct", 60.0, 0.1, 9.0),
                record_of("LUT 9³ linear tetrahedral", "lut", 5.0, 40.0, 150.0, shaper="linear"),
-               record_of(default, "lut", 20.0, 6.0, 12.0, shaper=methods.DEFAULT_SHAPER),
-               record_of("LUT 65³ logc tetrahedral", "lut", 25.0, 3.0, 40.0, shaper="logc")]
-    training, serving, baking = report.advice(records, {"bloom float32": 20.0})
+               record_of(default, "lut", 20.0, 6.0, 12.0, shaper="lattice", default_bake=True, lut_size=5,
+                         interpolation="tetrahedral"),
+               record_of("LUT 65³ logc tetrahedral", "lut", 25.0, 3.0, 40.0, shaper="logc", interpolation="tetrahedral")]
+    training, serving, baking = report.advice(records, {measure.LIVE: 20.0})
     assert training.startswith("Training augmentation: direct float32") and "direct float16 takes 0.60×" in training
     assert serving.startswith("Serving: direct float16") and f"{default} takes 0.33×" in serving and "linear" not in serving
-    assert baking.startswith("Baking a LUT: LUT 65³ logc tetrahedral") and f"the default ({methods.DEFAULT_SHAPER}" in baking
+    assert baking.startswith("Baking a LUT: LUT 65³ logc tetrahedral") and "the default bake (lattice, 5³ tetrahedral): p99.9 6.00" in baking
     records[0]["max_error_8bit"] = 2.0  # float32 no longer within a code: float64 would be needed, and none was timed
     assert report.training_advice(records).startswith("Training augmentation: no PyTorch row")
 
@@ -193,14 +195,6 @@ def test_pareto_plot_offers_no_linear_shaper_lut():
                record_of("LUT 33³ logc_hdr tetrahedral", "lut", 6.0, 6.0, 12.0, shaper="logc_hdr"),
                record_of("direct float32, whole look", "direct", 9.0, 0.0, 0.2, timed="whole look")]
     assert [r["method"] for r in report.hdr_choices(records)] == ["LUT 33³ logc_hdr tetrahedral"]
-
-
-def test_the_default_lattice_is_the_librarys():
-    look = tg.PostFX.from_config(workload.LOOK)
-    assert look.to_lut(size=3).lut.shaper == methods.DEFAULT_SHAPER
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", tg.lut.LUTAccuracyWarning)
-        assert tg.bake_lut(look.per_pixel_stages(), size=3).shaper == methods.DEFAULT_SHAPER
 
 
 def test_warnings_are_counted_once_per_message():
@@ -280,27 +274,31 @@ def test_every_benchmark_takes_out_and_defaults_away_from_the_committed_results(
     assert ("--quick" in usage) == bool(getattr(module, "QUICK", None))
 
 
-def test_a_tiny_run_writes_to_out_only_and_collects_its_warnings(tmp_path, monkeypatch):
+def test_a_tiny_run_writes_to_out_only_prints_a_short_table_and_collects_its_warnings(tmp_path, monkeypatch, capsys):
     from benchmarks import run
 
     for name, value in {"FRAME": (24, 32), "DEMO_SIZE": (24, 32), "BATCHES": (1,), "BATCH_SIDE": 8,
                         "RESOLUTIONS": ((8, 8),) * 3, "QUICK_RUNS": 2}.items():
         monkeypatch.setattr(workload, name, value)
     monkeypatch.setattr(workload, "accuracy_scenes", lambda plan: {"demo scene": tg.scene.demo_scene(16, 24)})
-    kept = ("direct float32", "direct float32, whole look", methods.lut_name(33, "logc", "tetrahedral"), methods.PEER)
+    kept = ("direct float32", "direct float32, whole look", rows.lut_name(33, "logc", "tetrahedral"), methods.PEER)
     every_row = methods.method_rows
     monkeypatch.setattr(measure, "method_rows", lambda work: [(n, b) for n, b in every_row(work) if n in kept])
     before = sorted(common.RESULTS.rglob("*"))
-    results = run.main(["--quick", "--out", str(tmp_path)])
+    assert door(["suite", "--quick", "--out", str(tmp_path)]) == 0
     assert sorted(common.RESULTS.rglob("*")) == before
     assert {p.name for p in tmp_path.iterdir()} == {"results.json", "results.md", "pareto.png", "scaling.png"}
     written = json.loads((tmp_path / "results.json").read_text())
-    assert written["environment"]["device"] == "cpu" and written["runs"] == 2
-    assert set(written["rounds_ms"]) == {*kept, measure.COPY, measure.BLOOM, measure.BLOOM64}
+    assert written["environment"]["device"] == "cpu" and written["runs"] == 2 and written["command"].endswith(f"--out {tmp_path}")
+    assert set(written["rounds_ms"]) == {*kept, measure.COPY, measure.LIVE}
     assert all(len(ms) == 2 for ms in written["rounds_ms"].values())
     assert {w["category"] for w in written["warnings"]} == {"LUTAccuracyWarning"}  # the 33³ bakes miss the look
-    assert [line.split(":")[0] for line in results["advice"]] == ["Training augmentation", "Serving", "Baking a LUT"]
-    assert results["check"]["whole_over_parts"] > 0
+    assert [line.split(":")[0] for line in written["advice"]] == ["Training augmentation", "Serving", "Baking a LUT"]
+    assert written["check"]["whole_over_parts"] > 0 and written["cpu_s"] > 0 and "modified" in written
+    printed = capsys.readouterr().out.splitlines()
+    header = next(at for at, line in enumerate(printed) if line.split() == ["method", "ms/MP", "×OCIO", "p99.9", "max", "ΔE"])
+    assert [line.split("  ")[0] for line in printed[header + 1:header + len(kept) + 1]] == list(kept)
+    assert "{" not in "".join(printed)
 
 
 @pytest.mark.parametrize("interpolation", ["trilinear", "tetrahedral"])
@@ -477,3 +475,35 @@ def test_the_gpu_benchmark_writes_its_results_without_cuda(tmp_path):
     report = json.loads((tmp_path / "gpu.json").read_text())
     assert report["skipped"] == ["kernels (no CUDA)", "forms (no CUDA)"] and not report["errors"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["gpu.json", "gpu.md"]  # no temporary file left
+
+
+def test_the_serving_benchmark_exits_0_through_the_door_and_writes_its_table(tmp_path, monkeypatch, capsys):
+    """``python -m benchmarks serving`` exits with what its ``main`` returns: it returned its results, which
+    ``sys.exit`` printed and exited 1 with. The server and its clients stand in here (the serving tests run them)."""
+    from benchmarks import bench_serving
+
+    run = {"requests": 16, "concurrency": 16, "statuses": {"200": 16}, "latency_ms_p50": 1.0, "latency_ms_p99": 2.0,
+           "latency_ms_max": 3.0, "slow_answers": {}, "server": {"peak_rss_mib": 900.0,
+                                                                  "memory": {"held_peak_mib": 10.0, "waited": 0}}}
+
+    class Served:
+        url = "http://127.0.0.1:1"
+
+        def __init__(self, model, flags):
+            pass
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *_):
+            pass
+
+        def client(self, flags, out):
+            return run
+
+    monkeypatch.setattr(bench_serving, "Server", Served)
+    monkeypatch.setattr(bench_serving, "_get_json", lambda url: {"idle_mib": 500.0, "costs": {}})
+    monkeypatch.setattr(tg.onnx, "export", lambda look, path, **options: path)
+    assert door(["serving", "--quick", "--out", str(tmp_path)]) == 0
+    assert "| real frames | 16 | 16 |" in (tmp_path / "serving.md").read_text()
+    assert "{'command'" not in capsys.readouterr().err

@@ -15,8 +15,11 @@ QUESTIONS = ("is_exporting", "is_tracing", "policy_for", "untracked", "is_compil
 run a step only in some of those places: the predicates and the helpers that ask them for their caller."""
 RUNTIME_PACKAGES = ("runtime", "onnx")
 """The packages whose job is to answer them."""
-PENDING = {"lut/apply.py": 2, "lut/layer.py": 2}
-"""The LUT's eager loop and its table cache, which its operator (a loop built with the package) replaces."""
+PENDING = {"lut/apply.py": 3, "lut/layer.py": 1}
+"""The LUT lookup's questions, left to its operator's next step: whether the operator runs (on the CPU, its kernel's
+device, outside forward-mode derivatives, which it has no formula for: ``runs_operator``), whether the lookup off the
+CPU takes its whole-frame form (where nothing records: ``whole_frame_tables``), and whether the table's planar rows
+are cached (not while compiling: ``LUT3D.rows``)."""
 
 
 def calls_of(names, keyword=None) -> list:
@@ -36,7 +39,7 @@ def calls_of(names, keyword=None) -> list:
 
 def test_the_maths_modules_ask_no_context_question():
     """Every formula has one form, the same eager, under autograd, compiled and exported: no module outside the
-    runtime asks where it runs, directly or through a helper, but the LUT's lookup that its operator replaces."""
+    runtime asks where it runs, directly or through a helper, but the LUT's lookup (:data:`PENDING`)."""
     calls = calls_of(QUESTIONS)
     by_file = {}
     for call in calls:

@@ -14,7 +14,7 @@ from torchgrade.runtime import policy
 
 ROOT = Path(__file__).resolve().parents[2]
 
-USERS = ["torchgrade.runtime.strips", "torchgrade.runtime.policy", "torchgrade.lut.apply"]
+USERS = ["torchgrade.runtime.strips", "torchgrade.runtime.policy"]
 """Every module that asks ``policy_for``."""
 
 LOOKS = {

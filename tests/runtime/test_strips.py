@@ -1,10 +1,6 @@
 """Per-pixel stages run in strips of rows on the CPU (``torchgrade.runtime.in_strips``): the whole frame's values to
 float32 rounding, with or without autograd (the same code records gradients), and the whole frame where the device is
-not the CPU; a LUT's pixel runs on worker threads give the serial runs' values."""
-
-import multiprocessing
-import os
-import threading
+not the CPU."""
 
 import pytest
 import torch
@@ -58,64 +54,6 @@ def test_strips_record_gradients_as_the_whole_frame_does(desk, monkeypatch):
     assert len(calls) > 3
     for stripped, expected in zip(run(), whole):
         torch.testing.assert_close(stripped, expected, rtol=1e-5, atol=1e-6)
-
-
-def test_lut_runs_on_worker_threads_give_the_serial_runs_values_and_leave_the_callers_threads_alone(desk, monkeypatch):
-    lut = tg.bake_lut(tg.PostFX(grade={"contrast": 20}, tonemap="aces"), size=17, report_tolerance=float("inf"))
-    image = desk[..., :200, :300]
-    with torch.no_grad():
-        serial = lut(image)
-    monkeypatch.setattr(policy, "PARALLEL_FROM", 1)  # workers from one thread up
-    threads = torch.get_num_threads()
-    try:
-        for count in (threads + 1, threads + 2):  # a new pool for each count: its workers set one thread each
-            torch.set_num_threads(count)
-            with torch.inference_mode():
-                threaded = lut(image)
-            assert threaded.is_inference() and torch.get_num_threads() == count
-            assert torch.equal(threaded, serial)
-            seen = []
-            thread = threading.Thread(target=lambda: seen.append(torch.get_num_threads()))
-            thread.start()
-            thread.join()
-            assert seen == [count]  # a thread started later begins with the caller's count, not the workers' one
-    finally:
-        torch.set_num_threads(threads)
-
-
-def test_each_worker_computes_on_one_thread_whatever_the_callers_count():
-    threads = torch.get_num_threads()
-    try:
-        torch.set_num_threads(threads + 3)  # a count no other test gives a pool: a new pool starts here
-        seen = []
-        runtime.run_pieces(lambda piece: seen.append(torch.get_num_threads()), range(8), workers=threads + 3)
-        assert seen == [1] * 8 and torch.get_num_threads() == threads + 3
-    finally:
-        torch.set_num_threads(threads)
-
-
-def _squares_on_workers(queue=None):
-    out = torch.zeros(4)
-    runtime.run_pieces(lambda i: out.__setitem__(i, i * i), range(4), workers=2)
-    if queue is None:
-        return out.tolist()
-    queue.put(out.tolist())
-
-
-@pytest.mark.skipif(not hasattr(os, "fork"), reason="platform-conditional: needs fork")
-def test_a_forked_child_runs_pieces_on_its_own_workers():
-    """A pool made before a fork holds threads that the child does not have: the child must start its own."""
-    assert _squares_on_workers() == [0.0, 1.0, 4.0, 9.0]  # the parent's pool of 2 exists now
-    context = multiprocessing.get_context("fork")
-    queue = context.Queue()
-    child = context.Process(target=_squares_on_workers, args=(queue,))
-    child.start()
-    child.join(60)
-    if child.is_alive():
-        child.kill()
-        child.join()
-    assert child.exitcode == 0, "the forked child never finished its pieces"
-    assert queue.get(timeout=5) == [0.0, 1.0, 4.0, 9.0]
 
 
 def test_other_devices_compute_whole_frames():

@@ -131,7 +131,7 @@ def in_state_check(value) -> bool:
 
 
 def check_given(table: dict, params: dict, owner: str) -> None:
-    """Check the controls of ``params`` given as plain values (numbers, triples, lists of them) against ``table``, a
+    """Check the controls of ``params`` given as plain values (numbers, integers, triples, lists of them) against ``table``, a
     stage's :class:`Control` table, with its ranges and messages: the functional API's door, where a stage checks at
     construction. Tensors are not read (on a GPU each read would wait for the device; a stage checks its learnable
     values with :meth:`Stage.check_learnable`). A name outside the table is refused as the stage ``owner`` refuses it
@@ -152,7 +152,7 @@ def check_given(table: dict, params: dict, owner: str) -> None:
     refuse_unknown(table, params, owner)
     for name, value in params.items():
         control = table.get(name)
-        if control is not None and control.kind == "number" and not _holds_tensor(value):
+        if control is not None and control.kind in ("number", "int") and not _holds_tensor(value):
             control.check(name, value)
 
 

@@ -153,12 +153,17 @@ def screen_blend(image, glow, strength, kept):
 def softlight_blend(image, glow, strength, kept):
     """Godot's soft-light glow: ``c + g (D(c) - c)``, ``g`` in [0, 1]; ``D`` a cubic to 0.25, then ``sqrt``; ``c > 1`` kept.
 
+    Godot blends display values, never below 0; here a negative (out-of-gamut) ``c`` meets the cubic's tangent at 0,
+    ``D(c) = 4c`` (``((16l - 12)l + 4) c`` with ``l = max(c, 0)``): the cubic itself grows as ``16c³``, a slope of
+    4.8e9 at -1e4.
+
     Examples:
-        >>> softlight_blend(torch.tensor([0.25, 2.0]), torch.tensor([1.0, 1.0]), 1.0, None)
-        tensor([0.5000, 2.0000])
+        >>> softlight_blend(torch.tensor([-1.0, 0.25, 2.0]), torch.tensor([1.0, 1.0, 1.0]), 1.0, None)
+        tensor([-4.0000,  0.5000,  2.0000])
     """
     glow = glow.clamp(0.0, 1.0)
-    dark = ((16.0 * image - 12.0) * image + 4.0) * image
+    light = image.clamp_min(0.0)
+    dark = ((16.0 * light - 12.0) * light + 4.0) * image
     target = torch.where(image <= 0.25, dark, image.clamp_min(0.25).sqrt())
     return torch.where(image > 1.0, image, image + glow * (target - image))
 

@@ -28,6 +28,9 @@ __all__ = ["main"]
 TERMINATED = 128 + signal.SIGTERM
 """The exit status of a command stopped by SIGTERM, as a shell reports it."""
 
+INTERRUPTED = 128 + signal.SIGINT
+"""The exit status of a command stopped by Ctrl-C (SIGINT), as a shell reports it."""
+
 SUBCOMMANDS = (add_demo, add_grade, add_bake, add_export, add_match)
 """Each subcommand's parser builder, in the order ``--help`` lists them."""
 
@@ -44,7 +47,8 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Run the command line ``argv``; a bad input prints one line on stderr and returns 2, never a traceback; a LUT
     baked past its tolerance (``bake``, ``export --lut``) prints its report and what to do, and returns
-    :data:`~torchgrade.cli.common.OVER_TOLERANCE` (3) unless ``--accept-error`` is given.
+    :data:`~torchgrade.cli.common.OVER_TOLERANCE` (3) unless ``--accept-error`` is given; Ctrl-C prints one line and
+    returns :data:`INTERRUPTED` (130), every write in flight having removed its temporary file.
 
     Examples:
         >>> main(["bake", "-o", "look.txt"])  # stderr: torchgrade bake: error: output must end in .cube, got look.txt
@@ -60,6 +64,9 @@ def main(argv: list[str] | None = None) -> int:
     except LUTOverTolerance as error:
         print(f"torchgrade {args.command}: error: {error}", file=sys.stderr)
         return OVER_TOLERANCE
+    except KeyboardInterrupt:
+        print(f"torchgrade {args.command}: interrupted", file=sys.stderr)
+        return INTERRUPTED
     return 0
 
 

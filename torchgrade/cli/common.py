@@ -183,7 +183,9 @@ def given_exposure_flags(args: argparse.Namespace) -> list:
 
 
 def exposure_from_args(args: argparse.Namespace) -> dict | None:
-    """The ``AutoExposure`` config the eye-adaptation flags ask for, ``None`` without any.
+    """The ``AutoExposure`` config the eye-adaptation flags ask for, ``None`` without any; ``ValueError`` for
+    ``--histogram-percent`` without histogram metering, where it would change nothing (``AutoExposure`` then refuses
+    a band whose low end is not below its high end).
 
     Examples:
         >>> args = argparse.Namespace(metering="histogram", metering_mask="center", compensation=None, ev_limits=[-3.0, 3.0],
@@ -198,6 +200,8 @@ def exposure_from_args(args: argparse.Namespace) -> dict | None:
     if args.ev_limits is not None:
         config["min_ev"], config["max_ev"] = args.ev_limits
     if args.histogram_percent is not None:
+        if args.metering != "histogram":
+            raise ValueError("--histogram-percent is the band histogram metering averages: give it with --metering histogram")
         config["low_percent"], config["high_percent"] = args.histogram_percent
     return config
 

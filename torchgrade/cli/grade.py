@@ -23,6 +23,7 @@ import time
 from functools import partial
 
 from ..io import read_cube
+from ..io.atomic import remove_interrupted
 from ..io.exr import ADAPTATIONS, exr_info
 from ..look.postfx import PostFX
 from ..output.display import DISPLAY_PRESETS, display_settings
@@ -127,6 +128,7 @@ def run_grade(args: argparse.Namespace) -> str:
     frames = shot_frames(args.inputs)
     outputs = output_paths(args.output, frames)
     refuse_overwriting(outputs, [*frames, args.config, args.lut, args.look_lut], allowed=args.overwrite_input)
+    remove_interrupted(outputs)  # what a run of these frames killed mid-write (SIGKILL) left beside them
     check_grading_memory(frames, args.part, args.jobs, args.max_bytes)
     look = look_to_grade(args)
     if args.display:

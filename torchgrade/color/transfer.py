@@ -15,7 +15,7 @@ import torch
 from ..runtime.constants import affine
 
 __all__ = [
-    "safe_pow", "safe_sqrt", "linear_to_srgb", "srgb_to_linear", "linear_to_logc", "logc_to_linear", "aces_to_acescc", "acescc_to_aces", "linear_to_pq", "pq_to_linear", "hlg_oetf", "hlg_inverse_oetf", "linear_to_acescct", "acescct_to_linear", "LOGC_CUT", "LOGC_E", "ACESCC_MIDGRAY", "ACESCC_MAX", "PQ_M1", "PQ_C1", "PQ_PEAK", "HLG_A", "HLG_B", "HLG_C", "ACESCCT_CUT_LINEAR", "ACESCCT_CUT_LOG", "ACESCCT_A", "LOGC_A", "LOGC_B", "LOGC_C", "LOGC_D", "LOGC_F", "PQ_M2", "PQ_C2", "PQ_C3", "ACESCCT_B",
+    "safe_pow", "safe_sqrt", "linear_to_srgb", "srgb_to_linear", "linear_to_logc", "logc_to_linear", "aces_to_acescc", "acescc_to_aces", "linear_to_pq", "pq_to_linear", "hlg_oetf", "hlg_inverse_oetf", "linear_to_acescct", "acescct_to_linear", "LOGC_CUT", "LOGC_E", "ACESCC_MIDGRAY", "ACESCC_MAX", "PQ_M1", "PQ_C1", "PQ_PEAK", "PQ_FOOT", "HLG_A", "HLG_B", "HLG_C", "ACESCCT_CUT_LINEAR", "ACESCCT_CUT_LOG", "ACESCCT_A", "LOGC_A", "LOGC_B", "LOGC_C", "LOGC_D", "LOGC_F", "PQ_M2", "PQ_C2", "PQ_C3", "ACESCCT_B",
 ]
 
 
@@ -137,6 +137,8 @@ PQ_M1, PQ_M2 = 2610.0 / 16384.0, 2523.0 / 4096.0 * 128.0
 PQ_C1, PQ_C2, PQ_C3 = 3424.0 / 4096.0, 2413.0 / 4096.0 * 32.0, 2392.0 / 4096.0 * 32.0
 PQ_PEAK = 10000.0
 """Luminance (cd/m²) of PQ code value 1."""
+PQ_FOOT = 1e-12
+"""The share of :data:`PQ_PEAK` (1e-8 cd/m²) below which :func:`linear_to_pq` takes the chord of ``Y^m1`` from 0."""
 
 
 def linear_to_pq(image: torch.Tensor, reference: float = 100.0) -> torch.Tensor:
@@ -145,13 +147,19 @@ def linear_to_pq(image: torch.Tensor, reference: float = 100.0) -> torch.Tensor:
     ``E' = ((c1 + c2 Y^m1) / (1 + c3 Y^m1))^m2`` with ``Y = image * reference / 10000``; the
     default ``reference`` puts 1.0 at 100 cd/m² (OpenColorIO's scene/display convention).
 
+    Below :data:`PQ_FOOT` (1e-8 cd/m²) ``Y^m1`` is its chord from 0, ``Y · PQ_FOOT^(m1 - 1)``: the power's slope,
+    ``m1 Y^(m1 - 1)`` with ``m1 = 0.159``, is infinite at 0, and Unity's HDR range reduction, which decodes a
+    black it lifted, passed it on (gradients of 8e30 at float32's smallest denormal). The chord moves codes by at most
+    4.7e-6 (a 12-bit code is 2.4e-4) and keeps the slope below 1.4e7 a unit of ``Y``.
+
     Examples:
         >>> round(float(linear_to_pq(torch.tensor(1.0))), 4)  # 100 cd/m²
         0.5081
         >>> float(linear_to_pq(torch.tensor(10000.0), reference=1.0))
         1.0
     """
-    y_m1 = safe_pow(image * (reference / PQ_PEAK), PQ_M1)
+    y = image * (reference / PQ_PEAK)
+    y_m1 = safe_pow(y.clamp_min(PQ_FOOT), PQ_M1) * (y.clamp(0.0, PQ_FOOT) / PQ_FOOT)
     return safe_pow((PQ_C1 + PQ_C2 * y_m1) / (1.0 + PQ_C3 * y_m1), PQ_M2)
 
 

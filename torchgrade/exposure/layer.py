@@ -109,29 +109,31 @@ class AutoExposure(Stage):
 
     @contextlib.contextmanager
     def compiled_frame(self, image: torch.Tensor, dt: Optional[Param] = None, stream: Optional[Hashable] = None):
-        """Around a compiled frame (:func:`torchgrade.compile` enters it): an empty :attr:`adapted_luminance` holds zeros
-        of ``image``'s batch shape for the call, kept if the frame runs and emptied again if it raises. A state that
-        is not positive starts a sequence as an empty one does (the same values; a learnable ``speed`` gets a zero
-        gradient where there is none); the graph then sees the state's shape from the first frame on, instead of
-        compiling the look a second time at the second frame, when the state first takes the batch's shape. A
-        ``stream``'s state is left alone.
+        """Around a compiled frame (:func:`torchgrade.compile` enters it), the state the graph sees, the same for every
+        frame of a kind, so that one graph serves them: for a frame that adapts instantly (``dt=None``, which reads
+        no state) an empty :attr:`adapted_luminance`, whatever the last frame's batch was; for the first frame of a
+        sequence (an empty state) zeros of ``image``'s batch shape (a state that is not positive starts a sequence as
+        an empty one does: the same values, and a learnable ``speed`` gets a zero gradient where there is none), as
+        the second frame's state will be. The frame's state is kept if it runs; the state before it comes back if it
+        raises. A ``stream``'s state is left alone.
 
         Examples:
             >>> layer = AutoExposure()
-            >>> with layer.compiled_frame(torch.ones(2, 3, 4, 4)):
+            >>> with layer.compiled_frame(torch.ones(2, 3, 4, 4), dt=1 / 24):
             ...     layer.adapted_luminance.tolist()
             [0.0, 0.0]
         """
-        if stream is not None or self.adapted_luminance.numel() != 0:
+        if stream is not None or (dt is not None and self.adapted_luminance.numel() != 0):
             yield
             return
-        empty = self.adapted_luminance
+        kept = self.adapted_luminance
         dtype = working_dtype(image.new_empty(0)).dtype  # the state's dtype after a frame
-        self.adapted_luminance = torch.zeros(image.shape[:-3], dtype=dtype, device=image.device)
+        shape = (0,) if dt is None else image.shape[:-3]
+        self.adapted_luminance = torch.zeros(shape, dtype=dtype, device=image.device)
         try:
             yield
         except BaseException:
-            self.adapted_luminance = empty
+            self.adapted_luminance = kept
             raise
 
     def _history(self, state: torch.Tensor, image: torch.Tensor, dt) -> Optional[torch.Tensor]:
@@ -182,9 +184,12 @@ class AutoExposure(Stage):
     def forward(self, image: torch.Tensor, dt: Optional[Param] = None, stream: Optional[Hashable] = None, *,
                 nan_free: bool = False) -> torch.Tensor:
         check_image(image)
-        # One dict read and one dict write per frame: atomic in CPython, so threads on distinct keys never mix.
-        state = self.adapted_luminance if stream is None else self.streams.get(stream, self.adapted_luminance.new_empty(0))
-        exposed, adapted = self.frame(image, self._history(state, image, dt), 0.0 if dt is None else dt, nan_free=nan_free)
+        # A frame without dt adapts instantly and reads no state: a compiled graph then holds no guard on the state's
+        # shape, which is the last batch's, and runs for a batch of another size. One dict read and one dict write
+        # per frame: atomic in CPython, so threads on distinct keys never mix.
+        history = None if dt is None else self._history(
+            self.adapted_luminance if stream is None else self.streams.get(stream, self.adapted_luminance.new_empty(0)), image, dt)
+        exposed, adapted = self.frame(image, history, 0.0 if dt is None else dt, nan_free=nan_free)
         if stream is None:
             self.adapted_luminance = adapted.detach()
         else:

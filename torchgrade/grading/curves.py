@@ -20,6 +20,7 @@ points; the ``x`` positions are fixed (their gradient is not computed).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Optional
 
@@ -94,13 +95,15 @@ def _spans_a_turn(points) -> bool:
 
 
 def _plain_points(points, name: str) -> tuple:
-    """Points given as numbers, as a tuple of ``(x, y)`` float pairs, checked: at least two, ``x`` strictly increasing."""
+    """Points given as numbers, as a tuple of ``(x, y)`` float pairs, checked: at least two, finite, ``x`` strictly increasing."""
     try:
         pairs = tuple((float(x), float(y)) for x, y in points)
     except (TypeError, ValueError) as error:
         raise ValueError(f"{name} must be a sequence of (x, y) points: {error}") from None
     if len(pairs) < 2:
         raise ValueError(f"{name} must be at least two (x, y) points, shape (N, 2), got shape ({len(pairs)}, 2)")
+    if not all(math.isfinite(v) for pair in pairs for v in pair):  # NaN passes every comparison below
+        raise ValueError(f"{name} must be finite (x, y) points, got {list(pairs)}")
     if any(later[0] <= earlier[0] for earlier, later in zip(pairs, pairs[1:])):
         raise ValueError(f"{name} x values must be strictly increasing, got {[x for x, _ in pairs]}")
     return pairs

@@ -26,10 +26,18 @@ from .primary import (
     style_table,
 )
 
-__all__ = ["ColorGrade", "PrimaryGrade"]
+__all__ = ["ColorGrade", "PrimaryGrade", "check_zone"]
 
 
-def _check_zone(start: Param, end: Param, zone: str) -> None:
+def check_zone(start: Param, end: Param, zone: str) -> None:
+    """A tonal zone's start below its end, as :class:`ColorGrade` orders ``shadows_*`` and ``highlights_*``.
+
+    Examples:
+        >>> check_zone(0.5, 0.25, "shadows")
+        Traceback (most recent call last):
+        ...
+        ValueError: shadows_start must be below shadows_end, got 0.5 and 0.25
+    """
     start_t, end_t = torch.as_tensor(start).detach(), torch.as_tensor(end).detach()
     if start_t.is_meta or end_t.is_meta:  # no values to compare
         return
@@ -75,8 +83,8 @@ class ColorGrade(Stage):
     def check_together(self) -> None:
         if self.log_space != "acescc" and not self.aces:
             raise ValueError(f"log_space {self.log_space!r} grades contrast in ACES: it needs aces=True")
-        _check_zone(self.shadows_start, self.shadows_end, "shadows")
-        _check_zone(self.highlights_start, self.highlights_end, "highlights")
+        check_zone(self.shadows_start, self.shadows_end, "shadows")
+        check_zone(self.highlights_start, self.highlights_end, "highlights")
 
     def is_default(self, name: str) -> bool:
         if name in GRADE_SETTINGS:

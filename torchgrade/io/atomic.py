@@ -1,15 +1,24 @@
-"""Atomic file writing: a failed write leaves no file and never clobbers an existing one."""
+"""Atomic file writing: a failed write leaves no file and never clobbers an existing one.
+
+A write goes to a hidden temporary beside its file, ``.{name}.{8 hex digits}{suffix}``, renamed onto the file once
+whole; an exception or SIGTERM removes it, but a process killed with SIGKILL (or a machine that stops) cannot:
+:func:`remove_interrupted` removes what such a write of the same files left.
+"""
 
 from __future__ import annotations
 
 import contextlib
 import os
+import re
 import secrets
 import stat
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterable
 
-__all__ = ["atomic_write"]
+__all__ = ["atomic_write", "remove_interrupted"]
+
+_TEMPORARY = re.compile(r"\.(?P<name>.+)\.[0-9a-f]{8}(?P<suffix>.*)", re.S)
+"""A temporary's name: ``.`` the file's name, ``.``, 8 hex digits, the file's suffix (the longest name that fits)."""
 
 
 def _temporary_beside(target: Path) -> str:
@@ -54,3 +63,49 @@ def atomic_write(path, write: Callable[[str], None]) -> None:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(temporary)
         raise
+
+
+def _written_by_a_temporary(name: str) -> str | None:
+    """The name of the file a temporary called ``name`` was written for, or ``None`` for any other name.
+
+    Examples:
+        >>> _written_by_a_temporary(".g.0015.exr.8ff158ee.exr"), _written_by_a_temporary(".g.0015.exr")
+        ('g.0015.exr', None)
+    """
+    match = _TEMPORARY.fullmatch(name)
+    if match is None or Path(match["name"]).suffix != match["suffix"]:
+        return None
+    return match["name"]
+
+
+def remove_interrupted(paths: Iterable) -> int:
+    """Remove the temporaries that writes of ``paths`` left when their process was killed (SIGKILL), and return how
+    many: this user's regular files named as :func:`atomic_write` names a temporary of one of ``paths``, and no other
+    file (a write of another file, in flight in another process, keeps its temporary).
+
+    Examples:
+        >>> import pathlib, tempfile
+        >>> folder = pathlib.Path(tempfile.mkdtemp())
+        >>> _ = (folder / ".g.0015.exr.8ff158ee.exr").write_bytes(b"half a frame")
+        >>> _ = (folder / ".g.0016.exr.0bc52090.exr").write_bytes(b"another run's frame")
+        >>> remove_interrupted([folder / "g.0015.exr"]), sorted(p.name for p in folder.iterdir())
+        (1, ['.g.0016.exr.0bc52090.exr'])
+    """
+    wanted: dict[str, set] = {}
+    for path in paths:
+        target = Path(os.path.realpath(path))
+        wanted.setdefault(str(target.parent), set()).add(target.name)
+    removed = 0
+    for folder, names in wanted.items():
+        with contextlib.suppress(FileNotFoundError), os.scandir(folder) as entries:
+            for entry in entries:
+                if entry.name.startswith(".") and _written_by_a_temporary(entry.name) in names and _own_file(entry):
+                    with contextlib.suppress(FileNotFoundError):
+                        os.unlink(entry.path)
+                        removed += 1
+    return removed
+
+
+def _own_file(entry: os.DirEntry) -> bool:
+    status = entry.stat(follow_symlinks=False)
+    return stat.S_ISREG(status.st_mode) and (not hasattr(os, "geteuid") or status.st_uid == os.geteuid())

@@ -44,9 +44,10 @@ import torch
 from torch import nn
 
 from ..base.config import load_config
-from ..base.images import check_image, with_alpha
+from ..base.images import with_alpha
 from ..bloom import ConvolutionBloom
-from ..lut import INTERPOLATIONS, LUT3D, ErrorReport, bake_lut
+from ..lut import INTERPOLATIONS, LUT3D, ErrorReport
+from ..lut.bake import bake_look
 from .slots import SLOT, SLOTS, STAGES, build_stage, is_identity_stage
 
 __all__ = ["PostFX", "SAFE_GLOBALS"]
@@ -237,8 +238,9 @@ class PostFX(nn.Module):
 
     def to_lut(self, size: Optional[int] = None, interpolation: Optional[str] = None, output_encoding: str = "linear",
                entries: str = "sampled", frames: Optional[torch.Tensor] = None) -> "PostFX":
-        """An equivalent look with grade, primary grade and tone mapping baked into a ``"logc_extended"`` LUT (51³ by
-        default, or ``size``³).
+        """An equivalent look with grade, primary grade and tone mapping baked into a LUT: the table
+        ``tg.bake_lut(look, ...)`` bakes from the same arguments (:func:`~torchgrade.lut.bake.bake_look`), on the default
+        lattice (``"logc_extended"`` at its default size, or ``size``³), its entries rounded to float32.
 
         The other slots stay live (copied, so the new look keeps its own adaptation state). The
         LUT's lattice is LogC up to linear 58.86, then a tail in stops up to 65504
@@ -250,13 +252,7 @@ class PostFX(nn.Module):
         (``(..., 3, H, W)`` scene-referred, as the look takes them) the report is measured on those frames as the LUT
         receives them (after the stages before it) rather than on the realistic colours.
         """
-        transform = self.per_pixel_stages()
-        if frames is not None:
-            check_image(frames, "frames")
-            with torch.no_grad():
-                frames = self.per_pixel_input(frames.reshape(-1, *frames.shape[-3:]))
-        lut = bake_lut(transform, size=size, shaper="logc_extended", output_encoding=output_encoding, entries=entries,
-                       frames=frames)
+        lut = bake_look(self, size=size, output_encoding=output_encoding, entries=entries, frames=frames)
         report = lut.error_report
         lut = LUT3D(lut.table.detach().float(), shaper=lut.shaper, domain=(lut.domain_min, lut.domain_max),
                     output_range=lut.output_range, output_encoding=lut.output_encoding,

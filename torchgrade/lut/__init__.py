@@ -7,6 +7,8 @@ The package holds one family per file:
   ``"logc"`` lattice to linear 58.86 and a tail to 65504 on 12 more planes);
 * :mod:`~torchgrade.lut.kernels`: the interpolations (:data:`KERNELS`), each with its gather form
   and its ``GridSample`` graph forms by export backend;
+* :mod:`~torchgrade.lut.operator`: the operator ``torchgrade::lut_lookup`` the CPU looks up with, over the C loop
+  built with the package (``lookup.c``);
 * :mod:`~torchgrade.lut.lattice`: sizes, lattice coordinates, table layouts, domains;
 * :mod:`~torchgrade.lut.apply`: :class:`LUT3D` (a :class:`~torchgrade.base.stage.Stage`), its lookup
   and compile cache, and :class:`LUTLookup`, its ONNX export form;

@@ -4,9 +4,9 @@ Every interpolation has a **gather form**, ``kernel(coords (3, P), rows (3, S³)
 integer lattice indices and one 1-D gather per vertex and channel on the planar table
 (:func:`~torchgrade.lut.planar_table`). That is what :class:`~torchgrade.LUT3D` runs under autograd,
 ``torch.compile`` and tracing, and what an ONNX export writes as ``Gather`` nodes. An interpolation
-may also have an **eager form** (:class:`EagerForm`), the same interpolation for the eager no-grad
-lookup from tables derived once per LUT: on the CPU in-place operations on buffers allocated once per
-lookup, elsewhere few operations on the whole frame.
+may also have a **whole-frame form** (:class:`EagerForm`), the same interpolation for the eager no-grad
+lookup off the CPU from tables derived once per LUT: few operations on the whole frame (on the CPU the operator
+``torchgrade::lut_lookup`` runs, :mod:`torchgrade.lut.operator`).
 And it may have **grid forms**, one per export backend, ``form(unit (N, 3, H, W) in [0, 1], table
 (S, S, S, 3)) -> (N, 3, H, W)`` built on ``grid_sample``, for runtimes that prefer ``GridSample`` (see
 :data:`~torchgrade.lut.backends.BACKENDS`).
@@ -25,7 +25,6 @@ Examples:
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass, field
 from typing import Callable, Optional
 
@@ -33,10 +32,9 @@ import torch
 import torch.nn.functional as F
 
 from ..runtime import constant, device_cached
-from .native import compiled_loop
 
 __all__ = ["Kernel", "EagerForm", "KERNELS", "INTERPOLATIONS", "tetrahedron", "tetrahedral",
-           "tetrahedral_tables", "TetrahedralRuns", "tetrahedral_frame", "trilinear", "trilinear_grid_sample", "strip_table", "trilinear_strip",
+           "tetrahedral_tables", "tetrahedral_frame", "trilinear", "trilinear_grid_sample", "strip_table", "trilinear_strip",
            "trilinear_slices_lookup"]
 
 
@@ -119,7 +117,7 @@ def tetrahedral(coords: torch.Tensor, table: torch.Tensor, size: int) -> torch.T
 
 
 def tetrahedral_tables(rows: torch.Tensor, size: int) -> torch.Tensor:
-    """What :class:`TetrahedralRuns` gathers from, derived once per table from the planar rows ``(3, S³)``.
+    """What :func:`tetrahedral_frame` gathers from, derived once per table from the planar rows ``(3, S³)``.
 
     ``(3, 4 S³ + S + 1)``: channel ``c`` holds the values ``v``, then the steps ``v[i + 1] - v[i]``
     (red), ``v[i + S] - v[i]`` (green) and ``v[i + S²] - v[i]`` (blue) by flat index ``i``, 0 where the
@@ -143,7 +141,7 @@ def tetrahedral_tables(rows: torch.Tensor, size: int) -> torch.Tensor:
 
 
 def _walk_matrix(size: int) -> list:
-    """The flat indices of :class:`TetrahedralRuns`' 4 gathers as rows of coefficients of the terms ``(corner r, g, b,
+    """The flat indices of :func:`tetrahedral_frame`'s 4 gathers as rows of coefficients of the terms ``(corner r, g, b,
     [f_r >= f_g], [f_g >= f_b], [f_r >= f_b], 1)``: the values at ``c000``, then each axis' steps at ``c000`` plus the
     steps of the axes ranked above it (a larger fraction; red before green before blue on ties, the order
     :func:`tetrahedron` picks vertices in), each table of :func:`tetrahedral_tables` ``S³`` entries after the last.
@@ -159,89 +157,17 @@ def _walk_matrix(size: int) -> list:
             [1, size, plane, 0, size, 1, 3 * cells]]
 
 
-class TetrahedralRuns:
-    """:func:`tetrahedral` at runs of up to ``n`` lattice coordinates, into given outputs, without autograd.
-
-    Built once per lookup with :func:`tetrahedral_tables`' ``tables``; holds its buffers and their
-    views (``16 n`` entries of ``tables``' dtype and ``4 n`` int32), so a run is 12 tensor operations.
-    Write a run's coordinates ``(3, m)``, ``m <= n``, into :meth:`coords`, then call ``runs(out)``.
-
-    The tetrahedron and vertex differences of :func:`tetrahedral`, without sorting the fractions:
-    the walk c000 -> v1 -> v2 -> c111 steps once along each axis, largest fraction first, so
-    ``y = v[c000] + f_r Δr[p_r] + f_g Δg[p_g] + f_b Δb[p_b]`` where ``p_k`` is c000 plus the steps of
-    the axes ranked above ``k``. Two comparison operations rank the axes, one matrix product of the
-    ranks and the corner gives the 4 flat indices (exact in floating point: below 2²⁴), converted
-    once to int32; then a gather of ``4 m`` entries per channel and 3 multiply-adds. These are the
-    terms of :func:`tetrahedral`, summed in r, g, b order instead of by size: the two agree to float
-    rounding. The corner is not clamped to ``S - 2``: at the lattice's top face the fraction is 0,
-    and the step tables' zeros and padding keep the indices inside the tables.
-
-    Examples:
-        >>> from torchgrade.lut import identity_table
-        >>> from torchgrade.lut.lattice import planar_table
-        >>> runs = TetrahedralRuns(tetrahedral_tables(planar_table(identity_table(3)), 3), 3, 4)
-        >>> runs.coords(1).copy_(torch.tensor([[1.5], [0.25], [2.0]]))[0].tolist()
-        [1.5]
-        >>> out = torch.empty(3, 1)
-        >>> runs(out).flatten().tolist()
-        [0.75, 0.125, 1.0]
-    """
-
-    floats = 16
-    """Buffer entries per pixel of a run, besides 4 int32 indices."""
-
-    def __init__(self, tables: torch.Tensor, size: int, n: int):
-        self.tables, self.views, self.ones = tables, {}, 0
-        self.work = tables.new_empty(self.floats * n)
-        self.index = torch.empty(4 * n, dtype=torch.int32, device=tables.device)
-        self.matrix = torch.tensor(_walk_matrix(size), dtype=tables.dtype, device=tables.device)
-
-    def _views(self, m: int):
-        if m not in self.views:
-            work = self.work
-            # work, by multiples of m: fractions [0, 3); coordinates [6, 9); the product's terms
-            # [9, 16): corner r, g, b, the three ranks, 1; its result [3, 7); the gathered entries
-            # [3, 15), written once the coordinates, terms and result are read.
-            fraction = work[:3 * m].view(3, m)
-            terms = work[9 * m:16 * m].view(7, m)
-            gathered = work[3 * m:15 * m].view(3, 4, m)  # channel, values or step along r, g, b, pixel
-            self.views[m] = (work[6 * m:9 * m].view(3, m), fraction, fraction.unbind(0), fraction[:2], fraction[1:], terms,
-                             terms[:3], terms[3:5], terms[5], work[3 * m:7 * m].view(4, m), self.index[:4 * m],
-                             gathered.view(3, 4 * m).unbind(0), gathered.unbind(1))
-        return self.views[m]
-
-    def coords(self, m: int) -> torch.Tensor:
-        """The ``(3, m)`` buffer the next run's lattice coordinates go in."""
-        return self._views(m)[0]
-
-    def __call__(self, out: torch.Tensor) -> torch.Tensor:
-        """Interpolate at the coordinates written into :meth:`coords`, into ``out`` ``(3, m)``; returns ``out``."""
-        m = out.shape[-1]
-        (coords, fraction, (f_r, f_g, f_b), first, second, terms, corner, ranks, rank, flat, index, rows,
-         (values, red, green, blue)) = self._views(m)
-        if m != self.ones:  # the row of ones is kept between runs of one length (runs of another overwrite it)
-            terms[6].fill_(1.0)
-            self.ones = m
-        torch.floor(coords, out=corner)
-        torch.sub(coords, corner, out=fraction)
-        torch.ge(first, second, out=ranks)  # [f_r >= f_g], [f_g >= f_b]
-        torch.ge(f_r, f_b, out=rank)  # [f_r >= f_b]
-        torch.mm(self.matrix, terms, out=flat)
-        index.copy_(flat.view(-1))
-        for table, row in zip(self.tables, rows):
-            torch.index_select(table, 0, index, out=row)
-        torch.addcmul(values, red, f_r, out=out)
-        out.addcmul_(green, f_g)
-        out.addcmul_(blue, f_b)
-        return out
-
-
 def tetrahedral_frame(coords: torch.Tensor, tables: torch.Tensor, size: int) -> torch.Tensor:
-    """:class:`TetrahedralRuns`' sum at lattice coordinates ``(3, P)`` of a whole frame -> ``(3, P)``, without autograd:
-    the eager form where a frame is one pass (a GPU), 13 operations.
+    """:func:`tetrahedral` at lattice coordinates ``(3, P)`` of a whole frame -> ``(3, P)``, without autograd: the eager
+    form off the CPU, where a frame is one pass (a GPU), 13 operations.
 
-    The same terms ``v[c000] + f_r Δr[p_r] + f_g Δg[p_g] + f_b Δb[p_b]`` from the same ``tables``, the flat indices
-    formed without a matrix product: one product and one sum give ``c000`` and the order code ``4 [f_r >= f_g] +
+    The tetrahedron and vertex differences of :func:`tetrahedral`, without sorting the fractions: the walk c000 -> v1
+    -> v2 -> c111 steps once along each axis, largest fraction first, so ``y = v[c000] + f_r Δr[p_r] + f_g Δg[p_g] +
+    f_b Δb[p_b]`` where ``p_k`` is c000 plus the steps of the axes ranked above ``k``: the terms of :func:`tetrahedral`,
+    summed in r, g, b order instead of by size (the two agree to float rounding). The corner is not clamped to
+    ``S - 2``: at the lattice's top face the fraction is 0, and the step tables' zeros and padding keep the indices
+    inside ``tables`` (:func:`tetrahedral_tables`). The flat indices are formed without a matrix product: one product
+    and one sum give ``c000`` and the order code ``4 [f_r >= f_g] +
     2 [f_g >= f_b] + [f_r >= f_b]``, which picks the 4 offsets from a table of 8 (:func:`_walk_offsets`). Every value
     is an integer below 2²⁴, so each step is exact in float32 whatever precision the device gives a matrix product
     (a GPU's TF32 would round the indices). One gather takes the 12 entries a pixel from the three channels' tables.
@@ -385,10 +311,9 @@ def trilinear_slices_lookup(unit: torch.Tensor, table: torch.Tensor) -> torch.Te
 
 @dataclass(frozen=True)
 class EagerForm:
-    """An interpolation for the eager no-grad lookup, for lattices up to ``max_size``: ``tables(rows, size)``
-    once per table; on the CPU ``runs(tables, size, n)`` once per lookup (a :class:`TetrahedralRuns`-like object
-    holding its buffers for runs of up to ``n`` pixels), elsewhere ``frame(coords, tables, size)`` on the whole
-    frame's lattice coordinates ``(3, P)`` (:func:`tetrahedral_frame`).
+    """An interpolation's whole-frame form for the eager no-grad lookup off the CPU, for lattices up to ``max_size``:
+    ``tables(rows, size)`` once per table, then ``frame(coords, tables, size)`` on the whole frame's lattice
+    coordinates ``(3, P)`` (:func:`tetrahedral_frame`).
 
     Examples:
         >>> KERNELS["tetrahedral"].eager.max_size
@@ -396,7 +321,6 @@ class EagerForm:
     """
 
     tables: Callable[[torch.Tensor, int], torch.Tensor]
-    runs: Callable
     frame: Callable[[torch.Tensor, torch.Tensor, int], torch.Tensor]
     max_size: int
 
@@ -404,8 +328,8 @@ class EagerForm:
 @dataclass(frozen=True)
 class Kernel:
     """One interpolation: its ``gather`` form (called by ``kernel(coords, rows, size)``), its ``grids`` by
-    backend, its ``eager`` form (or ``None``: the eager lookup runs the gather form) and its ``compiled`` CPU loop
-    (``compiled(dtype)`` gives it, or ``None`` where it did not compile: :mod:`torchgrade.lut.native`).
+    backend and its whole-frame ``eager`` form (or ``None``: the eager lookup off the CPU runs the gather form). On the
+    CPU the operator ``torchgrade::lut_lookup`` runs every interpolation (:mod:`torchgrade.lut.operator`).
 
     Examples:
         >>> KERNELS["tetrahedral"].graph_form("slices") is None
@@ -415,7 +339,6 @@ class Kernel:
     gather: Callable[[torch.Tensor, torch.Tensor, int], torch.Tensor]
     grids: dict = field(default_factory=dict)
     eager: Optional[EagerForm] = None
-    compiled: Optional[Callable[[torch.dtype], Optional[Callable]]] = None
 
     def __call__(self, coords: torch.Tensor, rows: torch.Tensor, size: int) -> torch.Tensor:
         return self.gather(coords, rows, size)
@@ -426,12 +349,11 @@ class Kernel:
 
 
 KERNELS = {
-    "trilinear": Kernel(trilinear, {"slices": trilinear_slices_lookup, "volume": trilinear_grid_sample},
-                        compiled=functools.partial(compiled_loop, "trilinear")),
+    "trilinear": Kernel(trilinear, {"slices": trilinear_slices_lookup, "volume": trilinear_grid_sample}),
     # Up to 65³: the tables are 4 times the planar table (13 MiB at 65³; 4 S³ < 2²⁴ keeps the index product exact).
-    "tetrahedral": Kernel(tetrahedral, eager=EagerForm(tetrahedral_tables, TetrahedralRuns, tetrahedral_frame, max_size=65),
-                          compiled=functools.partial(compiled_loop, "tetrahedral")),
+    "tetrahedral": Kernel(tetrahedral, eager=EagerForm(tetrahedral_tables, tetrahedral_frame, max_size=65)),
 }
-"""The interpolations by name, what ``LUT3D(...)(image, interpolation)`` takes."""
+"""The interpolations by name, what ``LUT3D(...)(image, interpolation)`` takes. The C loop of the operator
+``torchgrade::lut_lookup`` (``lookup.c``) has one loop for each."""
 
 INTERPOLATIONS = tuple(KERNELS)

@@ -19,14 +19,15 @@ from .lattice import MAX_CODE, check_size, checked_domain, planar_table
 from .apply import (
     OUTPUT_ENCODINGS,
     check_lookup_arguments,
-    EagerTables,
-    chunked_lookup,
     compiled_lookup,
     decode_output,
     encode_output,
+    lookup,
+    operator_lookup,
+    runs_operator,
     table_output,
+    whole_frame_tables,
 )
-from ..runtime import untracked
 from .shapers import SHAPERS, lattice_unit
 
 __all__ = ["LUT3D", "LUTLookup", "entry_bound"]
@@ -101,7 +102,7 @@ class LUT3D(Stage):
         self.register_buffer("domain_max", high)
         self.register_buffer("curve", None if curve is None else _check_curve(curve))
         self._rows_cache = (None, None, None)
-        self._tables_cache = (None, None, None)  # (rows, interpolation, the eager form's tables)
+        self._tables_cache = (None, None, None)  # (rows, interpolation, the whole-frame form's tables)
         self.error_report = None  # set by bake_lut: a torchgrade.lut.ErrorReport
         self.init_controls(shaper=shaper, output_range=output_range, curve_range=curve_range,
                            output_encoding=output_encoding, compile=bool(compile), interpolation=interpolation)
@@ -144,15 +145,19 @@ class LUT3D(Stage):
     def forward(self, image: torch.Tensor, interpolation: Optional[str] = None, *, nan_free: bool = False) -> torch.Tensor:
         interpolation = interpolation or self.interpolation
         check_lookup_arguments(image, self.shaper, interpolation, self.output_encoding)
-        arguments = (image, self.rows(working_dtype(image).dtype), self.size, self.shaper, self.domain_min, self.domain_max,
-                     interpolation, self.output_range, self.curve, self.curve_range, self.output_encoding)
+        dtype = working_dtype(image).dtype
+        settings = (self.shaper, self.domain_min, self.domain_max, interpolation, self.output_range, self.curve,
+                    self.curve_range, self.output_encoding)
         if self.compile:
             try:
-                return compiled_lookup()(*arguments)
+                return compiled_lookup()(image, self.rows(dtype), self.size, *settings)
             except Exception as error:  # no C++ compiler, unsupported device, ...: the eager path always works
                 warnings.warn(f"LUT3D(compile=True) fell back to eager: torch.compile failed with {error!r}", RuntimeWarning)
                 self.compile = False
-        return chunked_lookup(*arguments, tables=self._eager_tables(image, arguments[1], interpolation), nan_free=nan_free)
+        if runs_operator(image, self.table):
+            return operator_lookup(image, self.table.to(dtype), *settings, nan_free=nan_free)
+        rows = self.rows(dtype)
+        return lookup(image, rows, self.size, *settings, tables=self._whole_frame_tables(image, rows, interpolation), nan_free=nan_free)
 
     def rows(self, dtype: torch.dtype) -> torch.Tensor:
         """The table as planar rows ``(3, S³)`` in ``dtype`` (:func:`~torchgrade.lut.planar_table`), what the kernels read.
@@ -172,18 +177,19 @@ class LUT3D(Stage):
         return rows
 
     def _apply(self, fn, *args, **kwargs):
-        """Moves and casts drop the eager form's cached tables: they are derived from the table where it was."""
+        """Moves and casts drop the whole-frame form's cached tables: they are derived from the table where it was."""
         self._tables_cache = (None, None, None)
         return super()._apply(fn, *args, **kwargs)
 
-    def _eager_tables(self, image: torch.Tensor, rows: torch.Tensor, interpolation: str) -> Optional[EagerTables]:
-        """The eager forms' tables of ``rows`` (:meth:`rows`), cached with them (each derived on first use); ``None``
-        while the lookup of ``image`` runs the gather form (gradients, tracing)."""
-        if not untracked(image, rows):
+    def _whole_frame_tables(self, image: torch.Tensor, rows: torch.Tensor, interpolation: str) -> Optional[torch.Tensor]:
+        """The whole-frame form's tables of ``rows`` (:meth:`rows`), cached with them; ``None`` where the lookup of
+        ``image`` runs the gather form (:func:`~torchgrade.lut.apply.whole_frame_tables`)."""
+        if not whole_frame_tables(image, rows, self.size, interpolation):
             return None
         cached_rows, cached_interpolation, tables = self._tables_cache
         if cached_rows is not rows or cached_interpolation != interpolation:
-            tables = EagerTables(rows, self.size, interpolation)
+            with torch.no_grad():
+                tables = KERNELS[interpolation].eager.tables(rows, self.size)
             self._tables_cache = (rows, interpolation, tables)
         return tables
 

@@ -1,8 +1,9 @@
-/* Tetrahedral and trilinear interpolation of a 3D LUT on the CPU, one pass per pixel: torchgrade.lut.native compiles
- * this file on first use (with OpenMP) and calls it on whole frames or on runs of pixels.
+/* Tetrahedral and trilinear interpolation of a 3D LUT on the CPU, one pass per pixel: the CPU kernel of the operator
+ * torchgrade::lut_lookup (torchgrade/lut/operator.py), built with the package as the extension module
+ * torchgrade.lut._lookup (setup.py) and called on whole frames.
  *
- * For each pixel i of the planar input (r, g, b), as torchgrade.lut.apply.lookup computes it:
- *     x = NaN -> 0, clamped to +-65504                          (torchgrade.base.core.sanitize)
+ * For each pixel i of the planar input (r, g, b), as the operator's torch form (torchgrade.lut.operator) computes it:
+ *     x = NaN -> 0, clamped to +-65504                          (torchgrade.base.images.sanitize)
  *     u = clamp((x - low) * scale, 0, size - 1)                 (the lattice coordinate, per channel; the caller
  *                                                              gives scale = (size - 1) / span: a product, not a division)
  *     corner = min(floor(u), size - 2), f = u - corner          (the cell and the fractions)
@@ -11,11 +12,20 @@
  * where f_a >= f_b >= f_c are the sorted fractions, v1 is a step from c000 along the axis of f_a and v2 is c111
  * less a step along the axis of f_c (red before green before blue on ties): the six tetrahedra of Kasson, Nin and
  * Plouffe (1995), as OpenColorIO picks them; or trilinear (torchgrade.lut.kernels.trilinear): lerps along red, then
- * green, then blue over the cell's 8 corners. The table is packed, table[3 * (r + size * g + size^2 * b) + channel],
- * so a vertex is one 12-byte read; indices are 32-bit (the caller keeps 3 size^3 below 2^31). The loops have no
- * branches, so compilers vectorise them (gathers on AVX2); GCC 12 vectorises them only with each select a statement
- * of its own. */
+ * green, then blue over the cell's 8 corners. The table is the LUT's own (S, S, S, 3) [b, g, r, channel] tensor,
+ * table[3 * (r + size * g + size^2 * b) + channel], so a vertex is one 12-byte read; indices are 32-bit (the caller
+ * keeps 3 size^3 below 2^31). The loops have no branches, so compilers vectorise them (gathers on AVX2); GCC 12
+ * vectorises them only with each select a statement of its own.
+ *
+ * Built with OpenMP where the compiler has it: the extension then needs libgomp.so.1, which torch's CPU build has
+ * loaded already (torch/lib/libgomp.so.1, the same soname), so the dynamic loader binds it to torch's runtime and the
+ * chunks run on torch's own intra-op threads. On x86-64 each run is compiled twice, for AVX2 and for the baseline,
+ * and the processor picks one when the module loads (GCC's and Clang's target_clones): one wheel for every x86-64
+ * machine, never -march=native. No -ffast-math: NaN and rounding behave as in torch. */
 
+#define PY_SSIZE_T_CLEAN
+#define Py_LIMITED_API 0x030A0000
+#include <Python.h>
 #include <stdint.h>
 
 #define HALF_MAX 65504.0
@@ -61,10 +71,16 @@
     const int32_t o = 3 * c000;                                                                                        \
     out_r[i] = LERP_B(o, 0); out_g[i] = LERP_B(o, 1); out_b[i] = LERP_B(o, 2);
 
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__)) && !defined(__APPLE__)
+#define CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define CLONES
+#endif
+
 /* Pixels [begin, end) of one frame through INTERPOLATE (a statement of the cell); its own function, so the loop
  * vectorises. */
 #define RUN(NAME, T, INTERPOLATE)                                                                                      \
-static void NAME(const T *restrict in_r, const T *restrict in_g, const T *restrict in_b, int64_t begin, int64_t end,   \
+CLONES static void NAME(const T *restrict in_r, const T *restrict in_g, const T *restrict in_b, int64_t begin, int64_t end,   \
                  const T *restrict low, const T *restrict scale, const T *restrict table, int32_t size,                \
                  T *restrict out_r, T *restrict out_g, T *restrict out_b) {                                            \
     const T top = (T)(size - 1), half_max = (T)HALF_MAX;                                                               \
@@ -80,9 +96,9 @@ static void NAME(const T *restrict in_r, const T *restrict in_g, const T *restri
  * chunks of `chunk` pixels taken by `threads` OpenMP threads as each comes free (torch's own OpenMP runtime, whose
  * threads a torch operation just before has ready). */
 #define FRAMES(NAME, RUN_NAME, T)                                                                                      \
-void NAME(const T *in, int64_t in_frame, int64_t in_channel, T *out, int64_t out_frame, int64_t out_channel,           \
-          int64_t frames, int64_t n, const T *low, const T *scale, const T *table, int32_t size, int64_t chunk,        \
-          int32_t threads) {                                                                                           \
+static void NAME(const T *in, int64_t in_frame, int64_t in_channel, T *out, int64_t out_frame, int64_t out_channel,    \
+                 int64_t frames, int64_t n, const T *low, const T *scale, const T *table, int32_t size, int64_t chunk, \
+                 int32_t threads) {                                                                                    \
     const int64_t per_frame = (n + chunk - 1) / chunk, chunks = frames * per_frame;                                    \
     _Pragma("omp parallel for schedule(dynamic, 1) num_threads(threads) if(threads > 1 && chunks > 1)")                \
     for (int64_t k = 0; k < chunks; ++k) {                                                                             \
@@ -103,3 +119,49 @@ FRAMES(tetrahedral_float, tetrahedral_run_float, float)
 FRAMES(tetrahedral_double, tetrahedral_run_double, double)
 FRAMES(trilinear_float, trilinear_run_float, float)
 FRAMES(trilinear_double, trilinear_run_double, double)
+
+/* interpolate(kind, in, in_frame, in_channel, out, out_frame, out_channel, frames, n, low, scale, table, size, chunk,
+ * threads): the loop of `kind` (0: tetrahedral float32, 1: tetrahedral float64, 2: trilinear float32, 3: trilinear
+ * float64) over frames at the addresses given (tensors' data_ptr(); strides in elements), without the GIL. Nothing is
+ * checked here: torchgrade.lut.operator passes tensors it made and checked. */
+static PyObject *interpolate(PyObject *self, PyObject *args) {
+    int kind, size, threads;
+    unsigned long long in, out, low, scale, table;
+    long long in_frame, in_channel, out_frame, out_channel, frames, n, chunk;
+    if (!PyArg_ParseTuple(args, "iKLLKLLLLKKKiLi", &kind, &in, &in_frame, &in_channel, &out, &out_frame, &out_channel,
+                          &frames, &n, &low, &scale, &table, &size, &chunk, &threads))
+        return NULL;
+    if (kind < 0 || kind > 3 || chunk < 1) {
+        PyErr_SetString(PyExc_ValueError, "interpolate: kind must be 0 to 3 and chunk positive");
+        return NULL;
+    }
+    Py_BEGIN_ALLOW_THREADS
+    switch (kind) {
+    case 0:
+        tetrahedral_float((const float *)in, in_frame, in_channel, (float *)out, out_frame, out_channel, frames, n,
+                          (const float *)low, (const float *)scale, (const float *)table, size, chunk, threads);
+        break;
+    case 1:
+        tetrahedral_double((const double *)in, in_frame, in_channel, (double *)out, out_frame, out_channel, frames, n,
+                           (const double *)low, (const double *)scale, (const double *)table, size, chunk, threads);
+        break;
+    case 2:
+        trilinear_float((const float *)in, in_frame, in_channel, (float *)out, out_frame, out_channel, frames, n,
+                        (const float *)low, (const float *)scale, (const float *)table, size, chunk, threads);
+        break;
+    default:
+        trilinear_double((const double *)in, in_frame, in_channel, (double *)out, out_frame, out_channel, frames, n,
+                         (const double *)low, (const double *)scale, (const double *)table, size, chunk, threads);
+    }
+    Py_END_ALLOW_THREADS
+    Py_RETURN_NONE;
+}
+
+static PyMethodDef methods[] = {
+    {"interpolate", interpolate, METH_VARARGS, "Interpolate a packed 3D LUT at planar frames (see lookup.c)."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_lookup", "The CPU loops of torchgrade::lut_lookup.", -1, methods};
+
+PyMODINIT_FUNC PyInit__lookup(void) { return PyModule_Create(&module); }

@@ -1,4 +1,4 @@
-"""The execution policy: per device, whole frames or strips, worker threads, constants kept on the device, and
+"""The execution policy: per device, whole frames or strips, constants kept on the device, and
 the compiled form of a look. Every stage asks here; the maths modules decide nothing about devices.
 
 Examples:
@@ -9,12 +9,11 @@ Examples:
 """
 
 from .checks import DeferredCheck
-from .compile import ACTIVATION_MEMORY_BUDGET, CPU_OPTIONS, compile, compile_mode
+from .compile import COMPILE_SECONDS, CPU_OPTIONS, compile, compile_mode
 from .constants import affine, constant, device_cached, folded, scalar, values_of, where
 from .recording import is_exporting, is_tracing, untracked
-from .policy import LOOKUP_CHUNK, PARALLEL_FROM, STRIP_PIXELS_PER_THREAD, ExecutionPolicy, policy_for
+from .policy import STRIP_PIXELS_PER_THREAD, ExecutionPolicy, policy_for
 from .strips import in_strips, pixelwise
-from .workers import run_pieces
 
-__all__ = ["ExecutionPolicy", "policy_for", "STRIP_PIXELS_PER_THREAD", "PARALLEL_FROM", "LOOKUP_CHUNK", "in_strips", "pixelwise", "run_pieces", "constant", "scalar", "where", "affine", "values_of", "device_cached", "folded",
-           "compile", "compile_mode", "CPU_OPTIONS", "ACTIVATION_MEMORY_BUDGET", "DeferredCheck", "is_tracing", "is_exporting", "untracked"]
+__all__ = ["ExecutionPolicy", "policy_for", "STRIP_PIXELS_PER_THREAD", "in_strips", "pixelwise", "constant", "scalar", "where", "affine", "values_of", "device_cached", "folded",
+           "compile", "compile_mode", "CPU_OPTIONS", "COMPILE_SECONDS", "DeferredCheck", "is_tracing", "is_exporting", "untracked"]

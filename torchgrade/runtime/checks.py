@@ -28,9 +28,9 @@ from typing import Callable, NamedTuple, Optional
 
 import torch
 
-from .policy import readable
+from .policy import one_thread, readable
 from .recording import is_tracing
-from .workers import one_thread
+
 
 __all__ = ["DeferredCheck", "warn_if_eight_bit", "EIGHT_BIT_ROWS", "EIGHT_BIT_LEVELS"]
 

@@ -1,5 +1,5 @@
 """A compiled look in one word: :func:`compile` wraps a module in ``torch.compile`` with the mode that suits the
-device of the frames it gets.
+device of the frames it gets, and says when it compiles.
 
 * **CUDA**: ``mode="reduce-overhead"``: Inductor's fused kernels replayed as a CUDA graph, one launch per frame
   size instead of one per kernel. A graph's outputs are its own buffers, overwritten by the next call of the
@@ -9,22 +9,35 @@ device of the frames it gets.
 * **Other devices**: Inductor's default mode.
 
 ``fullgraph=True`` always: a look is one graph, so a graph break is an error here rather than a silent slowdown.
-Each device type compiles at its first frame, with the batch's size symbolic from the start (a last, smaller batch of
-an epoch runs the same graph; a batch of 1, a size PyTorch specialises, compiles its own); the first new frame size compiles again, with the sizes that changed made symbolic
-(``dynamic=None``, PyTorch's default), so every later size runs that graph. (``dynamic=False``
-compiles every size as it comes, and the ninth size stops with ``FailOnRecompileLimitHit``: Dynamo's
-``recompile_limit`` is 8 and ``fullgraph=True`` makes hitting it an error.)
+Sizes are symbolic from the first frame (``dynamic=True``, PyTorch's public way to ask for it): the batch, so that the
+last, smaller batch of an epoch runs the graph the first batch compiled, and the frame's sides (a batch of 1 and a side
+of 1, which PyTorch specialises, compile their own). Two costs come with it. PyTorch ties sizes that are equal at the
+first frame (its duck sizing): a batch of 16 on 16x16 frames ties the batch to the sides, and a batch of another size
+then compiles once more. And Dynamo traces a module twice where AOTAutograd runs (Inductor, training): ``dynamic=True``
+makes the module's float constants inputs, and the first pass restarts the trace to fix them. Marking the batch alone
+dynamic (``torch._dynamo.maybe_mark_dynamic``, used before) avoids both but is not public API. ``dynamic=None`` is
+PyTorch's default (the first size fixed, the first new size compiled once more with the changed sizes symbolic);
+``dynamic=False`` compiles every size as it comes, and the ninth size stops with ``FailOnRecompileLimitHit`` (Dynamo's
+``recompile_limit`` is 8 and ``fullgraph=True`` makes hitting it an error).
 
-**Compiling takes time**, paid at the first frame of each kind (shape, gradients, autocast), and said on the
-``torchgrade.compile`` logger (:data:`LOG`, INFO): "compiling the forward of PostFX for a (1, 3, 1080, 1920) float32
-frame on cpu, gradients off" and how long it took. ``benchmarks/bench_compile.py`` measures it cold (an empty Inductor
-cache), warm (Inductor's on-disk cache from an earlier process) and with saved cache artifacts
-(:func:`torchgrade.io.save_compile_cache`, :func:`torchgrade.io.load_compile_cache`: a file to carry to another machine
-or container), and the frames a compile takes to repay. :meth:`CompiledModule.warm_up` pays it before a run starts.
+**A compile says so.** Compiling takes time (:data:`COMPILE_SECONDS`), paid at the first frame of each kind (shape,
+gradients, autocast), and a run that waits on it should not look like a hang: the wrapper writes a line on stderr
+when a compile starts, with what it compiles, why (the module's first frame, or the guard of its last graph that this
+frame failed) and what such a compile costs, and a line when it ends, with its time; a training call's backward
+compiles at its first ``backward()`` and says so too. The lines are records of the ``torchgrade.compile`` logger
+(:data:`LOG`, INFO), written on stderr unless the program has configured logging (then its handlers take them):
+``tg.compile(module, verbose=False)``, ``LOG.setLevel(logging.WARNING)`` or a handler of one's own quiet them.
 
-In training the forward keeps less for the backward than PyTorch would by default (its activation memory budget,
-:data:`ACTIVATION_MEMORY_BUDGET`) and the backward recomputes the rest: a look's steps are per-pixel arithmetic, which
-on the CPU cost less to compute again than to write to memory and read back (not yet measured on a GPU).
+Whether a call compiles is asked of PyTorch through its public stance: a frame of a kind the wrapper has not run is
+first called under ``torch.compiler.set_stance("fail_on_recompile")``, which runs a graph whose guards hold and raises,
+naming the guards that failed, where a compile would start. The stance is the process's: such calls hold a lock, so
+they take turns, and a ``torch.compile`` of other code that compiles on another thread during one of them raises.
+:meth:`CompiledModule.warm_up` pays a compile before a run starts; ``benchmarks/bench_compile.py`` measures compiles
+cold (an empty Inductor cache), warm (Inductor's on-disk cache from an earlier process) and from saved cache artifacts
+(:func:`torchgrade.io.save_compile_cache`, :func:`torchgrade.io.load_compile_cache`).
+
+A training graph is partitioned as PyTorch partitions it: only private settings choose what its forward keeps for the
+backward (the activation memory budget of ``torch._functorch.config``), so ``tg.compile`` sets none.
 
 The compiled graph carries no range checks (they read values), so the wrapper checks every stage's learnable
 controls (:meth:`~torchgrade.Stage.check_learnable`) before each call, as an eager forward does. A module with
@@ -46,41 +59,52 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import numbers
 import threading
 import time
-import warnings
 from typing import Optional
 
 import torch
 from torch import nn
 
-__all__ = ["compile", "compile_mode", "CompiledModule", "CPU_OPTIONS", "ACTIVATION_MEMORY_BUDGET", "LOG"]
+__all__ = ["compile", "compile_mode", "CompiledModule", "CPU_OPTIONS", "COMPILE_SECONDS", "LOG"]
 
 LOG = logging.getLogger("torchgrade.compile")
-"""Where a compile of a :func:`compile`'d module says that it starts and how long it took (level INFO):
-``logging.basicConfig(level=logging.INFO)`` shows it."""
+"""Where a :func:`compile`'d module says that a compile starts, why and what it usually costs, and how long it took
+(level INFO; the logger's level is INFO, and its handler writes on stderr unless the program has configured logging)."""
+
+
+class _UnlessConfigured(logging.StreamHandler):
+    """stderr, for a record no handler of an enclosing logger takes: a program that has configured logging gets the
+    compile lines where it sends the rest, and one that has not sees them anyway."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if not (LOG.propagate and LOG.parent is not None and LOG.parent.hasHandlers()):
+            super().emit(record)
+
+
+_STDERR = _UnlessConfigured()
+_STDERR.setFormatter(logging.Formatter("torchgrade: %(message)s"))
+LOG.addHandler(_STDERR)
+LOG.setLevel(logging.INFO)
 
 
 CPU_OPTIONS = {"layout_optimization": False}
 """Inductor's settings on the CPU. Its layout optimisation gives the outputs of a graph's convolutions (the bloom
-pyramid's blurs) channels-last buffers; a per-pixel loop that reads such a frame as planes is then not vectorised
-(the compiled cinematic look with and without it: ``benchmarks/results/cpu_paths.md``)."""
+pyramid's blurs, when they compiled as convolutions; an anamorphic bloom's) channels-last buffers; a per-pixel loop
+that reads such a frame as planes is then not vectorised (the compiled cinematic look with and without it:
+``benchmarks/results/cpu_paths.md``)."""
 
 
-ACTIVATION_MEMORY_BUDGET = 0.5
-"""PyTorch's activation memory budget for a compiled training forward (``torch._functorch.config.activation_memory_budget``):
-between 0, what recomputing everything in the backward keeps (the inputs), and 1, what AOTAutograd's min-cut
-partitioner keeps by default; the partitioner recomputes the least that holds its estimate of the saved memory there. The frames the compiled look's
-forward and backward write at each budget: ``benchmarks/results/inductor_proxy.md``; its training step on the CPU at
-0.25, 0.5 and 1.0: ``benchmarks/results/cpu_paths.md``. On a GPU, ``benchmarks/bench_gpu.py``'s ``training_budget``
-section times it against 1.0."""
+COMPILE_SECONDS = {("PostFX", False): (46.6, 7.0), ("PostFX", True): (93.4, 8.6),
+                   ("RandomPostFX", False): (16.3, 4.7), ("RandomPostFX", True): (25.5, 4.6)}
+"""``(module, training) -> (cold, warm)``: the seconds of a first call that compiled, with an empty Inductor cache
+and with the cache of an earlier process, measured on 2 CPU threads (``benchmarks/results/compile.md``: the cinematic
+look on 1x3x1080x1920 and in training on 16x3x128x128, ``RandomPostFX`` on 64x3x224x224 and in training on
+16x3x128x128). A compile announces its module's figure, a whole look's for other modules."""
 
 
-_calling = threading.local()
-"""``.label``: what the compiled module running on this thread compiles (:func:`_describe`), while its call runs."""
-_compiles: dict = {}
-"""Compile id -> ``[label, start time]``: a forward's label names its backward, which compiles later with the same id."""
+_STANCE = threading.Lock()
+"""Held while a call runs under the ``"fail_on_recompile"`` stance, which is the process's."""
 
 
 def _describe(module: nn.Module, image: torch.Tensor) -> str:
@@ -92,32 +116,27 @@ def _describe(module: nn.Module, image: torch.Tensor) -> str:
             + (f", autocast {' and '.join(autocast)}" if autocast else ""))
 
 
-def _compile_started(event) -> None:
-    backward = event.callback_trigger.name == "LAZY_BACKWARD"
-    label = _compiles.get(event.compile_id, [None])[0] if backward else getattr(_calling, "label", None)
-    if label is None or event.callback_trigger.name not in ("DYNAMO", "LAZY_BACKWARD"):
-        return
-    _compiles[event.compile_id] = [label, time.perf_counter()]
-    LOG.info("compiling the %s of %s (tens of seconds on a cold cache, less from Inductor's or a loaded cache)",
-             "backward" if backward else "forward", label)
+def _usual_cost(module: nn.Module) -> str:
+    """What a compile of ``module`` usually costs, from :data:`COMPILE_SECONDS`."""
+    name = type(module).__name__ if (type(module).__name__, False) in COMPILE_SECONDS else "PostFX"
+    training = torch.is_grad_enabled() and (name, True) in COMPILE_SECONDS
+    cold, warm = COMPILE_SECONDS[(name, training)]
+    what = f"{'a whole look' if name == 'PostFX' else name}{' in training' if training else ''}"
+    return f"{what} took {cold} s cold, {warm} s from Inductor's cache, on 2 CPU threads (benchmarks/results/compile.md)"
 
 
-def _compile_ended(event) -> None:
-    if event.callback_trigger.name not in ("DYNAMO", "LAZY_BACKWARD") or event.compile_id not in _compiles:
-        return
-    label, started = _compiles[event.compile_id]
-    LOG.info("compiled the %s of %s in %.1f s", "backward" if event.callback_trigger.name == "LAZY_BACKWARD" else "forward",
-             label, time.perf_counter() - started)
+def _failed_guards(error: RuntimeError) -> list:
+    """The guards PyTorch names in the error the ``"fail_on_recompile"`` stance raises (none for a first compile)."""
+    return [line.strip()[2:] for line in str(error).splitlines() if line.strip().startswith("- ")]
 
 
-def _watch_compiles() -> None:
-    """Follow Dynamo's compile events: :func:`_compile_started` and :func:`_compile_ended`, registered once and again
-    after ``torch._dynamo.reset()``, which forgets them."""
-    from torch._dynamo import callback
-
-    if _compile_started not in callback.callback_handler.start_callbacks:
-        callback.on_compile_start(_compile_started)
-        callback.on_compile_end(_compile_ended)
+def _call_kind(args: tuple, kwargs: dict) -> tuple:
+    """What a call's graph depends on that changes from call to call: its tensors' devices, dtypes, shapes and
+    gradients, and the gradient and autocast modes."""
+    values = [item for value in (*args, *kwargs.values()) for item in (value.values() if isinstance(value, dict) else (value,))]
+    tensors = [value for value in values if isinstance(value, torch.Tensor)]  # a drawn look's parameters are a dict
+    autocast = tuple(torch.is_autocast_enabled(device) and torch.get_autocast_dtype(device) for device in ("cpu", "cuda"))
+    return (tuple((t.device, t.dtype, tuple(t.shape), t.requires_grad) for t in tensors), torch.is_grad_enabled(), autocast)
 
 
 def compile_mode(device: torch.device, cuda_graphs: bool = True) -> str:
@@ -129,18 +148,14 @@ class CompiledModule(nn.Module):
     """``module`` compiled per device type at its first frame there (see :func:`compile`); ``module`` is
     :attr:`module`, so its controls, state and ``to_config`` stay reachable."""
 
-    def __init__(self, module: nn.Module, cuda_graphs: bool = True, dynamic: Optional[bool] = None,
-                 activation_memory_budget: float = ACTIVATION_MEMORY_BUDGET):
+    def __init__(self, module: nn.Module, cuda_graphs: bool = True, dynamic: Optional[bool] = True, verbose: bool = True):
         super().__init__()
-        if isinstance(activation_memory_budget, bool) or not isinstance(activation_memory_budget, numbers.Real):
-            raise TypeError(f"activation_memory_budget must be a number, got {type(activation_memory_budget).__name__}")
-        if not 0.0 <= activation_memory_budget <= 1.0:
-            raise ValueError(f"activation_memory_budget must lie in [0, 1], got {activation_memory_budget}")
         self.module = module
         self.cuda_graphs = cuda_graphs
         self.dynamic = dynamic
-        self.activation_memory_budget = float(activation_memory_budget)
+        self.verbose = bool(verbose)
         self._compiled: dict = {}
+        self._ran: set = set()  # the kinds of call (_call_kind) that ran a graph
 
     def compiled_for(self, device: torch.device):
         """The compiled callable for frames on ``device`` (compiled lazily: the first frame pays the compile time)."""
@@ -156,40 +171,76 @@ class CompiledModule(nn.Module):
         """Check the learnable controls of every stage (``check_learnable``, which the graph skips), then run the graph
         inside the module's ``compiled_frame`` where it has one.
 
-        A frame the module refuses (an image of 2 channels, integer values, not a tensor) raises while Dynamo traces
-        it, which reports that as an ``Unsupported`` error of its own; the module is then called eagerly on the frame,
-        to raise its own error, as an uncompiled module would (should the eager call not raise, its output is returned,
-        with a ``RuntimeWarning``: the frame ran once, eagerly)."""
+        A call that compiles and fails calls the module eagerly on the frame: a frame the module refuses (an image of 2
+        channels, integer values, which Dynamo reports as an error of its own while it traces) raises the module's own
+        error, as an uncompiled module would; a frame the module takes raises the compile's error."""
         if not isinstance(image, torch.Tensor):
             return self.module(image, *args, **kwargs)  # the module's own TypeError
         for stage in self.module.modules():
             if hasattr(stage, "check_learnable"):
                 stage.check_learnable()
-        try:
-            return self._graph_call(image, *args, **kwargs)
-        except Exception as error:
-            if not _raised_while_traced(error):
-                raise
-            refused = error
-        out = self.module(image, *args, **kwargs)  # raises the module's own error (outside the handler: that error alone)
-        warnings.warn(f"the compiled graph of {type(self.module).__name__} raised where eager mode does not: this frame "
-                      f"ran eagerly ({str(refused).splitlines()[0]})", RuntimeWarning, stacklevel=2)
-        return out
-
-    def _graph_call(self, image: torch.Tensor, *args, **kwargs):
         prepare = getattr(self.module, "compiled_arguments", None)
         if prepare is not None:  # what must happen before the graph: a random draw from a generator
             (image, *args), kwargs = prepare(image, *args, **kwargs)
-        if self.dynamic is None:
-            _batch_may_change(image, *args, *kwargs.values())
-        _watch_compiles()
-        _calling.label = _describe(self.module, image)
         frame = getattr(self.module, "compiled_frame", None)
+        with frame(image, *args, **kwargs) if frame is not None else contextlib.nullcontext():
+            return self._graph_call(image, args, kwargs)
+
+    def _graph_call(self, image: torch.Tensor, args: tuple, kwargs: dict):
+        """The graph of this kind of call, compiled first (and said so) where PyTorch has none whose guards hold."""
+        call, kind = self.compiled_for(image.device), _call_kind((image, *args), kwargs)
+        if kind in self._ran:
+            return call(image, *args, **kwargs)
+        with _STANCE, torch.compiler.set_stance("fail_on_recompile"):
+            try:
+                out = call(image, *args, **kwargs)
+            except RuntimeError as error:  # where a compile would start
+                failed = _failed_guards(error)
+            else:
+                self._ran.add(kind)
+                return out
+        out = self._compiling_call(call, failed, image, args, kwargs)
+        self._ran.add(kind)
+        return out
+
+    def _compiling_call(self, call, failed: list, image: torch.Tensor, args: tuple, kwargs: dict):
+        label = _describe(self.module, image)
+        why = f"a guard of its last graph failed: {'; '.join(failed)}" if failed else "its first frame"
+        self._announce("compiling the forward of %s (%s); a compile of %s", label, why, _usual_cost(self.module))
+        started = time.perf_counter()
         try:
-            with frame(image, *args, **kwargs) if frame is not None else contextlib.nullcontext(), self._budget():
-                return self.compiled_for(image.device)(image, *args, **kwargs)
-        finally:
-            _calling.label = None
+            out = call(image, *args, **kwargs)
+        except Exception as error:
+            refused = error
+        else:
+            self._announce("compiled the forward of %s in %.1f s", label, time.perf_counter() - started)
+            self._announce_backward(out, label)
+            return out
+        self.module(image, *args, **kwargs)  # raises the module's own error (outside the handler: that error alone)
+        raise refused  # the compile's own failure
+
+    def _announce(self, message: str, *values) -> None:
+        if self.verbose:
+            LOG.info(message, *values)
+
+    def _announce_backward(self, out, label: str) -> None:
+        """Say when the backward of a graph just compiled compiles, at its first ``backward()``, and how long it took:
+        hooks on the output's node (``torch.autograd.graph.Node``), before and after it runs."""
+        node = next((value.grad_fn for value in (out if isinstance(out, tuple) else (out,))
+                     if isinstance(value, torch.Tensor) and value.grad_fn is not None), None)
+        if node is None or not self.verbose:
+            return
+        started = []
+
+        def before(grad_outputs):
+            started.append(time.perf_counter())
+            self._announce("compiling the backward of %s", label)
+
+        def after(grad_inputs, grad_outputs):
+            self._announce("compiled the backward of %s in %.1f s", label, time.perf_counter() - started[0])
+
+        node.register_prehook(before)
+        node.register_hook(after)
 
     def warm_up(self, example: torch.Tensor, *args, training: bool = False, **kwargs) -> float:
         """Compile for frames like ``example`` now (one call, and its backward with ``training``), not at the first
@@ -210,55 +261,22 @@ class CompiledModule(nn.Module):
                 out.sum().backward()
         return time.perf_counter() - started
 
-    def _budget(self):
-        """The activation memory budget, set for a call that records gradients (where a training graph may compile; the
-        partitioner reads it then). PyTorch's setting is the process's: another thread's compile meanwhile sees it too."""
-        if not torch.is_grad_enabled():
-            return contextlib.nullcontext()
-        from torch._functorch import config
 
-        if not hasattr(config, "activation_memory_budget"):
-            warnings.warn("this torch has no activation memory budget: a compiled training forward keeps what PyTorch "
-                          "keeps by default", RuntimeWarning, stacklevel=4)
-            return contextlib.nullcontext()
-        return config.patch(activation_memory_budget=self.activation_memory_budget)
-
-
-def _batch_may_change(*values) -> None:
-    """Tell Dynamo that the first size of every tensor given (the batch, and a batch of drawn parameters) may change
-    from call to call, so that the first graph already serves every batch size; a batch of 1 it may still specialise."""
-    from torch._dynamo import maybe_mark_dynamic
-
-    for value in values:
-        tensors = value.values() if isinstance(value, dict) else (value,)
-        for tensor in tensors:
-            if isinstance(tensor, torch.Tensor) and tensor.dim() > 0:
-                maybe_mark_dynamic(tensor, 0)
-
-
-def _raised_while_traced(error: Exception) -> bool:
-    """Whether ``error`` is Dynamo's report of an exception that the traced code raised (its cause: an exception Dynamo
-    observed). Imported here: ``import torchgrade`` does not load ``torch._dynamo``."""
-    from torch._dynamo import exc
-
-    return isinstance(error, exc.Unsupported) and isinstance(error.__cause__, getattr(exc, "ObservedException", ()))
-
-
-def compile(module: nn.Module, *, cuda_graphs: bool = True, dynamic: Optional[bool] = None,
-            activation_memory_budget: float = ACTIVATION_MEMORY_BUDGET) -> CompiledModule:
+def compile(module: nn.Module, *, cuda_graphs: bool = True, dynamic: Optional[bool] = True, verbose: bool = True) -> CompiledModule:
     """``module`` (a stage, a :class:`~torchgrade.PostFX`, a :class:`~torchgrade.RandomPostFX`, a LUT) through
     ``torch.compile`` with one graph and the device's mode (:func:`compile_mode`).
 
-    ``dynamic`` is passed to ``torch.compile``: ``None`` (default) compiles the first size with fixed sizes and, at
-    the first new size, one graph with the changed sizes symbolic, which every later size runs; ``True`` symbolic
-    sizes from the start; ``False`` one graph per size, at most eight sizes (Dynamo's ``recompile_limit``: the
-    ninth raises ``FailOnRecompileLimitHit``). ``activation_memory_budget`` (0 to 1): what a training forward keeps
-    for the backward, between recomputing everything (0) and PyTorch's default (1; :data:`ACTIVATION_MEMORY_BUDGET`).
-    It is read where a training graph compiles, and Dynamo does not guard on it: a module of the same structure
-    compiled earlier in the process runs the graph compiled then, with the budget it had (``torch._dynamo.reset()``
-    forgets it).
+    ``dynamic`` is passed to ``torch.compile``: ``True`` (default) symbolic sizes from the first frame, so that every
+    batch size and frame size (but 1) runs the first graph; ``None`` the first size fixed and, at the first new size,
+    one graph with the changed sizes symbolic; ``False`` one graph per size, at most eight sizes (Dynamo's
+    ``recompile_limit``: the ninth raises ``FailOnRecompileLimitHit``). ``verbose=False`` keeps the compile's lines
+    (on the ``torchgrade.compile`` logger, :data:`LOG`) to itself.
+
+    Examples:
+        >>> import torchgrade as tg
+        >>> tg.compile(tg.ToneMap("aces"), verbose=False).verbose
+        False
     """
     if not isinstance(module, nn.Module):
         raise TypeError(f"compile takes an nn.Module, got {type(module).__name__}")
-    return CompiledModule(module, cuda_graphs=cuda_graphs, dynamic=dynamic, activation_memory_budget=activation_memory_budget)
-
+    return CompiledModule(module, cuda_graphs=cuda_graphs, dynamic=dynamic, verbose=verbose)

@@ -3,10 +3,9 @@
 The maths modules write each formula once; how its operations run depends on the device, not on the maths:
 
 * **CPU**: a per-pixel module runs on strips of rows of :data:`STRIP_PIXELS_PER_THREAD` pixels per intra-op thread
-  (:func:`~torchgrade.runtime.strips.per_pixel`), so that each thread's share of a strip's intermediates stays in its
-  core's cache while every operation uses all the threads; a LUT's pixel runs, one thread each, go to
-  :data:`PARALLEL_FROM` or more worker threads when there are that many. A value of the data may be read back (free
-  on the CPU): checks of values run there (:mod:`torchgrade.runtime.checks`).
+  (:func:`~torchgrade.runtime.strips.pixelwise`), so that each thread's share of a strip's intermediates stays in its
+  core's cache while every operation uses all the threads. A value of the data may be read back (free on the CPU):
+  checks of values run there (:mod:`torchgrade.runtime.checks`).
 * **Any other device** (CUDA, ``meta``, ...): whole frames. Each operation is a kernel launch there, and a strip
   loop multiplies launches for no cache to gain (``benchmarks/results/gpu.md``, the stages' "before (strips / none)");
   a value read back is a synchronisation, so no check reads one at once.
@@ -22,6 +21,7 @@ Examples:
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass
 from typing import Optional
 
@@ -29,7 +29,7 @@ import torch
 
 from .recording import is_tracing
 
-__all__ = ["ExecutionPolicy", "policy_for", "readable", "STRIP_PIXELS_PER_THREAD", "PARALLEL_FROM", "LOOKUP_CHUNK"]
+__all__ = ["ExecutionPolicy", "policy_for", "readable", "STRIP_PIXELS_PER_THREAD", "one_thread"]
 
 STRIP_PIXELS_PER_THREAD = 1 << 16
 """Pixels of a CPU strip per intra-op thread (batch included): a strip's intermediates stay in the cores' caches,
@@ -39,39 +39,21 @@ much larger ones leave the cache; twice this size runs about as fast on 2 cores 
 ``benchmarks/results/cpu_forms.md``, "Strips"). A strip grows with the thread count: each thread's share stays that
 size, and a frame on many cores is fewer strips."""
 
-PARALLEL_FROM = 2
-"""Intra-op thread count from which the torch form of a LUT's pixel runs (one thread each,
-:func:`torchgrade.lut.apply.chunked_lookup`) goes to as many worker threads; below it they run on the calling thread.
-(The compiled tetrahedral loop spreads its chunks over torch's own threads instead.) Strips of a look stay on the
-calling thread, each operation on every thread."""
-
-LOOKUP_CHUNK = 32768
-"""Pixels per pass of the CPU LUT lookup. Tetrahedral's eager form holds 20 values a pixel (2.5 MiB a run): smaller
-runs pay the fixed cost of each of its 15 operations more often, larger ones leave the cache. The size is the eager
-form's: the compiled loop, a few values a pixel, is faster on larger runs. Both across run sizes: ``benchmarks/results/cpu_forms.md``,
-"LUT runs"; the time and temporary bytes per pixel: ``benchmarks/results/lut.md``."""
-
-
 @dataclass(frozen=True)
 class ExecutionPolicy:
     """How a device computes a frame.
 
     Attributes:
         strip_pixels: pixels per strip of a per-pixel module, or ``None`` for whole frames.
-        workers: LUT runs computed at once, each on a worker thread of one intra-op thread; 1 runs them in the
-            calling thread.
-        lookup_chunk: pixels per pass of the eager LUT lookup, or ``None`` for one pass over the frame.
         reads_values: a value of the data may be read back (a check of it): free on the CPU, a synchronisation of the
             device elsewhere.
     """
 
     strip_pixels: Optional[int]
-    workers: int
-    lookup_chunk: Optional[int]
     reads_values: bool
 
 
-WHOLE_FRAMES = ExecutionPolicy(strip_pixels=None, workers=1, lookup_chunk=None, reads_values=False)
+WHOLE_FRAMES = ExecutionPolicy(strip_pixels=None, reads_values=False)
 """Off the CPU, and while tracing, compiling or exporting."""
 
 
@@ -86,8 +68,7 @@ def policy_for(device: torch.device) -> ExecutionPolicy:
     if device.type != "cpu" or is_tracing():
         return WHOLE_FRAMES
     threads = torch.get_num_threads()
-    workers = threads if threads >= PARALLEL_FROM else 1
-    return ExecutionPolicy(strip_pixels=STRIP_PIXELS_PER_THREAD * threads, workers=workers, lookup_chunk=LOOKUP_CHUNK, reads_values=True)
+    return ExecutionPolicy(strip_pixels=STRIP_PIXELS_PER_THREAD * threads, reads_values=True)
 
 
 def readable(value) -> bool:
@@ -101,3 +82,24 @@ def readable(value) -> bool:
     if not isinstance(value, torch.Tensor):
         return True
     return not is_tracing() and policy_for(value.device).reads_values
+
+
+@contextlib.contextmanager
+def one_thread():
+    """Run the block with one intra-op CPU thread, then restore the count (thread-local under OpenMP and MKL).
+
+    Examples:
+        >>> import torch
+        >>> before = torch.get_num_threads()
+        >>> with one_thread():
+        ...     torch.get_num_threads()
+        1
+        >>> torch.get_num_threads() == before
+        True
+    """
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)

@@ -165,7 +165,8 @@ def grade_shot(look: PostFX, frames: list, read, write, dt: float, scene_referre
     """Read, grade and write every frame with a progress bar (frames, fps, ETA).
 
     Eye adaptation runs in frame order, one frame after the other; a look without it may grade ``jobs``
-    frames at a time.
+    frames at a time. An exception (a frame's error, Ctrl-C) stops the shot: the frames being written finish, no
+    other begins.
 
     Examples:
         >>> frames, written = ["f1", "f2"], {}
@@ -187,7 +188,11 @@ def grade_shot(look: PostFX, frames: list, read, write, dt: float, scene_referre
     with bar:
         if jobs > 1:
             with ThreadPoolExecutor(jobs) as pool:
-                list(pool.map(one, range(len(frames))))
+                try:
+                    list(pool.map(one, range(len(frames))))
+                except BaseException:  # Ctrl-C or a frame's error: the frames not begun are not graded
+                    pool.shutdown(cancel_futures=True)
+                    raise
         else:
             adapted = None
             for index in range(len(frames)):

@@ -28,6 +28,7 @@ from typing import Callable
 import torch
 from torch import nn
 
+from ..base.stage import Stage
 from ..bloom import BLOOM_MODES, Bloom, ConvolutionBloom
 from ..exposure import AutoExposure
 from ..grading.layer import ColorGrade, PrimaryGrade
@@ -38,7 +39,7 @@ from ..lut.bake import is_display_referred
 from ..output.layer import Dither, LookLUT
 from ..tonemap import TONEMAP_MODES, ToneMap
 
-__all__ = ["STRONG_GRADE", "StageKind", "STAGE_KINDS"]
+__all__ = ["STRONG_GRADE", "StageKind", "STAGE_KINDS", "learnable"]
 
 STRONG_GRADE = dict(
     post_exposure=0.7, temperature=25, tint=-10, contrast=35, color_filter=(1.0, 0.9, 0.8),
@@ -116,3 +117,37 @@ STAGE_KINDS: dict[str, StageKind] = _kinds()
 """``{name: StageKind}``: every tone mapper, the grade in Rec.709 and in ACES, both primary grade styles, both
 eye-adaptation operators, histogram metering with its limits and curve, a user's metering mask, every bloom
 composite, convolution bloom, dither, the LUT with each interpolation, a creative look LUT, and a whole ``PostFX`` look."""
+
+
+def learnable(module: nn.Module) -> dict:
+    """Make every continuous control of every stage in ``module`` an ``nn.Parameter`` holding its value: number
+    controls, tensor-valued ones (a convolution bloom's kernel) and a LUT's table. A control the stage takes only as a
+    number is left as it is (ACES 2.0's peak luminance, whose tables are cached per value: the stage refuses a
+    parameter with ``TypeError``). Returns the parameters by ``"Stage.control"``.
+
+    Examples:
+        >>> sorted(learnable(STAGE_KINDS["tonemap-neutral_hdr"].example()))
+        ['ToneMap.hue_shift', 'ToneMap.min_luminance', 'ToneMap.paper_white', 'ToneMap.peak_luminance']
+        >>> learnable(STAGE_KINDS["tonemap-aces2_hdr"].example())
+        {}
+    """
+    made = {}
+    for stage in module.modules():
+        if not isinstance(stage, Stage):
+            continue
+        values = {name: getattr(stage, name) for name, control in stage.control_table().items()
+                  if control.kind == "number" or isinstance(getattr(stage, name), torch.Tensor)}
+        if isinstance(stage, LUT3D):
+            stage.table = nn.Parameter(stage.table.detach().clone())
+            made[f"{type(stage).__name__}.table"] = stage.table
+        for name, value in values.items():
+            if value is None or (isinstance(value, torch.Tensor) and not value.is_floating_point()):
+                continue
+            parameter = nn.Parameter(torch.as_tensor(value, dtype=torch.float32).detach().clone())
+            try:
+                setattr(stage, name, parameter)
+            except TypeError:  # refused by the stage's rules between controls, after it was stored
+                setattr(stage, name, value)
+                continue
+            made[f"{type(stage).__name__}.{name}"] = parameter
+    return made

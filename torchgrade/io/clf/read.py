@@ -213,6 +213,7 @@ def _table(node: ElementTree.Element, path) -> tuple:
     interpolation = node.get("interpolation", "trilinear")
     if interpolation not in ("trilinear", "tetrahedral"):
         raise ValueError(f"{path}: LUT3D interpolation must be trilinear or tetrahedral, got {interpolation[:80]!r}")
+    _depth_scale(node, "inBitDepth", path)  # the lattice spans its input's [0, 1] at any known depth; another is refused
     array = next((child for child in node if _tag(child) == "Array"), None)
     if array is None:
         raise ValueError(f"{path}: the LUT3D has no Array")

@@ -20,8 +20,9 @@ import mmap
 import struct
 from dataclasses import dataclass
 
-__all__ = ["MAGIC", "MULTIPART", "MAX_ATTRIBUTES", "MAX_PARTS", "MAX_HEADER_BYTES", "HeaderBudgetError", "Attribute", "Headers", "PartBytes", "channel_list", "check_headers", "check_required", "part_bytes",
-           "read_headers", "value"]
+__all__ = ["MAGIC", "MULTIPART", "MAX_ATTRIBUTES", "MAX_FILE_ATTRIBUTES", "MAX_CHANNELS", "MAX_FILE_CHANNELS", "MAX_PARTS",
+           "MAX_HEADER_BYTES", "HeaderBudgetError", "Attribute", "Headers", "PartBytes", "channel_list", "check_headers",
+           "check_required", "part_bytes", "read_headers", "value"]
 
 MAGIC = 20000630
 """The first four bytes of every OpenEXR file, as a little-endian int."""
@@ -36,11 +37,25 @@ MAX_ATTRIBUTES = 1024
 """Most attributes a header may hold (the sample files hold at most 40): OpenEXR's own header parser takes time that
 grows with the square of their number (200,000 empty ones, 3 MB, took 198 s), so more are refused before it runs."""
 
+MAX_FILE_ATTRIBUTES = 16384
+"""Most attributes all the headers of a file may hold together (the required ones of 1,024 parts are 11,264): OpenEXR's
+parser pays for every part's, and 1,024 parts of 1,000 attributes (14 MB) held it for tens of seconds and a GiB
+for an 8x4 image."""
+
+MAX_CHANNELS = 4096
+"""Most channels a part may hold (a render's AOVs are a few hundred): OpenEXR's header parser takes time that grows with
+the square of their number (100,003 held it for tens of seconds)."""
+
+MAX_FILE_CHANNELS = 16384
+"""Most channels all the parts of a file may hold together."""
+
 MAX_PARTS = 1024
 """Most parts a file may hold."""
 
-MAX_HEADER_BYTES = 64 << 20
-"""Most bytes the headers may span (a preview image and an ICC profile fit many times over)."""
+MAX_HEADER_BYTES = 16 << 20
+"""Most bytes the headers may span, to the end of their last attribute (a 2048x2048 preview image fits, and a
+thumbnail and an ICC profile many times over): OpenEXR's parser holds about four times the headers' bytes (one
+attribute of 70 MB held 280 MiB for an 8x4 image), and tests/io/test_doors.py holds headers of this size under 100 MB."""
 _TILED, _DEEP = 1 << 9, 1 << 11
 """The version field's single-part tiled bit and its non-image (deep data) bit."""
 
@@ -58,8 +73,9 @@ document, "Tile Header Attribute" and "Multi-Part and Deep Data Header Attribute
 
 
 class HeaderBudgetError(ValueError):
-    """Headers past :data:`MAX_ATTRIBUTES`, :data:`MAX_PARTS` or :data:`MAX_HEADER_BYTES`: refused before OpenEXR's
-    own parser sees them, whatever else a caller tolerates in a damaged header."""
+    """Headers past one of the budgets (:data:`MAX_ATTRIBUTES`, :data:`MAX_FILE_ATTRIBUTES`, :data:`MAX_CHANNELS`,
+    :data:`MAX_FILE_CHANNELS`, :data:`MAX_PARTS`, :data:`MAX_HEADER_BYTES`): refused before OpenEXR's own parser sees
+    them, whatever else a caller tolerates in a damaged header."""
 
 
 @dataclass(frozen=True)
@@ -105,10 +121,15 @@ def _name(data, at: int) -> tuple[str, int]:
 
 
 def channel_list(data, attribute: Attribute) -> dict[str, int]:
-    """``{channel: bytes a sample}`` of a ``chlist`` attribute."""
+    """``{channel: bytes a sample}`` of a ``chlist`` attribute, at most :data:`MAX_CHANNELS` of them, each named once
+    (OpenEXR refuses a name listed twice too; refused here, every entry is a channel the budgets count)."""
     at, end, channels = attribute.value, attribute.end, {}
     while at < end and data[at] != 0:
+        if len(channels) == MAX_CHANNELS:
+            raise HeaderBudgetError(f"a part holds more than {MAX_CHANNELS} channels")
         name, at = _name(data, at)
+        if name in channels:
+            raise ValueError(f"channel {name!r} is listed twice")
         (pixel_type,) = struct.unpack_from("<i", data, at)
         if pixel_type not in _BYTES:
             raise ValueError(f"channel {name!r} has pixel type {pixel_type}, not 0 (uint), 1 (half) or 2 (float)")
@@ -117,17 +138,20 @@ def channel_list(data, attribute: Attribute) -> dict[str, int]:
     return channels
 
 
-def _attributes(data, at: int) -> tuple[list[Attribute], int]:
+def _attributes(data, at: int, before: int) -> tuple[list[Attribute], int]:
+    """The attributes of the header at ``at``, and where it ends; ``before`` the earlier headers hold."""
     attributes = []
     while data[at] != 0:
         if len(attributes) == MAX_ATTRIBUTES:
             raise HeaderBudgetError(f"a header holds more than {MAX_ATTRIBUTES} attributes")
-        if at > MAX_HEADER_BYTES:
-            raise HeaderBudgetError(f"the headers span more than {MAX_HEADER_BYTES} bytes")
+        if before + len(attributes) == MAX_FILE_ATTRIBUTES:
+            raise HeaderBudgetError(f"the headers hold more than {MAX_FILE_ATTRIBUTES} attributes in all")
         start = at
         name, at = _name(data, at)
         kind, at = _name(data, at)
         (size,) = struct.unpack_from("<i", data, at)
+        if at + 4 + size > MAX_HEADER_BYTES:
+            raise HeaderBudgetError(f"the headers span more than {MAX_HEADER_BYTES} bytes")
         if size < 0 or at + 4 + size > len(data):
             raise ValueError(f"attribute {name!r} of {size} bytes does not fit in the file")
         attributes.append(Attribute(name, kind, start, at + 4, at + 4 + size))
@@ -150,11 +174,12 @@ def read_headers(data) -> Headers:
     magic, version = struct.unpack_from("<ii", data)
     if magic != MAGIC:
         raise ValueError(f"no OpenEXR magic number (the file starts with {bytes(data[:4])!r})")
-    parts, at = [], 8
+    parts, at, count = [], 8, 0
     while True:
         if len(parts) == MAX_PARTS:
             raise HeaderBudgetError(f"the file holds more than {MAX_PARTS} parts")
-        attributes, at = _attributes(data, at)
+        attributes, at = _attributes(data, at, count)
+        count += len(attributes)
         parts.append(attributes)
         if not version & MULTIPART or data[at] == 0:
             break
@@ -243,12 +268,15 @@ def part_bytes(path) -> list[PartBytes] | None:
     try:
         with open(path, "rb") as file, mmap.mmap(file.fileno(), 0, access=mmap.ACCESS_READ) as data:
             headers = read_headers(data)
-            parts = []
+            parts, channel_count = [], 0
             for index in range(len(headers.parts)):
                 attributes = headers.attributes(index)
                 channels, tiles = attributes.get("channels"), attributes.get("tiles")
                 parts.append(PartBytes(channel_list(data, channels) if channels else {},
                                        value(data, tiles)[:2] if tiles is not None and tiles.kind == "tiledesc" else None))
+                channel_count += len(parts[-1].sample_bytes)
+                if channel_count > MAX_FILE_CHANNELS:
+                    raise HeaderBudgetError(f"the parts hold more than {MAX_FILE_CHANNELS} channels in all")
             return parts
     except HeaderBudgetError:
         raise

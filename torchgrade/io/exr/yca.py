@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import torch
 
-from ...runtime.workers import one_thread
+from ...runtime.policy import one_thread
 from .chromaticities import rgb_to_xyz
 
 __all__ = ["luminance_weights", "yca_to_rgb"]
