@@ -226,7 +226,7 @@ def test_lift_gamma_gain_mirrors_negative_values():
 
 
 IDENTITY_SETTINGS = dict(
-    lift=(1, 1, 1, 0), gamma=(1.0, 1.0, 1.0, 0.0), gain=torch.tensor([1.0, 1.0, 1.0, 0.0]), hue_vs_hue=((0.0, 0.5), (0.6, 0.5)),
+    lift=(1, 1, 1, 0), gamma=(1.0, 1.0, 1.0, 0.0), gain=[1.0, 1.0, 1.0, 0.0], hue_vs_hue=((0.0, 0.5), (0.6, 0.5)),
     hue_vs_sat=None, sat_vs_sat=((0.0, 0.5), (1.0, 0.5)), lum_vs_sat=(), curve_master=((0.0, 0.0), (0.5, 0.5), (1.0, 1.0)), curve_red=None,
 )
 
@@ -236,6 +236,15 @@ def test_identity_settings_return_the_input_itself():
     for aces in (False, True):
         grade = tg.ColorGrade(aces=aces, **IDENTITY_SETTINGS)
         assert grade.is_identity and grade(image) is image and grade.to_config() == ({"aces": True} if aces else {})
+
+
+def test_a_tensor_control_at_identity_is_computed_and_changes_nothing():
+    """A tensor's value is not read to skip its step (on a GPU each read waits for the device, and a compiler's graph
+    holds no value): the trackball is applied, and gives the image back to float rounding."""
+    image = torch.rand(2, 3, 5, 6)
+    grade = tg.ColorGrade(gain=torch.tensor([1.0, 1.0, 1.0, 0.0]))
+    assert not grade.is_identity
+    torch.testing.assert_close(grade(image), image)
 
 
 def test_curves_and_trackballs_in_configs_round_trip():
@@ -273,7 +282,7 @@ NEW_OPS = {
     "yrgb_curves": (lambda x, y: F.yrgb_curves(x, torch.stack((CURVE_X, y), 1), None, SAT_CURVE), ([p[1] for p in MASTER],)),
     "offset_exposure": (F.offset_exposure, ((0.01, -0.02, 0.03), (0.5, 0.0, -0.3))),
     "linear_contrast": (F.linear_contrast, ((1.3, 0.9, 1.1), -0.5)),
-    "log_contrast": (F.log_contrast, ((1.3, 0.9, 1.1), 0.1)),
+    "primary_log_contrast": (F.primary_log_contrast, ((1.3, 0.9, 1.1), 0.1)),
     "log_gamma": (F.log_gamma, ((1.3, 0.9, 1.1), 0.05, 0.95)),
     "primary_saturation": (F.primary_saturation, (1.4,)),
     "dither": (lambda x, a: F.dither(x, F.dither_pattern(8, torch.Generator().manual_seed(1), torch.float64), a), (2 / 255,)),
@@ -362,7 +371,7 @@ def test_primary_grade_matches_opencolorio(style, index):
 
 def test_primary_defaults_are_opencolorio_defaults_and_identity_returns_the_input():
     for style in ("linear", "log"):
-        assert OCIO.GradingPrimary(OCIO_STYLE[style]).pivot == pytest.approx(tg.primary.DEFAULT_PIVOT[style])
+        assert OCIO.GradingPrimary(OCIO_STYLE[style]).pivot == pytest.approx(tg.grading.primary.DEFAULT_PIVOT[style])
         image = torch.rand(2, 3, 4, 4)
         grade = tg.PrimaryGrade(style, contrast=(1.0, 1.0, 1.0), pivot=0.3)
         assert grade.is_identity and grade(image) is image

@@ -153,7 +153,7 @@ def test_the_captured_graph_agrees_with_eager_at_odd_sizes(name):
     """Dynamo's capture runs the traced forms (sizes as they come, no eager shortcut): the same pixels."""
     stage = _stage(name)
     image = scene((2, 3, 37, 53))
-    torch._dynamo.reset()
+    torch.compiler.reset()
     with torch.no_grad():
         torch.testing.assert_close(torch.compile(stage, fullgraph=True, backend="eager")(image), stage(image), rtol=1e-5, atol=1e-5)
 

@@ -43,14 +43,11 @@ from typing import Optional
 import torch
 from torch import nn
 
-from .._moved import OLD_CLASS_PATHS
 from ..base.config import load_config
 from ..base.images import with_alpha
-from ..base.stage import on_nan_free
 from ..bloom import ConvolutionBloom
 from ..lut import INTERPOLATIONS, LUT3D, ErrorReport
 from ..lut.bake import bake_look
-from ..runtime import is_tracing
 from .slots import SLOT, SLOTS, STAGES, build_stage, is_identity_stage
 
 __all__ = ["PostFX", "SAFE_GLOBALS"]
@@ -317,28 +314,21 @@ SAFE_GLOBALS = (PostFX, LUT3D, ErrorReport, ConvolutionBloom, *STAGES.values())
 torchgrade is imported, so ``torch.load(path, weights_only=True)`` reads back a ``torch.save(look)``."""
 
 torch.serialization.add_safe_globals(list(SAFE_GLOBALS))
-torch.serialization.add_safe_globals([(cls, old) for cls in SAFE_GLOBALS for old, new in OLD_CLASS_PATHS.items()
-                                      if new == f"{cls.__module__}.{cls.__qualname__}"])  # files saved before the move
 
 
 def _through(stages, image: torch.Tensor, dt) -> torch.Tensor:
     """``image`` through ``(slot name, stage)`` pairs in order, ``dt`` to those that keep state between frames.
 
     A stage's output holds no NaN (``tests/library/test_extremes.py``), so a stage whose input another stage made is
-    told so (:func:`~torchgrade.base.stage.on_nan_free`) and skips its input's NaN pass, one frame pass each. A stage that
-    hands its input back (an identity setting, a frame too small for a bloom level) makes nothing: its output is as
-    trusted as its input was. Not while tracing: a compiled look keeps every stage's whole policy (Inductor fuses it),
-    and an export decides it in its graph.
+    told so (``nan_free=True``, :attr:`~torchgrade.base.stage.Stage.takes_nan_free`) and skips its input's NaN pass, one
+    frame pass each. A stage that hands its input back (an identity setting, a frame too small for a bloom level)
+    makes nothing: its output is as trusted as its input was.
     """
     made = False
     for name, stage in stages:
         args = (dt,) if SLOT[name].timed else ()
-        out = on_nan_free(stage, image, *args) if made and not is_tracing() else stage(image, *args)
-        made = made or not _shares_base(out, image)
+        trusted = {"nan_free": True} if made and getattr(stage, "takes_nan_free", False) else {}
+        out = stage(image, *args, **trusted)
+        made = made or out is not image
         image = out
     return image
-
-
-def _shares_base(a: torch.Tensor, b: torch.Tensor) -> bool:
-    """Whether ``a`` and ``b`` are the same tensor or views of the same one."""
-    return (a if a._base is None else a._base) is (b if b._base is None else b._base)

@@ -23,7 +23,7 @@ supplies them for the duration of the export.
 **LUTs.** ``lut_backend`` picks how a :class:`~torchgrade.lut.LUT3D` is looked up in the graph
 (the LUT's ``export_form(interpolation, backend)``, from the kernel registry :data:`torchgrade.lut.KERNELS`):
 
-* ``"slices"`` (default, opset 17; ``"strip"`` before): trilinear lookups use the ``(S, S, S)`` volume laid out as its
+* ``"slices"`` (default, opset 17): trilinear lookups use the ``(S, S, S)`` volume laid out as its
   blue slices side by side, an ``S x S²`` image sampled by two 4-D ``GridSample`` nodes and a lerp;
   tetrahedral lookups use gathers (no GridSample form exists for them);
 * ``"gather"`` (opset 17): both interpolations as ``Gather`` nodes, exactly PyTorch's kernels;

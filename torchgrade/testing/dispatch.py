@@ -92,6 +92,10 @@ class DispatchCount(TorchDispatchMode):
 
     def __torch_dispatch__(self, func, types, args=(), kwargs=None):
         kwargs = kwargs or {}
+        kernel = _library_kernel(func, args)
+        if kernel is not None:  # counted by what its kernel for the device dispatches
+            with self:
+                return kernel(*args, **kwargs)
         name = func.overloadpacket.__name__
         out = func(*args, **kwargs)
         if func is torch.ops.aten._local_scalar_dense.default:
@@ -111,6 +115,16 @@ class DispatchCount(TorchDispatchMode):
             self.moved.append(sum(t.numel() * t.element_size() for t in tensors))
             self.by_operation[name] += 1
         return out
+
+
+def _library_kernel(func, args):
+    """The Python kernel a torchgrade operator (``torch.library``) runs off the CPU, for its operations to be counted as
+    they dispatch (the operator itself is one call on the host); ``None`` for any other operation."""
+    if func.namespace != "torchgrade" or any(isinstance(a, torch.Tensor) and a.device.type == "cpu" for a in args):
+        return None
+    from ..bloom.blur import _mirror_filter_by_convolution
+
+    return {"mirror_filter": _mirror_filter_by_convolution}.get(func.overloadpacket.__name__)
 
 
 def _gathers_rows(func, args) -> bool:
