@@ -71,6 +71,6 @@ def test_gradients_of_the_folded_grade_match_finite_differences():
               for name, value in (("post_exposure", 0.3), ("temperature", 8.0), ("tint", -5.0), ("contrast", 15.0))}
     color = torch.tensor((1.0, 0.9, 0.8), dtype=torch.float64, requires_grad=True)
     for aces in (False, True):
-        def graded(x, *values):
+        def graded(x, *values, aces=aces):
             return tg.functional.color_grade(x, aces=aces, color_filter=values[-1], **dict(zip(params, values[:-1])))
         assert torch.autograd.gradcheck(graded, (image, *params.values(), color))
