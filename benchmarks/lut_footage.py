@@ -126,8 +126,8 @@ def quantile_999(errors: torch.Tensor) -> float:
 
 
 def footage_rows(look: tg.PostFX) -> tuple:
-    """``(lattice, rows)`` for one look's default bake: what it baked (shaper, size, interpolation) and each row's
-    ``figure``, ``picture``, ``report`` (the stated p99.9) and ``real`` p99.9."""
+    """``(lut, rows)``: one look's default bake, and each row's ``figure``, ``picture``, ``report`` (the stated p99.9)
+    and ``real`` p99.9."""
     transform = look.per_pixel_stages()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LUTAccuracyWarning)
@@ -144,8 +144,7 @@ def footage_rows(look: tg.PostFX) -> tuple:
     for kelvin in STILL_LIFE_KELVIN:
         real = quantile_999(real_errors(lut, transform, still_life(kelvin)))
         rows.append(("warm practicals", f"still life, {kelvin:.0f} K", stated["warm practicals"], real))
-    lattice = f"`{lut.shaper}` {lut.size}³, {lut.interpolation}"
-    return lattice, [dict(zip(("figure", "picture", "report", "real"), row)) for row in rows]
+    return lut, [dict(zip(("figure", "picture", "report", "real"), row)) for row in rows]
 
 
 def framed_rows(look: tg.PostFX) -> list:
@@ -171,18 +170,21 @@ def span(ratios: list) -> str:
 
 
 def summary_table(looks: dict) -> list:
-    """Per look: each figure the report states and its ratio to the real p99.9 on each picture of its footage."""
+    """Per look: each figure the report states and its ratio to the real p99.9 on each picture of its footage, and the
+    cause the report names when over its tolerance; then, per figure, how many ratios lie within :data:`MARGIN`."""
     header = " | ".join(f"{figure} | report / real, {len(rows)} {FIGURES[figure]}"
-                        for figure, rows in by_figure(next(iter(looks.values()))).items())
-    lines = [f"| look | {header} |", "| --- |" + " ---: | ---: |" * len(FIGURES)]
-    for label, rows in looks.items():
+                        for figure, rows in by_figure(next(iter(looks.values()))["rows"]).items())
+    lines = [f"| look | {header} | report's cause |", "| --- |" + " ---: | ---: |" * len(FIGURES) + " --- |"]
+    for label, look in looks.items():
         cells = [f"{figures[0]['report']:.2f} | {span([r['report'] / r['real'] for r in figures])}"
-                 for figures in by_figure(rows).values()]
-        lines.append(f"| {label} | {' | '.join(cells)} |")
-    ratios = [row["report"] / row["real"] for rows in looks.values() for row in rows]
-    within = sum(1 / MARGIN <= ratio <= MARGIN for ratio in ratios)
-    return lines + ["", f"Report / real within {MARGIN:g}× either way for {within} of {len(ratios)} look-and-picture pairs "
-                        f"({span(ratios)})."]
+                 for figures in by_figure(look["rows"]).values()]
+        lines.append(f"| {label} | {' | '.join(cells)} | {(look['cause'] or 'within tolerance').split(' (')[0]} |")
+    counts = []
+    for figure in FIGURES:
+        ratios = [row["report"] / row["real"] for look in looks.values() for row in by_figure(look["rows"])[figure]]
+        within = sum(1 / MARGIN <= ratio <= MARGIN for ratio in ratios)
+        counts.append(f"{figure} {within} of {len(ratios)} ({span(ratios)})")
+    return lines + ["", f"Report / real within {MARGIN:g}× either way: {'; '.join(counts)}."]
 
 
 def by_figure(rows: list) -> dict:
@@ -205,12 +207,13 @@ def markdown(report: dict) -> list:
     and the ``frames=`` table marked ``frames`` (:func:`~benchmarks.common.mark_table`)."""
     stamp = f"`{report['commit'][:7]}`{' with uncommitted changes' if report['modified'] else ''}"
     pairs = [f"| {label} | {row['figure']} | {row['picture']} | {row['report']:.2f} | {row['real']:.2f} | "
-             f"{row['report'] / row['real']:.2f} |" for label, rows in report["looks"].items() for row in rows]
+             f"{row['report'] / row['real']:.2f} |" for label, look in report["looks"].items() for row in look["rows"]]
     return ["# A baked LUT's report on each footage against its error on pictures of it, every pixel", "",
             " ".join(__doc__.split("\n\n")[3].split()).replace("``", "`").replace(":func:", ""), "",
             f"Made by `{report['command']}` at commit {stamp}. Every look baked on {report['lattice']}.", "",
             "## Each figure's ratio to the real p99.9 on pictures of its footage", "",
-            "8-bit sRGB codes, p99.9; the report's figure, then report / real on each picture (lowest–highest).", "",
+            "8-bit sRGB codes, p99.9; the report's figure, then report / real on each picture (lowest–highest); the cause the "
+            "report names when over its tolerance (its whole text is in the JSON).", "",
             *mark_table("lut", "ratios", summary_table(report["looks"])), "",
             "## Every look and picture", "",
             "| look | figure | picture | report p99.9 | real p99.9 | report / real |", "| --- | --- | --- | ---: | ---: | ---: |",
@@ -225,8 +228,9 @@ def main(argv=None) -> None:
     report = {"command": f"{COMMAND} --out {out}", **source_commit(), "looks": {}}
     lattices = set()
     for label, config in LOOKS.items():
-        lattice, report["looks"][label] = footage_rows(tg.PostFX.from_config(config).eval())
-        lattices.add(lattice)
+        lut, rows = footage_rows(tg.PostFX.from_config(config).eval())
+        lattices.add(f"`{lut.shaper}` {lut.size}³, {lut.interpolation}")
+        report["looks"][label] = {"report": str(lut.error_report), "cause": lut.error_report.cause, "rows": rows}
     report["lattice"] = " and ".join(sorted(lattices))
     report["frames"] = framed_rows(tg.PostFX.from_config(LOOKS["cinematic (export/looks/cinematic.json)"]).eval())
     write_results(out, "lut_footage", report, markdown(report), report["command"])
