@@ -141,3 +141,14 @@ def test_a_batch_equal_to_a_side_of_the_first_frame_is_tied_to_it(side, compiles
         for batch in (16, 15):
             compiled(torch.rand(batch, 3, side, side))
     assert len(_started(caplog)) == compiles
+
+
+def test_compiling_a_look_of_sequence_controls_warns_of_no_cache(recwarn):
+    """A stage asks whether each control is its identity at every call, a sequence's answer cached eagerly; Dynamo
+    traces the comparison itself and has no cache to warn of (it warns once a process of any it looks through)."""
+    look = tg.PostFX(grade={"split_shadows": (0.2, 0.4, 0.9), "split_highlights": (1.0, 0.8, 0.6), "contrast": 10}).eval()
+    image = torch.rand(1, 3, 8, 8)
+    torch._dynamo.reset()
+    with torch.no_grad():
+        torch.testing.assert_close(torch.compile(look, backend="eager", fullgraph=True)(image), look(image))
+    assert not [w for w in recwarn if "lru_cache" in str(w.message)]

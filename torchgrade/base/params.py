@@ -5,13 +5,12 @@
 
 from __future__ import annotations
 
-import functools
 import numbers
 from typing import Union
 
 import torch
 
-from ..runtime.constants import constant, is_plain_number
+from ..runtime.constants import constant, eagerly_cached, is_plain_number
 
 __all__ = ["Param", "scalar_param", "is_plain_number", "color_param", "matrix_param", "check_range", "check_choice", "is_constant"]
 
@@ -174,7 +173,7 @@ def _is_number(value) -> bool:
     return isinstance(value, (float, int)) or isinstance(value, numbers.Real)
 
 
-@functools.lru_cache(maxsize=256)
+@eagerly_cached
 def _equal_everywhere(value, constant) -> bool:
     """:func:`is_constant` of plain values, one of them a sequence."""
     values, target = _flat(value), _flat(constant)

@@ -26,7 +26,7 @@ import torch
 
 from .recording import is_tracing
 
-__all__ = ["constant", "scalar", "where", "is_plain_number", "affine", "values_of", "device_cached", "folded", "CACHED_CONSTANTS"]
+__all__ = ["constant", "scalar", "where", "is_plain_number", "affine", "values_of", "device_cached", "eagerly_cached", "folded", "CACHED_CONSTANTS"]
 
 CACHED_CONSTANTS = 4096
 """Constants kept per kind (least recently used go first): a look holds tens; random controls are tensors, not cached."""
@@ -136,6 +136,27 @@ def values_of(tensor: torch.Tensor):
         ((1.0, 0.0), (0.0, 1.0))
     """
     return _nested_tuple(tensor.tolist())
+
+
+def eagerly_cached(function):
+    """Decorate ``function``, pure in hashable plain arguments (numbers, tuples), so that an eager call looks its
+    result up (``functools.lru_cache``) and a compiler traces the function itself: Dynamo would look through the
+    cache, and warns of one.
+
+    Examples:
+        >>> @eagerly_cached
+        ... def total(values):
+        ...     return sum(values)
+        >>> total((1, 2)), total((1, 2)), total.__wrapped__([1, 2])
+        (3, 3, 3)
+    """
+    cached = functools.lru_cache(maxsize=CACHED_CONSTANTS)(function)
+
+    @functools.wraps(function)
+    def call(*arguments):
+        return function(*arguments) if is_tracing() else cached(*arguments)
+
+    return call
 
 
 def device_cached(make):
