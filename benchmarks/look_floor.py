@@ -13,7 +13,8 @@ grade and the ACES tone map each on the frame it gets in the look, and onnxrunti
 of each case's time over the copy's in the same round (a load change between rounds cancels), and onnxruntime's over
 the eager look's.
 
-**Counted** (deterministic: ``--counts`` measures only these, the columns that may be committed from a busy machine):
+**Counted** (deterministic: ``--counts`` records only these, the columns that may be committed from a busy machine,
+and no time, the compile's included):
 
 * eager, a second frame of the look and of each stage on the ``meta`` device (shapes, nothing computed: each formula's one form on
   whole frames, where the CPU runs per-pixel stages in strips of rows) at the frame's size, under
@@ -313,7 +314,8 @@ def _measured(quick: bool, counts_only: bool, rounds: int) -> dict:
     report = {"frame": list(scene.shape[-2:]), "threads": threads, "device": "cpu", "rounds": rounds,
               "eager_counts": eager_counts(look, scene.shape), "metering": metering_effect(), "cold_compile_s": None, "inductor": None}
     if not quick:
-        compiled, report["cold_compile_s"], report["inductor"] = compiled_look(look, scene)
+        compiled, seconds, report["inductor"] = compiled_look(look, scene)
+        report["cold_compile_s"] = None if counts_only else seconds
         calls[COMPILED] = lambda: compiled(scene)
     with tempfile.TemporaryDirectory(prefix="torchgrade-look-floor-") as folder:
         calls[EXPORTED], report["onnx"] = exported_look(look, scene, Path(folder), threads)
