@@ -25,9 +25,9 @@ and no time, the compile's included):
   ``torch._logging.set_logs`` turns on): its kernels, their loop nests, and the buffers of a plane or more it allocates
   (the output among them) and what they hold in frames, sizes evaluated at the frame's;
 * exported: the nodes of the file (a ``Scan``'s body included, and the main graph's alone) and their operators;
-* metering: how far counting the histogram a value a block (``histogram_block``, :data:`METERING_BLOCKS`) moves the
-  metered exposure from counting every pixel, in stops, on the five sample photographs at their full sizes, each
-  metering mask.
+* metering: how far counting the histogram a value a block (``histogram_block``, :data:`METERING_BLOCKS`), or every
+  pixel of the frame box-filtered 2x2, moves the metered exposure from counting every pixel, in stops, on the five
+  sample photographs at their full sizes, each metering mask.
 
 ``--quick`` (for the tests): a 180x320 frame, 3 rounds, no ``tg.compile``. The results carry the commit, the command,
 the threads and the device. Writes look_floor.json and look_floor.md to ``--out`` (default benchmarks/out; the
@@ -241,16 +241,26 @@ def timed(calls: dict, rounds: int) -> dict:
     return {"rows": rows, "rounds_ms": {name: [round(ms, 2) for ms in values] for name, values in times.items()}}
 
 
+def metering_ways(image: torch.Tensor) -> dict:
+    """The ways of metering ``image`` that :func:`metering_effect` compares with counting every pixel, by name: a value a
+    block (each of :data:`METERING_BLOCKS`), and every pixel of the frame box-filtered to half its sides (the mean of
+    each 2x2 block's light, where the blocks take the mean of its stops)."""
+    box = torch.nn.functional.avg_pool2d(image, 2, ceil_mode=True)
+    ways = {f"{block}x{block} blocks": (lambda mask, block=block: tg.exposure.meter_luminance(image, "histogram", mask=mask, block=block))
+            for block in METERING_BLOCKS}
+    ways["the frame box-filtered 2x2"] = lambda mask: tg.exposure.meter_luminance(box, "histogram", mask=mask, block=1)
+    return ways
+
+
 def metering_effect() -> dict:
-    """``{photograph: {mask: {block: stops}}}``: how far each of :data:`METERING_BLOCKS` moves histogram metering from
+    """``{photograph: {mask: {way: stops}}}``: how far each of :func:`metering_ways` moves histogram metering from
     counting every pixel, on each sample photograph at its full size."""
     effect = {}
     for name in PHOTOGRAPHS:
         image, effect[name] = sample_exr(name, to_rec709=True), {}
         for mask in tg.exposure.METERING_MASKS:
             every = float(tg.exposure.meter_luminance(image, "histogram", mask=mask, block=1))
-            effect[name][mask] = {block: round(abs(math.log2(float(tg.exposure.meter_luminance(image, "histogram", mask=mask, block=block)) / every)), 4)
-                                  for block in METERING_BLOCKS}
+            effect[name][mask] = {way: round(abs(math.log2(float(meter(mask)) / every)), 4) for way, meter in metering_ways(image).items()}
     return effect
 
 
@@ -283,12 +293,11 @@ def markdown(report: dict) -> list:
         lines += ["", "## Compiled: Inductor's generated code for the timed graph", "",
                   "| graphs | kernels | loop nests | buffers of a plane or more | frames written |", "| ---: | ---: | ---: | ---: | ---: |",
                   f"| {c['graphs']} | {c['kernels']} | {c['loop_nests']} | {c['frame_buffers']} | {c['frames_written']} |"]
-    columns = [(mask, block) for mask in tg.exposure.METERING_MASKS for block in METERING_BLOCKS]
-    lines += ["", "## Metering: a histogram value a block against every pixel, in stops (sample photographs, full size)", "",
-              "| photograph | " + " | ".join(f"{mask}, {block}x{block}" for mask, block in columns) + " |",
-              "| --- |" + " ---: |" * len(columns)]
-    lines += [f"| {name} | " + " | ".join(str(masks[mask][block]) for mask, block in columns) + " |"
-              for name, masks in report["metering"].items()]
+    ways = next(iter(next(iter(report["metering"].values())).values()))
+    lines += ["", "## Metering: histogram metering's distance from counting every pixel, in stops (sample photographs, full size)", "",
+              "| photograph, mask | " + " | ".join(ways) + " |", "| --- |" + " ---: |" * len(ways)]
+    lines += [f"| {name}, {mask} | " + " | ".join(str(stops) for stops in by_way.values()) + " |"
+              for name, masks in report["metering"].items() for mask, by_way in masks.items()]
     nodes = report["onnx"]
     top = ", ".join(f"{count} `{op}`" for op, count in list(nodes["operators"].items())[:12])
     lines += ["", "## Exported", "", f"{nodes['nodes']} nodes ({nodes['main_graph_nodes']} in the main graph, the rest in its "

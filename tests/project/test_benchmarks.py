@@ -531,6 +531,7 @@ def test_the_look_floor_times_every_case_against_the_copy_in_the_same_rounds_and
     nodes = report["onnx"]
     assert nodes["nodes"] == sum(nodes["operators"].values()) > nodes["main_graph_nodes"]  # the Scan's body counted
     assert set(report["metering"]["Carrots"]) == set(tg.exposure.METERING_MASKS)
+    assert report["metering"]["Carrots"]["spot"]["4x4 blocks"] > report["metering"]["Carrots"]["spot"]["2x2 blocks"] > 0
 
 
 def test_the_code_inductor_generates_is_read_from_its_log_with_sizes_at_the_frame(tmp_path, monkeypatch):
