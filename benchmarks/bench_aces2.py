@@ -22,11 +22,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-ROOT = Path(__file__).resolve().parents[1]
-
 from benchmarks.common import argument_parser, median_ms, packed_rgb, sample_exr, write_results
 from torchgrade.tonemap.aces2 import aces2_output
 from torchgrade.tonemap.aces2.transform import prepare_output
+
+ROOT = Path(__file__).resolve().parents[1]
 
 COMMAND = ".venv/bin/python -m benchmarks aces2"
 HEIGHT, WIDTH, RUNS = 1080, 1920, 5

@@ -122,10 +122,10 @@ def section_look(device):
         image = scene(size, device)
         floor = floor_ms(image)
         with torch.no_grad():
-            calls = {"eager": lambda: look(image)}
+            calls = {"eager": lambda image=image: look(image)}
             if size == "4K":  # one compile: each frame size compiles on its own
                 fast, seconds = compiled(look, image)
-                calls["compiled"] = lambda: fast(image)
+                calls["compiled"] = lambda fast=fast, image=image: fast(image)
             times = cuda_ms(calls)
         record("look", f"cinematic {size} eager, no_grad", ms=times["eager"], x_floor=times["eager"] / floor)
         if "compiled" in times:
@@ -149,11 +149,11 @@ def section_stages(device):
     with torch.no_grad():
         for name, make in STAGES.items():
             stage = make().to(device)
-            calls = {"eager": lambda: stage(image)}
+            calls = {"eager": lambda stage=stage: stage(image)}
             seconds = None
             if name in COMPILED_STAGES:
                 fast, seconds = compiled(stage, image)
-                calls["compiled"] = lambda: fast(image)
+                calls["compiled"] = lambda fast=fast, image=image: fast(image)
             times = cuda_ms(calls)
             for way, ms in times.items():
                 extra = {"compile_s": seconds} if way == "compiled" else {}
@@ -283,7 +283,7 @@ def section_kernels(device):
     batch = torch.rand(256, 3, 224, 224, device=device)
     with torch.no_grad():
         for name, module in cases.items():
-            record_kernels(f"{name} 4K eager", lambda: module(image))
+            record_kernels(f"{name} 4K eager", lambda module=module: module(image))
         record_kernels("RandomPostFX 256x3x224x224 eager", lambda: ours(batch))
         fast, _ = compiled(ours, batch)
         record_kernels("RandomPostFX 256x3x224x224 compiled", lambda: fast(batch))

@@ -23,8 +23,10 @@ from pathlib import Path
 
 from benchmarks.common import ROOT, argument_parser, write_results
 
-LOADED_AT_FIRST_USE = ("torch.onnx", "torch._dynamo", "kornia", "onnx", "onnxruntime", "PyOpenColorIO", "colour", "matplotlib")
-"""Modules ``import torchgrade`` should leave to the first call that needs them (``tests/runtime/test_policies.py``)."""
+LOADED_AT_FIRST_USE = ("torch.onnx", "torch._dynamo", "kornia", "onnx", "onnxruntime", "OpenEXR", "Imath", "PIL", "scipy",
+                       "PyOpenColorIO", "colour", "matplotlib")
+"""Modules ``import torchgrade`` should leave to the first call that needs them (``tests/runtime/test_policies.py``,
+``tests/project/test_import.py``)."""
 
 _IMPORT = """
 import json, sys, time

@@ -36,14 +36,14 @@ from pathlib import Path
 import numpy as np
 import torch
 
-ROOT = Path(__file__).resolve().parents[1]
-
 import torchgrade as tg
 from benchmarks.common import (
     EXR_DIR, argument_parser, map_large_buffers, median_ms, ocio_in_place, ocio_processor, peak_rss_mb, run_and_reset, sample_exr, write_results)
 from benchmarks.metrics import srgb_codes
 from torchgrade.lut import INTERPOLATIONS, OUTPUT_ENCODINGS
 from torchgrade.lut.kernels import trilinear_grid_sample
+
+ROOT = Path(__file__).resolve().parents[1]
 
 COMMAND = ".venv/bin/python -m benchmarks lut"
 HEIGHT, WIDTH, SIZE, RUNS = 1080, 1920, 33, 7

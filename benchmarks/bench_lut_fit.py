@@ -23,8 +23,6 @@ from pathlib import Path
 import numpy as np
 import torch
 
-ROOT = Path(__file__).resolve().parents[1]
-
 from benchmarks.common import RESULTS, argument_parser, write_results
 from benchmarks.bench_lut import ACCURACY_IMAGES, SIZE, sample_exr, strong_look
 from benchmarks.lut_floor import interpolation_matrix, lowest_max_error
@@ -33,6 +31,8 @@ from torchgrade.lut.fit import SCENE_FIT_WEIGHT
 from torchgrade.lut.entries import SCENE_WEIGHT
 from torchgrade.lut import bake_lut, fit_entries
 from torchgrade.lut.shapers import lattice_unit
+
+ROOT = Path(__file__).resolve().parents[1]
 
 COMMAND = ".venv/bin/python -m benchmarks lut_fit"
 LATTICES = {"LogC to 65504 (default)": {"shaper": "logc_hdr"}, "LogC to 58.86": {"shaper": "logc"}, "fitted to the look": {"shaper": "fitted"},

@@ -29,11 +29,11 @@ from pathlib import Path
 
 import torch
 
-ROOT = Path(__file__).resolve().parents[1]
-
 import torchgrade as tg
 from benchmarks.common import argument_parser, median_ms, write_results
 from torchgrade.runtime.policy import one_thread
+
+ROOT = Path(__file__).resolve().parents[1]
 
 LOOK = ROOT / "export" / "looks" / "cinematic.json"
 HEIGHT, WIDTH, REPEATS = 1080, 1920, 9
@@ -93,7 +93,8 @@ def measure(name: str, look: tg.PostFX, image: torch.Tensor, folder: Path, devic
             continue
         on = device if runtime == "onnxruntime" else "cpu"
         runner = tg.onnx.session(path, runtime, precision, on, spin=not label.endswith("_no_spin"), threads=threads)
-        calls[label] = lambda runner=runner, feeds=tg.onnx.feeds(runner, look, inputs): runner.run(None, feeds)
+        feeds = tg.onnx.feeds(runner, look, inputs)
+        calls[label] = lambda runner=runner, feeds=feeds: runner.run(None, feeds)
     on_device = tg.onnx.graph_inputs(look, image.to(device))
     calls["pytorch"] = eager(look.to(device), on_device)
     if threads == 1:

@@ -21,9 +21,9 @@ import numpy as np
 import onnxruntime
 from onnx import TensorProto, helper, numpy_helper
 
-ROOT = Path(__file__).resolve().parents[1]
-
 from benchmarks.common import argument_parser, median_ms, write_results
+
+ROOT = Path(__file__).resolve().parents[1]
 
 COMMAND = ".venv/bin/python -m benchmarks onnx_ops"
 STRIP = (1, 3, 68, 1920)
@@ -147,7 +147,8 @@ def chain_session(step) -> onnxruntime.InferenceSession:
 def measure() -> dict:
     """``{pattern: {"frame_ms": ms per 1080p frame, "over_mul": that / the Mul's}}``."""
     strip = np.random.default_rng(0).random(STRIP, dtype=np.float32) * 4.0 - 1.0
-    calls = {name: (lambda s=chain_session(step): s.run(None, {"x": strip})) for name, step in PATTERNS.items()}
+    sessions = {name: chain_session(step) for name, step in PATTERNS.items()}
+    calls = {name: (lambda s=session: s.run(None, {"x": strip})) for name, session in sessions.items()}
     medians = median_ms(calls, REPEATS)
     frame = {name: ms / CHAIN * STRIPS_PER_FRAME for name, ms in medians.items()}
     mul = frame["Mul by a number"]

@@ -80,10 +80,10 @@ class Server:
             try:
                 _get_json(self.url + "/stats")
                 return self
-            except OSError:
+            except OSError as error:
                 if self.process.poll() is not None or time.monotonic() > deadline:
                     self.__exit__()
-                    raise RuntimeError(f"serve.py did not start: {self.process.stderr.read().decode()[-2000:]}")
+                    raise RuntimeError(f"serve.py did not start: {self.process.stderr.read().decode()[-2000:]}") from error
                 time.sleep(0.5)
 
     def __exit__(self, *_) -> None:

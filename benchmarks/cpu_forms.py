@@ -1,5 +1,5 @@
 """The CPU forms measured against the operations they replace: the figures behind the forms and sizes the maths
-modules and the CPU's execution policy choose (:mod:`torchgrade.runtime.policy`, :mod:`torchgrade.runtime.variants`).
+modules, the CPU kernels of their operators and the CPU's execution policy choose (:mod:`torchgrade.runtime.policy`).
 
     .venv/bin/python -m benchmarks cpu_forms [--quick]
 
@@ -26,16 +26,16 @@ import torch.nn.functional as F
 
 import torchgrade as tg
 from benchmarks.common import argument_parser, interleaved_ms, median_ratio, write_results
-from torchgrade.base.images import warn_if_eight_bit
 from torchgrade.base.planes import apply_matrix, channel_sum
-from torchgrade.bloom.blur import UNITY_BLUR_WEIGHTS, _mirrored_by_slices, mirror_filter, mirrored, unity_blur
+from torchgrade.bloom.blur import UNITY_BLUR_WEIGHTS, _mirror_filter_by_shifts, mirrored, unity_blur
 from torchgrade.bloom.prefilter import cross_sum
-from torchgrade.bloom.pyramid import _halve_strided
+from torchgrade.bloom.pyramid import halve
 from torchgrade.lut import identity_table, operator
 from torchgrade.lut.kernels import KERNELS, tetrahedron
 from torchgrade.lut.lattice import planar_table
 from torchgrade.match.residual import lattice_coordinates
 from torchgrade.runtime import policy, strips
+from torchgrade.runtime.checks import warn_if_eight_bit
 
 COMMAND = ".venv/bin/python -m benchmarks cpu_forms"
 QUICK = "fewer rounds, and the strip and LUT-run sizes of the policy and its neighbours only"
@@ -104,19 +104,17 @@ def rows() -> list:
     table = planar_table(identity_table(size, dtype=torch.float64)).requires_grad_()
     return [
         Row("bloom halving, even sides", "four strided views summed", "F.avg_pool2d",
-            (lambda: _halve_strided(level), lambda: F.avg_pool2d(level, 2))),
-        Row("bloom blur, Unity's 9 taps", "sums of shifted views (mirror_filter)", "kornia filter2d_separable",
-            (lambda: mirror_filter(level, UNITY_BLUR_WEIGHTS), lambda: unity_blur.formula.reference(level))),
+            (lambda: halve(level), lambda: F.avg_pool2d(level, 2))),
+        Row("bloom blur, Unity's 9 taps", "sums of shifted views (mirror_filter's CPU kernel)", "kornia filter2d_separable",
+            (lambda: _mirror_filter_by_shifts(level, UNITY_BLUR_WEIGHTS), lambda: unity_blur(level, any_size=True))),
         Row("firefly cross sum", "sums of shifted views (cross_sum)", "kornia filter2d, 3x3",
             (lambda: cross_sum(level), lambda: kornia.filters.filter2d(level, _cross_kernel(), border_type="replicate"))),
         Row("mirror padding of rows, radius 4", "edge slices flipped and joined", "a gather (index_select)",
-            (lambda: _mirrored_by_slices(level, -1, 4), lambda: mirrored.formula.reference(level, -1, 4))),
+            (lambda: mirrored(level, -1, 4), lambda: mirrored(level, -1, 4, any_size=True))),
         Row("3x3 colour matrix, a strip", "three multiply-adds (apply_matrix)", "torch.einsum",
             (lambda: apply_matrix(matrix, strip), lambda: torch.einsum("ij,...jhw->...ihw", matrix, strip))),
         Row("channel sum by numbers, a strip", "three passes (channel_sum)", "product and channel reduction",
             (lambda: channel_sum(strip, weights), lambda: (strip * weight_tensor).sum(-3, keepdim=True))),
-        Row("max(x, 0) with NaN to 0, a frame", "clamp and NaN pass in place", "torch.fmax",
-            (lambda: frame.clamp_min(0.0).nan_to_num_(nan=0.0, posinf=float("inf")), lambda: torch.fmax(frame, torch.zeros(())))),
         Row("residual fit: the lookup and its backward", "tetrahedral gathers", "a sparse lookup matrix (COO)",
             (_gathered_backward(coords, table, size), _sparse_backward(lookup_matrix(coords, size), table))),
         Row("8-bit check of a frame", "warn_if_eight_bit", "a copy of the frame",

@@ -35,13 +35,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
-ROOT = Path(__file__).resolve().parents[1]
-
 import torchgrade as tg
 from torchgrade.color import linear_to_srgb, luminance
 from torchgrade.io import read_exr
 from torchgrade.io.atomic import atomic_write
 from benchmarks.common import argument_parser, write_markdown
+
+ROOT = Path(__file__).resolve().parents[1]
 
 SAMPLES = ROOT.parent / "shared" / "data" / "exr"
 LOOK = ROOT / "export" / "looks" / "cinematic.json"

@@ -151,7 +151,7 @@ def clf_verdicts(count: int, seed: int = 0) -> collections.Counter:
             scale = rng.choice((1.0, 65504.0, 1e5, float("nan")))
             table = torch.rand(3, 3, 3, 3, generator=torch.Generator().manual_seed(rng.randrange(2**31))) * scale
 
-            def write_and_parse():
+            def write_and_parse(table=table, title=title):
                 tg.io.write_clf(path, tg.LUT3D(table), title=title)
                 root = ElementTree.parse(path).getroot()
                 return root.find("LUT3D") is not None

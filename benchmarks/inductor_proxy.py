@@ -48,7 +48,7 @@ def generated_code(module: torch.nn.Module, training: bool = False) -> tuple:
     no_grad through ``torch.compile(fullgraph=True)``; ``training``, its forward and backward through ``tg.compile``."""
     from torch._inductor.utils import run_and_get_code
 
-    torch._dynamo.reset()
+    torch.compiler.reset()
     image = tg.scene.demo_scene(*FRAME[2:])[None].contiguous().requires_grad_(training)
     if training:
         compiled = tg.compile(module, dynamic=False, verbose=False)

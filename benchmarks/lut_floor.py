@@ -48,8 +48,6 @@ from scipy.optimize import linprog
 from scipy.sparse import csr_matrix, hstack, vstack
 from tqdm import tqdm
 
-ROOT = Path(__file__).resolve().parents[1]
-
 from benchmarks.common import argument_parser, write_results
 from benchmarks.bench_lut import ACCURACY_IMAGES, SIZE, accuracy_image, strong_look
 from benchmarks.metrics import srgb_codes
@@ -58,6 +56,8 @@ from torchgrade.lut import DEFAULT_DOMAINS, INTERPOLATIONS, bake_lut
 from torchgrade.lut.shapers import lattice_unit
 from torchgrade.lut.bake import scene_domain
 from torchgrade.lut.kernels import tetrahedral, trilinear
+
+ROOT = Path(__file__).resolve().parents[1]
 
 COMMAND = ".venv/bin/python -m benchmarks lut_floor"
 MAX_BAR, P999_BAR = 4.0, 1.0

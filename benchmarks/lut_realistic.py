@@ -26,12 +26,12 @@ from pathlib import Path
 
 import torch
 
-ROOT = Path(__file__).resolve().parents[1]
-
 import torchgrade as tg
 from benchmarks.common import argument_parser, sample_exr, write_results
 from torchgrade.lut import LUTAccuracyWarning, code_errors
 from torchgrade.lut.report import SCENE_PIXELS
+
+ROOT = Path(__file__).resolve().parents[1]
 
 IMAGES = ("CandleGlass", "Carrots", "Desk", "Garden", "GoldenGate")
 """The natural sample images (the others are charts and ramps)."""

@@ -24,12 +24,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-ROOT = Path(__file__).resolve().parents[1]
-
 import torchgrade as tg
 from benchmarks.common import argument_parser, write_results
-from torchgrade.base.planes import apply_matrix
-from torchgrade.runtime.variants import Variant
+from torchgrade.base import planes
+
+ROOT = Path(__file__).resolve().parents[1]
 
 LOOK = ROOT / "export" / "looks" / "cinematic.json"
 COMMAND = ".venv/bin/python -m benchmarks openvino_precision"
@@ -71,14 +70,14 @@ MATRIX_FORMS = {"three products of planes (torchgrade's)": None, "MatMul": _matm
 
 @contextlib.contextmanager
 def matrices_exported_as(form):
-    """Colour matrices exported as ``form(matrix, image)`` within the block (``None``: torchgrade's own form)."""
-    variants = apply_matrix.formula.variants
-    kept = variants["export"]
-    variants["export"] = kept if form is None else Variant("export", form)
+    """The grade's colour matrices (:func:`~torchgrade.base.planes.matrix_on`) computed, and so exported, as
+    ``form(matrix, image)`` within the block (``None``: torchgrade's own form)."""
+    kept = planes.apply_matrix
+    planes.apply_matrix = kept if form is None else form
     try:
         yield
     finally:
-        variants["export"] = kept
+        planes.apply_matrix = kept
 
 
 def main(argv=None) -> int:

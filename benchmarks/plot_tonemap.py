@@ -22,11 +22,11 @@ import matplotlib.pyplot as plt
 import numpy as np
 import torch
 
-ROOT = Path(__file__).resolve().parents[1]
-
 import torchgrade as tg
 from benchmarks.common import EXR_DIR, argument_parser, write_results
 from torchgrade.functional import tonemap
+
+ROOT = Path(__file__).resolve().parents[1]
 
 COMMAND = ".venv/bin/python -m benchmarks tonemap"
 HDR_MODES = {"aces2_hdr": dict(peak_luminance=1000.0), "neutral_hdr": dict(peak_luminance=1000.0)}
@@ -105,8 +105,8 @@ def _ours(label: str, encoding: str, rgb: np.ndarray) -> np.ndarray:
     image = torch.from_numpy(np.ascontiguousarray(rgb.T))[None, :, :, None]
     with torch.no_grad():
         linear = torch.cat([tonemap(part, mode) for part in image.split(1 << 18, dim=2)], dim=2)
-    encoded = tg.display.encode_display(linear, encoding, "rec2020", 1000.0, "rec2020") if encoding == "pq" else \
-        tg.display.encode_display(linear, encoding)
+    encoded = tg.output.display.encode_display(linear, encoding, "rec2020", 1000.0, "rec2020") if encoding == "pq" else \
+        tg.output.display.encode_display(linear, encoding)
     return encoded[0, :, :, 0].T.double().numpy()
 
 

@@ -22,8 +22,6 @@ from pathlib import Path
 import torch
 from tqdm import tqdm
 
-ROOT = Path(__file__).resolve().parents[1]
-
 import torchgrade as tg
 import torchgrade.base.stage
 from benchmarks.bench_cube_read import timed_read
@@ -31,6 +29,8 @@ from benchmarks.common import EXR_DIR, argument_parser, write_markdown
 from benchmarks.fuzz import DEFECTS_FREE, FAMILIES
 from torchgrade.testing.catalog import STAGE_KINDS
 from torchgrade.testing.extremes import extreme_inputs
+
+ROOT = Path(__file__).resolve().parents[1]
 
 DTYPES = {"float32": torch.float32, "float16": torch.float16, "bfloat16": torch.bfloat16}
 FUZZED_FILES = 2000

@@ -10,20 +10,16 @@ Examples:
 
 import importlib
 
-from . import _moved
-
-_moved.install()  # old import paths (torchgrade.pipeline, ...) keep working for a release, with a warning
-
-from . import augment, color, functional, runtime, scene  # noqa: E402
-from .bloom import Bloom, ConvolutionBloom  # noqa: E402
-from .exposure import AutoExposure  # noqa: E402
-from .grading import ColorGrade, PrimaryGrade  # noqa: E402
-from .look import PostFX  # noqa: E402
-from .lut import LUT3D, bake_lut  # noqa: E402
-from .match import match_look  # noqa: E402
-from .output import Display, Dither, LookLUT  # noqa: E402
-from .runtime import compile  # noqa: E402
-from .tonemap import TONEMAP_MODES, ToneMap  # noqa: E402
+from . import augment, color, functional, runtime, scene
+from .bloom import Bloom, ConvolutionBloom
+from .exposure import AutoExposure
+from .grading import ColorGrade, PrimaryGrade
+from .look import PostFX
+from .lut import LUT3D, bake_lut
+from .match import match_look
+from .output import Display, Dither, LookLUT
+from .runtime import compile
+from .tonemap import TONEMAP_MODES, ToneMap
 
 __version__ = "0.1.0"
 
@@ -68,7 +64,7 @@ packages behind them (``benchmarks/results/import.md``: what the import loads, a
 
 
 def __getattr__(name: str):
-    if name in _LAZY_MODULES or f"{__name__}.{name}" in _moved.MOVED:  # a moved module warns as it is imported
+    if name in _LAZY_MODULES:
         return importlib.import_module(f".{name}", __name__)
     if name == "RandomPostFX":  # built on kornia, which takes longer to import than torchgrade: imported at first use
         return augment.RandomPostFX

@@ -272,7 +272,8 @@ def _grade_checks(given: dict) -> None:
     for zone in ("shadows", "highlights"):
         edges = _given_or_default(given, COLOR_GRADE_CONTROLS, (f"{zone}_start", f"{zone}_end"))
         if edges is not None:
-            check_zone(*edges, zone)
+            start, end = edges
+            check_zone(start, end, zone)
 
 
 def _exposure_checks(given: dict) -> None:
@@ -357,13 +358,3 @@ pivots, exposure's bounds). The stages' own doors (:func:`tonemap`, :func:`prima
 by one (its door here orders its tonal zones); the stages call the unchecked forms."""
 
 globals().update({function.__name__: checked(function, *door) for function, door in DOORS.items()})
-
-
-def __getattr__(name: str):
-    if name == "log_contrast":  # OpenColorIO's log contrast, named apart from Unity's (grading.steps.log_contrast)
-        import warnings
-
-        warnings.warn("torchgrade.functional.log_contrast is now primary_log_contrast; the old name goes in the next release",
-                      DeprecationWarning, stacklevel=2)
-        return primary_log_contrast
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

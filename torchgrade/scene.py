@@ -1,11 +1,9 @@
-"""A procedural HDR test scene, made by the package itself so the demo needs no data files, and the extreme inputs.
+"""A procedural HDR test scene, made by the package itself so the demo needs no data files.
 
 A dim room lit by one ceiling lamp (radiance 200) with inverse-square falloff: a plastered back wall
 carrying a colour chart of saturated patches, a wooden floor, emissive objects around 8 (a neon
 tube, a glowing orb, a lamp shade) and a few single-pixel specular glints of 1000. Values are
-scene-referred linear Rec.709.
-
-:func:`extreme_inputs` gathers the images every stage must survive (finite outputs and gradients).
+scene-referred linear Rec.709. (The images every stage must survive: :mod:`torchgrade.testing.extremes`.)
 """
 
 from __future__ import annotations
@@ -113,13 +111,3 @@ def demo_scene(height: int = 360, width: int = 640, dtype: torch.dtype = torch.f
         image[:, row, col] = 1000.0
     return image.unsqueeze(0)
 
-
-def __getattr__(name: str):
-    if name in ("EXTREME_VALUES", "extreme_inputs"):  # test support, now in torchgrade.testing.extremes
-        import importlib
-        import warnings
-
-        warnings.warn(f"torchgrade.scene.{name} moved to torchgrade.testing.extremes; the old path goes in the next release",
-                      DeprecationWarning, stacklevel=2)
-        return getattr(importlib.import_module("torchgrade.testing.extremes"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -140,7 +140,7 @@ def scaling(work: Workload) -> list:
     points = []
     for kind, batch, height, width in tqdm(shapes, desc="scaling", unit="shape"):
         image = tg.scene.demo_scene(height, width).to(work.plan.device).expand(batch, -1, -1, -1).contiguous()
-        calls = {path: (lambda apply=apply: apply(image)) for path, apply in paths.items()}
+        calls = {path: (lambda apply=apply, image=image: apply(image)) for path, apply in paths.items()}
         for path, ms in common.median_ms(calls, work.plan.scaling_runs, sync=sync).items():
             points.append({"path": path, "kind": kind, "batch": batch, "height": height, "width": width, "ms": ms,
                            "ms_per_megapixel": ms / (batch * height * width / 1e6)})

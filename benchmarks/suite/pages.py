@@ -1,13 +1,14 @@
-"""The suite's figures on the pages that quote them, written from the committed results and only from them.
+"""The benchmarks' figures on the pages that quote them, written from the committed results and only from them.
 
     .venv/bin/python -m benchmarks suite --pages
 
 A page marks each generated block ``<!-- suite:NAME -->`` … ``<!-- /suite:NAME -->`` (invisible in rendered
 Markdown); :func:`main` rewrites every block of :data:`PAGES` from :data:`COMMITTED` (the full form's results where
-they are committed, else the quick form's, and says which), and nothing outside the blocks.
-``tests/project/test_suite_results.py`` holds each page to what :func:`filled` would write, and keeps the suite's
-figures (``ms/MP``, ``× OCIO``) out of every page but inside its blocks. ``--committed`` (see ``benchmarks/run.py``)
-runs both forms and then this.
+they are committed, else the quick form's, and says which) and from the tables ``bench_match`` marks in its results
+(:data:`MATCH_TABLES`), and nothing outside the blocks. ``tests/project/test_suite_results.py`` holds each page to
+what :func:`filled` would write, and keeps the suite's figures (``ms/MP``, ``× OCIO``) out of every page but inside
+its blocks; ``tests/project/test_match_results.py`` holds the match results to the code that wrote them.
+``--committed`` (see ``benchmarks/run.py``) runs both forms of the suite and then this.
 """
 
 from __future__ import annotations
@@ -21,13 +22,31 @@ from benchmarks.suite.report import baselines_text, markdown_table, provenance
 from benchmarks.suite.runtimes import PEER
 from torchgrade.io.atomic import atomic_write
 
-__all__ = ["COMMITTED", "PAGES", "BLOCK", "committed", "blocks", "filled", "stale", "main"]
+__all__ = ["COMMITTED", "PAGES", "BLOCK", "MATCH", "MATCH_TABLES", "TABLE", "committed", "match_committed", "blocks",
+           "filled", "stale", "main"]
 
 COMMITTED = {"quick": RESULTS / "suite" / "quick", "full": RESULTS / "suite" / "full"}
 """Where each form's committed results live."""
-PAGES = (ROOT / "docs" / "performance.md", ROOT / "README.md")
-"""The pages that quote the suite."""
-BLOCK = re.compile(r"<!-- suite:(?P<name>[\w-]+) -->\n(?P<body>.*?)<!-- /suite:(?P=name) -->", re.S)
+PAGES = (ROOT / "docs" / "performance.md", ROOT / "README.md", ROOT / "docs" / "match.md")
+"""The pages that quote the benchmarks."""
+
+
+def marks(kind: str) -> re.Pattern:
+    """The pattern of a block marked ``<!-- KIND:NAME -->`` … ``<!-- /KIND:NAME -->``: its ``name`` and ``body``."""
+    return re.compile(rf"<!-- {kind}:(?P<name>[\w-]+) -->\n(?P<body>.*?)<!-- /{kind}:(?P=name) -->", re.S)
+
+
+BLOCK = marks("suite")
+"""A block of a page, which this module writes."""
+TABLE = marks("match")
+"""A table ``bench_match`` marks in its results (``bench_match.marked``)."""
+MATCH = {"quick": RESULTS / "match_quick", "full": RESULTS / "match"}
+"""Where each form of ``python -m benchmarks match`` commits its results (``.md`` and ``.json``)."""
+MATCH_TABLES = {"match-known": "known", "match-reach": "reach", "match-photograph": "photograph"}
+"""The page's blocks that quote a table of the quick form's results (accuracy only: a busy machine may make them)."""
+MATCH_TIMED = ("photograph", "jacobian")
+"""The full form's tables the ``match-timing`` block quotes: seconds and milliseconds, so only from a quiet run."""
+MATCH_FULL = ".venv/bin/python -m benchmarks match --out benchmarks/results"
 QUICK_OUT = "/tmp/torchgrade-bench"
 """Where the README's quick command writes (not the committed results)."""
 
@@ -102,14 +121,52 @@ def readme_block(results: dict) -> str:
                       f"{timing_line(results['quick'])} It prints a short table; the files hold the rest.", ""])
 
 
+def match_committed() -> dict:
+    """Each committed form of ``bench_match``'s results, by form: its ``.json`` as ``report`` and its marked tables,
+    by name, as ``tables``."""
+    return {form: {"report": json.loads(stem.with_suffix(".json").read_text(encoding="utf-8")),
+                   "tables": {m["name"]: m["body"] for m in TABLE.finditer(stem.with_suffix(".md").read_text(encoding="utf-8"))}}
+            for form, stem in MATCH.items() if stem.with_suffix(".json").is_file()}
+
+
+def match_source(form: str, report: dict) -> str:
+    """Where a match block's figures come from: the results file, the command and the commit."""
+    modified = " with uncommitted changes" if report["modified"] else ""
+    return (f"From [{MATCH[form].name}.md](../benchmarks/results/{MATCH[form].name}.md), made by `{report['command']}` at "
+            f"commit `{report['commit'][:7]}`{modified}.")
+
+
+def match_quick_block(table: str, results: dict) -> str:
+    if "quick" not in results:
+        raise ValueError(f"no committed {MATCH['quick'].name}.json: run .venv/bin/python -m benchmarks match --quick --out benchmarks/results")
+    return f"{match_source('quick', results['quick']['report'])}\n\n{results['quick']['tables'][table]}"
+
+
+def match_timing_block(results: dict) -> str:
+    if "full" not in results:
+        return (f"The timed run is not committed yet: `{MATCH_FULL}` on a quiet machine writes "
+                "`benchmarks/results/match.md`, and `.venv/bin/python -m benchmarks suite --pages` then writes its seconds here.\n")
+    report = results["full"]["report"]
+    return "\n".join([f"{match_source('full', report)} On {condition(report)}, {report['threads']} torch thread(s).", "",
+                      *(results["full"]["tables"][name] for name in MATCH_TIMED if name in results["full"]["tables"])])
+
+
+def match_blocks() -> dict:
+    """The body of every block that quotes ``bench_match``, from its committed results."""
+    results = match_committed()
+    return {"match-timing": match_timing_block(results),
+            **{block: match_quick_block(table, results) for block, table in MATCH_TABLES.items()}}
+
+
 RENDERERS = {"look": look_block, "table": table_block, "advice": advice_block, "reproduce": reproduce_block,
              "quick": readme_block}
 """Every block a page may hold, by name."""
 
 
 def blocks(results: dict) -> dict:
-    """The body of every block, from ``results`` (:func:`committed`)."""
-    return {name: render(results) for name, render in RENDERERS.items()}
+    """The body of every block, from the suite's ``results`` (:func:`committed`) and ``bench_match``'s
+    (:func:`match_blocks`)."""
+    return {**{name: render(results) for name, render in RENDERERS.items()}, **match_blocks()}
 
 
 def filled(text: str, bodies: dict) -> str:

@@ -122,20 +122,20 @@ class Workload:
         pixels = self.reference_codes[0, 0].numel()
         self.delta_e_pixels = metrics.sample_indices(pixels, plan.delta_e_samples)
 
-    @functools.lru_cache(maxsize=None)
+    @functools.lru_cache(maxsize=None)  # noqa: B019 (one workload a run: kept as long as its cache)
     def per_pixel_strip(self, dtype: torch.dtype) -> torch.Tensor:
         """The accuracy scenes as the per-pixel stage receives them (eye adaptation and bloom computed on ``dtype``
         input, :meth:`torchgrade.PostFX.per_pixel_input`), as one strip in ``dtype``."""
         with torch.no_grad():
             return as_strip(self.look.per_pixel_input(scene.to(dtype)) for scene in self.scenes.values())
 
-    @functools.lru_cache(maxsize=None)
+    @functools.lru_cache(maxsize=None)  # noqa: B019 (one workload a run: kept as long as its cache)
     def per_pixel_frame(self, dtype: torch.dtype) -> torch.Tensor:
         """The 1920×1080 frame as the per-pixel stage receives it."""
         with torch.no_grad():
             return self.look.per_pixel_input(self.frame.to(dtype))
 
-    @functools.lru_cache(maxsize=None)
+    @functools.lru_cache(maxsize=None)  # noqa: B019 (one workload a run: kept as long as its cache)
     def lut(self, size: int, shaper: str, fitted: bool = False) -> tg.LUT3D:
         """The per-pixel stage baked (in float64) into a ``size``³ LUT, table stored in float32.
 

@@ -22,7 +22,6 @@ import asyncio
 import collections
 import contextlib
 import ctypes
-import os
 import resource
 import sys
 from dataclasses import dataclass

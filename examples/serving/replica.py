@@ -121,7 +121,7 @@ class Looks:
         for kind in kinds:
             bodies = [sample_body(kind, side, self.format) for side in (PROBE_SIDES[0], *PROBE_SIDES)]
             self._decode(kind, bodies[0])
-            peaks = [(side * side, peak_growth(lambda body=body: self._decode(kind, body)))
+            peaks = [(side * side, peak_growth(lambda kind=kind, body=body: self._decode(kind, body)))
                      for side, body in zip(PROBE_SIDES, bodies[1:])]
             decoding[kind] = Cost.through(*peaks, floor=0 if kind == "frame" else frame_bytes)
         frames = [self._decode("frame", sample_body("frame", side, self.format)) for side in (PROBE_SIDES[0], *PROBE_SIDES)]

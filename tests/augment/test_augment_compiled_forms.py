@@ -1,6 +1,6 @@
 """RandomPostFX as a compiler is given it, run eagerly: its grade on the image's planes and the output finished plane by
-plane (``ExecutionPolicy.pixel_planes``), against its eager form on the same draw, in outputs and gradients, on ordinary
-and extreme values. (That Inductor then writes only the output: ``tests/runtime/test_gpu_path.py``.)"""
+plane (:func:`~torchgrade.runtime.strips.pixelwise`), against its eager form on the same draw, in outputs and
+gradients, on ordinary and extreme values. (That Inductor then writes only the output: ``tests/runtime/test_gpu_path.py``.)"""
 
 import pytest
 import torch
@@ -84,7 +84,7 @@ def test_a_compiled_layer_takes_a_generator_as_an_eager_one_does(monkeypatch, na
     capture alone (backend "eager", ``fullgraph=True``): the capture is what refused the generator."""
     real = torch.compile
     monkeypatch.setattr(torch, "compile", lambda *args, options=None, **kwargs: real(*args, **{**kwargs, "backend": "eager"}))
-    torch._dynamo.reset()
+    torch.compiler.reset()
     layer, images = tg.RandomPostFX(**LAYERS[name]), _images(name).float()
     compiled = tg.compile(layer)
     with torch.no_grad():

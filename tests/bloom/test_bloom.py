@@ -301,6 +301,8 @@ def test_default_module_matches_the_contract():
 def test_invalid_parameters_raise_naming_the_parameter(arguments, name):
     with pytest.raises(ValueError, match=name):
         tg.Bloom(**arguments)
+    if any(isinstance(value, torch.Tensor) for value in arguments.values()):
+        return  # the functional door reads no tensor back (a wait on a GPU), as every door (controls.check_given)
     with pytest.raises(ValueError, match=name):
         bloom(torch.rand(1, 3, 8, 8), **arguments)
 
@@ -334,7 +336,7 @@ def test_bad_images_raise():
 def test_identities_return_the_input_untouched():
     image = torch.rand(2, 3, 16, 16) * 5
     assert bloom(image, intensity=0.0) is image
-    assert bloom(image, mode="scattering", intensity=torch.tensor(0.0)) is image
+    assert torch.equal(bloom(image, mode="scattering", intensity=torch.tensor(0.0)), image)  # a tensor's is computed
     assert bloom(image, max_iterations=0) is image
     assert tg.Bloom(intensity=0)(image) is image
     dark = torch.rand(1, 3, 16, 16) * 0.4
@@ -441,8 +443,8 @@ def test_learnable_control_moved_out_of_range_raises_at_forward():
 def test_zero_is_identity_says_which_blends_keep_the_image_at_intensity_zero(mode):
     composite = tg.bloom.COMPOSITES[mode]
     image = torch.tensor([-1.0, 0.0, 0.1, 0.25, 0.7, 1.0, 3.0, 65504.0]).reshape(1, 1, 2, 4)
-    fraction = torch.full((1, 1, 1, 2), 0.5)
-    out = composite.blend(image, torch.zeros_like(image), torch.tensor(0.0), fraction)
+    kept = torch.ones_like(image) if composite.scatters else None  # 1 - strength * fraction at strength 0
+    out = composite.blend(image, torch.zeros_like(image), torch.tensor(0.0), kept)
     assert torch.equal(out, image) == composite.zero_is_identity
 
 

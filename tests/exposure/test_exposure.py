@@ -11,6 +11,7 @@ import pytest
 import torch
 
 import torchgrade as tg
+from torchgrade.exposure.adaptation import MAX_ADAPTED, MIN_LUMINANCE
 from torchgrade.functional import adapt_luminance, auto_exposure, exposure_operator, meter_luminance
 
 REC709 = torch.tensor([0.2126729, 0.7151522, 0.0721750], dtype=torch.float64)
@@ -381,7 +382,7 @@ def test_a_state_that_is_not_a_bounded_luminance_gives_a_finite_frame_and_state(
     for dt in (0.0, 0.5, 65504.0):
         exposed, new = auto_exposure(image, torch.tensor([state]), torch.tensor(dt), operator=operator)
         assert not exposed.isnan().any() and exposed.abs().max() <= 65504.0
-        assert tg.exposure.MIN_LUMINANCE <= new.item() <= tg.exposure.MAX_ADAPTED
+        assert MIN_LUMINANCE <= new.item() <= MAX_ADAPTED
 
 
 def test_exported_look_restarts_from_a_nan_or_infinite_state_or_step(tmp_path):

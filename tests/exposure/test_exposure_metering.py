@@ -137,10 +137,10 @@ def test_blocks_weighted_by_their_shares_average_to_the_frame_mean(size, block):
 
 @pytest.mark.parametrize("threads", [1, 3, 16])
 @pytest.mark.parametrize("mask", ["average", "center"])
-def test_histogram_metering_counted_by_groups_of_rows_matches_the_float64_reference(threads, mask):
-    """The CPU counts a group of image rows a thread (``ExecutionPolicy.histogram_row_groups``), as many as divide the
-    height: a batch of two frames 105 rows high, every pixel counted in 1, 3 and 15 groups, meters each frame as the
-    reference does, to 1e-6 stops."""
+def test_histogram_metering_on_any_thread_count_matches_the_float64_reference(threads, mask):
+    """A batch of two frames 105 rows high, their columns counted into eight tables
+    (:data:`~torchgrade.exposure.metering.HISTOGRAM_TABLES`), on 1, 3 and 16 threads: each frame metered, every pixel
+    counted, as the reference does, to 1e-6 stops."""
     frames = torch.cat([sample("Desk")[..., :105, :], sample("GoldenGate")[..., :105, :]])
     before = torch.get_num_threads()
     torch.set_num_threads(threads)

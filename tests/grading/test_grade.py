@@ -206,8 +206,8 @@ def test_config_lists_only_what_changed():
 
 
 def test_acescc_contrast_in_half_precision_stays_finite_at_the_top_of_the_range():
-    """The in-place form bounds the power at 65504 after taking it: in float16 log2(65504) rounds to 16, whose power is
-    infinite, and the decode's lerp of an infinity is NaN."""
+    """The folded contrast bounds the power at 65504 after taking it too: in float16 ln(65504) rounds up, whose
+    exponential is infinite, and the decode's difference of an infinity with itself is NaN."""
     from torchgrade.grading.steps import log_contrast
 
     x = torch.tensor([1000.0, 5000.0, 65504.0], dtype=torch.float16)

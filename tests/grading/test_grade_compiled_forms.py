@@ -1,5 +1,6 @@
-"""ColorGrade as a compiler is given it, run eagerly: its steps on the image's planes (``ExecutionPolicy.pixel_planes``),
-its curves and tensor split-toning colours on the joined image. Against the float64 re-implementation of Unity's
+"""ColorGrade as a compiler is given it, run eagerly: its steps on the image's planes (what
+:func:`~torchgrade.runtime.strips.pixelwise` gives a stage while compiling), its curves and tensor split-toning colours
+on the joined image. Against the float64 re-implementation of Unity's
 ColorGrade and against the eager forms, in outputs and gradients. (That Inductor fuses it: ``tests/runtime/test_gpu_path.py``.)"""
 
 import numpy as np

@@ -62,13 +62,14 @@ LUMA = LUM709 / LUM709.sum()
 
 def prepare_lift_gamma_gain(lift, gamma, gain):
     """Unity ColorUtils.PrepareLiftGammaGain."""
-    decode = lambda v: np.array([srgb_decode(c) for c in v[:3]])
-    l = decode(lift) * 0.15
-    l = l - l @ LUMA + lift[3]
+    def decode(v):
+        return np.array([srgb_decode(c) for c in v[:3]])
+    lf = decode(lift) * 0.15
+    lf = lf - lf @ LUMA + lift[3]
     g = decode(gamma) * 0.8
     inverse_gamma = 1 / np.maximum(g - g @ LUMA + gamma[3] + 1, 1e-3)
     k = decode(gain) * 0.8
-    return l, inverse_gamma, k - k @ LUMA + gain[3] + 1
+    return lf, inverse_gamma, k - k @ LUMA + gain[3] + 1
 
 
 TAIL_DEFAULTS = dict(lift=(1, 1, 1, 0), gamma=(1, 1, 1, 0), gain=(1, 1, 1, 0), hue_shift=0.0, saturation=0.0)
@@ -171,7 +172,7 @@ def test_curve_gradcheck_in_values_and_control_point_y():
     ys = torch.tensor(GENERIC_HUE_Y, dtype=torch.float64, requires_grad=True)
     t = (torch.rand(40, dtype=torch.float64) * 1.4 - 0.2).requires_grad_()
     for periodic in (False, True):
-        assert torch.autograd.gradcheck(lambda t, y: F.evaluate_curve(torch.stack((xs, y), 1), t, periodic), (t, ys))
+        assert torch.autograd.gradcheck(lambda t, y, periodic=periodic: F.evaluate_curve(torch.stack((xs, y), 1), t, periodic), (t, ys))
 
 
 # ---------------------------------------------------------------- ColorGrade: lift/gamma/gain and curves
@@ -219,13 +220,13 @@ def test_identity_trackballs_are_exact_when_evaluated():
 def test_lift_gamma_gain_mirrors_negative_values():
     c = pixels([[-0.2, 0.5, -1.5], [0.0, 2.0, 0.1]])
     lift, gamma, gain = (0.9, 1.0, 0.8, 0.05), (0.7, 1.0, 1.0, 0.2), (1.0, 1.0, 0.9, -0.1)
-    l, inverse_gamma, k = prepare_lift_gamma_gain(lift, gamma, gain)
-    expected = [np.sign(v * k + l) * np.abs(v * k + l) ** inverse_gamma for v in rows(c)]
+    lf, inverse_gamma, k = prepare_lift_gamma_gain(lift, gamma, gain)
+    expected = [np.sign(v * k + lf) * np.abs(v * k + lf) ** inverse_gamma for v in rows(c)]
     np.testing.assert_allclose(rows(F.lift_gamma_gain(c, lift, gamma, gain)), expected, rtol=1e-12, atol=1e-12)
 
 
 IDENTITY_SETTINGS = dict(
-    lift=(1, 1, 1, 0), gamma=(1.0, 1.0, 1.0, 0.0), gain=torch.tensor([1.0, 1.0, 1.0, 0.0]), hue_vs_hue=((0.0, 0.5), (0.6, 0.5)),
+    lift=(1, 1, 1, 0), gamma=(1.0, 1.0, 1.0, 0.0), gain=[1.0, 1.0, 1.0, 0.0], hue_vs_hue=((0.0, 0.5), (0.6, 0.5)),
     hue_vs_sat=None, sat_vs_sat=((0.0, 0.5), (1.0, 0.5)), lum_vs_sat=(), curve_master=((0.0, 0.0), (0.5, 0.5), (1.0, 1.0)), curve_red=None,
 )
 
@@ -235,6 +236,15 @@ def test_identity_settings_return_the_input_itself():
     for aces in (False, True):
         grade = tg.ColorGrade(aces=aces, **IDENTITY_SETTINGS)
         assert grade.is_identity and grade(image) is image and grade.to_config() == ({"aces": True} if aces else {})
+
+
+def test_a_tensor_control_at_identity_is_computed_and_changes_nothing():
+    """A tensor's value is not read to skip its step (on a GPU each read waits for the device, and a compiler's graph
+    holds no value): the trackball is applied, and gives the image back to float rounding."""
+    image = torch.rand(2, 3, 5, 6)
+    grade = tg.ColorGrade(gain=torch.tensor([1.0, 1.0, 1.0, 0.0]))
+    assert not grade.is_identity
+    torch.testing.assert_close(grade(image), image)
 
 
 def test_curves_and_trackballs_in_configs_round_trip():
@@ -272,7 +282,7 @@ NEW_OPS = {
     "yrgb_curves": (lambda x, y: F.yrgb_curves(x, torch.stack((CURVE_X, y), 1), None, SAT_CURVE), ([p[1] for p in MASTER],)),
     "offset_exposure": (F.offset_exposure, ((0.01, -0.02, 0.03), (0.5, 0.0, -0.3))),
     "linear_contrast": (F.linear_contrast, ((1.3, 0.9, 1.1), -0.5)),
-    "log_contrast": (F.log_contrast, ((1.3, 0.9, 1.1), 0.1)),
+    "primary_log_contrast": (F.primary_log_contrast, ((1.3, 0.9, 1.1), 0.1)),
     "log_gamma": (F.log_gamma, ((1.3, 0.9, 1.1), 0.05, 0.95)),
     "primary_saturation": (F.primary_saturation, (1.4,)),
     "dither": (lambda x, a: F.dither(x, F.dither_pattern(8, torch.Generator().manual_seed(1), torch.float64), a), (2 / 255,)),
@@ -361,7 +371,7 @@ def test_primary_grade_matches_opencolorio(style, index):
 
 def test_primary_defaults_are_opencolorio_defaults_and_identity_returns_the_input():
     for style in ("linear", "log"):
-        assert OCIO.GradingPrimary(OCIO_STYLE[style]).pivot == pytest.approx(tg.primary.DEFAULT_PIVOT[style])
+        assert OCIO.GradingPrimary(OCIO_STYLE[style]).pivot == pytest.approx(tg.grading.primary.DEFAULT_PIVOT[style])
         image = torch.rand(2, 3, 4, 4)
         grade = tg.PrimaryGrade(style, contrast=(1.0, 1.0, 1.0), pivot=0.3)
         assert grade.is_identity and grade(image) is image
@@ -419,7 +429,8 @@ def test_dither_removes_banding_on_a_smooth_ramp():
     the mean over 64 rows lands on the unquantised value."""
     encoded = torch.linspace(0.3, 0.3 + 6 / 255, 240, dtype=torch.float64).expand(1, 3, 64, 240)
     linear = tg.color.srgb_to_linear(encoded)
-    quantise = lambda x: torch.round(tg.color.linear_to_srgb(x) * 255) / 255
+    def quantise(x):
+        return torch.round(tg.color.linear_to_srgb(x) * 255) / 255
     banded = (quantise(linear).mean(dim=-2) - encoded[..., 0, :]).abs() * 255
     dithered = (quantise(tg.Dither()(linear)).mean(dim=-2) - encoded[..., 0, :]).abs() * 255
     assert float(banded.mean()) > 0.2 and float(dithered.mean()) < 0.08 and float(dithered.max()) < 0.3

@@ -234,7 +234,7 @@ def header_work(monkeypatch):
     """The attributes the header walk makes, counted; OpenEXR's parser made to fail the test if it is reached."""
     import OpenEXR
 
-    from torchgrade.io.exr import header_bytes, layout
+    from torchgrade.io.exr import header_bytes
 
     work = {"attributes": 0}
     made = header_bytes.Attribute
@@ -247,7 +247,7 @@ def header_work(monkeypatch):
         raise AssertionError("OpenEXR's parser was reached")
 
     monkeypatch.setattr(header_bytes, "Attribute", counted)
-    monkeypatch.setattr(layout.OpenEXR, "File", openexr)
+    monkeypatch.setattr(OpenEXR, "File", openexr)
     yield work
     assert OpenEXR.File is openexr
 

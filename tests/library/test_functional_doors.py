@@ -275,7 +275,7 @@ def test_every_control_given_by_keyword_is_refused_as_its_stage_refuses_it_or_gi
                 try:
                     result = function(IMAGE, *leading, **{control_name: value})
                 except ValueError as error:
-                    assert str(error) == message(lambda: stage(**{control_name: value})), f"{name}{leading}({control_name}={value!r})"
+                    assert str(error) == message(lambda stage=stage, controls={control_name: value}: stage(**controls)), f"{name}{leading}({control_name}={value!r})"
                 else:
                     assert all_finite(result), f"{name}{leading}({control_name}={value!r}) is not finite"
 

@@ -12,7 +12,6 @@ edges, its size or its orientation; these checks do (:mod:`torchgrade.testing.fr
 import json
 from pathlib import Path
 
-import numpy as np
 import pytest
 import torch
 
@@ -154,7 +153,7 @@ def test_the_captured_graph_agrees_with_eager_at_odd_sizes(name):
     """Dynamo's capture runs the traced forms (sizes as they come, no eager shortcut): the same pixels."""
     stage = _stage(name)
     image = scene((2, 3, 37, 53))
-    torch._dynamo.reset()
+    torch.compiler.reset()
     with torch.no_grad():
         torch.testing.assert_close(torch.compile(stage, fullgraph=True, backend="eager")(image), stage(image), rtol=1e-5, atol=1e-5)
 

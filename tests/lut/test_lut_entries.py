@@ -84,7 +84,7 @@ def test_the_fit_reaches_the_linear_programs_smallest_max_error():
     lookup = csr_matrix(torch.stack(columns, dim=1).numpy())  # (P, S³): value = lookup @ entries
     codes = (255.0 * linear_to_srgb(reference.clamp(0.0, 1.0))).numpy()
     optimum = 0.0
-    for channel, code in enumerate(codes):  # variables: entries (S³), then t; minimise t
+    for code in codes:  # variables: entries (S³), then t; minimise t
         inside, black, white = (code > 0) & (code < 255), code <= 0, code >= 255
         t_column = csr_matrix(-np.ones((lookup.shape[0], 1)))
         rows = [hstack([255.0 * lookup[inside], t_column[inside]]), hstack([-255.0 * lookup[inside], t_column[inside]]),

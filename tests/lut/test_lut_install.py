@@ -14,6 +14,7 @@ import subprocess
 import sys
 import sysconfig
 import venv
+import zipfile
 from pathlib import Path
 
 import pytest
@@ -76,9 +77,20 @@ def first_lookups(folder: Path, wheel: Path) -> dict:
     return report
 
 
+@pytest.fixture(scope="module")
+def wheel(tmp_path_factory) -> Path:
+    """The wheel the package's build makes where a C compiler works."""
+    return build_wheel(tmp_path_factory.mktemp("wheel"), dict(os.environ))
+
+
+def test_the_wheel_carries_the_package_type_hints_and_the_compiled_loop_stub(wheel):
+    names = set(zipfile.ZipFile(wheel).namelist())
+    assert {"torchgrade/py.typed", "torchgrade/lut/_lookup.pyi"} <= names  # PEP 561: type checkers read the hints
+    assert any(name.startswith("torchgrade/lut/_lookup.") and name.endswith((".so", ".pyd")) for name in names)
+
+
 @pytest.mark.skipif(sys.platform != "linux", reason="platform-conditional: the fresh environment's layout is Linux's")
-def test_a_fresh_user_without_a_compiler_gets_the_compiled_loop_from_the_wheel(tmp_path):
-    wheel = build_wheel(tmp_path, dict(os.environ))
+def test_a_fresh_user_without_a_compiler_gets_the_compiled_loop_from_the_wheel(wheel, tmp_path):
     assert "abi3" in wheel.name  # one build for every Python from 3.10 and every torch
     report = first_lookups(tmp_path, wheel)
     assert report["compiler"] is None

@@ -32,7 +32,7 @@ def test_the_file_describes_itself(look, with_inputs):
     model = onnx.load(str(with_inputs))
     props = metadata(with_inputs)
     assert props["torchgrade.version"] == tg.__version__ and props["torchgrade.output"] == "linear"
-    rebuilt = tg.PostFX.from_config(json.loads(props["torchgrade.base.config"]))
+    rebuilt = tg.PostFX.from_config(json.loads(props["torchgrade.config"]))
     image = hdr((1, 3, 8, 8))
     torch.testing.assert_close(rebuilt(image), look(image))
     controls = json.loads(props["torchgrade.grade_inputs"])
@@ -40,6 +40,19 @@ def test_the_file_describes_itself(look, with_inputs):
     assert "Rec.709" in model.doc_string or "Rec.709" in props["color_space.input"]
     assert all(graph_input.doc_string for graph_input in model.graph.input)
     assert all(graph_output.doc_string for graph_output in model.graph.output)
+
+
+def test_the_config_is_written_under_torchgrade_config_and_read_under_the_former_key_too(look, with_inputs, tmp_path):
+    written = {prop.key for prop in onnx.load(str(with_inputs)).metadata_props}
+    assert "torchgrade.config" in written and "torchgrade.base.config" not in written
+    model = onnx.load(str(with_inputs))
+    for prop in model.metadata_props:  # as a file exported while the key was "torchgrade.base.config" holds it
+        if prop.key == "torchgrade.config":
+            prop.key = "torchgrade.base.config"
+    onnx.save(model, str(tmp_path / "former.onnx"))
+    props = metadata(tmp_path / "former.onnx")
+    assert "torchgrade.base.config" not in props
+    assert tg.PostFX.from_config(json.loads(props["torchgrade.config"])).to_config() == look.to_config()
 
 
 def test_grading_controls_are_optional_inputs_with_the_looks_values(look, with_inputs, capfd):

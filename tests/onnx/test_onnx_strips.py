@@ -21,7 +21,7 @@ from torchgrade.onnx.strips import scan_strips
 from torchgrade.onnx.strips import DOMAIN
 from torchgrade.onnx.strips import SCAN_STRIP_PIXELS as STRIP_PIXELS
 from torchgrade.color import unity_to_aces
-from torchgrade.tonemap.aces1.rrt import _red_centered_hue, _red_hue_distance, _rgb_yc, cubic_basis_hue_weight, smoothstep_hue_weight
+from torchgrade.tonemap.aces1.rrt import _red_hue_distance, _yc, cubic_basis_hue_weight, smoothstep_hue_weight
 
 from reference.onnx import TOLERANCE
 
@@ -126,7 +126,7 @@ class _Powers(torch.nn.Module):
 def test_powers_export_without_where_or_pow_and_keep_their_values(tmp_path):
     path = export(_Powers(), tmp_path / "powers.onnx", example=torch.rand(1, 3, 4, 4))
     counts = ops(path)
-    assert counts["Where"] == 0 and counts["Pow"] == 3  # bounded_pow, ** 1.7 and ** 4 keep theirs
+    assert counts["Where"] == 0 and counts["Pow"] == 1  # a whole power but 2 and 3 keeps its Pow (x ** 4), others exp(e log x)
     row = torch.tensor([-2.0, -0.5, 0.0, 1e-30, 0.18, 1.0, 3.0, 60.0, 1e4, 65504.0])
     image = row.reshape(1, 1, 1, -1).expand(1, 3, 2, -1).contiguous()
     output = session(path).run(None, {"image": image.numpy()})[0]
@@ -238,7 +238,7 @@ def _rrt_edges() -> torch.Tensor:
             for red in (1.5, 0.5, 1.0 + 1e-6, 1.0 - 1e-6, 1.0):
                 pixels.append([level * red, level * (1.0 + spread), level * (1.0 - spread)])
     colours = torch.rand(40, 3, generator=torch.Generator().manual_seed(0), dtype=torch.float64) ** 2
-    yc = _rgb_yc(unity_to_aces(colours.T[:, :, None])).flatten()
+    yc = _yc(*unity_to_aces(colours.T[:, :, None]).split(1)).flatten()
     for end in (2.0 / 3.0 * 0.08, 2.0 * 0.08):
         for step in (1.0 - 1e-6, 1.0, 1.0 + 1e-6):
             pixels += (colours * (end * step / yc)[:, None]).tolist()
@@ -280,9 +280,12 @@ def test_aces_rrt_exports_without_selects_and_matches_pytorch_at_extremes(tmp_pa
 
 @pytest.mark.parametrize("weight", [smoothstep_hue_weight, cubic_basis_hue_weight])
 def test_red_hue_distance_weighs_as_the_centred_hue(weight):
-    """The export form of the hue gives the red modifier's weights on both sides of red, past ±90° (where it stops at
-    90°), at the ±180° wrap (g = b above r), for neutrals (0°) and greys a float step off neutral."""
+    """The hue's distance from red gives the red modifier's weights of the CTL's centred hue (``atan2`` in float64, 0
+    for neutrals) on both sides of red, past ±90° (where it stops at 90°), at the ±180° wrap (g = b above r), for
+    neutrals (0°) and greys a float step off neutral."""
     rgb = torch.tensor([[1.0, 0.5, 0.5], [0.0, 1.0, 1.0], [0.2, 0.7, 0.7], [1.0, 1.0, 1.0], [0.0, 0.0, 0.0], [1.0, 0.9, 0.2],
                         [1.0, 0.2, 0.9], [0.3, 1.0, 0.0], [0.5, 0.5 + 2**-24, 0.5], [0.5, 0.5, 0.5 + 2**-24], [0.5 + 2**-24, 0.5, 0.5],
                         [1.0, 1e-6, 0.0], [1.0, 0.0, 1e-6], [0.0, 1.0, 1.0 - 1e-6], [0.0, 1.0 - 1e-6, 1.0]]).T[:, :, None]
-    torch.testing.assert_close(weight(_red_hue_distance(*rgb.split(1))), weight(_red_centered_hue(rgb)), rtol=0.0, atol=1e-6)
+    r, g, b = rgb.double().squeeze(-1).numpy()
+    centred = torch.from_numpy(np.degrees(np.arctan2(np.sqrt(3.0) * (g - b), 2.0 * r - g - b))).reshape(1, -1, 1)
+    torch.testing.assert_close(weight(_red_hue_distance(*rgb.split(1))), weight(centred).float(), rtol=0.0, atol=1e-6)

@@ -258,7 +258,7 @@ def test_sixteen_clients_sending_real_frames_are_all_graded_within_the_memory_bu
     before = get_json(url + "/stats")["memory"]["waited"]
     chosen = [files[index % len(files)] for index in range(16)]
     answers = send_together(url, [body for body, _ in chosen], "/image")
-    for (body, expected), (status, answer) in zip(chosen, answers):
+    for (_, expected), (status, answer) in zip(chosen, answers):
         assert status == 200 and within_a_code(answer, expected), answer[:200]
     stats = get_json(url + "/stats")
     assert stats["memory"]["waited"] > before and stats["memory"]["held_mib"] == 0.0

@@ -202,8 +202,8 @@ def test_warnings_are_counted_once_per_message():
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         for _ in range(3):
-            warnings.warn("lattice too small", tg.lut.LUTAccuracyWarning)
-        warnings.warn("other", UserWarning)
+            warnings.warn("lattice too small", tg.lut.LUTAccuracyWarning, stacklevel=1)
+        warnings.warn("other", UserWarning, stacklevel=1)
     assert report.warning_records(caught) == [{"category": "LUTAccuracyWarning", "message": "lattice too small", "count": 3},
                                               {"category": "UserWarning", "message": "other", "count": 1}]
 
@@ -276,8 +276,6 @@ def test_every_benchmark_takes_out_and_defaults_away_from_the_committed_results(
 
 
 def test_a_tiny_run_writes_to_out_only_prints_a_short_table_and_collects_its_warnings(tmp_path, monkeypatch, capsys):
-    from benchmarks import run
-
     for name, value in {"FRAME": (24, 32), "DEMO_SIZE": (24, 32), "BATCHES": (1,), "BATCH_SIDE": 8,
                         "RESOLUTIONS": ((8, 8),) * 3, "QUICK_RUNS": 2}.items():
         monkeypatch.setattr(workload, name, value)

@@ -2,6 +2,8 @@
 are the ones its script writes, and ``mkdocs build --strict`` (links, anchors, the nav, the API pages made from the
 docstrings) passes without a warning."""
 
+import importlib
+import importlib.util
 import re
 import subprocess
 import sys
@@ -11,6 +13,7 @@ import pytest
 from shape_comments import check_shape_comments
 
 ROOT = Path(__file__).resolve().parents[2]
+PACKAGE = ROOT / "torchgrade"
 DOCS = ROOT / "docs"
 PAGES = sorted(DOCS.rglob("*.md"))
 BLOCKS = [(page, index, block) for page in PAGES
@@ -38,6 +41,41 @@ def test_blocks_left_out_say_why():
     for page, block in NOT_RUN:
         assert block.startswith("# not run by the tests: "), page
     assert not [page for page in PAGES if re.search(r"```(python3|py3|pycon|ipython)\n", page.read_text())]
+
+
+def _resolves(dotted: str) -> bool:
+    """Whether ``dotted`` names a module, or a name a module holds (found without importing an old module path)."""
+    parts = dotted.split(".")
+    for cut in range(len(parts), 0, -1):
+        try:
+            spec = importlib.util.find_spec(".".join(parts[:cut]))
+        except ImportError:  # a parent that is a module, not a package
+            spec = None
+        if spec is not None:
+            held = importlib.import_module(".".join(parts[:cut])) if cut < len(parts) else None
+            for name in parts[cut:]:
+                if not hasattr(held, name):
+                    return False
+                held = getattr(held, name)
+            return True
+    return False
+
+
+def test_the_layout_page_names_files_modules_and_names_that_exist():
+    """Every file and folder ``docs/layout.md`` names exists: a path from the repository or the package, or a file of
+    the package (in a row of the package table, of the packages that row is about); and every ``torchgrade.`` name it
+    gives is a module or a name a module holds."""
+    missing = []
+    for line in (DOCS / "layout.md").read_text().splitlines():
+        within = [PACKAGE]
+        if line.startswith("| `"):  # a row of the package table
+            within = [PACKAGE / name for name in re.findall(r"`(\w+)/`", line.split("|")[1])] or within
+        for name in re.findall(r"`([\w/.]+(?:\.py|\.c|/))`", line):
+            found = (ROOT / name).exists() or (PACKAGE / name).exists()
+            if not (found or any(any(package.rglob(name.rstrip("/"))) for package in within)):
+                missing.append(name)
+        missing += [name for name in re.findall(r"`(torchgrade(?:\.\w+)+)`", line) if not _resolves(name)]
+    assert missing == []
 
 
 def test_gallery_pictures_are_the_scripts(tmp_path):

@@ -1,5 +1,6 @@
-"""The package's structure: the maths modules ask no context question (the runtime does, through the variants each
-formula declares), state passes as arguments, and the packages import one another without a cycle."""
+"""The package's structure: the maths modules ask no context question (the runtime does: per device, the strips of
+a per-pixel stage and the checks of values), state passes as arguments, and the packages import one another without a
+cycle."""
 
 from __future__ import annotations
 
@@ -8,19 +9,22 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[2] / "torchgrade"
 
-PREDICATES = ("is_exporting", "is_tracing", "policy_for", "untracked", "is_compiling")
-"""The questions about where a call runs (exporting, tracing, compiling, which device, whether a gradient is recorded)."""
+QUESTIONS = ("is_exporting", "is_tracing", "policy_for", "untracked", "is_compiling", "is_differentiated", "readable",
+             "pixel_layout", "check_eagerly", "in_strips", "sizes_are_symbolic", "nonnegative")
+"""Calls that ask where a call runs (exporting, tracing, compiling, which device, whether a gradient is recorded), or
+run a step only in some of those places: the predicates and the helpers that ask them for their caller."""
 RUNTIME_PACKAGES = ("runtime", "onnx")
 """The packages whose job is to answer them."""
-MOST_PREDICATE_CALLS = 14
-"""Calls of :data:`PREDICATES` allowed outside :data:`RUNTIME_PACKAGES` (65 before the variants): whether a trusted
-input skips the non-finite policy's NaN pass (``base/images.py``, ``look/postfx.py``), whether a control is a known constant
-(``base/params.py``), the device policy's sizes for one bloom blur and for resampling matrices, the metering's
-histogram tables, the saturation matrix's folding and the LUT's eager-loop choice and table cache. A form of a formula
-goes in :mod:`torchgrade.runtime.variants` instead, and this number only goes down."""
+PENDING = {"lut/apply.py": 3, "lut/layer.py": 1}
+"""The LUT lookup's questions, left to its operator's next step: whether the operator runs (on the CPU, its kernel's
+device, outside forward-mode derivatives, which it has no formula for: ``runs_operator``), whether the lookup off the
+CPU takes its whole-frame form (where nothing records: ``whole_frame_tables``), and whether the table's planar rows
+are cached (not while compiling: ``LUT3D.rows``)."""
 
 
-def predicate_calls() -> list:
+def calls_of(names, keyword=None) -> list:
+    """``path:line name`` of every call of one of ``names`` outside :data:`RUNTIME_PACKAGES` (with ``keyword``: only
+    calls that pass it)."""
     calls = []
     for path in sorted(PACKAGE.rglob("*.py")):
         if path.relative_to(PACKAGE).parts[0] in RUNTIME_PACKAGES:
@@ -28,14 +32,51 @@ def predicate_calls() -> list:
         for node in ast.walk(ast.parse(path.read_text())):
             if isinstance(node, ast.Call):
                 name = node.func.attr if isinstance(node.func, ast.Attribute) else getattr(node.func, "id", None)
-                if name in PREDICATES:
+                if name in names and (keyword is None or any(k.arg == keyword for k in node.keywords)):
                     calls.append(f"{path.relative_to(PACKAGE)}:{node.lineno} {name}")
     return calls
 
 
-def test_the_maths_modules_leave_context_questions_to_the_runtime():
-    calls = predicate_calls()
-    assert len(calls) <= MOST_PREDICATE_CALLS, "\n".join(calls)
+def test_the_maths_modules_ask_no_context_question():
+    """Every formula has one form, the same eager, under autograd, compiled and exported: no module outside the
+    runtime asks where it runs, directly or through a helper, but the LUT's lookup (:data:`PENDING`)."""
+    calls = calls_of(QUESTIONS)
+    by_file = {}
+    for call in calls:
+        by_file[call.split(":")[0]] = by_file.get(call.split(":")[0], 0) + 1
+    assert by_file == PENDING, "\n".join(calls)
+
+
+def test_constants_are_placed_by_their_callers_and_the_non_finite_policy_asks_nothing():
+    """``folded`` keeps a constant where its caller says (``host``, a bool), never where autograd happens to record;
+    ``sanitize`` takes the caller's word that a frame holds no NaN (``nan_free``) wherever it runs."""
+    hosts = [node for path in PACKAGE.rglob("*.py") for node in ast.walk(ast.parse(path.read_text()))
+             if isinstance(node, ast.Call) and getattr(node.func, "id", getattr(node.func, "attr", None)) == "folded"
+             for keyword in node.keywords if keyword.arg == "host" and not isinstance(getattr(keyword.value, "value", None), bool)]
+    assert hosts == []
+    source = (PACKAGE / "base" / "images.py").read_text()
+    sanitize = next(node for node in ast.walk(ast.parse(source)) if isinstance(node, ast.FunctionDef) and node.name == "sanitize")
+    asked = [node.func.id for node in ast.walk(sanitize) if isinstance(node, ast.Call) and getattr(node.func, "id", None) in QUESTIONS]
+    assert asked == []
+
+
+def test_no_formula_has_a_second_form_by_context():
+    """No variant registry (``runtime/variants.py``) and no ``@reference.variant(context)`` forms: a second form of a
+    formula is a registered operator's kernel (``torch.library``) or an export rule (``torchgrade/onnx/symbolics.py``)."""
+    assert not (PACKAGE / "runtime" / "variants.py").exists()
+    declared = [f"{path.relative_to(PACKAGE)}:{node.lineno}" for path in PACKAGE.rglob("*.py")
+                for node in ast.walk(ast.parse(path.read_text())) if isinstance(node, ast.Attribute) and node.attr == "variant"]
+    assert declared == []
+
+
+def test_state_is_passed_not_read_from_signatures():
+    """Whether a module takes ``nan_free`` (or anything else) is declared (``takes_nan_free``), never read from its
+    ``forward``'s signature."""
+    readers = [f"{path.relative_to(PACKAGE)}:{node.lineno}" for path in PACKAGE.rglob("*.py")
+               for node in ast.walk(ast.parse(path.read_text()))
+               if isinstance(node, ast.Call) and getattr(node.func, "attr", None) == "signature"
+               and any(isinstance(arg, ast.Attribute) and arg.attr == "forward" for arg in node.args)]
+    assert readers == []
 
 
 def package_imports() -> dict:

@@ -91,7 +91,8 @@ def unity_grade_pixel(rgb, aces=False, **controls):
     lum = c @ lum_weights
     ws = 1 - smoothstep(p["shadows_start"], p["shadows_end"], lum)
     wh = smoothstep(p["highlights_start"], p["highlights_end"], lum)
-    decode = lambda col: np.array([srgb_decode(v) for v in col])
+    def decode(col):
+        return np.array([srgb_decode(v) for v in col])
     c = c * (decode(p["shadows"]) * ws + decode(p["midtones"]) * (1 - ws - wh) + decode(p["highlights"]) * wh)
     h, s, v = colorsys.rgb_to_hsv(*c)
     c = np.array(colorsys.hsv_to_rgb((h + p["hue_shift"] / 360) % 1.0, s, v))

@@ -51,14 +51,16 @@ SRGB_2_AP0 = np.array([[0.4397010, 0.3829780, 0.1773350], [0.0897923, 0.8134230,
 
 def _rgb_to_xyz(primaries, white):
     """SMPTE RP 177: the primaries' XYZ columns scaled so that RGB (1, 1, 1) is the white."""
-    xyz = lambda x, y: np.array([x / y, 1.0, (1 - x - y) / y])
+    def xyz(x, y):
+        return np.array([x / y, 1.0, (1 - x - y) / y])
     columns = np.stack([xyz(*p) for p in primaries], axis=1)
     return columns * np.linalg.solve(columns, xyz(*white))
 
 
 def _bradford(source_white, target_white):
     cone = np.array([[0.8951, 0.2664, -0.1614], [-0.7502, 1.7135, 0.0367], [0.0389, -0.0685, 1.0296]])
-    xyz = lambda x, y: np.array([x / y, 1.0, (1 - x - y) / y])
+    def xyz(x, y):
+        return np.array([x / y, 1.0, (1 - x - y) / y])
     return np.linalg.inv(cone) @ np.diag((cone @ xyz(*target_white)) / (cone @ xyz(*source_white))) @ cone
 
 

@@ -98,7 +98,7 @@ def test_grade_and_aces_under_cuda_float16_autocast_match_float32(desk):
 def test_every_stage_is_captured_whole_under_autocast(desk, name, device, dtype):
     """Under an active autocast the whole forward is one graph (``fullgraph=True``; Dynamo alone, the capture is what
     can break) that gives what it gives without autocast (the compiled forms differ from eager in float32 rounding)."""
-    torch._dynamo.reset()
+    torch.compiler.reset()
     module = torch.compile(_modules()[name].eval().to(device), fullgraph=True, backend="eager")
     _assert_autocast_changes_nothing(module, (desk.clamp(0.0, 1.0) if name == "lut" else desk).to(device), dtype)
 
@@ -106,7 +106,7 @@ def test_every_stage_is_captured_whole_under_autocast(desk, name, device, dtype)
 @pytest.mark.parametrize("device, dtype", AUTOCASTS)
 def test_a_compiled_look_under_autocast_matches_float32(desk, device, dtype):
     """``tg.compile`` (Inductor; CUDA graphs on CUDA) of a grade and ACES under autocast: the float32 result."""
-    torch._dynamo.reset()
+    torch.compiler.reset()
     _assert_autocast_changes_nothing(tg.compile(_look().eval().to(device)), desk.to(device), dtype)
 
 

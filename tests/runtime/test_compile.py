@@ -42,7 +42,7 @@ def _captured_only(monkeypatch, backend="eager"):
     (whose ``options`` are left out)."""
     real = torch.compile
     monkeypatch.setattr(torch, "compile", lambda *args, options=None, **kwargs: real(*args, **{**kwargs, "backend": backend}))
-    torch._dynamo.reset()
+    torch.compiler.reset()
 
 
 def test_tg_compile_runs_more_frame_sizes_than_dynamos_recompile_limit(monkeypatch):

@@ -82,15 +82,13 @@ def back_in_range(value):
 
 
 def further_out(value):
-    value.add_(1.0)  # a new version, still out of range
+    value.add_(1.0)  # still out of range
 
 
 def test_a_host_running_two_forwards_ahead_still_reports_a_value_moved_out_of_range(fake_cuda):
     fake_cuda.lag = 2  # every forward's copy lands after the next forward has queued its own
     raised = raised_at(fake_cuda, [keep, out_of_range] + [further_out] * 6, nn.Parameter(torch.tensor(1.0)))
-    # out at forward 1 and moved on at every step: its copy lands at 3 (changed since), the next one's at 4, which
-    # raises; the copies made before that report are dropped, the copy of forward 5 lands at 7 and raises
-    assert raised == [4, 7]
+    assert raised == [3, 4, 5, 6, 7]  # out from forward 1 on: each forward's copy raises as it lands, two forwards on
 
 
 def test_a_value_left_out_of_range_raises_at_every_forward_after_the_first_report(fake_cuda):
@@ -98,14 +96,14 @@ def test_a_value_left_out_of_range_raises_at_every_forward_after_the_first_repor
     assert raised == [2, 3, 4, 5, 6, 7]  # out at forward 1, its copy landed at 2; then as the CPU raises
 
 
-def test_a_value_restored_before_its_copy_landed_raises_nothing(fake_cuda):
+def test_a_forward_that_ran_out_of_range_is_reported_though_the_value_came_back_before_its_copy_landed(fake_cuda):
     raised = raised_at(fake_cuda, [keep, out_of_range, back_in_range] + [keep] * 4, nn.Parameter(torch.tensor(1.0)))
-    assert raised == []
+    assert raised == [2]  # forward 1 computed with 50: its copy lands at forward 2
 
 
-def test_a_value_restored_after_a_report_raises_no_more(fake_cuda):
+def test_a_value_restored_raises_no_more_once_the_copies_made_out_of_range_have_landed(fake_cuda):
     raised = raised_at(fake_cuda, [keep, out_of_range, keep, back_in_range] + [keep] * 4, nn.Parameter(torch.tensor(1.0)))
-    assert raised == [2]
+    assert raised == [2, 3]
 
 
 def test_each_copy_is_checked_by_the_check_its_caller_gave(fake_cuda):

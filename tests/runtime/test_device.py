@@ -209,16 +209,16 @@ class DeviceCheck(TorchDispatchMode):
 
 
 def _audit(name: str, dtype: torch.dtype) -> None:
-    """The forward and backward of a case, and its forward without autograd (the in-place and untracked forms)."""
+    """The forward and backward of a case, and its forward without autograd."""
     module = CASES[name]().to("meta", dtype)
     image = torch.empty(2, 3, 40, 56, device="meta", dtype=dtype, requires_grad=True)
     with DeviceCheck(dtype if dtype == torch.float64 else None):
         out = module(image)
         out.sum().backward()
         with torch.no_grad():
-            untracked = module(image)
+            inferred = module(image)
     assert (out.device.type, out.dtype, image.grad.device.type) == ("meta", dtype, "meta")
-    assert (untracked.device.type, untracked.dtype) == ("meta", dtype)
+    assert (inferred.device.type, inferred.dtype) == ("meta", dtype)
 
 
 @pytest.mark.parametrize("name", list(CASES))

@@ -1,5 +1,5 @@
-"""The GPU's execution policy (whole frames, library kernels, one 2-D blur for small planes, no reads) gives the CPU
-policy's values: run here on the CPU by handing every module the policy a GPU gets."""
+"""The GPU's execution policy (whole frames, no reads) gives the CPU policy's values: run here on the CPU by handing
+every module the policy a GPU gets."""
 
 import importlib
 import subprocess
@@ -14,8 +14,7 @@ from torchgrade.runtime import policy
 
 ROOT = Path(__file__).resolve().parents[2]
 
-USERS = ["torchgrade.runtime.strips", "torchgrade.runtime.policy", "torchgrade.runtime.variants", "torchgrade.bloom.pyramid", "torchgrade.bloom.blur",
-         "torchgrade.base.params", "torchgrade.exposure.metering"]
+USERS = ["torchgrade.runtime.strips", "torchgrade.runtime.policy"]
 """Every module that asks ``policy_for``."""
 
 LOOKS = {
@@ -33,7 +32,7 @@ LOOKS = {
 def gpu_policy(monkeypatch):
     """``policy_for`` answering with the whole-frames policy for every device, as it does for CUDA."""
     def whole_frames(device):
-        return policy.GRAPH if policy.is_tracing() else policy.WHOLE_FRAMES
+        return policy.WHOLE_FRAMES
 
     for name in USERS:
         monkeypatch.setattr(importlib.import_module(name), "policy_for", whole_frames)
@@ -44,41 +43,24 @@ def desk():
     return tg.io.read_exr("../shared/data/exr/Desk.exr")[:3].unsqueeze(0)
 
 
-def test_only_the_gpu_policy_blurs_small_planes_with_one_kernel_and_drops_nan_with_fmax():
-    assert policy.WHOLE_FRAMES.one_kernel_blur_pixels == policy.ONE_KERNEL_BLUR_PIXELS and policy.WHOLE_FRAMES.nan_dropping_max
-    cpu = policy.policy_for(torch.device("cpu"))
-    assert cpu.one_kernel_blur_pixels is None and not cpu.nan_dropping_max
-
-
-def test_a_gpu_counts_a_histogram_per_column_compiled_or_not_and_the_cpu_into_a_few_tables(monkeypatch):
-    assert policy.WHOLE_FRAMES.histogram_tables is None
-    assert policy.policy_for(torch.device("cpu")).histogram_tables == policy.CPU_HISTOGRAM_TABLES > 1
-    monkeypatch.setattr(torch.compiler, "is_compiling", lambda: True)
-    assert policy.policy_for(torch.device("meta")).histogram_tables is None
-    assert policy.policy_for(torch.device("cpu")).histogram_tables == 1
-
-
 @pytest.mark.parametrize("mask", ["average", "spot"])
-def test_a_histogram_counted_per_column_meters_each_image_of_a_batch_as_one_row_does(mask, desk, gpu_policy, request):
+def test_a_batch_of_histograms_meters_each_image_as_it_alone(mask, desk):
     frames = torch.cat([desk, desk.flip(-1) * 4, desk.flip(-2) * 0.01])
     metered = tg.exposure.meter_luminance(frames, "histogram", mask=mask)
-    request.getfixturevalue("monkeypatch").undo()
     alone = torch.cat([tg.exposure.meter_luminance(frame[None], "histogram", mask=mask) for frame in frames])
     torch.testing.assert_close(metered, alone, rtol=1e-5, atol=0)
 
 
-@pytest.mark.parametrize("tables", [None, 1, 3, 8])
 @pytest.mark.parametrize("width", [5, 8, 13])
-def test_a_histogram_counts_the_same_into_any_number_of_tables(tables, width, monkeypatch):
+def test_a_histogram_counts_into_its_tables_what_one_table_counts(width, monkeypatch):
     """Integer weights (each pixel's own value, rounded to 1/8) make every sum exact: any order of the additions, and so
-    any split into tables, gives the same histogram, bit for bit. Widths below, at and past the table count."""
+    the split into tables, gives the same histogram, bit for bit. Widths below, at and past the table count."""
     from torchgrade.exposure import metering
 
     stops = (torch.randn(2, 1, 7, width, generator=torch.Generator().manual_seed(width)) * 3 * 8).round() / 8
-    monkeypatch.setattr(metering, "policy_for", lambda device: policy.ExecutionPolicy(None, 1, None, False, False, histogram_tables=1))
-    expected = metering.histogram_band_average(stops, None, -8.0, 8.0, 10.0, 90.0)
-    monkeypatch.setattr(metering, "policy_for", lambda device: policy.ExecutionPolicy(None, 1, None, False, False, histogram_tables=tables))
-    assert torch.equal(metering.histogram_band_average(stops, None, -8.0, 8.0, 10.0, 90.0), expected)
+    tabled = metering.histogram_band_average(stops, None, -8.0, 8.0, 10.0, 90.0)
+    monkeypatch.setattr(metering, "HISTOGRAM_TABLES", 1)
+    assert torch.equal(metering.histogram_band_average(stops, None, -8.0, 8.0, 10.0, 90.0), tabled)
 
 
 @pytest.mark.parametrize("name", list(LOOKS))
@@ -102,9 +84,8 @@ def extremes(exr_dir):
 @pytest.mark.parametrize("family", ["all-half-values", "value-grid"])
 @pytest.mark.parametrize("name", list(__import__("torchgrade.testing.catalog", fromlist=["STAGE_KINDS"]).STAGE_KINDS))
 def test_the_gpu_policy_gives_the_cpu_policys_values_at_the_extremes(name, family, extremes, gpu_policy, request):
-    """Every stage kind on NaN, ±Inf, denormals, 65504, 1e30 and 3e38: the GPU's forms (fmax, one gather, one 2-D blur)
-    keep the non-finite policy as the CPU's do, and the pictures agree within half an 8-bit code as a viewer sees them
-    (bloom sums 65504s beside small values in another order: 9 of 196,608 values 5e-4 apart on all the half values)."""
+    """Every stage kind on NaN, ±Inf, denormals, 65504, 1e30 and 3e38: whole frames keep the non-finite policy as the
+    CPU's strips do, and the pictures agree within half an 8-bit code as a viewer sees them."""
     from torchgrade.testing.catalog import STAGE_KINDS
 
     kind, image = STAGE_KINDS[name], extremes[family]

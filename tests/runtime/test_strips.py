@@ -1,5 +1,6 @@
 """Per-pixel stages run in strips of rows on the CPU (``torchgrade.runtime.in_strips``): the whole frame's values to
-float32 rounding, and the whole frame whenever autograd records the call or the device is not the CPU."""
+float32 rounding, with or without autograd (the same code records gradients), and the whole frame where the device is
+not the CPU."""
 
 import pytest
 import torch
@@ -34,15 +35,42 @@ def test_strips_give_the_whole_frames_values(name, desk, monkeypatch):
     torch.testing.assert_close(strips, whole, rtol=1e-5, atol=1e-6)  # a matrix product may block a strip differently
 
 
-def test_strips_are_skipped_when_autograd_records(desk, monkeypatch):
-    monkeypatch.setattr(policy, "STRIP_PIXELS_PER_THREAD", 997 // torch.get_num_threads())
+def test_strips_record_gradients_as_the_whole_frame_does(desk, monkeypatch):
+    """A frame that records gradients runs on strips too (eager and autograd run the same code), joined by a
+    concatenation autograd records: the whole frame's values and gradients."""
+    layer, image = STAGES["grade"](), desk[..., :64, :64]
+
+    def run():
+        x = image.clone().requires_grad_()
+        out = layer(x)
+        out.square().sum().backward()
+        return out.detach(), x.grad
+
+    monkeypatch.setattr(policy, "STRIP_PIXELS_PER_THREAD", 1 << 20)  # one strip: the whole frame
+    whole = run()
     calls = []
-    image = desk[..., :64, :64].clone().requires_grad_()
-    out = runtime.in_strips(lambda x: calls.append(x.shape) or x * 2.0, image)
-    assert calls == [image.shape] and out.requires_grad
-    learnable = torch.nn.Parameter(torch.tensor(2.0))
-    runtime.in_strips(lambda x: calls.append(x.shape) or x * learnable, desk[..., :64, :64], (learnable,))
-    assert calls[-1] == image.shape
-    with torch.no_grad():
-        runtime.in_strips(lambda x: calls.append(x.shape) or x, desk[..., :64, :64], (learnable,))
+    monkeypatch.setattr(policy, "STRIP_PIXELS_PER_THREAD", 997 // torch.get_num_threads())
+    assert runtime.in_strips(lambda x: calls.append(x.shape) or x, image.clone().requires_grad_()).requires_grad
     assert len(calls) > 3
+    for stripped, expected in zip(run(), whole):
+        torch.testing.assert_close(stripped, expected, rtol=1e-5, atol=1e-6)
+
+
+def test_other_devices_compute_whole_frames():
+    assert runtime.policy_for(torch.device("meta")).strip_pixels is None
+    calls = []
+    image = torch.empty(1, 3, 2000, 2000, device="meta")
+    runtime.in_strips(lambda x: calls.append(x.shape) or x, image)
+    assert calls == [image.shape]
+
+
+def test_gradients_of_the_folded_grade_match_finite_differences():
+    torch.manual_seed(0)
+    image = (torch.rand(1, 3, 3, 4, dtype=torch.float64) * 2.0 + 0.05).requires_grad_()
+    params = {name: torch.tensor(value, dtype=torch.float64, requires_grad=True)
+              for name, value in (("post_exposure", 0.3), ("temperature", 8.0), ("tint", -5.0), ("contrast", 15.0))}
+    color = torch.tensor((1.0, 0.9, 0.8), dtype=torch.float64, requires_grad=True)
+    for aces in (False, True):
+        def graded(x, *values, aces=aces):
+            return tg.functional.color_grade(x, aces=aces, color_filter=values[-1], **dict(zip(params, values[:-1])))
+        assert torch.autograd.gradcheck(graded, (image, *params.values(), color))

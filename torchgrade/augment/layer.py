@@ -17,8 +17,8 @@ tone mapper -> look LUT -> (sRGB encode).
 **Tone mapping** is off by default (``tonemap=None``): the output of an HDR input stays
 scene-referred linear, ready for the next augmentation or for the network. ``tonemap`` may name
 one mode of :data:`torchgrade.TONEMAP_MODES` or a sequence of them, one chosen uniformly per
-sample (:func:`~torchgrade.augment.per_sample.tonemap_per_sample`: one tone mapper per sample whatever the number of
-modes).
+sample (:func:`~torchgrade.augment.per_sample.tonemap_per_sample`: each mode maps the batch, and each sample takes
+its own).
 
 **A look LUT** (``look_lut``: a :class:`~torchgrade.LookLUT`, a ``.cube``/CLF path, a
 :class:`~torchgrade.LUT3D` or a table) is applied after the tone mapper, on display-referred values
@@ -58,9 +58,9 @@ from ..grading.layer import ColorGrade
 from ..look.slots import SLOTS
 from ..output.layer import LookLUT
 from ..output.look_lut import look_lut
-from ..runtime import DeferredCheck, in_strips
-from ..runtime.checks import check_eagerly
-from .inputs import SRGB_TOLERANCE, check_srgb_peak, look_stage  # noqa: F401 (SRGB_TOLERANCE: its former path)
+from ..runtime import DeferredCheck
+from ..runtime.strips import pixelwise
+from .inputs import check_srgb_peak, look_stage
 from .per_sample import tonemap_per_sample
 from .ranges import (
     BLOOM_CONTROLS,
@@ -180,6 +180,7 @@ class RandomPostFX(IntensityAugmentationBase2D):
         self.same_on_frame = bool(same_on_frame)
         self._check_settings()
         self._local = threading.local()
+        self._range_check = DeferredCheck()  # made here, so that no graph a compiler records makes one
 
     def _look_ranges(self, contribution) -> dict:
         """The look LUT's contribution range (its own contribution when None), or nothing without a look LUT."""
@@ -279,9 +280,10 @@ class RandomPostFX(IntensityAugmentationBase2D):
                 raise ValueError(f"params[{name!r}] must be a tensor with {rows} per-sample values, got {value!r}")
         return {name: value.to(device) for name, value in params.items()}
 
-    def transform(self, images: torch.Tensor, params: dict, applied: torch.Tensor | None = None) -> torch.Tensor:
+    def transform(self, images: torch.Tensor, params: dict, applied: torch.Tensor | None = None, planes: bool = False) -> torch.Tensor:
         """Apply ``params`` to ``images`` (B, 3, H, W), slot by slot in the look's order (:meth:`slots`); with
-        ``applied`` ((B, 1, 1, 1) bool), only its samples get the random controls."""
+        ``applied`` ((B, 1, 1, 1) bool), only its samples get the random controls; ``planes``: the grade computes on
+        the image's planes (:func:`~torchgrade.grading.grade.color_grade_planes`)."""
         x = working_dtype(images)
         if self.input_space == "srgb":
             x = srgb_to_linear(x)
@@ -292,14 +294,13 @@ class RandomPostFX(IntensityAugmentationBase2D):
                 held = x
             if not random and held is not None:
                 x, held = torch.where(applied, joined(x), joined(held)), None
-            # the grade may return planes (while compiling); the other slots take an image
-            x = getattr(self, f"_{slot}")(x if slot == "grade" else joined(x), params, applied)
+            x = self._grade(x, params, planes) if slot == "grade" else getattr(self, f"_{slot}")(joined(x), params, applied)
 
         def finished(graded, source):  # encoded, in the input's dtype; only random controls: skipped samples exact
             graded = to_input_dtype(linear_to_srgb(graded).clamp(0.0, 1.0) if self.input_space == "srgb" else graded, source)
             return graded if held is None else torch.where(applied, graded, source)
 
-        if isinstance(x, tuple):  # the grade's planes (compiling): finished plane by plane into the output's stack
+        if isinstance(x, tuple):  # the grade's planes: finished plane by plane into the output's stack
             return joined(tuple(finished(*planes) for planes in zip(x, images.split(1, dim=-3))))
         return finished(x, images)
 
@@ -307,9 +308,9 @@ class RandomPostFX(IntensityAugmentationBase2D):
         controls = {BLOOM_CONTROLS[name][0]: params[name] for name in self.bloom_ranges}
         return bloom_with_settings(x, bloom_settings({"mode": self.bloom_mode, **controls}))  # drawn inside their ranges
 
-    def _grade(self, x: torch.Tensor, params: dict, applied):
-        """The graded image, or its planes while compiling (:func:`~torchgrade.grading.grade.color_grade_planes`)."""
-        return color_grade_planes(x, aces=self.aces, **{name: params[name] for name in self.grade_ranges})
+    def _grade(self, x: torch.Tensor, params: dict, planes: bool):
+        """The graded image, or its planes (:func:`~torchgrade.grading.grade.color_grade_planes`)."""
+        return color_grade_planes(x, aces=self.aces, planes=planes, **{name: params[name] for name in self.grade_ranges})
 
     def _tonemap(self, x: torch.Tensor, params: dict, applied) -> torch.Tensor:
         return tonemap_per_sample(x, params["tonemap"], self.tonemap)
@@ -328,24 +329,26 @@ class RandomPostFX(IntensityAugmentationBase2D):
         """Refuse 0..255 floats given as sRGB (kornia would clamp them to white). The batch's peak is read back
         without waiting for a GPU (:class:`~torchgrade.runtime.DeferredCheck`): there a batch out of range raises
         at a later call."""
-        check = self.__dict__.get("_range_check") or self.__dict__.setdefault("_range_check", DeferredCheck())
-        check({"peak": images.detach().amax()}, check_srgb_peak)
+        self._range_check({"peak": images.detach().amax()}, check_srgb_peak)
 
     def _graded(self, images: torch.Tensor, params: dict) -> torch.Tensor:
         """The batch graded by ``params``, with autocast off (:func:`~torchgrade.base.images.full_precision`): the
-        stages' maths keeps float32 or better whatever autocast a training loop runs, as each stage's call does.
-
-        Without bloom every slot is per-pixel, so the batch runs on strips of rows where the device's policy asks
-        (:func:`~torchgrade.runtime.in_strips`: on the CPU, eager, each strip's intermediates stay in cache)."""
+        stages' maths keeps float32 or better whatever autocast a training loop runs, as each stage's call does."""
         if self.is_identity or (self.p == 0 and not self.tonemap):
             return images
         if self.input_space == "srgb":
-            check_eagerly(self._check_display_range, images)
+            self._check_display_range(images)
         applied = params["batch_prob"].bool().reshape(-1, 1, 1, 1)
         with full_precision():
             if "bloom" in self.slots():
                 return self.transform(images, params, applied)
-            return in_strips(lambda part: self.transform(part, params, applied), images, tuple(params.values()))
+            return self._pixels(images, params, applied)
+
+    @pixelwise(planes=True)
+    def _pixels(self, images: torch.Tensor, params: dict, applied: torch.Tensor, *, planes: bool = False) -> torch.Tensor:
+        """:meth:`transform` of a batch whose every slot is per-pixel (no bloom), as the runtime runs a per-pixel module
+        (:func:`~torchgrade.runtime.strips.pixelwise`: strips of rows on the CPU, eager; planes where a compiler fuses)."""
+        return self.transform(images, params, applied, planes)
 
     def forward(self, x: torch.Tensor, generator: torch.Generator | None = None, params: dict | None = None,
                 **container_args) -> torch.Tensor:
@@ -425,6 +428,7 @@ class RandomPostFX(IntensityAugmentationBase2D):
     def __setstate__(self, state: dict) -> None:
         super().__setstate__(state)
         self._local = threading.local()
+        self._range_check = DeferredCheck()
         type(self).from_config(self.to_config())  # a saved layer is untrusted: its ranges are checked as construction checks them
 
     __repr__ = nn.Module.__repr__  # kornia's own repr lists only p and same_on_batch

@@ -1,5 +1,5 @@
-"""Images and their checks: shape and dtype, an alpha channel passed through, 8-bit pictures, the non-finite policy
-and the precision a stage computes in.
+"""Images and their checks: shape and dtype, an alpha channel passed through, the non-finite policy and the precision a
+stage computes in (floats that look like 8-bit pictures warn: :func:`~torchgrade.runtime.checks.warn_if_eight_bit`).
 
 * Images are float tensors ``(..., 3, H, W)`` (a stage also takes ``(..., 4, H, W)``, its alpha passed through:
   :func:`with_alpha`); anything else is a ``TypeError`` (dtype) or a ``ValueError`` (shape), with a message naming
@@ -14,16 +14,12 @@ and the precision a stage computes in.
 from __future__ import annotations
 
 import contextlib
-import warnings
 
 import torch
 
-from ..runtime.policy import readable
-from ..runtime.recording import is_exporting, is_tracing
 from ..runtime.strips import named_as
-from ..runtime.policy import one_thread
 
-__all__ = ["HALF_MAX", "NEGLIGIBLE_LIGHT", "check_image", "with_alpha", "warn_if_eight_bit", "check_on_cpu", "sanitize",
+__all__ = ["HALF_MAX", "NEGLIGIBLE_LIGHT", "check_image", "with_alpha", "check_on_cpu", "sanitize",
            "working_dtype", "to_input_dtype", "full_precision"]
 
 HALF_MAX = 65504.0
@@ -80,54 +76,13 @@ def with_alpha(function, image: torch.Tensor, *args, **kwargs) -> torch.Tensor:
         return torch.cat((function(colour, *args, **kwargs), alpha), dim=-3)
 
 
-EIGHT_BIT_ROWS = 8
-"""Rows :func:`warn_if_eight_bit` reads at most (at least half as many), evenly spaced, of the colour of the first image
-of a batch: whole rows, read in order (values spread over the frame would fetch a cache line each). Its cost against
-a copy of the frame: ``benchmarks/results/cpu_forms.md``, "8-bit check of a frame"."""
-
-
-EIGHT_BIT_LEVELS = 16
-"""Different whole numbers from which a sample reads as an 8-bit picture: a photograph's 8 rows hold far more (the
-sample pictures of the suite: every one above 60), a synthetic HDR frame of whole-number lamps on black a handful."""
-
-
-def warn_if_eight_bit(image: torch.Tensor) -> None:
-    """Warn when a linear ``image`` looks like 0..255 data: a sample of it holds whole numbers only, at least
-    :data:`EIGHT_BIT_LEVELS` different ones, none negative, the largest in (1, 255]. Such floats taken as light come out
-    nearly white; an HDR frame holds fractions, and a frame of a few whole levels (a test pattern of lamps of 8 and
-    60 on black) is no 8-bit picture. Only where the device's policy reads values (the CPU, :func:`readable`): on a
-    GPU the read would wait for the device at every frame.
-
-    Examples:
-        >>> import warnings
-        >>> with warnings.catch_warnings(record=True) as caught:
-        ...     warnings.simplefilter("always")
-        ...     warn_if_eight_bit(torch.arange(48.0).reshape(3, 4, 4) * 5)
-        >>> "divide by 255" in str(caught[0].message)
-        True
-    """
-    if not readable(image):
-        return
-    first = image.detach()[(0,) * (image.dim() - 3)][:3]  # colour, without an alpha
-    sample = first[:, :: max(1, first.shape[-2] // EIGHT_BIT_ROWS)]
-    with one_thread():  # tens of thousands of values: a parallel region's barrier would cost more on a loaded machine
-        low, high = torch.stack(sample.aminmax()).tolist()  # one read
-        eight_bit = (0.0 <= low < high and 1.0 < high <= 255.0 and torch.equal(sample, sample.round())
-                     and sample.unique().numel() >= EIGHT_BIT_LEVELS)  # counted only where the rest holds: almost never
-    if eight_bit:
-        warnings.warn(
-            f"the image looks like 0..255 data (whole numbers up to {high:g}), but stages take linear light: divide "
-            "by 255, and decode sRGB-encoded pictures (PNG, JPEG) with tg.color.srgb_to_linear or grade them with "
-            'RandomPostFX(input_space="srgb")', UserWarning, stacklevel=3)
-
-
 def sanitize(image: torch.Tensor, *, nan_free: bool = False) -> torch.Tensor:
     """Apply the non-finite policy: NaN -> 0, values bounded to [-65504, 65504] (so ±Inf -> ±65504).
 
-    ``clamp`` keeps NaN, so the clamped copy is then fixed in place: one new frame instead of two. ``nan_free``: the
-    caller knows ``image`` holds no NaN (a stage's output never does: ``tests/library/test_extremes.py``), so only the
-    bound is applied, without the NaN pass over the frame (a kernel, or ``IsNaN`` and ``Where`` in an exported graph).
-    A compiled graph keeps the pass whoever calls: Inductor fuses it into its neighbours.
+    NaN is found on the input itself, before the bound (OpenVINO's ``Clip`` turns NaN into its lower bound).
+    ``nan_free``: the caller knows ``image`` holds no NaN (a stage's output never does:
+    ``tests/library/test_extremes.py``), so only the bound is applied, without the NaN pass over the frame (a kernel,
+    or ``IsNaN`` and ``Where`` in an exported graph).
 
     Examples:
         >>> x = torch.tensor([float('nan'), float('inf'), -1.0])
@@ -136,15 +91,9 @@ def sanitize(image: torch.Tensor, *, nan_free: bool = False) -> torch.Tensor:
         >>> sanitize(x, nan_free=True).tolist()  # the caller's word is taken: only bounded
         [nan, 65504.0, -1.0]
     """
-    bounded = image.clamp(-HALF_MAX, HALF_MAX)
-    exporting = is_exporting()
-    if nan_free and (exporting or not is_tracing()):
-        return bounded
-    if not exporting:
-        return bounded.nan_to_num_(nan=0.0)
-    # NaN is found on the input itself: OpenVINO's Clip turns NaN into its lower bound (the clamped copy's NaN came
-    # out -65504 there); and nan_to_num would export a second Clip, to the dtype's range, a copy of the frame.
-    return torch.where(torch.isnan(image), 0.0, bounded)
+    if not nan_free:
+        image = image.nan_to_num(nan=0.0)
+    return image.clamp(-HALF_MAX, HALF_MAX)
 
 
 def check_on_cpu(transform, what: str) -> None:

@@ -5,14 +5,13 @@
 
 from __future__ import annotations
 
+import functools
 import numbers
 from typing import Union
 
 import torch
 
 from ..runtime.constants import constant, is_plain_number
-from ..runtime.policy import policy_for
-from ..runtime.recording import is_differentiated
 
 __all__ = ["Param", "scalar_param", "is_plain_number", "color_param", "matrix_param", "check_range", "check_choice", "is_constant"]
 
@@ -143,37 +142,44 @@ def check_choice(name: str, value, choices) -> None:
 
 
 def _flat(value) -> list:
-    """A number or nested sequence of numbers as a flat list of floats."""
-    return [float(item) for part in value for item in _flat(part)] if isinstance(value, (list, tuple)) else [float(value)]
+    """A number or nested sequence of numbers as a flat list of its numbers."""
+    return [item for part in value for item in _flat(part)] if isinstance(value, (list, tuple)) else [value]
 
 
 def is_constant(value, constant) -> bool:
-    """True when ``value`` is a plain (non-learnable) value equal to ``constant`` everywhere.
+    """True when ``value`` is a plain value (a number, or a sequence of numbers) equal to ``constant`` everywhere.
 
-    Learnable parameters (``requires_grad``) are never constant: they may move during training; nor are tensors
-    differentiated another way (:func:`~torchgrade.runtime.recording.is_differentiated`), tensors while ``torch.compile`` traces, or tensors off the
-    CPU (reading one back would wait for the device).
+    A tensor never is, nor a sequence holding one: learnable, per-sample or traced, its value may change, and reading
+    it back would wait for a device (a stage skips a step of a plain identity value, and computes a tensor's). Plain
+    values are compared in Python (a tensor made here would be traced while compiling), a sequence once for each pair
+    of values (a stage asks of each of its controls at every call).
 
     Examples:
-        >>> is_constant((0.5, 0.5, 0.5), 0.5), is_constant(torch.nn.Parameter(torch.tensor(0.5)), 0.5)
-        (True, False)
+        >>> is_constant((0.5, 0.5, 0.5), 0.5), is_constant(torch.tensor(0.5), 0.5), is_constant([[1, 0], [0, 1]], ((1, 0), (0, 1)))
+        (True, False, True)
     """
-    if isinstance(value, torch.Tensor) and (value.requires_grad or is_differentiated(value)):
+    if _is_number(value):
+        if _is_number(constant):
+            return value == constant
+    elif not isinstance(value, (list, tuple)):
         return False
-    if isinstance(value, (numbers.Real, list, tuple)):
-        # Plain values are compared in Python: a tensor made here would be traced while compiling (reading its
-        # value back is a graph break), and eager, a grade in strips asks a hundred times a frame.
-        try:
-            values, target = _flat(value), _flat(constant)
-        except (TypeError, ValueError):
-            return False
-        if len(values) == 1 or len(target) == 1:  # one number against many broadcasts
-            return all(v == t for v in values for t in target)
-        return values == target
-    if torch.compiler.is_compiling() or (isinstance(value, torch.Tensor) and not policy_for(value.device).reads_values):
-        return False  # a tensor's value is not read while compiling, nor off the CPU (a sync): its step is kept
     try:
-        value = torch.as_tensor(value, dtype=torch.float64, device="cpu")
-        return bool((value == torch.as_tensor(constant, dtype=torch.float64)).all())
-    except (TypeError, ValueError, RuntimeError):
+        return _equal_everywhere(value, constant)
+    except TypeError:  # a list: not hashable, compared as it is
+        return _equal_everywhere.__wrapped__(value, constant)
+
+
+def _is_number(value) -> bool:
+    """Whether ``value`` is a real number: a float or an int at once (``numbers.Real``'s check runs Python code)."""
+    return isinstance(value, (float, int)) or isinstance(value, numbers.Real)
+
+
+@functools.lru_cache(maxsize=256)
+def _equal_everywhere(value, constant) -> bool:
+    """:func:`is_constant` of plain values, one of them a sequence."""
+    values, target = _flat(value), _flat(constant)
+    if not all(isinstance(item, numbers.Real) for item in (*values, *target)):
         return False
+    if len(values) == 1 or len(target) == 1:  # one number against many broadcasts
+        return all(v == t for v in values for t in target)
+    return values == target

@@ -8,22 +8,22 @@ import math
 
 import torch
 
-from ..runtime.constants import constant, where
-from ..runtime.variants import formula
+from ..runtime.constants import constant
 from .images import HALF_MAX
 
-__all__ = ["apply_matrix", "matrix_on_planes", "rows_on_planes", "each_plane", "per_channel", "channel_max", "channel_min",
+__all__ = ["apply_matrix", "matrix_on_planes", "rows_on_planes", "rows_into", "each_plane", "per_channel", "channel_max", "channel_min",
            "like_image", "matrix_on", "joined", "matrix_product", "channel_sum", "bounded_pow"]
 
-@formula
 def apply_matrix(matrix: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
     """``out[..., i, h, w] = sum_j matrix[..., i, j] * image[..., j, h, w]`` for (3,3) or (B,3,3) matrices.
 
-    Three per-channel multiply-adds (a product and two ``addcmul``), never a matrix product: a 3x3 ``einsum``
-    runs as a batched product with an inner dimension of 3, which oneDNN and MKL block poorly
+    Three per-channel multiply-adds (a product and two ``addcmul``, :func:`matrix_on_planes`), never a matrix product:
+    a 3x3 ``einsum`` runs as a batched product with an inner dimension of 3, which oneDNN and MKL block poorly
     (``benchmarks/results/cpu_forms.md``, "3x3 colour matrix, a strip"), on CUDA a matrix product is a library call
-    of its own that nothing fuses (``benchmarks/bench_gpu.py``'s ``forms`` times three forms on a GPU), and Inductor
-    fuses these into the steps around them. Computed in place where nothing records (:func:`untracked`).
+    of its own that nothing fuses (``benchmarks/bench_gpu.py``'s ``forms`` times three forms on a GPU), Inductor
+    fuses these into the steps around them, and exported they are products and sums, which OpenVINO keeps in float32
+    where its default bfloat16 inference runs a ``MatMul`` or an ``Einsum`` in bfloat16, coefficients and all
+    (``benchmarks/results/openvino_precision.md``, "Colour matrices").
 
     Examples:
         >>> swap = torch.tensor([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
@@ -33,47 +33,21 @@ def apply_matrix(matrix: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
     return matrix_on_planes(matrix, image.split(1, dim=-3))
 
 
-@apply_matrix.variant("export")
-def _apply_matrix_exported(matrix: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
-    """Three broadcast products summed, of slices: where OpenVINO's default inference precision is bfloat16 (CPUs
-    with bfloat16 units) it runs a ``MatMul`` or an ``Einsum`` in bfloat16, coefficients and all, and the products in
-    float32 (``benchmarks/results/openvino_precision.md``, "Colour matrices"); onnxruntime's CPU runs the one-node
-    forms faster (``benchmarks/results/onnx_ops.md``)."""
-    return matrix_on_planes(matrix, [image[..., j : j + 1, :, :] for j in range(3)])
-
-
-@formula
 def matrix_on_planes(matrix: torch.Tensor, planes) -> torch.Tensor:
     """:func:`apply_matrix` on an image given as its three planes ``(..., 1, H, W)``: ``sum_j matrix[..., :, j] planes[j]``.
 
-    A product and two ``addcmul`` (in place where nothing records), or, exported, three products summed (the form
-    every exported matrix takes). Forms that already hold an image's planes pass them here instead of joining them into
-    a frame that the matrix would only slice apart again (a concatenation is a pass over the frame).
+    A product and two ``addcmul`` (exported as three products and two sums, ``torchgrade.onnx.symbolics``). Forms
+    that already hold an image's planes pass them here instead of joining them into a frame that the matrix would only
+    slice apart again (a concatenation is a pass over the frame).
 
     Examples:
         >>> matrix_on_planes(torch.eye(3), torch.arange(3.0).reshape(3, 1, 1, 1).unbind()).flatten().tolist()
         [0.0, 1.0, 2.0]
     """
-    columns = matrix.mT[..., None, None].unbind(-4)
+    columns = [column[..., None, None] for column in matrix.unbind(-1)]  # (..., 3, 1, 1) each
     out = columns[0] * planes[0]
     for column, plane in zip(columns[1:], planes[1:]):
         out = torch.addcmul(out, column, plane)
-    return out
-
-
-@matrix_on_planes.variant("export")
-def _matrix_on_planes_exported(matrix: torch.Tensor, planes) -> torch.Tensor:
-    """Three products summed: the form every exported matrix takes."""
-    return sum(matrix[..., :, j, None, None] * plane for j, plane in enumerate(planes))
-
-
-@matrix_on_planes.variant("untracked")
-def _matrix_on_planes_in_place(matrix: torch.Tensor, planes) -> torch.Tensor:
-    """The two ``addcmul`` in place on the product."""
-    columns = matrix.mT[..., None, None].unbind(-4)
-    out = columns[0] * planes[0]
-    for column, plane in zip(columns[1:], planes[1:]):
-        out.addcmul_(column, plane)
     return out
 
 
@@ -81,7 +55,7 @@ def rows_on_planes(rows, planes) -> tuple:
     """A 3x3 matrix of plain numbers (``rows``, nested tuples as :func:`~torchgrade.runtime.values_of` gives) on an
     image's three planes, returned as three planes: ``out_i = sum_j rows[i][j] planes[j]``.
 
-    The form of a chain computed on planes (:attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`): every step
+    The form of a chain computed on planes (:func:`~torchgrade.runtime.strips.pixelwise`): every step
     loops over the pixels once, and the numbers are written into a compiled kernel.
 
     Examples:
@@ -93,9 +67,23 @@ def rows_on_planes(rows, planes) -> tuple:
     return tuple(row[0] * red + row[1] * green + row[2] * blue for row in rows)
 
 
+def rows_into(rows, planes, as_planes: bool):
+    """A 3x3 matrix of plain numbers (``rows``) on an image's three planes, returned as planes (``as_planes``:
+    :func:`rows_on_planes`, nine products by numbers that a compiler keeps in one loop) or as an image (a product and two
+    ``addcmul`` by a device constant, :func:`matrix_on_planes`: three operations eager instead of fourteen).
+
+    Examples:
+        >>> swap = ((0.0, 1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, 1.0))
+        >>> planes = torch.arange(3.0).reshape(3, 1, 1, 1).unbind()
+        >>> rows_into(swap, planes, as_planes=False).flatten().tolist(), [p.item() for p in rows_into(swap, planes, as_planes=True)]
+        ([1.0, 0.0, 2.0], [1.0, 0.0, 2.0])
+    """
+    return rows_on_planes(rows, planes) if as_planes else matrix_on_planes(constant(rows, planes[0]), planes)
+
+
 def each_plane(function, x):
     """``function`` of an image, or of each of its three planes given as a tuple
-    (:attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`), returned in the same form.
+    (:func:`~torchgrade.runtime.strips.pixelwise`), returned in the same form.
 
     Examples:
         >>> each_plane(torch.neg, (torch.tensor(1.0), torch.tensor(2.0), torch.tensor(3.0)))
@@ -106,7 +94,7 @@ def each_plane(function, x):
 
 def per_channel(function, x, *coefficients):
     """``function(image, *coefficients)`` of an image and per-channel coefficients ``(..., 3, 1, 1)``; of an image given
-    as its three planes (a tuple, :attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`), ``function`` of each plane
+    as its three planes (a tuple, :func:`~torchgrade.runtime.strips.pixelwise`), ``function`` of each plane
     and of its channel's coefficients ``(..., 1, 1, 1)``, returned as planes.
 
     Examples:
@@ -187,29 +175,20 @@ def joined(x) -> torch.Tensor:
     return torch.stack([plane.squeeze(-3) for plane in x], dim=-3) if isinstance(x, tuple) else x
 
 
-@formula
 def channel_sum(image: torch.Tensor, weights) -> torch.Tensor:
     """``sum_j weights[j] * image[..., j, :, :]`` as ``(..., 1, H, W)``, for three Python-number ``weights``.
 
-    Three passes over the planes (a product and two adds by a number, in place where nothing records): no weight
-    tensor to make or copy, and faster on the CPU than a product and a channel reduction
-    (``benchmarks/results/cpu_forms.md``, "channel sum by numbers, a strip").
+    Three passes over the planes (a product and two adds by a number): no weight tensor to make or copy, and faster on
+    the CPU than a product and a channel reduction (``benchmarks/results/cpu_forms.md``, "channel sum by numbers, a
+    strip"); exported as three products and two sums (a ``ReduceSum`` over channels costs onnxruntime's CPU several of
+    them, ``benchmarks/results/onnx_ops.md``).
 
     Examples:
         >>> channel_sum(torch.tensor([1.0, 2.0, 3.0]).reshape(3, 1, 1), (0.5, 0.25, 0.0)).flatten().tolist()
         [1.0]
     """
     red, green, blue = image if isinstance(image, tuple) else image.split(1, dim=-3)  # or its planes, as a tuple
-    # exported as three products and two sums (a ReduceSum over channels costs onnxruntime's CPU several of them,
-    # benchmarks/results/onnx_ops.md)
-    return red * weights[0] + green * weights[1] + blue * weights[2]
-
-
-@channel_sum.variant("untracked")
-def _channel_sum_in_place(image, weights) -> torch.Tensor:
-    """The two adds in place on the first product."""
-    red, green, blue = image if isinstance(image, tuple) else image.split(1, dim=-3)
-    return (red * weights[0]).add_(green, alpha=weights[1]).add_(blue, alpha=weights[2])
+    return torch.add(red * weights[0], green, alpha=weights[1]).add(blue, alpha=weights[2])
 
 
 def matrix_product(second: torch.Tensor, first: torch.Tensor) -> torch.Tensor:
@@ -225,32 +204,27 @@ def matrix_product(second: torch.Tensor, first: torch.Tensor) -> torch.Tensor:
 
 
 _LOG2_HALF_MAX = math.log2(HALF_MAX)
+_ABOVE_ONE = 1.0 + 2.0**-10
+"""A base this much above the bound's root has a power above the bound for every exponent in use (down to 1e-3)."""
 
 
-@formula
 def bounded_pow(x: torch.Tensor, exponent) -> torch.Tensor:
     """``max(x, 0) ** exponent`` for ``exponent >= 0``, bounded to ``HALF_MAX``, with finite gradients everywhere.
 
     A documented control may raise an HDR value to a large power (OpenColorIO's gamma 0.01 is a
-    power of 100, Unity's gamma trackball at its minimum a power of 1000): the result saturates at
-    the non-finite policy's bound instead of overflowing to Inf, where a gradient would be NaN.
-    Below the bound the value is ``x ** exponent`` exactly, down to the smallest normal number: a positive ``x`` below it
-    (a denormal) is taken as it, since the slope ``e x^(e-1)`` of a power below 1 overflows there (a linear contrast of
-    0.12, a power of 0.12, gave infinite gradients at 1e-45).
+    power of 100, Unity's gamma trackball at its minimum a power of 1000): the base is clamped just above the value
+    whose power is the non-finite policy's bound, ``2^(log2(65504) / exponent)``, and the power to that bound, so the
+    result saturates there (with no gradient, as the bound has none) instead of overflowing to Inf, where a gradient
+    would be NaN. Below the bound the value is ``x ** exponent``, down to the
+    smallest normal number: a positive ``x`` below it (a denormal) is taken as it, since the slope ``e x^(e-1)`` of a
+    power below 1 overflows there (a linear contrast of 0.12, a power of 0.12, gave infinite gradients at 1e-45); a
+    base of 0 or less gives 0. Clamps, a power and a product: no select, in eager, compiled or exported graphs.
 
     Examples:
         >>> bounded_pow(torch.tensor([-1.0, 0.0, 4.0, 1e3]), 2.0).tolist()
         [0.0, 0.0, 16.0, 65504.0]
     """
     exponent = torch.as_tensor(exponent, dtype=x.dtype, device=x.device)
-    limit = torch.exp2(_LOG2_HALF_MAX / exponent.detach())
-    inside = (x > 0) & (x < limit)
-    powered = where(inside, x.clamp_min(torch.finfo(x.dtype).tiny), 1.0) ** exponent
-    return torch.where(inside, powered, (x > 0).to(x.dtype) * HALF_MAX)
-
-
-@bounded_pow.variant("export")
-def _bounded_pow_exported(x: torch.Tensor, exponent) -> torch.Tensor:
-    """Without the gradient guard's two ``Where`` nodes (``benchmarks/results/onnx_ops.md``); the same values for
-    ``exponent > 0`` (at exponent 0, 1 where ``x <= 0``: both callers multiply by ``sign(x)``)."""
-    return (x.clamp_min(0.0) ** torch.as_tensor(exponent, dtype=x.dtype, device=x.device)).clamp_max(HALF_MAX)
+    beyond = torch.exp2(_LOG2_HALF_MAX / exponent.detach()) * _ABOVE_ONE  # its power is above the bound: clamped there
+    powered = x.clamp(constant(torch.finfo(x.dtype).tiny, x), beyond) ** exponent
+    return powered.clamp(max=HALF_MAX) * (x > 0)

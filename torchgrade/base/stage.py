@@ -10,6 +10,7 @@ from the same tables, so a range is written in exactly one place.
 
 Examples:
     >>> import torch
+    >>> from torchgrade.base.controls import Control
     >>> class Gain(Stage):
     ...     controls = {"gain": Control(1.0, (0.0, 10.0))}
     ...     def __init__(self, gain=1.0):
@@ -29,22 +30,18 @@ Examples:
 
 from __future__ import annotations
 
-import functools
-import inspect
 from typing import ClassVar
 
 import torch
 from torch import nn
 
 from .config import config_value
-from .controls import KINDS, Control, check_given, controls_signature, digit_count, in_state_check, plain  # noqa: F401 (their former path)
-from .controls import refuse_unknown
-from .images import check_image, full_precision, warn_if_eight_bit, with_alpha
+from .controls import digit_count, in_state_check, plain, refuse_unknown
+from .images import check_image, full_precision, with_alpha
 from .params import is_constant
-from ..runtime import DeferredCheck, in_strips
-from ..runtime.checks import check_eagerly
+from ..runtime.checks import DeferredCheck, warn_if_eight_bit
 
-__all__ = ["Stage", "on_nan_free"]
+__all__ = ["Stage"]
 
 
 class Stage(nn.Module):
@@ -79,8 +76,14 @@ class Stage(nn.Module):
     """True for stages whose output is display-referred (tone mappers): a LUT baked through one clamps to [0, 1]."""
 
     per_pixel: ClassVar[bool] = False
-    """True for stages whose every output pixel depends on its input pixel alone (grades, tone mappers, LUTs):
-    an ONNX export runs them on strips of rows (:mod:`torchgrade.onnx.strips`)."""
+    """True for stages whose every output pixel depends on its input pixel alone (grades, tone mappers, LUTs): their
+    ``forward`` is :func:`~torchgrade.runtime.strips.pixelwise`, and an ONNX export runs them on strips of rows
+    (:mod:`torchgrade.onnx.strips`)."""
+
+    takes_nan_free: ClassVar[bool] = True
+    """Every stage's ``forward`` takes ``nan_free=True`` from a caller that knows its image holds no NaN (a look, for each
+    stage after one that made a new frame), and then only bounds it (:func:`~torchgrade.base.images.sanitize`). A module
+    that is not a stage (an export form) says so with this attribute of its own."""
 
     always_in_config: ClassVar[tuple] = ()
     """Controls written by :meth:`to_config` even at their defaults (a stage's defining settings)."""
@@ -88,6 +91,7 @@ class Stage(nn.Module):
     def __init__(self):
         super().__init__()
         self._control_names: list[str] = []
+        self._deferred_check = DeferredCheck()
 
     # ------------------------------------------------------------------ the table
 
@@ -151,18 +155,12 @@ class Stage(nn.Module):
         """The controls as stored (numbers, tensors or parameters), by name."""
         return {name: getattr(self, name) for name in self._control_names}
 
-    def run_in_strips(self, function, image: torch.Tensor, **options) -> torch.Tensor:
-        """``function(image, **self.params(), **options)`` for a per-pixel stage, on strips of rows where the device's
-        execution policy asks (:func:`~torchgrade.runtime.in_strips`), whole when the stage is identity."""
-        params = self.params()
-        call = functools.partial(function, **params, **options)
-        return call(image) if self.is_identity else in_strips(call, image, params.values())
-
     # ------------------------------------------------------------------ checks at run time
 
     def __call__(self, image, *args, **kwargs):
         """Check the learnable controls and the whole image, then run ``forward`` with autocast off (see
-        :func:`~torchgrade.base.images.full_precision`) on its colour channels.
+        :func:`~torchgrade.base.images.full_precision`) on its colour channels (and ``nan_free``,
+        :attr:`takes_nan_free`).
 
         Every stage goes through here, so the range, precision and input policies hold for all of them without each
         ``forward`` repeating them:
@@ -171,21 +169,22 @@ class Stage(nn.Module):
           comes back unchanged, bit for bit, as OpenColorIO and compositors grade RGBA
           (:func:`~torchgrade.base.images.with_alpha`);
         * display-referred pictures are decoded first: ``tg.color.srgb_to_linear(png.float() / 255)``; floats that look
-          like 0..255 data warn (:func:`~torchgrade.base.images.warn_if_eight_bit`, on the CPU);
+          like 0..255 data warn (:func:`~torchgrade.runtime.checks.warn_if_eight_bit`, on the CPU);
         * errors name the caller's shape, not a strip's.
         """
-        check_eagerly(self.check_learnable)  # a recorded graph carries no checks
+        self.check_learnable()
         check_image(image, alpha=True)
-        warn_if_eight_bit(image)
+        if not kwargs.get("nan_free"):  # a frame a stage made is light, not 8-bit codes
+            warn_if_eight_bit(image)
         with full_precision():
             return with_alpha(super().__call__, image, *args, **kwargs)
 
     def check_learnable(self) -> None:
         """Raise ``ValueError`` naming a learnable control an optimiser moved outside its range (or to NaN).
 
-        Called before every ``forward`` (:meth:`__call__`); skipped while tracing or compiling (the graph carries no
-        checks). A value is checked once per change (an optimiser step changes it in place); on CUDA without waiting
-        for the device, so the error comes at a later forward (:class:`~torchgrade.runtime.DeferredCheck`).
+        Called before every ``forward`` (:meth:`__call__`); nothing while tracing or compiling (the graph carries no
+        checks). On CUDA without waiting for the device, so the error comes at a later forward
+        (:class:`~torchgrade.runtime.DeferredCheck`).
         """
         table = self.control_table()
         learnable = {name: value for name, value in self._parameters.items()
@@ -194,11 +193,9 @@ class Stage(nn.Module):
             self.deferred_check()(learnable, lambda name, value: table[name].check(name, value))
 
     def deferred_check(self) -> DeferredCheck:
-        """This stage's :class:`~torchgrade.runtime.DeferredCheck` of learnable values (made at its first use)."""
-        check = self.__dict__.get("_deferred_check")
-        if check is None:  # setdefault: threads making it at once share the one that lands first
-            check = self.__dict__.setdefault("_deferred_check", DeferredCheck())
-        return check
+        """This stage's :class:`~torchgrade.runtime.DeferredCheck` of learnable values (made with the stage, so that no
+        graph a compiler records makes one)."""
+        return self._deferred_check
 
     def __getstate__(self):
         """A saved or copied stage leaves its pending checks behind (they hold CUDA events)."""
@@ -234,6 +231,7 @@ class Stage(nn.Module):
 
     def __setstate__(self, state) -> None:
         super().__setstate__(state)
+        self._deferred_check = DeferredCheck()
         self.check_state()
 
     def _load_from_state_dict(self, state_dict, prefix, local_metadata, strict, missing_keys, unexpected_keys, error_msgs) -> None:
@@ -332,23 +330,3 @@ class Stage(nn.Module):
 
     def extra_repr(self) -> str:
         return ", ".join(f"{key}={value!r}" for key, value in self.to_config().items())
-
-
-def on_nan_free(module: nn.Module, image: torch.Tensor, *args) -> torch.Tensor:
-    """``module(image, *args)`` for an ``image`` that holds no NaN (the output of a stage, which never makes one:
-    ``tests/library/test_extremes.py``): a module whose ``forward`` takes ``nan_free`` is told so, and its non-finite
-    policy only bounds the image (:func:`~torchgrade.base.images.sanitize`); any other module is called as it is.
-
-    Examples:
-        >>> from torchgrade import ToneMap
-        >>> on_nan_free(ToneMap("reinhard"), torch.full((1, 3, 1, 1), 1.0)).flatten().tolist()
-        [0.5, 0.5, 0.5]
-    """
-    if _takes_nan_free(type(module)):
-        return module(image, *args, nan_free=True)
-    return module(image, *args)
-
-
-@functools.cache
-def _takes_nan_free(kind: type) -> bool:
-    return "nan_free" in inspect.signature(kind.forward).parameters

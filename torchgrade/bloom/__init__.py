@@ -43,9 +43,11 @@ Examples:
 """
 
 from .composite import BLOOM_MODES, COMPOSITES, Composite
-from .convolution import ConvolutionBloom, DirectConvolutionBloom, convolution_bloom, direct_convolve, fft_convolve
-from .layer import Bloom, CONTROLS, FixedDepthBloom, MAX_FRAME_SIDE, OPTION_DEFAULTS, UNITY_SETTINGS, bloom, bloom_settings, bloom_with_settings
+from .convolution import ConvolutionBloom, convolution_bloom, fft_convolve
+from .layer import Bloom, CONTROLS, FixedDepthBloom, MAX_FRAME_SIDE, bloom, bloom_settings, bloom_with_settings
 from .prefilter import bloom_threshold
 from .pyramid import active_levels, pyramid_depth
 
-__all__ = ["BLOOM_MODES", "Bloom", "COMPOSITES", "CONTROLS", "Composite", "ConvolutionBloom", "DirectConvolutionBloom", "FixedDepthBloom", "MAX_FRAME_SIDE", "OPTION_DEFAULTS", "UNITY_SETTINGS", "active_levels", "bloom", "bloom_settings", "bloom_threshold", "bloom_with_settings", "convolution_bloom", "direct_convolve", "fft_convolve", "pyramid_depth"]
+__all__ = ["BLOOM_MODES", "Bloom", "COMPOSITES", "CONTROLS", "Composite", "ConvolutionBloom", "FixedDepthBloom", "MAX_FRAME_SIDE",
+           "active_levels", "bloom", "bloom_settings", "bloom_threshold", "bloom_with_settings", "convolution_bloom",
+           "fft_convolve", "pyramid_depth"]

@@ -5,11 +5,12 @@ in the frame. Unity's 9-tap binomial blur of each level (:func:`pyramid_blur`), 
 
 from __future__ import annotations
 
+from typing import Sequence
+
 import torch
 import torch.nn.functional as F
 
-from ..runtime import device_cached, policy_for
-from ..runtime.variants import formula
+from ..runtime import device_cached
 
 __all__ = ["UNITY_BLUR_WEIGHTS", "BLUR_TAPS", "BLUR_SIGMA", "ANAMORPHIC_TAPS", "mirror_pad", "mirror_filter", "pyramid_blur",
            "anamorphic_sigma", "mirrored", "symmetric_filter", "sliced", "unity_blur"]
@@ -29,33 +30,23 @@ ANAMORPHIC_TAPS = 23
 """Taps of the stretched blur: radius 11 covers 3 sigma at the widest stretch (``2 * 1.69``)."""
 
 
-@formula
-def mirror_pad(light: torch.Tensor, radius) -> torch.Tensor:
+def mirror_pad(light: torch.Tensor, radius, any_size: bool = False) -> torch.Tensor:
     """Extend the frame by ``radius`` pixels (a number, or ``(rows, columns)``) on every side with its mirror image
     about the edge.
 
     Half-sample symmetric extension (``c b a | a b c | c b a``), periodic with period ``2 · side``
     so it repeats when the frame is narrower than ``radius``. A symmetric kernel applied to it is a
     symmetric, row-stochastic operator, hence also column-stochastic: every pixel keeps all of its
-    light inside the frame, and a uniform frame stays uniform. Written as index arithmetic on the
-    tensor's own sizes, so a traced graph (ONNX) keeps working at every frame size; where the device's
-    policy takes library kernels (one launch each) the two axes are one gather over the flattened plane.
+    light inside the frame, and a uniform frame stays uniform. ``any_size``: index arithmetic on the tensor's own
+    sizes, so a traced graph (ONNX) keeps working at every frame size (:func:`mirrored`).
 
     Examples:
         >>> mirror_pad(torch.tensor([[[[1.0, 2.0, 3.0]]]]), 2)[0, 0, 0]
         tensor([2., 1., 1., 2., 3., 3., 2.])
     """
     for axis, side_radius in zip((-2, -1), _radii(radius)):
-        light = mirrored(light, axis, side_radius)
+        light = mirrored(light, axis, side_radius, any_size)
     return light
-
-
-@mirror_pad.variant("kernels")
-def _mirror_pad_gathered(light: torch.Tensor, radius) -> torch.Tensor:
-    """Where the device's policy takes library kernels (one launch each): one gather over the flattened plane."""
-    radii, (height, width) = _radii(radius), light.shape[-2:]
-    index = _mirror_plane_index(height, width, *radii, light.device)
-    return light.flatten(-2).index_select(-1, index).unflatten(-1, (height + 2 * radii[0], width + 2 * radii[1]))
 
 
 def _radii(radius) -> tuple:
@@ -63,20 +54,22 @@ def _radii(radius) -> tuple:
     return (radius, radius) if isinstance(radius, int) else tuple(radius)
 
 
-@formula
-def mirrored(light: torch.Tensor, axis: int, radius: int) -> torch.Tensor:
+def mirrored(light: torch.Tensor, axis: int, radius: int, any_size: bool = False) -> torch.Tensor:
     """``light`` extended by ``radius`` pixels at both ends of ``axis`` (:func:`mirror_pad`): where the side is at least
-    ``radius`` (and sizes are not symbolic), its edge slices flipped and joined (faster on the CPU than a gather along
-    the last axis: ``benchmarks/results/cpu_forms.md``, "mirror padding of rows"); otherwise a gather of :func:`_mirror_index`."""
-    return light.index_select(axis, _mirror_index(light.shape[axis], radius, light.device))
+    ``radius``, its edge slices flipped and joined (faster on the CPU than a gather along the last axis:
+    ``benchmarks/results/cpu_forms.md``, "mirror padding of rows"); otherwise, or for a graph that serves frames of
+    ``any_size`` (where the side is not known), a gather of :func:`_mirror_index`.
 
-
-@mirrored.variant("sizes", when=lambda light, axis, radius: light.shape[axis] >= radius)
-def _mirrored_by_slices(light: torch.Tensor, axis: int, radius: int) -> torch.Tensor:
-    """A side of at least ``radius`` pixels: its edge slices flipped and joined."""
+    Examples:
+        >>> row = torch.tensor([[1.0, 2.0, 3.0]])
+        >>> mirrored(row, -1, 2).tolist() == mirrored(row, -1, 2, any_size=True).tolist() == [[2.0, 1.0, 1.0, 2.0, 3.0, 3.0, 2.0]]
+        True
+    """
+    side = light.shape[axis]
+    if any_size or side < radius:
+        return light.index_select(axis, _mirror_index(side, radius, light.device))
     if radius == 0:
         return light
-    side = light.shape[axis]
     edges = sliced(light, axis, slice(0, radius)).flip(axis), sliced(light, axis, slice(side - radius, side)).flip(axis)
     return torch.cat((edges[0], light, edges[1]), dim=axis)
 
@@ -88,28 +81,66 @@ def _mirror_index(side: int, radius: int, device: torch.device) -> torch.Tensor:
     return torch.where(position < side, position, 2 * side - 1 - position)
 
 
-@device_cached
-def _mirror_plane_index(height: int, width: int, row_radius: int, column_radius: int, device: torch.device) -> torch.Tensor:
-    """The source of each pixel of the extended plane in the flattened ``height x width`` plane (:func:`mirror_pad`)."""
-    rows, columns = _mirror_index(height, row_radius, device), _mirror_index(width, column_radius, device)
-    return (rows[:, None] * width + columns[None, :]).flatten()
-
-
-def mirror_filter(light: torch.Tensor, weights) -> torch.Tensor:
+def mirror_filter(light: torch.Tensor, weights: Sequence[float]) -> torch.Tensor:
     """``light`` filtered along both axes by the symmetric ``weights`` (numbers, normalised here) over the mirrored
-    frame: keeps a uniform frame uniform and every pixel's light in the frame.
+    frame (:func:`mirror_pad`): keeps a uniform frame uniform and every pixel's light in the frame.
 
-    Sums of shifted views (:func:`symmetric_filter`): on the CPU faster than ``kornia.filters.filter2d_separable``,
-    whose depthwise convolution oneDNN runs slowly (``benchmarks/results/cpu_forms.md``, "bloom blur").
+    A registered operator (``torch.ops.torchgrade.mirror_filter``) of two kernels. On the CPU, sums of shifted views
+    (:func:`symmetric_filter`), 12.5 times as fast as a separable convolution, which oneDNN runs slowly
+    (``benchmarks/results/cpu_forms.md``, "bloom blur"); on every other device (CUDA, ``meta``), the padding's gathers
+    and two convolutions, four launches where the views take one a tap. The operator is its own adjoint (a symmetric
+    kernel over the mirrored frame is a symmetric matrix), so its backward is the operator again.
 
     Examples:
         >>> mirror_filter(torch.tensor([[[[0.0, 4.0, 0.0]]]]), (1, 2, 1))
         tensor([[[[1., 2., 1.]]]])
     """
+    return torch.ops.torchgrade.mirror_filter(light, [float(w) for w in weights])
+
+
+def _mirror_filter_by_convolution(light: torch.Tensor, weights: Sequence[float]) -> torch.Tensor:
+    """:func:`mirror_filter` off the CPU: the padding's gathers, then the two axes' convolutions of each plane."""
+    radius, kernel = len(weights) // 2, _filter_kernel(tuple(weights), light.dtype, light.device)
+    padded = mirror_pad(light, radius, any_size=True)
+    planes = padded.reshape((-1, 1) + padded.shape[-2:])
+    filtered = F.conv2d(F.conv2d(planes, kernel.reshape(1, 1, 1, -1)), kernel.reshape(1, 1, -1, 1))
+    return filtered.reshape(light.shape)
+
+
+def _mirror_filter_by_shifts(light: torch.Tensor, weights: Sequence[float]) -> torch.Tensor:
+    """:func:`mirror_filter` on the CPU: sums of shifted views of the mirrored frame."""
     total = sum(weights)
     weights = tuple(w / total for w in weights)
     padded = mirror_pad(light, len(weights) // 2)
     return symmetric_filter(symmetric_filter(padded, weights, -1), weights, -2)
+
+
+def _keep_weights(ctx, inputs, output) -> None:
+    ctx.weights = inputs[1]
+
+
+def _mirror_filter_backward(ctx, gradient: torch.Tensor):
+    return torch.ops.torchgrade.mirror_filter(gradient, ctx.weights), None
+
+
+def _mirror_filter_batched(info, in_dims, light: torch.Tensor, weights):
+    """A batch of frames is more leading dimensions: the batched one moved first."""
+    return torch.ops.torchgrade.mirror_filter(light.movedim(in_dims[0], 0), weights), 0
+
+
+_OPERATORS = torch.library.Library("torchgrade", "FRAGMENT")
+_OPERATORS.define("mirror_filter(Tensor light, float[] weights) -> Tensor")
+_OPERATORS.impl("mirror_filter", _mirror_filter_by_convolution, "CompositeExplicitAutograd")
+_OPERATORS.impl("mirror_filter", _mirror_filter_by_shifts, "CPU")
+torch.library.register_fake("torchgrade::mirror_filter", lambda light, weights: torch.empty_like(light))
+torch.library.register_autograd("torchgrade::mirror_filter", _mirror_filter_backward, setup_context=_keep_weights)
+torch.library.register_vmap("torchgrade::mirror_filter", _mirror_filter_batched)
+
+
+@device_cached
+def _filter_kernel(weights: tuple, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
+    """``weights`` normalised to sum to 1, as a 1-D tensor made once a device and dtype."""
+    return torch.tensor(weights, dtype=torch.float64).div(sum(weights)).to(dtype=dtype, device=device)
 
 
 def symmetric_filter(padded: torch.Tensor, weights, axis: int) -> torch.Tensor:
@@ -131,13 +162,10 @@ def symmetric_filter(padded: torch.Tensor, weights, axis: int) -> torch.Tensor:
     return out
 
 
-def pyramid_blur(light: torch.Tensor, sigma=None) -> torch.Tensor:
+def pyramid_blur(light: torch.Tensor, sigma=None, any_size: bool = False) -> torch.Tensor:
     """The pyramid blur over the mirrored frame (so it keeps the light): Unity's 9 taps
-    (:data:`UNITY_BLUR_WEIGHTS`), or with ``sigma`` ``(N or 1, 2)`` as ``(sigma_y, sigma_x)`` a 23-tap stretched
-    Gaussian (kornia's kernel).
-
-    The 9 taps run as sums of shifted views on the CPU, and as convolutions with a kernel made once where the
-    device's policy takes library kernels, or while tracing (an ONNX ``Conv``).
+    (:data:`UNITY_BLUR_WEIGHTS`, :func:`unity_blur`), or with ``sigma`` ``(N or 1, 2)`` as ``(sigma_y, sigma_x)`` a
+    23-tap stretched Gaussian (kornia's kernel).
 
     Examples:
         >>> light = torch.zeros(1, 3, 6, 6); light[..., 0, 0] = 1.0
@@ -148,56 +176,34 @@ def pyramid_blur(light: torch.Tensor, sigma=None) -> torch.Tensor:
 
     if sigma is not None:  # kornia's gaussian_blur2d would read the sigmas back to check them: they are positive
         kernel_y, kernel_x = (kornia.filters.get_gaussian_kernel1d(ANAMORPHIC_TAPS, s.unsqueeze(-1)) for s in sigma.to(light).unbind(-1))
-        return kornia.filters.filter2d_separable(mirror_pad(light, ANAMORPHIC_TAPS // 2), kernel_x, kernel_y, padding="valid")
-    return unity_blur(light)
+        padded = mirror_pad(light, ANAMORPHIC_TAPS // 2, any_size)
+        return kornia.filters.filter2d_separable(padded, kernel_x, kernel_y, padding="valid")
+    return unity_blur(light, any_size)
 
 
-@formula
-def unity_blur(light: torch.Tensor) -> torch.Tensor:
-    """Unity's 9 taps (:data:`UNITY_BLUR_WEIGHTS`) over the mirrored frame, as kornia's separable filter (while a
-    graph is recorded: an ONNX ``Conv``; kornia picks its own form for a compiler).
+def unity_blur(light: torch.Tensor, any_size: bool = False) -> torch.Tensor:
+    """Unity's 9 taps (:data:`UNITY_BLUR_WEIGHTS`) over the mirrored frame, as sums of shifted views
+    (:func:`mirror_filter`: on the CPU 12.5 times as fast as ``kornia.filters.filter2d_separable``,
+    ``benchmarks/results/cpu_forms.md``, "bloom blur"; a compiler fuses them), or for a graph that serves frames of
+    ``any_size`` (an exported model), as kornia's separable filter: a ``Conv`` node an axis where the views would be a
+    slice, a product and a sum a tap.
 
     Examples:
-        >>> round(float(unity_blur(torch.ones(1, 1, 5, 5)).mean()), 6)
-        1.0
+        >>> round(float(unity_blur(torch.ones(1, 1, 5, 5)).mean()), 6), round(float(unity_blur(torch.ones(1, 1, 5, 5), any_size=True).mean()), 6)
+        (1.0, 1.0)
     """
+    if not any_size:
+        return mirror_filter(light, UNITY_BLUR_WEIGHTS)
     import kornia.filters
 
     kernel = _blur_kernel(light.device, light.dtype)
-    return kornia.filters.filter2d_separable(mirror_pad(light, BLUR_TAPS // 2), kernel, kernel, padding="valid")
-
-
-@unity_blur.variant("kernels")
-def _unity_blur_in_one_kernel(light: torch.Tensor) -> torch.Tensor:
-    """Where the device's policy takes library kernels: small planes (up to its ``one_kernel_blur_pixels``) in one 2D
-    convolution, larger ones as kornia's separable filter."""
-    limit = policy_for(light.device).one_kernel_blur_pixels
-    if limit is None or light.shape[-2] * light.shape[-1] > limit:
-        return unity_blur.formula.reference(light)
-    padded = mirror_pad(light, BLUR_TAPS // 2)
-    return F.conv2d(padded.reshape((-1, 1) + padded.shape[-2:]), _blur_kernel_2d(light.device, light.dtype)).reshape(light.shape)
-
-
-@unity_blur.variant("planes")
-@unity_blur.variant("host")
-def _unity_blur_by_shifts(light: torch.Tensor) -> torch.Tensor:
-    """On the CPU, eager: sums of shifted views (:func:`mirror_filter`). Compiling too, on every device: a convolution's
-    backend is chosen by its sizes (oneDNN from a batch of 16 on the CPU), and the compiled graph would keep that choice
-    as a guard on the batch, compiling again for a last, smaller batch; sums of views are one fused loop for any size."""
-    return mirror_filter(light, UNITY_BLUR_WEIGHTS)
+    return kornia.filters.filter2d_separable(mirror_pad(light, BLUR_TAPS // 2, any_size), kernel, kernel, padding="valid")
 
 
 @device_cached
 def _blur_kernel(device: torch.device, dtype: torch.dtype) -> torch.Tensor:
     """:data:`UNITY_BLUR_WEIGHTS` as kornia's ``(1, taps)`` kernel."""
     return torch.tensor([UNITY_BLUR_WEIGHTS], dtype=dtype, device=device)
-
-
-@device_cached
-def _blur_kernel_2d(device: torch.device, dtype: torch.dtype) -> torch.Tensor:
-    """:func:`_blur_kernel` times itself, ``(1, 1, taps, taps)``: the separable blur as one convolution's weight."""
-    kernel = _blur_kernel(device, dtype)
-    return (kernel.mT * kernel).reshape(1, 1, BLUR_TAPS, BLUR_TAPS)
 
 
 def anamorphic_sigma(ratio: torch.Tensor) -> torch.Tensor:

@@ -22,9 +22,9 @@ not simply summed, its level weight. A new mode is one blend function and one li
   mapping; here it blends where the stage runs); ``"replace"`` ``g``; ``"mix"``
   ``lerp(c, glow, intensity)`` (``intensity`` is Godot's ``glow_mix``, at most 1).
 
-Every blend is ``(image, glow, strength, fraction) -> output`` with ``glow = strength * glow`` at full
-resolution, ``strength`` the intensity (clamped to 1 in lerp modes) and ``fraction`` the prefilter's
-share of each half-resolution block's light. The linear blends write the output into ``glow`` (a fresh
+Every blend is ``(image, glow, strength, kept) -> output`` with ``glow = strength * glow`` at full
+resolution, ``strength`` the intensity (clamped to 1 in lerp modes) and ``kept`` (scattering) the share of each
+pixel's light that its half-resolution block did not pass to the pyramid. The linear blends write the output into ``glow`` (a fresh
 tensor): every new frame-sized buffer costs page faults, and on CPU that is a large part of bloom's time.
 """
 
@@ -34,8 +34,6 @@ from dataclasses import dataclass
 from typing import Callable, Optional
 
 import torch
-
-from .pyramid import expand
 
 __all__ = [
     "Composite", "COMPOSITES", "BLOOM_MODES", "LERP_MODES", "bevy_blend_factor", "scatter_weight", "bevy_weight",
@@ -48,11 +46,12 @@ class Composite:
     """One composite mode: its final ``blend``, its ``level_weight`` (None: levels summed) and whether
     ``intensity`` is a lerp weight (``lerp``, clamped to 1).
 
-    ``level_weight(param, levels, strength)`` returns ``k -> weight`` of level ``k`` joining the one
-    above, given ``param(name)`` (a control as a broadcastable tensor) and the number of levels taking
-    part (an int, or a 0-d tensor in the fixed-depth form). ``dark_is_identity``: a frame with no light
-    over the knee comes back unchanged, so eager mode skips the pyramid. ``zero_is_identity``: the blend
-    returns the image unchanged when ``strength`` (and so the glow) is 0.
+    ``blend(image, glow, strength, kept)`` takes ``kept``, the share of each pixel's light that stays in the image
+    (``1 - strength · fraction`` at full resolution, the fraction its block passed to the pyramid), where the mode
+    ``scatters`` (None otherwise). ``level_weight(param, levels, strength)`` returns ``k -> weight`` of level ``k``
+    joining the one above, given ``param(name)`` (a control as a broadcastable tensor) and the number of levels taking
+    part (an int, or a 0-d tensor in the fixed-depth form). ``zero_is_identity``: the blend returns the image
+    unchanged when ``strength`` (and so the glow) is 0.
 
     Examples:
         >>> COMPOSITES["mix"].lerp, COMPOSITES["additive"].level_weight is None
@@ -62,7 +61,7 @@ class Composite:
     blend: Callable
     level_weight: Optional[Callable] = None
     lerp: bool = False
-    dark_is_identity: bool = False
+    scatters: bool = False
     zero_is_identity: bool = True
 
 
@@ -109,7 +108,7 @@ def bevy_weight(param, levels, strength):
     return lambda k: bevy_blend_factor(k, max_mip, strength, boost, curvature, high_pass)
 
 
-def additive_blend(image, glow, strength, fraction):
+def additive_blend(image, glow, strength, kept):
     """``image + glow``.
 
     Examples:
@@ -119,19 +118,18 @@ def additive_blend(image, glow, strength, fraction):
     return glow.add_(image)
 
 
-def scattering_blend(image, glow, strength, fraction):
-    """``glow + image * (1 - strength * fraction)``: the light passed to the pyramid leaves the image.
+def scattering_blend(image, glow, strength, kept):
+    """``glow + image * kept``: the light passed to the pyramid leaves the image.
 
     Examples:
-        >>> scattering_blend(torch.ones(1, 1, 2, 2), torch.full((1, 1, 2, 2), 0.5), 1.0, torch.full((1, 1, 1, 1), 0.5))
+        >>> scattering_blend(torch.ones(1, 1, 2, 2), torch.full((1, 1, 2, 2), 0.5), 1.0, torch.full((1, 1, 2, 2), 0.5))
         tensor([[[[1., 1.],
                   [1., 1.]]]])
     """
-    kept = expand(1.0 - strength * fraction, image.shape[-2:])
     return glow.addcmul_(image, kept)
 
 
-def lerp_blend(image, glow, strength, fraction):
+def lerp_blend(image, glow, strength, kept):
     """``lerp(image, glow, strength)`` given ``strength * glow``: ``glow + image * (1 - strength)``.
 
     Examples:
@@ -141,7 +139,7 @@ def lerp_blend(image, glow, strength, fraction):
     return glow.addcmul_(image, 1.0 - strength)
 
 
-def screen_blend(image, glow, strength, fraction):
+def screen_blend(image, glow, strength, kept):
     """Godot's screen glow (white 1): ``c + g - c g`` with ``g`` clamped to [0, 1].
 
     Examples:
@@ -152,7 +150,7 @@ def screen_blend(image, glow, strength, fraction):
     return image + glow - image * glow
 
 
-def softlight_blend(image, glow, strength, fraction):
+def softlight_blend(image, glow, strength, kept):
     """Godot's soft-light glow: ``c + g (D(c) - c)``, ``g`` in [0, 1]; ``D`` a cubic to 0.25, then ``sqrt``; ``c > 1`` kept.
 
     Godot blends display values, never below 0; here a negative (out-of-gamut) ``c`` meets the cubic's tangent at 0,
@@ -170,7 +168,7 @@ def softlight_blend(image, glow, strength, fraction):
     return torch.where(image > 1.0, image, image + glow * (target - image))
 
 
-def replace_blend(image, glow, strength, fraction):
+def replace_blend(image, glow, strength, kept):
     """Godot's replace: the glow alone.
 
     Examples:
@@ -181,8 +179,8 @@ def replace_blend(image, glow, strength, fraction):
 
 
 COMPOSITES = {
-    "additive": Composite(additive_blend, dark_is_identity=True),
-    "scattering": Composite(scattering_blend, scatter_weight, lerp=True),
+    "additive": Composite(additive_blend),
+    "scattering": Composite(scattering_blend, scatter_weight, lerp=True, scatters=True),
     "energy_conserving": Composite(lerp_blend, bevy_weight, lerp=True),
     "screen": Composite(screen_blend),
     "softlight": Composite(softlight_blend),

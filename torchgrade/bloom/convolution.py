@@ -101,9 +101,11 @@ def convolution_bloom(
     return _convolved(image, kernel, threshold, knee, intensity, fft_convolve)
 
 
-def _convolved(image, kernel, threshold, knee, intensity, convolve, *, nan_free: bool = False) -> torch.Tensor:
+def _convolved(image, kernel, threshold, knee, intensity, convolve, *, nan_free: bool = False,
+               any_size: bool = False) -> torch.Tensor:
     """:func:`convolution_bloom` on checked arguments, convolving with ``convolve``; ``nan_free``: ``image`` holds no
-    NaN (:func:`~torchgrade.base.images.sanitize`)."""
+    NaN (:func:`~torchgrade.base.images.sanitize`); ``any_size``: the mirror's general form, for a graph that serves
+    frames of any size (:func:`~torchgrade.bloom.blur.mirror_pad`)."""
     if is_constant(intensity, 0.0):
         return image
     height, width = image.shape[-2:]
@@ -114,7 +116,7 @@ def _convolved(image, kernel, threshold, knee, intensity, convolve, *, nan_free:
     )
     kernel = kernel.to(scene.dtype)
     radius = (kernel.shape[-2] // 2, kernel.shape[-1] // 2)
-    extended = mirror_pad(scene * threshold_fraction(scene, threshold, knee), radius)
+    extended = mirror_pad(scene * threshold_fraction(scene, threshold, knee), radius, any_size)
     glow = convolve(extended, kernel / kernel.sum(dim=(-2, -1), keepdim=True))
     glow = glow.narrow(-2, radius[0], height).narrow(-1, radius[1], width)
     return to_input_dtype((scene + intensity * glow).reshape(image.shape), image)
@@ -171,7 +173,8 @@ class ConvolutionBloom(Stage):
 
 
 class DirectConvolutionBloom(nn.Module):
-    """:class:`ConvolutionBloom` convolving directly (:func:`direct_convolve`): the same result in ONNX's operators.
+    """:class:`ConvolutionBloom` convolving directly (:func:`direct_convolve`): the same result in ONNX's operators, its
+    mirror in the form of any frame size (one exported graph serves every size).
 
     Examples:
         >>> stage = ConvolutionBloom(torch.rand(3, 5, 5) + 0.1, threshold=0.5)
@@ -180,6 +183,8 @@ class DirectConvolutionBloom(nn.Module):
         True
     """
 
+    takes_nan_free = True  # as the stage (Stage.takes_nan_free)
+
     def __init__(self, stage: ConvolutionBloom):
         super().__init__()
         self.stage = stage
@@ -187,4 +192,5 @@ class DirectConvolutionBloom(nn.Module):
     def forward(self, image: torch.Tensor, *, nan_free: bool = False) -> torch.Tensor:
         check_image(image)
         stage = self.stage
-        return _convolved(image, stage.kernel, stage.threshold, stage.knee, stage.intensity, direct_convolve, nan_free=nan_free)
+        return _convolved(image, stage.kernel, stage.threshold, stage.knee, stage.intensity, direct_convolve, nan_free=nan_free,
+                          any_size=True)

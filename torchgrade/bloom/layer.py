@@ -39,12 +39,10 @@ from ..base.controls import Control, controls_signature
 from ..base.stage import Stage
 from ..color import srgb_to_linear
 from ..runtime import constant
-from ..runtime.checks import check_eagerly
-from ..runtime.policy import readable
 from .composite import BLOOM_MODES, COMPOSITES
 from .prefilter import prefilter
 from .blur import anamorphic_sigma
-from .pyramid import active_levels, glow_pyramid, pyramid_depth, upsample
+from .pyramid import active_levels, expand, glow_pyramid, pyramid_depth, upsample
 from .texture import as_texture, check_texture, resampled
 
 __all__ = ["CONTROLS", "UNITY_SETTINGS", "OPTION_DEFAULTS", "MAX_FRAME_SIDE", "check_settings", "bloom_settings", "bloom", "bloom_with_settings", "Bloom",
@@ -86,17 +84,21 @@ OPTION_DEFAULTS = {name: control.default for name, control in CONTROLS.items() i
 
 
 def check_settings(settings: dict) -> None:
-    """Raise ``ValueError`` naming the first setting outside its :data:`CONTROLS` entry (as :class:`Bloom` does).
+    """Raise ``ValueError`` naming the first setting outside its :data:`CONTROLS` entry (as :class:`Bloom` does). A
+    tensor's values are not read (on a GPU each read would wait for the device): a stage checks its own when they are
+    set, and its learnable ones before every forward.
 
     Examples:
         >>> check_settings({"scatter": 0.99})
         Traceback (most recent call last):
         ...
         ValueError: scatter must lie in [0.05, 0.95], got 0.99
+        >>> check_settings({"scatter": torch.tensor(0.99)})  # not read
     """
     for name, value in settings.items():
-        CONTROLS[name].check(name, value)
-    check_texture(settings.get("dirt"), "dirt")
+        if not isinstance(value, torch.Tensor):
+            CONTROLS[name].check(name, value)
+    check_texture(settings.get("dirt"), "dirt", values=False)
 
 
 def bloom_settings(given: dict) -> dict:
@@ -146,13 +148,14 @@ def bloom(image: torch.Tensor, *, fixed_depth: int = None, **settings) -> torch.
     ``fixed_depth``: build that many pyramid levels whatever the frame size and mask out, with tensor
     arithmetic on the runtime shape (:func:`~torchgrade.bloom.active_levels`), the levels this frame
     does not have. The result equals the default path for every frame whose own depth is at most
-    ``fixed_depth``; it is the form a traced (ONNX) graph uses, so one graph serves every resolution.
+    ``fixed_depth``; it is the form a traced (ONNX) graph uses, so one graph serves every resolution: its steps take
+    the forms of any size (:mod:`~torchgrade.bloom.pyramid`).
 
     Identity cases return the input object untouched: ``intensity`` a plain 0 (in every mode,
     ``replace`` included), or a pyramid of depth 0 (a side of the quarter-resolution level below
     ``downscale_limit``, or ``max_iterations == 0``). In additive mode, when no block reaches the
-    knee, the output equals the sanitized input exactly (in eager mode on the CPU the pyramid is
-    then skipped; elsewhere reading that back would wait for the device). Options at their defaults (white tint, clamp 65504, ratio 0, dirt intensity 0) are not computed.
+    knee, the output equals the sanitized input exactly. Options at their defaults (white tint, clamp 65504, ratio 0,
+    dirt intensity 0) are not computed.
 
     Examples:
         >>> image = torch.zeros(1, 3, 16, 16); image[..., 8, 8] = 100.0
@@ -162,7 +165,7 @@ def bloom(image: torch.Tensor, *, fixed_depth: int = None, **settings) -> torch.
     """
     check_image(image)
     settings = bloom_settings(settings)
-    check_eagerly(check_settings, settings)
+    check_settings(settings)
     return bloom_with_settings(image, settings, fixed_depth)
 
 
@@ -194,21 +197,19 @@ def bloom_with_settings(image: torch.Tensor, settings: dict, fixed_depth=None, *
     def number_or_param(name):  # a number folds into terms made once (runtime.folded)
         return settings[name] if is_plain_number(settings[name]) else param(name)
 
+    any_size = fixed_depth is not None
     bound = None if is_constant(settings["clamp"], HALF_MAX) else param("clamp")
-    light, fraction = prefilter(
-        scene, number_or_param("threshold"), number_or_param("knee"), settings["fade_fireflies"], settings["karis_average"], bound
-    )
-    if COMPOSITES[settings["mode"]].dark_is_identity and readable(light) and not bool(light.any()):
-        out = scene
-    else:
-        out = _composited(scene, light, fraction, settings, param, depth, active, masked=fixed_depth is not None)
-    if fixed_depth is not None and not COMPOSITES[settings["mode"]].zero_is_identity:
+    light, fraction = prefilter(scene, number_or_param("threshold"), number_or_param("knee"), settings["fade_fireflies"],
+                                settings["karis_average"], bound, any_size)
+    out = _composited(scene, light, fraction, settings, param, depth, active, any_size)
+    if any_size and not COMPOSITES[settings["mode"]].zero_is_identity:
         out = torch.where(active > 0, out, scene)  # a frame too small for any level is not bloomed
     return to_input_dtype(out.reshape(image.shape), image)
 
 
-def _composited(scene, light, fraction, settings: dict, param, depth: int, active, masked: bool) -> torch.Tensor:
-    """The glow of the prefiltered ``light`` at full resolution (tint, lens dirt) blended into ``scene`` by the mode."""
+def _composited(scene, light, fraction, settings: dict, param, depth: int, active, any_size: bool) -> torch.Tensor:
+    """The glow of the prefiltered ``light`` at full resolution (tint, lens dirt) blended into ``scene`` by the mode;
+    ``any_size``: the fixed-depth form, its levels masked by ``active`` (:func:`bloom`)."""
     composite = COMPOSITES[settings["mode"]]
     bicubic = settings["bicubic_upsampling"]
     strength = param("intensity")
@@ -217,19 +218,20 @@ def _composited(scene, light, fraction, settings: dict, param, depth: int, activ
         strength = constant(min(float(number), 1.0), strength) if is_plain_number(number) else strength.clamp(max=1.0)
     sigma = None if is_constant(settings["anamorphic_ratio"], 0.0) else anamorphic_sigma(param("anamorphic_ratio"))
     weight = None if composite.level_weight is None else composite.level_weight(param, active, strength)
-    glow = glow_pyramid(light, depth, weight, bicubic, sigma, active if masked else None)
-    if masked:
+    glow = glow_pyramid(light, depth, weight, bicubic, sigma, active if any_size else None, any_size)
+    if any_size:
         # A frame too small for any level is not bloomed: intensity 0 leaves it as it is in every mode whose
         # ``zero_is_identity`` holds, for the cost of a scalar product instead of a frame-sized select.
         strength = strength * (active > 0)
-    glow = upsample(strength * glow, [light.shape[-2:], scene.shape[-2:]], bicubic)
+    glow = upsample(strength * glow, [light.shape[-2:], scene.shape[-2:]], bicubic, any_size)
     if not is_constant(settings["tint"], 1.0):
         glow = glow * srgb_to_linear(param("tint"))
     lens = None
     if settings["dirt"] is not None and not is_constant(settings["dirt_intensity"], 0.0):
         lens = param("dirt_intensity") * resampled(settings["dirt"], scene.shape[-2:], scene) * glow
         glow = glow.clone()  # the lens term keeps the glow for its gradient; the blend overwrites it
-    out = composite.blend(scene, glow, strength, fraction)
+    kept = expand(1.0 - strength * fraction, scene.shape[-2:], any_size) if composite.scatters else None
+    out = composite.blend(scene, glow, strength, kept)
     return out if lens is None else out + lens
 
 
@@ -310,6 +312,8 @@ class FixedDepthBloom(nn.Module):
         >>> bool(torch.allclose(FixedDepthBloom(stage)(image), stage(image), atol=1e-6))
         True
     """
+
+    takes_nan_free = True  # as the stage (Stage.takes_nan_free)
 
     def __init__(self, stage: Bloom):
         super().__init__()

@@ -99,7 +99,7 @@ def cross_sum(values: torch.Tensor) -> torch.Tensor:
     return values + (beside[..., :-2, :] + beside[..., 2:, :])
 
 
-def karis_mean(image: torch.Tensor, means: torch.Tensor) -> torch.Tensor:
+def karis_mean(image: torch.Tensor, means: torch.Tensor, any_size: bool = False) -> torch.Tensor:
     """Karis' average of each 2x2 block: ``sum(w p) / sum(w)``, ``w = 1 / (1 + Y(p))``, capped at ``means``.
 
     ``Y`` is Rec.709 luminance clamped at 0 (Karis 2013, "Real Shading in Unreal Engine 4"). The
@@ -112,7 +112,7 @@ def karis_mean(image: torch.Tensor, means: torch.Tensor) -> torch.Tensor:
         tensor([0.2903, 0.2903, 0.2903])
     """
     weight = 1.0 / (1.0 + luminance(image).clamp_min(0.0))
-    return torch.minimum(halve(image * weight) / halve(weight), means)
+    return torch.minimum(halve(image * weight, any_size) / halve(weight, any_size), means)
 
 
 def _source_share(source: torch.Tensor, means: torch.Tensor) -> torch.Tensor:
@@ -130,9 +130,10 @@ def _source_share(source: torch.Tensor, means: torch.Tensor) -> torch.Tensor:
     return where(means < NEGLIGIBLE_LIGHT, 1.0, source / means.clamp_min(NEGLIGIBLE_LIGHT))
 
 
-def prefilter(image: torch.Tensor, threshold, knee, fade_fireflies: bool, karis_average: bool = False, clamp=None):
-    """Half-resolution light entering the pyramid (means, :func:`~torchgrade.bloom.pyramid.halve`), and the fraction
-    of each block's light it took.
+def prefilter(image: torch.Tensor, threshold, knee, fade_fireflies: bool, karis_average: bool = False, clamp=None,
+              any_size: bool = False):
+    """Half-resolution light entering the pyramid (means, :func:`~torchgrade.bloom.pyramid.halve`; ``any_size`` as
+    its), and the fraction of each block's light it took.
 
     Each block's source is its mean, or its :func:`karis_mean`, then at most ``clamp``; the block
     passes on ``c = T(source)`` and so ``r * source / mean`` of its light. With fireflies (Unity
@@ -148,8 +149,8 @@ def prefilter(image: torch.Tensor, threshold, knee, fade_fireflies: bool, karis_
         >>> light.shape, round(float(light.mean()), 4), round(float(fraction.mean()), 4)
         (torch.Size([1, 3, 2, 2]), 3.0, 0.75)
     """
-    means = halve(image)
-    source = karis_mean(image, means) if karis_average else means
+    means = halve(image, any_size)
+    source = karis_mean(image, means, any_size) if karis_average else means
     if clamp is not None:
         source = torch.minimum(source, clamp)
     fraction = threshold_fraction(source, threshold, knee)

@@ -20,8 +20,11 @@ area of the frame, so a level's light is its sum times that area, and every step
   / 8`` for 4x. At even sides that is exactly bilinear sampling with ``align_corners=False`` and clamped edges
   (Unity's ``sampler_linear_clamp``); at every side both steps keep a uniform frame uniform and the light sum.
 
-Sizes come from tensor shapes, so a traced graph keeps working at every frame size, except
-:func:`pyramid_depth` (Python ints, as in kornia's pyramid functions).
+Where sizes halve exactly (even sides) and double back, each step takes the forms of those sizes: four strided views
+for a halving, a nearest or bilinear ``F.interpolate`` for an expansion or an upsampling, edge slices for a mirror.
+A graph that serves frames of ``any_size`` (an exported model, traced at one size) takes the general forms, whose
+sizes come from tensor shapes, so it keeps working at every frame size, except :func:`pyramid_depth` (Python ints, as
+in kornia's pyramid functions).
 """
 
 from __future__ import annotations
@@ -29,16 +32,10 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
-from ..runtime import device_cached, policy_for
-from ..runtime.variants import formula
-from .blur import ANAMORPHIC_TAPS, BLUR_SIGMA, BLUR_TAPS, UNITY_BLUR_WEIGHTS, anamorphic_sigma, mirror_pad  # noqa: F401 (their former path)
+from ..runtime import device_cached
 from .blur import mirror_filter, mirrored, pyramid_blur, sliced, symmetric_filter
 
-__all__ = [
-    "UNITY_BLUR_WEIGHTS", "BLUR_TAPS", "BLUR_SIGMA", "ANAMORPHIC_TAPS", "SMOOTHING", "BSPLINE_AFTER_BILINEAR",
-    "pyramid_depth", "active_levels", "halve", "expand", "mirror_pad", "mirror_filter", "pyramid_blur",
-    "anamorphic_sigma", "upsample", "glow_pyramid",
-]
+__all__ = ["SMOOTHING", "BSPLINE_AFTER_BILINEAR", "pyramid_depth", "active_levels", "halve", "expand", "upsample", "glow_pyramid"]
 
 
 SMOOTHING = {2: (1 / 4, 2 / 4, 1 / 4), 4: (1 / 8, 2 / 8, 2 / 8, 2 / 8, 1 / 8)}
@@ -81,11 +78,9 @@ def pyramid_depth(height: int, width: int, max_iterations: int, downscale_limit:
     return depth
 
 
-@formula
 def active_levels(image: torch.Tensor, max_iterations: int, downscale_limit: int) -> torch.Tensor:
-    """:func:`pyramid_depth` as a 0-d tensor: while tracing, computed from ``image``'s runtime shape (an exported
-    graph keeps it symbolic); otherwise made once per frame size on ``image``'s device, so that the selects it drives
-    copy nothing from the host (``torch.where`` copies a CPU condition to the device at every call).
+    """:func:`pyramid_depth` as a 0-d tensor on ``image``'s device, computed from its sizes as tensors (a traced graph
+    keeps them symbolic: an exported model counts the levels of each frame it is given).
 
     Level ``n`` counts when ``floor(side / 2^(n+1)) >= downscale_limit`` for both sides, that is when
     ``min(height, width) >= downscale_limit · 2^(n+1)``.
@@ -94,36 +89,24 @@ def active_levels(image: torch.Tensor, max_iterations: int, downscale_limit: int
         >>> int(active_levels(torch.zeros(1, 3, 1080, 1920), 16, 2))
         8
     """
-    return _levels_on(*image.shape[-2:], max_iterations, downscale_limit, image.device)
-
-
-@active_levels.variant("graph")
-def _active_levels_traced(image: torch.Tensor, max_iterations: int, downscale_limit: int) -> torch.Tensor:
-    """From the image's shape as a tensor, so that a traced graph keeps it symbolic."""
-    smaller_side = torch._shape_as_tensor(image)[-2:].min()
-    thresholds = downscale_limit * 2 ** torch.arange(2, max_iterations + 2)
-    return (smaller_side >= thresholds).sum()
-
-
-@device_cached
-def _levels_on(height: int, width: int, max_iterations: int, downscale_limit: int, device: torch.device) -> torch.Tensor:
-    return torch.tensor(pyramid_depth(height, width, max_iterations, downscale_limit), device=device)
+    height, width = (torch.as_tensor(side, device=image.device) for side in image.shape[-2:])
+    thresholds = downscale_limit * 2 ** torch.arange(2, max_iterations + 2, device=image.device)
+    return (torch.minimum(height, width) >= thresholds).sum()
 
 
 def _doubles(small, large) -> bool:
     """Whether every side of ``large`` is exactly twice that of ``small``: the case bilinear resampling by 2 is."""
-    return all(2 * s == l for s, l in zip(small, large))
+    return all(2 * s == big for s, big in zip(small, large))
 
 
-@formula
-def halve(light: torch.Tensor) -> torch.Tensor:
+def halve(light: torch.Tensor, any_size: bool = False) -> torch.Tensor:
     """Exact area means on sides of ``ceil(side / 2)`` pixels spanning the frame (the module's first rule).
 
     Pixel ``i`` of ``m = ceil(n / 2)`` is ``(m / n) (a_i x_{2i-1} + x_{2i} + b_i x_{2i+1})`` with ``a_i = i d / m``,
     ``b_i = 1 - (i + 1) d / m`` and ``d = 2 m - n`` (1 at an odd side, where the ``m`` pixels share the ``n``; 0 at an
-    even one, the 2x2 mean). Even sides (unless traced for ONNX, where sizes are symbolic) take the mean of four
-    strided views (on the CPU faster than ``F.avg_pool2d``: ``benchmarks/results/cpu_forms.md``, "bloom halving"), or ``F.avg_pool2d`` where the device's
-    policy takes library kernels; other sides go a side at a time (:func:`_along_sides`).
+    even one, the 2x2 mean). Even sides take the mean of four strided views (on the CPU 4.3 times as fast as
+    ``F.avg_pool2d``: ``benchmarks/results/cpu_forms.md``, "bloom halving"; a compiler fuses them); other sides, and a
+    graph that serves frames of ``any_size``, go a side at a time (:func:`_halve_along`).
 
     Examples:
         >>> halve(torch.tensor([[[[1.0, 2.0, 3.0, 4.0]]]]))
@@ -131,22 +114,8 @@ def halve(light: torch.Tensor) -> torch.Tensor:
         >>> halve(torch.tensor([[[[3.0, 0.0, 3.0]]]]))  # each half takes 1.5 pixels: (3 + 0.5 * 0) / 1.5
         tensor([[[[2., 2.]]]])
     """
-    return _along_sides(light, _halve_along, ((), ()))
-
-
-def _even_sides(light: torch.Tensor) -> bool:
-    return light.shape[-2] % 2 == 0 and light.shape[-1] % 2 == 0
-
-
-@halve.variant("kernels", when=_even_sides)
-def _halve_pooled(light: torch.Tensor) -> torch.Tensor:
-    """Even sides where the device's policy takes library kernels: ``F.avg_pool2d``, one launch."""
-    return F.avg_pool2d(light, 2)
-
-
-@halve.variant("sizes", when=_even_sides)
-def _halve_strided(light: torch.Tensor) -> torch.Tensor:
-    """Even sides: the mean of four strided views (see :func:`halve`)."""
+    if any_size or light.shape[-2] % 2 or light.shape[-1] % 2:
+        return _halve_along(_halve_along(light, -2), -1)
     return 0.25 * (light[..., ::2, ::2] + light[..., 1::2, ::2] + light[..., ::2, 1::2] + light[..., 1::2, 1::2])
 
 
@@ -172,25 +141,21 @@ def _halving_weight(side: int, dtype: torch.dtype, device: torch.device) -> torc
     return torch.stack((before, torch.ones_like(before), after), dim=-1) * (half / side)
 
 
-@formula
-def expand(values: torch.Tensor, size) -> torch.Tensor:
+def expand(values: torch.Tensor, size, any_size: bool = False) -> torch.Tensor:
     """Each pixel of the ``size`` level (sides ``n``) given the pixels of the halved level it overlaps (sides
     ``ceil(n / 2)``), weighted by overlap: the adjoint of :func:`halve`'s area mean, so ``sum`` times area is kept.
 
     Pixel ``2i`` takes coarse pixel ``i``; pixel ``2i + 1`` takes ``b_i`` of ``i`` and ``1 - b_i`` of ``i + 1``
-    (:func:`halve`'s shares). At even sides this is nearest-neighbour upsampling.
+    (:func:`halve`'s shares). Where the sides double exactly (unless for a graph of ``any_size``) this is
+    nearest-neighbour upsampling, one ``F.interpolate``.
 
     Examples:
         >>> expand(torch.tensor([[[[1.0, 2.0]]]]), (1, 3))  # the middle pixel lies half in each
         tensor([[[[1.0000, 1.5000, 2.0000]]]])
     """
-    return _along_sides(values, _expand_along, ((size[0],), (size[1],)))
-
-
-@expand.variant("sizes", when=lambda values, size: _doubles(values.shape[-2:], size))
-def _expand_doubled(values: torch.Tensor, size) -> torch.Tensor:
-    """Sides exactly doubled: nearest-neighbour upsampling."""
-    return F.interpolate(values, scale_factor=2.0, mode="nearest")
+    if not any_size and _doubles(values.shape[-2:], size):
+        return F.interpolate(values, scale_factor=2.0, mode="nearest")
+    return _expand_along(_expand_along(values, -2, size[0]), -1, size[1])
 
 
 def _expand_along(values: torch.Tensor, axis: int, side: int) -> torch.Tensor:
@@ -209,46 +174,20 @@ def _expanding_share(half: int, side: int, dtype: torch.dtype, device: torch.dev
     return torch.arange(1, half + 1, dtype=dtype, device=device) * (2 * half - side) / half
 
 
-def _smooth_along(light: torch.Tensor, axis: int, weights: tuple) -> torch.Tensor:
+def _smooth_along(light: torch.Tensor, axis: int, weights: tuple, any_size: bool) -> torch.Tensor:
     """``light`` filtered along ``axis`` by the symmetric ``weights`` (numbers summing to 1) over the mirrored side
-    (:func:`mirror_pad`, :func:`symmetric_filter`)."""
-    return symmetric_filter(mirrored(light, axis, len(weights) // 2), weights, axis)
+    (:func:`~torchgrade.bloom.blur.mirror_pad`, :func:`~torchgrade.bloom.blur.symmetric_filter`)."""
+    return symmetric_filter(mirrored(light, axis, len(weights) // 2, any_size), weights, axis)
 
 
-def _along_sides(light: torch.Tensor, step, arguments) -> torch.Tensor:
-    """``step(light, axis, *arguments[k])`` along the rows (``axis=-2``) and then the columns (``-1``).
-
-    Each step is linear along its axis. Eager, where the device's policy says a side is small enough
-    (:attr:`~torchgrade.runtime.ExecutionPolicy.resampling_matrix_side`), that linear map is applied as its matrix,
-    made once per size by ``step`` of the identity: one matrix product (one launch on a GPU) instead of the step's
-    slices, products and sums (a dozen launches for an upsampling).
-    """
-    largest = policy_for(light.device).resampling_matrix_side  # None while tracing (runtime.policy.GRAPH)
-    for axis, args in zip((-2, -1), arguments):
-        if largest is not None and light.shape[axis] <= largest:
-            matrix = _step_matrix(step, light.shape[axis], tuple(args), light.dtype, light.device)
-            light = torch.matmul(matrix, light) if axis == -2 else torch.matmul(light, matrix.mT)
-        else:
-            light = step(light, axis, *args)
-    return light
-
-
-@device_cached
-def _step_matrix(step, side: int, arguments: tuple, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
-    """The matrix of the linear ``step`` along a side of ``side`` pixels (:func:`_along_sides`): ``step`` of the
-    identity, made in float64."""
-    identity = torch.eye(side, dtype=torch.float64)
-    return step(identity, -2, *arguments).to(dtype=dtype, device=device)
-
-
-@formula
-def upsample(light: torch.Tensor, sizes, bicubic: bool) -> torch.Tensor:
+def upsample(light: torch.Tensor, sizes, bicubic: bool, any_size: bool = False) -> torch.Tensor:
     """Upsample a level through ``sizes``, each the level above the one before (one step: 2x; two: 4x), keeping a
     uniform frame uniform and the light: :func:`expand` to each size, then :data:`SMOOTHING` (bilinear) and, with
     ``bicubic``, :data:`BSPLINE_AFTER_BILINEAR` (cubic B-spline), over the mirrored frame, a side at a time.
 
-    Where every size is exactly twice the one before (unless traced for ONNX), the same maths as one bilinear
-    ``F.interpolate``.
+    Where every size is exactly twice the one before (unless for a graph of ``any_size``), the same maths as one
+    bilinear ``F.interpolate`` (of one channel, every leading dimension and the channels folded into its batch), then
+    the B-spline's remaining smoothing.
 
     Examples:
         >>> upsample(torch.tensor([[[[4.0, 2.0]]]]), [(2, 4)], bicubic=False)
@@ -259,27 +198,18 @@ def upsample(light: torch.Tensor, sizes, bicubic: bool) -> torch.Tensor:
         (torch.Size([1, 1, 9, 17]), True)
     """
     factor = 2 ** len(sizes)
+    if not any_size and all(_doubles(small, large) for small, large in zip([light.shape[-2:], *sizes], sizes)):
+        fine = F.interpolate(light.reshape((-1, 1) + light.shape[-2:]), scale_factor=float(factor), mode="bilinear", align_corners=False)
+        fine = fine.reshape(light.shape[:-2] + fine.shape[-2:])
+        return mirror_filter(fine, BSPLINE_AFTER_BILINEAR[factor]) if bicubic else fine
     smoothing = _convolved(SMOOTHING[factor], BSPLINE_AFTER_BILINEAR[factor]) if bicubic else SMOOTHING[factor]
     total = sum(smoothing)
     smoothing = tuple(w / total for w in smoothing)
-    return _along_sides(light, _upsample_along, tuple((tuple(size[k] for size in sizes), smoothing) for k in range(2)))
-
-
-@upsample.variant("sizes", when=lambda light, sizes, bicubic: all(_doubles(small, large) for small, large in zip([light.shape[-2:], *sizes], sizes)))
-def _upsample_doubled(light: torch.Tensor, sizes, bicubic: bool) -> torch.Tensor:
-    """Every size exactly twice the one before: one bilinear ``F.interpolate`` (of one channel, every leading
-    dimension and the channels folded into its batch), then the B-spline's remaining smoothing."""
-    factor = 2 ** len(sizes)
-    fine = F.interpolate(light.reshape((-1, 1) + light.shape[-2:]), scale_factor=float(factor), mode="bilinear", align_corners=False)
-    fine = fine.reshape(light.shape[:-2] + fine.shape[-2:])
-    return mirror_filter(fine, BSPLINE_AFTER_BILINEAR[factor]) if bicubic else fine
-
-
-def _upsample_along(light: torch.Tensor, axis: int, sides: tuple, smoothing: tuple) -> torch.Tensor:
-    """:func:`upsample` along one ``axis``: :func:`expand` to each of ``sides``, then ``smoothing``."""
-    for side in sides:
-        light = _expand_along(light, axis, side)
-    return _smooth_along(light, axis, smoothing)
+    for k, axis in enumerate((-2, -1)):
+        for size in sizes:
+            light = _expand_along(light, axis, size[k])
+        light = _smooth_along(light, axis, smoothing, any_size)
+    return light
 
 
 def _convolved(a, b) -> tuple:
@@ -292,13 +222,15 @@ def _convolved(a, b) -> tuple:
     return tuple(sum(a[i] * b[k - i] for i in range(len(a)) if 0 <= k - i < len(b)) for k in range(len(a) + len(b) - 1))
 
 
-def glow_pyramid(prefiltered: torch.Tensor, depth: int, level_weight, bicubic: bool, sigma=None, active=None) -> torch.Tensor:
+def glow_pyramid(prefiltered: torch.Tensor, depth: int, level_weight, bicubic: bool, sigma=None, active=None,
+                 any_size: bool = False) -> torch.Tensor:
     """Build ``depth`` blurred levels below the prefilter and combine them up to the first (a quarter of the frame).
 
     Level ``k`` joins level ``k - 1`` as ``level + low`` (``level_weight`` None) or
     ``lerp(level, low, level_weight(k))``, ``low`` the combined levels below upsampled 2x. With ``active`` (a 0-d
     tensor, see :func:`active_levels`) only the first ``active`` levels take part: deeper ones are built but masked
-    out. Unity's final pass then samples the result at the frame's resolution (:func:`upsample` by 4).
+    out. Unity's final pass then samples the result at the frame's resolution (:func:`upsample` by 4). ``any_size``: the
+    graph serves frames of any size (an exported model: the general forms, :mod:`~torchgrade.bloom.pyramid`).
 
     Examples:
         >>> light = torch.zeros(1, 3, 8, 8); light[..., 3, 4] = 1.0
@@ -308,12 +240,12 @@ def glow_pyramid(prefiltered: torch.Tensor, depth: int, level_weight, bicubic: b
     """
     levels, light = [], prefiltered
     for _ in range(depth):
-        light = pyramid_blur(halve(light), sigma)
+        light = pyramid_blur(halve(light, any_size), sigma, any_size)
         levels.append(light)
     glow = levels[-1]
     for k in range(depth - 1, 0, -1):
         level = levels[k - 1]
-        low = upsample(glow, [level.shape[-2:]], bicubic)
+        low = upsample(glow, [level.shape[-2:]], bicubic, any_size)
         joined = level + low if level_weight is None else torch.lerp(level, low, level_weight(k))
         glow = joined if active is None else torch.where(k < active, joined, level)
     return glow

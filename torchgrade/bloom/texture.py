@@ -18,10 +18,11 @@ def as_texture(value):
     return value if value is None or isinstance(value, torch.Tensor) else torch.tensor(value, dtype=torch.float32)
 
 
-def check_texture(texture, name: str, odd_sides: bool = False) -> None:
+def check_texture(texture, name: str, odd_sides: bool = False, values: bool = True) -> None:
     """Raise unless ``texture`` is None or a finite floating ``(C, h, w)`` tensor with C = 1 or 3.
 
-    ``odd_sides``: also require odd sides, so that the texture's centre is a pixel (a kernel).
+    ``odd_sides``: also require odd sides, so that the texture's centre is a pixel (a kernel). ``values=False``: its
+    shape and dtype only, not its values (a functional call reads no tensor back; a stage checks when it is set).
 
     Examples:
         >>> check_texture(torch.ones(2, 4, 4), "dirt")
@@ -35,7 +36,7 @@ def check_texture(texture, name: str, odd_sides: bool = False) -> None:
         raise TypeError(f"{name} must be a floating-point tensor (C, h, w), got {getattr(texture, 'dtype', type(texture).__name__)}")
     if texture.dim() != 3 or texture.shape[0] not in (1, 3) or texture.numel() == 0:
         raise ValueError(f"{name} must have shape (1 or 3, h, w), got {tuple(texture.shape)}")
-    if not bool(torch.isfinite(texture).all()):
+    if values and not bool(torch.isfinite(texture).all()):
         raise ValueError(f"{name} must be finite")
     if odd_sides and (texture.shape[-2] % 2 == 0 or texture.shape[-1] % 2 == 0):
         raise ValueError(f"{name} must have odd sides so that its centre is a pixel, got {tuple(texture.shape)}")

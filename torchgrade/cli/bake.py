@@ -6,7 +6,7 @@ Examples:
     >>> with tempfile.TemporaryDirectory() as folder:
     ...     main(["bake", "-o", str(pathlib.Path(folder) / "look.cube"), "--size", "65", "--contrast", "20"])  # doctest: +ELLIPSIS
     bake: 65³ logc LUT of ColorGrade -> ToneMap, ... s -> ...look.cube
-    error: p99.9 0.48, max 2.48 8-bit codes on 16384 realistic colours (tolerance 1 at p99.9); worst case: ...
+    error: p99.9 0.48, max 2.48 8-bit codes on 16384 realistic colours (tolerance 1 at p99.9); on colour charts: ...
     0
 
 At the default 39³ the same look misses realistic colours by p99.9 1.15 codes: the command writes nothing, prints the
@@ -24,8 +24,8 @@ from pathlib import Path
 import torch
 
 from ..io import write_cube
-from ..lut import ENTRY_CHOICES, LUTAccuracyWarning, bake_lut, srgb_code_error
-from ..lut.bake import expects_hdr
+from ..lut import ENTRY_CHOICES, LUTAccuracyWarning, srgb_code_error
+from ..lut.bake import LOOK_SHAPER, bake_look, live_stages
 from ..lut.shapers import DEFAULT_SIZES, SHAPERS
 from .common import (add_grading_flags, look_from_args, read_rec709, refuse_lut_over_tolerance, refuse_overwriting,
                      report_line, stages_label)
@@ -75,30 +75,30 @@ def _check_bake_arguments(args: argparse.Namespace) -> None:
         raise ValueError(f"--tolerance goes with --size auto and must be above 0, got {args.tolerance}")
 
 
-def _cube_shaper(shaper: str, transform) -> str:
-    """``--shaper``: ``auto`` is ``logc`` for a look taking HDR input: the default lattice (``"logc_extended"``) as a
-    ``.cube`` file can hold it. Its planes up to 58.86 are the ``"logc"`` lattice's at
-    :attr:`~torchgrade.lut.shapers.LogCExtendedShaper.cube_size` (39³), plane for plane, and a ``.cube`` 1D section
-    stops there; the tail above it lives on in ``bake_lut`` and CLF files.
+def _cube_shaper(shaper: str) -> str:
+    """``--shaper``: ``auto`` is ``logc``, the ``.cube`` form of the lattice a look is baked on
+    (:data:`~torchgrade.lut.bake.LOOK_SHAPER`): its planes up to 58.86 are the ``"logc"`` lattice's at
+    :attr:`~torchgrade.lut.shapers.LogCExtendedShaper.cube_size`, plane for plane, and a ``.cube`` 1D section stops
+    there; the tail above it lives on in ``bake_lut``, ``to_lut`` and CLF files.
 
     Examples:
-        >>> from torchgrade import ToneMap
-        >>> _cube_shaper("auto", ToneMap("aces")), _cube_shaper("auto", lambda image: image), _cube_shaper("fitted", None)
-        ('logc', 'auto', 'fitted')
+        >>> _cube_shaper("auto"), _cube_shaper("fitted")
+        ('logc', 'fitted')
     """
-    return "logc" if shaper == "auto" and expects_hdr(transform) else shaper
+    return "logc" if shaper == "auto" else shaper
 
 
 def _cube_size(size, shaper: str):
-    """``--size``, or when not given the default lattice's ``.cube`` form for ``logc`` (39) and 33 for the others.
+    """``--size``, or when not given the default lattice's ``.cube`` form for ``logc`` and the shaper's default size for
+    the others (:data:`~torchgrade.lut.shapers.DEFAULT_SIZES`).
 
     Examples:
-        >>> _cube_size(None, "logc"), _cube_size(None, "linear"), _cube_size(17, "logc")
-        (39, 33, 17)
+        >>> _cube_size(None, "logc") == SHAPERS[LOOK_SHAPER].cube_size, _cube_size(None, "linear"), _cube_size(17, "logc")
+        (True, 33, 17)
     """
     if size is not None:
         return size
-    return SHAPERS["logc_extended"].cube_size if shaper == "logc" else DEFAULT_SIZES["logc"]
+    return SHAPERS[LOOK_SHAPER].cube_size if shaper == "logc" else DEFAULT_SIZES[shaper]
 
 
 def run_bake(args: argparse.Namespace) -> str:
@@ -109,22 +109,15 @@ def run_bake(args: argparse.Namespace) -> str:
     refuse_overwriting([args.output], [args.config, args.scene, *(args.frames or ())])
     look = look_from_args(args)
     transform = look.per_pixel_stages()
-    live = [name for name in look.stages() if name not in ("grade", "primary", "tonemap")]
-    scene = None
-    if args.scene is not None:
-        with torch.no_grad():
-            scene = look.per_pixel_input(read_rec709(args.scene).unsqueeze(0))
-    frames = None
-    if args.frames:
-        with torch.no_grad():
-            frames = torch.cat([look.per_pixel_input(read_rec709(path).unsqueeze(0)).reshape(3, 1, -1) for path in args.frames], dim=-1)
+    scene = None if args.scene is None else read_rec709(args.scene).unsqueeze(0)
+    frames = [read_rec709(path) for path in args.frames] if args.frames else None
     tolerance = 0.5 if args.tolerance is None else args.tolerance
     start = time.perf_counter()
     with warnings.catch_warnings():  # the report is printed below, with its cause and advice
         warnings.simplefilter("ignore", LUTAccuracyWarning)
-        shaper = _cube_shaper(args.shaper, transform)
-        lut = bake_lut(transform, size=_cube_size(args.size, shaper), shaper=shaper, scene=scene, tolerance=tolerance, progress=True,
-                       report_tolerance=args.report_tolerance, entries=args.entries, frames=frames)
+        shaper = _cube_shaper(args.shaper)
+        lut = bake_look(look, size=_cube_size(args.size, shaper), shaper=shaper, scene=scene, tolerance=tolerance,
+                        progress=True, report_tolerance=args.report_tolerance, entries=args.entries, frames=frames)
     elapsed = time.perf_counter() - start
     refuse_lut_over_tolerance(lut.error_report, args.accept_error, REMEDIES.format(size=lut.size))
     title = Path(args.output).stem.replace('"', "")
@@ -132,8 +125,10 @@ def run_bake(args: argparse.Namespace) -> str:
     line = f"bake: {lut.size}³ {lut.shaper} LUT of {stages_label(transform)}, {elapsed:.1f} s -> {args.output}"
     if scene is not None:
         with torch.no_grad():
-            error = srgb_code_error(transform(scene.double()), lut(scene))
+            received = look.per_pixel_input(scene)
+            error = srgb_code_error(transform(received.double()), lut(received))
         line += f"; on {Path(args.scene).name}: {error:.2f} 8-bit codes at p99.9"
+    live = live_stages(look)
     if live:
         line += f"; left live, not in the LUT: {', '.join(live)}"
     return f"{line}\n{report_line(lut.error_report)}"
@@ -152,10 +147,12 @@ def add_bake(commands) -> None:
     bake = commands.add_parser("bake", help="bake grade and tone mapping into a .cube 3D LUT")
     bake.add_argument("--output", "-o", required=True, help=".cube file to write")
     bake.add_argument("--config", help="look JSON (PostFX config); without it, the grading flags below")
-    bake.add_argument("--size", type=_lut_size, help="points per axis, 2..256, or auto (needs --scene); default 39 for logc "
-                      "(the default lattice's planes to 58.86), 33 for the others")
+    bake.add_argument("--size", type=_lut_size, help=f"points per axis, 2..256, or auto (needs --scene); default "
+                      f"{SHAPERS[LOOK_SHAPER].cube_size} for logc (the default lattice's planes to 58.86), "
+                      f"{DEFAULT_SIZES['linear']} for the others")
     bake.add_argument("--shaper", choices=("auto", "linear", "logc", "fitted"), default="auto",
-                      help="default auto: logc (LogC to 58.86, what a .cube 1D section holds) when the look tone maps; fitted: per-channel shaper fitted to the look (and --scene)")
+                      help="default auto: logc (LogC to 58.86, what a .cube 1D section holds of the default lattice); "
+                      "fitted: per-channel shaper fitted to the look (and --scene)")
     bake.add_argument("--scene", help="EXR the look will grade: the lattice covers its range after the look's exposure and bloom, "
                       "and the error is reported on it")
     bake.add_argument("--frames", action="append", metavar="EXR",

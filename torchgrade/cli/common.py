@@ -72,7 +72,7 @@ def refuse_overwriting(outputs, inputs, allowed: bool = False) -> None:
     inputs = list(inputs)
     read = {identity(path): path for path in inputs if path is not None}
     read.pop(None, None)
-    written = {}
+    written: dict = {}
     for index, path in enumerate(outputs):
         if path is None:
             continue

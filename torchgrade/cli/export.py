@@ -26,7 +26,6 @@ import torch
 
 from ..look.postfx import PostFX
 from ..lut import INTERPOLATIONS, LUT_BACKENDS, LUTAccuracyWarning
-from ..lut.backends import FORMER_BACKENDS
 from ..onnx import INPUT_DTYPES, IO_DTYPES, LAYOUTS, OUTPUTS, export_look
 from ..scene import demo_scene
 from .common import read_rec709, refuse_lut_over_tolerance, refuse_overwriting
@@ -69,7 +68,7 @@ def add_export(commands) -> None:
     export.add_argument("--accept-error", action="store_true", help="export a LUT over its tolerance (p99.9 1 code on "
                         "realistic colours) anyway (else exit status 3 and nothing written)")
     export.add_argument("--interpolation", choices=INTERPOLATIONS, default="tetrahedral", help="the LUT's (with --lut)")
-    export.add_argument("--lut-backend", choices=(*LUT_BACKENDS, *FORMER_BACKENDS), default="slices", help="the LUT's graph form (default slices, opset 17)")
+    export.add_argument("--lut-backend", choices=LUT_BACKENDS, default="slices", help="the LUT's graph form (default slices, opset 17)")
     export.add_argument("--grade-inputs", action="store_true", help="grading controls as optional graph inputs")
     export.add_argument("--output", choices=OUTPUTS, default="linear", help="output encoding (default display-linear float)")
     names = [str(dtype).replace("torch.", "") for dtype in INPUT_DTYPES]

@@ -80,7 +80,7 @@ def rgb_from_hsv_planes(hue: torch.Tensor, saturation: torch.Tensor, value: torc
 
 def rgb_planes_from_hsv(hue: torch.Tensor, saturation: torch.Tensor, value: torch.Tensor) -> tuple:
     """:func:`rgb_from_hsv_planes` returned as the three planes ``(r, g, b)``: the form of a chain computed on planes
-    (:attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`), each channel's offset a number in the kernel.
+    (:func:`~torchgrade.runtime.strips.pixelwise`), each channel's offset a number in the kernel.
 
     Examples:
         >>> [float(p) for p in rgb_planes_from_hsv(*(torch.tensor(v) for v in (0.0, 1.0, 2.0)))]

@@ -9,59 +9,37 @@ infinite gradient.
 from __future__ import annotations
 
 import math
-import numbers
 
 import torch
 
-from ..runtime.constants import affine, where
-from ..runtime.policy import nonnegative
-from ..runtime.variants import formula
+from ..runtime.constants import affine
 
 __all__ = [
     "safe_pow", "safe_sqrt", "linear_to_srgb", "srgb_to_linear", "linear_to_logc", "logc_to_linear", "aces_to_acescc", "acescc_to_aces", "linear_to_pq", "pq_to_linear", "hlg_oetf", "hlg_inverse_oetf", "linear_to_acescct", "acescct_to_linear", "LOGC_CUT", "LOGC_E", "ACESCC_MIDGRAY", "ACESCC_MAX", "PQ_M1", "PQ_C1", "PQ_PEAK", "PQ_FOOT", "HLG_A", "HLG_B", "HLG_C", "ACESCCT_CUT_LINEAR", "ACESCCT_CUT_LOG", "ACESCCT_A", "LOGC_A", "LOGC_B", "LOGC_C", "LOGC_D", "LOGC_F", "PQ_M2", "PQ_C2", "PQ_C3", "ACESCCT_B",
 ]
 
 
-@formula
 def safe_pow(x: torch.Tensor, exponent) -> torch.Tensor:
-    """``max(x, 0) ** exponent`` with a finite gradient at 0 (HLSL ``PositivePow`` on clamped input).
+    """``max(x, 0) ** exponent`` for ``exponent > 0``, with a finite gradient at 0 (HLSL ``PositivePow`` on clamped
+    input): ``relu(x) ** exponent``. The power's slope ``e x^(e-1)`` is infinite at 0 for ``e < 1``; ``relu``'s
+    backward selects 0 wherever its output is 0, which no product with that infinity undoes. Exported as ``Relu`` and
+    ``exp(e log x)`` (``torchgrade.onnx.symbolics``: a ``Pow`` costs onnxruntime's CPU twice a ``Log`` and an ``Exp``).
 
     Examples:
         >>> safe_pow(torch.tensor([-1.0, 0.0, 4.0]), 0.5).tolist()
         [0.0, 0.0, 2.0]
     """
-    positive = x > 0
-    return where(positive, where(positive, x, 1.0) ** exponent, 0.0)
-
-
-def _positive_number(x: torch.Tensor, exponent) -> bool:
-    """Whether ``exponent`` is a plain positive number and ``x`` floating point (the variants' precondition)."""
-    return isinstance(exponent, numbers.Real) and exponent > 0 and x.is_floating_point()
-
-
-@safe_pow.variant("export", when=_positive_number)
-def _safe_pow_exported(x: torch.Tensor, exponent) -> torch.Tensor:
-    """Without the gradient guard's two ``Where`` nodes, and as ``exp(e log x)`` (0 at x = 0, to a few ulps of the
-    power): their costs on onnxruntime's CPU are in ``benchmarks/results/onnx_ops.md``."""
-    x = x.clamp_min(0.0)
-    return x.sqrt() if exponent == 0.5 else torch.exp(torch.log(x) * exponent)
-
-
-@safe_pow.variant("untracked", when=_positive_number)
-def _safe_pow_in_place(x: torch.Tensor, exponent) -> torch.Tensor:
-    """Unguarded, the same values in two cheap passes (or one ``fmax``, where the device's policy says) and one power
-    in place instead of four passes."""
-    return nonnegative(x).pow_(exponent)
+    return torch.relu(x) ** exponent
 
 
 def safe_sqrt(x: torch.Tensor) -> torch.Tensor:
-    """``sqrt(max(x, 0))`` with gradient 0 (not Inf) at 0.
+    """``sqrt(max(x, 0))`` with gradient 0 (not Inf) at 0 (see :func:`safe_pow`).
 
     Examples:
         >>> safe_sqrt(torch.tensor([-4.0, 0.0, 9.0])).tolist()
         [0.0, 0.0, 3.0]
     """
-    return safe_pow(x, 0.5)
+    return torch.relu(x).sqrt()
 
 
 def linear_to_srgb(image: torch.Tensor) -> torch.Tensor:
@@ -123,63 +101,36 @@ _HALF_MAX = 65504.0
 _ACESCC_LOW_KNEE = (9.72 - 15.0) / 17.52
 
 
-@formula
 def aces_to_acescc(image: torch.Tensor) -> torch.Tensor:
     """ACES2065-1 -> ACEScc (S-2014-003 §4.4), input clamped to [0, 65504] as Unity does.
+
+    The standard's two segments, ``log2(2^-16 + x/2)`` below ``2^-15`` and ``log2(x)`` from it, are one logarithm of
+    the larger argument: ``2^-16 + x/2 < x`` exactly from ``2^-15`` up. No comparison and select, in any graph.
 
     Examples:
         >>> round(float(aces_to_acescc(torch.tensor(0.18))), 4)  # ACESCC_MIDGRAY
         0.4136
     """
     x = image.clamp(0.0, _HALF_MAX)
-    low = (torch.log2(2.0**-16 + x * 0.5) + 9.72) / 17.52
-    high = (torch.log2(x.clamp_min(2.0**-15)) + 9.72) / 17.52
-    return torch.where(x < 2.0**-15, low, high)
-
-
-@aces_to_acescc.variant("untracked")
-def _aces_to_acescc_in_place(image: torch.Tensor) -> torch.Tensor:
-    """``2^-16 + x/2 < x`` exactly from ``2^-15`` up: the larger one is each segment's argument, one log for both."""
-    x = image.clamp(0.0, _HALF_MAX)
-    return torch.maximum(x, x * 0.5 + 2.0**-16).log2_().add_(9.72).div_(17.52)
-
-
-@aces_to_acescc.variant("export")
-def _aces_to_acescc_exported(image: torch.Tensor) -> torch.Tensor:
-    """The same maximum out of place: no comparison or ``Where`` (``benchmarks/results/onnx_ops.md``)."""
-    x = image.clamp(0.0, _HALF_MAX)
-    return (torch.log2(torch.maximum(x, x * 0.5 + 2.0**-16)) + 9.72) / 17.52
+    return (torch.log2(torch.maximum(x, affine(x, 0.5, 2.0**-16))) + 9.72) / 17.52
 
 
 _ACESCC_TOP = (math.log2(_HALF_MAX) + 9.72) / 17.52
 """The ACEScc code of 65504, a Python float (``torch.compile`` traces no tensor read-back)."""
 
 
-@formula
 def acescc_to_aces(image: torch.Tensor) -> torch.Tensor:
     """ACEScc -> ACES2065-1 (S-2014-003 §4.4); saturates at 65504 like Unity.
+
+    The low segment's ``(v - 2^-16)·2`` is below ``v = 2^(17.52 c - 9.72)`` exactly where ``v < 2^-15``: the smaller
+    of the two is the standard's value.
 
     Examples:
         >>> round(float(acescc_to_aces(torch.tensor(0.4135884))), 4)
         0.18
     """
-    x = image.clamp(max=_ACESCC_TOP)
-    value = torch.exp2(x * 17.52 - 9.72)
-    return torch.where(x < _ACESCC_LOW_KNEE, (value - 2.0**-16) * 2.0, value)
-
-
-@acescc_to_aces.variant("untracked")
-def _acescc_to_aces_in_place(image: torch.Tensor) -> torch.Tensor:
-    """``(v - 2^-16)·2 < v`` exactly below the knee (``v < 2^-15``): the smaller one is the segment's value."""
-    value = torch.exp2(image.clamp(max=_ACESCC_TOP) * 17.52 - 9.72)
-    return torch.minimum(value, (value - 2.0**-16).mul_(2.0), out=value)
-
-
-@acescc_to_aces.variant("export")
-def _acescc_to_aces_exported(image: torch.Tensor) -> torch.Tensor:
-    """The same minimum, without a comparison and ``Where``."""
-    value = torch.exp2(image.clamp(max=_ACESCC_TOP) * 17.52 - 9.72)
-    return torch.minimum(value, (value - 2.0**-16) * 2.0)
+    value = torch.exp2(affine(image.clamp(max=_ACESCC_TOP), 17.52, -9.72))
+    return torch.minimum(value, affine(value, 2.0, -(2.0**-15)))
 
 
 PQ_M1, PQ_M2 = 2610.0 / 16384.0, 2523.0 / 4096.0 * 128.0
@@ -262,40 +213,30 @@ ACESCCT_CUT_LOG = 0.155251141552511
 ACESCCT_A, ACESCCT_B = 10.5402377416545, 0.0729055341958355
 
 
-@formula
 def linear_to_acescct(image: torch.Tensor) -> torch.Tensor:
     """ACEScg (AP1) -> ACEScct: ``A x + B`` up to 2^-7, else ``(log2(x) + 9.72) / 17.52`` (S-2016-001).
+
+    The linear toe is the tangent of the log segment at the cut, above the (concave) logarithm everywhere else, and
+    the logarithm of ``max(x, 2^-7)`` is constant below the cut: the smaller of the two is the standard's value. No
+    comparison and select, in any graph (``benchmarks/results/onnx_ops.md``).
 
     Examples:
         >>> [round(v, 4) for v in linear_to_acescct(torch.tensor([0.0, 0.18])).tolist()]
         [0.0729, 0.4136]
     """
     log = (torch.log2(image.clamp_min(ACESCCT_CUT_LINEAR)) + 9.72) / 17.52
-    return torch.where(image <= ACESCCT_CUT_LINEAR, ACESCCT_A * image + ACESCCT_B, log)
+    return torch.minimum(affine(image, ACESCCT_A, ACESCCT_B), log)
 
 
-@linear_to_acescct.variant("export")
-def _linear_to_acescct_exported(image: torch.Tensor) -> torch.Tensor:
-    """The segments meet at the cut: each on its own side of it, added, less their common value there; no comparison
-    or ``Where`` (``benchmarks/results/onnx_ops.md``)."""
-    log = (torch.log2(image.clamp_min(ACESCCT_CUT_LINEAR)) + 9.72) / 17.52
-    return log + (ACESCCT_A * image.clamp_max(ACESCCT_CUT_LINEAR) + (ACESCCT_B - ACESCCT_CUT_LOG))
-
-
-@formula
 def acescct_to_linear(code: torch.Tensor) -> torch.Tensor:
     """ACEScct -> ACEScg (AP1), the inverse of :func:`linear_to_acescct`, saturating at 65504 like ACEScc.
+
+    The segments meet at the cut: each is evaluated on its own side of it, clamped there, and the two added less their
+    common value; no comparison or select (``benchmarks/results/onnx_ops.md``).
 
     Examples:
         >>> round(float(acescct_to_linear(torch.tensor(0.4135884))), 4)
         0.18
     """
-    log = torch.exp2(code.clamp(ACESCCT_CUT_LOG, _ACESCC_TOP) * 17.52 - 9.72)
-    return torch.where(code <= ACESCCT_CUT_LOG, (code - ACESCCT_B) / ACESCCT_A, log)
-
-
-@acescct_to_linear.variant("export")
-def _acescct_to_linear_exported(code: torch.Tensor) -> torch.Tensor:
-    """The segments added, as in :func:`linear_to_acescct`'s export form."""
-    log = torch.exp2(code.clamp(ACESCCT_CUT_LOG, _ACESCC_TOP) * 17.52 - 9.72)
-    return log + ((code.clamp_max(ACESCCT_CUT_LOG) - ACESCCT_B) / ACESCCT_A - ACESCCT_CUT_LINEAR)
+    log = torch.exp2(affine(code.clamp(ACESCCT_CUT_LOG, _ACESCC_TOP), 17.52, -9.72))
+    return log + affine(code.clamp_max(ACESCCT_CUT_LOG), 1.0 / ACESCCT_A, -ACESCCT_B / ACESCCT_A - ACESCCT_CUT_LINEAR)

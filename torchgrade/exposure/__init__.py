@@ -28,10 +28,10 @@ changes neither the metered value nor any other pixel. float16/bfloat16 images a
 float32 and returned in their own dtype; the adapted luminance is float32 for them.
 """
 
-from .adaptation import MAX_ADAPTED, MIN_LUMINANCE, OPERATORS, STOPS_RANGE, adapt_luminance, auto_exposure, compensation_at, exposure_operator
+from .adaptation import OPERATORS, adapt_luminance, auto_exposure, compensation_at, exposure_operator
 from .layer import AutoExposure
-from .metering import (HISTOGRAM_BINS, HISTOGRAM_RANGE, METERING_MASKS, METERING_MODES, area_resize, halving_average,
-                       histogram_band_average, meter_luminance, metering_weights)
+from .metering import (HISTOGRAM_BINS, METERING_MASKS, METERING_MODES, area_resize, halving_average, histogram_band_average,
+                       meter_luminance, metering_weights)
 
 __all__ = [
     "AutoExposure",
@@ -44,12 +44,8 @@ __all__ = [
     "METERING_MODES",
     "METERING_MASKS",
     "HISTOGRAM_BINS",
-    "HISTOGRAM_RANGE",
-    "STOPS_RANGE",
     "metering_weights",
     "histogram_band_average",
     "compensation_at",
     "OPERATORS",
-    "MIN_LUMINANCE",
-    "MAX_ADAPTED",
 ]

@@ -12,7 +12,6 @@ from ..base.params import Param, check_choice, check_range, is_plain_number, sca
 from ..base.controls import Control
 from ..color import luminance
 from ..runtime import constant
-from ..runtime.checks import check_eagerly
 from .metering import (
     HISTOGRAM_BLOCK,
     HISTOGRAM_RANGE,
@@ -328,17 +327,25 @@ def auto_exposure(
         min_ev=min_ev, max_ev=max_ev,
         compensation=compensation, compensation_curve=compensation_curve, fixed_exposure=fixed_exposure,
     )
-    check_eagerly(_check_given, controls, dt)
+    _check_given(controls, dt)
     return exposed_frame(image, adapted, dt, **controls)
 
 
 def _check_given(controls: dict, dt) -> None:
-    """:func:`auto_exposure`'s controls and step checked as the stage checks them, the mask and the curve in the forms
-    the operator takes (written back into ``controls``)."""
-    _check_controls(controls)
-    check_range(dt, "dt", 0.0, HALF_MAX)
-    controls["metering_mask"] = check_metering_mask(controls["metering_mask"])
-    controls["compensation_curve"] = check_compensation_curve(controls["compensation_curve"])
+    """:func:`auto_exposure`'s controls and step checked as the stage checks them, where they are plain values, the mask
+    and the curve in the forms the operator takes (written back into ``controls``): a tensor's values are not read (on
+    a GPU each read would wait for the device; a stage checks its own when they are set, and its learnable ones before
+    every forward)."""
+    for name, value in controls.items():
+        if not isinstance(value, torch.Tensor):
+            checked = checked_control(name, value)
+            if name in ("metering_mask", "compensation_curve"):
+                controls[name] = checked
+    bounds = {name: controls[name] for name in BOUNDS}
+    if not any(isinstance(value, torch.Tensor) for value in bounds.values()):
+        check_bounds(**bounds)
+    if not isinstance(dt, torch.Tensor):
+        check_range(dt, "dt", 0.0, HALF_MAX)
 
 
 def check_step(dt) -> None:
@@ -362,11 +369,13 @@ NOT_NUMBERS = ("metering", "operator", "metering_mask", "histogram_block", "comp
 """The controls that are not numbers a frame broadcasts: choices, the mask, the histogram's block and the curve."""
 
 
-def exposed_frame(image: torch.Tensor, adapted: Optional[torch.Tensor], dt: Param, **controls) -> tuple[torch.Tensor, torch.Tensor]:
-    """:func:`auto_exposure` of controls already checked (a stage's), reading nothing back from the device."""
+def exposed_frame(image: torch.Tensor, adapted: Optional[torch.Tensor], dt: Param, *, nan_free: bool = False,
+                  **controls) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`auto_exposure` of controls already checked (a stage's), reading nothing back from the device.
+    ``nan_free``: ``image`` holds no NaN (:func:`~torchgrade.base.images.sanitize`)."""
     x = working_dtype(image)
     c = {name: None if value is None else scalar_param(value, x, name) for name, value in controls.items() if name not in NOT_NUMBERS}
-    scene = sanitize(x)
+    scene = sanitize(x, nan_free=nan_free)
     if c["fixed_exposure"] is not None:
         target = (c["middle_grey"] * torch.exp2(-c["fixed_exposure"])).expand(x.shape[:-3] + (1, 1, 1))
         new = _adapted(scene, target, adapted, dt, c, limited=False)

@@ -148,11 +148,13 @@ class AutoExposure(Stage):
             )
         return state
 
-    def frame(self, image: torch.Tensor, adapted: Optional[torch.Tensor], dt: Param) -> tuple[torch.Tensor, torch.Tensor]:
+    def frame(self, image: torch.Tensor, adapted: Optional[torch.Tensor], dt: Param, *,
+              nan_free: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
         """One frame with these controls, stateless: ``(image, adapted, dt) -> (exposed, new adapted)``.
 
         ``adapted`` has one value per image (``image.shape[:-3]``); ``None`` or ``<= 0`` starts a
-        sequence (the frame adapts instantly). The stored :attr:`adapted_luminance` is left alone.
+        sequence (the frame adapts instantly). The stored :attr:`adapted_luminance` is left alone. ``nan_free``:
+        ``image`` holds no NaN (:func:`~torchgrade.base.images.sanitize`).
 
         Examples:
             >>> layer = AutoExposure(metering="mean")
@@ -163,7 +165,7 @@ class AutoExposure(Stage):
         self.check_learnable()
         check_image(image)
         check_step(dt)
-        return exposed_frame(image, adapted, dt, **self.params())
+        return exposed_frame(image, adapted, dt, nan_free=nan_free, **self.params())
 
     def exposure_stops(self, adapted: torch.Tensor) -> torch.Tensor:
         """The exposure this stage applies from the adapted luminance ``adapted`` (``(B,)``, as :meth:`frame` returns
@@ -180,14 +182,15 @@ class AutoExposure(Stage):
         c = {name: None if value is None else scalar_param(value, like, name) for name, value in self.params().items() if name not in NOT_NUMBERS}
         return torch.log2(exposure_key(like, c, self.compensation_curve) / like).reshape(adapted.shape)
 
-    def forward(self, image: torch.Tensor, dt: Optional[Param] = None, stream: Optional[Hashable] = None) -> torch.Tensor:
+    def forward(self, image: torch.Tensor, dt: Optional[Param] = None, stream: Optional[Hashable] = None, *,
+                nan_free: bool = False) -> torch.Tensor:
         check_image(image)
         # A frame without dt adapts instantly and reads no state: a compiled graph then holds no guard on the state's
         # shape, which is the last batch's, and runs for a batch of another size. One dict read and one dict write
         # per frame: atomic in CPython, so threads on distinct keys never mix.
         history = None if dt is None else self._history(
             self.adapted_luminance if stream is None else self.streams.get(stream, self.adapted_luminance.new_empty(0)), image, dt)
-        exposed, adapted = self.frame(image, history, 0.0 if dt is None else dt)
+        exposed, adapted = self.frame(image, history, 0.0 if dt is None else dt, nan_free=nan_free)
         if stream is None:
             self.adapted_luminance = adapted.detach()
         else:

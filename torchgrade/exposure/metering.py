@@ -19,9 +19,9 @@ import torch.nn.functional as F
 from ..base.images import check_image, sanitize
 from ..base.params import check_choice
 from ..color import luminance
-from ..runtime import constant, device_cached, policy_for
+from ..runtime import constant, device_cached
 
-__all__ = ["METERING_MODES", "METERING_MASKS", "METERING_SIZE", "LOG_DELTA", "HISTOGRAM_BINS", "HISTOGRAM_RANGE",
+__all__ = ["METERING_MODES", "METERING_MASKS", "METERING_SIZE", "LOG_DELTA", "HISTOGRAM_TABLES", "HISTOGRAM_BINS", "HISTOGRAM_RANGE",
            "HISTOGRAM_BLOCK", "SPOT_RADIUS", "area_resize", "halving_average", "meter_luminance", "metering_weights",
            "histogram_band_average", "block_stops"]
 
@@ -35,6 +35,15 @@ METERING_MODES = ("mean", "log", "histogram")
 
 METERING_MASKS = ("average", "center", "spot")
 """The built-in metering masks; a 2-D tensor of weights is the fourth kind (HDRP's Mask Weighted, Bevy's mask)."""
+
+HISTOGRAM_TABLES = 8
+"""Tables a histogram is counted into, image column ``c`` into table ``c mod 8``, the tables summed after. Neighbouring
+pixels of a frame mostly fall in one bin: counted into one table, each addition waits for the one before it at the
+same address (on a CPU, a chain of dependent additions; on a GPU, atomic additions of a warp's threads to one address:
+a 4K frame's histogram took 13.19 ms on an H200, ``benchmarks/results/gpu.md``, run D). Eight neighbouring columns
+in eight tables of 128 bins (4 KiB, in a CPU core's first-level cache) break that chain (the exposure stage 0.86 and
+0.65 of one table's time, ``benchmarks/results/cpu_paths.md``); a table per column, which a GPU's threads would
+never share, would not fit that cache (1920 tables of 128 bins at 1080p)."""
 
 HISTOGRAM_BINS = 128
 """Bins of the luminance histogram, as in HDRP's ``HISTOGRAM_BINS``."""
@@ -158,27 +167,12 @@ def _column_offsets(width: int, tables: int, device: torch.device) -> torch.Tens
 
 def _counted(bins: torch.Tensor, width: int, *amounts: torch.Tensor) -> tuple:
     """``(B, HISTOGRAM_BINS)`` for each of ``amounts`` (``(B, N)``): its sum in each of ``bins`` (``(B, N)``, of images
-    ``width`` wide), neighbouring columns counted into different tables and groups of rows apart, all summed after, as
-    the device's policy asks (:attr:`~torchgrade.runtime.ExecutionPolicy.histogram_tables` and ``histogram_row_groups``)."""
-    policy = policy_for(bins.device)
-    batch, tables = bins.shape[0], min(policy.histogram_tables or width, width)
-    groups = _largest_divisor(bins.shape[1] // width, policy.histogram_row_groups)
-    if tables > 1:
-        bins = (bins.reshape(batch, -1, width) + _column_offsets(width, tables, bins.device)).reshape(batch, -1)
-    rows = batch * groups  # a row of the scatter's output for each image's group of rows: one thread each
-    empty = torch.zeros(rows, tables * HISTOGRAM_BINS, dtype=amounts[0].dtype, device=amounts[0].device)
-    counted = (empty.scatter_add(1, bins.reshape(rows, -1), amount.reshape(rows, -1)) for amount in amounts)
-    return tuple(c if groups * tables == 1 else c.reshape(batch, groups * tables, HISTOGRAM_BINS).sum(dim=1) for c in counted)
-
-
-def _largest_divisor(number: int, limit: int) -> int:
-    """The largest divisor of ``number`` up to ``limit`` (at least 1).
-
-    Examples:
-        >>> _largest_divisor(1080, 16), _largest_divisor(7, 4)
-        (15, 1)
-    """
-    return max(d for d in range(1, max(1, min(number, limit)) + 1) if number % d == 0)
+    ``width`` wide), neighbouring columns counted into different tables (:data:`HISTOGRAM_TABLES`), summed after."""
+    batch, tables = bins.shape[0], HISTOGRAM_TABLES
+    bins = (bins.reshape(batch, -1, width) + _column_offsets(width, tables, bins.device)).reshape(batch, -1)
+    empty = torch.zeros(batch, tables * HISTOGRAM_BINS, dtype=amounts[0].dtype, device=amounts[0].device)
+    counted = (empty.scatter_add(1, bins, amount) for amount in amounts)
+    return tuple(c.reshape(batch, tables, HISTOGRAM_BINS).sum(dim=1) for c in counted)
 
 
 def block_stops(stops: torch.Tensor, low, high, block: int) -> tuple:

@@ -28,7 +28,6 @@ import torch
 
 from ..base.params import check_range
 from ..runtime import constant
-from ..runtime.policy import readable
 from ..base.controls import Control
 
 __all__ = [
@@ -70,8 +69,9 @@ class CurveControl(Control):
 def curve_points(points, like: torch.Tensor, name: str = "curve") -> tuple:
     """Control points as ``(x, y)`` 1-D tensors in ``like``'s dtype and device (``x`` detached).
 
-    Raises ``ValueError`` naming ``name`` unless there are at least two points, shaped ``(N, 2)``,
-    with strictly increasing ``x``.
+    Raises ``ValueError`` naming ``name`` unless there are at least two points, shaped ``(N, 2)``, with strictly
+    increasing ``x`` for points given as numbers (a tensor's are not read here: a stage checks them when they are set,
+    :func:`check_curve`).
 
     Examples:
         >>> x, y = curve_points(((0.0, 0.25), (1.0, 0.75)), torch.empty(()))
@@ -85,19 +85,13 @@ def curve_points(points, like: torch.Tensor, name: str = "curve") -> tuple:
     if table.dim() != 2 or table.shape[1] != 2 or table.shape[0] < 2:
         raise ValueError(f"{name} must be at least two (x, y) points, shape (N, 2), got shape {tuple(table.shape)}")
     x, y = table.unbind(1)
-    x = x.detach()
-    # a tensor's points are read to check them where reading is free (a stage checks its curves at assignment)
-    if isinstance(points, torch.Tensor) and readable(x) and not bool((x[1:] > x[:-1]).all()):
-        raise ValueError(f"{name} x values must be strictly increasing, got {x.tolist()}")
-    return x, y
+    return x.detach(), y
 
 
-def _spans_a_turn(points, x: torch.Tensor) -> bool:
-    """Whether a periodic curve's ``x`` values span a turn or more: in Python for points given as numbers, by a read of
-    a tensor's where reading is free (a stage checks its curves at assignment)."""
-    if not isinstance(points, torch.Tensor):
-        return float(points[-1][0]) >= float(points[0][0]) + 1.0
-    return readable(x) and bool(x[-1] >= x[0] + 1.0)
+def _spans_a_turn(points) -> bool:
+    """Whether a periodic curve's ``x`` values, given as numbers, span a turn or more (a tensor's are checked when a
+    stage's curve is set, :func:`check_curve`)."""
+    return not isinstance(points, torch.Tensor) and float(points[-1][0]) >= float(points[0][0]) + 1.0
 
 
 def _plain_points(points, name: str) -> tuple:
@@ -180,7 +174,7 @@ def evaluate_curve(points, t: torch.Tensor, periodic: bool = False, name: str = 
         [0.800000011920929, 1.0]
     """
     x, y = curve_points(points, t, name)
-    if periodic and _spans_a_turn(points, x):
+    if periodic and _spans_a_turn(points):
         raise ValueError(f"{name} is periodic: its x values must lie within one turn, got {x.tolist()}")
     tangents = monotone_tangents(x, y, periodic)
     if periodic:
@@ -233,6 +227,8 @@ def check_curve(name: str, points, periodic: bool = False) -> None:
     if len(points) == 0:
         return
     x, y = curve_points(points, torch.empty((), dtype=torch.float64), name)
+    if not bool((x[1:] > x[:-1]).all()):
+        raise ValueError(f"{name} x values must be strictly increasing, got {x.tolist()}")
     if x[0] < 0.0 or x[-1] > 1.0 or (periodic and x[-1] >= 1.0):
         raise ValueError(f"{name} x values must lie in [0, 1{')' if periodic else ']'}, got {x.tolist()}")
     check_range(y, f"{name} y", 0.0, 1.0)

@@ -38,12 +38,10 @@ import torch
 from ..base.images import HALF_MAX, check_image, sanitize, to_input_dtype, working_dtype
 from ..base.params import color_param, is_constant, scalar_param
 from ..base.planes import each_plane, joined, matrix_on, matrix_product
-from ..runtime.recording import untracked
 from ..base.controls import Control, check_given, refuse_unknown
 from ..color import srgb_to_linear
 from ..color.spaces import shared_matrix
-from ..runtime import folded, is_exporting
-from ..runtime.policy import pixel_layout
+from ..runtime import folded
 from .curves import CurveControl, curve_is_identity
 from .steps import (
     IDENTITY_MATRIX,
@@ -176,31 +174,36 @@ def color_grade(image: torch.Tensor, aces: bool = False, log_space: str = "acesc
 
 
 def graded_image(image: torch.Tensor, aces: bool = False, log_space: str = "acescc", *, nan_free: bool = False,
-                 **params) -> torch.Tensor:
+                 planes: bool = False, **params) -> torch.Tensor:
     """:func:`color_grade` without checking the controls' values: for :class:`~torchgrade.ColorGrade`, which checked
     them when they were set, on every strip of a frame. ``nan_free``: ``image`` holds no NaN
-    (:func:`~torchgrade.base.images.sanitize`).
+    (:func:`~torchgrade.base.images.sanitize`); ``planes``: the steps run on the image's three planes
+    (:func:`color_grade_planes`).
 
     Examples:
         >>> image = torch.rand(1, 3, 2, 2)
         >>> torch.equal(graded_image(image, contrast=20.0), color_grade(image, contrast=20.0))
         True
     """
-    graded = color_grade_planes(image, aces, log_space, nan_free=nan_free, **params)
+    graded = color_grade_planes(image, aces, log_space, nan_free=nan_free, planes=planes, **params)
     return graded if graded is image else to_input_dtype(joined(graded), image)
 
 
 def color_grade_planes(image: torch.Tensor, aces: bool = False, log_space: str = "acescc", *, nan_free: bool = False,
-                       **params):
-    """:func:`color_grade` without the cast back to the input's dtype, as the graded image's three planes (a tuple) where
-    its last steps ran on planes (while compiling, :attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`): for a
-    chain that goes on computing on planes, so no frame is joined only to be split again. A graded result is in the
-    working dtype (float32 or wider); an all-identity grade returns ``image`` itself, in its own dtype.
+                       planes: bool = False, **params):
+    """:func:`color_grade` without the cast back to the input's dtype; with ``planes``, on the image's three planes,
+    returned as the graded image's three planes (a tuple) where its last steps ran on planes: the form a compiler fuses
+    into one loop (:func:`~torchgrade.runtime.strips.pixelwise`), for a chain that goes on computing on planes, so no
+    frame is joined only to be split again. A graded result is in the working dtype (float32 or wider); an
+    all-identity grade returns ``image`` itself, in its own dtype.
 
     Examples:
         >>> image = torch.rand(1, 3, 2, 2)
-        >>> torch.equal(color_grade_planes(image, contrast=20.0), color_grade(image, contrast=20.0))  # eager: an image
+        >>> torch.equal(color_grade_planes(image, contrast=20.0), color_grade(image, contrast=20.0))
         True
+        >>> graded = color_grade_planes(image, contrast=20.0, planes=True)
+        >>> type(graded).__name__, bool(torch.allclose(torch.cat(graded, dim=-3), color_grade(image, contrast=20.0), atol=1e-6))
+        ('tuple', True)
     """
     check_image(image)
     p = _grade_inputs(params)
@@ -209,7 +212,7 @@ def color_grade_planes(image: torch.Tensor, aces: bool = False, log_space: str =
         return image
     weights = "ap1" if aces else "rec709"
     like = sanitize(working_dtype(image), nan_free=nan_free)
-    x = pixel_layout(like)  # compiling: the steps on planes, for Inductor to fuse
+    x = like.split(1, dim=-3) if planes else like
     # The linear steps between two non-linear ones are folded into one matrix, so each pixel sees one 3x3: post
     # exposure, white balance and the way into contrast's primaries; the way out of them and the colour filter.
     # Of plain-number controls the matrix is a constant, made once (runtime.folded).
@@ -241,9 +244,10 @@ def color_grade_planes(image: torch.Tensor, aces: bool = False, log_space: str =
         factor = saturation_curves(x, p["hue_vs_sat"], p["sat_vs_sat"], p["lum_vs_sat"], weights)
     if "hue_shift" in steps:
         x = hue_shift(x, p["hue_shift"], p["hue_vs_hue"])
-    # Saturation without curves is a matrix too, folded with the way out of ACEScg.
+    # Saturation without curves is a matrix too, folded into the way out of ACEScg: of a number, a constant; of a tensor
+    # (per sample, learnable, a graph input), products of 3x3 matrices made at each call (elementwise, no MatMul).
     amount = None
-    if factor is None and "saturation" in steps and _saturation_folds(x, p["saturation"]):
+    if factor is None and "saturation" in steps:
         amount = p["saturation"]
     elif "saturation" in steps or factor is not None:
         x = saturation(x, p["saturation"], weights, factor)
@@ -314,12 +318,3 @@ def _applied(linear, x):
 def _bounded(x):
     """An image, or its three planes as a tuple, bounded to ``[0, 65504]``."""
     return each_plane(lambda plane: plane.clamp(0.0, HALF_MAX), x)
-
-
-def _saturation_folds(x, amount) -> bool:
-    """Whether saturation is applied as a matrix: eager when nothing records gradients; in an export when ``amount`` is a
-    number, folded into the constant matrices (a graph input's would be a MatMul, which OpenVINO runs in bfloat16).
-    ``x`` is the image, or its planes as a tuple."""
-    if is_exporting():
-        return not isinstance(amount, torch.Tensor)
-    return untracked(*(x if isinstance(x, tuple) else (x,)), amount)

@@ -9,6 +9,7 @@ import torch
 from ..base.params import Param, is_constant
 from ..base.controls import controls_signature
 from ..base.stage import Stage
+from ..runtime.strips import pixelwise
 from .curves import CurveControl, check_curve, stored_curve
 from .grade import (
     COLOR_GRADE_CONTROLS,
@@ -100,8 +101,9 @@ class ColorGrade(Stage):
         curves = (name for name, control in self.controls.items() if isinstance(control, CurveControl))
         return {name: getattr(self, name) for name in curves if not self.is_default(name)}
 
-    def forward(self, image: torch.Tensor, *, nan_free: bool = False) -> torch.Tensor:
-        return self.run_in_strips(graded_image, image, nan_free=nan_free)
+    @pixelwise(planes=True)
+    def forward(self, image: torch.Tensor, *, nan_free: bool = False, planes: bool = False) -> torch.Tensor:
+        return graded_image(image, nan_free=nan_free, planes=planes, **self.params())
 
 
 ColorGrade.__signature__ = controls_signature(ColorGrade.controls)
@@ -163,8 +165,9 @@ class PrimaryGrade(Stage):
         """True when no control changes the image (then skipped by ``PostFX`` and not exported)."""
         return all(self.is_default(name) for name in self._control_names if name not in ("style", *PIVOTS))
 
+    @pixelwise
     def forward(self, image: torch.Tensor, *, nan_free: bool = False) -> torch.Tensor:
-        return self.run_in_strips(primary_graded, image, nan_free=nan_free)
+        return primary_graded(image, nan_free=nan_free, **self.params())
 
 
 PrimaryGrade.__signature__ = controls_signature(

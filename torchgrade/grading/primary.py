@@ -21,12 +21,11 @@ from __future__ import annotations
 import torch
 
 from ..base.images import check_image, sanitize, to_input_dtype, working_dtype
-from ..base.params import Param, check_choice, color_param, is_constant, scalar_param
+from ..base.params import Param, check_choice, color_param, is_constant, is_plain_number, scalar_param
 from ..base.planes import bounded_pow
 from ..base.controls import Control, check_given, refuse_unknown
 from ..color import CHANNEL
 from ..runtime import constant
-from ..runtime.policy import readable
 
 __all__ = [
     "primary_grade",
@@ -239,7 +238,7 @@ def primary_graded(image: torch.Tensor, style: str = "linear", *, nan_free: bool
     if "contrast" in changed:
         x = (linear_contrast if style == "linear" else primary_log_contrast)(x, p["contrast"], p["pivot"])
     if "gamma" in changed:
-        if readable(p["pivot_black"]) and readable(p["pivot_white"]):  # a GPU's are not read per frame: a stage checks them when set
+        if is_plain_number(p["pivot_black"]) and is_plain_number(p["pivot_white"]):  # a stage checks tensors when set
             check_pivots(p["pivot_black"], p["pivot_white"])
         x = log_gamma(x, p["gamma"], p["pivot_black"], p["pivot_white"])
     if "saturation" in changed:

@@ -151,7 +151,7 @@ def color_filter(image: torch.Tensor, color) -> torch.Tensor:
 
 def channel_mixer(image: torch.Tensor, mixer=IDENTITY_MATRIX) -> torch.Tensor:
     """Channel mixer: ``rgb' = M · rgb``, rows are the output channels (1.0 = Unity's 100%). An image given as its three
-    planes (a tuple, :attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`) is returned as planes.
+    planes (a tuple, :func:`~torchgrade.runtime.strips.pixelwise`) is returned as planes.
 
     Examples:
         >>> swap = ((0.0, 1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, 1.0))
@@ -187,7 +187,7 @@ def shadows_midtones_highlights(
 
     ``ws = 1 - smoothstep(s0, s1, Y)``, ``wh = smoothstep(h0, h1, Y)``, ``wm = 1 - ws - wh``;
     ``rgb' = rgb · (S ws + M wm + H wh)``. An image given as its three planes (a tuple,
-    :attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`) is returned as planes.
+    :func:`~torchgrade.runtime.strips.pixelwise`) is returned as planes.
 
     Examples:
         >>> image = torch.rand(3, 2, 2)
@@ -256,7 +256,7 @@ def lift_gamma_gain(image: torch.Tensor, lift=IDENTITY_TRACKBALL, gamma=IDENTITY
     negative values (ACEScg can be negative) and saturates at ±65504 (:func:`~torchgrade.base.planes.bounded_pow`):
     Unity's own minimum gamma is a power of 1000, which overflows float32 from 1.1 up.
 
-    An image given as its three planes (a tuple, :attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`) is returned
+    An image given as its three planes (a tuple, :func:`~torchgrade.runtime.strips.pixelwise`) is returned
     as planes.
 
     Examples:
@@ -283,7 +283,7 @@ def hue_shift(image: torch.Tensor, degrees: Param, hue_vs_hue=None) -> torch.Ten
     """Hue shift in HSV, wrapping around the colour wheel (Unity ``ColorGradingHueShift``); RGB ≥ 0.
 
     With a ``hue_vs_hue`` curve the shifted hue ``h`` moves on by ``curve(h) - 0.5`` turns (URP ``LutBuilderHdr``).
-    An image given as its three planes (a tuple, :attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`) is returned
+    An image given as its three planes (a tuple, :func:`~torchgrade.runtime.strips.pixelwise`) is returned
     as planes.
 
     Examples:
@@ -300,7 +300,7 @@ def hue_shift(image: torch.Tensor, degrees: Param, hue_vs_hue=None) -> torch.Ten
 
 def saturation_curves(image: torch.Tensor, hue_vs_sat=None, sat_vs_sat=None, lum_vs_sat=None, luminance_weights="rec709") -> torch.Tensor:
     """The saturation factor of the curves (URP ``LutBuilderHdr``), ``(..., 1, H, W)``; RGB ≥ 0, an image or its three
-    planes (a tuple, :attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`).
+    planes (a tuple, :func:`~torchgrade.runtime.strips.pixelwise`).
 
     ``2 HueVsSat(h) · 2 SatVsSat(s) · 2 LumVsSat(Y)`` of the pixel's HSV hue, HSV saturation and
     luminance; curves not given count as 1.
@@ -325,7 +325,7 @@ def saturation(image: torch.Tensor, amount: Param, luminance_weights="rec709", f
     """Saturation about luminance: ``Y + (rgb - Y)(1 + amount/100)``; -100 gives grey ``Y``.
 
     ``factor`` (from :func:`saturation_curves`) multiplies ``1 + amount/100``, as URP does. An image given as its three
-    planes (a tuple, :attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`) is returned as planes.
+    planes (a tuple, :func:`~torchgrade.runtime.strips.pixelwise`) is returned as planes.
 
     Examples:
         >>> grey = saturation(torch.tensor([1.0, 0.0, 0.0]).reshape(3, 1, 1), -100.0).flatten()

@@ -9,7 +9,6 @@ import torch
 from ..base.params import Param, color_param, is_constant, scalar_param
 from ..base.planes import each_plane, joined
 from ..color import luminance, safe_pow, safe_sqrt
-from ..runtime.variants import formula
 
 __all__ = ["soft_light", "split_toning"]
 
@@ -35,70 +34,47 @@ def _lighten(base: torch.Tensor, blend: torch.Tensor) -> torch.Tensor:
     return safe_sqrt(base) * (2.0 * blend - 1.0) + 2.0 * base * (1.0 - blend)
 
 
-@formula
 def _soft_light_by_channel(gamma, weights: tuple, offsets: tuple):
     """Soft-light blends of ``gamma`` with tints ``0.5 + offset · weight`` given by constant per-channel ``offsets``.
 
     With ``weight`` in [0, 1] a channel's blend stays on the side of 0.5 its offset's sign gives, so each channel is
     blended by that branch of :func:`soft_light` alone, written with ``s = 2 blend - 1 = 2 offset weight``:
     ``a + s(√a - a)`` (:func:`_lighten`) and ``a + s·a(1 - a)`` (:func:`_darken`), one multiply-add each; an offset of
-    0 blends with 0.5 exactly, where both branches return the base, and is skipped. The image's planes (a tuple,
-    :attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`) are returned as planes.
+    0 blends with 0.5 exactly, where both branches return the base, and is skipped. The image's planes (a tuple) are
+    returned as planes.
 
     Examples:
         >>> base, t = torch.rand(1, 3, 2, 2), torch.rand(1, 1, 2, 2)
         >>> tint = 0.5 + torch.tensor([-0.2, 0.0, 0.3]).reshape(3, 1, 1) * t
-        >>> bool(torch.allclose(_soft_light_by_channel(base.clone(), (t,), ((-0.2, 0.0, 0.3),)), soft_light(base, tint), atol=1e-6))
+        >>> bool(torch.allclose(_soft_light_by_channel(base, (t,), ((-0.2, 0.0, 0.3),)), soft_light(base, tint), atol=1e-6))
         True
     """
     on_planes = isinstance(gamma, tuple)
-    planes = _blend_planes(gamma if on_planes else gamma.split(1, dim=-3), weights, offsets,
-                           darken=lambda a: torch.addcmul(a, a, a, value=-1.0), lighten=lambda a: safe_sqrt(a) - a,
-                           add=lambda a, weight, shift, scale: torch.addcmul(a, weight, shift, value=scale))
+    planes = _blend_planes(gamma if on_planes else gamma.split(1, dim=-3), weights, offsets)
     return tuple(planes) if on_planes else torch.cat(planes, dim=-3)
 
 
-def _a_frame(gamma, weights: tuple, offsets: tuple) -> bool:
-    """Whether the blend is given a frame, not its planes."""
-    return isinstance(gamma, torch.Tensor)
-
-
-@_soft_light_by_channel.variant("untracked", when=_a_frame)
-def _soft_light_by_channel_in_place(gamma: torch.Tensor, weights: tuple, offsets: tuple) -> torch.Tensor:
-    """In place on ``gamma``'s planes, which it returns (a temporary of its caller); the planes are finite and at least
-    0 (gamma of a bounded frame; each blend keeps them so), so the square root needs no guard."""
-    _blend_planes(gamma.split(1, dim=-3), weights, offsets, darken=lambda a: torch.addcmul(a, a, a, value=-1.0),
-                  lighten=lambda a: a.sqrt() - a, add=lambda a, weight, shift, scale: a.addcmul_(weight, shift, value=scale))
-    return gamma
-
-
-@_soft_light_by_channel.variant("export", when=_a_frame)
-def _soft_light_by_channel_exported(gamma: torch.Tensor, weights: tuple, offsets: tuple) -> torch.Tensor:
-    """The expressions' nodes: an ``addcmul`` exports its value as a float32 ``Constant``, whatever the graph's dtype."""
-    planes = _blend_planes(gamma.split(1, dim=-3), weights, offsets, darken=lambda a: a * (1.0 - a),
-                           lighten=lambda a: safe_sqrt(a) - a, add=lambda a, weight, shift, scale: a + scale * weight * shift)
-    return torch.cat(planes, dim=-3)
-
-
-def _blend_planes(planes, weights: tuple, offsets: tuple, darken, lighten, add) -> list:
-    """Plane ``c`` blended with each weight in turn, ``add(a, weight, darken(a) or lighten(a), 2 offset)`` by the sign
-    of that weight's offset ``offsets[i][c]``, skipped where it is 0: the steps of :func:`_soft_light_by_channel`."""
+def _blend_planes(planes, weights: tuple, offsets: tuple) -> list:
+    """Plane ``c`` blended with each weight in turn, ``a + 2 offset · weight · (a(1 - a) or √a - a)`` by the sign of
+    that weight's offset ``offsets[i][c]``, skipped where it is 0: the steps of :func:`_soft_light_by_channel`."""
     blended = []
     for c, plane in enumerate(planes):
         for weight, channel_offsets in zip(weights, offsets):
             offset = channel_offsets[c]
             if offset != 0.0:
-                plane = add(plane, weight, darken(plane) if offset < 0.0 else lighten(plane), 2.0 * offset)
+                shift = torch.addcmul(plane, plane, plane, value=-1.0) if offset < 0.0 else safe_sqrt(plane) - plane
+                plane = torch.addcmul(plane, weight, shift, value=2.0 * offset)
         blended.append(plane)
     return blended
 
 
 def _soft_light_masked(base: torch.Tensor, weight: torch.Tensor, offset: torch.Tensor) -> torch.Tensor:
-    """:func:`soft_light` with the tint ``0.5 + offset · weight`` for export, with offsets that are graph inputs.
+    """:func:`soft_light` with the tint ``0.5 + offset · weight``, for offsets that are tensors (per sample, learnable).
 
     With ``weight`` in [0, 1] the blend's side of 0.5 is the offset's sign, so the branch is picked per channel by
-    ``m = [offset > 0]`` instead of per pixel: ``a + s(m √a + a((1 - 2m) - (1 - m) a))`` with ``s = 2 offset weight``
-    is :func:`_lighten` for ``m = 1`` and :func:`_darken` for ``m = 0``, exactly (a 0/1 factor of a finite value).
+    ``m = [offset > 0]`` instead of per pixel (an offset of 0 blends with 0.5, where both branches give the base):
+    ``a + s(m √a + a((1 - 2m) - (1 - m) a))`` with ``s = 2 offset weight`` is :func:`_lighten` for ``m = 1`` and
+    :func:`_darken` for ``m = 0``, exactly (a 0/1 factor of a finite value): no select over the frame.
 
     Examples:
         >>> base, t, offset = torch.rand(2, 3, 2, 2), torch.rand(2, 1, 2, 2), torch.tensor([[-0.2, 0.0, 0.3], [0.1, -0.4, 0.0]])
@@ -118,7 +94,7 @@ def split_toning(
 
     ``t = saturate(Y(saturate(c)) + balance/100)``; the shadow tint ``lerp(0.5, shadows, 1 - t)`` and the
     highlight tint ``lerp(0.5, highlights, t)`` are soft-light blended in turn. Grey 0.5 tints are neutral. An image
-    given as its three planes (a tuple, :attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`) is toned as planes
+    given as its three planes (a tuple, :func:`~torchgrade.runtime.strips.pixelwise`) is toned as planes
     where the tints are numbers, and joined into one image where they are tensors.
 
     Examples:
@@ -140,22 +116,18 @@ def split_toning(
     return safe_pow(_toned(gamma, t, *offsets), 2.2)
 
 
-@formula
 def _toned(gamma: torch.Tensor, t: torch.Tensor, shadows: torch.Tensor, highlights: torch.Tensor) -> torch.Tensor:
     """The two soft-light blends of :func:`split_toning` with the tints ``0.5 + shadows (1 - t)`` and
-    ``0.5 + highlights t`` (offsets from grey, tensors).
+    ``0.5 + highlights t`` (offsets from grey, tensors), the branch of each picked per channel
+    (:func:`_soft_light_masked`).
 
     Examples:
         >>> gamma, t = torch.rand(1, 3, 2, 2), torch.rand(1, 1, 2, 2)
-        >>> bool(torch.equal(_toned(gamma, t, torch.zeros(3, 1, 1), torch.zeros(3, 1, 1)), soft_light(soft_light(gamma, torch.full_like(gamma, 0.5)), torch.full_like(gamma, 0.5))))
+        >>> shadows, highlights = torch.tensor([-0.2, 0.0, 0.3]).reshape(3, 1, 1), torch.tensor([0.1, -0.4, 0.0]).reshape(3, 1, 1)
+        >>> expected = soft_light(soft_light(gamma, 0.5 + shadows * (1.0 - t)), 0.5 + highlights * t)
+        >>> bool(torch.allclose(_toned(gamma, t, shadows, highlights), expected, atol=1e-6))
         True
     """
-    return soft_light(soft_light(gamma, 0.5 + shadows * (1.0 - t)), 0.5 + highlights * t)
-
-
-@_toned.variant("export")
-def _toned_exported(gamma: torch.Tensor, t: torch.Tensor, shadows: torch.Tensor, highlights: torch.Tensor) -> torch.Tensor:
-    """The branch of each blend picked per channel by its offset's sign (:func:`_soft_light_masked`), not per pixel."""
     return _soft_light_masked(_soft_light_masked(gamma, 1.0 - t, shadows), t, highlights)
 
 

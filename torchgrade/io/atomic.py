@@ -32,7 +32,7 @@ def _temporary_beside(target: Path) -> str:
             continue
 
 
-def atomic_write(path, write: Callable[[str], None]) -> None:
+def atomic_write(path, write: Callable[[str], object]) -> None:
     """Call ``write(temporary_path)`` in ``path``'s folder, then rename the result onto ``path``.
 
     The rename is atomic on POSIX and Windows (``os.replace``): readers see either the old file or

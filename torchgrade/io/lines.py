@@ -76,7 +76,7 @@ def _bounded_carry(partial: bytes, line: int, path, comment: bytes) -> bytes:
 def _normalised(text: bytes, line: int, path) -> bytes:
     text = text.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
     if text.translate(None, _TEXT_BYTES):
-        position = _NOT_TEXT.search(text).start()
+        position = next(_NOT_TEXT.finditer(text)).start()
         raise ValueError(f"{path}: line {line + text.count(NEWLINE, 0, position)}: not a text file (control bytes)")
     if not text.isascii():
         try:

@@ -43,13 +43,11 @@ from typing import Optional
 import torch
 from torch import nn
 
-from .._moved import OLD_CLASS_PATHS
 from ..base.config import load_config
-from ..base.images import check_image, with_alpha
-from ..base.stage import on_nan_free
+from ..base.images import with_alpha
 from ..bloom import ConvolutionBloom
-from ..lut import INTERPOLATIONS, LUT3D, ErrorReport, bake_lut
-from ..runtime import is_tracing
+from ..lut import INTERPOLATIONS, LUT3D, ErrorReport
+from ..lut.bake import bake_look
 from .slots import SLOT, SLOTS, STAGES, build_stage, is_identity_stage
 
 __all__ = ["PostFX", "SAFE_GLOBALS"]
@@ -240,8 +238,9 @@ class PostFX(nn.Module):
 
     def to_lut(self, size: Optional[int] = None, interpolation: Optional[str] = None, output_encoding: str = "linear",
                entries: str = "sampled", frames: Optional[torch.Tensor] = None) -> "PostFX":
-        """An equivalent look with grade, primary grade and tone mapping baked into a ``"logc_extended"`` LUT (51³ by
-        default, or ``size``³).
+        """An equivalent look with grade, primary grade and tone mapping baked into a LUT: the table
+        ``tg.bake_lut(look, ...)`` bakes from the same arguments (:func:`~torchgrade.lut.bake.bake_look`), on the default
+        lattice (``"logc_extended"`` at its default size, or ``size``³), its entries rounded to float32.
 
         The other slots stay live (copied, so the new look keeps its own adaptation state). The
         LUT's lattice is LogC up to linear 58.86, then a tail in stops up to 65504
@@ -253,13 +252,7 @@ class PostFX(nn.Module):
         (``(..., 3, H, W)`` scene-referred, as the look takes them) the report is measured on those frames as the LUT
         receives them (after the stages before it) rather than on the realistic colours.
         """
-        transform = self.per_pixel_stages()
-        if frames is not None:
-            check_image(frames, "frames")
-            with torch.no_grad():
-                frames = self.per_pixel_input(frames.reshape(-1, *frames.shape[-3:]))
-        lut = bake_lut(transform, size=size, shaper="logc_extended", output_encoding=output_encoding, entries=entries,
-                       frames=frames)
+        lut = bake_look(self, size=size, output_encoding=output_encoding, entries=entries, frames=frames)
         report = lut.error_report
         lut = LUT3D(lut.table.detach().float(), shaper=lut.shaper, domain=(lut.domain_min, lut.domain_max),
                     output_range=lut.output_range, output_encoding=lut.output_encoding,
@@ -321,28 +314,21 @@ SAFE_GLOBALS = (PostFX, LUT3D, ErrorReport, ConvolutionBloom, *STAGES.values())
 torchgrade is imported, so ``torch.load(path, weights_only=True)`` reads back a ``torch.save(look)``."""
 
 torch.serialization.add_safe_globals(list(SAFE_GLOBALS))
-torch.serialization.add_safe_globals([(cls, old) for cls in SAFE_GLOBALS for old, new in OLD_CLASS_PATHS.items()
-                                      if new == f"{cls.__module__}.{cls.__qualname__}"])  # files saved before the move
 
 
 def _through(stages, image: torch.Tensor, dt) -> torch.Tensor:
     """``image`` through ``(slot name, stage)`` pairs in order, ``dt`` to those that keep state between frames.
 
     A stage's output holds no NaN (``tests/library/test_extremes.py``), so a stage whose input another stage made is
-    told so (:func:`~torchgrade.base.stage.on_nan_free`) and skips its input's NaN pass, one frame pass each. A stage that
-    hands its input back (an identity setting, a frame too small for a bloom level) makes nothing: its output is as
-    trusted as its input was. Not while tracing: a compiled look keeps every stage's whole policy (Inductor fuses it),
-    and an export decides it in its graph.
+    told so (``nan_free=True``, :attr:`~torchgrade.base.stage.Stage.takes_nan_free`) and skips its input's NaN pass, one
+    frame pass each. A stage that hands its input back (an identity setting, a frame too small for a bloom level)
+    makes nothing: its output is as trusted as its input was.
     """
     made = False
     for name, stage in stages:
         args = (dt,) if SLOT[name].timed else ()
-        out = on_nan_free(stage, image, *args) if made and not is_tracing() else stage(image, *args)
-        made = made or not _shares_base(out, image)
+        trusted = {"nan_free": True} if made and getattr(stage, "takes_nan_free", False) else {}
+        out = stage(image, *args, **trusted)
+        made = made or out is not image
         image = out
     return image
-
-
-def _shares_base(a: torch.Tensor, b: torch.Tensor) -> bool:
-    """Whether ``a`` and ``b`` are the same tensor or views of the same one."""
-    return (a if a._base is None else a._base) is (b if b._base is None else b._base)

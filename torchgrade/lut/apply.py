@@ -51,7 +51,7 @@ from .shapers import SHAPERS, lattice_unit, shaper_encode
 __all__ = ["OUTPUT_ENCODINGS", "apply_lut", "lookup", "operator_lookup", "runs_operator", "whole_frame_tables",
            "compiled_lookup", "decode_output", "encode_output", "table_output", "check_lookup_arguments"]
 
-OUTPUT_ENCODINGS = ("linear", "srgb")
+OUTPUT_ENCODINGS: tuple[str, ...] = ("linear", "srgb")
 """How table entries are stored: linear values, or sRGB-encoded values decoded after the lookup."""
 
 

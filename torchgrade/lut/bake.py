@@ -33,14 +33,21 @@ from .fit import SCENE_FIT_WEIGHT, SCENE_MIN_SIZE, fit_scene_shaper, fit_shaper,
 from .lattice import MIN_SIZE, check_size, checked_domain, lattice
 from .layer import LUT3D
 from .apply import OUTPUT_ENCODINGS, encode_output
-from .report import FRAMES, REALISTIC, code_errors, diagnose, enforce, highlights_report, measure, measured_colours, worst_case
+from .footage import footage_colours
+from .report import (REALISTIC, code_errors, diagnose, enforce, footage_reports, highlights_report, measure, measure_pixels,
+                     measured_colours, worst_case)
 from .shapers import DEFAULT_DOMAINS, DEFAULT_SIZES, SHAPERS
 from .validation import realistic_colours, validation_colours
 
-__all__ = ["AUTO_SIZES", "bake_lut", "expects_hdr", "is_display_referred", "scene_domain", "srgb_code_error"]
+__all__ = ["AUTO_SIZES", "LOOK_SHAPER", "bake_lut", "bake_look", "live_stages", "expects_hdr", "is_display_referred",
+           "scene_domain", "srgb_code_error"]
 
 AUTO_SIZES = (3, 5, 9, 17, 33, 65, 129, 256)
 """Sizes tried first by ``bake_lut(size="auto")`` before bisecting between the last two."""
+
+LOOK_SHAPER = "logc_extended"
+"""The lattice ``shaper="auto"`` bakes a look on (:func:`bake_look`): a look takes scene-referred light, up to 65504,
+whether or not it tone maps."""
 
 
 def _modules(transform) -> list:
@@ -79,7 +86,11 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=None, shape
              output_encoding: str = "linear", progress: bool = False, domain: Optional[tuple] = None,
              report_tolerance: float = 1.0, strict: bool = False, entries: str = "sampled",
              frames: Optional[torch.Tensor] = None) -> LUT3D:
-    """Bake a per-pixel ``transform`` on ``(N, 3, H, W)`` tensors into a :class:`~torchgrade.LUT3D`.
+    """Bake a per-pixel ``transform`` on ``(N, 3, H, W)`` tensors, or a look, into a :class:`~torchgrade.LUT3D`.
+
+    A look (:class:`~torchgrade.PostFX`) is baked by :func:`bake_look`, as ``look.to_lut()`` and ``torchgrade bake``
+    bake it: the same table from the same arguments. It must hold nothing a LUT cannot (exposure, bloom, a look LUT,
+    dither, a display: ``look.to_lut()`` keeps those live around the LUT).
 
     The transform is evaluated once on the lattice, in float64 and in shaper space, and the float64
     table kept (lattice point ``u`` is fed ``shaper.decode(min + u (max - min))``), ``chunk`` points at
@@ -98,16 +109,16 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=None, shape
       (benchmarks/results/lut_fit.md); its report says by how much.
     * ``scene``: an image the LUT is for. The lattice domain then follows its dynamic range: the
       top is the scene's largest value (after the non-finite policy), the bottom stays at black.
-    * ``frames``: frames the LUT will grade, ``(..., 3, H, W)`` as the transform receives them. The report is then
-      measured on their pixels (at most :data:`~torchgrade.lut.report.SCENE_PIXELS`, evenly strided) instead of the
-      realistic colours, and says so; nothing else changes. The realistic colours stand for footage in general
-      and can miss a grade's weak spot in one kind of scene (a candle-lit room's saturated oranges): a LUT
-      for known footage is best judged on it.
+    * ``frames``: frames the LUT will grade, ``(..., 3, H, W)`` as the transform receives them. The report's p99.9
+      and max are then measured on every one of their pixels instead of the realistic colours, and it says so (its
+      diagnosis, when over the tolerance, on at most :data:`~torchgrade.lut.report.SCENE_PIXELS` of them, evenly
+      strided); nothing else changes. The realistic colours stand for natural footage, and the report's ``footage``
+      figures for charts and warm practicals (:mod:`~torchgrade.lut.footage`); a LUT for known footage is best
+      judged on it.
     * ``domain``: ``(min, max)`` of the lattice in shaper code values (numbers or RGB triples, as
       :class:`~torchgrade.LUT3D` takes them), overriding the shaper's default and the scene's range
       (a ``scene`` then only serves ``size="auto"``).
-    * ``size``: 2..256 (by default the shaper's, :data:`~torchgrade.lut.shapers.DEFAULT_SIZES`: 45 for
-      ``"logc_extended"``, 33 for the others), or ``"auto"`` with a ``scene``: the smallest size whose error on the scene is
+    * ``size``: 2..256 (by default the shaper's :data:`~torchgrade.lut.shapers.DEFAULT_SIZES`), or ``"auto"`` with a ``scene``: the smallest size whose error on the scene is
       at most ``tolerance`` 8-bit sRGB code values at the 99.9th percentile (:func:`srgb_code_error`,
       against direct float64 evaluation). Sizes :data:`AUTO_SIZES` are tried in order, then the gap
       below the first that passes is bisected (error is assumed to fall as the size grows); if none
@@ -127,7 +138,8 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=None, shape
       A scene pixel weighs :data:`~torchgrade.lut.SCENE_WEIGHT` in the fit, or
       :data:`~torchgrade.lut.fit.SCENE_FIT_WEIGHT` on a scene-fitted lattice.
     * The LUT's error on realistic colours (:func:`~torchgrade.lut.realistic_colours`, plus the scene's
-      pixels), or on the ``frames``, is measured and kept as ``lut.error_report`` (:class:`~torchgrade.lut.ErrorReport`), with the
+      pixels), or on the ``frames``, is measured and kept as ``lut.error_report`` (:class:`~torchgrade.lut.ErrorReport`),
+      with (for an HDR bake without ``frames``) the same on colour charts and warm practicals as its ``footage``, the
       worst case, on the validation colours over the whole domain, as its ``worst_case``, and for a lattice that
       reaches 65504 its max error on bright saturated colours as its ``highlights``
       (:func:`~torchgrade.lut.report.highlights_report`). Above ``report_tolerance`` 8-bit codes at p99.9 on the
@@ -140,6 +152,13 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=None, shape
         'logc'
     """
     check_on_cpu(transform, "bake_lut")
+    if is_look(transform):
+        live = live_stages(transform)
+        if live:
+            raise ValueError(f"bake_lut(look) bakes a look's grade, primary grade and tone mapping; this look also runs "
+                             f"{', '.join(live)}, which a LUT cannot hold: look.to_lut() keeps them live around the LUT, "
+                             "bake_lut(look.per_pixel_stages()) bakes the rest alone")
+        transform, shaper, scene, frames = _per_pixel(transform, shaper, scene, frames)
     if shaper == "auto":
         shaper = "logc_extended" if expects_hdr(transform) else "linear"
     check_choice("bake shaper", shaper, DEFAULT_DOMAINS)
@@ -163,27 +182,84 @@ def bake_lut(transform: Callable[[torch.Tensor], torch.Tensor], size=None, shape
     if domain is not None:
         domain = checked_domain(domain)
     hdr = shaper != "linear" or expects_hdr(transform)
-    realistic = realistic_colours(hdr)
-    if frames is None:
-        measured = measured_colours(transform, realistic, scene)
-        scene_colours = measured[0].shape[-1] - realistic.shape[1]
-        colour_set = REALISTIC if scene is None else f"{REALISTIC} and scene pixels"
-    else:
+    if frames is not None:
         check_image(frames, "frames")
-        measured, colour_set, scene_colours = measured_colours(transform, realistic[:, :0], frames), FRAMES, 0
+    measured, scene_colours = _headline_colours(transform, hdr, scene, frames)
     worst = measured_colours(transform, validation_colours(hdr), None)
     bake = _baker(transform, domain, scene, chunk, output_encoding, progress, worst, hdr)
-    lut = bake(shaper, size) if size != "auto" else _smallest_within(lambda n: bake(shaper, n), transform, scene, tolerance)
+    if size == "auto" and scene is not None:  # "auto" without a scene was refused above
+        lut = _smallest_within(lambda n: bake(shaper, n), transform, scene, tolerance)
+    else:
+        lut = bake(shaper, size)
     if entries == "fitted":
         lut = fit_entries(lut, transform, scene, hdr, scene_weight=_scene_weight(lut, scene))
-    report = measure(lut, measured, report_tolerance, colour_set)
+    if frames is None:
+        report = measure(lut, measured, report_tolerance, REALISTIC if scene is None else f"{REALISTIC} and scene pixels")
+    else:
+        report = measure_pixels(lut, transform, frames, report_tolerance)
     if not report.within:
-        report = diagnose(report, lut, transform, measured, _rebaker(bake, lut), scene_colours)
+        report = diagnose(report, lut, transform, measured, _rebaker(bake, lut), scene_colours, scene is not None)
+    footage = {} if frames is not None or not hdr else footage_colours()
     report = replace(report, worst_case=worst_case(lut, transform, worst, report_tolerance),
-                     highlights=highlights_report(lut, transform, lambda n: bake(lut.shaper, n)))
+                     highlights=highlights_report(lut, transform, lambda n: bake(lut.shaper, n)),
+                     footage=footage_reports(lut, {name: measured_colours(transform, colours, None)
+                                                   for name, colours in footage.items()}, report_tolerance))
     enforce(report, strict)
     lut.error_report = report
     return lut
+
+
+def bake_look(look, size=None, shaper: str = "auto", scene=None, frames=None, **bake) -> LUT3D:
+    """The LUT of ``look``'s per-pixel stages (``look.per_pixel_stages()``: grade, primary grade, tone mapping), the one
+    bake behind ``bake_lut(look)``, ``look.to_lut()`` and ``torchgrade bake``; the look's other stages are left out.
+
+    ``shaper="auto"`` is :data:`LOOK_SHAPER` (a look takes scene-referred light, tone mapped or not); ``scene`` and
+    ``frames`` are frames the look takes, each measured as the LUT receives it (``look.per_pixel_input``: after the
+    exposure and bloom); ``frames`` may also be a list of frames of different sizes. The other arguments are
+    :func:`bake_lut`'s.
+
+    Examples:
+        >>> import torchgrade as tg
+        >>> look = tg.PostFX(bloom={"intensity": 0.5}, grade={"contrast": 10}, tonemap="aces")
+        >>> lut = bake_look(look, size=5, report_tolerance=float("inf"))
+        >>> lut.shaper, lut.size, live_stages(look)
+        ('logc_extended', 5, ['bloom'])
+    """
+    transform, shaper, scene, frames = _per_pixel(look, shaper, scene, frames)
+    return bake_lut(transform, size=size, shaper=shaper, scene=scene, frames=frames, **bake)
+
+
+def is_look(transform) -> bool:
+    """Whether ``transform`` is a look (it has per-pixel stages a LUT holds and frames them, as :class:`~torchgrade.PostFX`).
+
+    Examples:
+        >>> is_look(lambda image: image)
+        False
+    """
+    return callable(getattr(transform, "per_pixel_stages", None)) and callable(getattr(transform, "per_pixel_input", None))
+
+
+def live_stages(look) -> list:
+    """The names of ``look``'s stages that a LUT of it leaves out (run live): all but its per-pixel stages."""
+    baked = list(look.per_pixel_stages())
+    return [name for name, stage in look.stages().items() if all(stage is not module for module in baked)]
+
+
+def _per_pixel(look, shaper: str, scene, frames) -> tuple:
+    """``(transform, shaper, scene, frames)`` that bake ``look``: its per-pixel stages, ``"auto"`` as
+    :data:`LOOK_SHAPER`, the scene and frames as those stages receive them (``(1, 3, 1, N)`` for frames)."""
+    transform = look.per_pixel_stages()
+    with torch.no_grad():
+        if scene is not None:
+            check_image(scene, "scene")
+            scene = look.per_pixel_input(scene.reshape(-1, *scene.shape[-3:]))
+        if frames is not None:
+            frames = [frames] if isinstance(frames, torch.Tensor) else list(frames)
+            for frame in frames:
+                check_image(frame, "frames")
+            received = [look.per_pixel_input(f.reshape(-1, *f.shape[-3:])).movedim(-3, 0).reshape(3, -1) for f in frames]
+            frames = torch.cat(received, dim=-1).reshape(1, 3, 1, -1)
+    return transform, LOOK_SHAPER if shaper == "auto" else shaper, scene, frames
 
 
 def _baker(transform, domain, scene, chunk: int, output_encoding: str, progress: bool, measured: tuple, hdr: bool) -> Callable:
@@ -239,6 +315,17 @@ def _baker(transform, domain, scene, chunk: int, output_encoding: str, progress:
                      curve=curve, curve_range=curve_range)
 
     return cached
+
+
+def _headline_colours(transform, hdr: bool, scene: Optional[torch.Tensor], frames: Optional[torch.Tensor]) -> tuple:
+    """``(measured, scene colours)``: the realistic colours and the scene's pixels (the last ``scene colours`` of them),
+    or at most :data:`~torchgrade.lut.report.SCENE_PIXELS` of the frames' pixels (the diagnosis's: the report itself
+    measures every pixel), with the transform on them (:func:`~torchgrade.lut.report.measured_colours`)."""
+    realistic = realistic_colours(hdr)
+    if frames is not None:
+        return measured_colours(transform, realistic[:, :0], frames), 0
+    measured = measured_colours(transform, realistic, scene)
+    return measured, measured[0].shape[-1] - realistic.shape[1]
 
 
 def _scene_weight(lut: LUT3D, scene: Optional[torch.Tensor]) -> float:

@@ -150,7 +150,7 @@ def fit_entries(lut: LUT3D, transform, scene: Optional[torch.Tensor] = None, hdr
     for power in powers:
         optimizer = torch.optim.LBFGS([rows], max_iter=iterations, history_size=20, line_search_fn="strong_wolfe")
 
-        def closure() -> torch.Tensor:
+        def closure(optimizer=optimizer, power=power) -> torch.Tensor:
             optimizer.zero_grad()
             loss = power_mean(display_miss(kernel(coords, rows, lut.size), target, slope, below, above), power)
             loss.backward()

@@ -273,8 +273,8 @@ def planes_curve(planes: torch.Tensor, hdr: bool = True, knots: int = SCENE_KNOT
         (torch.Size([5, 3]), 0.0, 1.0)
     """
     top = HALF_MAX if hdr else 1.0
-    curve_range = tuple(float(linear_to_logc(torch.tensor(v, dtype=torch.float64))) for v in (0.0, top))
-    grid = torch.linspace(*curve_range, knots, dtype=torch.float64)
+    low, high = (float(linear_to_logc(torch.tensor(v, dtype=torch.float64))) for v in (0.0, top))
+    grid = torch.linspace(low, high, knots, dtype=torch.float64)
     coordinates = torch.linspace(0.0, 1.0, planes.shape[0], dtype=torch.float64)
     columns = []
     for channel in range(3):
@@ -282,7 +282,7 @@ def planes_curve(planes: torch.Tensor, hdr: bool = True, knots: int = SCENE_KNOT
         upper = torch.searchsorted(logc, grid, right=True).clamp(1, logc.numel() - 1)
         fraction = ((grid - logc[upper - 1]) / (logc[upper] - logc[upper - 1])).clamp(0.0, 1.0)
         columns.append(coordinates[upper - 1] + fraction * (coordinates[upper] - coordinates[upper - 1]))
-    return torch.stack(columns, dim=1), curve_range
+    return torch.stack(columns, dim=1), (low, high)
 
 
 def fit_scene_shaper(fit: Callable, pixels: torch.Tensor, errors_of: Callable, size: int, hdr: bool = True,
@@ -313,4 +313,6 @@ def fit_scene_shaper(fit: Callable, pixels: torch.Tensor, errors_of: Callable, s
             best = (planes, curve, errors)
         else:
             step /= 2
+    if best is None:
+        raise ValueError(f"rounds must be at least 1, got {rounds}")
     return best[1]

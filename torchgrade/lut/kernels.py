@@ -9,7 +9,7 @@ lookup off the CPU from tables derived once per LUT: few operations on the whole
 ``torchgrade::lut_lookup`` runs, :mod:`torchgrade.lut.operator`).
 And it may have **grid forms**, one per export backend, ``form(unit (N, 3, H, W) in [0, 1], table
 (S, S, S, 3)) -> (N, 3, H, W)`` built on ``grid_sample``, for runtimes that prefer ``GridSample`` (see
-:data:`BACKENDS`).
+:data:`~torchgrade.lut.backends.BACKENDS`).
 
 A new interpolation is one function here plus one :class:`Kernel` line in :data:`KERNELS`; a new
 graph form of an existing one is one function plus one entry in its ``grids``.
@@ -31,12 +31,11 @@ from typing import Callable, Optional
 import torch
 import torch.nn.functional as F
 
-from .backends import BACKENDS, LUT_BACKENDS  # noqa: F401 (their former path)
 from ..runtime import constant, device_cached
 
-__all__ = ["Kernel", "EagerForm", "KERNELS", "INTERPOLATIONS", "BACKENDS", "LUT_BACKENDS", "tetrahedron", "tetrahedral",
+__all__ = ["Kernel", "EagerForm", "KERNELS", "INTERPOLATIONS", "tetrahedron", "tetrahedral",
            "tetrahedral_tables", "tetrahedral_frame", "trilinear", "trilinear_grid_sample", "strip_table", "trilinear_strip",
-           "trilinear_slices_lookup", "trilinear_strip_lookup"]
+           "trilinear_slices_lookup"]
 
 
 def _cell(coords: torch.Tensor, size: int):
@@ -308,10 +307,6 @@ def trilinear_slices_lookup(unit: torch.Tensor, table: torch.Tensor) -> torch.Te
         [0.5, 0.5, 0.5]
     """
     return trilinear_strip(unit, strip_table(table))
-
-
-trilinear_strip_lookup = trilinear_slices_lookup
-"""The former name of :func:`trilinear_slices_lookup`, kept for a release."""
 
 
 @dataclass(frozen=True)

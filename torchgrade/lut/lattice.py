@@ -31,7 +31,7 @@ def check_size(size) -> int:
         >>> check_size(33)
         33
     """
-    if isinstance(size, bool) or not isinstance(size, numbers.Integral) or not MIN_SIZE <= size <= MAX_SIZE:
+    if isinstance(size, bool) or not isinstance(size, numbers.Integral) or not MIN_SIZE <= int(size) <= MAX_SIZE:
         raise ValueError(f"LUT size must be an integer from {MIN_SIZE} to {MAX_SIZE} (points per axis), got {size!r}")
     return int(size)
 

@@ -28,6 +28,7 @@ from .apply import (
     table_output,
     whole_frame_tables,
 )
+from .report import ErrorReport
 from .shapers import SHAPERS, lattice_unit
 
 __all__ = ["LUT3D", "LUTLookup", "entry_bound"]
@@ -74,6 +75,20 @@ class LUT3D(Stage):
 
     per_pixel = True
 
+    # the controls, buffers and report ``__init__`` sets, as a type checker reads them (nn.Module's own attribute
+    # lookup types every other attribute as a tensor or a module)
+    shaper: str
+    output_range: Optional[tuple[float, float]]
+    curve_range: tuple[float, float]
+    output_encoding: str
+    compile: bool  # type: ignore[assignment]  # the control, which hides nn.Module.compile on a LUT3D
+    interpolation: str
+    table: torch.Tensor
+    domain_min: torch.Tensor
+    domain_max: torch.Tensor
+    curve: Optional[torch.Tensor]
+    error_report: Optional[ErrorReport]
+
     controls = {
         "shaper": Control("linear", tuple(SHAPERS)),
         "output_range": Control(None),
@@ -101,8 +116,8 @@ class LUT3D(Stage):
         self.register_buffer("domain_min", low)
         self.register_buffer("domain_max", high)
         self.register_buffer("curve", None if curve is None else _check_curve(curve))
-        self._rows_cache = (None, None, None)
-        self._tables_cache = (None, None, None)  # (rows, interpolation, the whole-frame form's tables)
+        self._rows_cache: tuple = (None, None, None)
+        self._tables_cache: tuple = (None, None, None)  # (rows, interpolation, the whole-frame form's tables)
         self.error_report = None  # set by bake_lut: a torchgrade.lut.ErrorReport
         self.init_controls(shaper=shaper, output_range=output_range, curve_range=curve_range,
                            output_encoding=output_encoding, compile=bool(compile), interpolation=interpolation)
@@ -152,7 +167,8 @@ class LUT3D(Stage):
             try:
                 return compiled_lookup()(image, self.rows(dtype), self.size, *settings)
             except Exception as error:  # no C++ compiler, unsupported device, ...: the eager path always works
-                warnings.warn(f"LUT3D(compile=True) fell back to eager: torch.compile failed with {error!r}", RuntimeWarning)
+                warnings.warn(f"LUT3D(compile=True) fell back to eager: torch.compile failed with {error!r}", RuntimeWarning,
+                              stacklevel=4)
                 self.compile = False
         if runs_operator(image, self.table):
             return operator_lookup(image, self.table.to(dtype), *settings, nan_free=nan_free)

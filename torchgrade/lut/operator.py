@@ -47,7 +47,7 @@ from .shapers import lattice_unit
 try:
     from . import _lookup as NATIVE
 except ImportError:  # built without a C compiler: the torch form runs (one warning at the first lookup)
-    NATIVE = None
+    NATIVE = None  # type: ignore[assignment]  # (the stub, _lookup.pyi, types the calls made when it is there)
 
 __all__ = ["lut_lookup", "torch_form", "NATIVE", "CHUNK_PIXELS"]
 
@@ -150,7 +150,7 @@ def _backward(ctx, grad: Tensor):
     def looked_up(x, entries):
         return torch_form(x, entries, domain_min, domain_max, ctx.interpolation, ctx.nan_free)
 
-    _, pullback = torch.func.vjp(looked_up, codes, table)
+    pullback = torch.func.vjp(looked_up, codes, table)[1]
     grad_codes, grad_table = pullback(grad)
     return grad_codes, grad_table, None, None, None, None
 

@@ -4,9 +4,12 @@
 float64, in what a viewer sees: 8-bit sRGB display codes, p99.9 and max over every channel value, on
 two sets of colours (:mod:`~torchgrade.lut.validation`):
 
-* the **realistic colours**, what frames hold, and the scene's pixels when given, or the pixels of the user's own
-  frames when given (``bake_lut(frames=)``): the headline figure, which the tolerance judges
+* the **realistic colours**, what natural frames hold, and the scene's pixels when given, or every pixel of the user's
+  own frames when given (``bake_lut(frames=)``): the headline figure, which the tolerance judges
   (``benchmarks/results/lut_realistic.md``: within 1.5x of the p99.9 pooled over the sample images);
+* the **footage** the realistic colours hold few of, each figure named beside the headline (``ErrorReport.footage``;
+  not with ``frames=``, which are the footage): saturated colour charts and warm practicals
+  (:mod:`~torchgrade.lut.footage`), where a look's LUT can miss twice as much or more;
 * the **validation colours** over the whole domain (up to 65504, out of gamut, the gamut's corners):
   the worst case, shown beside it (``ErrorReport.worst_case``);
 * for a lattice that reaches 65504, the **bright saturated colours** (``ErrorReport.highlights``): their max
@@ -21,6 +24,12 @@ Above the tolerance the report names the cause it found on the realistic colours
 * **size**: the error falls as a smooth transform's does; a larger lattice meets it;
 
 and the first bake of :data:`CANDIDATES` that meets the tolerance, or says that none does.
+
+The default report of an HDR bake evaluates :data:`REPORT_COLOURS` colours directly in float64 and through the LUT
+(16,384 realistic, 6,168 chart, 8,192 warm, 17,113 validation and, for a lattice reaching 65504, 24,576 bright
+saturated colours): about half of a 51³ bake's 132,651 lattice points. Highlights missed by more than
+:data:`HIGHLIGHT_TOLERANCE` cost one bake twice as fine, a report over its tolerance the bakes its causes and advice
+name (:func:`diagnose`); ``frames=`` adds every pixel of the frames.
 
 Examples:
     >>> import torchgrade as tg
@@ -40,12 +49,14 @@ import torch
 
 from ..base.images import HALF_MAX, sanitize
 from ..color import linear_to_srgb
+from .footage import CHART_COLOURS, WARM_COLOURS
 from .shapers import SHAPERS
-from .validation import bright_saturated_colours
+from .validation import FOOTAGE_COLOURS, GRID_LEVELS, HIGHLIGHT_FRACTIONS, HIGHLIGHT_STEPS, REALISTIC_COLOURS, bright_saturated_colours
 
 __all__ = ["ErrorReport", "LUTAccuracyWarning", "code_errors", "measured_colours", "measure", "diagnose", "enforce",
            "SCENE_PIXELS", "KINK_RATIO", "CANDIDATES", "ADVICE_MAX_SIZE", "REALISTIC", "FRAMES", "WORST_CASE",
-           "HIGHLIGHT_TOLERANCE", "HIGHLIGHT_ADVICE_MAX_SIZE", "worst_case", "highlights_report"]
+           "HIGHLIGHT_TOLERANCE", "HIGHLIGHT_ADVICE_MAX_SIZE", "worst_case", "highlights_report", "footage_reports",
+           "measure_pixels", "PIXEL_CHUNK", "REPORT_COLOURS"]
 
 REALISTIC = "realistic colours"
 """How a report names :func:`~torchgrade.lut.validation.realistic_colours`."""
@@ -57,7 +68,17 @@ WORST_CASE = "validation colours over the whole domain"
 """How a report names :func:`~torchgrade.lut.validation.validation_colours`."""
 
 SCENE_PIXELS = 65536
-"""At most this many scene pixels (evenly strided) join the validation colours."""
+"""At most this many scene pixels (evenly strided) join the realistic colours; of ``frames=``, at most this many
+(evenly strided) serve the diagnosis, while the report's p99.9 and max are over every pixel."""
+
+PIXEL_CHUNK = 1 << 18
+"""Pixels of ``frames=`` evaluated at a time (float64): beyond the errors it keeps (float32, one per channel value, as
+many bytes as the frames themselves), the report's memory stays bounded."""
+
+REPORT_COLOURS = (REALISTIC_COLOURS + CHART_COLOURS + WARM_COLOURS + FOOTAGE_COLOURS + GRID_LEVELS ** 3
+                  + 6 * HIGHLIGHT_STEPS * len(HIGHLIGHT_FRACTIONS) ** 2)
+"""Colours the default report of an HDR bake evaluates in float64 and looks up, without diagnosis: realistic, chart,
+warm, validation and bright saturated colours (72,433)."""
 
 KINK_RATIO = 2.5
 """Error ratio from ``S³`` to ``(2S-1)³`` below which the cause is a kink (a smooth transform gives about 4)."""
@@ -100,6 +121,9 @@ class ErrorReport:
     """The max error on bright saturated colours (:func:`highlights_report`), for a lattice that reaches 65504."""
     binding: bool = True
     """Whether this report's tolerance judges the bake (a highlights report is not where no finer lattice helps)."""
+    footage: tuple = ()
+    """The same figures on the footage the realistic colours hold few of (:func:`footage_reports`: colour charts,
+    warm practicals), each an :class:`ErrorReport` named by its ``colour_set``; shown, not judged."""
 
     @property
     def within(self) -> bool:
@@ -110,6 +134,8 @@ class ErrorReport:
     def __str__(self) -> str:
         text = (f"p99.9 {self.p99_9:.2f}, max {self.max:.2f} 8-bit codes on {self.colours} {self.colour_set} "
                 f"(tolerance {self.tolerance:g} at p99.9)")
+        for kind in self.footage:
+            text += f"; on {kind.colour_set}: p99.9 {kind.p99_9:.2f}, max {kind.max:.2f} on {kind.colours}"
         if self.worst_case is not None:
             worst = self.worst_case
             text += f"; worst case: p99.9 {worst.p99_9:.2f}, max {worst.max:.2f} on {worst.colours} {worst.colour_set}"
@@ -161,6 +187,33 @@ def measure(lut, measured: tuple, tolerance: float, colour_set: str = "validatio
     return ErrorReport(_quantile(errors), float(errors.max()), image.shape[-1], tolerance, colour_set=colour_set)
 
 
+def footage_reports(lut, measured: dict, tolerance: float) -> tuple:
+    """The :class:`ErrorReport` of ``lut`` on each of ``measured`` (``{colour set: measured_colours(...)}``), not binding."""
+    return tuple(replace(measure(lut, colours, tolerance, name), binding=False) for name, colours in measured.items())
+
+
+def measure_pixels(lut, transform, pixels: torch.Tensor, tolerance: float, colour_set: str = FRAMES) -> ErrorReport:
+    """The :class:`ErrorReport` of ``lut`` on every pixel of ``pixels`` (``(..., 3, H, W)``, as the transform receives
+    them), :data:`PIXEL_CHUNK` pixels at a time: its p99.9 and max over every channel value.
+
+    Examples:
+        >>> import torch
+        >>> from torchgrade.lut import bake_lut
+        >>> lut = bake_lut(lambda image: image.clamp(0, 1), size=2)
+        >>> measure_pixels(lut, lambda image: image.clamp(0, 1), torch.rand(1, 3, 4, 4), 1.0).colours
+        16
+    """
+    flat = sanitize(pixels.detach()).movedim(-3, 0).reshape(3, -1)
+    errors, largest = [], 0.0
+    with torch.no_grad():
+        for chunk in flat.split(PIXEL_CHUNK, dim=1):
+            image = chunk.reshape(1, 3, 1, -1)
+            chunk_errors = code_errors(transform(image.double()), lut(image.float()))
+            largest = max(largest, float(chunk_errors.max()))
+            errors.append(chunk_errors.float().flatten())  # the quantile's to float32's 6e-8, at half the memory
+    return ErrorReport(_quantile(torch.cat(errors)), largest, flat.shape[1], tolerance, colour_set=colour_set)
+
+
 def _linear_bounds(lut) -> tuple:
     """A baked LUT's lattice bounds as linear values, two ``(3,)`` float64 tensors."""
     shaper = SHAPERS[lut.shaper]
@@ -177,10 +230,11 @@ ADVICE_MAX_SIZE = 65
 
 
 def diagnose(report: ErrorReport, lut, transform, measured: tuple, rebake: Callable[[str, int], object],
-             scene_colours: int = 0) -> ErrorReport:
+             scene_colours: int = 0, scene: bool = False) -> ErrorReport:
     """``report`` with its causes and advice; ``rebake(shaper, size)`` bakes the same transform otherwise.
 
-    ``scene_colours``: how many of the measured colours, at their end, are a scene's pixels. With a scene the advice
+    ``scene_colours``: how many of the measured colours, at their end, are a scene's pixels; ``scene``: whether the bake
+    has a scene (measured or not: with ``frames=`` it only shapes the lattice). With a scene the advice
     tries no fitted shaper, the LUT's own included (fitted to the scene, it serves the scene rather than other
     colours, and a new one costs rounds of entry fits), and a fitted shaper's lattice, fitted to the
     scene, is named as a cause with the error on the scene and on the other colours apart.
@@ -189,7 +243,7 @@ def diagnose(report: ErrorReport, lut, transform, measured: tuple, rebake: Calla
     lattice.
     """
     range_error, within_lattice = _within_lattice(lut, transform, measured)
-    causes = []
+    causes: list[str | None] = []
     if scene_colours and lut.shaper == "fitted":
         causes.append(_scene_fitted_cause(lut, measured, scene_colours))
     causes.append(_range_cause(lut, range_error, report.tolerance))
@@ -201,7 +255,7 @@ def diagnose(report: ErrorReport, lut, transform, measured: tuple, rebake: Calla
         kind = "a kink within a cell" if ratio < KINK_RATIO else "size"
         causes.append(f"{kind} (interpolation alone: p99.9 {interpolation:.2f} codes, {ratio:.1f}x less at {finer_size}³)")
     return replace(report, cause="; ".join(c for c in causes if c) or None,
-                   advice=_advice(lut, measured, report.tolerance, rebake, advise_fitted=not scene_colours))
+                   advice=_advice(lut, measured, report.tolerance, rebake, advise_fitted=not (scene or scene_colours)))
 
 
 def _within_lattice(lut, transform, measured: tuple) -> tuple:

@@ -295,7 +295,7 @@ def _inverse_ramp(values: torch.Tensor, ramp: torch.Tensor) -> torch.Tensor:
     return upper - 1 + (values - below) / (above - below)
 
 
-SHAPERS = {shaper.name: shaper for shaper in (LinearShaper(), LogCShaper(), LogCHDRShaper(), LogCExtendedShaper(), CurveShaper(),
+SHAPERS: dict[str, Shaper] = {shaper.name: shaper for shaper in (LinearShaper(), LogCShaper(), LogCHDRShaper(), LogCExtendedShaper(), CurveShaper(),
                                                FittedShaper())}
 """The shapers by name, what ``LUT3D(shaper=...)`` takes."""
 

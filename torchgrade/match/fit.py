@@ -1,13 +1,20 @@
-"""Fit a look's interpretable controls (and optionally a residual LUT) to before/after pairs.
+"""Fit a look's interpretable controls to before/after pixels, and find its tone mapper.
+
+Every candidate tone mapper is fitted briefly on a small sample; the best few are fitted afresh on every fitting
+pixel, and the one whose fitted error is lowest is the look's. Each fit is parsimonious: the global controls first
+(exposure, white balance, contrast, hue shift, saturation, with the tone mapper's curve), and only where they do not
+reach the target every control. Lift, gamma and gain repeat what exposure and contrast do (a gain is an exposure;
+contrast, a power about middle grey in log space, is a gamma's power and a gain), so a fit of all of them at once
+lands on any of the equivalent recipes: contrast traded for exposure and gamma.
 
 Examples:
     >>> import torch
     >>> import torchgrade as tg
     >>> source = torch.rand(3, 16, 16) * 4
     >>> target = tg.PostFX(grade={"contrast": 20}, tonemap="neutral")(source[None])[0]
-    >>> result = tg.match_look(source, target, controls=("contrast",), tonemaps="neutral", steps=60, progress=False)
-    >>> round(result.look.to_config()["grade"]["contrast"])
-    20
+    >>> result = tg.match_look(source, target, controls=("contrast",), tonemaps="neutral", progress=False)
+    >>> round(result.look.to_config()["grade"]["contrast"], 3)
+    20.0
 """
 
 from __future__ import annotations
@@ -18,37 +25,46 @@ from typing import Optional
 
 import torch
 from torch import nn
-from tqdm import tqdm
 
 from ..color import linear_to_logc, linear_to_srgb, srgb_to_linear
 from ..grading.grade import color_grade
 from ..grading.layer import ColorGrade
 from ..look.postfx import PostFX
-from ..lut.kernels import KERNELS
-from ..lut.lattice import planar_table
-from ..tonemap import tone_mapper, tonemap
+from ..tonemap import HDR_MODES, TONEMAP_MODES, tone_mapper, tonemap
 from .bounded import BoundedControls, fittable_names
 from .metrics import display_codes, match_errors
 from .pixels import PixelPairs
-from .residual import ResidualLUT, lattice_coordinates, monotonicity, smoothness
+from .solver import levenberg_marquardt
 
-__all__ = ["GRADE_CONTROLS", "TONEMAP_CANDIDATES", "TRACKBALLS", "canonical_trackball", "MatchedControls", "optimise",
-           "levenberg_marquardt", "every_loss", "pixel_residuals", "ControlsFit", "fit_controls",
-           "fit_residual", "evaluate"]
+__all__ = ["GRADE_CONTROLS", "GLOBAL_CONTROLS", "TONEMAP_CANDIDATES", "TRACKBALLS", "canonical_trackball",
+           "MatchedControls", "every_loss", "pixel_residuals", "fewer_controls_suffice", "fit_model", "ControlsFit",
+           "fit_controls", "EVALUATED_PIXELS", "evaluate"]
 
 GRADE_CONTROLS = ("post_exposure", "temperature", "tint", "contrast", "split_shadows", "split_highlights",
                   "split_balance", "lift", "gamma", "gain", "hue_shift", "saturation")
-"""The grading controls fitted by default: the global ones. Colour filter, channel mixer and shadows/midtones/highlights
+"""The grading controls fitted by default. Colour filter, channel mixer and shadows/midtones/highlights
 are left out because, with these, they only add directions that say the same (a gain colour and a colour filter
 both scale a channel); pass ``controls=`` to fit them."""
 
-TONEMAP_CANDIDATES = ("neutral", "aces", "aces_reference", "aces_hill", "aces_narkowicz", "reinhard",
-                      "reinhard_extended", "reinhard_luminance", "hable", "agx", "agx_godot", "khronos_pbr_neutral")
-"""The tone mappers tried by default for a display-referred target (SDR modes whose curves differ; ``filmic`` and
-``unreal_filmic`` add many parameters that say the same, and are tried only when named)."""
+GLOBAL_CONTROLS = ("post_exposure", "temperature", "tint", "contrast", "hue_shift", "saturation")
+"""The controls fitted first (those of them a fit is given): one number each, and no two with the same effect."""
 
+TONEMAP_CANDIDATES = tuple(sorted((mode for mode in TONEMAP_MODES if mode != "none" and mode not in HDR_MODES),
+                                  key=lambda mode: len(fittable_names(tone_mapper(mode).controls))))
+"""The tone mappers tried by default for a display-referred target: every SDR mode of the registry, those with the
+fewest curve parameters first (the registry's order among equals). The first that reaches a look ends the search,
+so where several do (``filmic``'s eight parameters can draw Narkowicz's ACES fit), the simplest is kept."""
 
 TRACKBALLS = ("lift", "gamma", "gain")
+
+REACHED = 1e-6
+"""A fitted loss (mean squared 8-bit codes, or LogC codes ×255) at which the look is reached: a root mean square of a
+thousandth of a code, which no other tone mapper could better visibly, so the candidates after it are not fitted. A
+fit stops at a hundredth of it, a tenth as far in codes."""
+
+JACOBIAN_DTYPE = torch.float32
+"""The dtype the forward differences are computed in (:func:`~torchgrade.match.solver.forward_differences`): the
+batch of looks moves half the bytes of float64; the trials, which decide what is kept, are computed in float64."""
 
 # Unity's trackball identity (1, 1, 1, 0) sits on the edge of the range, where a sigmoid has no slope. Any grey
 # colour is the same identity (a trackball's colour counts only minus its luminance), so the fit starts at this
@@ -72,7 +88,11 @@ def canonical_trackball(value) -> list:
 
 
 class MatchedControls(nn.Module):
-    """A grade (the controls ``names``, in range) followed by tone mapper ``mode`` (its curve parameters fitted), or no tone mapper."""
+    """A grade (the controls ``names``, in range) followed by tone mapper ``mode`` (its curve parameters fitted), or no tone mapper.
+
+    Its parameters may be given per sample (``torch.func.functional_call`` with ``(B, ...)`` values and ``B``
+    pictures): the stages take per-sample controls, which is how :func:`fit_stages` nudges every control at once.
+    """
 
     def __init__(self, names, mode: Optional[str], aces: bool = False):
         super().__init__()
@@ -85,6 +105,15 @@ class MatchedControls(nn.Module):
         graded = color_grade(pixels, aces=self.aces, **self.grade.values()) if self.grade.raw else pixels
         return tonemap(graded, self.mode, **self.curve.values()) if self.mode else graded
 
+    def parameter_names(self, controls) -> list:
+        """The names of the parameters behind the grading ``controls`` (those this model fits) and the curve's.
+
+        Examples:
+            >>> MatchedControls(("contrast", "lift"), "hable").parameter_names(("contrast",))
+            ['grade.raw.contrast', 'curve.raw.exposure_bias', 'curve.raw.white_point']
+        """
+        return [f"grade.raw.{name}" for name in self.grade.raw if name in controls] + [f"curve.raw.{name}" for name in self.curve.raw]
+
     def look(self) -> PostFX:
         """The fitted look as a :class:`~torchgrade.PostFX` of rounded plain values (what ``to_config`` shows)."""
         grade = {"aces": self.aces, **self.grade.plain_values()}
@@ -92,205 +121,171 @@ class MatchedControls(nn.Module):
         return PostFX(grade=grade, tonemap={"mode": self.mode, **self.curve.plain_values()} if self.mode else None)
 
 
-def optimise(module: nn.Module, loss_fn, steps: int, lbfgs_steps: int, lr: float, progress: bool, desc: str) -> dict:
-    """Adam for ``steps``, then up to ``lbfgs_steps`` L-BFGS iterations (strong Wolfe line search).
-
-    Returns the loss at every evaluation, in order, by optimiser: ``{"Adam": [one per step], "L-BFGS": [...]}``
-    (L-BFGS evaluates a few times per iteration; no ``"L-BFGS"`` without iterations); a module with nothing to fit
-    gives ``{"fixed": [its loss]}``.
-    ``progress`` shows a tqdm bar (on stderr, when it is a terminal) with the latest loss.
-    """
-    parameters = [p for p in module.parameters() if p.requires_grad]
-    if not parameters:
-        with torch.no_grad():
-            return {"fixed": [float(loss_fn())]}
-    history = []
-    with tqdm(total=steps + lbfgs_steps, desc=desc, disable=None if progress else True, leave=False) as bar:
-
-        def closure():
-            optimiser.zero_grad()
-            loss = loss_fn()
-            loss.backward()
-            history.append(loss.item())
-            bar.set_postfix(loss=f"{history[-1]:.4g}", refresh=False)
-            return loss
-
-        optimiser = torch.optim.Adam(parameters, lr=lr)
-        for _ in range(steps):
-            optimiser.step(closure)
-            bar.update()
-        if lbfgs_steps:
-            # One call runs every iteration: L-BFGS's curvature pairs are only kept within a call.
-            optimiser = torch.optim.LBFGS(parameters, lr=1.0, max_iter=lbfgs_steps, history_size=20,
-                                          tolerance_grad=1e-12, tolerance_change=1e-14, line_search_fn="strong_wolfe")
-            optimiser.step(closure)
-            bar.update(lbfgs_steps)
-    return {"Adam": history[:steps], **({"L-BFGS": history[steps:]} if lbfgs_steps else {})}
-
-
-def levenberg_marquardt(module: nn.Module, residuals, iterations: int, progress: bool, desc: str) -> list:
-    """Up to ``iterations`` Levenberg-Marquardt trials on ``module``'s trainable parameters, minimising the mean of
-    ``residuals(parameters)²`` (``parameters``: ``{name: tensor}`` for :func:`torch.func.functional_call`); the loss
-    at every evaluation.
-
-    Each trial solves ``(JᵀJ + μ D) h = -Jᵀr`` with the residuals' Jacobian ``J`` (forward-mode, one pass per
-    parameter: :func:`torch.func.jacfwd`) and ``D`` the largest diagonal of ``JᵀJ`` met so far (Moré's scaling, so a
-    control that stops mattering, as split balance does when both split-toning colours turn grey, keeps its damping);
-    a step that lowers the loss is taken and ``μ`` shrinks by ``max(1/3, 1 - (2ρ - 1)³)``, ``ρ`` the actual over the
-    predicted decrease, otherwise ``μ`` grows by ``ν`` (2, doubling while refused): Madsen, Nielsen & Tingleff,
-    *Methods for non-linear least squares problems* (2004), §3.2; Moré, *The Levenberg-Marquardt algorithm:
-    implementation and theory* (1978). It stops when a taken step lowers the loss by less than 1e-12 of it, or a step
-    would move the parameters by less than 1e-12 of their norm.
-    On a target the controls can reach exactly, the steps become Gauss-Newton's and converge quadratically, where
-    first-order methods crawl along the directions in which controls say nearly the same.
-
-    Examples:
-        >>> import torch
-        >>> line = torch.nn.Linear(1, 1, dtype=torch.float64)
-        >>> x = torch.tensor([[0.0], [1.0], [2.0]], dtype=torch.float64)
-        >>> losses = levenberg_marquardt(line, lambda p: torch.func.functional_call(line, p, (x,)).flatten()
-        ...                              - torch.tensor([1.0, 3.0, 5.0], dtype=torch.float64), 10, False, "line")
-        >>> round(line.weight.item(), 6), round(line.bias.item(), 6), losses[-1] < 1e-20
-        (2.0, 1.0, True)
-    """
-    names = [name for name, parameter in module.named_parameters() if parameter.requires_grad]
-    parameters = [module.get_parameter(name) for name in names]
-    sizes = [parameter.numel() for parameter in parameters]
-
-    def residuals_at(theta: torch.Tensor) -> torch.Tensor:
-        pieces = theta.split(sizes)
-        return residuals({name: piece.view_as(p) for name, piece, p in zip(names, pieces, parameters)})
-
-    with torch.no_grad():
-        theta = torch.cat([parameter.detach().flatten() for parameter in parameters])
-        r = residuals_at(theta)
-    loss = float(r.square().mean())
-    history = [loss]
-    damping, growth, jacobian_due, scale = 1e-3, 2.0, True, None
-    with tqdm(total=iterations, desc=desc, disable=None if progress else True, leave=False) as bar:
-        for _ in range(iterations):
-            if jacobian_due:
-                jacobian = torch.func.jacfwd(residuals_at)(theta)
-                gradient, curvature = jacobian.T @ r, jacobian.T @ jacobian
-                diagonal = curvature.diagonal()
-                scale = diagonal if scale is None else torch.maximum(scale, diagonal)
-                scale = scale.clamp_min(1e-12 * float(scale.max()) + 1e-300)
-                jacobian_due = False
-            with torch.no_grad():
-                step = torch.linalg.solve(curvature + torch.diag(damping * scale), -gradient)
-                if float(step.norm()) <= 1e-12 * (float(theta.norm()) + 1e-12):
-                    break  # the parameters no longer move: converged, or the loss is down to rounding
-                trial = residuals_at(theta + step)
-            bar.update()
-            trial_loss = float(trial.square().mean())
-            history.append(trial_loss)
-            bar.set_postfix(loss=f"{trial_loss:.4g}", refresh=False)
-            predicted = float(step @ (damping * scale * step - gradient)) / r.numel()
-            if math.isfinite(trial_loss) and trial_loss < loss and predicted > 0:
-                ratio, decrease = (loss - trial_loss) / predicted, loss - trial_loss
-                theta, r, loss, jacobian_due = theta + step, trial, trial_loss, True
-                damping, growth = damping * max(1.0 / 3.0, 1.0 - (2.0 * ratio - 1.0) ** 3), 2.0
-                if decrease <= 1e-12 * (loss + decrease):
-                    break
-            else:
-                damping, growth = damping * growth, growth * 2.0
-                if not math.isfinite(damping * growth):
-                    break
-    with torch.no_grad():
-        for parameter, piece in zip(parameters, theta.split(sizes)):
-            parameter.copy_(piece.view_as(parameter))
-    return history
-
-
 def every_loss(phases: dict) -> list:
     """The losses of ``{phase: [losses]}`` as one list, in the phases' order.
 
     Examples:
-        >>> every_loss({"Adam": [4.0, 2.0], "L-BFGS": [1.0]})
+        >>> every_loss({"screening": [4.0, 2.0], "Levenberg-Marquardt": [1.0]})
         [4.0, 2.0, 1.0]
     """
     return [loss for losses in phases.values() for loss in losses]
 
 
 def pixel_residuals(display: bool):
-    """The differences a fit of controls minimises the mean square of: in 8-bit sRGB codes (display targets) or in
-    LogC codes ×255 (scene-referred targets), flattened.
+    """The encoding whose differences a fit of controls minimises the mean square of: 8-bit sRGB codes (display
+    targets) or LogC codes ×255 (scene-referred targets)."""
+    return display_codes if display else (lambda x: 255.0 * linear_to_logc(x.clamp_min(0.0)))
 
-    The residual LUT's fit uses Huber instead (squared within one code, linear beyond), so pixels no smooth
-    correction can reach (several sources shown as one clipped display colour, each with its own target) do
-    not bend it elsewhere.
+
+def fewer_controls_suffice(loss_fewer: float, fewer: int, loss_more: float, more: int, residuals: int) -> bool:
+    """Whether a fit of ``fewer`` parameters explains ``residuals`` values as well as one of ``more``, by Akaike's
+    information criterion for least squares, ``n ln(mean square) + 2k`` (Akaike, *A new look at the statistical
+    model identification*, 1974): the extra parameters must lower the mean square by more than ``e^(2Δk/n)``.
+    A target that is a look of the global controls, saved as 8-bit codes, is fitted by them to its rounding; lift,
+    gamma and gain then fit only the rounding, by about ``Δk / n`` of it, and are left out.
+
+    Examples:
+        >>> fewer_controls_suffice(0.08335, 6, 0.0833, 25, 49152)   # 0.06 % lower for 19 more: the fewer
+        True
+        >>> fewer_controls_suffice(0.5, 6, 0.0833, 25, 49152)
+        False
     """
-    encode = display_codes if display else (lambda x: 255.0 * linear_to_logc(x.clamp_min(0.0)))
-    return lambda fitted, target: (encode(fitted) - encode(target)).flatten()
+    tiny = 1e-300
+    return residuals * math.log(max(loss_fewer, tiny)) + 2 * fewer <= residuals * math.log(max(loss_more, tiny)) + 2 * more
+
+
+def _fit_parameters(model: MatchedControls, names: list, source: torch.Tensor, wanted: torch.Tensor, encode,
+                    iterations: int, progress: bool, desc: str) -> list:
+    """Fit the parameters ``names`` of ``model`` (the others held) so that ``encode(model(source))`` meets ``wanted``,
+    by :func:`~torchgrade.match.solver.levenberg_marquardt`; the loss at every evaluation."""
+    parameters = dict(model.named_parameters())
+    shapes = [parameters[name].shape for name in names]
+    sizes = [math.prod(shape) for shape in shapes]
+    fixed = {name: parameter.detach() for name, parameter in parameters.items() if name not in names}
+
+    def residuals(theta: torch.Tensor, dtype: torch.dtype) -> torch.Tensor:
+        pieces = theta.to(dtype).split(sizes, dim=1)
+        values = {name: value.to(dtype) for name, value in fixed.items()}
+        values.update({name: piece.reshape(len(theta), *shape) for name, piece, shape in zip(names, pieces, shapes)})
+        pixels = source.to(dtype).expand(len(theta), -1, -1, -1)
+        shown = torch.func.functional_call(model, values, (pixels,))
+        return encode(shown).reshape(len(theta), -1) - wanted.to(dtype)
+
+    start = torch.cat([parameters[name].detach().reshape(-1) for name in names])
+    theta, losses = levenberg_marquardt(residuals, start, iterations, progress, desc, JACOBIAN_DTYPE, REACHED / 100)
+    with torch.no_grad():
+        for name, piece in zip(names, theta.split(sizes)):
+            parameters[name].copy_(piece.reshape(parameters[name].shape))
+    return losses
+
+
+def fit_model(model: MatchedControls, source: torch.Tensor, target: torch.Tensor, display: bool, iterations: int,
+              progress: bool, desc: str) -> tuple:
+    """Fit ``model`` to the pixels ``(1, 3, N, 1)``, up to ``iterations`` trials a phase; ``(losses by phase, loss)``.
+
+    Parsimonious: the global controls among the model's (:data:`GLOBAL_CONTROLS`) with the curve first, from the
+    identity (``"global controls"``); where they do not reach the target (:data:`REACHED`), every control from the
+    identity (``"every control"``), and the recipe with fewer controls is kept where it explains the pixels as well
+    (:func:`fewer_controls_suffice`). Every control from the identity rather than from the global controls' fit,
+    which stands in for what lift, gamma and gain do with exposure and contrast and can leave the full fit in a
+    valley it does not leave. A model with nothing to fit gives ``({"fixed": [its loss]}, its loss)``.
+
+    Examples:
+        >>> import torch
+        >>> source = torch.rand(1, 3, 64, 1, dtype=torch.float64) * 4
+        >>> target = MatchedControls(("contrast",), "aces").double()
+        >>> with torch.no_grad():
+        ...     _ = target.grade.raw["contrast"].fill_(0.3)
+        ...     shown = target(source)
+        >>> model = MatchedControls(("contrast", "gamma"), "aces").double()
+        >>> phases, loss = fit_model(model, source, shown, True, 20, False, "fit")
+        >>> list(phases), loss < 1e-8, round(model.grade.raw["contrast"].item(), 4)
+        (['global controls'], True, 0.3)
+    """
+    encode = pixel_residuals(display)
+    wanted = encode(target).reshape(-1)
+    names = list(model.grade.raw)
+    first = [name for name in names if name in GLOBAL_CONTROLS]
+    every = model.parameter_names(names)
+    if not every:
+        with torch.no_grad():
+            loss = float((encode(model(source)).reshape(-1) - wanted).square().mean())
+        return {"fixed": [loss]}, loss
+    phases = {}
+    if first and len(first) < len(names):
+        identity = {name: value.clone() for name, value in model.state_dict().items()}
+        fewer = model.parameter_names(first)
+        phases["global controls"] = _fit_parameters(model, fewer, source, wanted, encode, iterations, progress, desc)
+        if _last(phases["global controls"]) <= REACHED:
+            return phases, _last(phases["global controls"])
+        globals_only = {name: value.clone() for name, value in model.state_dict().items()}
+        model.load_state_dict(identity)
+    phases["every control"] = _fit_parameters(model, every, source, wanted, encode, iterations, progress, desc)
+    loss = _last(phases["every control"])
+    if "global controls" in phases:
+        count = dict(model.named_parameters())
+        sizes = [sum(count[name].numel() for name in group) for group in (fewer, every)]
+        if fewer_controls_suffice(_last(phases["global controls"]), sizes[0], loss, sizes[1], wanted.numel()):
+            model.load_state_dict(globals_only)
+            loss = _last(phases["global controls"])
+    return phases, loss
+
+
+def _last(losses: list) -> float:
+    """The latest loss, ``inf`` where it is not finite (a fit that failed is never chosen)."""
+    return losses[-1] if math.isfinite(losses[-1]) else float("inf")
 
 
 @dataclass
 class ControlsFit:
-    """One candidate's fitted controls, its losses by phase (``{"screening": [...], "Adam": [...], ...}``) and final fitting loss."""
+    """One candidate's fitted controls, its losses by phase (see :func:`fit_model`) and its fitted loss."""
 
     model: MatchedControls
     phases: dict = field(default_factory=dict)
     loss: float = float("inf")
 
 
-def fit_controls(pairs: PixelPairs, names, modes, aces: bool, steps: int, lm_steps: int, screen_steps: int,
-                 lr: float, progress: bool, max_pixels: int) -> tuple:
-    """Screen every tone mapper in ``modes`` with ``screen_steps`` Adam steps, finish the best with ``steps`` more and
-    up to ``lm_steps`` Levenberg-Marquardt trials (:func:`levenberg_marquardt`); ``(fit, {mode: loss})``.
+def fit_controls(pairs: PixelPairs, names, modes, aces: bool, steps: int, screen_steps: int, screen_pixels: int,
+                 keep: int, progress: bool) -> tuple:
+    """Fit the controls ``names`` with each tone mapper of ``modes``; ``(the best fit, {mode: loss after screening},
+    {mode: loss after the full fit})``.
 
-    Fits on the first ``max_pixels`` fitting pixels (they are shuffled).
+    Each fit is :func:`fit_model`'s. With several modes, each is fitted for up to ``screen_steps`` trials a phase on
+    the first ``screen_pixels`` fitting pixels (a stratified sample too: they are in random order), in order, until
+    one reaches :data:`REACHED`; the ``keep`` lowest are then fitted afresh, in that order, for up to ``steps`` trials
+    a phase on every fitting pixel, until one reaches it; the lowest fitted loss is the look's.
     """
-    residuals_of = pixel_residuals(display=modes != (None,))
-    source, target = pairs.train_source[:, :, :max_pixels], pairs.train_target[:, :, :max_pixels]
-
-    def loss_fn(model):
-        return lambda: residuals_of(model(source), target).square().mean()
-
-    fits = {mode: ControlsFit(MatchedControls(names, mode, aces).to(source.device)) for mode in modes}
+    display = modes != (None,)
+    source, target = pairs.train_source, pairs.train_target
+    finalists, screened = modes, {}
     if len(modes) > 1:
-        for mode, fit in fits.items():
-            screening = every_loss(optimise(fit.model, loss_fn(fit.model), screen_steps, 0, lr, progress, f"screen {mode}"))
-            fit.phases["screening"] = screening
-            fit.loss = float("inf") if math.isnan(screening[-1]) else screening[-1]
-    best = min(fits.values(), key=lambda f: f.loss)
-    target_kind = best.model.mode or "scene-referred"
-    best.phases.update(optimise(best.model, loss_fn(best.model), steps, 0, lr, progress, f"match {target_kind}"))
-    if lm_steps and "fixed" not in best.phases:
-        best.phases["Levenberg-Marquardt"] = levenberg_marquardt(
-            best.model, lambda values: residuals_of(torch.func.functional_call(best.model, values, (source,)), target),
-            lm_steps, progress, f"refine {target_kind}")
-    if len(modes) == 1:
-        best.loss = every_loss(best.phases)[-1]
-    return best, {mode: fit.loss for mode, fit in fits.items()}
+        small = source[:, :, :screen_pixels], target[:, :, :screen_pixels]
+        for mode in modes:
+            model = MatchedControls(names, mode, aces).to(source)
+            screened[mode] = fit_model(model, *small, display, screen_steps, progress, f"screen {mode}")[1]
+            if screened[mode] <= REACHED:
+                break  # no other tone mapper could show the look visibly better
+        finalists = sorted(screened, key=lambda mode: screened[mode])[:keep]
+    fits = []
+    for mode in finalists:
+        fit = ControlsFit(MatchedControls(names, mode, aces).to(source))
+        fit.phases, fit.loss = fit_model(fit.model, source, target, display, steps, progress, f"match {mode or 'scene-referred'}")
+        fits.append(fit)
+        if fit.loss <= REACHED:
+            break
+    best = min(fits, key=lambda fit: fit.loss)
+    return best, screened, {fit.model.mode: fit.loss for fit in fits}
 
 
-def fit_residual(display: torch.Tensor, target: torch.Tensor, size: int, steps: int, smooth: float, monotone: float,
-                 progress: bool) -> tuple:
-    """Fit a :class:`ResidualLUT` from the look's display output to the target; ``(residual, losses by optimiser)``.
-
-    The data term is Huber in 8-bit codes (see :func:`pixel_residuals`); the table is looked up at the pixels'
-    :func:`~torchgrade.match.residual.lattice_coordinates`, computed once.
-    """
-    residual = ResidualLUT(size).to(display.device)
-    coords = lattice_coordinates(display, size)
-    target_codes = display_codes(target).movedim(-3, 0).reshape(3, -1).T
-    scale = 255.0**2  # regularisers on the table's [0, 1] units, brought to the data term's squared codes
-
-    def loss_fn():
-        table = residual.lut.table
-        # Entries are sRGB codes: decoding, clamping to the display and encoding again is a clamp.
-        codes = 255.0 * KERNELS["tetrahedral"](coords, planar_table(table), size).T.clamp(0.0, 1.0)
-        data = 2.0 * nn.functional.smooth_l1_loss(codes, target_codes, beta=1.0)
-        return data + scale * (smooth * smoothness(table) + monotone * monotonicity(table))
-
-    history = optimise(residual, loss_fn, steps // 2, steps - steps // 2, 2e-3, progress, f"residual {size}³")
-    return residual, history
+EVALUATED_PIXELS = 1 << 16
+"""Held-out pixels a look is applied to at a time: its working memory, not the picture's, bounds the evaluation."""
 
 
 def evaluate(transform, pairs: PixelPairs, display: bool) -> dict:
     """:func:`~torchgrade.match.metrics.match_errors` on the held-out pixels (scene-referred ones viewed through ``neutral``)."""
     with torch.no_grad():
-        fitted, target = transform(pairs.test_source), pairs.test_target
+        fitted = torch.cat([transform(part) for part in pairs.test_source.split(EVALUATED_PIXELS, dim=2)], dim=2)
+        target = pairs.test_target
         if not display:
             fitted, target = tonemap(fitted, "neutral"), tonemap(target, "neutral")
     return match_errors(target.reshape(3, -1), fitted.reshape(3, -1))

@@ -20,20 +20,12 @@ from typing import Optional
 import torch
 from torch import nn
 
-from ..io import read_cube, write_clf, write_cube
 from ..look.postfx import PostFX
 from ..lut import LUT3D, bake_lut
 from ..tonemap import tone_mapper
-from .fit import (
-    GRADE_CONTROLS,
-    TONEMAP_CANDIDATES,
-    evaluate,
-    every_loss,
-    fit_controls,
-    fit_residual,
-)
+from .fit import GRADE_CONTROLS, TONEMAP_CANDIDATES, evaluate, every_loss, fit_controls
 from .pixels import PixelPairs, sample_pairs
-from .residual import ResidualLUT
+from .residual import ResidualLUT, fit_residual
 
 __all__ = ["match_look", "MatchResult", "STAGES", "LUT_FILES"]
 
@@ -51,11 +43,13 @@ class MatchResult:
     * ``look``: the fitted :class:`~torchgrade.PostFX`; ``look.to_config()`` is the readable recipe.
     * ``residual``: the :class:`~torchgrade.match.ResidualLUT` fitted on top (``residual=True``), else ``None``.
     * ``errors``: ``{"controls": ..., "residual": ...}``, each ``{"p99.9", "max"}`` in 8-bit sRGB codes and
-      ``"delta_e_2000"`` (mean), on held-out pixels.
-    * ``history``: the fitting loss at every evaluation (screening, Adam, Levenberg-Marquardt; then the residual's).
-    * ``phases``: ``[(phase, evaluations)]`` in order, how ``history`` divides: ``"screening"``, ``"Adam"``,
-      ``"Levenberg-Marquardt"``, ``"residual Adam"``, ``"residual L-BFGS"`` (those that ran).
-    * ``candidates``: each tone mapper tried and its loss after screening.
+      ``"delta_e_2000"`` (mean), on the held-out pixels (every pixel of the held-out blocks, never fitted).
+    * ``history``: the fitting loss at every evaluation (the chosen tone mapper's full fit, then the residual's).
+    * ``phases``: ``[(phase, evaluations)]`` in order, how ``history`` divides: ``"global controls"``,
+      ``"every control"`` (see :func:`~torchgrade.match.fit.fit_model`), ``"residual Adam"``, ``"residual L-BFGS"``
+      (those that ran; ``"fixed"`` for a model with nothing to fit).
+    * ``candidates``: each tone mapper screened and its loss after screening (empty when one was given).
+    * ``finalists``: each tone mapper fitted fully and its fitted loss, the look's the lowest.
     """
 
     look: PostFX
@@ -65,6 +59,7 @@ class MatchResult:
     candidates: dict
     pixels: PixelPairs = field(repr=False)
     phases: list = field(default_factory=list)
+    finalists: dict = field(default_factory=dict)
 
     def transform(self) -> nn.Module:
         """The per-pixel look as one module: grade, tone mapper, then the residual LUT (if any)."""
@@ -95,6 +90,8 @@ class MatchResult:
         back, or of the LUT a CLF states exactly (shaper included, as OpenColorIO applies it), and the bake's
         :class:`~torchgrade.lut.ErrorReport` (validation colours and fitting pixels against the look itself).
         """
+        from ..io import read_cube, write_clf, write_cube  # file formats load at their first use, not with torchgrade
+
         suffix = Path(path).suffix.lower()
         if suffix not in LUT_FILES:
             raise ValueError(f"a look's LUT is written as {' or '.join(LUT_FILES)}, got {path}")
@@ -120,32 +117,52 @@ def _modes(stages, tonemaps) -> tuple:
     return modes
 
 
+def _check_counts(**counts) -> None:
+    """``ValueError`` naming the first count that is not an integer, at least 0 for steps and 1 for the others.
+
+    Examples:
+        >>> _check_counts(steps=0, keep=0)
+        Traceback (most recent call last):
+        ...
+        ValueError: keep must be an integer of at least 1, got 0
+    """
+    for name, value in counts.items():
+        least = 0 if name.endswith("steps") else 1
+        if isinstance(value, bool) or not isinstance(value, int) or value < least:
+            raise ValueError(f"{name} must be an integer of at least {least}, got {value!r}")
+
+
 def match_look(source, target, stages=STAGES, mask=None, *, controls=GRADE_CONTROLS, tonemaps=None, aces: bool = False,
-               steps: int = 200, lm_steps: int = 100, screen_steps: int = 60, lr: float = 0.05,
+               steps: int = 100, screen_steps: int = 20, screen_pixels: int = 2048, keep: int = 3,
                residual: bool = False, residual_size: int = 17, residual_steps: int = 300, smooth: float = 0.05,
-               monotone: float = 1.0, max_pixels: int = 8192, residual_pixels: int = 65536, holdout: float = 0.25, seed: int = 0,
-               progress: bool = True) -> MatchResult:
-    """Fit a look's controls to before/after pairs by gradient descent; see :class:`MatchResult`.
+               monotone: float = 1.0, max_pixels: int = 16384, residual_pixels: int = 65536, holdout: float = 0.25,
+               seed: int = 0, progress: bool = True) -> MatchResult:
+    """Fit a look's controls to before/after pairs; see :class:`MatchResult`.
 
     ``source``: scene-referred linear Rec.709 ``(3, H, W)`` or ``(B, 3, H, W)`` (or a list of them);
     ``target``: the same pictures after the look, display-referred linear [0, 1] when ``"tonemap"`` is in
-    ``stages``, else scene-referred; ``mask``: which pixels count (one per pair). The ``controls`` of the
-    grade (names in :class:`~torchgrade.ColorGrade`'s table) are fitted within their documented ranges
-    (a sigmoid onto each range), ``steps`` of Adam then up to ``lm_steps`` Levenberg-Marquardt trials (a
-    Gauss-Newton step damped until it lowers the loss) on at most ``max_pixels``
-    pixels, in float64 (the residual LUT, cheaper to evaluate, on up to ``residual_pixels``). ``tonemaps``: a mode, several, or ``None`` for :data:`TONEMAP_CANDIDATES`; with more
-    than one each is fitted for ``screen_steps`` and the best finished. ``residual=True`` (display targets) then
-    fits a ``residual_size``³ :class:`~torchgrade.match.ResidualLUT` with weights ``smooth`` and ``monotone``.
-    Errors are measured on ``holdout`` of the pixels, never fitted. ``progress`` shows a tqdm bar per phase
-    with the latest loss (on stderr, when it is a terminal).
+    ``stages``, else scene-referred; ``mask``: which pixels count (one per pair). A share ``holdout`` of each
+    picture's blocks is held out (:func:`~torchgrade.match.pixels.sample_pairs`): the errors are measured on all
+    their pixels, and the fit sees none of them. The ``controls`` of the grade (names in
+    :class:`~torchgrade.ColorGrade`'s table) are fitted within their documented ranges (a sigmoid onto each range)
+    by Levenberg-Marquardt (trials in float64) on ``max_pixels`` pixels stratified by colour, the global controls
+    first (:func:`~torchgrade.match.fit.fit_model`), up to ``steps`` trials a phase. ``tonemaps``: a mode, several,
+    or ``None`` for :data:`TONEMAP_CANDIDATES` (every SDR mode); with more than one each is fitted for
+    ``screen_steps`` trials a phase on ``screen_pixels`` pixels, the ``keep`` best are fitted fully and the lowest
+    fitted error chooses (:func:`~torchgrade.match.fit.fit_controls`). ``residual=True`` (display targets) then fits a ``residual_size``³
+    :class:`~torchgrade.match.ResidualLUT` with weights ``smooth`` and ``monotone`` on up to ``residual_pixels``.
+    ``progress`` shows a tqdm bar per fit with the latest loss (on stderr, when it is a terminal).
     """
     modes = _modes(stages, tonemaps)
     names = tuple(controls) if "grade" in stages else ()
     if residual and modes == (None,):
         raise ValueError("residual=True needs a display-referred target: include 'tonemap' in stages")
+    _check_counts(steps=steps, screen_steps=screen_steps, screen_pixels=screen_pixels, keep=keep, max_pixels=max_pixels)
     generator = torch.Generator().manual_seed(seed)
     pixels = sample_pairs(source, target, mask, max(max_pixels, residual_pixels if residual else 0), holdout, generator)
-    fit, candidates = fit_controls(pixels, names, modes, aces, steps, lm_steps, screen_steps, lr, progress, max_pixels)
+    fitting = PixelPairs(pixels.train_source[:, :, :max_pixels], pixels.train_target[:, :, :max_pixels],
+                         pixels.test_source, pixels.test_target)
+    fit, candidates, finalists = fit_controls(fitting, names, modes, aces, steps, screen_steps, screen_pixels, keep, progress)
     look = fit.model.look()
     display = modes != (None,)
     errors = {"controls": evaluate(look.per_pixel_stages() if look.stages() else nn.Identity(), pixels, display)}
@@ -159,4 +176,4 @@ def match_look(source, target, stages=STAGES, mask=None, *, controls=GRADE_CONTR
         errors["residual"] = evaluate(nn.Sequential(*look.per_pixel_stages(), fitted_residual), pixels, display)
     history = every_loss(phases)
     counts = [(name, len(losses)) for name, losses in phases.items() if losses]
-    return MatchResult(look, fitted_residual, errors, history, candidates, pixels, counts)
+    return MatchResult(look, fitted_residual, errors, history, candidates, pixels, counts, finalists)

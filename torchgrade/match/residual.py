@@ -22,10 +22,15 @@ from __future__ import annotations
 import torch
 from torch import nn
 
+from tqdm import tqdm
+
 from ..color import linear_to_srgb
 from ..lut import LUT3D, identity_table
+from ..lut.kernels import KERNELS
+from ..lut.lattice import planar_table
+from .metrics import display_codes
 
-__all__ = ["ResidualLUT", "smoothness", "monotonicity", "lattice_coordinates"]
+__all__ = ["ResidualLUT", "smoothness", "monotonicity", "lattice_coordinates", "optimise", "fit_residual"]
 
 
 class ResidualLUT(nn.Module):
@@ -98,3 +103,63 @@ def lattice_coordinates(display_linear: torch.Tensor, size: int) -> torch.Tensor
         True
     """
     return linear_to_srgb(display_linear.clamp(0.0, 1.0)).movedim(-3, 0).reshape(3, -1) * (size - 1)
+
+
+def optimise(module: nn.Module, loss_fn, steps: int, lbfgs_steps: int, lr: float, progress: bool, desc: str) -> dict:
+    """Adam for ``steps``, then up to ``lbfgs_steps`` L-BFGS iterations (strong Wolfe line search).
+
+    Returns the loss at every evaluation, in order, by optimiser: ``{"Adam": [one per step], "L-BFGS": [...]}``
+    (L-BFGS evaluates a few times per iteration; no ``"L-BFGS"`` without iterations); a module with nothing to fit
+    gives ``{"fixed": [its loss]}``.
+    ``progress`` shows a tqdm bar (on stderr, when it is a terminal) with the latest loss.
+    """
+    parameters = [p for p in module.parameters() if p.requires_grad]
+    if not parameters:
+        with torch.no_grad():
+            return {"fixed": [float(loss_fn())]}
+    history = []
+    with tqdm(total=steps + lbfgs_steps, desc=desc, disable=None if progress else True, leave=False) as bar:
+
+        def closure():
+            optimiser.zero_grad()
+            loss = loss_fn()
+            loss.backward()
+            history.append(loss.item())
+            bar.set_postfix(loss=f"{history[-1]:.4g}", refresh=False)
+            return loss
+
+        optimiser: torch.optim.Optimizer = torch.optim.Adam(parameters, lr=lr)
+        for _ in range(steps):
+            optimiser.step(closure)
+            bar.update()
+        if lbfgs_steps:
+            # One call runs every iteration: L-BFGS's curvature pairs are only kept within a call.
+            optimiser = torch.optim.LBFGS(parameters, lr=1.0, max_iter=lbfgs_steps, history_size=20,
+                                          tolerance_grad=1e-12, tolerance_change=1e-14, line_search_fn="strong_wolfe")
+            optimiser.step(closure)
+            bar.update(lbfgs_steps)
+    return {"Adam": history[:steps], **({"L-BFGS": history[steps:]} if lbfgs_steps else {})}
+
+
+def fit_residual(display: torch.Tensor, target: torch.Tensor, size: int, steps: int, smooth: float, monotone: float,
+                 progress: bool) -> tuple:
+    """Fit a :class:`ResidualLUT` from the look's display output to the target; ``(residual, losses by optimiser)``.
+
+    The data term is Huber in 8-bit codes (squared within one code, linear beyond), so pixels no smooth correction
+    can reach (several sources shown as one clipped display colour, each with its own target) do not bend it
+    elsewhere; the table is looked up at the pixels' :func:`lattice_coordinates`, computed once.
+    """
+    residual = ResidualLUT(size).to(display.device)
+    coords = lattice_coordinates(display, size)
+    target_codes = display_codes(target).movedim(-3, 0).reshape(3, -1).T
+    scale = 255.0**2  # regularisers on the table's [0, 1] units, brought to the data term's squared codes
+
+    def loss_fn():
+        table = residual.lut.table
+        # Entries are sRGB codes: decoding, clamping to the display and encoding again is a clamp.
+        codes = 255.0 * KERNELS["tetrahedral"](coords, planar_table(table), size).T.clamp(0.0, 1.0)
+        data = 2.0 * nn.functional.smooth_l1_loss(codes, target_codes, beta=1.0)
+        return data + scale * (smooth * smoothness(table) + monotone * monotonicity(table))
+
+    history = optimise(residual, loss_fn, steps // 2, steps - steps // 2, 2e-3, progress, f"residual {size}³")
+    return residual, history

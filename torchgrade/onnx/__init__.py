@@ -23,7 +23,7 @@ supplies them for the duration of the export.
 **LUTs.** ``lut_backend`` picks how a :class:`~torchgrade.lut.LUT3D` is looked up in the graph
 (the LUT's ``export_form(interpolation, backend)``, from the kernel registry :data:`torchgrade.lut.KERNELS`):
 
-* ``"slices"`` (default, opset 17; ``"strip"`` before): trilinear lookups use the ``(S, S, S)`` volume laid out as its
+* ``"slices"`` (default, opset 17): trilinear lookups use the ``(S, S, S)`` volume laid out as its
   blue slices side by side, an ``S x S²`` image sampled by two 4-D ``GridSample`` nodes and a lerp;
   tetrahedral lookups use gathers (no GridSample form exists for them);
 * ``"gather"`` (opset 17): both interpolations as ``Gather`` nodes, exactly PyTorch's kernels;
@@ -78,17 +78,14 @@ Examples:
     True
 """
 
-from .defaults import STATE_DEFAULTS
 from .describe import describe
-from .exporter import DEFAULT_OPSET, IO_DTYPES, VOLUME_OPSET, export
+from .exporter import DEFAULT_OPSET, IO_DTYPES, export
 from .frames import (
-    CODE_MAX,
     INPUT_DTYPES,
     LAYOUTS,
     OUTPUTS,
     FrameFormat,
     decode_frame,
-    eight_bit_codes,
     encode_frame,
     frame_format,
     model_input,
@@ -97,9 +94,7 @@ from .frames import (
 from .graph import GRADE_INPUTS, grade_feeds
 from .look import export_look, graph_inputs
 from .verify import (
-    DEVICES,
     RUNTIMES,
-    Inputs,
     OpenVINOSession,
     feeds,
     latency_ms,
@@ -109,14 +104,12 @@ from .verify import (
     session,
     verify,
 )
-from ..lut import LUT_BACKENDS
 
 __all__ = [
     "export", "verify", "session", "reference", "feeds", "graph_inputs", "metadata", "describe", "node_count",
     "latency_ms", "export_look", "grade_feeds", "FrameFormat", "frame_format", "read_frame_format", "model_input",
-    "decode_frame", "encode_frame", "eight_bit_codes", "GRADE_INPUTS", "INPUT_DTYPES", "IO_DTYPES", "LAYOUTS",
-    "OUTPUTS", "CODE_MAX", "LUT_BACKENDS", "RUNTIMES", "DEVICES", "DEFAULT_OPSET", "VOLUME_OPSET", "STATE_DEFAULTS",
-    "Inputs", "OpenVINOSession",
+    "decode_frame", "encode_frame", "GRADE_INPUTS", "INPUT_DTYPES", "IO_DTYPES", "LAYOUTS", "OUTPUTS", "RUNTIMES",
+    "DEFAULT_OPSET", "OpenVINOSession",
 ]
 """The names a user calls. The package also imports the export's building blocks (the graph forms, symbolics, strip
 forms, graph inspection helpers) for its modules and the tests; they are not part of the API contract: import them

@@ -1,8 +1,8 @@
 """What an exported file says about itself: doc strings, metadata, and the defaults of its optional inputs.
 
 Every file carries, in ``metadata_props``: ``torchgrade.version``, ``torchgrade.stages``,
-``torchgrade.base.config`` (the look's config as JSON, what :meth:`~torchgrade.PostFX.from_config` reads;
-``null`` for a look baked to a LUT), how frames come in and go out (``torchgrade.input_dtype``,
+``torchgrade.config`` (:data:`CONFIG_KEY`: the look's config as JSON, what :meth:`~torchgrade.PostFX.from_config`
+reads; ``null`` for a look baked to a LUT), how frames come in and go out (``torchgrade.input_dtype``,
 ``torchgrade.layout``, ``torchgrade.output``, ``torchgrade.io_dtype``, ``torchgrade.output_layout``:
 :func:`~torchgrade.onnx.frames.read_frame_format` reads them), ``color_space.input`` / ``color_space.output``,
 ``range.input`` / ``range.output``, and for a ``grade_inputs`` model ``torchgrade.grade_inputs``: each control's
@@ -18,7 +18,7 @@ Examples:
     >>> with tempfile.TemporaryDirectory() as folder:
     ...     path = tg.onnx.export(tg.PostFX(tonemap="aces"), folder + "/look.onnx", output="srgb8")
     ...     props = {p.key: p.value for p in onnx.load(str(path)).metadata_props}
-    >>> props["torchgrade.output"], props["torchgrade.base.config"], props["torchgrade.layout"]
+    >>> props["torchgrade.output"], props["torchgrade.config"], props["torchgrade.layout"]
     ('srgb8', '{"tonemap": {"mode": "aces"}}', 'NCHW')
 """
 
@@ -34,7 +34,14 @@ from .defaults import STATE_DEFAULTS, with_defaults
 from .frames import CODE_MAX, OUTPUTS, FrameFormat, metadata_of
 from .graph import GRADE_INPUTS, grade_feeds, grade_of
 
-__all__ = ["INPUT_DOCS", "look_config", "describe"]
+__all__ = ["CONFIG_KEY", "FORMER_CONFIG_KEY", "INPUT_DOCS", "look_config", "describe"]
+
+CONFIG_KEY = "torchgrade.config"
+"""The metadata key of the look's config."""
+
+FORMER_CONFIG_KEY = "torchgrade.base.config"
+"""The key files exported by an earlier version of the package hold the config under
+(:func:`~torchgrade.onnx.verify.metadata` reads it as :data:`CONFIG_KEY`)."""
 
 INPUT_DOCS = {
     "image": "scene-linear RGB, Rec.709 primaries (D65); HDR, unbounded above; "
@@ -114,7 +121,7 @@ def describe(model: onnx_lib.ModelProto, module: nn.Module, frames: FrameFormat 
     encoded = frames.input_dtype in CODE_MAX
     metadata = {
         "torchgrade.version": __version__, "torchgrade.stages": json.dumps(stages),
-        "torchgrade.base.config": json.dumps(look_config(module)), **metadata_of(frames),
+        CONFIG_KEY: json.dumps(look_config(module)), **metadata_of(frames),
         "color_space.input": ("sRGB-encoded, decoded to linear in the graph, " if encoded else "scene-linear ") + "Rec.709 primaries, D65",
         "range.input": _image_doc(frames),
         "color_space.output": "Rec.709 primaries, D65, " + ("linear" if frames.output == "linear" else "sRGB transfer"),

@@ -106,8 +106,7 @@ def export(module: nn.Module, path, *, example: Optional[torch.Tensor] = None, o
         opset: default :data:`DEFAULT_OPSET` (17), or :data:`VOLUME_OPSET` (20) for
             ``lut_backend="volume"``; each backend needs at least its opset in
             :data:`~torchgrade.lut.BACKENDS`.
-        lut_backend: ``"slices"``, ``"gather"`` or ``"volume"`` (see :data:`~torchgrade.lut.BACKENDS`; ``"strip"``, its
-            former name for ``"slices"``, warns).
+        lut_backend: ``"slices"``, ``"gather"`` or ``"volume"`` (see :data:`~torchgrade.lut.BACKENDS`).
         grade_inputs: expose the grading controls as graph inputs (see :mod:`torchgrade.onnx`), optional
             (the look's values are their defaults) and clamped to their ranges.
         output: the output encoding, one of :data:`~torchgrade.onnx.OUTPUTS` (``"linear"``, ``"srgb"``, ``"srgb8"``,

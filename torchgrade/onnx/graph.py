@@ -22,7 +22,6 @@ from typing import Callable, Optional, Sequence
 import torch
 from torch import nn
 
-from ..base.stage import on_nan_free
 from ..grading.grade import graded_image
 from ..grading.layer import ColorGrade
 from ..lut.backends import backend_named
@@ -73,6 +72,9 @@ class GradeWithInputs(nn.Module):
 
     per_pixel = True
     """Each output pixel depends on its input pixel alone (see :attr:`torchgrade.base.stage.Stage.per_pixel`)."""
+
+    takes_nan_free = True
+    """See :attr:`torchgrade.base.stage.Stage.takes_nan_free`."""
 
     def __init__(self, aces: bool, curves: Optional[dict] = None, log_space: str = "acescc"):
         super().__init__()
@@ -130,7 +132,8 @@ class ExportGraph(nn.Module):
             image = mark(image) if index == mark_at else image
             args = (image, *controls) if isinstance(stage, GradeWithInputs) else (image,)
             # the exposed frame holds no NaN (auto_exposure), so the stage after it skips its sanitize's NaN pass
-            image = on_nan_free(stage, *args) if index == 0 and self.exposure is not None else stage(*args)
+            trusted = index == 0 and self.exposure is not None and getattr(stage, "takes_nan_free", False)
+            image = stage(*args, nan_free=True) if trusted else stage(*args)
         return (image, adapted) if self.exposure is not None else (image,)
 
 

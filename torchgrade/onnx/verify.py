@@ -27,6 +27,7 @@ import torch
 from torch import nn
 
 from .defaults import STATE_DEFAULTS, plain_inputs
+from .describe import CONFIG_KEY, FORMER_CONFIG_KEY
 from .frames import check_batch, decode_frame, eight_bit_codes, encode_frame, from_nchw, model_input, read_frame_format, to_nchw
 from .graph import GRADE_INPUTS, frame_of, grade_feeds, grade_of, has_state
 
@@ -252,13 +253,18 @@ def verify(module: nn.Module, path, inputs: Inputs, runtime: str = "onnxruntime"
 
 
 def metadata(path) -> dict:
-    """An ONNX file's ``metadata_props`` as a dict (see :mod:`~torchgrade.onnx.describe`).
+    """An ONNX file's ``metadata_props`` as a dict (see :mod:`~torchgrade.onnx.describe`); the config of a file written
+    under the former key (:data:`~torchgrade.onnx.describe.FORMER_CONFIG_KEY`) is given under today's,
+    ``"torchgrade.config"``.
 
     Examples:
         >>> callable(metadata)
         True
     """
-    return {prop.key: prop.value for prop in onnx_lib.load(str(path), load_external_data=False).metadata_props}
+    props = {prop.key: prop.value for prop in onnx_lib.load(str(path), load_external_data=False).metadata_props}
+    if FORMER_CONFIG_KEY in props:
+        props.setdefault(CONFIG_KEY, props.pop(FORMER_CONFIG_KEY))
+    return props
 
 
 def graph_nodes(graph: onnx_lib.GraphProto) -> list:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import functools
 from pathlib import Path
 
 import torch
@@ -12,7 +11,7 @@ from ..base.params import Param, check_range, is_constant
 from ..base.controls import Control, in_state_check, plain
 from ..base.stage import Stage
 from ..lut import LUT3D, identity_table
-from ..runtime import in_strips
+from ..runtime.strips import pixelwise
 from .display import DISPLAY_ENCODINGS, DISPLAY_PRIMARIES, HLG_PEAK_RANGE, encode_display
 from .dither import DEFAULT_AMPLITUDE, DITHER_CONTROLS, dither_pattern, dithered
 from .look_lut import LOOK_ENCODINGS, look_lut, read_lut_file
@@ -62,9 +61,9 @@ class LookLUT(Stage):
         """True at contribution 0 (a LUT table is not checked for being the identity)."""
         return is_constant(self.contribution, 0.0)
 
+    @pixelwise
     def forward(self, image: torch.Tensor, *, nan_free: bool = False) -> torch.Tensor:
-        call = functools.partial(look_lut, lookup=self.lut, contribution=self.contribution, encoding=self.encoding, nan_free=nan_free)
-        return in_strips(call, image, (self.contribution, self.lut.table))
+        return look_lut(image, self.lut, self.contribution, self.encoding, nan_free=nan_free)
 
     def export_form(self, backend: str = "slices") -> nn.Module:
         """The module an ONNX export traces: the blend around the LUT's own export form in ``backend``'s graph form."""
@@ -90,6 +89,7 @@ class LookLUTForm(nn.Module):
     """What an ONNX export traces for a :class:`LookLUT`: :func:`look_lut` around the LUT's export form."""
 
     per_pixel = True
+    takes_nan_free = True  # as the stage (Stage.takes_nan_free)
 
     def __init__(self, stage: LookLUT, lookup: nn.Module):
         super().__init__()
@@ -243,5 +243,7 @@ class Display(Stage):
         """True for display-linear output in the input's primaries: the tone mapper already clipped it."""
         return self.encoding == "linear" and self.primaries == self.input_primaries
 
-    def forward(self, image: torch.Tensor) -> torch.Tensor:
+    def forward(self, image: torch.Tensor, *, nan_free: bool = False) -> torch.Tensor:
+        """The display's signal of ``image``; ``nan_free`` (every stage's keyword) changes nothing: the encodings make
+        no NaN pass of their own."""
         return encode_display(image, **self.params())

@@ -1,18 +1,14 @@
 """Checks of values: range checks of learnable controls on a GPU, without waiting for it, and none in a recorded graph.
 
-A recorded graph (traced, compiled, exported) carries no checks: :class:`DeferredCheck` and :func:`check_eagerly` do
-nothing while one is recorded, so no stage asks.
+A recorded graph (traced, compiled, exported) carries no checks: :class:`DeferredCheck` and :func:`warn_if_eight_bit`
+do nothing while one is recorded, so no stage asks.
 
 A learnable control is checked against its range before every forward (an optimiser may have moved it out).
 On the CPU the check reads the value directly. On CUDA a read would wait for every queued kernel, once per
-frame; instead :class:`DeferredCheck` copies a value to pinned host memory without blocking when its version
-changes (an optimiser step changes it in place), and checks the copy at a later forward, once the copy has
-landed. Copies are checked in order, however far the host runs ahead of the device. A value an optimiser moved
-out of its range therefore raises at a later forward (usually the next one), with the same message, and at every
-forward after that while it stays unchanged; no forward waits for the GPU.
-
-A copy that fails after its value has changed again (a later step may have brought it back) raises only if the
-copy before it or the next one fails too: a value restored before its bad copy landed raises nothing.
+frame; instead :class:`DeferredCheck` copies the value to pinned host memory without blocking, and checks the copy
+at a later forward, once it has landed. Copies are checked in the order they were made, however far the host runs
+ahead of the device. A value an optimiser moved out of its range therefore raises at a later forward (usually the
+next one), with the same message, and at every forward after that while it stays out; no forward waits for the GPU.
 
 Examples:
     >>> import torch
@@ -27,39 +23,66 @@ from __future__ import annotations
 
 import collections
 import threading
+import warnings
 from typing import Callable, NamedTuple, Optional
 
 import torch
 
+from .policy import one_thread, readable
 from .recording import is_tracing
 
-__all__ = ["DeferredCheck", "check_eagerly"]
+
+__all__ = ["DeferredCheck", "warn_if_eight_bit", "EIGHT_BIT_ROWS", "EIGHT_BIT_LEVELS"]
 
 
-def check_eagerly(check: Callable, *args, **kwargs) -> None:
-    """``check(*args, **kwargs)``, except while a graph is recorded (it carries no checks; a check of a tensor's value
-    would break a compiler's graph).
+EIGHT_BIT_ROWS = 8
+"""Rows :func:`warn_if_eight_bit` reads at most (at least half as many), evenly spaced, of the colour of the first image
+of a batch: whole rows, read in order (values spread over the frame would fetch a cache line each). Its cost against
+a copy of the frame: ``benchmarks/results/cpu_forms.md``, "8-bit check of a frame"."""
+
+
+EIGHT_BIT_LEVELS = 16
+"""Different whole numbers from which a sample reads as an 8-bit picture: a photograph's 8 rows hold far more (the
+sample pictures of the suite: every one above 60), a synthetic HDR frame of whole-number lamps on black a handful."""
+
+
+def warn_if_eight_bit(image: torch.Tensor) -> None:
+    """Warn when a linear ``image`` looks like 0..255 data: a sample of it holds whole numbers only, at least
+    :data:`EIGHT_BIT_LEVELS` different ones, none negative, the largest in (1, 255]. Such floats taken as light come out
+    nearly white; an HDR frame holds fractions, and a frame of a few whole levels (a test pattern of lamps of 8 and
+    60 on black) is no 8-bit picture. Only where the device's policy reads values (the CPU,
+    :func:`~torchgrade.runtime.policy.readable`): on a GPU the read would wait for the device at every frame.
 
     Examples:
-        >>> check_eagerly(lambda x: print("checked", x), 3)
-        checked 3
+        >>> import warnings
+        >>> with warnings.catch_warnings(record=True) as caught:
+        ...     warnings.simplefilter("always")
+        ...     warn_if_eight_bit(torch.arange(48.0).reshape(3, 4, 4) * 5)
+        >>> "divide by 255" in str(caught[0].message)
+        True
     """
-    if not is_tracing():
-        check(*args, **kwargs)
+    first = image.detach()[(0,) * (image.dim() - 3)][:3]  # colour, without an alpha
+    sample = first[:, :: max(1, first.shape[-2] // EIGHT_BIT_ROWS)]
+    if sample.numel() < EIGHT_BIT_LEVELS or not readable(image):  # too few values to hold that many levels
+        return
+    with one_thread():  # tens of thousands of values: a parallel region's barrier would cost more on a loaded machine
+        low, high = torch.stack(sample.aminmax()).tolist()  # one read
+        eight_bit = (0.0 <= low < high and 1.0 < high <= 255.0 and torch.equal(sample, sample.round())
+                     and sample.unique().numel() >= EIGHT_BIT_LEVELS)  # counted only where the rest holds: almost never
+    if eight_bit:
+        warnings.warn(
+            f"the image looks like 0..255 data (whole numbers up to {high:g}), but stages take linear light: divide "
+            "by 255, and decode sRGB-encoded pictures (PNG, JPEG) with tg.color.srgb_to_linear or grade them with "
+            'RandomPostFX(input_space="srgb")', UserWarning, stacklevel=3)
 
 
 class _Copy(NamedTuple):
     """A value's copy on its way to the host, and the check its caller asked for once it has landed."""
 
-    value: torch.Tensor
-    version: int  # the value's version when copied
+    name: str
     host: torch.Tensor
     landed: object  # the CUDA event recorded after the copy
     check: Callable[[str, torch.Tensor], None]
-
-    def describes(self, value: torch.Tensor) -> bool:
-        """True when this copy was made from ``value`` as it is now."""
-        return self.value is value and self.version == value._version
 
 
 def _deferred(device: torch.device) -> bool:
@@ -78,20 +101,16 @@ def _copy_to_host(value: torch.Tensor) -> tuple:
 
 
 class DeferredCheck:
-    """Checks ``check(name, value)`` of a stage's learnable values: at once on the CPU, asynchronously on CUDA,
-    once per change of a value (its tensor version), never on ``meta`` (no values). Callers may share one
-    (a stage's number controls and its kernel): each copy is checked with its own caller's ``check``.
-    Safe to call from several threads."""
+    """Checks ``check(name, value)`` of a stage's learnable values at every call: at once on the CPU, asynchronously on
+    CUDA, never on ``meta`` (no values). Callers may share one (a stage's number controls and its kernel): each copy is
+    checked with its own caller's ``check``. Safe to call from several threads."""
 
     def __init__(self):
         self._lock = threading.Lock()
-        self._passed: dict = {}  # name -> (tensor, version) whose check passed
-        self._failed: dict = {}  # name -> the _Copy whose check raised last
-        self._pending: dict = {}  # name -> deque of _Copy not yet checked, oldest first
-        self._failing: set = set()  # names whose last landed copy failed
+        self._pending: collections.deque = collections.deque()  # _Copy not yet checked, oldest first
 
     def __call__(self, values: dict, check: Callable[[str, torch.Tensor], None], summary: Optional[Callable] = None) -> None:
-        """Check each of ``values`` (by name) whose tensor or version changed: ``check(name, summary(value))``.
+        """Check each of ``values`` (by name): ``check(name, summary(value))``.
 
         ``summary`` (default: the value itself) reduces a large value to what ``check`` needs (a table to its
         extremes), so only that is copied back. Nothing while a graph is recorded.
@@ -100,38 +119,13 @@ class DeferredCheck:
             return
         with self._lock:
             for name, value in values.items():
-                passed = self._passed.get(name)
-                if value.device.type == "meta" or (passed is not None and passed[0] is value and passed[1] == value._version):
+                if value.device.type == "meta":
                     continue
-                failed = self._failed.get(name)
-                if failed is not None and failed.describes(value):
-                    failed.check(name, failed.host)  # raises again, as the CPU does at every forward
-                if not _deferred(value.device):
-                    check(name, value.detach() if summary is None else summary(value.detach()))
-                    self._passed[name] = (value, value._version)
-                    continue
-                queue = self._pending.setdefault(name, collections.deque())
-                if not queue or not queue[-1].describes(value):
-                    summarised = value.detach() if summary is None else summary(value.detach())
-                    queue.append(_Copy(value, value._version, *_copy_to_host(summarised), check))
-            self._check_landed()
-
-    def _check_landed(self) -> None:
-        """Check every copy that has landed, oldest first; raise the first failure that counts."""
-        for name, queue in self._pending.items():
-            while queue and queue[0].landed.query():
-                self._judge(name, queue.popleft())
-
-    def _judge(self, name: str, copy: _Copy) -> None:
-        try:
-            copy.check(name, copy.host)
-        except ValueError:
-            repeated = name in self._failing
-            self._failing.add(name)
-            if copy.value._version == copy.version or repeated:  # unchanged since, or not back in range since
-                self._failed[name] = copy
-                self._pending[name].clear()  # copies made before this report: the value is copied again as it is now
-                raise
-        else:
-            self._failing.discard(name)
-            self._passed[name] = (copy.value, copy.version)
+                seen = value.detach() if summary is None else summary(value.detach())
+                if _deferred(value.device):
+                    self._pending.append(_Copy(name, *_copy_to_host(seen), check))
+                else:
+                    check(name, seen)
+            while self._pending and self._pending[0].landed.query():  # a failure raises; later copies wait their turn
+                copy = self._pending.popleft()
+                copy.check(copy.name, copy.host)

@@ -6,8 +6,8 @@ value, dtype and device, so a frame after the first builds nothing from Python d
 or exporting it makes the tensor afresh, which the graph records as a constant.
 
 Tables derived from sizes (a blur's kernel, a padding's indices) are kept the same way by :func:`device_cached`.
-Cached tensors are shared: callers never modify them in place, and public functions hand out copies. Should a
-caller modify one all the same, its version counter moves and the cache makes it again rather than serve it.
+Cached tensors are shared: callers never modify them in place, and public functions hand out copies
+(:func:`~torchgrade.color.matrix`).
 
 Examples:
     >>> import torch
@@ -24,7 +24,7 @@ import numbers
 
 import torch
 
-from .recording import is_tracing, untracked
+from .recording import is_tracing
 
 __all__ = ["constant", "scalar", "where", "is_plain_number", "affine", "values_of", "device_cached", "folded", "CACHED_CONSTANTS"]
 
@@ -112,28 +112,20 @@ _CPU = torch.device("cpu")
 
 
 def _cached(values, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
-    """``torch.tensor(values)`` in ``dtype`` on ``device``, made once (:func:`_made`) and made again if modified."""
-    return _unchanged(_made(values, dtype, device), torch.tensor, values, dtype=dtype, device=device)
+    """``torch.tensor(values)`` in ``dtype`` on ``device``, made once."""
+    return _made(values, dtype, device)
 
 
 @functools.lru_cache(maxsize=CACHED_CONSTANTS)
-def _made(values, dtype: torch.dtype, device: torch.device) -> list:
+def _made(values, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
     return _kept(torch.tensor, values, dtype=dtype, device=device)
 
 
-def _kept(make, *arguments, **keywords) -> list:
-    """``[tensor, its version]`` of ``make(*arguments, **keywords)``, made outside inference mode (an inference tensor
-    cannot be saved for a later backward pass)."""
+def _kept(make, *arguments, **keywords) -> torch.Tensor:
+    """``make(*arguments, **keywords)``, made outside inference mode (an inference tensor cannot be saved for a later
+    backward pass)."""
     with torch.inference_mode(False):
-        tensor = make(*arguments, **keywords)
-    return [tensor, tensor._version]
-
-
-def _unchanged(kept: list, make, *arguments, **keywords) -> torch.Tensor:
-    """The tensor of ``kept`` (:func:`_kept`), made again if a caller modified it in place (its version moved)."""
-    if kept[0]._version != kept[1]:
-        kept[:] = _kept(make, *arguments, **keywords)
-    return kept[0]
+        return make(*arguments, **keywords)
 
 
 def values_of(tensor: torch.Tensor):
@@ -166,20 +158,18 @@ def device_cached(make):
 
     @functools.wraps(make)
     def call(*arguments):
-        return make(*arguments) if is_tracing() else _unchanged(cached(*arguments), make, *arguments)
+        return make(*arguments) if is_tracing() else cached(*arguments)
 
     return call
 
 
-def folded(function, *arguments, like: torch.Tensor, host=False):
+def folded(function, *arguments, like: torch.Tensor, host: bool = False):
     """``function(*arguments, like=like)``, a small tensor of the controls (a colour matrix, gains), made once.
 
     With plain controls (numbers, strings, nested sequences, ``None``) the result is computed once in float64 on
     the CPU and kept, in ``like``'s dtype, on its device (:func:`constant`): a frame then launches nothing for it.
     With ``host``, kept on the CPU instead (:func:`scalar`), for a caller that takes its values as 0-d operands of
-    two-operand operations; ``host="untracked"`` only where nothing records how ``like`` is used
-    (:func:`~torchgrade.runtime.recording.untracked`: a backward through such an operand, a power's exponent, would copy
-    it to the device at every step). A tensor among the arguments (a per-sample or learnable control), or tracing, computes it
+    two-operand operations. A tensor among the arguments (a per-sample or learnable control), or tracing, computes it
     on ``like`` as called.
 
     Examples:
@@ -199,8 +189,7 @@ def folded(function, *arguments, like: torch.Tensor, host=False):
     except TypeError:
         return function(*arguments, like=like)
     values = _float64_values(function, key)
-    on_host = untracked(like) if host == "untracked" else host
-    return None if values is None else (scalar if on_host else constant)(values, like)
+    return None if values is None else (scalar if host else constant)(values, like)
 
 
 @functools.lru_cache(maxsize=CACHED_CONSTANTS)

@@ -63,28 +63,15 @@ def untracked(*tensors) -> bool:
 
 
 def is_differentiated(value: torch.Tensor) -> bool:
-    """Whether ``value`` carries a derivative that ``requires_grad`` does not show: a tensor inside a ``torch.func``
-    transform (``grad``, ``jacfwd``, ``jvp``, ``vmap``) or a forward-mode dual tensor. A step skipped at its control's
-    identity, or a guard skipped, would lose it (``jacfwd`` of a grade at contrast 0 gave 0; of split toning, NaN).
+    """Whether ``value`` carries a forward-mode derivative that ``requires_grad`` does not show: a dual tensor of
+    ``torch.autograd.forward_ad`` or of ``torch.func.jvp`` and ``jacfwd`` (inside ``torch.func.grad`` a tensor
+    ``requires_grad``). A guard skipped, or a form computed in place, would lose it.
 
     Examples:
-        >>> is_differentiated(torch.tensor(0.0)), torch.func.grad(lambda x: x * is_differentiated(x))(torch.tensor(0.0))
-        (False, tensor(1.))
+        >>> from torch.autograd import forward_ad
+        >>> with forward_ad.dual_level():
+        ...     dual = forward_ad.make_dual(torch.tensor(0.0), torch.tensor(1.0))
+        ...     is_differentiated(torch.tensor(0.0)), is_differentiated(dual)
+        (False, True)
     """
-    if torch.compiler.is_compiling():
-        return False  # Dynamo cannot trace the check; the compiled graph keeps every step and guard anyway
-    if torch._C._functorch.is_functorch_wrapped_tensor(value):
-        return True
-    # a dual tensor exists only inside forward_ad.dual_level(): outside one, no unpacking (it costs a microsecond)
-    return forward_ad._current_level >= 0 and forward_ad.unpack_dual(value).tangent is not None
-
-
-def sizes_are_symbolic() -> bool:
-    """Whether sizes are symbolic to Python: while a graph is traced for ONNX (``torch.jit`` or an export), every size
-    takes the general forms. A compiler's sizes are ints or guarded symbols: it takes the forms of particular sizes.
-
-    Examples:
-        >>> sizes_are_symbolic()
-        False
-    """
-    return torch.jit.is_tracing() or is_exporting()
+    return forward_ad.unpack_dual(value).tangent is not None

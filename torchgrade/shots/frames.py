@@ -42,7 +42,10 @@ def frame_width(name: str) -> int:
         >>> frame_width("plate.%04d.exr"), frame_width("plate.%d.exr")
         (4, 0)
     """
-    digits = PRINTF_FRAME.search(name).group(1)
+    pattern = PRINTF_FRAME.search(name)
+    if pattern is None:
+        raise ValueError(f"{name}: no frame number pattern such as %04d")
+    digits = pattern.group(1)
     width = int(digits) if digits.lstrip("0") else 0
     if len(digits) > 4 or width > MAX_FRAME_DIGITS:
         raise ValueError(f"{name}: a frame number of {digits[:12]} digits; at most {MAX_FRAME_DIGITS}")
@@ -62,7 +65,7 @@ def _frame_key(path: Path) -> tuple:
 
 def _pattern_frames(path: Path) -> list:
     width = frame_width(path.name)
-    digits = rf"\d{{{width}}}" if PRINTF_FRAME.search(path.name).group(1).startswith("0") else r"\d+"
+    digits = rf"\d{{{width}}}" if next(PRINTF_FRAME.finditer(path.name)).group(1).startswith("0") else r"\d+"
     parts = PRINTF_FRAME.split(path.name)
     name = re.compile("".join(re.escape(part) if i % 2 == 0 else digits for i, part in enumerate(parts)) + "$")
     folder = path.parent
@@ -130,8 +133,8 @@ def output_paths(output: str, frames: list) -> list:
         return [Path(output)]
     folder, name = Path(output).parent, Path(output).name
     frame_width(name)
-    paths = [folder / PRINTF_FRAME.sub(lambda match: f"%{match.group(1)}d" % frame_number(frame, i), name, count=1)
-             for i, frame in enumerate(frames)]
+    pattern = next(PRINTF_FRAME.finditer(name)).group(0)  # the first, "%04d": filled as printf fills it
+    paths = [folder / name.replace(pattern, pattern % frame_number(frame, i), 1) for i, frame in enumerate(frames)]
     if len(set(paths)) < len(paths):
         raise ValueError(f"two frames carry the same number, so would both write one file of {output}")
     return paths

@@ -75,12 +75,12 @@ class DispatchCount(TorchDispatchMode):
         super().__init__()
         self.frame_bytes = 2 * frame.numel() * frame.element_size() if frame is not None else None
         self.plane = frame.shape[-2] * frame.shape[-1] if frame is not None else None
-        self.written = []  # bytes of each launch's results of a plane or more
-        self.frame_writes = collections.Counter()
-        self.moved = []
-        self.reads = collections.Counter()
-        self.host_data = collections.Counter()
-        self.by_operation = collections.Counter()
+        self.written: list[int] = []  # bytes of each launch's results of a plane or more
+        self.frame_writes: collections.Counter[str] = collections.Counter()
+        self.moved: list[int] = []  # bytes each copy moved
+        self.reads: collections.Counter[str] = collections.Counter()
+        self.host_data: collections.Counter[str] = collections.Counter()
+        self.by_operation: collections.Counter[str] = collections.Counter()
         self.row_gathers = 0
         self.unvectorised = 0
 
@@ -92,6 +92,8 @@ class DispatchCount(TorchDispatchMode):
     @property
     def frame_passes(self) -> float:
         """The bytes every launch moved over the bytes one copy of the frame reads and writes."""
+        if self.frame_bytes is None:
+            raise ValueError("frame_passes needs the frame: DispatchCount(frame=image)")
         return sum(self.moved) / self.frame_bytes
 
     @property
@@ -102,6 +104,10 @@ class DispatchCount(TorchDispatchMode):
 
     def __torch_dispatch__(self, func, types, args=(), kwargs=None):
         kwargs = kwargs or {}
+        kernel = _library_kernel(func, args)
+        if kernel is not None:  # counted by what its kernel for the device dispatches
+            with self:
+                return kernel(*args, **kwargs)
         name = func.overloadpacket.__name__
         out = func(*args, **kwargs)
         if func is torch.ops.aten._local_scalar_dense.default:
@@ -125,6 +131,16 @@ class DispatchCount(TorchDispatchMode):
                 self.written.append(sum(t.numel() * t.element_size() for t in large))
                 self.frame_writes[name] += 1
         return out
+
+
+def _library_kernel(func, args):
+    """The Python kernel a torchgrade operator (``torch.library``) runs off the CPU, for its operations to be counted as
+    they dispatch (the operator itself is one call on the host); ``None`` for any other operation."""
+    if func.namespace != "torchgrade" or any(isinstance(a, torch.Tensor) and a.device.type == "cpu" for a in args):
+        return None
+    from ..bloom.blur import _mirror_filter_by_convolution
+
+    return {"mirror_filter": _mirror_filter_by_convolution}.get(func.overloadpacket.__name__)
 
 
 def _gathers_rows(func, args) -> bool:

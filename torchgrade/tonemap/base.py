@@ -8,14 +8,12 @@ LUT that clips after its lookup does).
 from __future__ import annotations
 
 import inspect
-import numbers
 from typing import Callable, NamedTuple, Optional
 
 import torch
 
 from ..base.planes import apply_matrix
 from ..base.controls import Control
-from ..runtime.variants import formula
 
 __all__ = ["TONEMAP_INPUT_LIMIT", "WHITE_POINT_RANGE", "ToneMapper", "limited", "display", "apply_rows", "no_tonemap"]
 
@@ -34,7 +32,8 @@ class ToneMapper(NamedTuple):
     (:func:`~torchgrade.base.images.sanitize`), and returns display-referred linear Rec.709, clipped to [0, 1] when
     ``clip``; ``prepare(**controls)`` returns what the stage keeps so that what was built stays built while the stage
     lives. A curve that also stands alone and sanitizes its input itself (ACES 2.0's) takes ``nan_free``
-    (``takes_nan_free``), so its input's NaN pass is not made twice.
+    (``takes_nan_free``), so its input's NaN pass is not made twice; a curve that computes on the image's planes where
+    a compiler fuses them (:func:`~torchgrade.runtime.strips.pixelwise`) takes ``planes`` (``takes_planes``).
 
     Examples:
         >>> entry = ToneMapper.of(no_tonemap)
@@ -46,10 +45,13 @@ class ToneMapper(NamedTuple):
     controls: dict
     prepare: Optional[Callable[..., object]] = None
     takes_nan_free: bool = False
+    takes_planes: bool = False
 
     @classmethod
-    def of(cls, curve: Callable[..., torch.Tensor], prepare: Optional[Callable[..., object]] = None, **ranges: tuple) -> "ToneMapper":
-        """The entry of ``curve`` with a control per ``ranges`` item, its default from ``curve``'s own signature.
+    def of(cls, curve: Callable[..., torch.Tensor], prepare: Optional[Callable[..., object]] = None, *,
+           takes_nan_free: bool = False, takes_planes: bool = False, **ranges: tuple) -> "ToneMapper":
+        """The entry of ``curve`` with a control per ``ranges`` item, its default from ``curve``'s own signature, and
+        the keywords it takes (``nan_free``, ``planes``) as its entry states them.
 
         Examples:
             >>> def lift(image, amount=0.5, clip=True):
@@ -59,10 +61,9 @@ class ToneMapper(NamedTuple):
         """
         defaults = inspect.signature(curve).parameters
         controls = {name: Control(defaults[name].default, allowed) for name, allowed in ranges.items()}
-        return cls(curve, controls, prepare, takes_nan_free="nan_free" in defaults)
+        return cls(curve, controls, prepare, takes_nan_free, takes_planes)
 
 
-@formula
 def limited(image: torch.Tensor, limit=TONEMAP_INPUT_LIMIT) -> torch.Tensor:
     """``clamp(image, 0, limit)``: black for negative (out-of-gamut) values, ``limit`` a number or a tensor.
 
@@ -70,17 +71,8 @@ def limited(image: torch.Tensor, limit=TONEMAP_INPUT_LIMIT) -> torch.Tensor:
         >>> limited(torch.tensor([-1.0, 0.5, 100.0])).tolist()
         [0.0, 0.5, 60.0]
     """
-    return torch.minimum(image.clamp_min(0.0), torch.as_tensor(limit, dtype=image.dtype, device=image.device))
-
-
-def _limit_is_a_number(image: torch.Tensor, limit=TONEMAP_INPUT_LIMIT) -> bool:
-    return isinstance(limit, numbers.Real)
-
-
-@limited.variant("untracked", when=_limit_is_a_number)
-@limited.variant("export", when=_limit_is_a_number)
-def _limited_by_a_number(image: torch.Tensor, limit=TONEMAP_INPUT_LIMIT) -> torch.Tensor:
-    """One clamp (exported, one ``Clip`` where the other form is a ``Clip`` and a ``Min``)."""
+    if isinstance(limit, torch.Tensor):  # torch.clamp takes two numbers or two tensors: a tensor limit, two passes
+        return image.clamp_min(0.0).clamp_max(limit)
     return image.clamp(0.0, limit)
 
 

@@ -9,6 +9,7 @@ import torch
 from ..base.params import Param
 from ..base.controls import Control, controls_signature
 from ..base.stage import Stage
+from ..runtime.strips import pixelwise
 from .registry import TONE_MAPPERS, TONEMAP_MODES, check_curve_params, tone_mapped
 
 __all__ = ["ToneMap"]
@@ -107,8 +108,9 @@ class ToneMap(Stage):
         """True when a curve maps scene-referred input (any mode but ``"none"``): a LUT baked through it needs an HDR shaper."""
         return self.mode != "none"
 
-    def forward(self, image: torch.Tensor, *, nan_free: bool = False) -> torch.Tensor:
-        return self.run_in_strips(tone_mapped, image, nan_free=nan_free)
+    @pixelwise(planes=True)
+    def forward(self, image: torch.Tensor, *, nan_free: bool = False, planes: bool = False) -> torch.Tensor:
+        return tone_mapped(image, nan_free=nan_free, planes=planes, **self.params())
 
 
 def _signature() -> inspect.Signature:

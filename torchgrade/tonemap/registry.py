@@ -43,7 +43,7 @@ TONE_MAPPERS = {
     "reinhard_extended": ToneMapper.of(reinhard_extended, white_point=WHITE_POINT_RANGE),
     "reinhard_luminance": ToneMapper.of(reinhard_luminance, white_point=WHITE_POINT_RANGE),
     "neutral": ToneMapper.of(neutral),
-    "aces": ToneMapper.of(aces),
+    "aces": ToneMapper.of(aces, takes_planes=True),
     "hable": ToneMapper.of(hable, **HABLE_RANGES),
     "filmic": ToneMapper.of(filmic, **FILMIC_RANGES),
     "unreal_filmic": ToneMapper.of(unreal_filmic, **UNREAL_FILMIC_RANGES),
@@ -53,8 +53,8 @@ TONE_MAPPERS = {
     "agx": ToneMapper.of(agx),
     "agx_godot": ToneMapper.of(agx_godot),
     "khronos_pbr_neutral": ToneMapper.of(khronos_pbr_neutral),
-    "aces2": ToneMapper.of(aces2_sdr, prepare=prepare_aces2_sdr),
-    "aces2_hdr": ToneMapper.of(aces2_hdr, prepare=prepare_aces2_hdr, **ACES2_HDR_RANGES),
+    "aces2": ToneMapper.of(aces2_sdr, prepare=prepare_aces2_sdr, takes_nan_free=True, takes_planes=True),
+    "aces2_hdr": ToneMapper.of(aces2_hdr, prepare=prepare_aces2_hdr, takes_nan_free=True, takes_planes=True, **ACES2_HDR_RANGES),
     "neutral_hdr": ToneMapper.of(neutral_hdr, **NEUTRAL_HDR_RANGES),
 }
 """Every tone mapper by mode name: its curve and its controls (defaults are the curve's own)."""
@@ -128,10 +128,11 @@ def tonemap(image: torch.Tensor, mode: str = "neutral", clip: bool = True, **par
 
 
 def tone_mapped(image: torch.Tensor, mode: str = "neutral", clip: bool = True, *, nan_free: bool = False,
-                **params: Param) -> torch.Tensor:
+                planes: bool = False, **params: Param) -> torch.Tensor:
     """:func:`tonemap` without checking the parameters' values: for :class:`~torchgrade.ToneMap`, which checked them
     when they were set, on every strip of a frame. ``nan_free``: ``image`` holds no NaN
-    (:func:`~torchgrade.base.images.sanitize`).
+    (:func:`~torchgrade.base.images.sanitize`); ``planes``: a curve that can computes on the image's three planes
+    (:attr:`~torchgrade.tonemap.base.ToneMapper.takes_planes`).
 
     Examples:
         >>> image = torch.full((1, 3, 1, 1), 8.0)
@@ -142,5 +143,7 @@ def tone_mapped(image: torch.Tensor, mode: str = "neutral", clip: bool = True, *
     entry = tone_mapper(mode)
     check_curve_params(mode, params)
     working = sanitize(working_dtype(image), nan_free=nan_free)
-    sanitized = {"nan_free": True} if entry.takes_nan_free else {}  # a curve that sanitizes again leaves out the NaN pass
-    return to_input_dtype(entry.curve(working, clip=clip, **sanitized, **params), image)
+    options = {"nan_free": True} if entry.takes_nan_free else {}  # a curve that sanitizes again leaves out the NaN pass
+    if entry.takes_planes:
+        options["planes"] = planes
+    return to_input_dtype(entry.curve(working, clip=clip, **options, **params), image)

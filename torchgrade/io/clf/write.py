@@ -66,7 +66,8 @@ def clf_text(lut: LUT3D, title: str = "torchgrade", interpolation: Optional[str]
     lines += _rows(table)
     lines += ["    </Array>", "  </LUT3D>"]
     if lut.output_range is not None:
-        lines += _range(*(torch.tensor(v) for v in lut.output_range), *lut.output_range)
+        low, high = lut.output_range
+        lines += _range(torch.tensor(low), torch.tensor(high), low, high)
     lines.append("</ProcessList>")
     return "\n".join(lines) + "\n"
 
@@ -76,15 +77,16 @@ def _shaper_nodes(lut: LUT3D) -> list:
     if lut.shaper == "linear":
         return []
     lines = []
-    tail = isinstance(SHAPERS[lut.shaper], LogCHDRShaper)
+    shaper = SHAPERS[lut.shaper]
+    tail = isinstance(shaper, LogCHDRShaper)
     if lut.shaper in ("logc", "fitted") or tail:
         lines += [f'  <Log {_DEPTHS} style="linToLog">',
                   f'    <LogParams base="10" linSideSlope="{LOGC_A!r}" linSideOffset="{LOGC_B!r}" '
                   f'logSideSlope="{LOGC_C!r}" logSideOffset="{LOGC_D!r}"/>', "  </Log>"]
     curve, curve_range = lut.curve, lut.curve_range
-    if tail:  # the tail after LogC: piecewise linear with its knots on table points, so exact
+    if isinstance(shaper, LogCHDRShaper):  # the tail after LogC: piecewise linear with its knots on table points, so exact
         bottom = min(0.0, math.floor(float(lut.domain_min.min()) * 10.0) / 10.0)
-        curve_range, curve = SHAPERS[lut.shaper].logc_table(bottom)
+        curve_range, curve = shaper.logc_table(bottom)
     if curve is not None:  # a fitted curve over LogC codes, the tail, or a .cube 1D section over linear values
         low, high = curve_range
         lines += _range(torch.tensor(low, dtype=torch.float64), torch.tensor(high, dtype=torch.float64), 0.0, 1.0)

@@ -51,10 +51,10 @@ def read_cube(path) -> LUT3D:
         _check_file_size(os.fstat(handle.fileno()).st_size, sizes, path)
         values = _read_rows(itertools.chain([first_data], blocks), sizes, path)
     shaper_size, table_size = sizes
-    curve = torch.from_numpy(values[:shaper_size]) if shaper_size else None
     curve_range = header.get("LUT_1D_INPUT_RANGE", [0.0, 1.0])
     if not table_size:
-        return _curve_only(curve, curve_range)
+        return _curve_only(torch.from_numpy(values), curve_range)
+    curve = torch.from_numpy(values[:shaper_size]) if shaper_size else None
     table = torch.from_numpy(values[shaper_size:]).reshape(table_size, table_size, table_size, 3)
     if shaper_size:
         return LUT3D(table, "curve", _domain(header), curve=curve, curve_range=curve_range)
@@ -130,7 +130,7 @@ def _keyword_numbers(keyword: str, rest: str, line: int, path) -> list:
         raise ValueError(f"{path}: line {line}: {keyword} takes {_KEYWORDS[keyword]} number(s), got {rest[:80]!r}")
     numbers = [float(w) for w in words]
     with np.errstate(over="ignore"):
-        finite = np.isfinite(np.float32(numbers)).all()
+        finite = np.isfinite(np.asarray(numbers, dtype=np.float32)).all()
     if not finite:
         raise ValueError(f"{path}: line {line}: {keyword} must be finite in float32, got {rest!r}")
     return numbers
@@ -152,7 +152,8 @@ def _check_header(header: dict, path):
     if ("DOMAIN_MIN" in header or "DOMAIN_MAX" in header) and "LUT_3D_INPUT_RANGE" in header:
         raise ValueError(f"{path}: both DOMAIN_MIN/MAX and LUT_3D_INPUT_RANGE given")
     _check_span("the 3D domain", *_domain(header), path)
-    _check_span("LUT_1D_INPUT_RANGE", *([value] for value in header.get("LUT_1D_INPUT_RANGE", (0.0, 1.0))), path)
+    low, high = header.get("LUT_1D_INPUT_RANGE", (0.0, 1.0))
+    _check_span("LUT_1D_INPUT_RANGE", [low], [high], path)
     return shaper_size, table_size
 
 
@@ -164,7 +165,7 @@ def _check_span(name: str, low, high, path) -> None:
         raise ValueError(f"{path}: {name} must span a positive, finite float32 width, got {low} to {high}")
 
 
-def _domain(header: dict):
+def _domain(header: dict) -> tuple[list, list]:
     """The 3D lattice's ``(min, max)`` RGB triples: ``LUT_3D_INPUT_RANGE``, else ``DOMAIN_MIN/MAX``, else [0, 1]."""
     if "LUT_3D_INPUT_RANGE" in header:
         low, high = header["LUT_3D_INPUT_RANGE"]

@@ -28,17 +28,17 @@ What a chunk's data decompresses to is left to the library, which raises when it
 
 from __future__ import annotations
 
+import functools
 import mmap
 import struct
 from dataclasses import dataclass
 
 import numpy as np
-import OpenEXR
 
 from .header_bytes import MULTIPART, Headers, channel_list, check_required, read_headers, value
 from .layout import ExrPart
 
-__all__ = ["MAX_CHUNKS", "LIBRARY_COMPRESSIONS", "ChunkTable", "chunk_table"]
+__all__ = ["MAX_CHUNKS", "library_compressions", "ChunkTable", "chunk_table"]
 
 MAX_CHUNKS = 1 << 20
 """Most chunks a part may have: OpenEXRCore refuses larger offset tables (``extract_chunk_table``)."""
@@ -49,10 +49,21 @@ HTJ2K32 (file layout document, "Regular Scan Line Blocks"), LJ2K (HTJ2K256's blo
 and ZSTD (one line, as OpenEXR 3.5.3 writes it: 1000 chunks for 1000 lines). A code not here that the library knows
 is a newer library's: its scanline parts are left to the library (:func:`chunk_table`)."""
 
-LIBRARY_COMPRESSIONS = frozenset(int(code) for code in OpenEXR.Compression.__members__.values()
-                                 if code != OpenEXR.Compression.NUM_COMPRESSION_METHODS)
-"""The compression codes the installed OpenEXR knows. It reads any other code as ZIP without a word (3.5.3), so a
-file holding one is refused here."""
+
+@functools.cache
+def library_compressions() -> frozenset[int]:
+    """The compression codes the installed OpenEXR knows. It reads any other code as ZIP without a word (3.5.3), so a
+    file holding one is refused here.
+
+    Examples:
+        >>> {0, 3} <= library_compressions()  # NO_COMPRESSION, ZIP_COMPRESSION
+        True
+    """
+    import OpenEXR  # the bindings load at the first read, not with torchgrade.io
+
+    codes = OpenEXR.Compression
+    return frozenset(int(code) for code in codes.__members__.values() if code != codes.NUM_COMPRESSION_METHODS)
+
 
 _LINE_ORDERS = ("INCREASING_Y", "DECREASING_Y", "RANDOM_Y")
 
@@ -154,7 +165,7 @@ def _left_to_library(attributes: dict, data, part: ExrPart) -> bool:
     """True for a scanline part whose compression the library knows and these checks do not (how many lines its
     chunks hold): a newer library's. ``ValueError`` for a code the library does not know either."""
     (compression,) = value(data, attributes["compression"])
-    if compression not in LIBRARY_COMPRESSIONS:
+    if compression not in library_compressions():
         raise ValueError(f"its compression {compression} is none the installed OpenEXR knows")
     return part.kind != "tiledimage" and compression not in _LINES_PER_CHUNK
 

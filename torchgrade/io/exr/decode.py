@@ -28,7 +28,6 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-import OpenEXR
 
 from .chunks import chunk_table
 from .layout import ExrPart
@@ -177,6 +176,8 @@ def decode(path, parts: list[ExrPart], chosen: ExrPart, names: list[str]) -> dic
         >>> {name: array.shape for name, array in decode(path, parts, parts[0], ["R", "G"]).items()}
         {'R': (2, 4), 'G': (2, 4)}
     """
+    import OpenEXR
+
     with _part_file(path, chosen, alone=len(parts) == 1) as source, _decoding(path, source):
         opened = OpenEXR.File(str(source), separate_channels=True)
         decoded = [{name: channel.pixels for name, channel in part.channels.items()} for part in opened.parts]
@@ -205,6 +206,8 @@ def decode_strips(path, chosen: ExrPart, sources: list, target, crop: tuple[slic
         tensor([[20., 21., 22., 23.],
                 [ 0.,  0.,  0.,  0.]])
     """
+    import OpenEXR
+
     names = sorted({name for name in sources if name is not None})
     height, width = chosen.size()
     rows = max(1, STRIP_BYTES // (width * sum(chosen.sample_bytes[name] for name in names)))
@@ -216,7 +219,7 @@ def decode_strips(path, chosen: ExrPart, sources: list, target, crop: tuple[slic
         opened = OpenEXR.InputFile(str(source))
         try:
             types = opened.header()["channels"]
-            by_type = {}
+            by_type: dict[int, list[str]] = {}
             for name in names:
                 by_type.setdefault(types[name].type.v, []).append(name)
             for first in range(0, height, rows):

@@ -123,7 +123,8 @@ def _name(data, at: int) -> tuple[str, int]:
 def channel_list(data, attribute: Attribute) -> dict[str, int]:
     """``{channel: bytes a sample}`` of a ``chlist`` attribute, at most :data:`MAX_CHANNELS` of them, each named once
     (OpenEXR refuses a name listed twice too; refused here, every entry is a channel the budgets count)."""
-    at, end, channels = attribute.value, attribute.end, {}
+    at, end = attribute.value, attribute.end
+    channels: dict[str, int] = {}
     while at < end and data[at] != 0:
         if len(channels) == MAX_CHANNELS:
             raise HeaderBudgetError(f"a part holds more than {MAX_CHANNELS} channels")
@@ -140,7 +141,7 @@ def channel_list(data, attribute: Attribute) -> dict[str, int]:
 
 def _attributes(data, at: int, before: int) -> tuple[list[Attribute], int]:
     """The attributes of the header at ``at``, and where it ends; ``before`` the earlier headers hold."""
-    attributes = []
+    attributes: list[Attribute] = []
     while data[at] != 0:
         if len(attributes) == MAX_ATTRIBUTES:
             raise HeaderBudgetError(f"a header holds more than {MAX_ATTRIBUTES} attributes")
@@ -174,7 +175,8 @@ def read_headers(data) -> Headers:
     magic, version = struct.unpack_from("<ii", data)
     if magic != MAGIC:
         raise ValueError(f"no OpenEXR magic number (the file starts with {bytes(data[:4])!r})")
-    parts, at, count = [], 8, 0
+    parts: list[list[Attribute]] = []
+    at, count = 8, 0
     while True:
         if len(parts) == MAX_PARTS:
             raise HeaderBudgetError(f"the file holds more than {MAX_PARTS} parts")

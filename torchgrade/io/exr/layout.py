@@ -12,14 +12,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import OpenEXR
-
 from ...base.files import check_regular
 from .header_bytes import PartBytes, part_bytes
 
 __all__ = ["ExrPart", "exr_info", "split_channel_name"]
-
-_DEEP = (OpenEXR.deepscanline, OpenEXR.deeptile)
 
 
 @dataclass(frozen=True)
@@ -108,7 +104,9 @@ def _describe(index: int, part, raw: PartBytes | None) -> ExrPart:
     part_view = header.get("view")  # in a multi-part file, every channel of the part is in its view
     if not views and part_view:
         views = (str(part_view),)
-    channels, layers, names = {}, {}, {}
+    channels: dict[str, tuple[int, int]] = {}
+    layers: dict[tuple[str | None, str], list[str]] = {}
+    names: dict[str, tuple[str | None, str, str]] = {}
     for channel in header.get("channels") or ():
         channels[channel.name] = (int(channel.xSampling), int(channel.ySampling))
         view, layer, letter = split_channel_name(channel.name, views)
@@ -116,7 +114,7 @@ def _describe(index: int, part, raw: PartBytes | None) -> ExrPart:
             view, layer = str(part_view), channel.name.rpartition(".")[0]
         names[channel.name] = (view, layer, letter)
         layers.setdefault((view, layer), []).append(letter)
-    kind = str(header.get("type", OpenEXR.scanlineimage)).split(".")[-1]
+    kind = str(header.get("type", "scanlineimage")).split(".")[-1]  # the bindings' default, as its enum prints
     sizes = raw.sample_bytes if raw is not None and raw.sample_bytes.keys() == channels.keys() else dict.fromkeys(channels, 4)
     return ExrPart(index, header.get("name"), kind, _window(header["dataWindow"]), _window(header["displayWindow"]),
                    views, _chromaticities(header), channels, {key: sorted(value) for key, value in layers.items()}, names,
@@ -138,6 +136,8 @@ def exr_info(path) -> list[ExrPart]:
         >>> part.kind, part.size(), part.layers
         ('scanlineimage', (2, 4), {(None, ''): ['B', 'G', 'R']})
     """
+    import OpenEXR  # the bindings load at the first read, not with torchgrade.io
+
     check_regular(path, "EXR file")
     try:
         raw = part_bytes(path) or []  # first: it refuses headers past their budgets before OpenEXR's parser runs

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-import OpenEXR
 import torch
 
 from ...base.images import check_image
@@ -12,7 +11,10 @@ from ..atomic import atomic_write
 __all__ = ["write_exr"]
 
 
-def _write(header: dict, channels: dict, temporary: str) -> None:
+def _write(channels: dict, temporary: str) -> None:
+    import OpenEXR  # the bindings load at the first write, not with torchgrade.io
+
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     try:
         OpenEXR.File(header, channels).write(temporary)
     except RuntimeError as error:  # the bindings report a failed write (a full disk, say) as RuntimeError
@@ -44,5 +46,4 @@ def write_exr(path, image: torch.Tensor, half: bool = True) -> None:
         pixels = np.clip(np.nan_to_num(pixels, nan=0.0), -65504.0, 65504.0)
     name = "RGBA" if image.shape[0] == 4 else "RGB"
     data = np.ascontiguousarray(pixels.transpose(1, 2, 0).astype(dtype))
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    atomic_write(path, lambda temporary: _write(header, {name: data}, temporary))
+    atomic_write(path, lambda temporary: _write({name: data}, temporary))

@@ -3,24 +3,22 @@
 from __future__ import annotations
 
 import torch
+import torch.nn.functional as F
 
-from ...base.planes import apply_matrix, matrix_on_planes, rows_on_planes
-from ...color import AP1_LUMINANCE, MATRICES, MATRIX_VALUES, convert, unity_to_aces
-from ...color.spaces import shared_matrix
-from ...runtime import affine, constant, values_of, where
-from ...runtime.variants import formula
+from ...base.planes import each_plane, joined, matrix_on, rows_into
+from ...color import AP1_LUMINANCE, MATRICES, MATRIX_VALUES
+from ...runtime import affine, constant, values_of
 from .rrt import (
     AP1_TO_REC709,
     DIM_SURROUND_GAMMA,
     ODT_SAT_FACTOR,
     RRT_SAT_FACTOR,
-    rrt_glow_and_red_modifier,
     rrt_glow_and_red_modifier_planes,
     smoothstep_hue_weight,
 )
 from ..base import apply_rows, display, limited
 
-__all__ = ["aces_fitted", "aces_fitted_planes", "aces", "aces_hill", "aces_narkowicz"]
+__all__ = ["aces_fitted", "aces", "aces_hill", "aces_narkowicz"]
 
 _ACES_FIT = dict(a=2.785085, b=0.107772, c=2.936045, d=0.887122, e=0.806889)
 """Luminance fit of RRT 1.0.3 + ODT RGBmonitor_100nits_dim (Unity AcesTonemap; RMSE 0.0013)."""
@@ -46,97 +44,53 @@ def _fit(x: torch.Tensor) -> torch.Tensor:
 
 
 def _dim_surround_planes(big_x: torch.Tensor, big_y: torch.Tensor, big_z: torch.Tensor) -> tuple:
-    """Unity's ``darkSurround_to_dimSurround`` on the planes of XYZ: ``Y → Y^0.9811`` in xyY, chromaticity kept, with 1e-4 floors."""
+    """Unity's ``darkSurround_to_dimSurround`` on the planes of XYZ: ``Y → Y^0.9811`` in xyY, chromaticity kept, with 1e-4
+    floors (the power of ``Y`` clamped to [0, 65504] by ``hardtanh``, whose gradient is 0 at its bounds: finite at 0, as
+    :func:`~torchgrade.color.safe_pow`'s)."""
     total = (big_x + big_y + big_z).clamp_min(1e-4)
     x, y = big_x / total, big_y / total
-    new_y = _dim_surround_power(big_y.clamp(0.0, 65504.0))
+    new_y = F.hardtanh(big_y, 0.0, 65504.0) ** DIM_SURROUND_GAMMA
     m = new_y / y.clamp_min(1e-4)
     return x * m, new_y, (1.0 - x - y) * m
 
 
-@formula
-def _dim_surround_power(y: torch.Tensor) -> torch.Tensor:
-    """``y^0.9811`` on ``y`` in [0, 65504], with a finite gradient at 0.
-
-    Examples:
-        >>> _dim_surround_power(torch.tensor([0.0, 1.0])).tolist()
-        [0.0, 1.0]
-    """
-    return where(y > 0, where(y > 0, y, 1.0) ** DIM_SURROUND_GAMMA, y)
-
-
-@_dim_surround_power.variant("export")
-def _dim_surround_power_exported(y: torch.Tensor) -> torch.Tensor:
-    """``y`` is bounded: :func:`~torchgrade.color.safe_pow`'s export form without its clamp (no ``Where``, no ``Pow``)."""
-    return torch.exp(torch.log(y) * DIM_SURROUND_GAMMA)
-
-
-@_dim_surround_power.variant("untracked")
-def _dim_surround_power_in_place(y: torch.Tensor) -> torch.Tensor:
-    """In place on ``y`` (a temporary of its caller): the guard only keeps the gradient at 0 finite, and 0^0.9811 is 0."""
-    return y.pow_(DIM_SURROUND_GAMMA)
-
-
-@formula
-def aces_fitted(aces: torch.Tensor) -> torch.Tensor:
+def aces_fitted(aces):
     """Unity ``AcesTonemap`` on ACES2065-1 input: RRT glow and red modifier, desaturation, the luminance
     fit ``x (a x + b) / (x (c x + d) + e)`` of RRT+ODT (RGB monitor, 100 nits, dim), dim surround,
     ODT desaturation, then AP1 → XYZ → D60→D65 → Rec.709; not clipped.
 
+    ``aces`` is an image or its three planes (a tuple), and the result takes its form. The RRT runs on the image's
+    planes (:func:`~torchgrade.tonemap.aces1.rrt.rrt_glow_and_red_modifier_planes`), which go into the next matrix as
+    they are; on planes, every matrix gives planes (:func:`~torchgrade.base.planes.rows_into`), so that a compiler
+    keeps the chain in one loop.
+
     Examples:
         >>> round(float(aces_fitted(torch.zeros(3, 1, 1)).max()), 6)
         0.0
-    """
-    return _fitted_from_ap1(convert(rrt_glow_and_red_modifier(aces, smoothstep_hue_weight), "ap0_to_ap1"))
-
-
-@aces_fitted.variant("export")
-def _aces_fitted_exported(aces: torch.Tensor) -> torch.Tensor:
-    """The RRT's planes go into the next matrix as they are (``matrix_on_planes``), without a ``Concat`` and a
-    ``Split`` (the matrices on planes too, as 9 products by constants and 6 sums, would add 38 nodes)."""
-    planes = rrt_glow_and_red_modifier_planes(aces.split(1, dim=-3), smoothstep_hue_weight)
-    return _fitted_from_ap1(matrix_on_planes(shared_matrix("ap0_to_ap1", aces), planes))
-
-
-def _fitted_from_ap1(ap1: torch.Tensor) -> torch.Tensor:
-    """:func:`aces_fitted` after the RRT's glow and red modifier, from AP1."""
-    acescg = apply_matrix(constant(_RRT_DESATURATE_VALUES, ap1), ap1.clamp_min(0.0))
-    xyz = convert(_fit(acescg), "ap1_to_xyz")
-    # the dim surround's planes go into the last matrix as they are, without a concatenation
-    return matrix_on_planes(constant(_ODT_TAIL_VALUES, xyz), _dim_surround_planes(*xyz.split(1, dim=-3)))
-
-
-def aces_fitted_planes(planes) -> tuple:
-    """:func:`aces_fitted` step by step on the three planes of ACES2065-1, returned as the three planes of linear
-    Rec.709: the form a compiler fuses into one kernel (:attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`).
-
-    Examples:
         >>> image = torch.rand(3, 2, 2) * 4
-        >>> bool(torch.allclose(torch.stack(aces_fitted_planes(image.unbind(-3)), dim=-3), aces_fitted(image), atol=1e-6))
+        >>> bool(torch.allclose(torch.cat(aces_fitted(image.split(1, dim=-3)), dim=-3), aces_fitted(image), atol=1e-6))
         True
     """
-    ap1 = rows_on_planes(MATRIX_VALUES["ap0_to_ap1"], rrt_glow_and_red_modifier_planes(planes, smoothstep_hue_weight))
-    acescg = rows_on_planes(_RRT_DESATURATE_VALUES, [plane.clamp_min(0.0) for plane in ap1])
-    xyz = rows_on_planes(MATRIX_VALUES["ap1_to_xyz"], [_fit(plane) for plane in acescg])
-    return rows_on_planes(_ODT_TAIL_VALUES, _dim_surround_planes(*xyz))
+    on_planes = isinstance(aces, tuple)
+    planes = rrt_glow_and_red_modifier_planes(aces if on_planes else aces.split(1, dim=-3), smoothstep_hue_weight)
+    ap1 = rows_into(MATRIX_VALUES["ap0_to_ap1"], planes, on_planes)
+    acescg = matrix_on(_RRT_DESATURATE_VALUES, each_plane(lambda plane: plane.clamp_min(0.0), ap1))
+    xyz = matrix_on(MATRIX_VALUES["ap1_to_xyz"], each_plane(_fit, acescg))
+    return rows_into(_ODT_TAIL_VALUES, _dim_surround_planes(*(xyz if on_planes else xyz.split(1, dim=-3))), on_planes)
 
 
-@formula
-def aces(image: torch.Tensor, clip: bool = True) -> torch.Tensor:
+def aces(image: torch.Tensor, clip: bool = True, *, planes: bool = False) -> torch.Tensor:
     """ACES filmic tone mapping as Unity does it: ``AcesTonemap(unity_to_ACES(min(x, 60)))`` (HDR §3.5).
+
+    ``planes``: computed on the image's three planes (:func:`aces_fitted`), the form a compiler fuses into one loop.
 
     Examples:
         >>> [round(v, 3) for v in aces(torch.tensor([0.18, 1.0, 100.0]).expand(3, 1, 3))[0, 0].tolist()]
         [0.108, 0.63, 0.945]
     """
-    return display(aces_fitted(unity_to_aces(limited(image))), clip)
-
-
-@aces.variant("planes")
-def _aces_on_planes(image: torch.Tensor, clip: bool = True) -> torch.Tensor:
-    """Step by step on the image's planes (:func:`aces_fitted_planes`), which a compiler fuses into one kernel."""
-    scene = rows_on_planes(MATRIX_VALUES["srgb_to_ap0"], limited(image).unbind(-3))
-    return torch.stack([display(plane, clip) for plane in aces_fitted_planes(scene)], dim=-3)
+    scene = limited(image)
+    linear = aces_fitted(matrix_on(MATRIX_VALUES["srgb_to_ap0"], scene.split(1, dim=-3) if planes else scene))
+    return joined(each_plane(lambda plane: display(plane, clip), linear))
 
 
 _HILL_INPUT = ((0.59719, 0.35458, 0.04823), (0.07600, 0.90834, 0.01566), (0.02840, 0.13383, 0.83777))

@@ -21,8 +21,7 @@ from ...color import (
     primaries_to_rec709_matrix,
     safe_sqrt,
 )
-from ...runtime import affine, constant, scalar, values_of, where
-from ...runtime.variants import formula
+from ...runtime import affine, constant, scalar, values_of
 
 __all__ = [
     "RRT_SAT_FACTOR",
@@ -73,43 +72,15 @@ def rec709_to_aces(image: torch.Tensor) -> torch.Tensor:
     return apply_matrix(constant(_REC709_TO_AP0_VALUES, image), image)
 
 
-def _rgb_saturation(rgb: torch.Tensor, tiny: float) -> torch.Tensor:
-    """ACES ``rgb_2_saturation`` of an image (see :func:`_saturation`)."""
-    return _saturation(channel_max(rgb), channel_min(rgb), tiny)
-
-
 def _saturation(high: torch.Tensor, low: torch.Tensor, tiny: float) -> torch.Tensor:
     """ACES ``rgb_2_saturation`` from the channels' max and min: ``(max(ma, tiny) - max(mi, tiny)) / max(ma, 1e-2)``."""
     return (high.clamp_min(tiny) - low.clamp_min(tiny)) / high.clamp_min(1e-2)
-
-
-def _rgb_yc(rgb: torch.Tensor) -> torch.Tensor:
-    """ACES ``rgb_2_yc`` of an image (see :func:`_yc`)."""
-    return _yc(*rgb.split(1, dim=-3))
 
 
 def _yc(r: torch.Tensor, g: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """ACES ``rgb_2_yc``: ``(r + g + b + 1.75 sqrt(b(b-g) + g(g-r) + r(r-b))) / 3``."""
     chroma = safe_sqrt(torch.addcmul(torch.addcmul(b * (b - g), g, g - r), r, r - b))
     return torch.add(r + g + b, chroma, alpha=1.75) / 3.0
-
-
-def _rgb_hue_degrees(rgb: torch.Tensor) -> torch.Tensor:
-    """ACES ``rgb_2_hue`` in [0, 360): ``atan2(sqrt(3)(g - b), 2r - g - b)``; 0 for neutrals.
-
-    Where ``x² + y²`` is below the dtype's smallest normal the hue passes no gradient: atan2's derivative,
-    ``(x, -y) / (x² + y²)``, is then 0/0 or beyond the dtype (a float32 pixel of 2.3e-23 gave NaN on every channel).
-    Only pixels whose saturation is 0 get there: their channels differ by less than a step of a channel above the
-    saturation's floor (a float32 step of 1e-10 is 6.9e-18, the hue's ``sqrt(tiny)`` 1.1e-19), and the red modifier
-    multiplies the hue's weight by that saturation. The values stay ``atan2``'s.
-    """
-    r, g, b = rgb.split(1, dim=-3)
-    y = 3.0**0.5 * (g - b)
-    x = 2.0 * r - g - b
-    x = where((x == 0) & (y == 0), 1.0, x)  # neutral: 0°
-    flat = torch.addcmul(x * x, y, y) <= torch.finfo(x.dtype).tiny
-    hue = torch.atan2(torch.where(flat, y.detach(), y), torch.where(flat, x.detach(), x)) * (180.0 / math.pi)  # rad2deg has no ONNX export
-    return torch.where(hue < 0, hue + 360.0, hue)
 
 
 def _sigmoid_shaper(x: torch.Tensor) -> torch.Tensor:
@@ -125,23 +96,16 @@ def _sigmoid_shaper(x: torch.Tensor) -> torch.Tensor:
     return 0.5 + c * affine(torch.abs(c), -0.125, 0.5)
 
 
-@formula
 def _glow(yc: torch.Tensor, gain: torch.Tensor, mid: float) -> torch.Tensor:
-    """ACES ``glow_fwd``: full gain below 2/3·mid, none above 2·mid, ``gain (mid / yc - 1/2)`` between.
+    """ACES ``glow_fwd``: full gain below 2/3·mid, none above 2·mid, ``gain (mid / yc - 1/2)`` between: with ``yc``
+    clamped to that ramp, ``gain (mid / yc - 1/2)`` is ``gain`` (to float rounding) below it and exactly 0 above it,
+    without selects.
 
     Examples:
         >>> [round(v, 6) for v in _glow(torch.tensor([0.0, 0.08, 1.0]), torch.tensor(0.05), 0.08).tolist()]
         [0.05, 0.025, 0.0]
     """
-    between = gain * (mid / yc.clamp_min(2.0 / 3.0 * mid) - 0.5)
-    return where(yc <= 2.0 / 3.0 * mid, gain, where(yc >= 2.0 * mid, 0.0, between))
-
-
-@_glow.variant("untracked")
-@_glow.variant("export")
-def _glow_clamped(yc: torch.Tensor, gain: torch.Tensor, mid: float) -> torch.Tensor:
-    """``yc`` clamped to the ramp gives ``gain`` (to float rounding) below it and exactly 0 above it, without selects."""
-    return torch.div(scalar(mid, yc), yc.clamp(2.0 / 3.0 * mid, 2.0 * mid)).sub_(0.5).mul_(gain)
+    return torch.div(scalar(mid, yc), yc.clamp(2.0 / 3.0 * mid, 2.0 * mid)).sub(0.5).mul(gain)
 
 
 def smoothstep_hue_weight(centered_hue: torch.Tensor) -> torch.Tensor:
@@ -172,9 +136,9 @@ def cubic_basis_hue_weight(centered_hue: torch.Tensor) -> torch.Tensor:
     return 1.5 * torch.where(u < 1.0, inner, outer)
 
 
-@formula
 def rrt_glow_and_red_modifier(aces: torch.Tensor, hue_weight, tiny: float = UNITY_TINY) -> torch.Tensor:
-    """The ACES RRT's first two modules on ACES2065-1 (RRT 1.0.3, ``rrt.ctl``).
+    """The ACES RRT's first two modules on ACES2065-1 (RRT 1.0.3, ``rrt.ctl``), computed on its planes
+    (:func:`rrt_glow_and_red_modifier_planes`) and joined.
 
     Glow: ``aces · (1 + glow_fwd(yc, 0.05 · sigmoid_shaper((s - 0.4) / 0.2), 0.08))`` with ``s`` the
     saturation; red modifier: ``r += w(h) · s · (0.03 - r) · (1 - 0.82)`` with ``h`` the hue centred on
@@ -185,41 +149,18 @@ def rrt_glow_and_red_modifier(aces: torch.Tensor, hue_weight, tiny: float = UNIT
         >>> torch.equal(rrt_glow_and_red_modifier(grey, smoothstep_hue_weight), grey)  # no saturation: no glow
         True
     """
-    _, red, green_blue, weight = _glowed_and_red_terms(aces, hue_weight, tiny)
-    return torch.cat((torch.addcmul(red, weight, _RRT_RED_PIVOT - red, value=1.0 - _RRT_RED_SCALE), green_blue), dim=-3)
-
-
-@rrt_glow_and_red_modifier.variant("untracked")
-def _rrt_glow_and_red_modifier_in_place(aces: torch.Tensor, hue_weight, tiny: float = UNITY_TINY) -> torch.Tensor:
-    """The red modifier in place on the glow's product (made here), which it returns."""
-    glowed, red, _, weight = _glowed_and_red_terms(aces, hue_weight, tiny)
-    red.addcmul_(weight, _RRT_RED_PIVOT - red, value=1.0 - _RRT_RED_SCALE)
-    return glowed
-
-
-@rrt_glow_and_red_modifier.variant("export")
-def _rrt_glow_and_red_modifier_exported(aces: torch.Tensor, hue_weight, tiny: float = UNITY_TINY) -> torch.Tensor:
-    """On planes (:func:`rrt_glow_and_red_modifier_planes`), joined."""
     return torch.cat(rrt_glow_and_red_modifier_planes(aces.split(1, dim=-3), hue_weight, tiny), dim=-3)
 
 
-def _glowed_and_red_terms(aces: torch.Tensor, hue_weight, tiny: float) -> tuple:
-    """The glow applied, its red and its green and blue (views of it), and the red modifier's weight ``w(h) s``."""
-    saturation = _rgb_saturation(aces, tiny)
-    s = _sigmoid_shaper(affine(saturation, 5.0, -2.0))  # (s - 0.4) / 0.2
-    glowed = torch.addcmul(aces, aces, _glow(_rgb_yc(aces), _RRT_GLOW_GAIN * s, _RRT_GLOW_MID))
-    red, green_blue = glowed.split((1, 2), dim=-3)
-    return glowed, red, green_blue, hue_weight(_red_centered_hue(glowed)) * saturation
-
-
 def rrt_glow_and_red_modifier_planes(planes, hue_weight, tiny: float = UNITY_TINY) -> tuple:
-    """The exported and compiled form of :func:`rrt_glow_and_red_modifier`: the same modules on the three planes of
-    ACES2065-1 (exported, of one ``Split``), returned as three planes of the same shape.
+    """:func:`rrt_glow_and_red_modifier` on the three planes of ACES2065-1 (of one split), returned as three planes of the
+    same shape.
 
-    Saturation, ``yc`` and hue each split the image in the eager form, and the glow scales it by a plane; in ONNX each
-    split is a node, and that broadcast product costs more than the 3 products of planes here. Channel max and min are
-    Max and Min of the planes (no reduction over channels, ``benchmarks/results/onnx_ops.md``), and the hue is its distance from red
-    (:func:`_red_hue_distance`).
+    Saturation, ``yc`` and hue each read the three planes: split once, no broadcast product of the frame by a plane (in
+    ONNX each split is a node, and such a product costs more than the 3 products of planes here). Channel max and min
+    are maxima and minima of the planes (no reduction over channels, ``benchmarks/results/onnx_ops.md``), and the hue
+    is its distance from red (:func:`_red_hue_distance`), read before the glow (which scales the three channels alike,
+    by a gain of at least 1: the same hue).
     """
     if isinstance(planes, torch.Tensor):
         raise TypeError("rrt_glow_and_red_modifier_planes takes an image's three planes as a tuple (image.split(1, dim=-3))")
@@ -227,42 +168,25 @@ def rrt_glow_and_red_modifier_planes(planes, hue_weight, tiny: float = UNITY_TIN
     saturation = _saturation(channel_max((r, g, b)), channel_min((r, g, b)), tiny)
     s = _sigmoid_shaper(affine(saturation, 5.0, -2.0))  # (s - 0.4) / 0.2
     gain = 1.0 + _glow(_yc(r, g, b), _RRT_GLOW_GAIN * s, _RRT_GLOW_MID)
+    weight = hue_weight(_red_hue_distance(r, g, b)) * saturation
     r, g, b = r * gain, g * gain, b * gain
-    change = hue_weight(_red_hue_distance(r, g, b)) * saturation * (_RRT_RED_PIVOT - r) * (1.0 - _RRT_RED_SCALE)
-    return r + change, g, b
-
-
-@formula
-def _red_centered_hue(rgb: torch.Tensor) -> torch.Tensor:
-    """The hue in degrees relative to red's (``_RRT_RED_HUE``, 0°), in (-180, 180]: ``hue - 0`` wrapped.
-
-    Eager, that is ``atan2`` itself, which also gives 0 for neutrals: the hue's shift into [0, 360) and
-    back is skipped (it moved hues below 0° by float rounding, 3e-5° at most).
-    """
-    centered = _rgb_hue_degrees(rgb) - _RRT_RED_HUE
-    return torch.where(centered < -180.0, centered + 360.0, torch.where(centered > 180.0, centered - 360.0, centered))
-
-
-@_red_centered_hue.variant("untracked")
-def _red_centered_hue_of_atan2(rgb: torch.Tensor) -> torch.Tensor:
-    """``atan2`` itself, in place on its temporaries."""
-    r, g, b = rgb.split(1, dim=-3)
-    return torch.atan2((g - b).mul_(3.0**0.5), (2.0 * r).sub_(g).sub_(b)).mul_(180.0 / math.pi)
+    return torch.addcmul(r, weight, _RRT_RED_PIVOT - r, value=1.0 - _RRT_RED_SCALE), g, b
 
 
 def _red_hue_distance(r: torch.Tensor, g: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """``|atan2(y, x)|`` in degrees, ``y = sqrt(3)(g - b)``, ``x = 2r - g - b``: the red-centred hue's distance from red,
     all the (symmetric) hue weights read, as ``atan((|y| + max(-x, 0)) / max(x, 1e-30))``.
 
-    The export form of :func:`_red_centered_hue`: ``atan2`` exports as an Atan and two selects, and the hue's guards
-    and wraps add five more (a select's cost: ``benchmarks/results/onnx_ops.md``). For ``x > 0`` this is ``atan(|y| / x)``;
+    ``atan2`` exports as an Atan and two selects, and a hue's guards and wraps add five more (a select's cost:
+    ``benchmarks/results/onnx_ops.md``); the weights read only the distance. For ``x > 0`` this is ``atan(|y| / x)``;
     for ``x < 0`` the ratio is ``(|y| + |x|) / 1e-30``, so 90° (no weight), as every hue past ±90° has; a neutral
     pixel gets 0°, as ``atan2(0, 0)``. An ``x`` that is not 0 is a float32 step of the pixel's largest channel or
     more, so ``1e-30`` only moves hues of pixels darker than the saturation's floor, where the weight is unused.
+    Written with ``-x = g + b - 2r`` and the ratio's sign moved into the degrees: ten operations.
     """
-    y = torch.abs(g - b) * 3.0**0.5
-    x = 2.0 * r - g - b
-    return torch.atan((y + torch.relu(-x)) / x.clamp_min(1e-30)) * (180.0 / math.pi)
+    negated = torch.add(g + b, r, alpha=-2.0)
+    ratio = torch.add(torch.relu(negated), torch.abs(g - b), alpha=3.0**0.5) / negated.clamp_max(-1e-30)
+    return torch.atan(ratio) * (-180.0 / math.pi)
 
 
 def _ap1_y(rgb: torch.Tensor) -> torch.Tensor:

@@ -19,9 +19,8 @@ from dataclasses import dataclass, field
 import torch
 
 from ...base.planes import apply_matrix, matrix_on_planes, rows_on_planes
-from ...color import rgb_to_xyz_matrix, safe_pow
+from ...color import rgb_to_xyz_matrix, safe_pow, safe_sqrt
 from ...runtime import affine, constant, values_of, where
-from ...runtime.variants import formula
 
 __all__ = ["CAM16_PRIMARIES", "JMhParams", "jmh_params", "rgb_to_aab", "rgb_to_aab_planes", "aab_to_jmh",
            "aab_planes_to_jmh", "jmh_to_rgb", "jmh_to_rgb_planes", "y_to_j", "a_to_y"]
@@ -79,20 +78,13 @@ def _expanded(r: torch.Tensor, divisor: float = 1.0) -> torch.Tensor:
     return safe_pow(r / affine(r, -scale, scale), 1.0 / 0.42)
 
 
-@formula
 def _signed_as(magnitude: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
-    """``sign(v) magnitude`` for a magnitude that is 0 where ``v`` is: one ``copysign``.
+    """``sign(v) magnitude`` for a magnitude that is 0 where ``v`` is (ONNX has no ``copysign``).
 
     Examples:
         >>> _signed_as(torch.tensor([2.0, 0.0]), torch.tensor([-1.0, 0.0])).tolist()
         [-2.0, 0.0]
     """
-    return torch.copysign(magnitude, v)
-
-
-@_signed_as.variant("export")
-def _signed_as_exported(magnitude: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
-    """``Sign`` and ``Mul`` (ONNX has no copysign)."""
     return torch.sign(v) * magnitude
 
 
@@ -171,7 +163,7 @@ def rgb_to_aab(rgb: torch.Tensor, p: JMhParams, dim: int = -3) -> torch.Tensor:
 
 def rgb_to_aab_planes(planes, p: JMhParams) -> tuple:
     """:func:`rgb_to_aab` on an image's three planes, returned as the planes ``(A, a, b)``: the form a compiler fuses
-    (:attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`).
+    (:func:`~torchgrade.runtime.strips.pixelwise`).
 
     Examples:
         >>> from torchgrade.color import AP0_CHROMATICITIES
@@ -183,56 +175,31 @@ def rgb_to_aab_planes(planes, p: JMhParams) -> tuple:
     return rows_on_planes(p.values["cone_to_aab"], cone)
 
 
-@formula
-def _safe_hypot_atan2(a: torch.Tensor, b: torch.Tensor):
-    """``sqrt(a²+b²)`` and ``atan2(b, a)`` with finite gradients at the origin (hue 0 there).
+def _polar(a: torch.Tensor, b: torch.Tensor) -> tuple:
+    """``(M, h, cos h, sin h)`` of ``(a, b)``: ``M = sqrt(a² + b²)``, ``h = atan2(b, a)``, and the hue's cosine and sine as
+    ``(a / M, b / M)``, with finite gradients at the origin, where the hue is 0 (cosine 1, sine 0).
 
-    Below the smallest normal ``a²+b²`` counts as the origin: atan2's gradient divides by ``a²+b²``,
-    which a denormal turns into 0/0 (a grey pixel of 1e-38 in float32 did).
-
-    Examples:
-        >>> [[round(v, 6) for v in t.tolist()] for t in _safe_hypot_atan2(torch.tensor([3.0, 0.0]), torch.tensor([4.0, 0.0]))]
-        [[5.0, 0.0], [0.927295, 0.0]]
-    """
-    r2 = a * a + b * b
-    zero = r2 <= torch.finfo(r2.dtype).tiny
-    m = torch.sqrt(where(zero, 1.0, r2))
-    hue = torch.atan2(where(zero, 0.0, b), where(zero, 1.0, a))
-    return where(zero, 0.0, m), hue
-
-
-@_safe_hypot_atan2.variant("untracked")
-def _hypot_atan2(a: torch.Tensor, b: torch.Tensor):
-    """``hypot`` and ``atan2`` themselves: 2 operations instead of 10 (``atan2(0, 0)`` is 0)."""
-    return torch.hypot(a, b), torch.atan2(b, a)
-
-
-@formula
-def _hue_cos_sin(a: torch.Tensor, b: torch.Tensor, m: torch.Tensor, hue: torch.Tensor):
-    """The cosine and sine of the hue of ``(a, b)``, of magnitude ``m`` and angle ``hue``, from ``(a, b)`` directly:
-    ``(a / m, b / m)``, ``(1, 0)`` where ``m`` is 0 (as ``atan2`` gives hue 0 there).
+    Below the smallest normal number ``a² + b²`` counts as the origin: atan2's gradient divides by ``a² + b²``, which a
+    denormal turns into 0/0 (a grey pixel of 1e-38 in float32 did). There ``a`` is taken as 1 for the hue and ``M`` as
+    1 for the division (values within a denormal of the origin's), and the square root's gradient is selected away at
+    0 (:func:`~torchgrade.color.safe_sqrt`): no select over the frame.
 
     Examples:
-        >>> a, b = torch.tensor([0.0, 3.0], dtype=torch.float64), torch.tensor([0.0, 4.0], dtype=torch.float64)
-        >>> [[round(v, 6) for v in t.tolist()] for t in _hue_cos_sin(a, b, torch.hypot(a, b), torch.atan2(b, a))]
-        [[1.0, 0.6], [0.0, 0.8]]
+        >>> [[round(v, 6) for v in t.tolist()] for t in _polar(torch.tensor([3.0, 0.0]), torch.tensor([4.0, 0.0]))]
+        [[5.0, 0.0], [0.927295, 0.0], [0.6, 1.0], [0.8, 0.0]]
     """
-    chromatic = m > 0
-    safe_m = where(chromatic, m, 1.0)
-    return where(chromatic, a / safe_m, 1.0), where(chromatic, b / safe_m, 0.0)
-
-
-@_hue_cos_sin.variant("untracked")
-def _hue_cos_sin_of_angle(a: torch.Tensor, b: torch.Tensor, m: torch.Tensor, hue: torch.Tensor):
-    """``cos`` and ``sin`` of the angle: 2 operations instead of 5."""
-    return torch.cos(hue), torch.sin(hue)
+    squared = torch.addcmul(a * a, b, b)
+    origin = squared <= torch.finfo(squared.dtype).tiny
+    m = safe_sqrt(squared)
+    unit_a = a + origin
+    unit_m = m + origin
+    return m, torch.atan2(b, unit_a), unit_a / unit_m, b / unit_m
 
 
 def aab_to_jmh(aab: torch.Tensor, p: JMhParams, dim: int = -3):
     """``J = 100 A^cz``, ``M = |(a, b)|``, ``h = atan2(b, a)`` in degrees; ``A <= 0`` is black (0, 0, 0).
 
-    Returns ``(J, M, h, cos h, sin h)``, trigonometry from ``(a, b)`` directly (where nothing records a gradient,
-    the cosine and sine of the hue: the same to float rounding wherever ``J > 0``, the only pixels they reach).
+    Returns ``(J, M, h, cos h, sin h)``, the trigonometry from ``(a, b)`` directly (:func:`_polar`).
 
     Examples:
         >>> from torchgrade.color import AP0_CHROMATICITIES
@@ -249,8 +216,7 @@ def aab_planes_to_jmh(a_: torch.Tensor, a: torch.Tensor, b: torch.Tensor, p: JMh
     """:func:`aab_to_jmh` of the planes ``A``, ``a`` and ``b``."""
     lit = a_ > 0
     j = J_SCALE * safe_pow(a_, p.cz)
-    m, hue = _safe_hypot_atan2(a, b)
-    cos_h, sin_h = _hue_cos_sin(a, b, m, hue)
+    m, hue, cos_h, sin_h = _polar(a, b)
     h = where(lit, torch.remainder(torch.rad2deg(hue), 360.0), 0.0)
     return j, where(lit, m, 0.0), h, cos_h, sin_h
 
@@ -276,7 +242,7 @@ def jmh_to_rgb(j, m, cos_h, sin_h, p: JMhParams, dim: int = -3) -> torch.Tensor:
 
 def jmh_to_rgb_planes(j, m, cos_h, sin_h, p: JMhParams) -> tuple:
     """:func:`jmh_to_rgb` returned as the three planes of RGB: the form a compiler fuses
-    (:attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`).
+    (:func:`~torchgrade.runtime.strips.pixelwise`).
 
     Examples:
         >>> from torchgrade.color import AP0_CHROMATICITIES

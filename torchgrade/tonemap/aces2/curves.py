@@ -19,34 +19,36 @@ ACES2_HDR_RANGES = {"peak_luminance": (100.0, 10000.0)}
 """Peak luminance of the HDR display in cd/m²: the range the ACES 2.0 tonescale is defined for."""
 
 
-def aces2_sdr(image: torch.Tensor, clip: bool = True, *, nan_free: bool = False) -> torch.Tensor:
+def aces2_sdr(image: torch.Tensor, clip: bool = True, *, nan_free: bool = False, planes: bool = False) -> torch.Tensor:
     """ACES 2.0 "SDR 100 nits (Rec.709)": display-linear Rec.709 in [0, 1] (1.0 = 100 cd/m²).
 
     Encode with BT.1886 (``x ** (1 / 2.4)``) to get OpenColorIO's "Rec.1886 Rec.709 - Display"
     values, or with sRGB for an sRGB monitor. ``clip`` changes nothing: the transform's output lies in [0, 1].
-    ``nan_free``: the caller knows ``image`` holds no NaN (:func:`~torchgrade.base.images.sanitize`).
+    ``nan_free``: the caller knows ``image`` holds no NaN (:func:`~torchgrade.base.images.sanitize`); ``planes``: computed
+    on the image's planes (:func:`~torchgrade.tonemap.aces2.aces2_output`).
 
     Examples:
         >>> grey = torch.full((1, 3, 1, 1), 0.18)
         >>> round(float(aces2_sdr(grey)[0, 0, 0, 0] ** (1 / 2.4)), 3)  # OpenColorIO: 0.3831
         0.383
     """
-    return aces2_output(image, nan_free=nan_free)  # display-linear in [0, 1] already: clipped or not, the same values
+    return aces2_output(image, nan_free=nan_free, planes=planes)  # display-linear in [0, 1] already: clipped or not, the same values
 
 
-def aces2_hdr(image: torch.Tensor, peak_luminance: float = 1000.0, clip: bool = True, *, nan_free: bool = False) -> torch.Tensor:
+def aces2_hdr(image: torch.Tensor, peak_luminance: float = 1000.0, clip: bool = True, *, nan_free: bool = False,
+              planes: bool = False) -> torch.Tensor:
     """ACES 2.0 HDR output for a ``peak_luminance`` cd/m² display, limited to P3-D65, in Rec.2020 primaries.
 
     Returns display-linear **Rec.2020** values in [0, 1] with 1.0 = ``peak_luminance`` (OpenColorIO's
     "ACES 2.0 - HDR 1000 nits (P3 D65)" view at 1000); encode for a Rec.2100 PQ display with
-    ``torchgrade.color.linear_to_pq(x, reference=peak_luminance)``. ``nan_free`` as :func:`aces2_sdr`'s.
+    ``torchgrade.color.linear_to_pq(x, reference=peak_luminance)``. ``nan_free`` and ``planes`` as :func:`aces2_sdr`'s.
 
     Examples:
         >>> grey = torch.full((1, 3, 1, 1), 0.18)
         >>> round(float(aces2_hdr(grey)[0, 1, 0, 0]) * 1000.0, 1)  # cd/m²
         14.5
     """
-    return aces2_output(image, peak_luminance, "p3_d65", "rec2020", nan_free=nan_free)  # in [0, 1] already, as aces2_sdr
+    return aces2_output(image, peak_luminance, "p3_d65", "rec2020", nan_free=nan_free, planes=planes)  # in [0, 1] already, as aces2_sdr
 
 
 def prepare_aces2_sdr() -> Prepared:

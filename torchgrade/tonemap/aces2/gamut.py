@@ -12,13 +12,15 @@ path share them.
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+
 import torch
 
 from ...color import safe_pow, safe_sqrt
-from ...runtime import affine, constant, values_of, where
-from ...runtime.variants import formula
+from ...runtime import affine, constant, device_cached, values_of, where
 
-__all__ = ["count_below", "GamutParams", "gamut_compress", "focus_gain", "solve_j_intersect", "compression_slope",
+__all__ = ["HueSearch", "GamutParams", "gamut_compress", "focus_gain", "solve_j_intersect", "compression_slope",
            "hull_boundary_m", "focus_j"]
 
 SMOOTH_CUSPS = 0.12
@@ -124,36 +126,50 @@ def _remap_m(m, gamut_m, reach_m):
     return torch.where(active, threshold + scale * nd / (1.0 + nd), m)
 
 
-@formula
-def count_below(table: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
-    """How many entries of the ascending 1-D ``table`` lie below each ``x``: ``torch.searchsorted(table, x)``.
-
-    Eager, that search itself (one kernel). While tracing, compiling or exporting, ``ceil(log2(n))`` branchless
-    halving steps of gathers, because ONNX has no search operator: the same index for every number (8 operations a
-    step on a GPU, 73 for the hue table, where the search is one; a NaN, which a sanitized frame never gives, counts
-    ``n`` in the search and 0 in the steps).
+@dataclass(frozen=True, eq=False)
+class HueSearch:
+    """How many entries of an ascending table of hues lie below a hue, found by a look-up instead of a search: bin ``k``
+    of the hues' span (``floor(h · scale)``) holds the count below it (``below``, as tuples of numbers) and the one entry
+    that can lie in it (``entries``; ``inf`` where none does). The bins are narrower than two thirds of the closest two
+    entries, and reach a quarter bin into their neighbours, so a hue rounded into the next bin still finds its count.
+    A gather, a comparison and a sum: eager, three operations where a search is one; compiled, loads of the pixels'
+    loop, where a search is a call of its own; exported, ``Gather`` nodes (ONNX has no search).
 
     Examples:
-        >>> table = torch.tensor([0.0, 1.0, 2.0, 3.0, 4.0])
-        >>> x = torch.tensor([-1.0, 0.0, 0.5, 4.0, 9.0])
-        >>> count_below(table, x).tolist() == torch.searchsorted(table, x).tolist()
-        True
+        >>> search = HueSearch.of(torch.tensor([0.0, 90.0, 180.0, 270.0, 360.0]))
+        >>> search.count(torch.tensor([0.0, 45.0, 90.0, 90.5, 359.9, 360.0])).tolist()
+        [0, 1, 1, 2, 4, 4]
     """
-    return torch.searchsorted(table, x.contiguous())  # warns on a strided input
+
+    scale: float
+    below: tuple
+    entries: tuple
+
+    @classmethod
+    def of(cls, hues: torch.Tensor, span: float = 360.0) -> "HueSearch":
+        hues = hues.double()
+        closest = float((hues[1:] - hues[:-1]).min())
+        bins = 1 << math.ceil(math.log2(1.5 * span / closest))
+        width = span / bins
+        starts = torch.arange(bins, dtype=torch.float64) * width
+        below = torch.searchsorted(hues, starts - width / 4)
+        ahead = hues[below.clamp(max=len(hues) - 1)]
+        entries = torch.where((below < len(hues)) & (ahead < starts + width * 1.25), ahead, math.inf)
+        return cls(bins / span, tuple(below.tolist()), values_of(entries))
+
+    def count(self, h: torch.Tensor) -> torch.Tensor:
+        """The entries below each hue ``h`` (in ``[0, span)``): ``torch.searchsorted(hues, h)``."""
+        below, entries = _search_tables(self, h.dtype, h.device)
+        k = (h * self.scale).long().clamp(0, len(self.below) - 1)
+        return below[k] + (entries[k] < h)
 
 
-@count_below.variant("graph")
-def _count_below_in_halving_steps(table: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
-    """Halving steps of gathers (ONNX has no search operator)."""
-    n = int(table.shape[0])  # a constant table: its size may be frozen into a traced graph
-    count = torch.zeros(x.shape, dtype=torch.long, device=x.device)
-    step = 1 << (n.bit_length() - 1)
-    while step:
-        candidate = count + step
-        below = table[(candidate - 1).clamp(max=n - 1)] < x
-        count = torch.where((candidate <= n) & below, candidate, count)
-        step >>= 1
-    return count
+@device_cached
+def _search_tables(search: HueSearch, dtype: torch.dtype, device: torch.device) -> tuple:
+    """A :class:`HueSearch`'s counts (int64) and entries (``dtype``) on ``device``, made once (a search is hashed by
+    identity, not by its thousands of numbers)."""
+    return (torch.tensor(search.below, dtype=torch.long, device=device),
+            torch.tensor(search.entries, dtype=dtype, device=device))
 
 
 class GamutParams:
@@ -173,11 +189,13 @@ class GamutParams:
         # the tables as tuples of floats: device constants of a compiled graph, not inputs copied at every call; the
         # segment tables by column, so that a gather gives each column as a plane (:func:`_gathered_columns`)
         self.hue_values = values_of(hues)
+        self.hue_search = HueSearch.of(hues)
         self.cusp_segments = _segment_columns(hues, cusps)
         self.reach_segments = values_of(torch.stack((reach, reach.roll(-1) - reach)))  # value, step to the next degree
 
-    def cusp(self, h: torch.Tensor):
-        """``(J_cusp, M_cusp, 1/gamma_top)`` at hue ``h``: linear in the non-uniform hue table.
+    def cusp(self, h: torch.Tensor, planes: bool = False):
+        """``(J_cusp, M_cusp, 1/gamma_top)`` at hue ``h``: linear in the non-uniform hue table (``planes``: the table's
+        rows gathered one by one, :func:`_gathered_columns`).
 
         Examples:
             >>> from torchgrade.tonemap.aces2.transform import _output
@@ -186,15 +204,15 @@ class GamutParams:
             >>> [round(float(v), 1) for v in p.cusp(torch.tensor([120.0], dtype=torch.float64))]
             [86.8, 57.3, 1.1]
         """
-        hi = count_below(constant(self.hue_values, h), h.detach()).clamp(1, len(self.hue_values) - 1)
-        segment = _gathered_columns(constant(self.cusp_segments, h), hi)
+        hi = self.hue_search.count(h.detach()).clamp(1, len(self.hue_values) - 1)
+        segment = _gathered_columns(constant(self.cusp_segments, h), hi, planes)
         t = (h - segment[0]) * segment[1]
-        if isinstance(segment, tuple):  # compiling: a plane a row (_gathered_columns)
+        if planes:
             return tuple(torch.addcmul(value, step, t) for value, step in zip(segment[2:5], segment[5:]))
         return torch.addcmul(segment[2:5], segment[5:], t).unbind(0)
 
-    def reach_m(self, h: torch.Tensor) -> torch.Tensor:
-        """AP1 reach M at ``J_max``, linear between whole degrees.
+    def reach_m(self, h: torch.Tensor, planes: bool = False) -> torch.Tensor:
+        """AP1 reach M at ``J_max``, linear between whole degrees (``planes`` as :meth:`cusp`'s).
 
         Examples:
             >>> from torchgrade.tonemap.aces2.transform import _output
@@ -202,7 +220,7 @@ class GamutParams:
             166.8
         """
         base = torch.floor(h.detach())
-        segment = _gathered_columns(constant(self.reach_segments, h), base.long().remainder(360))
+        segment = _gathered_columns(constant(self.reach_segments, h), base.long().remainder(360), planes)
         return torch.addcmul(segment[0], segment[1], h - base)
 
 
@@ -220,32 +238,28 @@ def _segment_columns(knots: torch.Tensor, values: torch.Tensor) -> tuple:
     return values_of(torch.cat((rows[:1], rows)).T)
 
 
-@formula
-def _gathered_columns(table: torch.Tensor, index: torch.Tensor):
-    """``(C, *index.shape)``: the columns ``index`` of a ``(C, K)`` table, each row of the table a plane (while
-    compiling, a tuple of the ``C`` planes).
+def _gathered_columns(table: torch.Tensor, index: torch.Tensor, planes: bool = False):
+    """``(C, *index.shape)``: the columns ``index`` of a ``(C, K)`` table, each row of the table a plane; with
+    ``planes``, each row gathered on its own, as a tuple of the ``C`` planes.
 
     By column, not ``table.T[index]``: CUDA gathers rows of a multiple of 16 bytes (the cusp table's 8 values) with a
     block of threads per pixel (about a third of ACES 2.0's 4K frame on an H200: ``benchmarks/results/gpu.md``, run D),
-    and the planes it would give are strided. While compiling, each row gathered on its own, as a tuple of planes
-    (:attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`): loads of the pixels' loop, where the ``(C, ...)``
-    gather is a loop of its own whose planes the frame's loop then reads back.
+    and the planes it would give are strided. On planes (the form a compiler fuses), each row's gather is a load of
+    the pixels' loop, where the ``(C, ...)`` gather is a loop of its own whose planes the frame's loop then reads back.
 
     Examples:
-        >>> _gathered_columns(torch.tensor([[0.0, 10.0, 20.0], [1.0, 2.0, 3.0]]), torch.tensor([[2, 0]])).tolist()
-        [[[20.0, 0.0]], [[3.0, 1.0]]]
+        >>> table, index = torch.tensor([[0.0, 10.0, 20.0], [1.0, 2.0, 3.0]]), torch.tensor([[2, 0]])
+        >>> _gathered_columns(table, index).tolist(), [row.tolist() for row in _gathered_columns(table, index, planes=True)]
+        ([[[20.0, 0.0]], [[3.0, 1.0]]], [[[20.0, 0.0]], [[3.0, 1.0]]])
     """
+    if planes:
+        return tuple(row[index] for row in table)
     return table.index_select(1, index.reshape(-1)).view(table.shape[0], *index.shape)
 
 
-@_gathered_columns.variant("planes")
-def _gathered_rows(table: torch.Tensor, index: torch.Tensor) -> tuple:
-    """Each row gathered on its own, as a tuple of planes: loads of the pixels' loop."""
-    return tuple(row[index] for row in table)
-
-
-def gamut_compress(j, m, h, reach_m, p: GamutParams):
-    """Compressed ``(J, M)``: ``J <= 0`` -> black, ``M <= 0`` or ``J > J_max`` -> ``(J, 0)``, else the hull mapping.
+def gamut_compress(j, m, h, reach_m, p: GamutParams, planes: bool = False):
+    """Compressed ``(J, M)``: ``J <= 0`` -> black, ``M <= 0`` or ``J > J_max`` -> ``(J, 0)``, else the hull mapping
+    (``planes``: :meth:`GamutParams.cusp`'s).
 
     Examples:
         >>> from torchgrade.tonemap.aces2.transform import _output
@@ -255,7 +269,7 @@ def gamut_compress(j, m, h, reach_m, p: GamutParams):
         >>> bool(m_out < m)  # far outside Rec.709: pulled in
         True
     """
-    cusp_j, cusp_m, top_inv = p.cusp(h)
+    cusp_j, cusp_m, top_inv = p.cusp(h, planes)
     focus = focus_j(cusp_j, p.mid_j, p.limit_j_max)
     threshold = cusp_j + (p.limit_j_max - cusp_j) * FOCUS_GAIN_BLEND
     gain = focus_gain(j, threshold, p.limit_j_max, p.focus_dist)

@@ -18,7 +18,6 @@ from ... import color
 from ...base.images import check_image, full_precision, sanitize
 from ...base.planes import each_plane, matrix_on
 from ...runtime import values_of
-from ...runtime.policy import pixel_layout
 from ..aces1.rrt import REC709_TO_AP0
 from .cam import (
     REFERENCE_LUMINANCE,
@@ -98,8 +97,8 @@ class Aces2Output:
         return rgb.clamp(0.0, self.peak / REFERENCE_LUMINANCE)
 
     def render_planes(self, planes, primaries: str = "ap0") -> tuple:
-        """:meth:`render` on an image's three planes, returned as planes: the form a compiler fuses
-        (:attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`).
+        """:meth:`render` on an image's three planes, returned as planes: the form a compiler fuses into one loop
+        (:func:`~torchgrade.runtime.strips.pixelwise`).
 
         Examples:
             >>> output, aces = _output(100.0, "rec709"), torch.rand(1, 3, 2, 2) * 4
@@ -108,17 +107,18 @@ class Aces2Output:
         """
         a_, a, b = rgb_to_aab_planes(planes, self.inputs[primaries])
         j, m, h, cos_h, sin_h = aab_planes_to_jmh(a_, a, b, self.aces)
-        j_out, m_out = self._compressed(a_, j, m, h, cos_h, sin_h)
+        j_out, m_out = self._compressed(a_, j, m, h, cos_h, sin_h, planes=True)
         rgb = jmh_to_rgb_planes(j_out, m_out, cos_h, sin_h, self.limit)
         return tuple(plane.clamp(0.0, self.peak / REFERENCE_LUMINANCE) for plane in rgb)
 
-    def _compressed(self, a_, j, m, h, cos_h, sin_h) -> tuple:
-        """The tone scale, chroma compression and gamut compression of ``(J, M, h)``: ``(J, M)`` of the display."""
+    def _compressed(self, a_, j, m, h, cos_h, sin_h, planes: bool = False) -> tuple:
+        """The tone scale, chroma compression and gamut compression of ``(J, M, h)``: ``(J, M)`` of the display
+        (``planes``: the hue tables gathered a row at a time, :meth:`~.gamut.GamutParams.cusp`)."""
         j_ts = y_to_j(daniele_tonescale(a_to_y(a_, self.aces), self.tone), self.aces)
-        reach_m = self.gamut.reach_m(h)
+        reach_m = self.gamut.reach_m(h, planes)
         norm = chroma_norm(cos_h, sin_h, self.chroma)
         m_ts = chroma_compress(j, m, j_ts, norm, reach_m, self.gamut.limit_j_max, self.aces.cz, self.chroma)
-        return gamut_compress(j_ts, m_ts, h, reach_m, self.gamut)
+        return gamut_compress(j_ts, m_ts, h, reach_m, self.gamut, planes)
 
 
 class Prepared:
@@ -155,8 +155,9 @@ def _output(peak: float, limiting: str) -> Aces2Output:
 
 
 def prepare_output(peak: float, limiting: str) -> Prepared:
-    """Build (once) the tables of ``(peak, limiting)``, outside any ONNX trace (which would record their search), and
-    keep them while the returned :class:`Prepared` lives (and while they are among the :data:`MAX_BUILT` built last).
+    """Build (once) the tables of ``(peak, limiting)`` and keep them while the returned :class:`Prepared` lives (and
+    while they are among the :data:`MAX_BUILT` built last). A stage prepares its tables when its controls are set, so
+    that an ONNX trace or a compiler finds them built (a graph keeps their values as constants, not their search).
 
     Examples:
         >>> prepare_output(100.0, "rec709").output is prepare_output(100.0, "rec709").output
@@ -166,13 +167,7 @@ def prepare_output(peak: float, limiting: str) -> Prepared:
     with _LOCK:
         built = _BUILT.get(key)
         if built is None:
-            tracing = torch._C._get_tracing_state()
-            torch._C._set_tracing_state(None)
-            try:
-                built = Aces2Output(*key)
-            finally:
-                torch._C._set_tracing_state(tracing)
-            _BUILT[key] = built
+            built = _BUILT[key] = Aces2Output(*key)
             held = {prepared.key for prepared in _HELD}
             for old in [old for old in _BUILT if old not in held and old != key][:max(len(_BUILT) - MAX_BUILT, 0)]:
                 del _BUILT[old]
@@ -217,7 +212,7 @@ def _check(peak_luminance: float, limiting_primaries, display_primaries, encodin
 
 def aces2_output(image: torch.Tensor, peak_luminance: float = 100.0, limiting_primaries: str = "rec709",
                  display_primaries: str | None = None, encoding: str = "linear",
-                 input_space: str = "rec709", *, nan_free: bool = False) -> torch.Tensor:
+                 input_space: str = "rec709", *, nan_free: bool = False, planes: bool = False) -> torch.Tensor:
     r"""ACES 2.0 Output Transform of a scene-referred ``(..., 3, H, W)`` image.
 
     ``input_space`` is ``"rec709"`` (linear Rec.709, Bradford-adapted to AP0) or ``"aces"``
@@ -233,7 +228,8 @@ def aces2_output(image: torch.Tensor, peak_luminance: float = 100.0, limiting_pr
 
     Matches OpenColorIO's "ACES 2.0 - SDR 100 nits (Rec.709)" and "ACES 2.0 - HDR 1000 nits
     (Rec.2020)" / "(P3 D65)" views (Academy ACES 2.0; see ``tests/tonemap/test_aces2.py`` for the measured
-    distance). Differentiable with respect to the image. ``peak_luminance`` is a number (or a
+    distance). ``planes``: computed on the image's three planes, the form a compiler fuses into one loop
+    (:meth:`Aces2Output.render_planes`). Differentiable with respect to the image. ``peak_luminance`` is a number (or a
     0-d tensor without gradient) in ``[100, 10000]`` cd/m², not a learnable parameter: the gamut
     tables are searched for it, once per ``(peak_luminance, limiting_primaries)``, then cached.
 
@@ -255,7 +251,7 @@ def aces2_output(image: torch.Tensor, peak_luminance: float = 100.0, limiting_pr
     # The CAM's powers and the table lookups need float32 or better, whatever autocast is active.
     with full_precision():
         image = sanitize(image, nan_free=nan_free)
-        linear = _display_linear(pixel_layout(image, keepdim=False), peak, limiting_primaries, display_primaries, input_space)
+        linear = _display_linear(image.unbind(-3) if planes else image, peak, limiting_primaries, display_primaries, input_space)
         encoded = each_plane(lambda plane: _encoded(plane, encoding, peak), linear)
         return torch.stack(encoded, dim=-3) if isinstance(encoded, tuple) else encoded
 
@@ -272,7 +268,7 @@ def _encoded(linear: torch.Tensor, encoding: str, peak: float) -> torch.Tensor:
 def _display_linear(x, peak: float, limiting: str, display: str, input_space: str):
     """The Output Transform to display-linear RGB, 1.0 = peak: each run of matrices folded into one (into AP1, the AP1
     -> AP0 matrix and the CAM's first, the display's and the scaling to the peak). ``x`` is an image, or its three
-    planes as a tuple (:attr:`~torchgrade.runtime.ExecutionPolicy.pixel_planes`), and the result takes its form."""
+    planes as a tuple, and the result takes its form."""
     output = _output(peak, limiting)
     into_ap1 = matrix_on(_MATRIX_VALUES["rec709_to_ap1" if input_space == "rec709" else "ap0_to_ap1"], x)
     ap1 = each_plane(lambda v: v.clamp(0.0, output.tone.forward_limit), into_ap1)
