@@ -74,7 +74,7 @@ class DispatchCount(TorchDispatchMode):
     def __init__(self, frame: Optional[torch.Tensor] = None):
         super().__init__()
         self.frame_bytes = 2 * frame.numel() * frame.element_size() if frame is not None else None
-        self.plane = frame.shape[-2] * frame.shape[-1] if frame is not None else None
+        self.plane = frame.numel() // frame.shape[-3] if frame is not None else None  # a channel of every image
         self.written: list[int] = []  # bytes of each launch's results of a plane or more
         self.frame_writes: collections.Counter[str] = collections.Counter()
         self.moved: list[int] = []  # bytes each copy moved
