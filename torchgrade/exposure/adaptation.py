@@ -12,15 +12,8 @@ from ..base.params import Param, check_choice, check_range, is_plain_number, sca
 from ..base.controls import Control
 from ..color import luminance
 from ..runtime import constant
-from .metering import (
-    HISTOGRAM_BLOCK,
-    HISTOGRAM_RANGE,
-    METERING_MASKS,
-    METERING_MODES,
-    meter_histogram,
-    meter_sanitized,
-    metering_weights,
-)
+from .metering import (HISTOGRAM_BLOCK, HISTOGRAM_RANGE, METERING_MASKS, METERING_MODES, meter_histogram, meter_sanitized,
+                       metering_weights)
 
 __all__ = ["CONTROLS", "MIN_LUMINANCE", "MAX_ADAPTED", "OPERATORS", "STOPS_RANGE", "adapt_luminance", "auto_exposure", "check_bounds",
            "check_step", "checked_control", "compensation_at", "exposed_frame", "exposure_key", "exposure_operator", "metered_luminance"]
@@ -44,8 +37,6 @@ MAX_COMPENSATION_POINTS = 64
 """Most ``(metered stops, compensation stops)`` pairs a compensation curve holds (a grading curve's own limit is
 :data:`torchgrade.grading.curves.MAX_CURVE_POINTS`)."""
 MAX_MASK_SIDE = 4096
-MAX_HISTOGRAM_BLOCK = 16
-"""The largest block a histogram counts a value for (:data:`~torchgrade.exposure.metering.HISTOGRAM_BLOCK`)."""
 
 
 CONTROLS = {
@@ -61,7 +52,7 @@ CONTROLS = {
     "metering_mask": Control("average", kind="value"),
     "low_percent": Control(40.0, (0.0, 100.0)),
     "high_percent": Control(90.0, (0.0, 100.0)),
-    "histogram_block": Control(HISTOGRAM_BLOCK, (1, MAX_HISTOGRAM_BLOCK)),
+    "histogram_block": Control(HISTOGRAM_BLOCK, (1, 16)),  # 16x16 blocks at most
     "min_ev": Control(None, STOPS_RANGE),
     "max_ev": Control(None, STOPS_RANGE),
     "compensation": Control(0.0, STOPS_RANGE),
