@@ -38,7 +38,7 @@ from pathlib import Path
 import torch
 
 import torchgrade as tg
-from benchmarks.common import EXR_DIR, argument_parser, ocio_look, write_results
+from benchmarks.common import EXR_DIR, argument_parser, mark_table, ocio_look, write_results
 from benchmarks.suite.stamp import source_commit
 from torchgrade.match import TONEMAP_CANDIDATES, MatchedControls, match_errors
 
@@ -220,7 +220,7 @@ def verdict(rows: list) -> str:
 def marked(name: str, table: list) -> list:
     """``table``'s lines between ``<!-- match:NAME -->`` and ``<!-- /match:NAME -->``, the marks by which
     ``python -m benchmarks suite --pages`` copies it onto docs/match.md (:data:`benchmarks.suite.pages.MATCH_TABLES`)."""
-    return [f"<!-- match:{name} -->", *table, f"<!-- /match:{name} -->"]
+    return mark_table("match", name, table)
 
 
 def known_table(rows: list, timing: bool) -> list:

@@ -99,6 +99,18 @@ def write_results(out: Path, stem: str, report: dict, lines: list, command: str,
         print(f"\nwrote {out / stem}.json and .md; reproduce: {command}")
 
 
+def mark_table(kind: str, name: str, table: list) -> list:
+    """``table``'s lines between ``<!-- KIND:NAME -->`` and ``<!-- /KIND:NAME -->``: the marks by which
+    ``python -m benchmarks suite --pages`` copies a table of committed results onto the page that quotes it
+    (``benchmarks/suite/pages.py``).
+
+    Examples:
+        >>> mark_table("lut", "frames", ["| a |"])
+        ['<!-- lut:frames -->', '| a |', '<!-- /lut:frames -->']
+    """
+    return [f"<!-- {kind}:{name} -->", *table, f"<!-- /{kind}:{name} -->"]
+
+
 def sample_exr(name: str, to_rec709: bool = False) -> torch.Tensor:
     """The RGB of sample image ``name`` (e.g. ``"Desk"``) as a ``(1, 3, H, W)`` float32 tensor."""
     return tg.io.read_exr(EXR_DIR / f"{name}.exr", to_rec709=to_rec709)[:3].unsqueeze(0)

@@ -4,20 +4,23 @@ Usage::
 
     .venv/bin/python -m benchmarks lut_footage
 
-For each look, bakes its per-pixel stages as ``bake_lut`` does by default (``logc_extended``, 51³, tetrahedral,
-linear entries) and sets the report's three figures (p99.9, 8-bit sRGB codes against the look in float64) beside the
+For each look, bakes its per-pixel stages as ``bake_lut`` does by default (``logc_extended`` at its default size,
+tetrahedral, linear entries; the results name the lattice) and sets the report's three figures (p99.9, 8-bit sRGB codes against the look in float64) beside the
 p99.9 the LUT gets on every pixel of pictures of that footage: the realistic colours' beside each natural sample
 photograph (as the LUT receives it, after the look's exposure and bloom), the colour charts' beside two charts, the
 warm practicals' beside three candle-lit still lifes. The pictures are built from colour-science's reference data,
 which the library never reads (:func:`chart_picture`, :func:`still_life`). Ratio: report / real; the tests hold it
 within 2x (``tests/lut/test_lut_footage.py``). A second table is the shipped look's ``to_lut(frames=image)`` on
 every sample image: the report's p99.9 and max, and the real ones over every pixel. Writes ``lut_footage.{md,json}``
-to ``--out`` (default benchmarks/out; the committed ones with ``--out benchmarks/results``); minutes on 2 cores.
+to ``--out`` (default benchmarks/out; the committed ones with ``--out benchmarks/results``), stamped with the commit
+it measured; minutes on 2 cores.
+
+Accuracy only, so a busy machine may make the committed ones. The summary and ``frames=`` tables are marked
+(:func:`~benchmarks.common.mark_table`) so that ``python -m benchmarks suite --pages`` copies them onto docs/lut.md.
 """
 
 from __future__ import annotations
 
-import subprocess
 import warnings
 
 import colour
@@ -26,8 +29,13 @@ import torch
 from colour.quality.datasets import SDS_TCS, SDS_VS
 
 import torchgrade as tg
-from benchmarks.common import ROOT, argument_parser, sample_exr, write_results
+from benchmarks.common import ROOT, argument_parser, mark_table, sample_exr, write_results
+from benchmarks.suite.stamp import source_commit
 from torchgrade.lut import LUTAccuracyWarning, code_errors
+
+COMMAND = ".venv/bin/python -m benchmarks lut_footage"
+MARGIN = 2.0
+"""The factor, either way, within which a report's figure should be of the real p99.9 on pictures of its footage."""
 
 REC709 = colour.RGB_COLOURSPACES["ITU-R BT.709"]
 SPECTRUM = colour.SpectralShape(380, 780, 5)
@@ -47,6 +55,9 @@ PHOTOGRAPHS = ("CandleGlass", "Carrots", "Desk", "Garden", "GoldenGate")
 
 EVERY_IMAGE = PHOTOGRAPHS + ("WideColorGamut", "WideFloatRange", "BrightRings", "GrayRampsHorizontal", "AllHalfValues")
 """Every RGB sample image, charts and ramps too, for the ``frames=`` table."""
+
+FIGURES = {"realistic colours": "photographs", "colour charts": "charts", "warm practicals": "still lifes"}
+"""The report's figures, each by the pictures of its footage it is set against."""
 
 LOOKS = {
     "cinematic (export/looks/cinematic.json)": ROOT / "export" / "looks" / "cinematic.json",
@@ -113,8 +124,9 @@ def quantile_999(errors: torch.Tensor) -> float:
     return float(flat.kthvalue(max(1, -(-999 * flat.numel() // 1000))).values)
 
 
-def footage_rows(look: tg.PostFX) -> list:
-    """``(figure, picture, stated p99.9, real p99.9)`` for one look's default bake."""
+def footage_rows(look: tg.PostFX) -> tuple:
+    """``(lut, rows)``: one look's default bake, and each row's ``figure``, ``picture``, ``report`` (the stated p99.9)
+    and ``real`` p99.9."""
     transform = look.per_pixel_stages()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LUTAccuracyWarning)
@@ -131,7 +143,7 @@ def footage_rows(look: tg.PostFX) -> list:
     for kelvin in STILL_LIFE_KELVIN:
         real = quantile_999(real_errors(lut, transform, still_life(kelvin)))
         rows.append(("warm practicals", f"still life, {kelvin:.0f} K", stated["warm practicals"], real))
-    return rows
+    return lut, [dict(zip(("figure", "picture", "report", "real"), row)) for row in rows]
 
 
 def framed_rows(look: tg.PostFX) -> list:
@@ -151,32 +163,76 @@ def framed_rows(look: tg.PostFX) -> list:
     return rows
 
 
-def commit() -> str:
-    """The checked-out commit, and whether the tree differs from it."""
-    head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
-    dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=ROOT, capture_output=True, text=True).stdout
-    return f"{head or 'unknown'}{' (with uncommitted changes)' if dirty.strip() else ''}"
+def span(ratios: list) -> str:
+    """The lowest and highest of ``ratios``, as the tables show them."""
+    return f"{min(ratios):.2f}–{max(ratios):.2f}"
+
+
+def summary_table(looks: dict) -> list:
+    """Per look: each figure the report states and its ratio to the real p99.9 on each picture of its footage, and the
+    cause the report names when over its tolerance; then, per figure, how many ratios lie within :data:`MARGIN`."""
+    header = " | ".join(f"{figure} | report / real, {len(rows)} {FIGURES[figure]}"
+                        for figure, rows in by_figure(next(iter(looks.values()))["rows"]).items())
+    lines = [f"| look | {header} | report's cause |", "| --- |" + " ---: | ---: |" * len(FIGURES) + " --- |"]
+    for label, look in looks.items():
+        cells = [f"{figures[0]['report']:.2f} | {span([r['report'] / r['real'] for r in figures])}"
+                 for figures in by_figure(look["rows"]).values()]
+        lines.append(f"| {label} | {' | '.join(cells)} | {(look['cause'] or 'within tolerance').split(' (')[0]} |")
+    counts = []
+    for figure in FIGURES:
+        ratios = [row["report"] / row["real"] for look in looks.values() for row in by_figure(look["rows"])[figure]]
+        within = sum(1 / MARGIN <= ratio <= MARGIN for ratio in ratios)
+        counts.append(f"{figure} {within} of {len(ratios)} ({span(ratios)})")
+    return lines + ["", f"Report / real within {MARGIN:g}× either way: {'; '.join(counts)}."]
+
+
+def by_figure(rows: list) -> dict:
+    """``rows`` of one look by the figure they are set against, in :data:`FIGURES`' order."""
+    return {figure: [row for row in rows if row["figure"] == figure] for figure in FIGURES}
+
+
+def frames_table(rows: list) -> list:
+    lines = ["| image | pixels | report p99.9 | real p99.9 | report max | real max |", "| --- | ---: | ---: | ---: | ---: | ---: |"]
+    lines += [f"| {r['image']} | {r['pixels']} | {r['report_p99_9']:.2f} | {r['real_p99_9']:.2f} | {r['report_max']:.2f} | "
+              f"{r['real_max']:.2f} |" for r in rows]
+    p99_9 = [r["report_p99_9"] / r["real_p99_9"] for r in rows]
+    most = max(abs(r["report_max"] - r["real_max"]) for r in rows)
+    return lines + ["", f"Report / real p99.9 {span(p99_9)} on {len(rows)} images; the report's max is the real max "
+                        f"within {most:.2f} codes on every one."]
+
+
+def markdown(report: dict) -> list:
+    """The results page from the run's ``report``: the summary table marked ``ratios``, every look-and-picture pair,
+    and the ``frames=`` table marked ``frames`` (:func:`~benchmarks.common.mark_table`)."""
+    stamp = f"`{report['commit'][:7]}`{' with uncommitted changes' if report['modified'] else ''}"
+    pairs = [f"| {label} | {row['figure']} | {row['picture']} | {row['report']:.2f} | {row['real']:.2f} | "
+             f"{row['report'] / row['real']:.2f} |" for label, look in report["looks"].items() for row in look["rows"]]
+    return ["# A baked LUT's report on each footage against its error on pictures of it, every pixel", "",
+            " ".join(__doc__.split("\n\n")[3].split()).replace("``", "`").replace(":func:", ""), "",
+            f"Made by `{report['command']}` at commit {stamp}. Every look baked on {report['lattice']}.", "",
+            "## Each figure's ratio to the real p99.9 on pictures of its footage", "",
+            "8-bit sRGB codes, p99.9; the report's figure, then report / real on each picture (lowest–highest); the cause the "
+            "report names when over its tolerance (its whole text is in the JSON).", "",
+            *mark_table("lut", "ratios", summary_table(report["looks"])), "",
+            "## Every look and picture", "",
+            "| look | figure | picture | report p99.9 | real p99.9 | report / real |", "| --- | --- | --- | ---: | ---: | ---: |",
+            *pairs, "",
+            "## The shipped look's `to_lut(frames=image)`: the report against every pixel", "",
+            *mark_table("lut", "frames", frames_table(report["frames"]))]
 
 
 def main(argv=None) -> None:
     out = argument_parser(__doc__).parse_args(argv).out
     torch.manual_seed(0)
-    command = ".venv/bin/python -m benchmarks lut_footage --out benchmarks/results"
-    lines = ["# A baked LUT's report on each footage against its error on pictures of it, every pixel", "",
-             " ".join(__doc__.split("\n\n")[3].split()).replace("``", "`"), "", f"Commit {commit()}; `{command}`.", "",
-             "| look | figure | picture | report p99.9 | real p99.9 | report / real |", "| --- | --- | --- | ---: | ---: | ---: |"]
-    results = {}
+    report = {"command": f"{COMMAND} --out {out}", **source_commit(), "looks": {}}
+    lattices = set()
     for label, config in LOOKS.items():
-        rows = footage_rows(tg.PostFX.from_config(config).eval())
-        results[label] = [dict(zip(("figure", "picture", "report", "real"), row)) for row in rows]
-        lines += [f"| {label} | {figure} | {picture} | {stated:.2f} | {real:.2f} | {stated / real:.2f} |"
-                  for figure, picture, stated, real in rows]
-    framed = framed_rows(tg.PostFX.from_config(LOOKS["cinematic (export/looks/cinematic.json)"]).eval())
-    lines += ["", "## The shipped look's `to_lut(frames=image)`: the report against every pixel", "",
-              "| image | pixels | report p99.9 | real p99.9 | report max | real max |", "| --- | ---: | ---: | ---: | ---: | ---: |"]
-    lines += [f"| {r['image']} | {r['pixels']} | {r['report_p99_9']:.2f} | {r['real_p99_9']:.2f} | {r['report_max']:.2f} | "
-              f"{r['real_max']:.2f} |" for r in framed]
-    write_results(out, "lut_footage", {"commit": commit(), "looks": results, "frames": framed}, lines, command)
+        lut, rows = footage_rows(tg.PostFX.from_config(config).eval())
+        lattices.add(f"`{lut.shaper}` {lut.size}³, {lut.interpolation}")
+        report["looks"][label] = {"report": str(lut.error_report), "cause": lut.error_report.cause, "rows": rows}
+    report["lattice"] = " and ".join(sorted(lattices))
+    report["frames"] = framed_rows(tg.PostFX.from_config(LOOKS["cinematic (export/looks/cinematic.json)"]).eval())
+    write_results(out, "lut_footage", report, markdown(report), report["command"])
 
 
 if __name__ == "__main__":

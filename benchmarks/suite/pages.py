@@ -4,10 +4,11 @@
 
 A page marks each generated block ``<!-- suite:NAME -->`` … ``<!-- /suite:NAME -->`` (invisible in rendered
 Markdown); :func:`main` rewrites every block of :data:`PAGES` from :data:`COMMITTED` (the full form's results where
-they are committed, else the quick form's, and says which) and from the tables ``bench_match`` marks in its results
-(:data:`MATCH_TABLES`), and nothing outside the blocks. ``tests/project/test_suite_results.py`` holds each page to
+they are committed, else the quick form's, and says which) and from the tables ``bench_match`` and ``lut_footage``
+mark in their results (:data:`MATCH_TABLES`, :data:`LUT_TABLES`), and nothing outside the blocks. ``tests/project/test_suite_results.py`` holds each page to
 what :func:`filled` would write, and keeps the suite's figures (``ms/MP``, ``× OCIO``) out of every page but inside
-its blocks; ``tests/project/test_match_results.py`` holds the match results to the code that wrote them.
+its blocks; ``tests/project/test_match_results.py`` and ``tests/project/test_lut_footage_results.py`` hold the match
+and LUT report results to the code that wrote them.
 ``--committed`` (see ``benchmarks/run.py``) runs both forms of the suite and then this.
 """
 
@@ -22,12 +23,12 @@ from benchmarks.suite.report import baselines_text, markdown_table, provenance
 from benchmarks.suite.runtimes import PEER
 from torchgrade.io.atomic import atomic_write
 
-__all__ = ["COMMITTED", "PAGES", "BLOCK", "MATCH", "MATCH_TABLES", "TABLE", "committed", "match_committed", "blocks",
-           "filled", "stale", "main"]
+__all__ = ["COMMITTED", "PAGES", "BLOCK", "MATCH", "MATCH_TABLES", "TABLE", "LUT_FOOTAGE", "LUT_TABLES", "committed",
+           "marked_results", "match_committed", "lut_blocks", "blocks", "filled", "stale", "main"]
 
 COMMITTED = {"quick": RESULTS / "suite" / "quick", "full": RESULTS / "suite" / "full"}
 """Where each form's committed results live."""
-PAGES = (ROOT / "docs" / "performance.md", ROOT / "README.md", ROOT / "docs" / "match.md")
+PAGES = (ROOT / "docs" / "performance.md", ROOT / "README.md", ROOT / "docs" / "match.md", ROOT / "docs" / "lut.md")
 """The pages that quote the benchmarks."""
 
 
@@ -47,6 +48,10 @@ MATCH_TABLES = {"match-known": "known", "match-reach": "reach", "match-photograp
 MATCH_TIMED = ("photograph", "jacobian")
 """The full form's tables the ``match-timing`` block quotes: seconds and milliseconds, so only from a quiet run."""
 MATCH_FULL = ".venv/bin/python -m benchmarks match --out benchmarks/results"
+LUT_FOOTAGE = RESULTS / "lut_footage"
+"""Where ``python -m benchmarks lut_footage`` commits its results (``.md`` and ``.json``)."""
+LUT_TABLES = {"lut-footage": "ratios", "lut-frames": "frames"}
+"""docs/lut.md's blocks, each quoting a table ``lut_footage`` marks ``<!-- lut:NAME -->`` (accuracy only)."""
 QUICK_OUT = "/tmp/torchgrade-bench"
 """Where the README's quick command writes (not the committed results)."""
 
@@ -121,25 +126,29 @@ def readme_block(results: dict) -> str:
                       f"{timing_line(results['quick'])} It prints a short table; the files hold the rest.", ""])
 
 
+def marked_results(stem: Path, kind: str) -> dict:
+    """A benchmark's committed results at ``stem``: its ``.json`` as ``report`` and the tables its ``.md`` marks
+    ``<!-- KIND:NAME -->`` (``benchmarks.common.mark_table``), by name, as ``tables``."""
+    return {"report": json.loads(stem.with_suffix(".json").read_text(encoding="utf-8")),
+            "tables": {m["name"]: m["body"] for m in marks(kind).finditer(stem.with_suffix(".md").read_text(encoding="utf-8"))}}
+
+
 def match_committed() -> dict:
-    """Each committed form of ``bench_match``'s results, by form: its ``.json`` as ``report`` and its marked tables,
-    by name, as ``tables``."""
-    return {form: {"report": json.loads(stem.with_suffix(".json").read_text(encoding="utf-8")),
-                   "tables": {m["name"]: m["body"] for m in TABLE.finditer(stem.with_suffix(".md").read_text(encoding="utf-8"))}}
-            for form, stem in MATCH.items() if stem.with_suffix(".json").is_file()}
+    """Each committed form of ``bench_match``'s results, by form (:func:`marked_results`)."""
+    return {form: marked_results(stem, "match") for form, stem in MATCH.items() if stem.with_suffix(".json").is_file()}
 
 
-def match_source(form: str, report: dict) -> str:
-    """Where a match block's figures come from: the results file, the command and the commit."""
+def results_source(stem: Path, report: dict) -> str:
+    """Where a block's figures come from: the results file at ``stem``, the command and the commit."""
     modified = " with uncommitted changes" if report["modified"] else ""
-    return (f"From [{MATCH[form].name}.md](../benchmarks/results/{MATCH[form].name}.md), made by `{report['command']}` at "
+    return (f"From [{stem.name}.md](../benchmarks/results/{stem.name}.md), made by `{report['command']}` at "
             f"commit `{report['commit'][:7]}`{modified}.")
 
 
 def match_quick_block(table: str, results: dict) -> str:
     if "quick" not in results:
         raise ValueError(f"no committed {MATCH['quick'].name}.json: run .venv/bin/python -m benchmarks match --quick --out benchmarks/results")
-    return f"{match_source('quick', results['quick']['report'])}\n\n{results['quick']['tables'][table]}"
+    return f"{results_source(MATCH['quick'], results['quick']['report'])}\n\n{results['quick']['tables'][table]}"
 
 
 def match_timing_block(results: dict) -> str:
@@ -147,7 +156,7 @@ def match_timing_block(results: dict) -> str:
         return (f"The timed run is not committed yet: `{MATCH_FULL}` on a quiet machine writes "
                 "`benchmarks/results/match.md`, and `.venv/bin/python -m benchmarks suite --pages` then writes its seconds here.\n")
     report = results["full"]["report"]
-    return "\n".join([f"{match_source('full', report)} On {condition(report)}, {report['threads']} torch thread(s).", "",
+    return "\n".join([f"{results_source(MATCH['full'], report)} On {condition(report)}, {report['threads']} torch thread(s).", "",
                       *(results["full"]["tables"][name] for name in MATCH_TIMED if name in results["full"]["tables"])])
 
 
@@ -158,15 +167,24 @@ def match_blocks() -> dict:
             **{block: match_quick_block(table, results) for block, table in MATCH_TABLES.items()}}
 
 
+def lut_blocks() -> dict:
+    """The body of every block that quotes ``lut_footage``, from its committed results."""
+    if not LUT_FOOTAGE.with_suffix(".json").is_file():
+        raise ValueError(f"no committed {LUT_FOOTAGE.name}.json: run .venv/bin/python -m benchmarks lut_footage --out benchmarks/results")
+    results = marked_results(LUT_FOOTAGE, "lut")
+    source = results_source(LUT_FOOTAGE, results["report"])
+    return {block: f"{source}\n\n{results['tables'][table]}" for block, table in LUT_TABLES.items()}
+
+
 RENDERERS = {"look": look_block, "table": table_block, "advice": advice_block, "reproduce": reproduce_block,
              "quick": readme_block}
 """Every block a page may hold, by name."""
 
 
 def blocks(results: dict) -> dict:
-    """The body of every block, from the suite's ``results`` (:func:`committed`) and ``bench_match``'s
-    (:func:`match_blocks`)."""
-    return {**{name: render(results) for name, render in RENDERERS.items()}, **match_blocks()}
+    """The body of every block, from the suite's ``results`` (:func:`committed`), ``bench_match``'s
+    (:func:`match_blocks`) and ``lut_footage``'s (:func:`lut_blocks`)."""
+    return {**{name: render(results) for name, render in RENDERERS.items()}, **match_blocks(), **lut_blocks()}
 
 
 def filled(text: str, bodies: dict) -> str:

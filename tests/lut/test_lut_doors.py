@@ -2,7 +2,9 @@
 arguments, and that table is the look evaluated in float64 on a lattice computed here from Unity's LogC formula."""
 
 import json
+import re
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,6 +14,10 @@ import torchgrade as tg
 from torchgrade.cli import main
 from torchgrade.lut import LUTAccuracyWarning
 from torchgrade.lut.shapers import SHAPERS
+
+ROOT = Path(__file__).resolve().parents[2]
+STATED_DEFAULT = re.compile(r"\b(\d+)³ by default|\bdefault (?:lattice |size )?(\d+)³|DEFAULT_SIZES`?: (\d+)")
+"""How a page or a docstring states a default lattice size: ``51³ by default``, ``the default 39³``, ``DEFAULT_SIZES: 51``."""
 
 LOOK = {"grade": {"contrast": 20.0, "saturation": 10.0, "temperature": 8.0}, "primary": {"saturation": 1.1},
         "tonemap": "aces"}
@@ -108,3 +114,20 @@ def test_the_doors_report_the_same_figures_on_the_same_frames():
                quiet(look.to_lut, 9, frames=frames).lut.error_report]
     assert reports[0].colour_set == reports[1].colour_set == "pixels of the given frames"
     assert (reports[0].p99_9, reports[0].max, reports[0].colours) == (reports[1].p99_9, reports[1].max, reports[1].colours)
+
+
+def stated_defaults(path: Path) -> list:
+    return [int(next(size for size in match.groups() if size)) for match in STATED_DEFAULT.finditer(path.read_text(encoding="utf-8"))]
+
+
+def test_the_default_size_is_stated_once_in_the_docs_and_as_the_constant_everywhere():
+    """The pages (README and docs/) state the bake's default size once; every page or docstring that states a default
+    size states the constant: ``logc_extended``'s ``default_size`` for the bake, its ``cube_size`` for the ``.cube``
+    the command writes."""
+    shaper = SHAPERS["logc_extended"]
+    pages = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+    stated = {path.relative_to(ROOT).as_posix(): stated_defaults(path)
+              for path in [*pages, *sorted((ROOT / "torchgrade").rglob("*.py"))]}
+    assert {size for sizes in stated.values() for size in sizes} == {shaper.default_size, shaper.cube_size}
+    assert [name for name, sizes in stated.items() for size in sizes if size == shaper.default_size and name.endswith(".md")] \
+        == ["docs/lut.md"]

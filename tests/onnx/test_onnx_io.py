@@ -77,14 +77,15 @@ def test_integer_codes_are_srgb_decoded_to_linear(tmp_path):
 
 
 def test_a_per_pixel_look_decodes_and_encodes_in_the_strips(tmp_path):
-    """Only the layout's transposes run on the whole frame: the sRGB decode (a Pow) and encode are in the Scan's body."""
+    """Only the layout's transposes run on the whole frame: the sRGB decode and encode (each a power, written as Exp of a
+    Log) are in the Scan's body, which begins with the codes' Cast and ends with the rounding's."""
     path = export(LOOK, tmp_path / "look.onnx", input_dtype=torch.uint8, layout="NHWC", output="srgb8")
     graph = onnx.load(str(path)).graph
     main_ops = [node.op_type for node in graph.node]
     scan, = [node for node in graph.node if node.op_type == "Scan"]
     body_ops = [node.op_type for node in graph_nodes(next(a.g for a in scan.attribute if a.name == "body"))]
-    assert main_ops.count("Transpose") == 2 and "Pow" not in main_ops and "Cast" not in main_ops
-    assert body_ops.count("Pow") == 2 and body_ops[0] == "Cast"
+    assert main_ops.count("Transpose") == 2 and not {"Pow", "Exp", "Log", "Cast"} & set(main_ops)
+    assert body_ops[0] == "Cast" and body_ops[-2:] == ["Round", "Cast"] and "Pow" not in body_ops
 
 
 def test_the_file_states_its_frame_format(tmp_path):

@@ -120,18 +120,19 @@ class _Powers(torch.nn.Module):
 
     def forward(self, x):
         return torch.cat([safe_pow(x, 1.0 / 2.2), safe_pow(x, 2.2), bounded_pow(x, 3.5), x.abs() ** 2, x ** 3,
-                          x.abs() ** 0.5, x.abs() ** 1.7, x ** 4], dim=1)
+                          x.abs() ** 0.5, x.abs() ** 1.7, x ** 4, x ** 0.0, x ** 1.0], dim=1)
 
 
 def test_powers_export_without_where_or_pow_and_keep_their_values(tmp_path):
     path = export(_Powers(), tmp_path / "powers.onnx", example=torch.rand(1, 3, 4, 4))
     counts = ops(path)
-    assert counts["Where"] == 0 and counts["Pow"] == 1  # a whole power but 2 and 3 keeps its Pow (x ** 4), others exp(e log x)
-    row = torch.tensor([-2.0, -0.5, 0.0, 1e-30, 0.18, 1.0, 3.0, 60.0, 1e4, 65504.0])
+    assert counts["Where"] == 0 and counts["Pow"] == 1  # a whole power but 0 to 3 keeps its Pow (x ** 4), others exp(e log x)
+    row = torch.tensor([-2.0, -0.5, 0.0, 1e-30, 0.18, 1.0, 3.0, 60.0, 1e4, 65504.0, float("inf"), float("nan")])
     image = row.reshape(1, 1, 1, -1).expand(1, 3, 2, -1).contiguous()
     output = session(path).run(None, {"image": image.numpy()})[0]
     expected = _Powers()(image.double()).numpy()
-    np.testing.assert_allclose(output, expected, rtol=5e-6, atol=1e-30)  # exp(e log x): a few ulps
+    np.testing.assert_allclose(output, expected, rtol=5e-6, atol=1e-30, equal_nan=True)  # exp(e log x): a few ulps
+    np.testing.assert_array_equal(output[:, 24:27], 1.0)  # x ** 0 is 1 at NaN and infinity too
 
 
 GRADES = {

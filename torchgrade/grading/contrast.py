@@ -20,7 +20,7 @@ from ..color import (
     convert,
     linear_to_acescct,
 )
-from ..runtime import affine, scalar
+from ..runtime import affine
 from ..runtime.constants import is_plain_number
 
 __all__ = ["contrast_space", "log_contrast", "logc_contrast", "acescc_contrast", "contrast"]
@@ -71,7 +71,7 @@ def _exp(value):
 
 
 def logc_contrast(image: torch.Tensor, k) -> torch.Tensor:
-    """:func:`log_contrast` in LogC with slope ``k`` (a number or a tensor), as one power and one multiply-add:
+    """:func:`log_contrast` in LogC with slope ``k`` (a number or a tensor), as one power and a multiply-add:
     ``((a x + b)^k · 10^((d - 0.4135884)(k - 1) / c) - b) / a`` (exported as ``exp(k ln(a x + b))``, the base being
     positive: a ``Log`` and an ``Exp`` cost onnxruntime's CPU less than half a ``Pow``, :mod:`torchgrade.onnx.symbolics`).
 
@@ -81,8 +81,8 @@ def logc_contrast(image: torch.Tensor, k) -> torch.Tensor:
     """
     base = affine(image, LOGC_A, LOGC_B).clamp_min(torch.finfo(image.dtype).tiny)
     gain = _exp(_LOGC_GAIN_PER_SLOPE * (k - 1.0)) / LOGC_A
-    if isinstance(gain, torch.Tensor):
-        return torch.addcmul(scalar(-LOGC_B / LOGC_A, image), base**k, gain)
+    if isinstance(gain, torch.Tensor):  # a product and a difference by a number: a 0-d CPU operand CUDA's addcmul refuses
+        return base**k * gain - LOGC_B / LOGC_A
     return affine(base**k, gain, -LOGC_B / LOGC_A)
 
 

@@ -2,9 +2,9 @@
 
 The realistic colours (:func:`~torchgrade.lut.validation.realistic_colours`) are natural footage: their chroma is
 spread as the sample photographs' is, so they hold few of a colour chart's saturated patches and few of the deep
-oranges a candle or a tungsten bulb casts, where a grade's LUT misses most (the cinematic look at 51³: 1.52 codes
-on the realistic colours, several codes on a chart or a candle-lit still life). The report measures two more sets and
-names each (:class:`~torchgrade.lut.ErrorReport`'s ``footage``):
+oranges a candle or a tungsten bulb casts, where a grade's LUT misses most (the cinematic look's default bake: 1.52
+codes on the realistic colours, several codes on a chart or a candle-lit still life). The report measures two more
+sets and names each (:class:`~torchgrade.lut.ErrorReport`'s ``footage``):
 
 * **colour charts** (:func:`chart_colours`): the 24 patches of the ColorChecker Classic (:data:`COLORCHECKER_LAB`),
   in linear Rec.709, exposed within :data:`CHART_STOPS` of their published values;

@@ -27,7 +27,7 @@ and the first bake of :data:`CANDIDATES` that meets the tolerance, or says that 
 
 The default report of an HDR bake evaluates :data:`REPORT_COLOURS` colours directly in float64 and through the LUT
 (16,384 realistic, 6,168 chart, 8,192 warm, 17,113 validation and, for a lattice reaching 65504, 24,576 bright
-saturated colours): about half of a 51³ bake's 132,651 lattice points. Highlights missed by more than
+saturated colours): about half the lattice points of a bake at the default size. Highlights missed by more than
 :data:`HIGHLIGHT_TOLERANCE` cost one bake twice as fine, a report over its tolerance the bakes its causes and advice
 name (:func:`diagnose`); ``frames=`` adds every pixel of the frames.
 
@@ -89,9 +89,9 @@ HIGHLIGHT_TOLERANCE = 2.0
 would hold them: the report is then over its tolerance, and says so (:func:`highlights_report`)."""
 
 
-HIGHLIGHT_ADVICE_MAX_SIZE = 101
-"""The largest lattice :func:`highlights_report` bakes to see whether a finer one holds the highlights (twice the
-default 51³'s intervals)."""
+HIGHLIGHT_ADVICE_MAX_SIZE = 2 * (SHAPERS["logc_extended"].default_size - 1) + 1
+"""The largest lattice :func:`highlights_report` bakes to see whether a finer one holds the highlights (the default
+lattice with twice its intervals, 101³)."""
 
 
 class LUTAccuracyWarning(UserWarning):

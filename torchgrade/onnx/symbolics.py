@@ -96,7 +96,8 @@ def _nan_to_num(g, x, nan, posinf, neginf):
 
 
 def _pow(g, x, exponent):
-    """``x ** exponent``; a constant exponent 2 or 3 as products, 0.5 as ``Sqrt`` (each correctly rounded, as
+    """``x ** exponent``; a constant exponent 0 as ones of ``x``'s shape (``x ** 0`` is 1 for every ``x``, NaN and
+    infinities too), 1 as ``x``, 2 or 3 as products, 0.5 as ``Sqrt`` (each correctly rounded, as
     ``Pow`` is), any other that is not a whole number as ``Exp(e · Log(x))`` (to a few ulps of the power; the same
     NaN for a negative base, 0 and infinity at 0), and so is an exponent that is a graph input where the graph shows
     the base positive (:func:`_sign`: a slope of LogC or ACEScc contrast given as an input): onnxruntime's CPU runs a
@@ -110,6 +111,10 @@ def _pow(g, x, exponent):
     if not symbolic_helper._is_fp(x) or not isinstance(value, torch.Tensor) or value.numel() != 1:
         return symbolic_opset9.pow(g, x, exponent)
     power = float(value)
+    if power == 0.0:
+        return g.op("Expand", _constant_like(g, 1.0, x), g.op("Shape", x))
+    if power == 1.0:
+        return x
     if power in (2.0, 3.0):
         square = g.op("Mul", x, x)
         return square if power == 2.0 else g.op("Mul", square, x)
