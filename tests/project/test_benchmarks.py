@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import json
+import logging
 import os
 import subprocess
 import sys
@@ -505,3 +506,42 @@ def test_the_serving_benchmark_exits_0_through_the_door_and_writes_its_table(tmp
     assert door(["serving", "--quick", "--out", str(tmp_path)]) == 0
     assert "| real frames | 16 | 16 |" in (tmp_path / "serving.md").read_text()
     assert "{'command'" not in capsys.readouterr().err
+
+
+def test_the_look_floor_times_every_case_against_the_copy_in_the_same_rounds_and_counts_the_passes(tmp_path, monkeypatch):
+    from benchmarks import look_floor
+
+    monkeypatch.setattr(look_floor, "PHOTOGRAPHS", ("Carrots",))
+    threads = torch.get_num_threads()
+    before = sorted(common.RESULTS.rglob("*"))
+    assert door(["look_floor", "--quick", "--out", str(tmp_path)]) == 0
+    assert sorted(common.RESULTS.rglob("*")) == before and torch.get_num_threads() == threads
+    report = json.loads((tmp_path / "look_floor.json").read_text())
+    assert report["command"].endswith(f"look_floor --quick --out {tmp_path}") and report["commit"] and report["threads"] == 2
+    rows, rounds = report["timing"]["rows"], report["timing"]["rounds_ms"]
+    assert set(rows) == {look_floor.COPY, "frame copy into a frame made once", look_floor.EAGER, look_floor.EXPORTED,
+                         *look_floor.STAGES.values()}
+    assert rows[look_floor.COPY]["over_copy"] == 1.0 and all(len(ms) == look_floor.QUICK_ROUNDS for ms in rounds.values())
+    counts = report["eager_counts"]
+    stages = [counts[name]["operations"] for name in look_floor.STAGES.values()]
+    assert max(stages) < counts[look_floor.EAGER]["operations"] <= sum(stages)  # the stages, the frame sanitized once
+    assert counts[look_floor.STAGES["tonemap"]]["frames_written"] >= 1.0  # its output at least
+    nodes = report["onnx"]
+    assert nodes["nodes"] == sum(nodes["operators"].values()) > nodes["main_graph_nodes"]  # the Scan's body counted
+    assert set(report["metering"]["Carrots"]) == set(tg.exposure.METERING_MASKS)
+    assert report["metering"]["Carrots"]["spot"]["4x4 blocks"] > report["metering"]["Carrots"]["spot"]["2x2 blocks"] > 0
+
+
+def test_the_code_inductor_generates_is_read_from_its_log_with_sizes_at_the_frame(tmp_path, monkeypatch):
+    """A compiled tone map of a frame with symbolic sides: one kernel, one buffer of a plane or more (its output, a
+    frame), read from the ``output_code`` log; torch's logging is left as it was."""
+    from benchmarks import look_floor
+
+    monkeypatch.setenv("TORCHINDUCTOR_CACHE_DIR", str(tmp_path))  # the code is generated, not read from a cache
+    handlers = list(logging.getLogger("torch._inductor").handlers)
+    with look_floor.inductor_output_code() as sources, torch.no_grad():
+        tg.compile(tg.ToneMap("reinhard"), verbose=False)(torch.rand(1, 3, 24, 40))
+    assert logging.getLogger("torch._inductor").handlers == handlers
+    counts = [look_floor.code_counts(source, 24 * 40) for source in sources]
+    assert counts == [{"kernels": 1, "loop_nests": counts[0]["loop_nests"], "frame_buffers": 1, "frames_written": 1.0}]
+    assert counts[0]["loop_nests"] >= 1

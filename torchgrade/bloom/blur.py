@@ -185,8 +185,9 @@ def unity_blur(light: torch.Tensor, any_size: bool = False) -> torch.Tensor:
     """Unity's 9 taps (:data:`UNITY_BLUR_WEIGHTS`) over the mirrored frame, as sums of shifted views
     (:func:`mirror_filter`: on the CPU 12.5 times as fast as ``kornia.filters.filter2d_separable``,
     ``benchmarks/results/cpu_forms.md``, "bloom blur"; a compiler fuses them), or for a graph that serves frames of
-    ``any_size`` (an exported model), as kornia's separable filter: a ``Conv`` node an axis where the views would be a
-    slice, a product and a sum a tap.
+    ``any_size`` (an exported model), as the operator's kernel off the CPU: a ``Conv`` node an axis of each plane, where
+    the views would be a slice, a product and a sum a tap (about half the nodes of kornia's separable filter, whose
+    reshapes by the channels and by the kernel's batch each take a chain of shape operations).
 
     Examples:
         >>> round(float(unity_blur(torch.ones(1, 1, 5, 5)).mean()), 6), round(float(unity_blur(torch.ones(1, 1, 5, 5), any_size=True).mean()), 6)
@@ -194,16 +195,7 @@ def unity_blur(light: torch.Tensor, any_size: bool = False) -> torch.Tensor:
     """
     if not any_size:
         return mirror_filter(light, UNITY_BLUR_WEIGHTS)
-    import kornia.filters
-
-    kernel = _blur_kernel(light.device, light.dtype)
-    return kornia.filters.filter2d_separable(mirror_pad(light, BLUR_TAPS // 2, any_size), kernel, kernel, padding="valid")
-
-
-@device_cached
-def _blur_kernel(device: torch.device, dtype: torch.dtype) -> torch.Tensor:
-    """:data:`UNITY_BLUR_WEIGHTS` as kornia's ``(1, taps)`` kernel."""
-    return torch.tensor([UNITY_BLUR_WEIGHTS], dtype=dtype, device=device)
+    return _mirror_filter_by_convolution(light, UNITY_BLUR_WEIGHTS)
 
 
 def anamorphic_sigma(ratio: torch.Tensor) -> torch.Tensor:

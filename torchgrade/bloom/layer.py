@@ -42,7 +42,7 @@ from ..runtime import constant
 from .composite import BLOOM_MODES, COMPOSITES
 from .prefilter import prefilter
 from .blur import anamorphic_sigma
-from .pyramid import active_levels, expand, glow_pyramid, pyramid_depth, upsample
+from .pyramid import active_levels, glow_pyramid, over_blocks, pyramid_depth, upsample
 from .texture import as_texture, check_texture, resampled
 
 __all__ = ["CONTROLS", "UNITY_SETTINGS", "OPTION_DEFAULTS", "MAX_FRAME_SIDE", "check_settings", "bloom_settings", "bloom", "bloom_with_settings", "Bloom",
@@ -230,8 +230,11 @@ def _composited(scene, light, fraction, settings: dict, param, depth: int, activ
     if settings["dirt"] is not None and not is_constant(settings["dirt_intensity"], 0.0):
         lens = param("dirt_intensity") * resampled(settings["dirt"], scene.shape[-2:], scene) * glow
         glow = glow.clone()  # the lens term keeps the glow for its gradient; the blend overwrites it
-    kept = expand(1.0 - strength * fraction, scene.shape[-2:], any_size) if composite.scatters else None
-    out = composite.blend(scene, glow, strength, kept)
+    if composite.scatters:  # the share each block keeps scales the frame's 2x2 blocks: no frame of it is written
+        image, glow_blocks, kept = over_blocks(1.0 - strength * fraction, scene, glow, any_size=any_size)
+        out = composite.blend(image, glow_blocks, strength, kept).reshape(scene.shape)
+    else:
+        out = composite.blend(scene, glow, strength, None)
     return out if lens is None else out + lens
 
 

@@ -154,14 +154,15 @@ def prefilter(image: torch.Tensor, threshold, knee, fade_fireflies: bool, karis_
     if clamp is not None:
         source = torch.minimum(source, clamp)
     fraction = threshold_fraction(source, threshold, knee)
-    bright = source * fraction
-    if source is not means:
-        fraction = fraction * _source_share(source, means)
+    share = None if source is means else _source_share(source, means)
     if not fade_fireflies:
-        return bright, fraction
-    weight = 1.0 / (1.0 + luminance(bright).clamp_min(0.0))
+        return source * fraction, fraction if share is None else fraction * share
+    # The thresholded light c = fraction · source is not made: its luminance is fraction · Y(source) (fraction >= 0),
+    # and the faded light's sum takes fraction · w' · source, the product of two planes then one frame.
+    weight = 1.0 / (1.0 + (luminance(source) * fraction).clamp_min(0.0))
     total_weight = cross_sum(weight)
     reach = cross_sum(1.0 / total_weight)
     capped = torch.minimum(weight, 1.0 / reach)
-    faded = cross_sum(bright * capped) / total_weight
-    return faded, fraction * capped * reach
+    faded = cross_sum(source * (fraction * capped)) / total_weight
+    taken = fraction * capped * reach
+    return faded, taken if share is None else taken * share

@@ -12,14 +12,8 @@ from ..base.params import Param, check_choice, check_range, is_plain_number, sca
 from ..base.controls import Control
 from ..color import luminance
 from ..runtime import constant
-from .metering import (
-    HISTOGRAM_RANGE,
-    METERING_MASKS,
-    METERING_MODES,
-    meter_histogram,
-    meter_sanitized,
-    metering_weights,
-)
+from .metering import (HISTOGRAM_BLOCK, HISTOGRAM_RANGE, METERING_MASKS, METERING_MODES, meter_histogram, meter_sanitized,
+                       metering_weights)
 
 __all__ = ["CONTROLS", "MIN_LUMINANCE", "MAX_ADAPTED", "OPERATORS", "STOPS_RANGE", "adapt_luminance", "auto_exposure", "check_bounds",
            "check_step", "checked_control", "compensation_at", "exposed_frame", "exposure_key", "exposure_operator", "metered_luminance"]
@@ -58,6 +52,7 @@ CONTROLS = {
     "metering_mask": Control("average", kind="value"),
     "low_percent": Control(40.0, (0.0, 100.0)),
     "high_percent": Control(90.0, (0.0, 100.0)),
+    "histogram_block": Control(HISTOGRAM_BLOCK, (1, 16)),  # 16x16 blocks at most
     "min_ev": Control(None, STOPS_RANGE),
     "max_ev": Control(None, STOPS_RANGE),
     "compensation": Control(0.0, STOPS_RANGE),
@@ -166,6 +161,8 @@ def checked_control(name: str, value):
         return check_compensation_curve(value)
     value = _from_list(value)
     control = CONTROLS[name]
+    if control.kind == "int":
+        return control.check(name, value)
     if control.kind == "choice":
         check_choice(name, value, control.range)
     elif value is not None:
@@ -269,6 +266,7 @@ def auto_exposure(
     metering_mask="average",
     low_percent: Param = 40.0,
     high_percent: Param = 90.0,
+    histogram_block: int = HISTOGRAM_BLOCK,
     min_ev: Optional[Param] = None,
     max_ev: Optional[Param] = None,
     compensation: Param = 0.0,
@@ -282,7 +280,8 @@ def auto_exposure(
     until calibrated; for a frame in cd/m², EV100 = ``log2(L * 100 / 12.5)``, HDRP's and Unreal's K = 12.5).
 
     1. ``metered = meter_luminance(image, metering, metering_mask, ...)`` (``"histogram"`` averages the
-       ``[low_percent, high_percent]`` band of the histogram over ±8 stops, or the limits where wider),
+       ``[low_percent, high_percent]`` band of the histogram over ±8 stops, or the limits where wider, counted a
+       value for each square of ``histogram_block`` pixels a side, the mean of its stops; 1 counts every pixel),
        bounded to ``[min_ev, max_ev]`` stops (HDRP's Limit Min/Max, Unreal's Min/Max EV100) and to
        ``[min_luminance, max_adapted]``;
     2. ``new = adapt_luminance(adapted, metered, dt, speed, ...)``, bounded the same way; where ``adapted``
@@ -315,7 +314,8 @@ def auto_exposure(
     controls = dict(
         middle_grey=middle_grey, max_luminance=max_luminance, speed=speed, metering=metering, operator=operator,
         speed_to_light=speed_to_light, speed_to_dark=speed_to_dark, min_luminance=min_luminance, max_adapted=max_adapted,
-        metering_mask=metering_mask, low_percent=low_percent, high_percent=high_percent, min_ev=min_ev, max_ev=max_ev,
+        metering_mask=metering_mask, low_percent=low_percent, high_percent=high_percent, histogram_block=histogram_block,
+        min_ev=min_ev, max_ev=max_ev,
         compensation=compensation, compensation_curve=compensation_curve, fixed_exposure=fixed_exposure,
     )
     _check_given(controls, dt)
@@ -356,8 +356,8 @@ def check_step(dt) -> None:
         raise ValueError(f"dt must lie in [0.0, {HALF_MAX}], got {dt!r}")
 
 
-NOT_NUMBERS = ("metering", "operator", "metering_mask", "compensation_curve")
-"""The controls that are not numbers a frame broadcasts: choices, the mask and the curve."""
+NOT_NUMBERS = ("metering", "operator", "metering_mask", "histogram_block", "compensation_curve")
+"""The controls that are not numbers a frame broadcasts: choices, the mask, the histogram's block and the curve."""
 
 
 def exposed_frame(image: torch.Tensor, adapted: Optional[torch.Tensor], dt: Param, *, nan_free: bool = False,
@@ -391,15 +391,14 @@ def exposure_key(adapted: torch.Tensor, c: dict, curve) -> torch.Tensor:
 def metered_luminance(scene: torch.Tensor, c: dict, controls: dict) -> torch.Tensor:
     """The sanitized frame's metered luminance, ``(..., 1, 1, 1)``, bounded by the limits (``c``: the number
     controls as :func:`~torchgrade.base.params.scalar_param` tensors; ``controls``: all of them as given)."""
-    weights = metering_weights(controls["metering_mask"], scene)
     if controls["metering"] == "histogram":
         low, high = histogram_range(c["min_ev"], c["max_ev"])
         # the percents and middle grey as given where they are plain numbers: arithmetic on them launches nothing
         low_percent, high_percent, grey = (controls[name] if is_plain_number(controls[name]) else c[name]
                                            for name in ("low_percent", "high_percent", "middle_grey"))
-        metered = meter_histogram(scene, weights, low, high, low_percent, high_percent, grey)
+        metered = meter_histogram(scene, controls["metering_mask"], low, high, low_percent, high_percent, grey, controls["histogram_block"])
     else:
-        metered = meter_sanitized(scene, controls["metering"], weights)
+        metered = meter_sanitized(scene, controls["metering"], metering_weights(controls["metering_mask"], scene))
     return _limited(metered.reshape(scene.shape[:-3] + (1, 1, 1)), c)
 
 

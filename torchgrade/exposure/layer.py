@@ -41,7 +41,8 @@ class AutoExposure(Stage):
     on one key interleave into one adaptation (use a key each, or :meth:`frame`).
 
     Metering (:func:`auto_exposure`): ``metering`` ``"log"`` (default), ``"mean"`` or ``"histogram"`` (the
-    ``[low_percent, high_percent]`` band, HDRP's default 40-90 %), weighted by ``metering_mask`` (``"average"``,
+    ``[low_percent, high_percent]`` band, HDRP's default 40-90 %, counted a value for each square of ``histogram_block``
+    pixels, 2 by default, 1 for every pixel), weighted by ``metering_mask`` (``"average"``,
     ``"center"``, ``"spot"`` or a 2-D tensor of weights); limits ``min_ev``/``max_ev`` and ``compensation`` in
     stops around middle grey; a ``compensation_curve`` of the metered stops; ``fixed_exposure`` (stops) meters
     nothing.

@@ -22,7 +22,8 @@ from ..color import luminance
 from ..runtime import constant, device_cached
 
 __all__ = ["METERING_MODES", "METERING_MASKS", "METERING_SIZE", "LOG_DELTA", "HISTOGRAM_TABLES", "HISTOGRAM_BINS", "HISTOGRAM_RANGE",
-           "SPOT_RADIUS", "area_resize", "halving_average", "meter_luminance", "metering_weights", "histogram_band_average"]
+           "HISTOGRAM_BLOCK", "SPOT_RADIUS", "area_resize", "halving_average", "meter_luminance", "metering_weights",
+           "histogram_band_average", "block_stops"]
 
 METERING_SIZE = 64
 """Side of the square grid the frame is resampled to before the 2x2 averaging (a power of two)."""
@@ -49,6 +50,15 @@ HISTOGRAM_BINS = 128
 
 HISTOGRAM_RANGE = (-8.0, 8.0)
 """Stops around middle grey the histogram spans when no limits are set: Bevy's default 16-stop range."""
+
+HISTOGRAM_BLOCK = 2
+"""Side of the square blocks of pixels the histogram counts, one value a block (a quarter of the pixels), as the engines
+meter a reduced frame. A block's value is the area mean of its pixels' stops (each clamped to the histogram's range
+first), the log-average of its luminance: averaging the luminance itself (a box filter of the frame) blends a block's
+darks into its lights and moves the band the histogram averages (Desk 0.12 stops at 2x2 blocks, centre-weighted),
+where the stops' mean keeps the metering of the five sample photographs within 0.05 stops of counting every pixel
+with every mask (``tests/exposure/test_exposure_metering.py``; the figures in ``docs/exposure.md``). 1 counts every
+pixel; larger blocks count fewer and move it further (4x4 blocks moved the spot metering of Garden 0.096 stops)."""
 
 SPOT_RADIUS = 0.075
 """HDRP's spot metering radius, as a fraction of half the frame's width plus height."""
@@ -165,6 +175,42 @@ def _counted(bins: torch.Tensor, width: int, *amounts: torch.Tensor) -> tuple:
     return tuple(c.reshape(batch, tables, HISTOGRAM_BINS).sum(dim=1) for c in counted)
 
 
+def block_stops(stops: torch.Tensor, low, high, block: int) -> tuple:
+    """``stops`` (``(B, 1, H, W)``) clamped to ``[low, high]`` and averaged over squares of ``block`` pixels a side:
+    ``(means, shares)``, the means ``(B, 1, ceil(H / block), ceil(W / block))`` and each block's share of a whole
+    block's pixels ``(ceil(H / block), ceil(W / block))`` (below 1 only for the blocks cut by the frame's right and
+    bottom edges, whose means are of their own pixels), ``None`` at ``block == 1``. Weighted by their shares, the means
+    average to the frame's mean: every pixel counts once.
+
+    Examples:
+        >>> means, shares = block_stops(torch.arange(6.0).expand(1, 1, 4, 6), -8.0, 8.0, 4)  # four rows of 0 .. 5
+        >>> means.flatten().tolist(), shares.flatten().tolist()  # the second block holds two pixels
+        ([1.5, 4.5], [1.0, 0.5])
+    """
+    stops = _clamped(stops, low, high)
+    if block == 1:
+        return stops, None
+    means = F.avg_pool2d(stops, block, ceil_mode=True)
+    return means, _block_shares(stops.shape[-2:], means.shape[-2:], block, stops.dtype, stops.device)
+
+
+@device_cached
+def _block_shares(sides, blocks, block: int, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
+    """The share of a whole block's ``block²`` pixels that each of the ``blocks`` (rows, columns) of a frame of ``sides``
+    holds (:func:`block_stops`)."""
+    rows, columns = ((side - block * torch.arange(count, dtype=dtype, device=device)).clamp(max=block) / block
+                     for side, count in zip(sides, blocks))
+    return rows[:, None] * columns
+
+
+def _clamped(values: torch.Tensor, low, high) -> torch.Tensor:
+    """``values`` clamped to ``[low, high]``: numbers, or tensors that broadcast against ``values``."""
+    # torch.clamp takes two numbers or two tensors: a tensor limit with a number beside it takes two passes
+    if isinstance(low, torch.Tensor) == isinstance(high, torch.Tensor):
+        return values.clamp(low, high)
+    return values.clamp(min=low).clamp(max=high)
+
+
 def histogram_band_average(stops: torch.Tensor, weights: Optional[torch.Tensor], low, high, low_percent, high_percent) -> torch.Tensor:
     """Average of the pixels of ``stops`` (``(B, 1, H, W)``) whose rank lies in ``[low_percent, high_percent]`` %, ``(B,)``.
 
@@ -184,10 +230,7 @@ def histogram_band_average(stops: torch.Tensor, weights: Optional[torch.Tensor],
     """
     batch = stops.shape[0]
     low, high, low_percent, high_percent = (_per_row(v) for v in (low, high, low_percent, high_percent))
-    values = stops.reshape(batch, -1)
-    # torch.clamp takes two numbers or two tensors: a tensor limit with a number beside it takes two passes
-    same = isinstance(low, torch.Tensor) == isinstance(high, torch.Tensor)
-    values = values.clamp(low, high) if same else values.clamp(min=low).clamp(max=high)
+    values = _clamped(stops.reshape(batch, -1), low, high)
     # values - low >= 0, so the cast's truncation is the floor
     bins = ((values - low) * (HISTOGRAM_BINS / (high - low))).clamp_max_(HISTOGRAM_BINS - 1).long()
     weight = constant(1.0, values).expand_as(values) if weights is None else weights.reshape(1, -1).expand(batch, -1)
@@ -200,7 +243,7 @@ def histogram_band_average(stops: torch.Tensor, weights: Optional[torch.Tensor],
 
 
 def meter_luminance(image: torch.Tensor, metering: str = "log", mask="average", stop_range=HISTOGRAM_RANGE,
-                    percents=(40.0, 90.0), middle_grey=0.18) -> torch.Tensor:
+                    percents=(40.0, 90.0), middle_grey=0.18, block: int = HISTOGRAM_BLOCK) -> torch.Tensor:
     """Scene luminance of each image of ``(..., 3, H, W)``, shaped ``image.shape[:-3]``.
 
     The Rec.709 luminance ``L`` (negative values clipped to 0, non-finite pixels sanitized), averaged with the
@@ -212,7 +255,9 @@ def meter_luminance(image: torch.Tensor, metering: str = "log", mask="average", 
       is subtracted again, so a uniform frame meters exactly its luminance. The source document's resampling to
       a 64x64 grid (:func:`area_resize`) and 2x2 averaging (:func:`halving_average`) give this same mean;
     * ``"histogram"``: ``middle_grey * 2^s`` with ``s`` the average of the ``percents`` band of the histogram of
-      ``log2(L / middle_grey)`` over ``stop_range`` stops (:func:`histogram_band_average`; defaults HDRP's 40-90 %).
+      ``log2(L / middle_grey)`` over ``stop_range`` stops (:func:`histogram_band_average`; defaults HDRP's 40-90 %),
+      counted a value for each square of ``block`` pixels a side, the mean of its pixels' stops (:func:`block_stops`,
+      :data:`HISTOGRAM_BLOCK`; 1 counts every pixel), the mask taken at the blocks.
 
     Examples:
         >>> [round(v, 4) for v in meter_luminance(torch.full((2, 3, 8, 8), 0.5), 'mean').tolist()]
@@ -225,7 +270,7 @@ def meter_luminance(image: torch.Tensor, metering: str = "log", mask="average", 
     scene = sanitize(image)
     if metering != "histogram":
         return meter_sanitized(scene, metering, metering_weights(mask, scene))
-    return meter_histogram(scene, metering_weights(mask, scene), *stop_range, *percents, middle_grey)
+    return meter_histogram(scene, mask, *stop_range, *percents, middle_grey, block)
 
 
 def meter_sanitized(scene: torch.Tensor, metering: str, weights: Optional[torch.Tensor] = None) -> torch.Tensor:
@@ -245,17 +290,23 @@ def meter_sanitized(scene: torch.Tensor, metering: str, weights: Optional[torch.
     return average
 
 
-def meter_histogram(scene: torch.Tensor, weights: Optional[torch.Tensor], low, high, low_percent, high_percent, middle_grey) -> torch.Tensor:
+def meter_histogram(scene: torch.Tensor, mask, low, high, low_percent, high_percent, middle_grey,
+                    block: int = HISTOGRAM_BLOCK) -> torch.Tensor:
     """:func:`meter_luminance` ``"histogram"`` of a sanitized ``(..., 3, H, W)`` frame, shaped ``scene.shape[:-3]``:
     ``middle_grey * 2^s``, ``s`` the :func:`histogram_band_average` of ``log2(L / middle_grey)`` over ``[low, high]``
-    stops. ``middle_grey`` is a number, 0-d or ``(B, 1, 1, 1)``.
+    stops, counted a value a ``block`` (:func:`block_stops`) weighted by ``mask`` (:func:`metering_weights`) at the
+    blocks. ``middle_grey`` is a number, 0-d or ``(B, 1, 1, 1)``.
 
     Examples:
-        >>> round(meter_histogram(torch.full((1, 3, 4, 4), 0.09), None, -8.0, 8.0, 40.0, 90.0, 0.18).item(), 4)
+        >>> round(meter_histogram(torch.full((1, 3, 4, 4), 0.09), "average", -8.0, 8.0, 40.0, 90.0, 0.18).item(), 4)
         0.09
     """
     # clamped to the smallest normal number, not 0: black is -126 stops (clamped to the range), with a finite gradient
     lum = luminance(scene).clamp_min(torch.finfo(scene.dtype).tiny).reshape(-1, 1, *scene.shape[-2:])
     stops = torch.log2(lum) - (torch.log2(middle_grey) if isinstance(middle_grey, torch.Tensor) else math.log2(middle_grey))
-    average = histogram_band_average(stops, weights, low, high, low_percent, high_percent)
+    means, shares = block_stops(stops, low, high, block)
+    weights = metering_weights(mask, means)
+    if shares is not None:
+        weights = shares if weights is None else weights * shares
+    average = histogram_band_average(means, weights, low, high, low_percent, high_percent)
     return (middle_grey * torch.exp2(average.reshape(-1, 1, 1, 1))).reshape(scene.shape[:-3])

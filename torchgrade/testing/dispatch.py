@@ -9,16 +9,18 @@ elementwise pass. PyTorch's CUDA elementwise kernels are vectorised only where e
 the result's size (a 0-d CPU operand is passed as an argument): an operand broadcast to the frame (a 0-d or per-channel
 tensor on the device) or strided takes the unvectorised loop, counted as ``unvectorised``. An elementwise kernel on a frame runs at the memory's
 speed, so the bytes its operands and result hold (read and written once) predict its time: counted in *frame
-passes*, the bytes over those of one copy of the frame (read and written). On the ``meta`` device (shapes, no data)
-all of this is counted without computing anything.
+passes*, the bytes over those of one copy of the frame (read and written). On a CPU, where a fused chain is not the
+eager form, what matters is what goes to memory and comes back: the results of a plane of the frame or more (*frames
+written*: full-frame passes and temporaries, in frames). On the ``meta`` device (shapes, no data) all of this is
+counted without computing anything.
 
 Examples:
     >>> import torch
     >>> image = torch.empty(1, 3, 8, 8, device="meta")
     >>> with DispatchCount(frame=image) as counted:
     ...     _ = (image * 2).clamp_(0, 1)
-    >>> counted.launches, counted.frame_passes
-    (2, 2.0)
+    >>> counted.launches, counted.frame_passes, counted.frames_written
+    (2, 2.0, 2.0)
 """
 
 from __future__ import annotations
@@ -66,11 +68,15 @@ class DispatchCount(TorchDispatchMode):
         unvectorised: elementwise launches of :data:`UNVECTORISED_FROM` elements or more with an operand on the device
             broadcast to the result or strided: CUDA's unvectorised loop.
         by_operation: ``Counter`` of launches per operation name.
+        frame_writes: ``Counter`` of the launches per operation name whose result holds a plane of ``frame`` or more.
     """
 
     def __init__(self, frame: Optional[torch.Tensor] = None):
         super().__init__()
         self.frame_bytes = 2 * frame.numel() * frame.element_size() if frame is not None else None
+        self.plane = frame.numel() // frame.shape[-3] if frame is not None else None  # a channel of every image
+        self.written: list[int] = []  # bytes of each launch's results of a plane or more
+        self.frame_writes: collections.Counter[str] = collections.Counter()
         self.moved: list[int] = []  # bytes each copy moved
         self.reads: collections.Counter[str] = collections.Counter()
         self.host_data: collections.Counter[str] = collections.Counter()
@@ -89,6 +95,12 @@ class DispatchCount(TorchDispatchMode):
         if self.frame_bytes is None:
             raise ValueError("frame_passes needs the frame: DispatchCount(frame=image)")
         return sum(self.moved) / self.frame_bytes
+
+    @property
+    def frames_written(self) -> float:
+        """The bytes of the results of a plane of the frame or more, over those of the frame: the full-frame passes and
+        temporaries a forward writes (a plane a third of a frame)."""
+        return 2 * sum(self.written) / self.frame_bytes
 
     def __torch_dispatch__(self, func, types, args=(), kwargs=None):
         kwargs = kwargs or {}
@@ -114,6 +126,10 @@ class DispatchCount(TorchDispatchMode):
             self.unvectorised += torch.Tag.pointwise in func.tags and _unvectorised(tensors)
             self.moved.append(sum(t.numel() * t.element_size() for t in tensors))
             self.by_operation[name] += 1
+            large = [t for t in tree_flatten(out)[0] if isinstance(t, torch.Tensor) and self.plane and t.numel() >= self.plane]
+            if large:
+                self.written.append(sum(t.numel() * t.element_size() for t in large))
+                self.frame_writes[name] += 1
         return out
 
 
