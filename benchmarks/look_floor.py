@@ -70,8 +70,8 @@ STAGES = {"exposure": "exposure stage (histogram, centre mask)", "bloom": "bloom
           "tonemap": "ACES tone map"}
 """The look's stages timed alone, by slot, each on the frame it gets in the look."""
 PHOTOGRAPHS = ("Desk", "CandleGlass", "GoldenGate", "Garden", "Carrots")
-METERING_BLOCKS = (tg.exposure.metering.HISTOGRAM_BLOCK, 4)
-"""The histogram's blocks whose effect on the metering is measured: the default, and 4x4."""
+METERING_BLOCKS = (2, 4)
+"""The histogram's blocks whose effect on the metering is measured: 2x2 (a quarter of the values), and 4x4."""
 
 
 def stage_inputs(look: tg.PostFX, scene: torch.Tensor) -> dict:

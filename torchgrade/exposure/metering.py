@@ -51,9 +51,11 @@ HISTOGRAM_BINS = 128
 HISTOGRAM_RANGE = (-8.0, 8.0)
 """Stops around middle grey the histogram spans when no limits are set: Bevy's default 16-stop range."""
 
-HISTOGRAM_BLOCK = 2
-"""Side of the square blocks of pixels the histogram counts, one value a block (a quarter of the pixels), as the engines
-meter a reduced frame. A block's value is the area mean of its pixels' stops (each clamped to the histogram's range
+HISTOGRAM_BLOCK = 1
+"""Side of the square blocks of pixels the histogram counts, one value a block: by default 1, every pixel. 2 counts a
+quarter of the values, as the engines meter a reduced frame, but its blocks start at the frame's top left corner, so
+at an odd side the edge that cuts them is the right or bottom one, and a flipped or turned frame meters other blocks
+(``tests/library/test_whole_frames.py`` holds the default to turned frames). A block's value is the area mean of its pixels' stops (each clamped to the histogram's range
 first), the log-average of its luminance: averaging the luminance itself (a box filter of the frame) blends a block's
 darks into its lights and moves the band the histogram averages (Desk 0.12 stops at 2x2 blocks, centre-weighted),
 where the stops' mean keeps the metering of the five sample photographs within 0.05 stops of counting every pixel
