@@ -181,18 +181,18 @@ def block_stops(stops: torch.Tensor, low, high, block: int) -> tuple:
     """``stops`` (``(B, 1, H, W)``) clamped to ``[low, high]`` and averaged over squares of ``block`` pixels a side:
     ``(means, shares)``, the means ``(B, 1, ceil(H / block), ceil(W / block))`` and each block's share of a whole
     block's pixels ``(ceil(H / block), ceil(W / block))`` (below 1 only for the blocks cut by the frame's right and
-    bottom edges, whose means are of their own pixels), ``None`` at ``block == 1``. Weighted by their shares, the means
-    average to the frame's mean: every pixel counts once.
+    bottom edges, whose means are of their own pixels); at ``block == 1``, ``stops`` as they are and ``None`` (the band
+    average clamps the values it counts). Weighted by their shares, the means average to the frame's mean: every pixel
+    counts once.
 
     Examples:
         >>> means, shares = block_stops(torch.arange(6.0).expand(1, 1, 4, 6), -8.0, 8.0, 4)  # four rows of 0 .. 5
         >>> means.flatten().tolist(), shares.flatten().tolist()  # the second block holds two pixels
         ([1.5, 4.5], [1.0, 0.5])
     """
-    stops = _clamped(stops, low, high)
     if block == 1:
         return stops, None
-    means = F.avg_pool2d(stops, block, ceil_mode=True)
+    means = F.avg_pool2d(_clamped(stops, low, high), block, ceil_mode=True)
     return means, _block_shares(stops.shape[-2:], means.shape[-2:], block, stops.dtype, stops.device)
 
 
