@@ -159,8 +159,10 @@ SLOW_SHOT = """
 import sys, time
 from torchgrade.shots import frames
 graded = frames.render_frame
-def slowly(*args, **kwargs):  # each frame a while, so that a signal lands mid-shot
-    time.sleep(0.2)
+begun = []
+def slowly(*args, **kwargs):  # every frame after the first seconds long, so that a signal lands mid-shot on a busy machine
+    begun.append(None)
+    time.sleep(0.2 if len(begun) == 1 else 3.0)
     return graded(*args, **kwargs)
 frames.render_frame = slowly
 from torchgrade.cli import main
