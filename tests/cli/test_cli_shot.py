@@ -180,7 +180,8 @@ def start_shot(tmp_path, count: int, *flags) -> tuple:
     (tmp_path / "out").mkdir()
     command = [sys.executable, "-c", SLOW_SHOT, "grade", str(folder), "-o", str(tmp_path / "out" / "g.%04d.exr"),
                "--scene-referred", "--contrast", "10", "--quiet", *flags]
-    child = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    child = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,  # as a terminal starts it:
+                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # a background job ignores SIGINT
     deadline = time.monotonic() + 900  # a guard against a child that never starts, not a measure: a busy machine's
     while not list((tmp_path / "out").glob("g.*.exr")) and child.poll() is None and time.monotonic() < deadline:
         time.sleep(0.01)  # first import of torch in a fresh environment has taken minutes
