@@ -136,11 +136,40 @@ def test_a_batch_equal_to_a_side_of_the_first_frame_is_tied_to_it(side, compiles
     """The cost of ``dynamic=True`` that ``docs/gpu.md`` states: PyTorch ties sizes equal at the first frame (duck
     sizing), so a batch of 16 on 16x16 frames compiles again for a batch of 15; on 24x24 frames it does not."""
     _counted(monkeypatch, "eager")
-    compiled = tg.compile(tg.ToneMap("reinhard"))
+    compiled = tg.compile(tg.ToneMap("reinhard"), dynamic=True)
     with caplog.at_level("INFO", logger="torchgrade.compile"), torch.no_grad():
         for batch in (16, 15):
             compiled(torch.rand(batch, 3, side, side))
     assert len(_started(caplog)) == compiles
+
+
+@pytest.mark.parametrize("side", [16, 24])
+def test_the_batch_alone_is_symbolic_by_default(side, monkeypatch, caplog):
+    """By default the batch is symbolic and the sides fixed: a batch of 15 after 16 runs the first graph whatever the
+    sides (no duck sizing ties them), and a frame of new sides compiles once more."""
+    _counted(monkeypatch, "eager")
+    compiled = tg.compile(tg.ToneMap("reinhard"))
+    with caplog.at_level("INFO", logger="torchgrade.compile"), torch.no_grad():
+        for batch, height in ((16, side), (15, side), (8, side), (8, side + 1)):
+            compiled(torch.rand(batch, 3, height, side))
+    assert [re.search(r"\((\d+), 3, (\d+), (\d+)\)", message).groups() for message in _started(caplog)] == [
+        ("16", str(side), str(side)), ("8", str(side + 1), str(side))]
+
+
+def test_a_stage_state_of_the_batch_shape_is_symbolic_with_the_batch(monkeypatch, caplog):
+    """An exposure stage's state has the batch's shape (``batch_state``): sequences of batches 4, 3 and 2 run one
+    graph, their second frames (which read the state the first wrote) included, and give what the stage gives."""
+    counter = _counted(monkeypatch, "eager")
+    stage, eager = tg.AutoExposure(speed=2.0), tg.AutoExposure(speed=2.0)
+    compiled = tg.compile(stage)
+    with caplog.at_level("INFO", logger="torchgrade.compile"), torch.no_grad():
+        for batch in (4, 3, 2):
+            for frame in range(2):
+                image = torch.rand(batch, 3, 8, 8, generator=torch.Generator().manual_seed(batch + frame)) * 4
+                torch.testing.assert_close(compiled(image, dt=1 / 24), eager(image, dt=1 / 24))
+            stage.reset()
+            eager.reset()
+    assert len(_started(caplog)) == 1 and counter.frame_count == 1
 
 
 def test_compiling_a_look_of_sequence_controls_warns_of_no_cache(recwarn):

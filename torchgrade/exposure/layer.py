@@ -73,6 +73,8 @@ class AutoExposure(Stage):
     always_in_config = tuple(controls)
 
     adapted_luminance: torch.Tensor
+    batch_state = ("adapted_luminance",)
+    """The buffers of the batch's shape, which :func:`torchgrade.compile` makes symbolic with the frame's batch."""
 
     POSITIONAL = ("middle_grey", "max_luminance", "speed", "metering")
     """The controls that may be given in order, before the others by name (defaults: :data:`CONTROLS`)."""

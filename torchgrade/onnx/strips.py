@@ -35,7 +35,7 @@ __all__ = ["DOMAIN", "SCAN_STRIP_PIXELS", "mark", "scan_strips"]
 
 SCAN_STRIP_PIXELS = 1 << 17
 """Pixels per strip of the ``Scan`` (batch included): eager PyTorch's strip on two threads
-(:data:`~torchgrade.runtime.STRIP_PIXELS_PER_THREAD` each), the size ``benchmarks/bench_onnx.py`` measured the
+(:data:`~torchgrade.runtime.policy.STRIP_PIXELS_PER_THREAD` each), the size ``benchmarks/bench_onnx.py`` measured the
 exported look's strips at."""
 
 DOMAIN = "torchgrade"

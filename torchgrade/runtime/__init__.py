@@ -9,11 +9,11 @@ Examples:
 """
 
 from .checks import DeferredCheck
-from .compile import COMPILE_SECONDS, CPU_OPTIONS, compile, compile_mode
+from .compile import compile, compile_mode
 from .constants import affine, constant, device_cached, folded, scalar, values_of, where
 from .recording import is_exporting, is_tracing, untracked
-from .policy import STRIP_PIXELS_PER_THREAD, ExecutionPolicy, policy_for
+from .policy import ExecutionPolicy, policy_for
 from .strips import in_strips, pixelwise
 
-__all__ = ["ExecutionPolicy", "policy_for", "STRIP_PIXELS_PER_THREAD", "in_strips", "pixelwise", "constant", "scalar", "where", "affine", "values_of", "device_cached", "folded",
-           "compile", "compile_mode", "CPU_OPTIONS", "COMPILE_SECONDS", "DeferredCheck", "is_tracing", "is_exporting", "untracked"]
+__all__ = ["ExecutionPolicy", "policy_for", "in_strips", "pixelwise", "constant", "scalar", "where", "affine", "values_of", "device_cached", "folded",
+           "compile", "compile_mode", "DeferredCheck", "is_tracing", "is_exporting", "untracked"]

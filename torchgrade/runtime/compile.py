@@ -9,16 +9,19 @@ device of the frames it gets, and says when it compiles.
 * **Other devices**: Inductor's default mode.
 
 ``fullgraph=True`` always: a look is one graph, so a graph break is an error here rather than a silent slowdown.
-Sizes are symbolic from the first frame (``dynamic=True``, PyTorch's public way to ask for it): the batch, so that the
-last, smaller batch of an epoch runs the graph the first batch compiled, and the frame's sides (a batch of 1 and a side
-of 1, which PyTorch specialises, compile their own). Two costs come with it. PyTorch ties sizes that are equal at the
-first frame (its duck sizing): a batch of 16 on 16x16 frames ties the batch to the sides, and a batch of another size
-then compiles once more. And Dynamo traces a module twice where AOTAutograd runs (Inductor, training): ``dynamic=True``
-makes the module's float constants inputs, and the first pass restarts the trace to fix them. Marking the batch alone
-dynamic (``torch._dynamo.maybe_mark_dynamic``, used before) avoids both but is not public API. ``dynamic=None`` is
-PyTorch's default (the first size fixed, the first new size compiled once more with the changed sizes symbolic);
-``dynamic=False`` compiles every size as it comes, and the ninth size stops with ``FailOnRecompileLimitHit`` (Dynamo's
-``recompile_limit`` is 8 and ``fullgraph=True`` makes hitting it an error).
+The batch is symbolic from the first frame, the frame's sides fixed (``dynamic="batch"``, the default): the last,
+smaller batch of an epoch runs the graph the first batch compiled (a batch of 1, which PyTorch specialises, compiles its
+own). It is asked through PyTorch's public ``torch.compiler.config.dynamic_sources`` (:func:`batch_sources`: the first
+dimension of every tensor the module's forward is handed and of the state a stage declares batch-sized, none of the
+module's parameters and other buffers) while a call may compile. A frame of new sides compiles once more, and PyTorch then makes the sizes that changed symbolic.
+``dynamic=True`` makes every size symbolic from the first frame; its index arithmetic is what Inductor spends a compile
+on: a bloom's pyramid of symbolic sides compiled in 326 s on a 64x96 frame where its sides fixed took 28 s (the
+cinematic look's bloom stage, 2 CPU threads), and at 1080p the whole look did not finish in 15 minutes. PyTorch also
+ties sizes equal at the first frame (its duck sizing: a batch of 16 on 16x16 frames ties the batch to the sides) and
+traces twice where AOTAutograd runs (the module's float constants become inputs). ``dynamic=None`` is PyTorch's default
+(the first size fixed; at the first new size one graph with the changed sizes symbolic); ``dynamic=False`` compiles
+every size as it comes, and the ninth size stops with ``FailOnRecompileLimitHit`` (Dynamo's ``recompile_limit`` is 8
+and ``fullgraph=True`` makes hitting it an error).
 
 **A compile says so.** Compiling takes time (:data:`COMPILE_SECONDS`), paid at the first frame of each kind (shape,
 gradients, autocast), and a run that waits on it should not look like a hang: the wrapper writes a line on stderr
@@ -61,12 +64,12 @@ import contextlib
 import logging
 import threading
 import time
-from typing import Optional
+from typing import Union
 
 import torch
 from torch import nn
 
-__all__ = ["compile", "compile_mode", "CompiledModule", "CPU_OPTIONS", "COMPILE_SECONDS", "LOG"]
+__all__ = ["compile", "compile_mode", "CompiledModule", "CPU_OPTIONS", "COMPILE_SECONDS", "FRAME_SOURCES", "batch_sources", "LOG"]
 
 LOG = logging.getLogger("torchgrade.compile")
 """Where a :func:`compile`'d module says that a compile starts, why and what it usually costs, and how long it took
@@ -101,6 +104,29 @@ COMPILE_SECONDS = {("PostFX", False): (46.6, 7.0), ("PostFX", True): (93.4, 8.6)
 and with the cache of an earlier process, measured on 2 CPU threads (``benchmarks/results/compile.md``: the cinematic
 look on 1x3x1080x1920 and in training on 16x3x128x128, ``RandomPostFX`` on 64x3x224x224 and in training on
 16x3x128x128). A compile announces its module's figure, a whole look's for other modules."""
+
+
+FRAME_SOURCES = r"L\['[^']+'\](\[[^\]]+\])?$:0"
+"""The first dimension of every tensor a compiled forward gets by argument, as ``torch.compiler.config.dynamic_sources``
+reads it: a local (``L['image']``) or an item of one (``L['args'][0]``, a drawn look's ``L['params']['hue_shift']``),
+and nothing reached through an attribute (``L['self']._modules['grade'].contrast``, the module's controls, parameters
+and buffers, which an entry that matched them would make symbolic too)."""
+
+
+def batch_sources(module: nn.Module) -> str:
+    """What ``dynamic="batch"`` makes symbolic in ``module``'s graph, as ``torch.compiler.config.dynamic_sources``
+    reads it: :data:`FRAME_SOURCES`, and the first dimension of each buffer a stage of ``module`` names in its
+    ``batch_state`` (state of the batch's shape, such as an exposure stage's adapted luminance).
+
+    Examples:
+        >>> import torchgrade as tg
+        >>> batch_sources(tg.ToneMap("aces")) == FRAME_SOURCES
+        True
+        >>> print(batch_sources(tg.AutoExposure()).split(",")[1])
+        .*\\['adapted_luminance'\\]:0
+    """
+    names = dict.fromkeys(name for stage in module.modules() for name in getattr(stage, "batch_state", ()))
+    return ",".join([FRAME_SOURCES, *(rf".*\['{name}'\]:0" for name in names)])
 
 
 _STANCE = threading.Lock()
@@ -148,7 +174,8 @@ class CompiledModule(nn.Module):
     """``module`` compiled per device type at its first frame there (see :func:`compile`); ``module`` is
     :attr:`module`, so its controls, state and ``to_config`` stay reachable."""
 
-    def __init__(self, module: nn.Module, cuda_graphs: bool = True, dynamic: Optional[bool] = True, verbose: bool = True):
+    def __init__(self, module: nn.Module, cuda_graphs: bool = True, dynamic: Union[bool, None, str] = "batch",
+                 verbose: bool = True):
         super().__init__()
         self.module = module
         self.cuda_graphs = cuda_graphs
@@ -163,7 +190,8 @@ class CompiledModule(nn.Module):
         if call is None:
             # torch.compile takes a mode or options: on the CPU, the options of the default mode (CPU_OPTIONS)
             settings = {"options": CPU_OPTIONS} if device.type == "cpu" else {"mode": compile_mode(device, self.cuda_graphs)}
-            call = torch.compile(self.module, fullgraph=True, dynamic=self.dynamic, **settings)
+            dynamic = None if self.dynamic == "batch" else self.dynamic  # the batch: marked while compiling
+            call = torch.compile(self.module, fullgraph=True, dynamic=dynamic, **settings)
             self._compiled[device.type] = call
         return call
 
@@ -191,6 +219,17 @@ class CompiledModule(nn.Module):
         call, kind = self.compiled_for(image.device), _call_kind((image, *args), kwargs)
         if kind in self._ran:
             return call(image, *args, **kwargs)
+        with self._symbolic_sizes():
+            return self._first_call(call, kind, image, args, kwargs)
+
+    def _symbolic_sizes(self):
+        """What a call that may compile runs under: with ``dynamic="batch"``, :func:`batch_sources` symbolic."""
+        if self.dynamic != "batch":
+            return contextlib.nullcontext()
+        return torch.compiler.config.patch(dynamic_sources=batch_sources(self.module))
+
+    def _first_call(self, call, kind: tuple, image: torch.Tensor, args: tuple, kwargs: dict):
+        """The first call of a kind: the graph whose guards hold, or a compile (said so)."""
         with _STANCE, torch.compiler.set_stance("fail_on_recompile"):
             try:
                 out = call(image, *args, **kwargs)
@@ -262,14 +301,17 @@ class CompiledModule(nn.Module):
         return time.perf_counter() - started
 
 
-def compile(module: nn.Module, *, cuda_graphs: bool = True, dynamic: Optional[bool] = True, verbose: bool = True) -> CompiledModule:
+def compile(module: nn.Module, *, cuda_graphs: bool = True, dynamic: Union[bool, None, str] = "batch",
+            verbose: bool = True) -> CompiledModule:
     """``module`` (a stage, a :class:`~torchgrade.PostFX`, a :class:`~torchgrade.RandomPostFX`, a LUT) through
     ``torch.compile`` with one graph and the device's mode (:func:`compile_mode`).
 
-    ``dynamic`` is passed to ``torch.compile``: ``True`` (default) symbolic sizes from the first frame, so that every
-    batch size and frame size (but 1) runs the first graph; ``None`` the first size fixed and, at the first new size,
-    one graph with the changed sizes symbolic; ``False`` one graph per size, at most eight sizes (Dynamo's
-    ``recompile_limit``: the ninth raises ``FailOnRecompileLimitHit``). ``verbose=False`` keeps the compile's lines
+    ``dynamic``: ``"batch"`` (default) the batch symbolic from the first frame and the sides fixed, so that every batch
+    size (but 1) runs the first graph and a frame of new sides compiles once more with its sides symbolic; the rest is
+    passed to ``torch.compile``: ``True`` every size symbolic from the first frame (minutes to compile a look with
+    bloom: see the module's docstring); ``None`` the first size fixed and, at the first new size, one graph with the
+    changed sizes symbolic; ``False`` one graph per size, at most eight sizes (Dynamo's ``recompile_limit``: the ninth
+    raises ``FailOnRecompileLimitHit``). ``verbose=False`` keeps the compile's lines
     (on the ``torchgrade.compile`` logger, :data:`LOG`) to itself.
 
     Examples:
@@ -279,4 +321,6 @@ def compile(module: nn.Module, *, cuda_graphs: bool = True, dynamic: Optional[bo
     """
     if not isinstance(module, nn.Module):
         raise TypeError(f"compile takes an nn.Module, got {type(module).__name__}")
+    if dynamic not in ("batch", True, False, None):
+        raise ValueError(f"dynamic is 'batch', True, False or None, got {dynamic!r}")
     return CompiledModule(module, cuda_graphs=cuda_graphs, dynamic=dynamic, verbose=verbose)

@@ -56,7 +56,7 @@ def in_strips(transform, image: torch.Tensor) -> torch.Tensor:
     """``transform(image)`` for a per-pixel ``transform``, on strips of rows where the device's policy asks.
 
     On the CPU an eager per-pixel stage is dozens of whole-tensor operations, each reading and writing the frame from
-    memory; on strips of :data:`~torchgrade.runtime.STRIP_PIXELS_PER_THREAD` pixels per thread the intermediates stay
+    memory; on strips of :data:`~torchgrade.runtime.policy.STRIP_PIXELS_PER_THREAD` pixels per thread the intermediates stay
     in cache (``benchmarks/results/cpu_forms.md``, "Strips": the whole frame 1.83 times as long). Strips are joined by
     one concatenation, which autograd and ``torch.func`` transforms record like any other operation. The frame is
     processed whole (the same values) on other devices, when it is not larger than a strip, and while tracing,
