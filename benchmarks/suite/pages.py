@@ -4,8 +4,8 @@
 
 A page marks each generated block ``<!-- suite:NAME -->`` … ``<!-- /suite:NAME -->`` (invisible in rendered
 Markdown); :func:`main` rewrites every block of :data:`PAGES` from :data:`COMMITTED` (the full form's results where
-they are committed, else the quick form's, and says which) and from the tables ``bench_match`` and ``lut_footage``
-mark in their results (:data:`MATCH_TABLES`, :data:`LUT_TABLES`), and nothing outside the blocks. ``tests/project/test_suite_results.py`` holds each page to
+they are committed, else the quick form's, and says which) and from the tables ``bench_match``, ``lut_footage`` and
+``look_floor`` mark in their results (:data:`MATCH_TABLES`, :data:`LUT_TABLES`, :data:`FLOOR_TABLES`), and nothing outside the blocks. ``tests/project/test_suite_results.py`` holds each page to
 what :func:`filled` would write, and keeps the suite's figures (``ms/MP``, ``× OCIO``) out of every page but inside
 its blocks; ``tests/project/test_match_results.py`` and ``tests/project/test_lut_footage_results.py`` hold the match
 and LUT report results to the code that wrote them.
@@ -24,7 +24,7 @@ from benchmarks.suite.runtimes import PEER
 from torchgrade.io.atomic import atomic_write
 
 __all__ = ["COMMITTED", "PAGES", "BLOCK", "MATCH", "MATCH_TABLES", "TABLE", "LUT_FOOTAGE", "LUT_TABLES", "committed",
-           "marked_results", "match_committed", "lut_blocks", "blocks", "filled", "stale", "main"]
+           "marked_results", "match_committed", "quoted_blocks", "LOOK_FLOOR", "FLOOR_TABLES", "blocks", "filled", "stale", "main"]
 
 COMMITTED = {"quick": RESULTS / "suite" / "quick", "full": RESULTS / "suite" / "full"}
 """Where each form's committed results live."""
@@ -52,6 +52,10 @@ LUT_FOOTAGE = RESULTS / "lut_footage"
 """Where ``python -m benchmarks lut_footage`` commits its results (``.md`` and ``.json``)."""
 LUT_TABLES = {"lut-footage": "ratios", "lut-frames": "frames"}
 """docs/lut.md's blocks, each quoting a table ``lut_footage`` marks ``<!-- lut:NAME -->`` (accuracy only)."""
+LOOK_FLOOR = RESULTS / "look_floor"
+"""Where ``python -m benchmarks look_floor`` commits its results (``.md`` and ``.json``)."""
+FLOOR_TABLES = {"floor-time": "time"}
+"""docs/performance.md's block quoting the timed table ``look_floor`` marks ``<!-- floor:time -->`` (a quiet run's)."""
 QUICK_OUT = "/tmp/torchgrade-bench"
 """Where the README's quick command writes (not the committed results)."""
 
@@ -167,13 +171,18 @@ def match_blocks() -> dict:
             **{block: match_quick_block(table, results) for block, table in MATCH_TABLES.items()}}
 
 
-def lut_blocks() -> dict:
-    """The body of every block that quotes ``lut_footage``, from its committed results."""
-    if not LUT_FOOTAGE.with_suffix(".json").is_file():
-        raise ValueError(f"no committed {LUT_FOOTAGE.name}.json: run .venv/bin/python -m benchmarks lut_footage --out benchmarks/results")
-    results = marked_results(LUT_FOOTAGE, "lut")
-    source = results_source(LUT_FOOTAGE, results["report"])
-    return {block: f"{source}\n\n{results['tables'][table]}" for block, table in LUT_TABLES.items()}
+def quoted_blocks(stem: Path, kind: str, tables: dict) -> dict:
+    """The body of every block of ``tables`` (``{block: table}``) that quotes a table the committed results at ``stem``
+    mark ``<!-- KIND:TABLE -->``, each with where it comes from."""
+    if not stem.with_suffix(".json").is_file():
+        raise ValueError(f"no committed {stem.name}.json: run .venv/bin/python -m benchmarks {stem.name} --out benchmarks/results")
+    results = marked_results(stem, kind)
+    missing = sorted(set(tables.values()) - set(results["tables"]))
+    if missing:
+        raise ValueError(f"{stem.name}.md marks no table {missing}: run .venv/bin/python -m benchmarks {stem.name} "
+                         "--out benchmarks/results (without --counts) on a quiet machine")
+    source = results_source(stem, results["report"])
+    return {block: f"{source}\n\n{results['tables'][table]}" for block, table in tables.items()}
 
 
 RENDERERS = {"look": look_block, "table": table_block, "advice": advice_block, "reproduce": reproduce_block,
@@ -183,8 +192,9 @@ RENDERERS = {"look": look_block, "table": table_block, "advice": advice_block, "
 
 def blocks(results: dict) -> dict:
     """The body of every block, from the suite's ``results`` (:func:`committed`), ``bench_match``'s
-    (:func:`match_blocks`) and ``lut_footage``'s (:func:`lut_blocks`)."""
-    return {**{name: render(results) for name, render in RENDERERS.items()}, **match_blocks(), **lut_blocks()}
+    (:func:`match_blocks`), ``lut_footage``'s and ``look_floor``'s (:func:`quoted_blocks`)."""
+    return {**{name: render(results) for name, render in RENDERERS.items()}, **match_blocks(),
+            **quoted_blocks(LUT_FOOTAGE, "lut", LUT_TABLES), **quoted_blocks(LOOK_FLOOR, "floor", FLOOR_TABLES)}
 
 
 def filled(text: str, bodies: dict) -> str:

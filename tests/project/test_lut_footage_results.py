@@ -55,7 +55,7 @@ def test_the_docs_quote_the_committed_results():
     """docs/lut.md holds every block that quotes the benchmark, each as ``suite --pages`` writes it."""
     names = {match["name"] for match in pages.BLOCK.finditer(PAGE.read_text(encoding="utf-8"))}
     assert names == set(pages.LUT_TABLES)
-    assert pages.stale(PAGE, pages.lut_blocks()) == [], "run: .venv/bin/python -m benchmarks suite --pages"
+    assert pages.stale(PAGE, pages.quoted_blocks(pages.LUT_FOOTAGE, "lut", pages.LUT_TABLES)) == [], "run: .venv/bin/python -m benchmarks suite --pages"
 
 
 def test_where_the_report_names_size_no_figure_understates_by_more_than_2x_and_only_photographs_are_overstated():
