@@ -34,6 +34,7 @@ import torch
 
 import torchgrade as tg
 from benchmarks.common import EXR_DIR, ROOT, argument_parser, write_results
+from benchmarks.suite.stamp import source_commit
 
 EXAMPLE = ROOT / "examples" / "serving"
 FILES = ("Desk", "CandleGlass", "GoldenGate", "Carrots", "BrightRings", "WideColorGamut")
@@ -105,8 +106,9 @@ class Server:
 def markdown(results: dict) -> list:
     server = results["real_frames"]["server"]
     lines = ["# The serving example under load", "",
-             f"Cinematic look, float32 NHWC in, sRGB 8-bit out; replica memory budget {results['memory_mib']} MiB "
-             f"(idle {results['model']['idle_mib']} MiB); reproduce: `{results['command']}`.", "",
+             f"`{results['command']}` at `{results['commit']}`{' (modified)' if results['modified'] else ''}: the cinematic "
+             f"look, float32 NHWC in, sRGB 8-bit out; replica memory budget {results['memory_mib']} MiB "
+             f"(idle {results['model']['idle_mib']} MiB).", "",
              "| phase | requests | clients | statuses | p50 ms | p99 ms | max ms | trickling answers |",
              "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for phase in ("real_frames", "slow_clients"):
@@ -129,8 +131,8 @@ def main(argv=None) -> None:
     parser.add_argument("--threads", type=int, help="onnxruntime threads per batch (default: one per core)")
     args = parser.parse_args(argv)
     requests, slow_requests = (16, 8) if args.quick else (args.requests, 20)
-    command = "python -m benchmarks serving" + (" --quick" if args.quick else f" --requests {requests}") + \
-        f" --memory-mib {args.memory_mib}" + (f" --threads {args.threads}" if args.threads else "")
+    command = ".venv/bin/python -m benchmarks serving" + (" --quick" if args.quick else f" --requests {requests}") + \
+        f" --memory-mib {args.memory_mib}" + (f" --threads {args.threads}" if args.threads else "") + f" --out {args.out}"
     with tempfile.TemporaryDirectory(prefix="torchgrade-bench-serving-") as folder:
         folder = Path(folder)
         look = tg.PostFX.from_config(ROOT / "export" / "looks" / "cinematic.json").eval()
@@ -144,7 +146,7 @@ def main(argv=None) -> None:
             slow = server.client(["--frames", str(slow_requests), "--concurrency", "1", "--image", str(smallest),
                                   "--slow", str(TRICKLERS)], folder / "slow.json")
             served = _get_json(server.url + "/model")
-        results = {"command": command, "quick": args.quick, "memory_mib": args.memory_mib, "model": served,
+        results = {"command": command, **source_commit(), "quick": args.quick, "memory_mib": args.memory_mib, "model": served,
                    "files": {path.name: path.stat().st_size for path in files}, "real_frames": loaded, "slow_clients": slow}
     write_results(args.out, "serving", results, markdown(results), command)
 
