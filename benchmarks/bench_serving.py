@@ -33,7 +33,7 @@ from pathlib import Path
 import torch
 
 import torchgrade as tg
-from benchmarks.common import EXR_DIR, ROOT, argument_parser, write_results
+from benchmarks.common import EXR_DIR, ROOT, argument_parser, mark_table, write_results
 from benchmarks.suite.stamp import source_commit
 
 EXAMPLE = ROOT / "examples" / "serving"
@@ -103,22 +103,28 @@ class Server:
         return json.loads(out.read_text())
 
 
-def markdown(results: dict) -> list:
-    server = results["real_frames"]["server"]
-    lines = ["# The serving example under load", "",
-             f"`{results['command']}` at `{results['commit']}`{' (modified)' if results['modified'] else ''}: the cinematic "
-             f"look, float32 NHWC in, sRGB 8-bit out; replica memory budget {results['memory_mib']} MiB "
-             f"(idle {results['model']['idle_mib']} MiB).", "",
-             "| phase | requests | clients | statuses | p50 ms | p99 ms | max ms | trickling answers |",
+def load_table(results: dict) -> list:
+    """Each phase's requests, statuses and latencies as the clients saw them, and the replica's peak memory."""
+    lines = ["| phase | requests | clients | statuses | p50 ms | p99 ms | max ms | trickling answers |",
              "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for phase in ("real_frames", "slow_clients"):
         run = results[phase]
         lines.append(f"| {phase.replace('_', ' ')} | {run['requests']} | {run['concurrency']} | {run['statuses']} | "
                      f"{run['latency_ms_p50']} | {run['latency_ms_p99']} | {run['latency_ms_max']} | "
                      f"{run['slow_answers'] or '-'} |")
+    peak = results["real_frames"]["server"]["peak_rss_mib"]
+    return lines + ["", f"Replica peak resident memory {peak} MiB of its {results['memory_mib']} MiB budget."]
+
+
+def markdown(results: dict) -> list:
+    server = results["real_frames"]["server"]
+    lines = ["# The serving example under load", "",
+             f"`{results['command']}` at `{results['commit']}`{' (modified)' if results['modified'] else ''}: the cinematic "
+             f"look, float32 NHWC in, sRGB 8-bit out; replica memory budget {results['memory_mib']} MiB "
+             f"(idle {results['model']['idle_mib']} MiB).", "",
+             *mark_table("serving", "load", load_table(results))]
     memory = server["memory"]
-    lines += ["", f"Replica peak resident memory {server['peak_rss_mib']} MiB of its {results['memory_mib']} MiB budget; "
-              f"requests held at most {memory['held_peak_mib']} MiB at once; {memory['waited']} waited for memory. "
+    lines += ["", f"Requests held at most {memory['held_peak_mib']} MiB at once; {memory['waited']} waited for memory. "
               f"Measured costs (fixed MiB, bytes a pixel): {results['model']['costs']}.",
               "Files: " + ", ".join(f"{name} ({size // 1024} KiB)" for name, size in results["files"].items()) + "."]
     return lines

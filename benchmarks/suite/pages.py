@@ -4,8 +4,8 @@
 
 A page marks each generated block ``<!-- suite:NAME -->`` … ``<!-- /suite:NAME -->`` (invisible in rendered
 Markdown); :func:`main` rewrites every block of :data:`PAGES` from :data:`COMMITTED` (the full form's results where
-they are committed, else the quick form's, and says which) and from the tables ``bench_match``, ``lut_footage`` and
-``look_floor`` mark in their results (:data:`MATCH_TABLES`, :data:`LUT_TABLES`, :data:`FLOOR_TABLES`), and nothing outside the blocks. ``tests/project/test_suite_results.py`` holds each page to
+they are committed, else the quick form's, and says which) and from the tables ``bench_match``, ``lut_footage``,
+``look_floor`` and ``serving`` mark in their results (:data:`MATCH_TABLES`, :data:`LUT_TABLES`, :data:`FLOOR_TABLES`, :data:`SERVING_TABLES`), and nothing outside the blocks. ``tests/project/test_suite_results.py`` holds each page to
 what :func:`filled` would write, and keeps the suite's figures (``ms/MP``, ``× OCIO``) out of every page but inside
 its blocks; ``tests/project/test_match_results.py`` and ``tests/project/test_lut_footage_results.py`` hold the match
 and LUT report results to the code that wrote them.
@@ -24,11 +24,12 @@ from benchmarks.suite.runtimes import PEER
 from torchgrade.io.atomic import atomic_write
 
 __all__ = ["COMMITTED", "PAGES", "BLOCK", "MATCH", "MATCH_TABLES", "TABLE", "LUT_FOOTAGE", "LUT_TABLES", "committed",
-           "marked_results", "match_committed", "quoted_blocks", "LOOK_FLOOR", "FLOOR_TABLES", "blocks", "filled", "stale", "main"]
+           "marked_results", "match_committed", "quoted_blocks", "LOOK_FLOOR", "FLOOR_TABLES", "SERVING", "SERVING_TABLES", "blocks", "filled", "stale", "main"]
 
 COMMITTED = {"quick": RESULTS / "suite" / "quick", "full": RESULTS / "suite" / "full"}
 """Where each form's committed results live."""
-PAGES = (ROOT / "docs" / "performance.md", ROOT / "README.md", ROOT / "docs" / "match.md", ROOT / "docs" / "lut.md")
+PAGES = (ROOT / "docs" / "performance.md", ROOT / "README.md", ROOT / "docs" / "match.md", ROOT / "docs" / "lut.md",
+         ROOT / "docs" / "onnx.md")
 """The pages that quote the benchmarks."""
 
 
@@ -56,6 +57,10 @@ LOOK_FLOOR = RESULTS / "look_floor"
 """Where ``python -m benchmarks look_floor`` commits its results (``.md`` and ``.json``)."""
 FLOOR_TABLES = {"floor-time": "time"}
 """docs/performance.md's block quoting the timed table ``look_floor`` marks ``<!-- floor:time -->`` (a quiet run's)."""
+SERVING = RESULTS / "serving"
+"""Where ``python -m benchmarks serving`` commits its results (``.md`` and ``.json``)."""
+SERVING_TABLES = {"serving-load": "load"}
+"""docs/onnx.md's block quoting the table ``serving`` marks ``<!-- serving:load -->``."""
 QUICK_OUT = "/tmp/torchgrade-bench"
 """Where the README's quick command writes (not the committed results)."""
 
@@ -194,7 +199,8 @@ def blocks(results: dict) -> dict:
     """The body of every block, from the suite's ``results`` (:func:`committed`), ``bench_match``'s
     (:func:`match_blocks`), ``lut_footage``'s and ``look_floor``'s (:func:`quoted_blocks`)."""
     return {**{name: render(results) for name, render in RENDERERS.items()}, **match_blocks(),
-            **quoted_blocks(LUT_FOOTAGE, "lut", LUT_TABLES), **quoted_blocks(LOOK_FLOOR, "floor", FLOOR_TABLES)}
+            **quoted_blocks(LUT_FOOTAGE, "lut", LUT_TABLES), **quoted_blocks(LOOK_FLOOR, "floor", FLOOR_TABLES),
+            **quoted_blocks(SERVING, "serving", SERVING_TABLES)}
 
 
 def filled(text: str, bodies: dict) -> str:

@@ -22,6 +22,8 @@ COMMITTED = pages.match_committed()
 PAGE = ROOT / "docs" / "match.md"
 SHOWN = 0.005
 """Half the last digit the tables show (codes to 0.01): a fresh figure may differ by float rounding, never by a digit."""
+FLAT_MINIMUM = 0.1
+"""How far, relatively, an out-of-reach fit's figures off its objective may move with the CPU's rounding (4.9 % seen)."""
 
 
 @pytest.fixture
@@ -92,7 +94,11 @@ def test_the_bar(truth, held_out, met):
 
 @pytest.mark.parametrize("part, mode", [("known_looks", "agx"), ("out_of_reach", "agx")])
 def test_a_fresh_fit_gives_the_committed_figures(one_thread, part, mode):
-    """The quick form's AgX look, found with every default and fitted with ``neutral`` forced, fitted now."""
+    """The quick form's AgX look, found with every default and fitted with ``neutral`` forced, fitted now: a known look
+    to the digits shown. A fit that cannot reach the look has a flat minimum, where another CPU (its sums rounded in
+    another order: an AMD EPYC with AVX2 against the machine of the committed run) lands elsewhere on it: on the AgX
+    look fitted with ``neutral`` the objective (the left half's p99.9) moved 0.03 %, the figures off it up to 4.9 %; such
+    a fit's objective is held to 0.5 % and its other figures to :data:`FLAT_MINIMUM`."""
     row = next(row for row in COMMITTED["quick"]["report"][part] if row["mode"] == mode)
     source, half = bench_match.halves(row["picture"], 8)
     with torch.no_grad():
@@ -102,4 +108,8 @@ def test_a_fresh_fit_gives_the_committed_figures(one_thread, part, mode):
     assert fresh["found"] == row["found"]
     for figure in ("truth", "held_out", "left_half"):
         for statistic in ("p99.9", "max"):
-            assert fresh[figure][statistic] == pytest.approx(row[figure][statistic], abs=SHOWN), (figure, statistic)
+            if part == "known_looks":
+                tolerance = {"abs": SHOWN}
+            else:
+                tolerance = {"rel": 0.005 if (figure, statistic) == ("left_half", "p99.9") else FLAT_MINIMUM}
+            assert fresh[figure][statistic] == pytest.approx(row[figure][statistic], **tolerance), (figure, statistic)
