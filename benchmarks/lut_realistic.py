@@ -28,8 +28,8 @@ import torch
 
 import torchgrade as tg
 from benchmarks.common import argument_parser, sample_exr, write_results
+from benchmarks.suite.stamp import source_commit
 from torchgrade.lut import LUTAccuracyWarning, code_errors
-from torchgrade.lut.report import SCENE_PIXELS
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -128,14 +128,16 @@ def framed_lines(rows: list) -> list:
     default = [row["realistic_real"] / row["realistic_report"] for row in rows]
     framed = [row["frames_real"] / row["frames_report"] for row in rows]
     lines += ["", f"Real / report: {min(default):.2f} to {max(default):.2f} on realistic colours, {min(framed):.2f} to "
-              f"{max(framed):.2f} with `frames=` (at most {SCENE_PIXELS} of an image's pixels, evenly strided)."]
+              f"{max(framed):.2f} with `frames=` (every pixel of the image)."]
     return lines
 
 
 def main(argv=None) -> None:
     out = argument_parser(__doc__).parse_args(argv).out
     torch.manual_seed(0)
+    command, stamp = f".venv/bin/python -m benchmarks lut_realistic --out {out}", source_commit()
     rows, lines = [], ["# A baked LUT's report on realistic colours against its error on the sample images", "",
+                       f"Made by `{command}` at commit `{stamp['commit'][:7]}`{' with uncommitted changes' if stamp['modified'] else ''}.", "",
                        __doc__.split("\n\n")[3].replace("\n", " ").replace("``", "`"), "",
                        "| look | size | shaper | report: realistic p99.9 | pooled images p99.9 | ratio | images p99.9 "
                        f"({' / '.join(IMAGES)}) | worst case p99.9 / max |",
@@ -157,8 +159,7 @@ def main(argv=None) -> None:
               f"The verdict (p99.9 within {TOLERANCE:g} code) agrees with the pooled images' in {agree} of {len(rows)}."]
     framed = framed_rows(tg.PostFX.from_config(LOOKS["cinematic (export/looks/cinematic.json)"][0]).eval())
     lines += framed_lines(framed)
-    write_results(out, "lut_realistic", {"rows": rows, "frames": framed}, lines,
-                  ".venv/bin/python -m benchmarks lut_realistic --out benchmarks/results")
+    write_results(out, "lut_realistic", {"command": command, **stamp, "rows": rows, "frames": framed}, lines, command)
 
 
 if __name__ == "__main__":
