@@ -249,7 +249,7 @@ def checked(function, checks: StageCheck, arguments: dict):
         checks.check(given)
         return function(*args, **kwargs)
 
-    door.controls, door.stage = dict(arguments), checks.stage
+    vars(door).update(controls=dict(arguments), stage=checks.stage)
     return door
 
 

@@ -54,6 +54,15 @@ def test_inverse_undoes_the_flip_and_leaves_the_grade():
     assert torch.allclose(seq.inverse(out), graded, atol=1e-6), "inverse should flip back and keep the grade (identity inverse)"
 
 
+def test_params_come_second_as_in_kornias_forward():
+    """kornia's ``forward(input, params=None)`` takes the draw second: ``layer(x, params)`` replays it (the generator,
+    once second, took the dict and failed with ``AttributeError``)."""
+    layer = tg.RandomPostFX(contrast=(-20.0, 20.0), p=1.0)
+    images = hdr()
+    out = layer(images, generator=torch.Generator().manual_seed(0))
+    assert torch.equal(layer(images, dict(layer._params)), out)
+
+
 def test_scalar_ranges_are_symmetric_about_the_identity():
     layer = tg.RandomPostFX(contrast=30, split_shadows=0.2, hue_shift=0)
     assert layer.ranges == {"contrast": (-30.0, 30.0), "split_shadows": (0.3, 0.7)}

@@ -119,7 +119,7 @@ class RandomPostFX(IntensityAugmentationBase2D):
         same_on_frame: for clips ``(B, T, 3, H, W)``, one look per clip (kornia ``VideoSequential``'s
             default) rather than one per frame; parameters then hold ``B`` rows, else ``B * T``.
 
-    ``forward(x, generator=None, params=None)``: parameters are drawn from ``generator`` (a
+    ``forward(input, params=None, *, generator=None)``: parameters are drawn from ``generator`` (a
     ``torch.Generator``; the global generator when None), or taken from ``params`` to replay a
     previous draw. The parameters used are kept in ``last_params`` (see :meth:`sample_params`), one
     copy per thread, so threads sharing the layer each read back their own draw; to pass a draw
@@ -293,6 +293,7 @@ class RandomPostFX(IntensityAugmentationBase2D):
             if random and held is None and applied is not None:
                 held = x
             if not random and held is not None:
+                assert applied is not None  # held only where some samples are skipped
                 x, held = torch.where(applied, joined(x), joined(held)), None
             x = self._grade(x, params, planes) if slot == "grade" else getattr(self, f"_{slot}")(joined(x), params, applied)
 
@@ -319,6 +320,7 @@ class RandomPostFX(IntensityAugmentationBase2D):
         contribution = params["look_lut_contribution"]
         if applied is not None:
             contribution = contribution * applied.reshape(-1)
+        assert self.look_lut is not None  # a look_lut slot runs only with one
         return look_lut(x, self.look_lut.lut, contribution, self.look_lut.encoding)
 
     def apply_transform(self, input: torch.Tensor, params: dict, flags: dict, transform=None) -> torch.Tensor:
@@ -350,12 +352,13 @@ class RandomPostFX(IntensityAugmentationBase2D):
         (:func:`~torchgrade.runtime.strips.pixelwise`: strips of rows on the CPU, eager; planes where a compiler fuses)."""
         return self.transform(images, params, applied, planes)
 
-    def forward(self, x: torch.Tensor, generator: torch.Generator | None = None, params: dict | None = None,
+    def forward(self, input: torch.Tensor, params: dict | None = None, *, generator: torch.Generator | None = None,
                 **container_args) -> torch.Tensor:
-        """Grade ``x`` with a new draw (or ``params``). ``container_args`` (``data_keys`` ...) are what
-        kornia's containers pass along with an image; an intensity layer needs none of them."""
-        check_image(x)
-        images, rows, frames = self._batch(x)
+        """Grade ``input`` with a new draw (or ``params``, second as in kornia's ``forward(input, params)``).
+        ``container_args`` (``data_keys`` ...) are what kornia's containers pass along with an image; an intensity layer
+        needs none of them."""
+        check_image(input)
+        images, rows, frames = self._batch(input)
         if params is None:
             params = self.sample_params(rows, generator, images.device)
         else:
@@ -364,8 +367,8 @@ class RandomPostFX(IntensityAugmentationBase2D):
         self._commit_state(params=params)
         per_image = params if rows == images.shape[0] else {k: v.repeat_interleave(frames, 0) for k, v in params.items()}
         out = self._graded(images, per_image)
-        if x.dim() == 5 or (self.keepdim and x.dim() == 3):
-            return out.reshape(x.shape)
+        if input.dim() == 5 or (self.keepdim and input.dim() == 3):
+            return out.reshape(input.shape)
         return out
 
     def _batch(self, x: torch.Tensor) -> tuple:
@@ -377,7 +380,7 @@ class RandomPostFX(IntensityAugmentationBase2D):
         clips, frames = (x.shape[0], x.shape[1]) if x.dim() == 5 else (images.shape[0], 1)
         return images, clips if self.same_on_frame else images.shape[0], frames
 
-    def compiled_arguments(self, x: torch.Tensor, generator: torch.Generator | None = None, params: dict | None = None,
+    def compiled_arguments(self, x: torch.Tensor, params: dict | None = None, *, generator: torch.Generator | None = None,
                            **container_args) -> tuple:
         """The arguments of a compiled call (:func:`torchgrade.compile`): the draw made here, before the graph, from
         ``generator`` as an eager call makes it, and passed in as ``params`` (a generator cannot enter a compiled graph).
@@ -398,7 +401,7 @@ class RandomPostFX(IntensityAugmentationBase2D):
 
         ``RandomPostFX.from_config(layer.to_config())`` builds a layer that draws the same looks.
         """
-        config = {name: list(pair) for name, pair in self.ranges.items()}
+        config: dict[str, object] = {name: list(pair) for name, pair in self.ranges.items()}
         look = None if self.look_lut is None else {k: v for k, v in self.look_lut.to_config().items() if k != "contribution"}
         settings = {"bloom_mode": self.bloom_mode if self.bloom_ranges else "additive",
                     "tonemap": list(self.tonemap) or None, "look_lut": look, "aces": self.aces, "input_space": self.input_space,

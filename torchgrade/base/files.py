@@ -26,7 +26,10 @@ from __future__ import annotations
 import io
 import os
 import stat
-from typing import BinaryIO
+from typing import TYPE_CHECKING, BinaryIO
+
+if TYPE_CHECKING:
+    from _typeshed import MaybeNone  # None where a non-blocking read finds no data, as io.FileIO.read's stub states
 
 __all__ = ["check_regular", "open_regular", "read_regular"]
 
@@ -98,7 +101,7 @@ class _Bounded(io.FileIO):
             chunks.append(chunk)
         return b"".join(chunks)
 
-    def read(self, size: int = -1) -> bytes | None:
+    def read(self, size: int | None = -1) -> bytes | MaybeNone:
         if size is None or size < 0:
             return self.readall()
         buffer = bytearray(size)

@@ -30,7 +30,8 @@ Examples:
 
 from __future__ import annotations
 
-from typing import ClassVar
+import inspect
+from typing import ClassVar, TypeVar
 
 import torch
 from torch import nn
@@ -42,6 +43,8 @@ from .params import is_constant
 from ..runtime.checks import DeferredCheck, warn_if_eight_bit
 
 __all__ = ["Stage"]
+
+S = TypeVar("S", bound="Stage")
 
 
 class Stage(nn.Module):
@@ -85,8 +88,15 @@ class Stage(nn.Module):
     stage after one that made a new frame), and then only bounds it (:func:`~torchgrade.base.images.sanitize`). A module
     that is not a stage (an export form) says so with this attribute of its own."""
 
-    always_in_config: ClassVar[tuple] = ()
-    """Controls written by :meth:`to_config` even at their defaults (a stage's defining settings)."""
+    @property
+    def always_in_config(self) -> tuple:
+        """Controls written by :meth:`to_config` even at their defaults (a stage's defining settings): a class's tuple,
+        or a property where they depend on a setting (a tone mapper's on its mode); none by default."""
+        return ()
+
+    __signature__: ClassVar[inspect.Signature]
+    """What ``help()`` and :func:`inspect.signature` show of a stage taking ``**controls``
+    (:func:`~torchgrade.base.controls.controls_signature`)."""
 
     def __init__(self):
         super().__init__()
@@ -306,7 +316,7 @@ class Stage(nn.Module):
         return cls.controls
 
     @classmethod
-    def from_config(cls, config: dict) -> "Stage":
+    def from_config(cls: type[S], config: dict) -> S:
         """Build the stage from a dict of its constructor arguments (what :meth:`to_config` returns).
 
         A JSON list where the stage keeps a per-sample tensor comes back as that tensor

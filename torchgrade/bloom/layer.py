@@ -29,12 +29,13 @@ from __future__ import annotations
 
 import inspect
 import numbers
+from typing import Optional
 
 import torch
 from torch import nn
 
 from ..base.images import HALF_MAX, check_image, sanitize, to_input_dtype, working_dtype
-from ..base.params import color_param, is_constant, is_plain_number, scalar_param
+from ..base.params import Param, color_param, is_constant, is_plain_number, scalar_param
 from ..base.controls import Control, controls_signature
 from ..base.stage import Stage
 from ..color import srgb_to_linear
@@ -118,7 +119,7 @@ def bloom_settings(given: dict) -> dict:
     return {name: bool(value) if CONTROLS[name].kind == "bool" else value for name, value in settings.items()}
 
 
-def bloom(image: torch.Tensor, *, fixed_depth: int = None, **settings) -> torch.Tensor:
+def bloom(image: torch.Tensor, *, fixed_depth: Optional[int] = None, **settings) -> torch.Tensor:
     """Bloom an HDR image ``(..., 3, H, W)``; see :mod:`torchgrade.bloom` for the passes and guarantees.
 
     Keyword Args:
@@ -169,7 +170,7 @@ def bloom(image: torch.Tensor, *, fixed_depth: int = None, **settings) -> torch.
     return bloom_with_settings(image, settings, fixed_depth)
 
 
-bloom.__signature__ = controls_signature(
+vars(bloom)["__signature__"] = controls_signature(  # what help() and inspect.signature show
     {**CONTROLS, "fixed_depth": Control(None)}, leading=(inspect.Parameter("image", inspect.Parameter.POSITIONAL_OR_KEYWORD),)
 )
 
@@ -180,6 +181,7 @@ def bloom_with_settings(image: torch.Tensor, settings: dict, fixed_depth=None, *
     random ones are drawn inside their ranges. ``nan_free``: ``image`` holds no NaN (:func:`~torchgrade.base.images.sanitize`)."""
     height, width = image.shape[-2:]
     most, limit = settings["max_iterations"], settings["downscale_limit"]
+    active: int | torch.Tensor
     if fixed_depth is None:
         depth = active = pyramid_depth(height, width, most, limit)
     else:
@@ -202,7 +204,7 @@ def bloom_with_settings(image: torch.Tensor, settings: dict, fixed_depth=None, *
     light, fraction = prefilter(scene, number_or_param("threshold"), number_or_param("knee"), settings["fade_fireflies"],
                                 settings["karis_average"], bound, any_size)
     out = _composited(scene, light, fraction, settings, param, depth, active, any_size)
-    if any_size and not COMPOSITES[settings["mode"]].zero_is_identity:
+    if isinstance(active, torch.Tensor) and not COMPOSITES[settings["mode"]].zero_is_identity:  # any_size
         out = torch.where(active > 0, out, scene)  # a frame too small for any level is not bloomed
     return to_input_dtype(out.reshape(image.shape), image)
 
@@ -256,6 +258,9 @@ class Bloom(Stage):
 
     controls = CONTROLS
     always_in_config = UNITY_SETTINGS
+    intensity: Param
+    max_iterations: int
+    downscale_limit: int
 
     def __init__(self, **controls) -> None:
         super().__init__()

@@ -26,7 +26,7 @@ import torch
 from ..io import write_cube
 from ..lut import ENTRY_CHOICES, LUTAccuracyWarning, srgb_code_error
 from ..lut.bake import LOOK_SHAPER, bake_look, live_stages
-from ..lut.shapers import DEFAULT_SIZES, SHAPERS
+from ..lut.shapers import DEFAULT_SIZES, SHAPERS, LogCExtendedShaper
 from .common import (add_grading_flags, look_from_args, read_rec709, refuse_lut_over_tolerance, refuse_overwriting,
                      report_line, stages_label)
 
@@ -93,12 +93,19 @@ def _cube_size(size, shaper: str):
     the others (:data:`~torchgrade.lut.shapers.DEFAULT_SIZES`).
 
     Examples:
-        >>> _cube_size(None, "logc") == SHAPERS[LOOK_SHAPER].cube_size, _cube_size(None, "linear"), _cube_size(17, "logc")
+        >>> _cube_size(None, "logc") == LogCExtendedShaper.cube_size, _cube_size(None, "linear"), _cube_size(17, "logc")
         (True, 33, 17)
     """
     if size is not None:
         return size
-    return SHAPERS[LOOK_SHAPER].cube_size if shaper == "logc" else DEFAULT_SIZES[shaper]
+    return _look_cube_size() if shaper == "logc" else DEFAULT_SIZES[shaper]
+
+
+def _look_cube_size() -> int:
+    """The ``.cube`` size of the default lattice (:attr:`~torchgrade.lut.shapers.LogCExtendedShaper.cube_size`)."""
+    shaper = SHAPERS[LOOK_SHAPER]
+    assert isinstance(shaper, LogCExtendedShaper)
+    return shaper.cube_size
 
 
 def run_bake(args: argparse.Namespace) -> str:
@@ -148,7 +155,7 @@ def add_bake(commands) -> None:
     bake.add_argument("--output", "-o", required=True, help=".cube file to write")
     bake.add_argument("--config", help="look JSON (PostFX config); without it, the grading flags below")
     bake.add_argument("--size", type=_lut_size, help=f"points per axis, 2..256, or auto (needs --scene); default "
-                      f"{SHAPERS[LOOK_SHAPER].cube_size} for logc (the default lattice's planes to 58.86), "
+                      f"{_look_cube_size()} for logc (the default lattice's planes to 58.86), "
                       f"{DEFAULT_SIZES['linear']} for the others")
     bake.add_argument("--shaper", choices=("auto", "linear", "logc", "fitted"), default="auto",
                       help="default auto: logc (LogC to 58.86, what a .cube 1D section holds of the default lattice); "

@@ -49,6 +49,7 @@ def run_export(args: argparse.Namespace) -> str:
         with warnings.catch_warnings():  # the report is printed with the export, or refused with what to do
             warnings.simplefilter("ignore", LUTAccuracyWarning)
             look = look.to_lut(args.lut, args.interpolation)
+        assert look.lut is not None  # to_lut's look holds the baked LUT
         refuse_lut_over_tolerance(look.lut.error_report, args.accept_error, REMEDIES.format(size=args.lut))
     if args.scene:
         images = {Path(path).name: read_rec709(path).unsqueeze(0) for path in args.scene}

@@ -141,7 +141,7 @@ PQ_FOOT = 1e-12
 """The share of :data:`PQ_PEAK` (1e-8 cd/m²) below which :func:`linear_to_pq` takes the chord of ``Y^m1`` from 0."""
 
 
-def linear_to_pq(image: torch.Tensor, reference: float = 100.0) -> torch.Tensor:
+def linear_to_pq(image: torch.Tensor, reference: float | torch.Tensor = 100.0) -> torch.Tensor:
     """SMPTE ST 2084 inverse EOTF of ``image * reference`` cd/m², negatives clamped to 0.
 
     ``E' = ((c1 + c2 Y^m1) / (1 + c3 Y^m1))^m2`` with ``Y = image * reference / 10000``; the

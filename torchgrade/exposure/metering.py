@@ -244,8 +244,8 @@ def histogram_band_average(stops: torch.Tensor, weights: Optional[torch.Tensor],
     return (fraction * values_in_bin).sum(dim=1) / (fraction * weight_in_bin).sum(dim=1)
 
 
-def meter_luminance(image: torch.Tensor, metering: str = "log", mask="average", stop_range=HISTOGRAM_RANGE,
-                    percents=(40.0, 90.0), middle_grey=0.18, block: int = HISTOGRAM_BLOCK) -> torch.Tensor:
+def meter_luminance(image: torch.Tensor, metering: str = "log", mask="average", stop_range: tuple[float, float] = HISTOGRAM_RANGE,
+                    percents: tuple[float, float] = (40.0, 90.0), middle_grey=0.18, block: int = HISTOGRAM_BLOCK) -> torch.Tensor:
     """Scene luminance of each image of ``(..., 3, H, W)``, shaped ``image.shape[:-3]``.
 
     The Rec.709 luminance ``L`` (negative values clipped to 0, non-finite pixels sanitized), averaged with the

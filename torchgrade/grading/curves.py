@@ -124,8 +124,8 @@ def monotone_tangents(x: torch.Tensor, y: torch.Tensor, periodic: bool = False) 
     secants = (y[1:] - y[:-1]) / (x[1:] - x[:-1])
     before = torch.cat((secants[-1:] if periodic else secants[:1], secants))
     after = torch.cat((secants, secants[:1] if periodic else secants[-1:]))
-    tangents = torch.where(before * after > 0, (before + after) / 2, torch.zeros_like(before))
-    tangents = list(tangents[:-1] if periodic else tangents)
+    mean = torch.where(before * after > 0, (before + after) / 2, torch.zeros_like(before))
+    tangents = list(mean[:-1] if periodic else mean)
     count = len(tangents)
     for k in range(len(secants)):
         low, high = tangents[k], tangents[(k + 1) % count]

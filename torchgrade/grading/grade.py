@@ -235,8 +235,8 @@ def color_grade_planes(image: torch.Tensor, aces: bool = False, log_space: str =
         x = channel_mixer(x, p["channel_mixer"])
     x = _bounded(x)
     if "shadows_midtones_highlights" in steps:
-        zones = [p[name] for name in ("shadows_start", "shadows_end", "highlights_start", "highlights_end")]
-        x = shadows_midtones_highlights(x, p["shadows"], p["midtones"], p["highlights"], *zones, weights)
+        x = shadows_midtones_highlights(x, p["shadows"], p["midtones"], p["highlights"], p["shadows_start"], p["shadows_end"],
+                                        p["highlights_start"], p["highlights_end"], weights)
     if "lift_gamma_gain" in steps:
         x = each_plane(lambda plane: plane.clamp_min(0.0), lift_gamma_gain(x, p["lift"], p["gamma"], p["gain"]))
     factor = None

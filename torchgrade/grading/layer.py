@@ -68,6 +68,12 @@ class ColorGrade(Stage):
 
     # Each control, its identity value and its allowed range, in Unity's order; then the curves.
     controls = COLOR_GRADE_CONTROLS
+    aces: bool
+    log_space: str
+    shadows_start: Param
+    shadows_end: Param
+    highlights_start: Param
+    highlights_end: Param
 
     def __init__(self, aces: bool = False, **controls):
         super().__init__()
@@ -134,6 +140,9 @@ class PrimaryGrade(Stage):
     # Each control, its identity (or default) and its allowed range; STYLE_CONTROLS says which style has it.
     controls = PRIMARY_GRADE_CONTROLS
     always_in_config = ("style",)
+    style: str
+    pivot_black: Param
+    pivot_white: Param
 
     def __init__(self, style: str = "linear", **controls):
         super().__init__()

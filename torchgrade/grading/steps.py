@@ -349,8 +349,8 @@ def saturation_matrix(image: torch.Tensor, amount: Param, luminance_weights="rec
     """
     scale = 1.0 + scalar_param(amount, image, "saturation") * 0.01
     scale = scale.reshape(scale.shape[:1] + (1, 1)) if scale.dim() else scale
-    weights = {"rec709": REC709_LUMINANCE, "ap1": AP1_LUMINANCE}[luminance_weights]
-    weights = constant(weights, image).expand(3, 3)
+    luminance = {"rec709": REC709_LUMINANCE, "ap1": AP1_LUMINANCE}[luminance_weights]
+    weights = constant(luminance, image).expand(3, 3)
     return scale * torch.eye(3, dtype=image.dtype, device=image.device) + (1.0 - scale) * weights
 
 

@@ -27,6 +27,7 @@ import torch
 
 from ..shots.frames import output_paths, render_frame, shot_frames
 from ..shots.outputs import check_output, write_frame
+from ..exposure import AutoExposure
 from ..io import read_exr
 from ..look.postfx import PostFX
 
@@ -38,8 +39,15 @@ def adaptation_schedule(look: PostFX, metered: list, dt: float) -> list:
     before, adapted = [], torch.zeros(1)
     for value in metered:
         before.append(float(adapted))
-        _, adapted = look.exposure.frame(torch.full((1, 3, 1, 1), float(value)), adapted, dt)
+        _, adapted = _exposure(look).frame(torch.full((1, 3, 1, 1), float(value)), adapted, dt)
     return before
+
+
+def _exposure(look: PostFX) -> AutoExposure:
+    """The look's exposure stage, which the adaptation steps run; ``ValueError`` for a look without one."""
+    if look.exposure is None:
+        raise ValueError("the look has no exposure stage to adapt")
+    return look.exposure
 
 
 def _read(path: str, read_options: dict) -> torch.Tensor:
@@ -48,7 +56,7 @@ def _read(path: str, read_options: dict) -> torch.Tensor:
 
 def _meter_rows(batch: dict, look: PostFX, read_options: dict) -> dict:
     """Step 1: each frame's metered luminance, what its exposure stage adapts to at once on a first frame."""
-    metered = [look.exposure.frame(_read(path, read_options).unsqueeze(0), None, 0.0)[1].item() for path in batch["path"]]
+    metered = [_exposure(look).frame(_read(path, read_options).unsqueeze(0), None, 0.0)[1].item() for path in batch["path"]]
     return {"index": batch["index"], "metered": metered}
 
 
@@ -74,10 +82,11 @@ def grade_shot_on_ray(look: PostFX, inputs, output: str, bit_depth: str | None =
     rows = [{"index": i, "path": str(path), "output": str(out)} for i, (path, out) in enumerate(zip(frames, outputs))]
     adapted = [0.0] * len(rows)
     if look.exposure is not None:
-        metered = ray.data.from_items(rows).map_batches(_meter_rows, fn_kwargs={"look": look, "read_options": read_options})
+        metered = ray.data.from_items(rows).map_batches(_meter_rows,  # type: ignore[arg-type]  # Ray's fn type leaves out fn_kwargs
+                                                        fn_kwargs={"look": look, "read_options": read_options})
         by_index = sorted(metered.take_all(), key=lambda row: row["index"])
         adapted = adaptation_schedule(look, [row["metered"] for row in by_index], dt)
     shot = ray.data.from_items([{**row, "adapted": value} for row, value in zip(rows, adapted)])
     arguments = {"look": look, "read_options": read_options, "depth": depth, "dt": dt, "scene_referred": scene_referred}
-    shot.map_batches(grade_rows, batch_size=1, fn_kwargs=arguments).materialize()
+    shot.map_batches(grade_rows, batch_size=1, fn_kwargs=arguments).materialize()  # type: ignore[arg-type]  # as above: fn_kwargs
     return [Path(out) for out in outputs]

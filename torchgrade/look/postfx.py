@@ -45,7 +45,9 @@ from torch import nn
 
 from ..base.config import load_config
 from ..base.images import with_alpha
+from ..base.stage import Stage
 from ..bloom import ConvolutionBloom
+from ..exposure import AutoExposure
 from ..lut import INTERPOLATIONS, LUT3D, ErrorReport
 from ..lut.bake import bake_look
 from .slots import SLOT, SLOTS, STAGES, build_stage, is_identity_stage
@@ -77,6 +79,16 @@ class PostFX(nn.Module):
         >>> look.to_config()
         {'grade': {'contrast': 20}, 'tonemap': {'mode': 'aces'}}
     """
+
+    exposure: Optional[AutoExposure]
+    bloom: Optional[nn.Module]
+    grade: Optional[nn.Module]
+    primary: Optional[nn.Module]
+    tonemap: Optional[nn.Module]
+    lut: Optional[LUT3D]
+    look_lut: Optional[nn.Module]
+    dither: Optional[nn.Module]
+    display: Optional[nn.Module]
 
     def __init__(self, **slots):
         super().__init__()
@@ -173,13 +185,14 @@ class PostFX(nn.Module):
     def _saved_stage(stage: str, config: dict, extra: dict, state_dict: dict, prefix: str) -> nn.Module:
         """A stage rebuilt from its saved config, its own tensors (learnable ones as parameters) at their saved shapes."""
         module = build_stage(stage, config)
+        assert isinstance(module, Stage)  # built from a config: the slot's stage class
         start = f"{prefix}{stage}."
         for key, value in state_dict.items():
             name = key[len(start):]
             if not key.startswith(start) or "." in name:
                 continue  # nested modules are built by the stage itself
             value = nn.Parameter(value.clone()) if f"{stage}.{name}" in extra["parameters"] else value.clone()
-            if name in getattr(module, "_control_names", ()):
+            if name in module._control_names:
                 module.set_param(name, value)
             else:
                 setattr(module, name, value)

@@ -9,6 +9,7 @@ from typing import Callable, Optional
 
 from torch import nn
 
+from ..base.stage import Stage
 from ..bloom import Bloom
 from ..exposure import AutoExposure
 from ..grading.layer import ColorGrade, PrimaryGrade
@@ -31,7 +32,7 @@ class Slot:
     """
 
     name: str
-    stage: type
+    stage: type[Stage]
     shorthand: Optional[str] = None
     completed: Optional[Callable] = None
     timed: bool = False

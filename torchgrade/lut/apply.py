@@ -119,7 +119,7 @@ def apply_lut(image: torch.Tensor, table: torch.Tensor, shaper: str = "linear", 
     if runs_operator(image, table):
         return operator_lookup(image, table, *settings)
     rows, size = planar_table(table), table.shape[0]
-    steps = KERNELS[interpolation].eager.tables(rows, size) if whole_frame_tables(image, rows, size, interpolation) else None
+    steps = KERNELS[interpolation].whole_frame.tables(rows, size) if whole_frame_tables(image, rows, size, interpolation) else None
     return lookup(image, rows, size, *settings, tables=steps)
 
 
@@ -145,7 +145,7 @@ def lookup(image, rows, size: int, shaper, domain_min, domain_max, interpolation
     x = sanitize(working_dtype(image), nan_free=nan_free).movedim(-3, 0)  # (3, ..., H, W): a view
     coords = lattice_unit(x.reshape(3, -1), shaper, domain_min, domain_max, curve, curve_range) * (size - 1)
     kernel = KERNELS[interpolation]
-    values = kernel(coords, rows, size) if tables is None else kernel.eager.frame(coords, tables, size)
+    values = kernel(coords, rows, size) if tables is None else kernel.whole_frame.frame(coords, tables, size)
     y = table_output(values, output_encoding, output_range)
     return to_input_dtype(y.reshape(x.shape).movedim(0, -3), image)
 

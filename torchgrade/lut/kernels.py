@@ -343,6 +343,14 @@ class Kernel:
     def __call__(self, coords: torch.Tensor, rows: torch.Tensor, size: int) -> torch.Tensor:
         return self.gather(coords, rows, size)
 
+    @property
+    def whole_frame(self) -> EagerForm:
+        """The whole-frame form, for a caller that checked there is one
+        (:func:`~torchgrade.lut.apply.whole_frame_tables`); ``ValueError`` where there is none."""
+        if self.eager is None:
+            raise ValueError(f"{self.gather.__name__} has no whole-frame form")
+        return self.eager
+
     def graph_form(self, backend: str) -> Optional[Callable[[torch.Tensor, torch.Tensor], torch.Tensor]]:
         """The grid form an export with ``backend`` uses, or ``None`` to export the gather form."""
         return self.grids.get(backend)

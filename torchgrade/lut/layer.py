@@ -205,7 +205,7 @@ class LUT3D(Stage):
         cached_rows, cached_interpolation, tables = self._tables_cache
         if cached_rows is not rows or cached_interpolation != interpolation:
             with torch.no_grad():
-                tables = KERNELS[interpolation].eager.tables(rows, self.size)
+                tables = KERNELS[interpolation].whole_frame.tables(rows, self.size)
             self._tables_cache = (rows, interpolation, tables)
         return tables
 

@@ -116,7 +116,8 @@ def describe(model: onnx_lib.ModelProto, module: nn.Module, frames: FrameFormat 
     graph.output[0].doc_string = output_doc
     for extra in graph.output[1:]:
         extra.doc_string = "adapted luminance per sample for the next frame's 'adapted' input, (batch,)"
-    stages = list(module.stages()) if callable(getattr(module, "stages", None)) else [type(module).__name__]
+    listed = getattr(module, "stages", None)
+    stages = list(listed()) if callable(listed) else [type(module).__name__]
     model.doc_string = f"torchgrade {__version__} look: {' -> '.join(stages)}. Output: {output_doc}."
     encoded = frames.input_dtype in CODE_MAX
     metadata = {

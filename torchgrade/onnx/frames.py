@@ -96,9 +96,8 @@ def frame_format(input_dtype: Optional[torch.dtype] = None, layout: str = "NCHW"
         ...
         ValueError: input_dtype must be one of (torch.float32, torch.float16, torch.uint8, torch.uint16), got torch.int8
     """
-    for name, value in (("io_dtype", io_dtype), ("input_dtype", input_dtype)):
-        if value is not None and not isinstance(value, torch.dtype):
-            raise TypeError(f"{name} must be a torch.dtype, got {value!r}")
+    _checked_dtype(io_dtype, "io_dtype")
+    _checked_dtype(input_dtype, "input_dtype")
     _named(io_dtype, FLOAT_DTYPES, "io_dtype")
     input_dtype = _named(io_dtype if input_dtype is None else input_dtype, INPUT_DTYPES, "input_dtype")
     layouts = [_named(str(value).upper(), LAYOUTS, name) for name, value in (("layout", layout), ("output_layout", output_layout or layout))]
@@ -117,8 +116,16 @@ def read_frame_format(metadata: Mapping[str, str]) -> FrameFormat:
         torch.uint8
     """
     values = [metadata.get(key) for key in _METADATA]
-    dtypes = [None if value is None else getattr(torch, value, value) for value in (values[0], values[3])]
-    return frame_format(dtypes[0], values[1] or "NCHW", values[2] or "linear", dtypes[1] or torch.float32, values[4])
+    io_dtype, input_dtype = (None if value is None else _checked_dtype(getattr(torch, value, value), name)
+                             for name, value in (("io_dtype", values[3]), ("input_dtype", values[0])))
+    return frame_format(input_dtype, values[1] or "NCHW", values[2] or "linear", io_dtype or torch.float32, values[4])
+
+
+def _checked_dtype(value: object, name: str) -> Optional[torch.dtype]:
+    """``value``, a ``torch.dtype`` or ``None``; ``TypeError`` naming ``name`` for anything else."""
+    if value is not None and not isinstance(value, torch.dtype):
+        raise TypeError(f"{name} must be a torch.dtype, got {value!r}")
+    return value
 
 
 def metadata_of(fmt: FrameFormat) -> dict:

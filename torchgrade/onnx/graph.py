@@ -84,7 +84,7 @@ class GradeWithInputs(nn.Module):
 
     def forward(self, image: torch.Tensor, *controls: torch.Tensor, nan_free: bool = False) -> torch.Tensor:
         clamped = {name: value.clamp(*ColorGrade.controls[name].range) for name, value in zip(GRADE_INPUTS, controls)}
-        return graded_image(image, self.aces, self.log_space, nan_free=nan_free, **clamped, **self.curves)
+        return graded_image(image, self.aces, self.log_space, nan_free=nan_free, planes=False, **clamped, **self.curves)
 
 
 class ExportGraph(nn.Module):
@@ -125,7 +125,9 @@ class ExportGraph(nn.Module):
     def _graded(self, image: torch.Tensor, *extra: torch.Tensor, mark_at: Optional[int] = None) -> tuple:
         if self.exposure is not None:
             adapted, dt, *controls = extra
-            image, adapted = frame_of(self.exposure)(image, adapted, dt)
+            frame = frame_of(self.exposure)
+            assert frame is not None  # the exposure stage keeps state (_look_stages)
+            image, adapted = frame(image, adapted, dt)
         else:
             controls = list(extra)
         for index, stage in enumerate(self.stages):
@@ -151,7 +153,7 @@ def is_per_pixel(module: nn.Module) -> bool:
     return getattr(module, "per_pixel", False)
 
 
-def _per_pixel_from(stages: Sequence[nn.Module]) -> int:
+def _per_pixel_from(stages: nn.ModuleList) -> int:
     """Index of the first of the stages that end the list and are all per pixel (``len(stages)`` where the last is not)."""
     index = len(stages)
     while index and is_per_pixel(stages[index - 1]):
@@ -198,7 +200,7 @@ def export_graph(module: nn.Module, lut_backend: str = "slices", grade_inputs: b
     """
     exposure, named = _look_stages(module)
     options = {"backend": backend_named(lut_backend)}
-    stages = []
+    stages: list[nn.Module] = []
     for stage in named:
         if grade_inputs and isinstance(stage, ColorGrade):
             stages.append(GradeWithInputs(stage.aces, stage.curves(), stage.log_space))
@@ -209,7 +211,7 @@ def export_graph(module: nn.Module, lut_backend: str = "slices", grade_inputs: b
     return ExportGraph(stages, exposure, frames, strips).eval()
 
 
-def grade_of(module: nn.Module) -> Optional[ColorGrade]:
+def grade_of(module: Optional[nn.Module]) -> Optional[ColorGrade]:
     """The grade whose controls feed a ``grade_inputs`` graph: a grade itself, or a look's ``grade``.
 
     Examples:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+from typing import Callable
 
 import torch
 
@@ -183,7 +184,7 @@ def _lerp(g, start, end, weight):
     return g.op("Add", base, difference if factor == 1.0 else g.op("Mul", difference, _constant_like(g, factor, start)))
 
 
-SYMBOLICS = {
+SYMBOLICS: dict[str, Callable] = {
     "aten::pow": _pow,
     "aten::addcmul": _addcmul,
     "aten::lerp": _lerp,

@@ -63,7 +63,7 @@ class OpenVINOSession:
     def __init__(self, path, precision: Optional[str] = None, threads: Optional[int] = None):
         import openvino
 
-        config = {} if precision is None else {"INFERENCE_PRECISION_HINT": precision}
+        config: dict[str, str | int] = {} if precision is None else {"INFERENCE_PRECISION_HINT": precision}
         if threads is not None:
             config["INFERENCE_NUM_THREADS"] = threads
         model = onnx_lib.load(str(path))
@@ -221,7 +221,9 @@ def reference(module: nn.Module, inputs: Inputs) -> tuple:
     with torch.no_grad():
         if stateful:
             adapted, dt = state or (torch.zeros(image.shape[0]), torch.tensor(0.0))
-            return tuple(frame_of(module)(image, adapted, dt))
+            frame = frame_of(module)
+            assert frame is not None  # a module with state has its frame function
+            return tuple(frame(image, adapted, dt))
         return (module(image),)
 
 

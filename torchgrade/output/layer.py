@@ -49,6 +49,8 @@ class LookLUT(Stage):
     }
     display_referred = True
     per_pixel = True
+    contribution: Param
+    encoding: str
 
     def __init__(self, lut, contribution: Param = 1.0, encoding: str = "srgb", interpolation=None):
         super().__init__()
@@ -168,6 +170,10 @@ class Dither(Stage):
 
     controls = DITHER_CONTROLS
     always_in_config = ("amplitude", "seed", "size")
+    amplitude: Param
+    seed: int
+    size: int
+    pattern: torch.Tensor
 
     def __init__(self, amplitude: Param = DEFAULT_AMPLITUDE, seed: int = 0, size: int = 64):
         super().__init__()
@@ -227,6 +233,7 @@ class Display(Stage):
     }
     display_referred = True
     always_in_config = ("encoding",)
+    peak_luminance: Param
 
     def __init__(self, encoding: str = "srgb", primaries: str = "rec709", peak_luminance: Param = 100.0, input_primaries: str = "rec709"):
         super().__init__()

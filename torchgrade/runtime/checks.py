@@ -123,7 +123,8 @@ class DeferredCheck:
                     continue
                 seen = value.detach() if summary is None else summary(value.detach())
                 if _deferred(value.device):
-                    self._pending.append(_Copy(name, *_copy_to_host(seen), check))
+                    host, landed = _copy_to_host(seen)
+                    self._pending.append(_Copy(name, host, landed, check))
                 else:
                     check(name, seen)
             while self._pending and self._pending[0].landed.query():  # a failure raises; later copies wait their turn

@@ -64,7 +64,7 @@ import contextlib
 import logging
 import threading
 import time
-from typing import Union
+from typing import Literal, Union
 
 import torch
 from torch import nn
@@ -174,7 +174,7 @@ class CompiledModule(nn.Module):
     """``module`` compiled per device type at its first frame there (see :func:`compile`); ``module`` is
     :attr:`module`, so its controls, state and ``to_config`` stay reachable."""
 
-    def __init__(self, module: nn.Module, cuda_graphs: bool = True, dynamic: Union[bool, None, str] = "batch",
+    def __init__(self, module: nn.Module, cuda_graphs: bool = True, dynamic: Union[bool, None, Literal["batch"]] = "batch",
                  verbose: bool = True):
         super().__init__()
         self.module = module
@@ -205,8 +205,9 @@ class CompiledModule(nn.Module):
         if not isinstance(image, torch.Tensor):
             return self.module(image, *args, **kwargs)  # the module's own TypeError
         for stage in self.module.modules():
-            if hasattr(stage, "check_learnable"):
-                stage.check_learnable()
+            check_learnable = getattr(stage, "check_learnable", None)
+            if check_learnable is not None:
+                check_learnable()
         prepare = getattr(self.module, "compiled_arguments", None)
         if prepare is not None:  # what must happen before the graph: a random draw from a generator
             (image, *args), kwargs = prepare(image, *args, **kwargs)
@@ -301,7 +302,7 @@ class CompiledModule(nn.Module):
         return time.perf_counter() - started
 
 
-def compile(module: nn.Module, *, cuda_graphs: bool = True, dynamic: Union[bool, None, str] = "batch",
+def compile(module: nn.Module, *, cuda_graphs: bool = True, dynamic: Union[bool, None, Literal["batch"]] = "batch",
             verbose: bool = True) -> CompiledModule:
     """``module`` (a stage, a :class:`~torchgrade.PostFX`, a :class:`~torchgrade.RandomPostFX`, a LUT) through
     ``torch.compile`` with one graph and the device's mode (:func:`compile_mode`).

@@ -57,9 +57,9 @@ def untracked(*tensors) -> bool:
         ...     untracked(x)
         True
     """
-    tensors = [t for t in tensors if isinstance(t, torch.Tensor)]
-    recorded = torch.is_grad_enabled() and any(t.requires_grad for t in tensors)
-    return not recorded and not any(map(is_differentiated, tensors)) and not is_tracing()
+    given = [t for t in tensors if isinstance(t, torch.Tensor)]
+    recorded = torch.is_grad_enabled() and any(t.requires_grad for t in given)
+    return not recorded and not any(map(is_differentiated, given)) and not is_tracing()
 
 
 def is_differentiated(value: torch.Tensor) -> bool:

@@ -92,15 +92,26 @@ class DispatchCount(TorchDispatchMode):
     @property
     def frame_passes(self) -> float:
         """The bytes every launch moved over the bytes one copy of the frame reads and writes."""
-        if self.frame_bytes is None:
-            raise ValueError("frame_passes needs the frame: DispatchCount(frame=image)")
-        return sum(self.moved) / self.frame_bytes
+        return sum(self.moved) / self._frame_bytes("frame_passes")
 
     @property
     def frames_written(self) -> float:
         """The bytes of the results of a plane of the frame or more, over those of the frame: the full-frame passes and
-        temporaries a forward writes (a plane a third of a frame)."""
-        return 2 * sum(self.written) / self.frame_bytes
+        temporaries a forward writes (a plane a third of a frame).
+
+        Examples:
+            >>> DispatchCount().frames_written
+            Traceback (most recent call last):
+            ...
+            ValueError: frames_written needs the frame: DispatchCount(frame=image)
+        """
+        return 2 * sum(self.written) / self._frame_bytes("frames_written")
+
+    def _frame_bytes(self, count: str) -> int:
+        """The bytes one copy of the frame reads and writes; ``ValueError`` naming ``count`` where no frame was given."""
+        if self.frame_bytes is None:
+            raise ValueError(f"{count} needs the frame: DispatchCount(frame=image)")
+        return self.frame_bytes
 
     def __torch_dispatch__(self, func, types, args=(), kwargs=None):
         kwargs = kwargs or {}

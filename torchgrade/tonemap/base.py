@@ -8,7 +8,7 @@ LUT that clips after its lookup does).
 from __future__ import annotations
 
 import inspect
-from typing import Callable, NamedTuple, Optional
+from typing import Callable, Mapping, NamedTuple, Optional
 
 import torch
 
@@ -59,6 +59,13 @@ class ToneMapper(NamedTuple):
             >>> ToneMapper.of(lift, amount=(0.0, 1.0)).controls["amount"]
             Control(default=0.5, range=(0.0, 1.0), kind='number')
         """
+        return cls.with_ranges(curve, ranges, prepare, takes_nan_free=takes_nan_free, takes_planes=takes_planes)
+
+    @classmethod
+    def with_ranges(cls, curve: Callable[..., torch.Tensor], ranges: Mapping[str, tuple],
+                    prepare: Optional[Callable[..., object]] = None, *, takes_nan_free: bool = False,
+                    takes_planes: bool = False) -> "ToneMapper":
+        """:meth:`of` with the ranges as one mapping ``{name: (low, high)}`` (a curve's table of them)."""
         defaults = inspect.signature(curve).parameters
         controls = {name: Control(defaults[name].default, allowed) for name, allowed in ranges.items()}
         return cls(curve, controls, prepare, takes_nan_free, takes_planes)

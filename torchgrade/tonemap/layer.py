@@ -48,6 +48,8 @@ class ToneMap(Stage):
     """The controls of every mode; :meth:`control_table` adds the mode's curve parameters."""
 
     display_referred = True
+    mode: str
+    clip: bool
 
     def __init__(
         self, mode: str = "neutral", white_point: Param | None = None, exposure_bias: Param | None = None, clip: bool = True, **curve_params: Param

@@ -44,9 +44,9 @@ TONE_MAPPERS = {
     "reinhard_luminance": ToneMapper.of(reinhard_luminance, white_point=WHITE_POINT_RANGE),
     "neutral": ToneMapper.of(neutral),
     "aces": ToneMapper.of(aces, takes_planes=True),
-    "hable": ToneMapper.of(hable, **HABLE_RANGES),
-    "filmic": ToneMapper.of(filmic, **FILMIC_RANGES),
-    "unreal_filmic": ToneMapper.of(unreal_filmic, **UNREAL_FILMIC_RANGES),
+    "hable": ToneMapper.with_ranges(hable, HABLE_RANGES),
+    "filmic": ToneMapper.with_ranges(filmic, FILMIC_RANGES),
+    "unreal_filmic": ToneMapper.with_ranges(unreal_filmic, UNREAL_FILMIC_RANGES),
     "aces_reference": ToneMapper.of(aces_reference),
     "aces_hill": ToneMapper.of(aces_hill),
     "aces_narkowicz": ToneMapper.of(aces_narkowicz),
@@ -54,8 +54,8 @@ TONE_MAPPERS = {
     "agx_godot": ToneMapper.of(agx_godot),
     "khronos_pbr_neutral": ToneMapper.of(khronos_pbr_neutral),
     "aces2": ToneMapper.of(aces2_sdr, prepare=prepare_aces2_sdr, takes_nan_free=True, takes_planes=True),
-    "aces2_hdr": ToneMapper.of(aces2_hdr, prepare=prepare_aces2_hdr, takes_nan_free=True, takes_planes=True, **ACES2_HDR_RANGES),
-    "neutral_hdr": ToneMapper.of(neutral_hdr, **NEUTRAL_HDR_RANGES),
+    "aces2_hdr": ToneMapper.with_ranges(aces2_hdr, ACES2_HDR_RANGES, prepare_aces2_hdr, takes_nan_free=True, takes_planes=True),
+    "neutral_hdr": ToneMapper.with_ranges(neutral_hdr, NEUTRAL_HDR_RANGES),
 }
 """Every tone mapper by mode name: its curve and its controls (defaults are the curve's own)."""
 
@@ -124,7 +124,7 @@ def tonemap(image: torch.Tensor, mode: str = "neutral", clip: bool = True, **par
     """
     check_curve_params(mode, params)
     check_given(tone_mapper(mode).controls, params, f"ToneMap({mode!r})")
-    return tone_mapped(image, mode, clip, **params)
+    return tone_mapped(image, mode, clip, nan_free=False, planes=False, **params)
 
 
 def tone_mapped(image: torch.Tensor, mode: str = "neutral", clip: bool = True, *, nan_free: bool = False,

@@ -209,7 +209,8 @@ def aab_to_jmh(aab: torch.Tensor, p: JMhParams, dim: int = -3):
         >>> [round(float(v), 2) for v in (j, m, h)]
         [58.62, 52.42, 26.24]
     """
-    return aab_planes_to_jmh(*aab.unbind(dim), p)
+    a_, a, b = aab.unbind(dim)
+    return aab_planes_to_jmh(a_, a, b, p)
 
 
 def aab_planes_to_jmh(a_: torch.Tensor, a: torch.Tensor, b: torch.Tensor, p: JMhParams):

@@ -111,7 +111,8 @@ def _merged_hues(a: list, b: list) -> list:
 
 def _sample_counts(hues: list) -> list:
     """Table index for each corner hue: its rounded degree, nudged so no two corners share one."""
-    counts, last, floor = [], None, 0 if hues[0] == 0.0 else 1
+    counts: list[int] = []
+    last, floor = None, 0 if hues[0] == 0.0 else 1
     for k, hue in enumerate(hues):
         idx = min(max(math.floor(hue + 0.5), floor), 359)
         if idx == last:

@@ -141,7 +141,7 @@ MAX_BUILT = 8
 """Tables kept beyond those a stage holds (each is a few hundred kilobytes); ``_BUILT`` is read without the lock, by
 forwards (a compiled one reads it as a constant), and only ever loses a key no stage holds."""
 
-_HELD = weakref.WeakSet()
+_HELD: weakref.WeakSet[Prepared] = weakref.WeakSet()
 """The :class:`Prepared` objects alive (held by stages)."""
 
 _LOCK = threading.Lock()
