@@ -292,8 +292,7 @@ class RandomPostFX(IntensityAugmentationBase2D):
             random = slot in _RANDOM_SLOTS
             if random and held is None and applied is not None:
                 held = x
-            if not random and held is not None:
-                assert applied is not None  # held only where some samples are skipped
+            if not random and held is not None and applied is not None:  # held only where some samples are skipped
                 x, held = torch.where(applied, joined(x), joined(held)), None
             x = self._grade(x, params, planes) if slot == "grade" else getattr(self, f"_{slot}")(joined(x), params, applied)
 
@@ -318,8 +317,7 @@ class RandomPostFX(IntensityAugmentationBase2D):
 
     def _look_lut(self, x: torch.Tensor, params: dict, applied) -> torch.Tensor:
         contribution = params["look_lut_contribution"]
-        if applied is not None:
-            contribution = contribution * applied.reshape(-1)
+        contribution = contribution if applied is None else contribution * applied.reshape(-1)
         assert self.look_lut is not None  # a look_lut slot runs only with one
         return look_lut(x, self.look_lut.lut, contribution, self.look_lut.encoding)
 
@@ -354,9 +352,8 @@ class RandomPostFX(IntensityAugmentationBase2D):
 
     def forward(self, input: torch.Tensor, params: dict | None = None, *, generator: torch.Generator | None = None,
                 **container_args) -> torch.Tensor:
-        """Grade ``input`` with a new draw (or ``params``, second as in kornia's ``forward(input, params)``).
-        ``container_args`` (``data_keys`` ...) are what kornia's containers pass along with an image; an intensity layer
-        needs none of them."""
+        """Grade ``input`` with a new draw (or ``params``, second as in kornia's ``forward(input, params)``);
+        ``container_args`` (``data_keys`` ...) are what kornia's containers pass along: an intensity layer needs none."""
         check_image(input)
         images, rows, frames = self._batch(input)
         if params is None:

@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from typing import Optional
+from typing import Optional, cast
 
 import torch
 
@@ -368,9 +368,7 @@ def exposed_frame(image: torch.Tensor, adapted: Optional[torch.Tensor], dt: Para
     c = {name: None if value is None else scalar_param(value, x, name) for name, value in controls.items() if name not in NOT_NUMBERS}
     scene = sanitize(x, nan_free=nan_free)
     if c["fixed_exposure"] is not None:
-        middle_grey = c["middle_grey"]
-        assert middle_grey is not None  # of the controls only fixed_exposure may be None
-        target = (middle_grey * torch.exp2(-c["fixed_exposure"])).expand(x.shape[:-3] + (1, 1, 1))
+        target = (cast(torch.Tensor, c["middle_grey"]) * torch.exp2(-c["fixed_exposure"])).expand(x.shape[:-3] + (1, 1, 1))
         new = _adapted(scene, target, adapted, dt, c, limited=False)
     else:
         new = _adapted(scene, metered_luminance(scene, c, controls), adapted, dt, c)
