@@ -298,7 +298,7 @@ def markdown(report: dict) -> list:
                   *mark_table("floor", "time", time_table(report))]
         if report.get("cold_compile_s") is not None:
             lines += ["", f"Cold compile of the look (an empty Inductor cache): {report['cold_compile_s']} s (target "
-                      f"≤ {COLD_COMPILE_TARGET:g} s{'' if report['cold_compile_s'] <= COLD_COMPILE_TARGET else ': missed'})."]
+                      f"{_against(report['cold_compile_s'], COLD_COMPILE_TARGET, ' s')})."]
         lines += [""]
     else:
         lines += ["Counts only (`--counts`): the timing columns come from a run without it on a quiet machine.", ""]
